@@ -1,0 +1,552 @@
+//! Diagnostics: what went wrong (or looks suspicious), where, and how to show it.
+//!
+//! A [`Diagnostic`] carries a [`FileId`] and a byte range into that file's text; line and column
+//! are computed only when a diagnostic is rendered (see [`Sources::line_col`]). The readers never
+//! stop at the first problem: they push into a [`Diagnostics`] sink and go on.
+
+use std::fmt::Write as _;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+/// Index of a file in [`Sources`].
+pub type FileId = usize;
+
+/// Every text the compiler read, so diagnostics can point into it.
+#[derive(Debug, Default)]
+pub struct Sources {
+    files: Vec<SourceFile>,
+}
+
+/// One file's text as it was read (a UTF-8 byte order mark is stripped, `bom` records it).
+#[derive(Debug)]
+pub struct SourceFile {
+    /// The path the file was read from.
+    pub path: PathBuf,
+    /// The path as shown in diagnostics (relative to the working directory where possible).
+    pub display: String,
+    /// The text after the BOM.
+    pub text: String,
+    /// Whether the file started with a UTF-8 BOM.
+    pub bom: bool,
+    line_starts: Vec<usize>,
+}
+
+impl Sources {
+    /// Adds a file and returns its id.
+    pub fn add(&mut self, path: PathBuf, display: String, text: String, bom: bool) -> FileId {
+        let line_starts = std::iter::once(0)
+            .chain(memchr_iter(b'\n', text.as_bytes()).map(|i| i + 1))
+            .collect();
+        self.files.push(SourceFile {
+            path,
+            display,
+            text,
+            bom,
+            line_starts,
+        });
+        self.files.len() - 1
+    }
+
+    /// The file with this id.
+    pub fn get(&self, id: FileId) -> &SourceFile {
+        &self.files[id]
+    }
+
+    /// All files, in the order they were read.
+    pub fn iter(&self) -> impl Iterator<Item = &SourceFile> {
+        self.files.iter()
+    }
+
+    /// Finds a file already read from `path`.
+    pub fn find(&self, path: &Path) -> Option<FileId> {
+        self.files.iter().position(|f| f.path == path)
+    }
+
+    /// 1-based line and column (in characters) of a byte offset.
+    pub fn line_col(&self, id: FileId, offset: usize) -> (usize, usize) {
+        let f = &self.files[id];
+        let offset = offset.min(f.text.len());
+        let line = match f.line_starts.binary_search(&offset) {
+            Ok(l) => l,
+            Err(l) => l - 1,
+        };
+        let start = f.line_starts[line];
+        let col = f
+            .text
+            .get(start..offset)
+            .map(|s| s.chars().count())
+            .unwrap_or(offset - start);
+        (line + 1, col + 1)
+    }
+
+    /// Byte offset of a 1-based line and column (as roxmltree reports them).
+    pub fn offset_of(&self, id: FileId, line: usize, col: usize) -> usize {
+        let f = &self.files[id];
+        let Some(&start) = f.line_starts.get(line.saturating_sub(1)) else {
+            return f.text.len();
+        };
+        let rest = &f.text[start..];
+        rest.char_indices()
+            .nth(col.saturating_sub(1))
+            .map(|(i, _)| start + i)
+            .unwrap_or(f.text.len())
+    }
+}
+
+fn memchr_iter(needle: u8, hay: &[u8]) -> impl Iterator<Item = usize> + '_ {
+    hay.iter()
+        .enumerate()
+        .filter(move |(_, b)| **b == needle)
+        .map(|(i, _)| i)
+}
+
+/// How bad a diagnostic is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Severity {
+    /// The inputs cannot be compiled.
+    Error,
+    /// Compiled, but something is suspicious (shown with `--warn`).
+    Warning,
+}
+
+/// A place in a file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Span {
+    pub file: FileId,
+    pub range: Range<usize>,
+}
+
+impl Span {
+    pub fn new(file: FileId, range: Range<usize>) -> Self {
+        Span { file, range }
+    }
+}
+
+/// One problem found in the inputs.
+#[derive(Debug, Clone)]
+pub struct Diagnostic {
+    pub severity: Severity,
+    pub code: Code,
+    pub message: String,
+    /// Where it is; `None` only for problems that have no place (a file that cannot be read).
+    pub span: Option<Span>,
+    /// The element concerned: an SFC `localId`, or a CAEX element's name and ID.
+    pub element: Option<String>,
+    /// Further places (e.g. the IRL line when the blackboard mapping is at fault).
+    pub related: Vec<(Span, String)>,
+    /// Free-form notes.
+    pub notes: Vec<String>,
+    /// A path for diagnostics without a span (the file that could not be read).
+    pub path: Option<PathBuf>,
+}
+
+impl Diagnostic {
+    pub fn error(code: Code, message: impl Into<String>) -> Self {
+        Diagnostic {
+            severity: Severity::Error,
+            code,
+            message: message.into(),
+            span: None,
+            element: None,
+            related: Vec::new(),
+            notes: Vec::new(),
+            path: None,
+        }
+    }
+
+    pub fn warning(code: Code, message: impl Into<String>) -> Self {
+        Diagnostic {
+            severity: Severity::Warning,
+            ..Diagnostic::error(code, message)
+        }
+    }
+
+    pub fn at(mut self, span: Span) -> Self {
+        self.span = Some(span);
+        self
+    }
+
+    pub fn at_opt(mut self, span: Option<Span>) -> Self {
+        self.span = span;
+        self
+    }
+
+    pub fn element(mut self, element: impl Into<String>) -> Self {
+        self.element = Some(element.into());
+        self
+    }
+
+    pub fn related(mut self, span: Span, message: impl Into<String>) -> Self {
+        self.related.push((span, message.into()));
+        self
+    }
+
+    pub fn note(mut self, note: impl Into<String>) -> Self {
+        self.notes.push(note.into());
+        self
+    }
+
+    pub fn path(mut self, path: impl Into<PathBuf>) -> Self {
+        self.path = Some(path.into());
+        self
+    }
+}
+
+/// The diagnostics of one run, in the order they were found.
+#[derive(Debug, Default)]
+pub struct Diagnostics {
+    list: Vec<Diagnostic>,
+}
+
+impl Diagnostics {
+    pub fn push(&mut self, d: Diagnostic) {
+        self.list.push(d);
+    }
+
+    pub fn has_errors(&self) -> bool {
+        self.list.iter().any(|d| d.severity == Severity::Error)
+    }
+
+    pub fn error_count(&self) -> usize {
+        self.list
+            .iter()
+            .filter(|d| d.severity == Severity::Error)
+            .count()
+    }
+
+    pub fn warning_count(&self) -> usize {
+        self.list
+            .iter()
+            .filter(|d| d.severity == Severity::Warning)
+            .count()
+    }
+
+    pub fn iter(&self) -> impl Iterator<Item = &Diagnostic> {
+        self.list.iter()
+    }
+
+    pub fn into_vec(self) -> Vec<Diagnostic> {
+        self.list
+    }
+
+    /// Sorts by file, then position, keeping the order of equal places; errors without a place
+    /// come first.
+    pub fn sort(&mut self) {
+        self.list.sort_by_key(|d| {
+            d.span
+                .as_ref()
+                .map(|s| (1, s.file, s.range.start))
+                .unwrap_or((0, 0, 0))
+        });
+    }
+}
+
+macro_rules! codes {
+    ($( $(#[$doc:meta])* $name:ident = $code:literal, )*) => {
+        /// Stable diagnostic codes. `E…` are errors, `W…` warnings; the number's first digit
+        /// names the stage: 1 files and XML, 2 blackboard, 3 SFC, 4 IRL, 5 values and mappings,
+        /// 6 output. `docs/DIAGNOSTICS.md` lists them all.
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+        pub enum Code { $( $(#[$doc])* $name, )* }
+
+        impl Code {
+            /// The code as printed, e.g. `E301`.
+            pub fn as_str(self) -> &'static str {
+                match self { $( Code::$name => $code, )* }
+            }
+
+            /// Every code, for the documentation test.
+            pub const ALL: &'static [Code] = &[ $( Code::$name, )* ];
+        }
+    };
+}
+
+codes! {
+    /// A file named by the inputs cannot be read (missing, a directory, not UTF-8, too large).
+    FileUnreadable = "E101",
+    /// A file is not well-formed XML.
+    XmlSyntax = "E102",
+    /// A file is well-formed XML but not of the expected kind (wrong root element).
+    XmlWrongRoot = "E103",
+    /// A `refURI` value cannot be turned into a path.
+    BadRefUri = "E104",
+
+    /// No blackboard `InstanceHierarchy`.
+    NoHierarchy = "E201",
+    /// No `Ressourcen`/`Resources` element in the hierarchy.
+    NoResources = "E202",
+    /// No SFC reference (`Process Sequence` → interface → `refURI` → `Value`).
+    NoSfcReference = "E203",
+    /// An attribute name contains a `.`.
+    DotInAttributeName = "E204",
+    /// A skill parameter without a usable `Value`.
+    ParameterWithoutValue = "E205",
+    /// A function without exactly one `FunctionDataInterface`, or without `Name`/`refURI`.
+    BadFunction = "E206",
+    /// A function mapping without a usable `Name`, a bad `Order`, or a mapping path that is not a
+    /// skill parameter.
+    BadFunctionMapping = "E207",
+    /// Two resources, skills or functions with the same name.
+    DuplicateName = "E208",
+
+    /// No program `pou` with an `SFC` body.
+    NoSfcBody = "E301",
+    /// A `localId` is used twice or is not a number.
+    BadLocalId = "E302",
+    /// A `refLocalId` names no element.
+    DanglingReference = "E303",
+    /// A step with more than one predecessor or successor.
+    StepFanInOut = "E304",
+    /// Two steps connected without a transition.
+    StepToStep = "E305",
+    /// A transition-like element with several inputs and several outputs.
+    NToM = "E306",
+    /// No start step, or several.
+    StartStep = "E307",
+    /// No end step, or several.
+    EndStep = "E308",
+    /// The flow has a cycle.
+    Cycle = "E309",
+    /// A simultaneous divergence without its convergence, or vice versa.
+    UnbalancedBranch = "E310",
+    /// A step names a resource the blackboard does not have (or none, ambiguously).
+    UnknownResource = "E311",
+    /// A step names a skill its resource does not offer (or none).
+    UnknownSkill = "E312",
+    /// A construct that is not supported yet (selection branches, jump and macro steps, several
+    /// resources in one program, nesting deeper than the limit).
+    Unsupported = "E313",
+    /// A step lacks a variable its skill needs.
+    MissingVariable = "E314",
+    /// A variable's value is not a well-formed value or list.
+    BadVariableSyntax = "E315",
+
+    /// An IRL file without `<src>`, or not an `<irl>` document.
+    BadIrl = "E401",
+    /// A function's command is not in its IRL file.
+    UnknownCommand = "E402",
+    /// Template parameters and mapped function parameters do not fit.
+    ParameterMismatch = "E403",
+
+    /// A mapping names a function the resource does not have.
+    UnknownFunction = "E501",
+    /// A value does not have its parameter's type.
+    TypeMismatch = "E502",
+    /// A value is not a safe KRL token (it could inject code).
+    UnsafeValue = "E503",
+    /// An index into a list variable is out of range, or a list where one value is needed.
+    BadIndex = "E504",
+
+    /// The program name is not a KRL name.
+    BadProgramName = "E601",
+    /// A non-ASCII character in generated code.
+    NonAscii = "E602",
+    /// The output template cannot be used.
+    BadTemplate = "E603",
+
+    /// The hierarchy is not named `Blackboard` (the only one was used).
+    HierarchyNotNamed = "W201",
+    /// An `AttributeDataType` that is not understood.
+    UnknownType = "W202",
+    /// Two function mappings with the same order.
+    EqualOrder = "W203",
+    /// No write-back target in the blackboard.
+    NoWriteBackTarget = "W204",
+    /// The start step is not marked `initialStep="true"`.
+    StartNotInitial = "W301",
+    /// A step's resource was inferred from its skill.
+    ResourceInferred = "W302",
+    /// A step has variables its skill does not use.
+    ExtraVariable = "W303",
+    /// An ignored SFC element (action block, non-`TRUE` condition, unknown element).
+    Ignored = "W304",
+}
+
+impl std::fmt::Display for Code {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// How diagnostics are printed (`--format`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Format {
+    /// `error[CODE]: message`, the place, the source line and a marker.
+    #[default]
+    Human,
+    /// One line each: `file:line:column: error[CODE]: message`.
+    Short,
+    /// One JSON object per line.
+    Json,
+}
+
+/// A diagnostic with its place resolved to file name, line and column: what JSON output and the
+/// daemon's events carry.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Located {
+    pub severity: Severity,
+    pub code: &'static str,
+    pub message: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub file: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub line: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub column: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub element: Option<String>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
+}
+
+impl Diagnostic {
+    /// Resolves the place to file, line and column.
+    pub fn locate(&self, sources: &Sources) -> Located {
+        let (file, line, column) = match &self.span {
+            Some(s) => {
+                let (l, c) = sources.line_col(s.file, s.range.start);
+                (
+                    Some(sources.get(s.file).display.clone()),
+                    Some(l),
+                    Some(c),
+                )
+            }
+            None => (
+                self.path.as_ref().map(|p| p.display().to_string()),
+                None,
+                None,
+            ),
+        };
+        let mut notes = self.notes.clone();
+        for (span, msg) in &self.related {
+            let (l, c) = sources.line_col(span.file, span.range.start);
+            notes.push(format!(
+                "{}:{}:{}: {}",
+                sources.get(span.file).display,
+                l,
+                c,
+                msg
+            ));
+        }
+        Located {
+            severity: self.severity,
+            code: self.code.as_str(),
+            message: self.message.clone(),
+            file,
+            line,
+            column,
+            element: self.element.clone(),
+            notes,
+        }
+    }
+}
+
+/// Renders diagnostics in the chosen format. Warnings are left out unless `warnings` is set.
+pub fn render(
+    diags: &[Diagnostic],
+    sources: &Sources,
+    format: Format,
+    warnings: bool,
+    color: bool,
+) -> String {
+    let mut out = String::new();
+    let shown = diags
+        .iter()
+        .filter(|d| warnings || d.severity == Severity::Error);
+    match format {
+        Format::Json => {
+            for d in shown {
+                let l = d.locate(sources);
+                out.push_str(&serde_json::to_string(&l).expect("a Located always serialises"));
+                out.push('\n');
+            }
+        }
+        Format::Short => {
+            for d in shown {
+                let l = d.locate(sources);
+                let place = match (&l.file, l.line, l.column) {
+                    (Some(f), Some(line), Some(col)) => format!("{f}:{line}:{col}: "),
+                    (Some(f), _, _) => format!("{f}: "),
+                    _ => String::new(),
+                };
+                let elem = l
+                    .element
+                    .as_ref()
+                    .map(|e| format!(" [{e}]"))
+                    .unwrap_or_default();
+                let _ = writeln!(
+                    out,
+                    "{place}{}[{}]: {}{elem}",
+                    severity_word(l.severity),
+                    l.code,
+                    l.message
+                );
+            }
+        }
+        Format::Human => {
+            use codespan_reporting::diagnostic as cs;
+            use codespan_reporting::files::SimpleFiles;
+            use codespan_reporting::term;
+            let mut files = SimpleFiles::new();
+            for f in sources.iter() {
+                files.add(f.display.as_str(), f.text.as_str());
+            }
+            let config = term::Config::default();
+            let mut buf: Vec<u8> = Vec::new();
+            for d in shown {
+                let mut c = match d.severity {
+                    Severity::Error => cs::Diagnostic::error(),
+                    Severity::Warning => cs::Diagnostic::warning(),
+                }
+                .with_code(d.code.as_str())
+                .with_message(&d.message);
+                let mut labels = Vec::new();
+                if let Some(s) = &d.span {
+                    let end = s.range.end.max(s.range.start);
+                    let label = cs::Label::primary(s.file, s.range.start..end);
+                    labels.push(match &d.element {
+                        Some(e) => label.with_message(e.clone()),
+                        None => label,
+                    });
+                }
+                for (s, m) in &d.related {
+                    labels.push(cs::Label::secondary(s.file, s.range.clone()).with_message(m));
+                }
+                let mut notes = d.notes.clone();
+                if d.span.is_none() {
+                    if let Some(p) = &d.path {
+                        notes.insert(0, format!("file: {}", p.display()));
+                    }
+                    if let Some(e) = &d.element {
+                        notes.push(format!("element: {e}"));
+                    }
+                }
+                c = c.with_labels(labels).with_notes(notes);
+                let r = if color {
+                    let mut w = term::termcolor::Ansi::new(&mut buf);
+                    term::emit_to_write_style(&mut w, &config, &files, &c)
+                } else {
+                    let mut w = term::termcolor::NoColor::new(&mut buf);
+                    term::emit_to_write_style(&mut w, &config, &files, &c)
+                };
+                if r.is_err() {
+                    // A span outside its file (a bug, never input): fall back to the message.
+                    use std::io::Write as _;
+                    let _ = writeln!(buf, "{}[{}]: {}", severity_word(d.severity), d.code, d.message);
+                }
+            }
+            out.push_str(&String::from_utf8_lossy(&buf));
+        }
+    }
+    out
+}
+
+fn severity_word(s: Severity) -> &'static str {
+    match s {
+        Severity::Error => "error",
+        Severity::Warning => "warning",
+    }
+}

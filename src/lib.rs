@@ -1,0 +1,35 @@
+//! skillpost: AutomationML blackboard + PLCopen SFC + IRL snippets → KUKA KRL.
+//!
+//! # Layout
+//!
+//! The modules follow the data (see `ARCHITECTURE.md` for the invariants):
+//!
+//! - [`load`]: the only file-system reads of the compiler core, behind the [`load::FileSource`]
+//!   trait; records every file a compile read.
+//! - [`read`]: blackboard, SFC and IRL files → [`model`], every item with its byte span.
+//! - [`plan`]: SFC graph checks → an ordered program tree ([`plan::Block`]).
+//! - [`bind`]: skill steps → function calls with checked, typed values ([`bind::BoundStep`]).
+//! - [`template`]: IRL template parsing and parameter substitution.
+//! - [`emit`]: a language profile turns the bound program into text (KRL first).
+//! - [`write`]: atomic output files and the byte-preserving blackboard write-back.
+//! - [`compile`]: the whole pipeline for one project: inputs in, outputs + diagnostics out.
+//! - [`print`]: the `-pB`/`-pS`/`-pF`/`-pO` and `--info` listings.
+//! - [`diag`]: diagnostics, their codes and their rendering.
+//! - [`names`]: case-insensitive name keys, KRL names, transliteration.
+#![forbid(unsafe_code)]
+
+pub mod bind;
+pub mod compile;
+pub mod diag;
+pub mod emit;
+pub mod load;
+pub mod model;
+pub mod names;
+pub mod plan;
+pub mod print;
+pub mod read;
+pub mod template;
+pub mod write;
+
+/// The version printed by `--info`.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");

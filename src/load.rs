@@ -1,0 +1,86 @@
+//! The loading layer: the only place the compiler core touches the file system.
+//!
+//! The core asks a [`FileSource`] for a file's bytes; [`FsSource`] reads the real file system,
+//! tests and the daemon may pass their own. Every file asked for is recorded, so the caller knows
+//! exactly which files a compile read (the daemon watches those).
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+/// Default limit for one input file (256 MiB): far above any real project, far below memory.
+pub const DEFAULT_MAX_FILE_SIZE: u64 = 256 * 1024 * 1024;
+
+/// Where the compiler's input files come from.
+pub trait FileSource {
+    /// Reads a whole file.
+    fn read(&self, path: &Path) -> std::io::Result<Vec<u8>>;
+}
+
+/// Reads regular files from disk, refusing anything else and anything too large.
+#[derive(Debug, Clone)]
+pub struct FsSource {
+    pub max_file_size: u64,
+}
+
+impl Default for FsSource {
+    fn default() -> Self {
+        FsSource {
+            max_file_size: DEFAULT_MAX_FILE_SIZE,
+        }
+    }
+}
+
+impl FileSource for FsSource {
+    fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
+        use std::io::{Error, ErrorKind};
+        let file = std::fs::File::open(path)?;
+        let meta = file.metadata()?;
+        if meta.is_dir() {
+            return Err(Error::new(ErrorKind::InvalidInput, "is a directory"));
+        }
+        if !meta.is_file() {
+            return Err(Error::new(ErrorKind::InvalidInput, "is not a regular file"));
+        }
+        if meta.len() > self.max_file_size {
+            return Err(Error::new(
+                ErrorKind::InvalidData,
+                format!(
+                    "is {} bytes, more than the limit of {} bytes",
+                    meta.len(),
+                    self.max_file_size
+                ),
+            ));
+        }
+        let mut buf = Vec::with_capacity(meta.len() as usize + 1);
+        // Read at most one byte past the limit, in case the file grew since the metadata call.
+        file.take(self.max_file_size + 1).read_to_end(&mut buf)?;
+        if buf.len() as u64 > self.max_file_size {
+            return Err(Error::new(
+                ErrorKind::InvalidData,
+                format!("is larger than the limit of {} bytes", self.max_file_size),
+            ));
+        }
+        Ok(buf)
+    }
+}
+
+/// An in-memory file source, for tests and fuzzing.
+#[derive(Debug, Default, Clone)]
+pub struct MemSource {
+    pub files: std::collections::HashMap<PathBuf, Vec<u8>>,
+}
+
+impl MemSource {
+    pub fn insert(&mut self, path: impl Into<PathBuf>, bytes: impl Into<Vec<u8>>) {
+        self.files.insert(path.into(), bytes.into());
+    }
+}
+
+impl FileSource for MemSource {
+    fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
+        self.files
+            .get(path)
+            .cloned()
+            .ok_or_else(|| std::io::Error::new(std::io::ErrorKind::NotFound, "not found"))
+    }
+}

@@ -1,0 +1,110 @@
+//! Name matching: every name the program looks up is compared case-insensitively after trimming
+//! (German umlauts and ß included), and KRL names are validated here.
+
+/// The comparison key of a name: trimmed and lower-cased (Unicode, so `Ä` and `ä` are one letter).
+pub fn key(name: &str) -> String {
+    let t = name.trim();
+    if t.bytes().all(|b| b.is_ascii() && !b.is_ascii_uppercase()) {
+        t.to_owned()
+    } else {
+        t.to_lowercase()
+    }
+}
+
+/// Whether two names are the same under [`key`].
+pub fn eq(a: &str, b: &str) -> bool {
+    let (a, b) = (a.trim(), b.trim());
+    if a.is_ascii() && b.is_ascii() {
+        a.eq_ignore_ascii_case(b)
+    } else {
+        a.to_lowercase() == b.to_lowercase()
+    }
+}
+
+/// Whether `name` is a valid KRL name: a letter or `_`, then letters, digits or `_`, at most 24
+/// characters.
+pub fn is_krl_name(name: &str) -> bool {
+    let b = name.as_bytes();
+    !b.is_empty()
+        && b.len() <= 24
+        && (b[0].is_ascii_alphabetic() || b[0] == b'_')
+        && b.iter().all(|c| c.is_ascii_alphanumeric() || *c == b'_')
+}
+
+/// Transliterates text for a KRL comment: German umlauts and ß spelled out, other non-ASCII
+/// letters reduced to their base letter where known, anything else `?`. Control characters
+/// (line breaks) become spaces so a comment stays one line.
+pub fn transliterate(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        if c.is_ascii() {
+            out.push(if c.is_ascii_control() { ' ' } else { c });
+            continue;
+        }
+        let s = match c {
+            'ä' => "ae",
+            'ö' => "oe",
+            'ü' => "ue",
+            'Ä' => "Ae",
+            'Ö' => "Oe",
+            'Ü' => "Ue",
+            'ß' => "ss",
+            'ẞ' => "SS",
+            'à' | 'á' | 'â' | 'ã' | 'å' => "a",
+            'À' | 'Á' | 'Â' | 'Ã' | 'Å' => "A",
+            'è' | 'é' | 'ê' | 'ë' => "e",
+            'È' | 'É' | 'Ê' | 'Ë' => "E",
+            'ì' | 'í' | 'î' | 'ï' => "i",
+            'Ì' | 'Í' | 'Î' | 'Ï' => "I",
+            'ò' | 'ó' | 'ô' | 'õ' | 'ø' => "o",
+            'Ò' | 'Ó' | 'Ô' | 'Õ' | 'Ø' => "O",
+            'ù' | 'ú' | 'û' => "u",
+            'Ù' | 'Ú' | 'Û' => "U",
+            'ç' => "c",
+            'Ç' => "C",
+            'ñ' => "n",
+            'Ñ' => "N",
+            'æ' => "ae",
+            'Æ' => "AE",
+            'œ' => "oe",
+            'Œ' => "OE",
+            '\u{a0}' => " ",
+            '°' => "deg",
+            'µ' => "u",
+            _ => "?",
+        };
+        out.push_str(s);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keys_fold_case_and_umlauts() {
+        assert_eq!(key("  Größe "), key("GRÖSSE".replace("SS", "ß").as_str()));
+        assert!(eq("Ärger", "äRGER"));
+        assert!(eq(" Move PTP", "move ptp "));
+        assert!(!eq("Move PTP", "Move LIN"));
+    }
+
+    #[test]
+    fn krl_names() {
+        assert!(is_krl_name("output"));
+        assert!(is_krl_name("_a1"));
+        assert!(is_krl_name("abcdefghijklmnopqrstuvwx"));
+        assert!(!is_krl_name("abcdefghijklmnopqrstuvwxy"));
+        assert!(!is_krl_name("1abc"));
+        assert!(!is_krl_name("a-b"));
+        assert!(!is_krl_name(""));
+        assert!(!is_krl_name("Zelle_Ä"));
+    }
+
+    #[test]
+    fn transliteration() {
+        assert_eq!(transliterate("Schweißen Überkopf"), "Schweissen Ueberkopf");
+        assert_eq!(transliterate("a\r\nb"), "a  b");
+    }
+}

@@ -1,0 +1,1 @@
+//! IRL reader (being written).

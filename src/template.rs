@@ -1,0 +1,1 @@
+//! IRL template parsing and parameter substitution (being written).

@@ -1,0 +1,1 @@
+//! Atomic writes and the blackboard write-back splice (being written).
