@@ -408,11 +408,7 @@ impl Diagnostic {
         let (file, line, column) = match &self.span {
             Some(s) => {
                 let (l, c) = sources.line_col(s.file, s.range.start);
-                (
-                    Some(sources.get(s.file).display.clone()),
-                    Some(l),
-                    Some(c),
-                )
+                (Some(sources.get(s.file).display.clone()), Some(l), Some(c))
             }
             None => (
                 self.path.as_ref().map(|p| p.display().to_string()),
@@ -535,7 +531,13 @@ pub fn render(
                 if r.is_err() {
                     // A span outside its file (a bug, never input): fall back to the message.
                     use std::io::Write as _;
-                    let _ = writeln!(buf, "{}[{}]: {}", severity_word(d.severity), d.code, d.message);
+                    let _ = writeln!(
+                        buf,
+                        "{}[{}]: {}",
+                        severity_word(d.severity),
+                        d.code,
+                        d.message
+                    );
                 }
             }
             out.push_str(&String::from_utf8_lossy(&buf));

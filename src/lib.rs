@@ -19,6 +19,7 @@
 #![forbid(unsafe_code)]
 
 pub mod bind;
+pub mod cli;
 pub mod compile;
 pub mod diag;
 pub mod emit;

@@ -29,9 +29,12 @@ pub fn load(
         return Some(id);
     }
     let unreadable = |why: String| {
-        Diagnostic::error(Code::FileUnreadable, format!("cannot read `{display}`: {why}"))
-            .at_opt(origin.clone())
-            .path(path)
+        Diagnostic::error(
+            Code::FileUnreadable,
+            format!("cannot read `{display}`: {why}"),
+        )
+        .at_opt(origin.clone())
+        .path(path)
     };
     let bytes = match fs.read(path) {
         Ok(b) => b,
@@ -158,8 +161,7 @@ pub fn caex_name<'a>(node: Node<'a, '_>) -> Option<&'a str> {
 
 /// CAEX `Attribute` children whose `Name` matches (case-insensitively, trimmed).
 pub fn caex_attr<'a, 'i: 'a>(node: Node<'a, 'i>, name: &str) -> Option<Node<'a, 'i>> {
-    children(node, "Attribute")
-        .find(|a| caex_name(*a).is_some_and(|n| crate::names::eq(n, name)))
+    children(node, "Attribute").find(|a| caex_name(*a).is_some_and(|n| crate::names::eq(n, name)))
 }
 
 /// A CAEX `Attribute`'s `Value` text, trimmed, with the span of the `Value` element; `None` when

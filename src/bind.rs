@@ -1,0 +1,777 @@
+//! Binding: each skill step's resource and skill, its function calls in order, and every value
+//! taken from the SFC, type-checked (SPEC.md 2.1–2.3, 4).
+//!
+//! Binding runs in two passes so the compiler can load exactly the IRL files it needs in between:
+//! [`resolve`] finds each step's resource and skill; [`needed_functions`] lists the functions
+//! those skills call; [`bind`] renders every call with the IRL templates.
+
+use std::collections::HashMap;
+
+use crate::diag::{Code, Diagnostic, Diagnostics, Span};
+use crate::model::{Blackboard, ElementKind, Irl, Sfc, Step, Value, ValueType};
+use crate::plan::Plan;
+
+/// Which resource and skill each step uses.
+#[derive(Debug, Default)]
+pub struct Resolution {
+    /// By element index: `(resource, skill)` for steps that produce code.
+    pub step_skill: Vec<Option<(usize, usize)>>,
+    /// The distinct `(resource, skill)` pairs used, in first-use order.
+    pub used: Vec<(usize, usize)>,
+    /// The program's resource (the first one a step uses).
+    pub resource: Option<usize>,
+}
+
+/// Resolves every step's resource and skill.
+pub fn resolve(bb: &Blackboard, sfc: &Sfc, plan: &Plan, diags: &mut Diagnostics) -> Resolution {
+    let mut r = Resolution {
+        step_skill: vec![None; sfc.elements.len()],
+        ..Resolution::default()
+    };
+    let mut several_reported = false;
+    for i in plan.steps() {
+        let e = &sfc.elements[i];
+        let ElementKind::Step(st) = &e.kind else {
+            continue;
+        };
+        let label = format!("localId {}", e.local_id);
+        let Some(skill_name) = &st.skill else {
+            if i != plan.start && i != plan.end {
+                diags.push(
+                    Diagnostic::error(
+                        Code::UnknownSkill,
+                        format!(
+                            "step `{}` names no skill (addData/data/iwb/skill@name)",
+                            st.name
+                        ),
+                    )
+                    .at(e.span.clone())
+                    .element(label),
+                );
+            }
+            continue;
+        };
+        let res = match &st.resource {
+            Some(rn) => match bb.resources.iter().position(|r| r.name.key == rn.key) {
+                Some(ri) => ri,
+                None => {
+                    diags.push(
+                        Diagnostic::error(
+                            Code::UnknownResource,
+                            format!(
+                                "unknown resource `{}`; the blackboard has {}",
+                                rn.text,
+                                known(bb.resources.iter().map(|r| r.name.text.as_str()))
+                            ),
+                        )
+                        .at(rn.span.clone())
+                        .element(label),
+                    );
+                    continue;
+                }
+            },
+            None => {
+                let offering: Vec<usize> = (0..bb.resources.len())
+                    .filter(|&ri| bb.resources[ri].skill(&skill_name.key).is_some())
+                    .collect();
+                match offering.as_slice() {
+                    [ri] => {
+                        diags.push(
+                            Diagnostic::warning(
+                                Code::ResourceInferred,
+                                format!(
+                                    "step names no resource; `{}` is the only one with skill `{}`",
+                                    bb.resources[*ri].name.text, skill_name.text
+                                ),
+                            )
+                            .at(e.span.clone())
+                            .element(label.clone()),
+                        );
+                        *ri
+                    }
+                    _ => {
+                        diags.push(
+                            Diagnostic::error(
+                                Code::UnknownResource,
+                                if offering.is_empty() {
+                                    format!(
+                                        "step names no resource, and no resource offers skill `{}`",
+                                        skill_name.text
+                                    )
+                                } else {
+                                    format!(
+                                        "step names no resource, and {} resources offer skill `{}`",
+                                        offering.len(),
+                                        skill_name.text
+                                    )
+                                },
+                            )
+                            .at(e.span.clone())
+                            .element(label),
+                        );
+                        continue;
+                    }
+                }
+            }
+        };
+        let resource = &bb.resources[res];
+        let Some(sk) = resource.skill(&skill_name.key) else {
+            diags.push(
+                Diagnostic::error(
+                    Code::UnknownSkill,
+                    format!(
+                        "resource `{}` has no skill `{}`; it offers {}",
+                        resource.name.text,
+                        skill_name.text,
+                        known(resource.skills.iter().map(|s| s.name.text.as_str()))
+                    ),
+                )
+                .at(skill_name.span.clone())
+                .element(label),
+            );
+            continue;
+        };
+        match r.resource {
+            None => r.resource = Some(res),
+            Some(first) if first != res && !several_reported => {
+                several_reported = true;
+                diags.push(
+                    Diagnostic::error(
+                        Code::Unsupported,
+                        format!(
+                            "steps of several resources in one program are not supported yet: this step uses `{}`, earlier steps `{}`",
+                            resource.name.text, bb.resources[first].name.text
+                        ),
+                    )
+                    .at(st.resource.as_ref().map(|n| n.span.clone()).unwrap_or(e.span.clone()))
+                    .element(label.clone()),
+                );
+            }
+            _ => {}
+        }
+        if !r.used.contains(&(res, sk)) {
+            r.used.push((res, sk));
+            let skill = &resource.skills[sk];
+            for d in &skill.defects {
+                diags.push(d.clone().note(format!(
+                    "skill `{}` is used by step {label}",
+                    skill.name.text
+                )));
+            }
+        }
+        r.step_skill[i] = Some((res, sk));
+    }
+    r
+}
+
+fn known<'a>(names: impl Iterator<Item = &'a str>) -> String {
+    let v: Vec<String> = names.take(12).map(|n| format!("`{n}`")).collect();
+    if v.is_empty() {
+        "none".to_owned()
+    } else {
+        v.join(", ")
+    }
+}
+
+/// The `(resource, function)` pairs the used skills call, each once, in first-use order.
+/// Mappings naming an unknown function are reported here (`E501`).
+pub fn needed_functions(
+    bb: &Blackboard,
+    r: &Resolution,
+    diags: &mut Diagnostics,
+) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    for &(res, sk) in &r.used {
+        let resource = &bb.resources[res];
+        for m in &resource.skills[sk].mappings {
+            match resource.function(&m.function.key) {
+                Some(f) => {
+                    if !out.contains(&(res, f)) {
+                        out.push((res, f));
+                    }
+                }
+                None => diags.push(
+                    Diagnostic::error(
+                        Code::UnknownFunction,
+                        format!(
+                            "skill `{}` maps function `{}`, which resource `{}` does not have; it has {}",
+                            resource.skills[sk].name.text,
+                            m.function.text,
+                            resource.name.text,
+                            known(resource.functions.iter().map(|f| f.name.text.as_str()))
+                        ),
+                    )
+                    .at(m.function.span.clone()),
+                ),
+            }
+        }
+    }
+    out
+}
+
+/// The bound program: each code-producing step's rendered calls, and the definitions to append.
+#[derive(Debug, Default)]
+pub struct Bound {
+    /// By element index: the code lines of the step's calls (a call may span several lines).
+    pub steps: Vec<Option<BoundStep>>,
+    /// `(irl, definition)` indexes into the IRL list, in order of first use.
+    pub definitions: Vec<(usize, usize)>,
+}
+
+#[derive(Debug)]
+pub struct BoundStep {
+    pub resource: usize,
+    pub skill: usize,
+    /// One rendered call after another.
+    pub calls: Vec<String>,
+}
+
+/// A function mapping made ready to render: the IRL call, and for each template parameter the
+/// skill parameter that fills it.
+struct Prepared {
+    calls: Vec<PreparedCall>,
+}
+
+struct PreparedCall {
+    irl: usize,
+    call: usize,
+    /// Skill parameter index per template parameter.
+    args: Vec<usize>,
+}
+
+/// Renders every step. `fn_irl` maps `(resource, function)` to the loaded IRL file (absent when
+/// it could not be loaded; that was reported).
+pub fn bind(
+    bb: &Blackboard,
+    sfc: &Sfc,
+    plan: &Plan,
+    r: &Resolution,
+    irls: &[Irl],
+    fn_irl: &HashMap<(usize, usize), usize>,
+    diags: &mut Diagnostics,
+) -> Bound {
+    let mut prepared: HashMap<(usize, usize), Option<Prepared>> = HashMap::new();
+    for &(res, sk) in &r.used {
+        let p = prepare(bb, res, sk, irls, fn_irl, diags);
+        prepared.insert((res, sk), p);
+    }
+    let mut bound = Bound {
+        steps: (0..sfc.elements.len()).map(|_| None).collect(),
+        definitions: Vec::new(),
+    };
+    let mut def_keys: Vec<String> = Vec::new();
+    for i in plan.steps() {
+        let Some((res, sk)) = r.step_skill[i] else {
+            continue;
+        };
+        let Some(Some(p)) = prepared.get(&(res, sk)) else {
+            continue;
+        };
+        let e = &sfc.elements[i];
+        let ElementKind::Step(st) = &e.kind else {
+            continue;
+        };
+        let skill = &bb.resources[res].skills[sk];
+        let label = format!("localId {}", e.local_id);
+        let mut ok = check_variables(st, skill, e.span.clone(), &label, diags);
+        let mut calls = Vec::with_capacity(p.calls.len());
+        for pc in &p.calls {
+            let call = &irls[pc.irl].calls[pc.call];
+            let mut values: Vec<String> = Vec::with_capacity(pc.args.len());
+            for &pi in &pc.args {
+                match value_of(st, skill, pi, &label) {
+                    Ok(v) => values.push(v),
+                    Err(Some(d)) => {
+                        diags.push(d);
+                        ok = false;
+                    }
+                    Err(None) => ok = false, // missing variable: reported by check_variables
+                }
+            }
+            if ok {
+                let refs: Vec<&str> = values.iter().map(String::as_str).collect();
+                let mut s = String::new();
+                call.template.render(&refs, &mut s);
+                calls.push(s);
+                if let Some(d) = irls[pc.irl]
+                    .definitions
+                    .iter()
+                    .position(|d| d.name.key == call.name.key)
+                    && !def_keys.contains(&call.name.key)
+                {
+                    def_keys.push(call.name.key.clone());
+                    bound.definitions.push((pc.irl, d));
+                }
+            }
+        }
+        if ok {
+            bound.steps[i] = Some(BoundStep {
+                resource: res,
+                skill: sk,
+                calls,
+            });
+        }
+    }
+    bound
+}
+
+/// Reports missing variables (`E314`) and extra ones (`W303`). False when one is missing.
+fn check_variables(
+    st: &Step,
+    skill: &crate::model::Skill,
+    span: Span,
+    label: &str,
+    diags: &mut Diagnostics,
+) -> bool {
+    let mut ok = true;
+    for p in skill.params.iter().filter(|p| p.indices.is_empty()) {
+        let Some(var) = &p.variable else { continue };
+        if !st.variables.iter().any(|v| v.name.key == var.key) {
+            ok = false;
+            diags.push(
+                Diagnostic::error(
+                    Code::MissingVariable,
+                    format!(
+                        "step lacks variable `{}`, which skill `{}` needs for parameter `{}`",
+                        var.text, skill.name.text, p.path.text
+                    ),
+                )
+                .at(span.clone())
+                .element(label.to_owned()),
+            );
+        }
+    }
+    for v in &st.variables {
+        let used = skill
+            .params
+            .iter()
+            .any(|p| p.variable.as_ref().is_some_and(|n| n.key == v.name.key));
+        if !used {
+            diags.push(
+                Diagnostic::warning(
+                    Code::ExtraVariable,
+                    format!(
+                        "variable `{}` is not used by skill `{}`",
+                        v.name.text, skill.name.text
+                    ),
+                )
+                .at(v.name.span.clone())
+                .element(label.to_owned()),
+            );
+        }
+    }
+    ok
+}
+
+/// The emitted token for skill parameter `pi` at this step. `Err(None)`: the variable is
+/// missing (reported elsewhere).
+fn value_of(
+    st: &Step,
+    skill: &crate::model::Skill,
+    pi: usize,
+    label: &str,
+) -> Result<String, Option<Diagnostic>> {
+    let p = &skill.params[pi];
+    let Some(var_name) = &p.variable else {
+        return Err(None);
+    };
+    let Some(var) = st.variables.iter().find(|v| v.name.key == var_name.key) else {
+        return Err(None);
+    };
+    let mut v = &var.value;
+    let mut path = var.name.text.clone();
+    for &ix in &p.indices {
+        match v {
+            Value::List(items) => match items.get(ix) {
+                Some(item) => {
+                    v = item;
+                    path.push_str(&format!("[{ix}]"));
+                }
+                None => {
+                    return Err(Some(
+                        Diagnostic::error(
+                            Code::BadIndex,
+                            format!(
+                                "parameter `{}` reads `{path}[{ix}]`, but `{path}` has {} item{}",
+                                p.path.text,
+                                items.len(),
+                                if items.len() == 1 { "" } else { "s" }
+                            ),
+                        )
+                        .at(var.value_span.clone())
+                        .element(label.to_owned())
+                        .related(p.path.span.clone(), "the parameter's index"),
+                    ));
+                }
+            },
+            Value::Scalar(_) => {
+                return Err(Some(
+                    Diagnostic::error(
+                        Code::BadIndex,
+                        format!(
+                            "parameter `{}` reads `{path}[{ix}]`, but `{path}` is one value, not a list",
+                            p.path.text
+                        ),
+                    )
+                    .at(var.value_span.clone())
+                    .element(label.to_owned()),
+                ));
+            }
+        }
+    }
+    let Value::Scalar(s) = v else {
+        return Err(Some(
+            Diagnostic::error(
+                Code::BadIndex,
+                format!(
+                    "parameter `{}` needs one value, but `{path}` is a list",
+                    p.path.text
+                ),
+            )
+            .at(var.value_span.clone())
+            .element(label.to_owned()),
+        ));
+    };
+    typed_token(s, p.ty).map_err(|why| {
+        let code = if p.ty.is_some() && !why.starts_with("non-ASCII") {
+            Code::TypeMismatch
+        } else if why.starts_with("non-ASCII") {
+            Code::NonAscii
+        } else {
+            Code::UnsafeValue
+        };
+        Some(
+            Diagnostic::error(
+                code,
+                format!("`{path}` = `{s}` for parameter `{}`: {why}", p.path.text),
+            )
+            .at(var.value_span.clone())
+            .element(label.to_owned()),
+        )
+    })
+}
+
+/// Checks a value against its type (or, untyped, the safe-token rule) and returns the KRL token.
+pub fn typed_token(s: &str, ty: Option<ValueType>) -> Result<String, String> {
+    match ty {
+        Some(ValueType::Double) if is_number(s, true) => Ok(s.to_owned()),
+        Some(ValueType::Decimal) if is_number(s, false) => Ok(s.to_owned()),
+        Some(ValueType::Integer) if is_integer(s) => Ok(s.to_owned()),
+        Some(ValueType::Boolean) => match s.to_ascii_lowercase().as_str() {
+            "true" | "1" => Ok("TRUE".to_owned()),
+            "false" | "0" => Ok("FALSE".to_owned()),
+            _ => Err("not an xs:boolean (true, false, 1 or 0)".to_owned()),
+        },
+        Some(ValueType::String) => {
+            if s.contains('"') {
+                Err("a string value must not contain `\"`".to_owned())
+            } else if s.contains(['\n', '\r']) {
+                Err("a string value must not contain a line break".to_owned())
+            } else if !s.is_ascii() {
+                Err("non-ASCII character in a string value (KRL code is ASCII)".to_owned())
+            } else if s.chars().any(|c| c.is_ascii_control()) {
+                Err("a string value must not contain control characters".to_owned())
+            } else {
+                Ok(format!("\"{s}\""))
+            }
+        }
+        Some(t) => Err(format!("not an {}", t.xs_name())),
+        None => {
+            if is_safe_token(s) {
+                Ok(s.to_owned())
+            } else if !s.is_ascii() {
+                Err("non-ASCII character in a value (KRL code is ASCII)".to_owned())
+            } else {
+                Err("an untyped value must be one KRL token (a number, a name, TRUE/FALSE, #ENUM or a \"string\"); give the parameter an AttributeDataType".to_owned())
+            }
+        }
+    }
+}
+
+fn is_integer(s: &str) -> bool {
+    let d = s.strip_prefix(['+', '-']).unwrap_or(s);
+    !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit())
+}
+
+/// A decimal number, with an optional exponent when `exp` is set.
+fn is_number(s: &str, exp: bool) -> bool {
+    let b = s.strip_prefix(['+', '-']).unwrap_or(s).as_bytes();
+    let mut i = 0;
+    let int_start = i;
+    while i < b.len() && b[i].is_ascii_digit() {
+        i += 1;
+    }
+    let int_digits = i - int_start;
+    let mut frac_digits = 0;
+    if i < b.len() && b[i] == b'.' {
+        i += 1;
+        let f = i;
+        while i < b.len() && b[i].is_ascii_digit() {
+            i += 1;
+        }
+        frac_digits = i - f;
+    }
+    if int_digits + frac_digits == 0 {
+        return false;
+    }
+    if exp && i < b.len() && (b[i] == b'e' || b[i] == b'E') {
+        i += 1;
+        if i < b.len() && (b[i] == b'+' || b[i] == b'-') {
+            i += 1;
+        }
+        let e = i;
+        while i < b.len() && b[i].is_ascii_digit() {
+            i += 1;
+        }
+        if i == e {
+            return false;
+        }
+    }
+    i == b.len()
+}
+
+fn is_ident(s: &str) -> bool {
+    let b = s.as_bytes();
+    !b.is_empty()
+        && (b[0].is_ascii_alphabetic() || b[0] == b'_')
+        && b.iter().all(|c| c.is_ascii_alphanumeric() || *c == b'_')
+}
+
+/// One safe KRL token: a number, a name (a system variable `$NAME` too), `TRUE`/`FALSE`, an enum
+/// `#NAME`, or a string literal without quotes or line breaks inside.
+pub fn is_safe_token(s: &str) -> bool {
+    if is_number(s, true) || is_ident(s) {
+        return true;
+    }
+    if let Some(rest) = s.strip_prefix('$').or_else(|| s.strip_prefix('#')) {
+        return is_ident(rest);
+    }
+    if s.len() >= 2 && s.starts_with('"') && s.ends_with('"') {
+        let inner = &s[1..s.len() - 1];
+        return inner.is_ascii()
+            && !inner.contains('"')
+            && !inner.chars().any(|c| c.is_ascii_control());
+    }
+    false
+}
+
+/// Prepares a skill's calls: functions, IRL commands, overloads and parameter fit. Reports
+/// problems once per skill; `None` when the skill cannot be rendered.
+fn prepare(
+    bb: &Blackboard,
+    res: usize,
+    sk: usize,
+    irls: &[Irl],
+    fn_irl: &HashMap<(usize, usize), usize>,
+    diags: &mut Diagnostics,
+) -> Option<Prepared> {
+    let resource = &bb.resources[res];
+    let skill = &resource.skills[sk];
+    if !skill.defects.is_empty() {
+        return None; // reported by resolve
+    }
+    let mut ok = true;
+    let mut calls = Vec::new();
+    for m in &skill.mappings {
+        let Some(fi) = resource.function(&m.function.key) else {
+            ok = false; // reported by needed_functions
+            continue;
+        };
+        let f = &resource.functions[fi];
+        let Some(&irl_i) = fn_irl.get(&(res, fi)) else {
+            ok = false; // the IRL file could not be read or parsed: reported
+            continue;
+        };
+        let irl = &irls[irl_i];
+        let irl_span = Span::new(irl.file, 0..0);
+        let candidates: Vec<usize> = (0..irl.calls.len())
+            .filter(|&c| irl.calls[c].name.key == f.command.key)
+            .collect();
+        if candidates.is_empty() {
+            diags.push(
+                Diagnostic::error(
+                    Code::UnknownCommand,
+                    format!(
+                        "function `{}`: its IRL file has no function-call `{}`",
+                        f.name.text, f.command.text
+                    ),
+                )
+                .at(f.command.span.clone())
+                .related(irl_span, "the IRL file"),
+            );
+            ok = false;
+            continue;
+        }
+        let mut wanted: Vec<&str> = m
+            .args
+            .iter()
+            .map(|a| a.function_param.key.as_str())
+            .collect();
+        wanted.sort_unstable();
+        wanted.dedup();
+        let fits = |c: usize| {
+            let mut have: Vec<&str> = irl.calls[c].params.iter().map(|p| p.key.as_str()).collect();
+            have.sort_unstable();
+            have == wanted
+        };
+        let chosen = candidates
+            .iter()
+            .copied()
+            .find(|&c| fits(c))
+            .or(if candidates.len() == 1 {
+                Some(candidates[0])
+            } else {
+                None
+            });
+        let Some(ci) = chosen else {
+            let shapes: Vec<String> = candidates
+                .iter()
+                .map(|&c| {
+                    let ps: Vec<&str> = irl.calls[c]
+                        .params
+                        .iter()
+                        .map(|p| p.text.as_str())
+                        .collect();
+                    format!("({})", ps.join(", "))
+                })
+                .collect();
+            let mut d = Diagnostic::error(
+                Code::ParameterMismatch,
+                format!(
+                    "no overload of `{}` takes the mapped parameters ({}); the IRL file has {}",
+                    f.command.text,
+                    m.args
+                        .iter()
+                        .map(|a| a.function_param.text.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    shapes.join(", ")
+                ),
+            )
+            .at(m.span.clone());
+            for &c in &candidates {
+                d = d.related(irl.calls[c].span.clone(), "an overload");
+            }
+            diags.push(d);
+            ok = false;
+            continue;
+        };
+        let call = &irl.calls[ci];
+        let mut args = vec![usize::MAX; call.params.len()];
+        for a in &m.args {
+            let Some(pi) = skill.param(&a.skill_param.key) else {
+                ok = false; // reported by the reader
+                continue;
+            };
+            match call
+                .params
+                .iter()
+                .position(|p| p.key == a.function_param.key)
+            {
+                Some(ti) => args[ti] = pi,
+                None => {
+                    diags.push(
+                        Diagnostic::error(
+                            Code::ParameterMismatch,
+                            format!(
+                                "mapping fills parameter `{}` of `{}`, which its IRL template does not have (it has {})",
+                                a.function_param.text,
+                                call.name.text,
+                                known(call.params.iter().map(|p| p.text.as_str()))
+                            ),
+                        )
+                        .at(a.function_param.span.clone())
+                        .related(call.span.clone(), "the IRL template"),
+                    );
+                    ok = false;
+                }
+            }
+            let p = &skill.params[pi];
+            if !p.leaf {
+                diags.push(
+                    Diagnostic::error(
+                        Code::BadIndex,
+                        format!(
+                            "mapping fills `{}` with skill parameter `{}`, which is a list (it has nested parameters); map its items",
+                            a.function_param.text, p.path.text
+                        ),
+                    )
+                    .at(a.skill_param.span.clone()),
+                );
+                ok = false;
+            }
+        }
+        for (ti, &pi) in args.iter().enumerate() {
+            if pi == usize::MAX {
+                diags.push(
+                    Diagnostic::error(
+                        Code::ParameterMismatch,
+                        format!(
+                            "parameter `{}` of IRL template `{}` is not filled by the mapping of skill `{}`",
+                            call.params[ti].text, call.name.text, skill.name.text
+                        ),
+                    )
+                    .at(m.span.clone())
+                    .related(call.params[ti].span.clone(), "the template parameter"),
+                );
+                ok = false;
+            }
+        }
+        calls.push(PreparedCall {
+            irl: irl_i,
+            call: ci,
+            args,
+        });
+    }
+    ok.then_some(Prepared { calls })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn typed_values() {
+        use ValueType::*;
+        assert_eq!(typed_token("1.5e3", Some(Double)).unwrap(), "1.5e3");
+        assert_eq!(typed_token("-.5", Some(Double)).unwrap(), "-.5");
+        assert!(typed_token("1.5e", Some(Double)).is_err());
+        assert!(typed_token("1e3", Some(Decimal)).is_err());
+        assert_eq!(typed_token("+12", Some(Integer)).unwrap(), "+12");
+        assert!(typed_token("1.0", Some(Integer)).is_err());
+        assert_eq!(typed_token("True", Some(Boolean)).unwrap(), "TRUE");
+        assert_eq!(typed_token("0", Some(Boolean)).unwrap(), "FALSE");
+        assert!(typed_token("yes", Some(Boolean)).is_err());
+        assert_eq!(typed_token("abc def", Some(String)).unwrap(), "\"abc def\"");
+        assert!(typed_token("a\"b", Some(String)).is_err());
+        assert!(typed_token("a\nb", Some(String)).is_err());
+    }
+
+    #[test]
+    fn untyped_values_must_be_one_token() {
+        for ok in [
+            "12",
+            "-1.5",
+            "NAME_1",
+            "TRUE",
+            "#BASE",
+            "$POS_ACT",
+            "\"text ok\"",
+        ] {
+            assert!(is_safe_token(ok), "{ok}");
+        }
+        for bad in [
+            "1; PTP HOME",
+            "a b",
+            "x\nEND",
+            "\"a\"b\"",
+            "}",
+            "",
+            "1)",
+            "\"unterminated",
+            "Grüße",
+        ] {
+            assert!(!is_safe_token(bad), "{bad}");
+        }
+    }
+}

@@ -1,0 +1,243 @@
+//! The command line (SPEC.md section 6): parses arguments, runs the compiler, prints diagnostics
+//! and listings, writes outputs, and maps the result to an exit status (0 success, 1 the inputs
+//! have errors, 2 usage or I/O failure).
+
+use std::ffi::OsString;
+use std::io::{IsTerminal, Write};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Parser;
+
+use crate::compile::{self, Compilation, Options};
+use crate::diag::{self, Format};
+use crate::load::FsSource;
+
+/// skillpost: AutomationML blackboard + PLCopen SFC + IRL snippets -> KUKA KRL (.src/.dat)
+#[derive(Debug, Parser)]
+#[command(
+    name = "skillpost",
+    version,
+    disable_version_flag = true,
+    override_usage = "skillpost [OPTIONS] <BLACKBOARD> <PROGRAM>\n       skillpost --sfc [OPTIONS] <SFC>\n       skillpost --info [<BLACKBOARD>]",
+    after_help = "Exit status: 0 success (warnings allowed), 1 the inputs have errors, 2 usage or I/O failure."
+)]
+struct Args {
+    /// BLACKBOARD and PROGRAM (compile); SFC (with --sfc); optional BLACKBOARD (with --info)
+    #[arg(value_name = "FILES")]
+    inputs: Vec<PathBuf>,
+    /// Print the version and build; with a blackboard, the skills of each resource and the SFC
+    /// variables each needs
+    #[arg(long)]
+    info: bool,
+    /// Show warnings
+    #[arg(long)]
+    warn: bool,
+    /// Read and check everything, write nothing (implies --warn)
+    #[arg(long)]
+    validate: bool,
+    /// Check an SFC file on its own (implies --validate)
+    #[arg(long)]
+    sfc: bool,
+    /// Print: B the blackboard, S the SFC objects, F the flow with times, O (or 0) the execution
+    /// order; repeatable (-pB -pS -pF -pO)
+    #[arg(short = 'p', value_name = "B|S|F|O", action = clap::ArgAction::Append,
+          value_parser = ["B", "S", "F", "O", "0", "b", "s", "f", "o"])]
+    print: Vec<String>,
+    /// How diagnostics are printed: human (stderr), short (stderr), json (one object per line,
+    /// stdout)
+    #[arg(long, value_enum, default_value_t = Format::Human)]
+    format: Format,
+    /// Write LF line endings instead of CRLF
+    #[arg(long)]
+    lf: bool,
+    /// Use this output template instead of the built-in one (see templates/krl.toml)
+    #[arg(long, value_name = "FILE")]
+    template: Option<PathBuf>,
+    /// Print version
+    #[arg(long, action = clap::ArgAction::Version)]
+    version: Option<bool>,
+}
+
+/// Runs the command line; returns the exit status.
+pub fn main(args: impl IntoIterator<Item = OsString>) -> ExitCode {
+    let args = match Args::try_parse_from(args) {
+        Ok(a) => a,
+        Err(e) => {
+            let _ = e.print();
+            return ExitCode::from(if e.use_stderr() { 2 } else { 0 });
+        }
+    };
+    ExitCode::from(run(args))
+}
+
+fn usage(msg: &str) -> u8 {
+    eprintln!(
+        "error: {msg}\n\nUsage: skillpost [OPTIONS] <BLACKBOARD> <PROGRAM>\n       skillpost --sfc [OPTIONS] <SFC>\n       skillpost --info [<BLACKBOARD>]\n\nFor more information, try '--help'."
+    );
+    2
+}
+
+fn run(a: Args) -> u8 {
+    let fs = FsSource::default();
+    let print = |c: char| {
+        a.print
+            .iter()
+            .any(|p| p.eq_ignore_ascii_case(&c.to_string()) || (c == 'O' && p == "0"))
+    };
+    let warnings = a.warn || a.validate || a.sfc;
+    let mut stdout = std::io::stdout().lock();
+
+    if a.info {
+        if a.inputs.len() > 1 {
+            return usage("--info takes at most one argument, the blackboard");
+        }
+        let Some(bb) = a.inputs.first() else {
+            let _ = write!(stdout, "{}", crate::print::info(None));
+            return 0;
+        };
+        // Read only the blackboard: no SFC or IRL files are needed to list skills.
+        let mut sources = diag::Sources::default();
+        let mut diags = diag::Diagnostics::default();
+        let file = crate::read::xml::load(
+            &fs,
+            bb,
+            bb.display().to_string(),
+            None,
+            &mut sources,
+            &mut diags,
+        );
+        let model =
+            file.and_then(|f| crate::read::blackboard::read_blackboard(&sources, f, &mut diags));
+        let _ = write!(stdout, "{}", crate::print::info(model.as_ref()));
+        let list = diags.into_vec();
+        report(&list, &sources, a.format, warnings);
+        return if file.is_none() && sources.find(bb).is_none() {
+            2
+        } else if list.iter().any(|d| d.severity == diag::Severity::Error) {
+            1
+        } else {
+            0
+        };
+    }
+
+    if a.sfc {
+        let [path] = a.inputs.as_slice() else {
+            return usage("--sfc takes one argument, the SFC file");
+        };
+        let c = compile::check_sfc(&fs, path);
+        print_listings(&c, &print, &mut stdout);
+        report(&c.diagnostics, &c.sources, a.format, warnings);
+        return status(&c, "SFC validation successful!", a.format);
+    }
+
+    let [blackboard, program] = a.inputs.as_slice() else {
+        return usage("expected a blackboard and a program name");
+    };
+    let opts = Options {
+        program: program.to_string_lossy().into_owned(),
+        lf: a.lf,
+        template: a.template.clone(),
+        confine_to: None,
+    };
+    let c = compile::compile(&fs, blackboard, &opts);
+    print_listings(&c, &print, &mut stdout);
+    report(&c.diagnostics, &c.sources, a.format, warnings);
+    if c.io_failure {
+        return 2;
+    }
+    if c.has_errors() {
+        return status(&c, "", a.format);
+    }
+    if a.validate {
+        return status(&c, "Input validation successful!", a.format);
+    }
+    match compile::apply(&c) {
+        Ok(applied) => {
+            for (path, written) in &applied.outputs {
+                eprintln!(
+                    "{} {}",
+                    if *written { "wrote" } else { "unchanged" },
+                    path.display()
+                );
+            }
+            use crate::write::WriteBackOutcome as W;
+            match (&applied.write_back, &c.write_back) {
+                (Some(W::Written), Some(wb)) => {
+                    eprintln!("wrote back `{}` into {}", wb.value, wb.blackboard.display())
+                }
+                (Some(W::AlreadyRight), _) => {}
+                (Some(W::SkippedChangedOnDisk), Some(wb)) => eprintln!(
+                    "warning: {} changed on disk while compiling; the write-back of `{}` was skipped (run again)",
+                    wb.blackboard.display(),
+                    wb.value
+                ),
+                _ => {}
+            }
+            0
+        }
+        Err(e) => {
+            eprintln!("error: cannot write: {e}");
+            2
+        }
+    }
+}
+
+fn print_listings(c: &Compilation, print: &dyn Fn(char) -> bool, out: &mut impl Write) {
+    if print('B')
+        && let Some(bb) = &c.blackboard
+    {
+        let _ = writeln!(out, "{}", crate::print::blackboard(bb));
+    }
+    if print('S')
+        && let Some(sfc) = &c.sfc
+    {
+        let _ = writeln!(out, "{}", crate::print::sfc(sfc));
+    }
+    if let (Some(sfc), Some(plan)) = (&c.sfc, &c.plan) {
+        if print('F') {
+            let _ = writeln!(out, "{}", crate::print::flow(sfc, plan));
+        }
+        if print('O') {
+            let _ = writeln!(out, "{}", crate::print::order(sfc, plan));
+        }
+    }
+}
+
+fn report(list: &[diag::Diagnostic], sources: &diag::Sources, format: Format, warnings: bool) {
+    let color = format == Format::Human && std::io::stderr().is_terminal();
+    let text = diag::render(list, sources, format, warnings, color);
+    if text.is_empty() {
+        return;
+    }
+    if format == Format::Json {
+        let _ = std::io::stdout().lock().write_all(text.as_bytes());
+    } else {
+        let _ = std::io::stderr().lock().write_all(text.as_bytes());
+    }
+}
+
+fn status(c: &Compilation, ok_message: &str, format: Format) -> u8 {
+    if c.io_failure {
+        return 2;
+    }
+    let errors = c
+        .diagnostics
+        .iter()
+        .filter(|d| d.severity == diag::Severity::Error)
+        .count();
+    if errors > 0 {
+        if format != Format::Json {
+            eprintln!(
+                "error: {errors} error{} found; nothing was written",
+                if errors == 1 { "" } else { "s" }
+            );
+        }
+        1
+    } else {
+        if !ok_message.is_empty() {
+            eprintln!("{ok_message}");
+        }
+        0
+    }
+}

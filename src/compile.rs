@@ -1,0 +1,362 @@
+//! The whole pipeline for one project: read → plan → bind → emit, with every file read through a
+//! [`FileSource`]. [`compile`] does no writing; [`apply`] writes the outputs and the write-back.
+
+use std::collections::HashMap;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use crate::bind;
+use crate::diag::{Code, Diagnostic, Diagnostics, Sources, Span};
+use crate::emit::krl::OutputTemplate;
+use crate::emit::{EmitInput, OutputFile};
+use crate::load::FileSource;
+use crate::model::{Blackboard, Irl, Sfc};
+use crate::plan::{self, Plan};
+use crate::read::{self, blackboard::read_blackboard, irl::read_irl, sfc::read_sfc, xml};
+
+/// What to compile and how.
+#[derive(Debug, Clone, Default)]
+pub struct Options {
+    /// The program name (`<PROGRAM>`): the output files' stem and the `DEF` name.
+    pub program: String,
+    /// LF line endings instead of CRLF.
+    pub lf: bool,
+    /// A user output template instead of the built-in one.
+    pub template: Option<PathBuf>,
+    /// Refuse references that leave this folder (the daemon's project folder).
+    pub confine_to: Option<PathBuf>,
+}
+
+/// The write-back to do after a successful compile.
+#[derive(Debug, Clone)]
+pub struct WriteBack {
+    pub blackboard: PathBuf,
+    /// The blackboard's bytes as read (BOM included).
+    pub expected: Vec<u8>,
+    pub bom: bool,
+    /// The refURI `Attribute` element's range in the text after the BOM.
+    pub attribute: Range<usize>,
+    /// The value to write: the `.src` path relative to the blackboard, with `/`.
+    pub value: String,
+}
+
+/// Everything a compile produced.
+#[derive(Debug, Default)]
+pub struct Compilation {
+    pub sources: Sources,
+    /// Sorted by file and position.
+    pub diagnostics: Vec<Diagnostic>,
+    /// Every file the compile asked for, read or not (the daemon watches these).
+    pub files_read: Vec<PathBuf>,
+    /// Set when the blackboard itself could not be read (an I/O failure, exit status 2).
+    pub io_failure: bool,
+    /// The outputs to write, with their paths; empty when there are errors.
+    pub outputs: Vec<(PathBuf, OutputFile)>,
+    pub write_back: Option<WriteBack>,
+    pub blackboard: Option<Blackboard>,
+    pub sfc: Option<Sfc>,
+    pub plan: Option<Plan>,
+    pub irls: Vec<Irl>,
+    /// Skill steps that produce code.
+    pub skill_steps: usize,
+}
+
+impl Compilation {
+    pub fn has_errors(&self) -> bool {
+        self.diagnostics
+            .iter()
+            .any(|d| d.severity == crate::diag::Severity::Error)
+    }
+}
+
+/// Records every path asked for.
+struct Recorder<'a> {
+    fs: &'a dyn FileSource,
+    read: std::cell::RefCell<Vec<PathBuf>>,
+}
+
+impl FileSource for Recorder<'_> {
+    fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
+        let mut r = self.read.borrow_mut();
+        if !r.iter().any(|p| p == path) {
+            r.push(path.to_owned());
+        }
+        drop(r);
+        self.fs.read(path)
+    }
+}
+
+struct Ctx<'a> {
+    fs: Recorder<'a>,
+    sources: Sources,
+    diags: Diagnostics,
+    base: PathBuf,
+    confine: Option<PathBuf>,
+}
+
+impl Ctx<'_> {
+    /// Resolves a `refURI` and loads the file; errors are located at the reference.
+    fn load_ref(&mut self, value: &str, at: &Span) -> Option<crate::diag::FileId> {
+        let path = match read::resolve_ref(&self.base, value) {
+            Ok(p) => p,
+            Err(why) => {
+                self.diags.push(
+                    Diagnostic::error(Code::BadRefUri, format!("bad refURI: {why}")).at(at.clone()),
+                );
+                return None;
+            }
+        };
+        if let Some(root) = &self.confine
+            && !read::normalize(&absolute(&path)).starts_with(root)
+        {
+            self.diags.push(
+                Diagnostic::error(
+                    Code::BadRefUri,
+                    format!(
+                        "refURI `{value}` leaves the project folder `{}`; the configuration does not allow that",
+                        root.display()
+                    ),
+                )
+                .at(at.clone()),
+            );
+            return None;
+        }
+        let display = path.display().to_string();
+        xml::load(
+            &self.fs,
+            &path,
+            display,
+            Some(at.clone()),
+            &mut self.sources,
+            &mut self.diags,
+        )
+    }
+}
+
+fn absolute(p: &Path) -> PathBuf {
+    if p.is_absolute() {
+        p.to_owned()
+    } else {
+        std::env::current_dir()
+            .map(|d| d.join(p))
+            .unwrap_or_else(|_| p.to_owned())
+    }
+}
+
+/// Compiles one project. Never writes; see [`apply`].
+pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compilation {
+    let base = blackboard.parent().map(Path::to_owned).unwrap_or_default();
+    let mut cx = Ctx {
+        fs: Recorder {
+            fs,
+            read: Default::default(),
+        },
+        sources: Sources::default(),
+        diags: Diagnostics::default(),
+        base,
+        confine: opts
+            .confine_to
+            .as_ref()
+            .map(|p| read::normalize(&absolute(p))),
+    };
+    let mut out = Compilation::default();
+
+    if !crate::names::is_krl_name(&opts.program) {
+        cx.diags.push(Diagnostic::error(
+            Code::BadProgramName,
+            format!(
+                "program name `{}` is not a KRL name: a letter or `_`, then letters, digits or `_`, at most 24 characters",
+                opts.program
+            ),
+        ));
+    }
+
+    let bb_file = xml::load(
+        &cx.fs,
+        blackboard,
+        blackboard.display().to_string(),
+        None,
+        &mut cx.sources,
+        &mut cx.diags,
+    );
+    let Some(bb_file) = bb_file else {
+        out.io_failure = cx.sources.find(blackboard).is_none();
+        return finish(cx, out);
+    };
+    let Some(bb) = read_blackboard(&cx.sources, bb_file, &mut cx.diags) else {
+        return finish(cx, out);
+    };
+
+    // The output template.
+    let template = match &opts.template {
+        None => Some(OutputTemplate::builtin()),
+        Some(p) => xml::load(
+            &cx.fs,
+            p,
+            p.display().to_string(),
+            None,
+            &mut cx.sources,
+            &mut cx.diags,
+        )
+        .and_then(|f| OutputTemplate::parse(&cx.sources, f, &mut cx.diags)),
+    };
+
+    // The SFC and its plan.
+    let sfc = bb
+        .sfc_ref
+        .clone()
+        .and_then(|r| cx.load_ref(&r.value, &r.span))
+        .and_then(|f| read_sfc(&cx.sources, f, &mut cx.diags));
+    let plan = sfc.as_ref().and_then(|s| plan::plan(s, &mut cx.diags));
+
+    // Bind, loading the IRL files the used skills need.
+    let mut irls: Vec<Irl> = Vec::new();
+    if let (Some(sfc), Some(plan)) = (&sfc, &plan) {
+        let res = bind::resolve(&bb, sfc, plan, &mut cx.diags);
+        let needed = bind::needed_functions(&bb, &res, &mut cx.diags);
+        let mut fn_irl: HashMap<(usize, usize), usize> = HashMap::new();
+        let mut by_file: HashMap<crate::diag::FileId, Option<usize>> = HashMap::new();
+        for (r, f) in needed {
+            let func = &bb.resources[r].functions[f];
+            let Some(file) = cx.load_ref(&func.irl.value, &func.irl.span) else {
+                continue;
+            };
+            let idx = *by_file.entry(file).or_insert_with(|| {
+                read_irl(&cx.sources, file, &mut cx.diags).map(|irl| {
+                    irls.push(irl);
+                    irls.len() - 1
+                })
+            });
+            if let Some(i) = idx {
+                fn_irl.insert((r, f), i);
+            }
+        }
+        let bound = bind::bind(&bb, sfc, plan, &res, &irls, &fn_irl, &mut cx.diags);
+        out.skill_steps = bound.steps.iter().filter(|s| s.is_some()).count();
+        if !cx.diags.has_errors()
+            && let Some(template) = &template
+        {
+            let input = EmitInput {
+                program: &opts.program,
+                blackboard: &bb,
+                sfc,
+                plan,
+                bound: &bound,
+                irls: &irls,
+                newline: if opts.lf { "\n" } else { "\r\n" },
+            };
+            if let Some(files) = crate::emit::krl::emit(&input, template, &mut cx.diags) {
+                out.outputs = files
+                    .into_iter()
+                    .map(|f| {
+                        let name = format!("{}.{}", opts.program, f.extension);
+                        (cx.base.join(name), f)
+                    })
+                    .collect();
+            }
+        }
+    }
+
+    if !cx.diags.has_errors()
+        && let Some(wb) = &bb.write_back
+    {
+        let src = cx.sources.get(bb_file);
+        let mut expected = Vec::with_capacity(src.text.len() + 3);
+        if src.bom {
+            expected.extend_from_slice(b"\xEF\xBB\xBF");
+        }
+        expected.extend_from_slice(src.text.as_bytes());
+        out.write_back = Some(WriteBack {
+            blackboard: blackboard.to_owned(),
+            expected,
+            bom: src.bom,
+            attribute: wb.attribute.range.clone(),
+            value: format!("{}.src", opts.program),
+        });
+    }
+    out.blackboard = Some(bb);
+    out.sfc = sfc;
+    out.plan = plan;
+    out.irls = irls;
+    finish(cx, out)
+}
+
+/// Checks an SFC file on its own (`--sfc`): read and plan, no blackboard.
+pub fn check_sfc(fs: &dyn FileSource, path: &Path) -> Compilation {
+    let mut cx = Ctx {
+        fs: Recorder {
+            fs,
+            read: Default::default(),
+        },
+        sources: Sources::default(),
+        diags: Diagnostics::default(),
+        base: PathBuf::new(),
+        confine: None,
+    };
+    let mut out = Compilation::default();
+    let file = xml::load(
+        &cx.fs,
+        path,
+        path.display().to_string(),
+        None,
+        &mut cx.sources,
+        &mut cx.diags,
+    );
+    let Some(file) = file else {
+        out.io_failure = cx.sources.find(path).is_none();
+        return finish(cx, out);
+    };
+    out.sfc = read_sfc(&cx.sources, file, &mut cx.diags);
+    out.plan = out.sfc.as_ref().and_then(|s| plan::plan(s, &mut cx.diags));
+    finish(cx, out)
+}
+
+fn finish(cx: Ctx, mut out: Compilation) -> Compilation {
+    let mut diags = cx.diags;
+    diags.sort();
+    out.diagnostics = diags.into_vec();
+    out.sources = cx.sources;
+    out.files_read = cx.fs.read.into_inner();
+    if out.has_errors() {
+        out.outputs.clear();
+        out.write_back = None;
+    }
+    out
+}
+
+/// What [`apply`] did.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Applied {
+    /// Each output path and whether it was (re)written.
+    pub outputs: Vec<(PathBuf, bool)>,
+    pub write_back: Option<crate::write::WriteBackOutcome>,
+}
+
+/// Writes the outputs (atomically, only when their bytes change), then the write-back.
+pub fn apply(c: &Compilation) -> std::io::Result<Applied> {
+    let mut outputs = Vec::new();
+    for (path, f) in &c.outputs {
+        let o = crate::write::write_if_changed(path, f.text.as_bytes())
+            .map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", path.display())))?;
+        outputs.push((path.clone(), o == crate::write::WriteOutcome::Written));
+    }
+    let write_back = match &c.write_back {
+        Some(wb) => Some(
+            crate::write::write_back(
+                &wb.blackboard,
+                &wb.expected,
+                wb.bom,
+                wb.attribute.clone(),
+                &wb.value,
+            )
+            .map_err(|e| {
+                std::io::Error::new(e.kind(), format!("{}: {e}", wb.blackboard.display()))
+            })?,
+        ),
+        None => None,
+    };
+    Ok(Applied {
+        outputs,
+        write_back,
+    })
+}

@@ -1,0 +1,260 @@
+//! The listings of the original's print options: `-pB` (blackboard), `-pS` (SFC objects), `-pF`
+//! (flow with parallel branches and times), `-pO` (execution order), and `--info`.
+//!
+//! Each returns a `String`; the command line prints it. The layout follows the original's
+//! console output (see `docs/CLI.md`), with localIds everywhere.
+
+use std::fmt::Write as _;
+
+use crate::model::{Blackboard, ElementKind, Sfc, Value};
+use crate::plan::{Block, Plan};
+
+/// `-pB`: resources, their skills with the calls they map, and functions with their IRL files.
+pub fn blackboard(bb: &Blackboard) -> String {
+    let mut o = String::new();
+    for r in &bb.resources {
+        let _ = writeln!(o, "{:<23} {}", r.name.text, r.id.as_deref().unwrap_or(""));
+        let mut skills: Vec<_> = r.skills.iter().collect();
+        skills.sort_by(|a, b| a.name.key.cmp(&b.name.key));
+        for s in skills {
+            let _ = writeln!(
+                o,
+                "        (Skill) {:<41} {}",
+                s.name.text,
+                s.id.as_deref().unwrap_or("")
+            );
+            for m in &s.mappings {
+                let args: Vec<&str> = m.args.iter().map(|a| a.skill_param.text.as_str()).collect();
+                let _ = writeln!(
+                    o,
+                    "                -> {} ({})   [order {}]",
+                    m.function.text,
+                    args.join(", "),
+                    m.order
+                );
+            }
+        }
+        let mut funcs: Vec<_> = r.functions.iter().collect();
+        funcs.sort_by(|a, b| a.name.key.cmp(&b.name.key));
+        for f in funcs {
+            let _ = writeln!(
+                o,
+                "        (Func)  {:<41} {}",
+                f.name.text,
+                f.id.as_deref().unwrap_or("")
+            );
+            let _ = writeln!(
+                o,
+                "                -> IRL-File:  \t{}   (command {})",
+                f.irl.value, f.command.text
+            );
+        }
+    }
+    o
+}
+
+fn value_text(v: &Value) -> String {
+    match v {
+        Value::Scalar(s) => s.clone(),
+        Value::List(items) => {
+            let inner: Vec<String> = items.iter().map(value_text).collect();
+            format!("[ {} ]", inner.join(", "))
+        }
+    }
+}
+
+/// `-pS`: the file header, then every SFC object with its connections.
+pub fn sfc(sfc: &Sfc) -> String {
+    let mut o = String::new();
+    let h = &sfc.header;
+    let parts: Vec<&str> = [
+        &h.company_name,
+        &h.product_name,
+        &h.product_version,
+        &h.creation_date_time,
+    ]
+    .iter()
+    .map(|v| v.as_deref().unwrap_or("?"))
+    .collect();
+    let _ = writeln!(o, "{}", parts.join(", "));
+    let mut succs: std::collections::HashMap<u64, Vec<u64>> = Default::default();
+    for e in &sfc.elements {
+        for (r, _) in &e.inputs {
+            succs.entry(*r).or_default().push(e.local_id);
+        }
+    }
+    let ids = |v: Option<&Vec<u64>>| match v {
+        Some(v) if !v.is_empty() => v.iter().map(u64::to_string).collect::<Vec<_>>().join(", "),
+        _ => "(?)".to_owned(),
+    };
+    for e in &sfc.elements {
+        let ins: Vec<u64> = e.inputs.iter().map(|(r, _)| *r).collect();
+        let conn = format!(
+            "{} -> [ {} ] -> {}",
+            ids(Some(&ins)),
+            e.local_id,
+            ids(succs.get(&e.local_id))
+        );
+        match &e.kind {
+            ElementKind::Step(st) => {
+                let _ = writeln!(
+                    o,
+                    "Step: {}     {}",
+                    if st.initial { "*" } else { " " },
+                    st.name
+                );
+                let _ = writeln!(o, "            {conn}");
+                let _ = writeln!(
+                    o,
+                    "            Duration:   {} seconds",
+                    st.duration.unwrap_or(0.0)
+                );
+                if let Some(r) = &st.resource {
+                    let _ = writeln!(o, "            Resource:   {}", r.text);
+                }
+                if let Some(s) = &st.skill {
+                    let _ = writeln!(o, "            Skill:      {}", s.text);
+                }
+                for v in &st.variables {
+                    let kind = match v.value {
+                        Value::Scalar(_) => "(Value)",
+                        Value::List(_) => "(List) ",
+                    };
+                    let _ = writeln!(
+                        o,
+                        "            {:<19} {kind}    = {}",
+                        format!("{}:", v.name.text.to_uppercase()),
+                        value_text(&v.value)
+                    );
+                }
+            }
+            k => {
+                let _ = writeln!(o, "Transition  ({})", k.tag());
+                let _ = writeln!(o, "            {conn}");
+            }
+        }
+    }
+    o
+}
+
+fn step_name(sfc: &Sfc, i: usize) -> &str {
+    match &sfc.elements[i].kind {
+        ElementKind::Step(s) => &s.name,
+        _ => "",
+    }
+}
+
+fn duration(sfc: &Sfc, i: usize) -> f64 {
+    match &sfc.elements[i].kind {
+        ElementKind::Step(s) => s.duration.unwrap_or(0.0),
+        _ => 0.0,
+    }
+}
+
+/// `-pF`: the flow as a pseudo-graphic: one line per step with its start time and duration;
+/// simultaneous branches drawn as `{ | … + | … }`. A block of branches ends when its longest
+/// branch ends (they run in parallel in the plan, even though one robot runs them in turn).
+pub fn flow(sfc: &Sfc, plan: &Plan) -> String {
+    fn walk(sfc: &Sfc, blocks: &[Block], t: f64, indent: &str, o: &mut String) -> f64 {
+        let mut t = t;
+        for b in blocks {
+            match b {
+                Block::Step(i) => {
+                    let d = duration(sfc, *i);
+                    let _ = writeln!(
+                        o,
+                        "{indent}id={:>4}, [@{:<6} + {:>6}], {}",
+                        sfc.elements[*i].local_id,
+                        fmt_num(t),
+                        fmt_num(d),
+                        step_name(sfc, *i)
+                    );
+                    t += d;
+                }
+                Block::Parallel { branches, .. } => {
+                    let _ = writeln!(o, "{indent}{{");
+                    let inner = format!("{indent} | ");
+                    let mut end = t;
+                    for (k, br) in branches.iter().enumerate() {
+                        if k > 0 {
+                            let _ = writeln!(o, "{indent} +");
+                        }
+                        end = end.max(walk(sfc, br, t, &inner, o));
+                    }
+                    let _ = writeln!(o, "{indent}}}");
+                    t = end;
+                }
+            }
+        }
+        t
+    }
+    let mut o = String::new();
+    let total = walk(sfc, &plan.body, 0.0, "", &mut o);
+    let _ = writeln!(o, "total: {} seconds", fmt_num(total));
+    o
+}
+
+fn fmt_num(x: f64) -> String {
+    let s = format!("{x:.3}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s.is_empty() {
+        "0".to_owned()
+    } else {
+        s.to_owned()
+    }
+}
+
+/// `-pO`: the execution order, one step per line with its number and localId.
+pub fn order(sfc: &Sfc, plan: &Plan) -> String {
+    let mut o = String::new();
+    for (n, i) in plan.steps().into_iter().enumerate() {
+        let _ = writeln!(
+            o,
+            " #{} \t(id={}) \t{}",
+            n + 1,
+            sfc.elements[i].local_id,
+            step_name(sfc, i)
+        );
+    }
+    o
+}
+
+/// `--info`: version and build; with a blackboard, per resource the skills and the SFC
+/// variables each needs (the original printed a fixed list of step types here).
+pub fn info(bb: Option<&Blackboard>) -> String {
+    let mut o = String::new();
+    let _ = writeln!(
+        o,
+        "skillpost v{}, build: {} {}",
+        crate::VERSION,
+        std::env::consts::OS,
+        std::env::consts::ARCH
+    );
+    let _ = writeln!(o, "  Output profile: KUKA KRL (.src/.dat)");
+    let _ = writeln!(
+        o,
+        "  Step types: any; a step's variables come from its skill's SFC mapping"
+    );
+    if let Some(bb) = bb {
+        for r in &bb.resources {
+            let _ = writeln!(o, "{}", r.name.text);
+            if r.skills.is_empty() {
+                let _ = writeln!(o, "  (no skills)");
+            }
+            for s in &r.skills {
+                let vars = s.variables();
+                let _ = writeln!(
+                    o,
+                    "  {:<28} variables: {}",
+                    s.name.text,
+                    if vars.is_empty() {
+                        "none".to_owned()
+                    } else {
+                        vars.join(", ")
+                    }
+                );
+            }
+        }
+    }
+    o
+}

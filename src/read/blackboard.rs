@@ -1,0 +1,614 @@
+//! The AutomationML blackboard (CAEX 2.15 or 3.0): resources, skills, functions, mappings, and
+//! the SFC and write-back references (SPEC.md section 2).
+
+use roxmltree::Node;
+
+use super::xml::{caex_attr, caex_element, caex_name, caex_value, children, tag_span};
+use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
+use crate::model::{
+    Blackboard, Function, FunctionMapping, MappedArg, Name, Param, RefValue, Resource, Skill,
+    ValueType, WriteBackTarget,
+};
+use crate::names;
+
+/// Reads the blackboard. Returns `None` only when the document cannot be used at all (not XML,
+/// no hierarchy); otherwise a model with every problem reported in `diags`.
+pub fn read_blackboard(
+    sources: &Sources,
+    file: FileId,
+    diags: &mut Diagnostics,
+) -> Option<Blackboard> {
+    let doc = super::xml::parse(sources, file, diags)?;
+    let root = doc.root_element();
+    if root.tag_name().name() != "CAEXFile" {
+        diags.push(
+            Diagnostic::error(
+                Code::XmlWrongRoot,
+                format!(
+                    "not a CAEX file: the root element is `{}`, not `CAEXFile`",
+                    root.tag_name().name()
+                ),
+            )
+            .at(tag_span(file, root)),
+        );
+        return None;
+    }
+    let hierarchies: Vec<Node> = children(root, "InstanceHierarchy").collect();
+    let named: Vec<Node> = hierarchies
+        .iter()
+        .copied()
+        .filter(|h| caex_name(*h).is_some_and(|n| names::eq(n, "Blackboard")))
+        .collect();
+    let hierarchy = match (named.as_slice(), hierarchies.as_slice()) {
+        ([h], _) => *h,
+        ([h, ..], _) => {
+            diags.push(
+                Diagnostic::warning(
+                    Code::HierarchyNotNamed,
+                    "several InstanceHierarchies are named `Blackboard`; the first is used",
+                )
+                .at(tag_span(file, *h)),
+            );
+            *h
+        }
+        ([], [h]) => {
+            diags.push(
+                Diagnostic::warning(
+                    Code::HierarchyNotNamed,
+                    format!(
+                        "no InstanceHierarchy is named `Blackboard`; the only one, `{}`, is used",
+                        caex_name(*h).unwrap_or("")
+                    ),
+                )
+                .at(tag_span(file, *h)),
+            );
+            *h
+        }
+        ([], []) => {
+            diags.push(
+                Diagnostic::error(Code::NoHierarchy, "the blackboard has no InstanceHierarchy")
+                    .at(tag_span(file, root)),
+            );
+            return None;
+        }
+        ([], _) => {
+            diags.push(
+                Diagnostic::error(
+                    Code::NoHierarchy,
+                    format!(
+                        "no InstanceHierarchy is named `Blackboard`, and there are {}: which one is meant?",
+                        hierarchies.len()
+                    ),
+                )
+                .at(tag_span(file, root)),
+            );
+            return None;
+        }
+    };
+
+    let r = Reader { file, diags };
+    Some(r.hierarchy(hierarchy))
+}
+
+struct Reader<'d> {
+    file: FileId,
+    diags: &'d mut Diagnostics,
+}
+
+/// An `InternalElement` child of `parent` whose `Name` is one of `names`.
+fn internal_element<'a, 'i>(parent: Node<'a, 'i>, wanted: &[&str]) -> Option<Node<'a, 'i>> {
+    children(parent, "InternalElement")
+        .find(|e| caex_name(*e).is_some_and(|n| wanted.iter().any(|w| names::eq(n, w))))
+}
+
+fn ref_base_ends_with(node: Node, suffix: &str) -> bool {
+    node.attribute("RefBaseClassPath").is_some_and(|p| {
+        let p = p.trim();
+        p.len() >= suffix.len()
+            && p.is_char_boundary(p.len() - suffix.len())
+            && p[p.len() - suffix.len()..].eq_ignore_ascii_case(suffix)
+    })
+}
+
+fn ref_base_contains(node: Node, part: &str) -> bool {
+    node.attribute("RefBaseClassPath")
+        .is_some_and(|p| p.to_ascii_lowercase().contains(&part.to_ascii_lowercase()))
+}
+
+impl Reader<'_> {
+    fn span(&self, node: Node) -> Span {
+        tag_span(self.file, node)
+    }
+
+    fn name_of(&self, node: Node) -> Name {
+        let span = super::xml::attr_span(self.file, node, "Name");
+        Name::new(caex_name(node).unwrap_or(""), span)
+    }
+
+    fn hierarchy(mut self, h: Node) -> Blackboard {
+        let mut resources = Vec::new();
+        match internal_element(h, &["Ressourcen", "Resources"]) {
+            Some(res) => {
+                for r in children(res, "InternalElement") {
+                    resources.push(self.resource(r));
+                }
+                self.check_unique(resources.iter().map(|r| &r.name), "resource");
+            }
+            None => self.diags.push(
+                Diagnostic::error(
+                    Code::NoResources,
+                    "the blackboard has no `Ressourcen` (or `Resources`) element",
+                )
+                .at(self.span(h))
+                .element(caex_element(h)),
+            ),
+        }
+
+        let sfc_ref = self.sfc_reference(h);
+        let write_back = self.write_back(h);
+        Blackboard {
+            file: self.file,
+            resources,
+            sfc_ref,
+            write_back,
+        }
+    }
+
+    fn check_unique<'n>(&mut self, names: impl Iterator<Item = &'n Name>, what: &str) {
+        let mut seen: Vec<&Name> = Vec::new();
+        for n in names {
+            if let Some(first) = seen.iter().find(|s| s.key == n.key) {
+                self.diags.push(
+                    Diagnostic::error(
+                        Code::DuplicateName,
+                        format!("a second {what} named `{}`", n.text),
+                    )
+                    .at(n.span.clone())
+                    .related(first.span.clone(), "the first one"),
+                );
+            } else {
+                seen.push(n);
+            }
+        }
+    }
+
+    fn resource(&mut self, r: Node) -> Resource {
+        let name = self.name_of(r);
+        let mut skills = Vec::new();
+        if let Some(s) = internal_element(r, &["Skills"]) {
+            for sk in children(s, "InternalElement") {
+                skills.push(self.skill(sk));
+            }
+        }
+        self.check_unique(skills.iter().map(|s| &s.name), "skill");
+        let mut functions = Vec::new();
+        for fd in children(r, "InternalElement").filter(|e| {
+            caex_name(*e).is_some_and(|n| {
+                names::eq(n, "FunctionDescription") || names::eq(n, "FunctionDescriptions")
+            })
+        }) {
+            for f in children(fd, "InternalElement") {
+                if let Some(f) = self.function(f) {
+                    functions.push(f);
+                }
+            }
+        }
+        self.check_unique(functions.iter().map(|f| &f.name), "function");
+        Resource {
+            name,
+            id: r.attribute("ID").map(str::to_owned),
+            skills,
+            functions,
+        }
+    }
+
+    fn skill(&mut self, sk: Node) -> Skill {
+        let name = self.name_of(sk);
+        let mut params = Vec::new();
+        let mut defects = Vec::new();
+        for a in children(sk, "Attribute") {
+            self.param(a, None, &mut Vec::new(), None, &mut params, &mut defects);
+        }
+        let mut mappings = Vec::new();
+        for ei in children(sk, "ExternalInterface") {
+            let is_mapping = if ei.attribute("RefBaseClassPath").is_some() {
+                ref_base_ends_with(ei, "SkillMapping") || ref_base_ends_with(ei, "FunctionMapping")
+            } else {
+                caex_name(ei).is_some_and(|n| names::eq(n, "FunctionMapping"))
+            };
+            if is_mapping && let Some(m) = self.mapping(ei, &params, &mut defects) {
+                mappings.push(m);
+            }
+        }
+        // Stable sort: equal orders keep document order.
+        mappings.sort_by_key(|m| m.order);
+        for w in mappings.windows(2) {
+            if w[0].order == w[1].order {
+                self.diags.push(
+                    Diagnostic::warning(
+                        Code::EqualOrder,
+                        format!(
+                            "skill `{}`: function mappings `{}` and `{}` have the same order {}; they run in document order",
+                            name.text, w[0].function.text, w[1].function.text, w[0].order
+                        ),
+                    )
+                    .at(w[1].span.clone())
+                    .related(w[0].span.clone(), "the other mapping"),
+                );
+            }
+        }
+        Skill {
+            name,
+            id: sk.attribute("ID").map(str::to_owned),
+            params,
+            mappings,
+            defects,
+        }
+    }
+
+    /// Reads one skill parameter and its nested ones.
+    fn param(
+        &mut self,
+        a: Node,
+        prefix: Option<&str>,
+        indices: &mut Vec<usize>,
+        variable: Option<&Name>,
+        out: &mut Vec<Param>,
+        defects: &mut Vec<Diagnostic>,
+    ) {
+        let own = caex_name(a).unwrap_or("").trim();
+        let name_span = super::xml::attr_span(self.file, a, "Name");
+        if own.contains('.') {
+            self.diags.push(
+                Diagnostic::error(
+                    Code::DotInAttributeName,
+                    format!(
+                        "attribute name `{own}` contains a `.`, which joins nested parameter names"
+                    ),
+                )
+                .at(name_span.clone())
+                .element(caex_element(a)),
+            );
+            return;
+        }
+        let path = match prefix {
+            Some(p) => format!("{p}.{own}"),
+            None => own.to_owned(),
+        };
+        let nested: Vec<Node> = children(a, "Attribute").collect();
+        let leaf = nested.is_empty();
+        let value = caex_value(self.file, a);
+        let mut usable = true;
+        let mut this_variable = variable.cloned();
+        let mut pushed_index = false;
+        match (prefix, value) {
+            (None, Some((v, span))) if !v.is_empty() => {
+                this_variable = Some(Name::new(&v, span));
+            }
+            (Some(_), Some((v, span))) if !v.is_empty() => match v.parse::<usize>() {
+                Ok(i) => {
+                    indices.push(i);
+                    pushed_index = true;
+                }
+                Err(_) => {
+                    usable = false;
+                    defects.push(
+                        Diagnostic::error(
+                            Code::ParameterWithoutValue,
+                            format!(
+                                "parameter `{path}`: its value `{v}` is not a 0-based index into the variable's list"
+                            ),
+                        )
+                        .at(span)
+                        .element(caex_element(a)),
+                    );
+                }
+            },
+            _ => {
+                usable = false;
+                defects.push(
+                    Diagnostic::error(
+                        Code::ParameterWithoutValue,
+                        format!(
+                            "parameter `{path}` has no value: {}",
+                            if prefix.is_none() {
+                                "it must name the SFC variable"
+                            } else {
+                                "it must be the index into the variable's list"
+                            }
+                        ),
+                    )
+                    .at(name_span.clone())
+                    .element(caex_element(a)),
+                );
+            }
+        }
+        let ty = if leaf {
+            a.attribute("AttributeDataType")
+                .filter(|t| !t.trim().is_empty())
+                .and_then(|t| {
+                    let parsed = ValueType::parse(t);
+                    if parsed.is_none() {
+                        self.diags.push(
+                            Diagnostic::warning(
+                                Code::UnknownType,
+                                format!(
+                                    "parameter `{path}`: unknown AttributeDataType `{t}`; its values are treated as untyped"
+                                ),
+                            )
+                            .at(super::xml::attr_span(self.file, a, "AttributeDataType")),
+                        );
+                    }
+                    parsed
+                })
+        } else {
+            None
+        };
+        out.push(Param {
+            path: Name::new(&path, name_span),
+            variable: if usable { this_variable.clone() } else { None },
+            indices: indices.clone(),
+            ty,
+            leaf,
+        });
+        for n in nested {
+            self.param(
+                n,
+                Some(&path),
+                indices,
+                this_variable.as_ref(),
+                out,
+                defects,
+            );
+        }
+        if pushed_index {
+            indices.pop();
+        }
+    }
+
+    fn mapping(
+        &mut self,
+        ei: Node,
+        params: &[Param],
+        defects: &mut Vec<Diagnostic>,
+    ) -> Option<FunctionMapping> {
+        let span = self.span(ei);
+        let elem = caex_element(ei);
+        let function = match caex_attr(ei, "Name").and_then(|a| caex_value(self.file, a)) {
+            Some((v, s)) if !v.is_empty() => Name::new(&v, s),
+            _ => {
+                defects.push(
+                    Diagnostic::error(
+                        Code::BadFunctionMapping,
+                        "function mapping without `Name` value (the function to call)",
+                    )
+                    .at(span)
+                    .element(elem),
+                );
+                return None;
+            }
+        };
+        let order_attr = caex_attr(ei, "Order").or_else(|| caex_attr(ei, "Index"));
+        let order = match order_attr.and_then(|a| caex_value(self.file, a)) {
+            None => 0,
+            Some((v, _)) if v.is_empty() => 0,
+            Some((v, s)) => match v.parse::<i64>() {
+                Ok(o) => o,
+                Err(_) => {
+                    defects.push(
+                        Diagnostic::error(
+                            Code::BadFunctionMapping,
+                            format!(
+                                "function mapping `{}`: order `{v}` is not an integer",
+                                function.text
+                            ),
+                        )
+                        .at(s)
+                        .element(elem.clone()),
+                    );
+                    0
+                }
+            },
+        };
+        let mut args = Vec::new();
+        if let Some(m) = caex_attr(ei, "Mapping") {
+            let mut stack: Vec<(Node, String)> = children(m, "Attribute")
+                .map(|a| (a, caex_name(a).unwrap_or("").trim().to_owned()))
+                .collect();
+            stack.reverse();
+            while let Some((a, path)) = stack.pop() {
+                let nested: Vec<Node> = children(a, "Attribute").collect();
+                let name_span = super::xml::attr_span(self.file, a, "Name");
+                if let Some((v, vspan)) = caex_value(self.file, a).filter(|(v, _)| !v.is_empty()) {
+                    let skill_param = Name::new(&path, name_span.clone());
+                    if !params.iter().any(|p| p.path.key == skill_param.key) {
+                        defects.push(
+                            Diagnostic::error(
+                                Code::BadFunctionMapping,
+                                format!(
+                                    "function mapping `{}`: `{path}` is not a parameter of the skill",
+                                    function.text
+                                ),
+                            )
+                            .at(name_span.clone()),
+                        );
+                    } else {
+                        args.push(MappedArg {
+                            skill_param,
+                            function_param: Name::new(&v, vspan),
+                        });
+                    }
+                } else if nested.is_empty() {
+                    defects.push(
+                        Diagnostic::error(
+                            Code::BadFunctionMapping,
+                            format!(
+                                "function mapping `{}`: `{path}` names no function parameter (no `Value`)",
+                                function.text
+                            ),
+                        )
+                        .at(name_span),
+                    );
+                }
+                for n in nested.into_iter().rev() {
+                    let own = caex_name(n).unwrap_or("").trim();
+                    stack.push((n, format!("{path}.{own}")));
+                }
+            }
+        }
+        Some(FunctionMapping {
+            function,
+            order,
+            args,
+            span,
+        })
+    }
+
+    fn function(&mut self, f: Node) -> Option<Function> {
+        let name = self.name_of(f);
+        let ifaces: Vec<Node> = children(f, "ExternalInterface")
+            .filter(|ei| {
+                caex_name(*ei).is_some_and(|n| names::eq(n, "FunctionDataInterface"))
+                    || ref_base_ends_with(*ei, "FunctionLogic")
+            })
+            .collect();
+        let iface = match ifaces.as_slice() {
+            [one] => *one,
+            [] => {
+                self.diags.push(
+                    Diagnostic::error(
+                        Code::BadFunction,
+                        format!(
+                            "function `{}` has no `FunctionDataInterface` (an ExternalInterface with the IRL command and file)",
+                            name.text
+                        ),
+                    )
+                    .at(self.span(f))
+                    .element(caex_element(f)),
+                );
+                return None;
+            }
+            [_, second, ..] => {
+                self.diags.push(
+                    Diagnostic::error(
+                        Code::BadFunction,
+                        format!(
+                            "function `{}` has {} function data interfaces; exactly one is allowed",
+                            name.text,
+                            ifaces.len()
+                        ),
+                    )
+                    .at(self.span(*second))
+                    .element(caex_element(f)),
+                );
+                return None;
+            }
+        };
+        let mut get = |attr: &str| -> Option<(String, Span)> {
+            match caex_attr(iface, attr).and_then(|a| caex_value(self.file, a)) {
+                Some((v, s)) if !v.is_empty() => Some((v, s)),
+                _ => {
+                    self.diags.push(
+                        Diagnostic::error(
+                            Code::BadFunction,
+                            format!(
+                                "function `{}`: its data interface has no `{attr}` value",
+                                name.text
+                            ),
+                        )
+                        .at(tag_span(self.file, iface))
+                        .element(caex_element(iface)),
+                    );
+                    None
+                }
+            }
+        };
+        let command = get("Name");
+        let irl = get("refURI");
+        let ((command, cspan), (irl, ispan)) = (command?, irl?);
+        Some(Function {
+            name,
+            id: f.attribute("ID").map(str::to_owned),
+            command: Name::new(&command, cspan),
+            irl: RefValue {
+                value: irl,
+                span: ispan,
+            },
+        })
+    }
+
+    fn sfc_reference(&mut self, h: Node) -> Option<RefValue> {
+        let Some(ps) = internal_element(h, &["Process Sequenz", "Process Sequence"]) else {
+            self.diags.push(
+                Diagnostic::error(
+                    Code::NoSfcReference,
+                    "the blackboard has no `Process Sequence` (or `Process Sequenz`) element naming the SFC file",
+                )
+                .at(self.span(h))
+                .element(caex_element(h)),
+            );
+            return None;
+        };
+        let iface = children(ps, "ExternalInterface")
+            .find(|ei| caex_name(*ei).is_some_and(|n| names::eq(n, "SFC Benutzereingabe")))
+            .or_else(|| {
+                children(ps, "ExternalInterface")
+                    .find(|ei| ref_base_contains(*ei, "ExternalDataConnector"))
+            });
+        let Some(iface) = iface else {
+            self.diags.push(
+                Diagnostic::error(
+                    Code::NoSfcReference,
+                    "`Process Sequence` has no `SFC Benutzereingabe` (or ExternalDataConnector) interface",
+                )
+                .at(self.span(ps))
+                .element(caex_element(ps)),
+            );
+            return None;
+        };
+        match caex_attr(iface, "refURI").and_then(|a| caex_value(self.file, a)) {
+            Some((v, span)) if !v.is_empty() => Some(RefValue { value: v, span }),
+            _ => {
+                self.diags.push(
+                    Diagnostic::error(
+                        Code::NoSfcReference,
+                        "the SFC interface has no `refURI` value naming the SFC file",
+                    )
+                    .at(self.span(iface))
+                    .element(caex_element(iface)),
+                );
+                None
+            }
+        }
+    }
+
+    fn write_back(&mut self, h: Node) -> Option<WriteBackTarget> {
+        let code = internal_element(h, &["Code"]);
+        let iface = code.and_then(|c| {
+            children(c, "ExternalInterface")
+                .find(|ei| caex_name(*ei).is_some_and(|n| names::eq(n, "KRL code")))
+                .or_else(|| {
+                    children(c, "ExternalInterface")
+                        .find(|ei| ref_base_contains(*ei, "ExternalDataConnector"))
+                })
+        });
+        let attr = iface.and_then(|i| caex_attr(i, "refURI"));
+        match attr {
+            Some(a) => Some(WriteBackTarget {
+                attribute: Span::new(self.file, a.range()),
+                current: caex_value(self.file, a).map(|(v, _)| v),
+            }),
+            None => {
+                let at = iface.or(code).unwrap_or(h);
+                self.diags.push(
+                    Diagnostic::warning(
+                        Code::NoWriteBackTarget,
+                        "no write-back target (`Code` → `KRL code` → `refURI`): the program's path is not written into the blackboard",
+                    )
+                    .at(self.span(at)),
+                );
+                None
+            }
+        }
+    }
+}
