@@ -282,7 +282,7 @@ pub fn bind(
                 match value_of(st, skill, pi, &label) {
                     Ok(v) => values.push(v),
                     Err(Some(d)) => {
-                        diags.push(d);
+                        diags.push(*d);
                         ok = false;
                     }
                     Err(None) => ok = false, // missing variable: reported by check_variables
@@ -370,7 +370,7 @@ fn value_of(
     skill: &crate::model::Skill,
     pi: usize,
     label: &str,
-) -> Result<String, Option<Diagnostic>> {
+) -> Result<String, Option<Box<Diagnostic>>> {
     let p = &skill.params[pi];
     let Some(var_name) = &p.variable else {
         return Err(None);
@@ -388,7 +388,7 @@ fn value_of(
                     path.push_str(&format!("[{ix}]"));
                 }
                 None => {
-                    return Err(Some(
+                    return Err(Some(Box::new(
                         Diagnostic::error(
                             Code::BadIndex,
                             format!(
@@ -401,11 +401,11 @@ fn value_of(
                         .at(var.value_span.clone())
                         .element(label.to_owned())
                         .related(p.path.span.clone(), "the parameter's index"),
-                    ));
+                    )));
                 }
             },
             Value::Scalar(_) => {
-                return Err(Some(
+                return Err(Some(Box::new(
                     Diagnostic::error(
                         Code::BadIndex,
                         format!(
@@ -415,12 +415,12 @@ fn value_of(
                     )
                     .at(var.value_span.clone())
                     .element(label.to_owned()),
-                ));
+                )));
             }
         }
     }
     let Value::Scalar(s) = v else {
-        return Err(Some(
+        return Err(Some(Box::new(
             Diagnostic::error(
                 Code::BadIndex,
                 format!(
@@ -430,7 +430,7 @@ fn value_of(
             )
             .at(var.value_span.clone())
             .element(label.to_owned()),
-        ));
+        )));
     };
     typed_token(s, p.ty).map_err(|why| {
         let code = if p.ty.is_some() && !why.starts_with("non-ASCII") {
@@ -440,14 +440,14 @@ fn value_of(
         } else {
             Code::UnsafeValue
         };
-        Some(
+        Some(Box::new(
             Diagnostic::error(
                 code,
                 format!("`{path}` = `{s}` for parameter `{}`: {why}", p.path.text),
             )
             .at(var.value_span.clone())
             .element(label.to_owned()),
-        )
+        ))
     })
 }
 
