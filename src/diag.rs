@@ -552,3 +552,35 @@ fn severity_word(s: Severity) -> &'static str {
         Severity::Warning => "warning",
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_code_is_documented_once() {
+        let doc = include_str!("../docs/DIAGNOSTICS.md");
+        let mut seen = std::collections::HashSet::new();
+        for c in Code::ALL {
+            assert!(seen.insert(c.as_str()), "code {} used twice", c.as_str());
+            assert!(
+                doc.contains(&format!("| `{}` |", c.as_str())),
+                "code {} missing from docs/DIAGNOSTICS.md",
+                c.as_str()
+            );
+        }
+    }
+
+    #[test]
+    fn line_and_column_from_offsets() {
+        let mut s = Sources::default();
+        let f = s.add("a".into(), "a".into(), "ab\r\ncäd\nx".into(), false);
+        assert_eq!(s.line_col(f, 0), (1, 1));
+        assert_eq!(s.line_col(f, 4), (2, 1));
+        // `ä` is two bytes but one column.
+        assert_eq!(s.line_col(f, 7), (2, 3));
+        assert_eq!(s.line_col(f, 9), (3, 1));
+        assert_eq!(s.offset_of(f, 2, 3), 7);
+        assert_eq!(s.line_col(f, 999), (3, 2));
+    }
+}
