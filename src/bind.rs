@@ -9,7 +9,6 @@ use std::collections::HashMap;
 
 use crate::diag::{Code, Diagnostic, Diagnostics, Span};
 use crate::model::{Blackboard, ElementKind, Irl, Sfc, Step, Value, ValueType};
-use crate::plan::Plan;
 
 /// Which resource and skill each step uses.
 #[derive(Debug, Default)]
@@ -22,21 +21,60 @@ pub struct Resolution {
     pub resource: Option<usize>,
 }
 
+/// Which steps to bind, in which order.
+#[derive(Debug, Clone)]
+pub struct StepOrder {
+    /// Element indexes of the steps, in execution order (or document order when the flow could
+    /// not be planned: then the values are still checked, but nothing is emitted).
+    pub steps: Vec<usize>,
+    /// The start and end steps, which may name no skill; `None` when unknown (then any step may
+    /// name no skill without an error, since the flow errors are reported already).
+    pub start_end: Option<(usize, usize)>,
+}
+
+impl StepOrder {
+    /// The planned order.
+    pub fn planned(plan: &crate::plan::Plan) -> Self {
+        StepOrder {
+            steps: plan.steps(),
+            start_end: Some((plan.start, plan.end)),
+        }
+    }
+
+    /// Every step in document order, for a flow that could not be planned.
+    pub fn document(sfc: &Sfc) -> Self {
+        StepOrder {
+            steps: (0..sfc.elements.len())
+                .filter(|&i| sfc.elements[i].kind.is_step())
+                .collect(),
+            start_end: None,
+        }
+    }
+}
+
 /// Resolves every step's resource and skill.
-pub fn resolve(bb: &Blackboard, sfc: &Sfc, plan: &Plan, diags: &mut Diagnostics) -> Resolution {
+pub fn resolve(
+    bb: &Blackboard,
+    sfc: &Sfc,
+    order: &StepOrder,
+    diags: &mut Diagnostics,
+) -> Resolution {
     let mut r = Resolution {
         step_skill: vec![None; sfc.elements.len()],
         ..Resolution::default()
     };
     let mut several_reported = false;
-    for i in plan.steps() {
+    for &i in &order.steps {
         let e = &sfc.elements[i];
         let ElementKind::Step(st) = &e.kind else {
             continue;
         };
         let label = format!("localId {}", e.local_id);
         let Some(skill_name) = &st.skill else {
-            if i != plan.start && i != plan.end {
+            if order
+                .start_end
+                .is_some_and(|(start, end)| i != start && i != end)
+            {
                 diags.push(
                     Diagnostic::error(
                         Code::UnknownSkill,
@@ -244,7 +282,7 @@ struct PreparedCall {
 pub fn bind(
     bb: &Blackboard,
     sfc: &Sfc,
-    plan: &Plan,
+    order: &StepOrder,
     r: &Resolution,
     irls: &[Irl],
     fn_irl: &HashMap<(usize, usize), usize>,
@@ -260,7 +298,7 @@ pub fn bind(
         definitions: Vec::new(),
     };
     let mut def_keys: Vec<String> = Vec::new();
-    for i in plan.steps() {
+    for &i in &order.steps {
         let Some((res, sk)) = r.step_skill[i] else {
             continue;
         };

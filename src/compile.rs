@@ -211,8 +211,14 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
 
     // Bind, loading the IRL files the used skills need.
     let mut irls: Vec<Irl> = Vec::new();
-    if let (Some(sfc), Some(plan)) = (&sfc, &plan) {
-        let res = bind::resolve(&bb, sfc, plan, &mut cx.diags);
+    if let Some(sfc) = &sfc {
+        // Bind even when the flow has errors (in document order), so one run reports every
+        // problem; emit only a planned flow.
+        let order = match &plan {
+            Some(p) => bind::StepOrder::planned(p),
+            None => bind::StepOrder::document(sfc),
+        };
+        let res = bind::resolve(&bb, sfc, &order, &mut cx.diags);
         let needed = bind::needed_functions(&bb, &res, &mut cx.diags);
         let mut fn_irl: HashMap<(usize, usize), usize> = HashMap::new();
         let mut by_file: HashMap<crate::diag::FileId, Option<usize>> = HashMap::new();
@@ -231,10 +237,10 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 fn_irl.insert((r, f), i);
             }
         }
-        let bound = bind::bind(&bb, sfc, plan, &res, &irls, &fn_irl, &mut cx.diags);
+        let bound = bind::bind(&bb, sfc, &order, &res, &irls, &fn_irl, &mut cx.diags);
         out.skill_steps = bound.steps.iter().filter(|s| s.is_some()).count();
         if !cx.diags.has_errors()
-            && let Some(template) = &template
+            && let (Some(template), Some(plan)) = (&template, &plan)
         {
             let input = EmitInput {
                 program: &opts.program,
