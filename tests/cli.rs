@@ -1,0 +1,264 @@
+//! The command line as a user runs it: modes, print options, formats, exit statuses.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_skillpost"))
+}
+
+fn sample() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/ok/reference-sample")
+}
+
+/// A fresh copy of the reference sample.
+fn project() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    for e in std::fs::read_dir(sample()).unwrap() {
+        let e = e.unwrap();
+        if e.file_type().unwrap().is_file() {
+            std::fs::copy(e.path(), dir.path().join(e.file_name())).unwrap();
+        }
+    }
+    dir
+}
+
+fn run(args: &[&str], cwd: &Path) -> Output {
+    bin().args(args).current_dir(cwd).output().unwrap()
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8(o.stdout.clone()).unwrap()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8(o.stderr.clone()).unwrap()
+}
+
+#[test]
+fn compile_writes_outputs_and_reports_them() {
+    let p = project();
+    let o = run(&["Blackboard.aml", "Demo_1"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let src = std::fs::read_to_string(p.path().join("Demo_1.src")).unwrap();
+    assert!(src.contains("DEF Demo_1( )\r\n"));
+    assert!(src.contains("SetVelCP (0.5)\r\n"));
+    assert!(p.path().join("Demo_1.dat").exists());
+    assert!(stderr(&o).contains("wrote"), "{}", stderr(&o));
+    let bb = std::fs::read_to_string(p.path().join("Blackboard.aml")).unwrap();
+    assert!(bb.contains("<Value>Demo_1.src</Value>"));
+}
+
+#[test]
+fn lf_option_writes_lf_only() {
+    let p = project();
+    let o = run(&["--lf", "Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let src = std::fs::read(p.path().join("out.src")).unwrap();
+    assert!(!src.contains(&b'\r'));
+    assert!(src.ends_with(b"END\n"));
+}
+
+#[test]
+fn validate_writes_nothing_and_shows_warnings() {
+    let p = project();
+    let before = std::fs::read(p.path().join("Blackboard.aml")).unwrap();
+    let o = run(&["--validate", "Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(0));
+    assert!(!p.path().join("out.src").exists());
+    assert!(!p.path().join("out.dat").exists());
+    assert_eq!(
+        std::fs::read(p.path().join("Blackboard.aml")).unwrap(),
+        before
+    );
+    // The sample's steps carry a JointConfig variable no skill uses: a warning.
+    let e = stderr(&o);
+    assert!(e.contains("warning[W303]"), "{e}");
+    assert!(e.contains("Input validation successful!"), "{e}");
+}
+
+#[test]
+fn warnings_hidden_without_warn() {
+    let p = project();
+    let o = run(&["Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(0));
+    assert!(!stderr(&o).contains("W303"));
+    let o = run(&["--warn", "Blackboard.aml", "out"], p.path());
+    assert!(stderr(&o).contains("W303"));
+}
+
+#[test]
+fn print_order_and_flow() {
+    let p = project();
+    let o = run(
+        &["--validate", "-pO", "-pF", "Blackboard.aml", "out"],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(0));
+    let out = stdout(&o);
+    // Execution order: branch heads left to right by x; equal x → document order (8 before 6).
+    let order: Vec<&str> = out.lines().filter(|l| l.starts_with(" #")).collect();
+    assert_eq!(order.len(), 5, "{out}");
+    assert!(order[0].contains("(id=1)") && order[0].contains("Start"));
+    assert!(order[1].contains("(id=3)"));
+    assert!(order[2].contains("(id=8)") && order[2].contains("LIN"));
+    assert!(order[3].contains("(id=6)"));
+    assert!(order[4].contains("(id=12)") && order[4].contains("End"));
+    // The flow: both branches start at 1.5 s; the block ends with the longer one (2 s).
+    assert!(
+        out.contains(
+            "{\n | id=   8, [@1.5    +      2], LIN\n +\n | id=   6, [@1.5    +      1], P2P\n}"
+        ),
+        "{out}"
+    );
+    assert!(out.contains("id=  12, [@3.5    +      0], End"), "{out}");
+    assert!(out.contains("total: 3.5 seconds"), "{out}");
+    // -p0 is accepted for -pO.
+    let o = run(&["--validate", "-p0", "Blackboard.aml", "out"], p.path());
+    assert_eq!(
+        stdout(&o).lines().filter(|l| l.starts_with(" #")).count(),
+        5
+    );
+}
+
+#[test]
+fn print_blackboard_and_sfc() {
+    let p = project();
+    let o = run(
+        &["--validate", "-pB", "-pS", "Blackboard.aml", "out"],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(0));
+    let out = stdout(&o);
+    assert!(out.contains("KUKA KR15-2"));
+    assert!(out.contains("(Skill) Move PTP"));
+    assert!(
+        out.contains("-> SetToolPathVelocity (Velocity)   [order 0]"),
+        "{out}"
+    );
+    assert!(out.contains("(Func)  SetToolPathVelocity"));
+    assert!(out.contains("IRL-File:  \tkr15-2.irl"));
+    assert!(out.contains("iwb, DemoProduct, 1, 2015-05-26T12:00:00"));
+    assert!(out.contains("4 -> [ 5 ] -> 8, 6"), "{out}");
+    assert!(
+        out.contains("FRAME:              (List)     = [ 100, 200, 300, 0, 90, 0 ]"),
+        "{out}"
+    );
+}
+
+#[test]
+fn sfc_mode_checks_the_sfc_alone() {
+    let p = project();
+    let o = run(&["--sfc", "-pO", "sfc.xml"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stdout(&o).contains("(id=12)"));
+    assert!(stderr(&o).contains("SFC validation successful!"));
+    // A broken flow: exit 1, located.
+    let sfc = std::fs::read_to_string(p.path().join("sfc.xml")).unwrap();
+    std::fs::write(
+        p.path().join("bad.xml"),
+        sfc.replacen("refLocalId=\"2\"", "refLocalId=\"77\"", 1),
+    )
+    .unwrap();
+    let o = run(&["--sfc", "--format", "short", "bad.xml"], p.path());
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    assert!(
+        e.contains("bad.xml:31:58: error[E303]: refLocalId 77 names no element"),
+        "{e}"
+    );
+}
+
+#[test]
+fn info_lists_skills_and_their_variables() {
+    let o = run(&["--info"], &sample());
+    assert_eq!(o.status.code(), Some(0));
+    assert!(stdout(&o).starts_with("skillpost v"));
+    let o = run(&["--info", "Blackboard.aml"], &sample());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let out = stdout(&o);
+    assert!(out.contains("KUKA KR15-2"));
+    let ptp = out.lines().find(|l| l.contains("Move PTP")).unwrap();
+    assert!(ptp.contains("variables: Velocity, Frame"), "{out}");
+    let lin = out.lines().find(|l| l.contains("Move LIN")).unwrap();
+    assert!(lin.ends_with("variables: Frame"), "{out}");
+}
+
+#[test]
+fn exit_status_two_for_usage_and_io() {
+    let d = tempfile::tempdir().unwrap();
+    assert_eq!(run(&[], d.path()).status.code(), Some(2));
+    assert_eq!(run(&["only-one"], d.path()).status.code(), Some(2));
+    assert_eq!(run(&["--bogus", "a", "b"], d.path()).status.code(), Some(2));
+    assert_eq!(run(&["-pX", "a", "b"], d.path()).status.code(), Some(2));
+    let o = run(&["missing.aml", "out"], d.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("missing.aml"), "{}", stderr(&o));
+    assert_eq!(run(&["--help"], d.path()).status.code(), Some(0));
+}
+
+#[test]
+fn output_folder_not_writable_is_an_io_failure() {
+    // A blackboard whose folder holds a directory where the output file should go.
+    let p = project();
+    std::fs::create_dir(p.path().join("out.src")).unwrap();
+    let before = std::fs::read(p.path().join("Blackboard.aml")).unwrap();
+    let o = run(&["Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("out.src"), "{}", stderr(&o));
+    // The write-back comes last and did not happen.
+    assert_eq!(
+        std::fs::read(p.path().join("Blackboard.aml")).unwrap(),
+        before
+    );
+}
+
+#[test]
+fn json_format_is_one_object_per_line_on_stdout() {
+    let p = project();
+    let o = run(
+        &["--format", "json", "--warn", "Blackboard.aml", "9bad"],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(1));
+    let lines: Vec<serde_json::Value> = stdout(&o)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let e = lines
+        .iter()
+        .find(|v| v["code"] == "E601")
+        .expect("bad program name reported");
+    assert_eq!(e["severity"], "error");
+    assert!(e["message"].as_str().unwrap().contains("9bad"));
+    // Warnings come along with --warn, located.
+    let w = lines.iter().find(|v| v["code"] == "W303").unwrap();
+    assert_eq!(w["severity"], "warning");
+    assert!(w["file"].as_str().unwrap().ends_with("sfc.xml"));
+    assert!(w["line"].as_u64().unwrap() > 0 && w["column"].as_u64().unwrap() > 0);
+    assert!(!p.path().join("9bad.src").exists());
+}
+
+#[test]
+fn user_template_replaces_the_builtin_one() {
+    let p = project();
+    let builtin =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("templates/krl.toml"))
+            .unwrap();
+    let mine = builtin.replace(
+        "END\n{{definitions}}",
+        "  PTP $H_POS ; home again\nEND\n{{definitions}}",
+    );
+    assert_ne!(mine, builtin);
+    std::fs::write(p.path().join("mine.toml"), mine).unwrap();
+    let o = run(
+        &["--template", "mine.toml", "Blackboard.aml", "out"],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let src = std::fs::read_to_string(p.path().join("out.src")).unwrap();
+    assert!(
+        src.contains("  PTP $H_POS ; home again\r\nEND\r\n"),
+        "{src}"
+    );
+}
