@@ -239,7 +239,8 @@ pub fn needed_functions(
                             known(resource.functions.iter().map(|f| f.name.text.as_str()))
                         ),
                     )
-                    .at(m.function.span.clone()),
+                    .at(m.function.span.clone())
+                    .element(m.element.clone()),
                 ),
             }
         }
@@ -635,6 +636,7 @@ fn prepare(
                     ),
                 )
                 .at(f.command.span.clone())
+                .element(f.element.clone())
                 .related(irl_span, "the IRL file"),
             );
             ok = false;
@@ -686,7 +688,8 @@ fn prepare(
                     shapes.join(", ")
                 ),
             )
-            .at(m.span.clone());
+            .at(m.span.clone())
+            .element(m.element.clone());
             for &c in &candidates {
                 d = d.related(irl.calls[c].span.clone(), "an overload");
             }
@@ -719,6 +722,7 @@ fn prepare(
                             ),
                         )
                         .at(a.function_param.span.clone())
+                        .element(m.element.clone())
                         .related(call.span.clone(), "the IRL template"),
                     );
                     ok = false;
@@ -734,7 +738,8 @@ fn prepare(
                             a.function_param.text, p.path.text
                         ),
                     )
-                    .at(a.skill_param.span.clone()),
+                    .at(a.skill_param.span.clone())
+                    .element(m.element.clone()),
                 );
                 ok = false;
             }
@@ -750,6 +755,7 @@ fn prepare(
                         ),
                     )
                     .at(m.span.clone())
+                    .element(m.element.clone())
                     .related(call.params[ti].span.clone(), "the template parameter"),
                 );
                 ok = false;

@@ -54,6 +54,8 @@ pub struct WriteBackTarget {
 #[derive(Debug)]
 pub struct Resource {
     pub name: Name,
+    /// The CAEX element, described for diagnostics (`InternalElement "KUKA KR15-2" {ID}`).
+    pub element: String,
     pub id: Option<String>,
     pub skills: Vec<Skill>,
     pub functions: Vec<Function>,
@@ -71,6 +73,8 @@ impl Resource {
 #[derive(Debug)]
 pub struct Skill {
     pub name: Name,
+    /// The CAEX element, described for diagnostics.
+    pub element: String,
     pub id: Option<String>,
     /// Every parameter, nested ones included, in document order.
     pub params: Vec<Param>,
@@ -157,6 +161,8 @@ impl ValueType {
 pub struct FunctionMapping {
     /// The function's name (`Attribute Name` → `Value`).
     pub function: Name,
+    /// The CAEX `ExternalInterface`, described for diagnostics.
+    pub element: String,
     pub order: i64,
     /// Skill parameter (joined path) → function parameter.
     pub args: Vec<MappedArg>,
@@ -175,6 +181,8 @@ pub struct MappedArg {
 #[derive(Debug, Clone)]
 pub struct Function {
     pub name: Name,
+    /// The CAEX element, described for diagnostics.
+    pub element: String,
     pub id: Option<String>,
     /// The command's name in the IRL file (`Attribute Name` of the data interface).
     pub command: Name,

@@ -132,7 +132,10 @@ impl Reader<'_> {
                 for r in children(res, "InternalElement") {
                     resources.push(self.resource(r));
                 }
-                self.check_unique(resources.iter().map(|r| &r.name), "resource");
+                self.check_unique(
+                    resources.iter().map(|r| (&r.name, r.element.as_str())),
+                    "resource",
+                );
             }
             None => self.diags.push(
                 Diagnostic::error(
@@ -154,9 +157,9 @@ impl Reader<'_> {
         }
     }
 
-    fn check_unique<'n>(&mut self, names: impl Iterator<Item = &'n Name>, what: &str) {
+    fn check_unique<'n>(&mut self, names: impl Iterator<Item = (&'n Name, &'n str)>, what: &str) {
         let mut seen: Vec<&Name> = Vec::new();
-        for n in names {
+        for (n, element) in names {
             if let Some(first) = seen.iter().find(|s| s.key == n.key) {
                 self.diags.push(
                     Diagnostic::error(
@@ -164,6 +167,7 @@ impl Reader<'_> {
                         format!("a second {what} named `{}`", n.text),
                     )
                     .at(n.span.clone())
+                    .element(element)
                     .related(first.span.clone(), "the first one"),
                 );
             } else {
@@ -180,7 +184,10 @@ impl Reader<'_> {
                 skills.push(self.skill(sk));
             }
         }
-        self.check_unique(skills.iter().map(|s| &s.name), "skill");
+        self.check_unique(
+            skills.iter().map(|s| (&s.name, s.element.as_str())),
+            "skill",
+        );
         let mut functions = Vec::new();
         for fd in children(r, "InternalElement").filter(|e| {
             caex_name(*e).is_some_and(|n| {
@@ -193,9 +200,13 @@ impl Reader<'_> {
                 }
             }
         }
-        self.check_unique(functions.iter().map(|f| &f.name), "function");
+        self.check_unique(
+            functions.iter().map(|f| (&f.name, f.element.as_str())),
+            "function",
+        );
         Resource {
             name,
+            element: caex_element(r),
             id: r.attribute("ID").map(str::to_owned),
             skills,
             functions,
@@ -233,12 +244,14 @@ impl Reader<'_> {
                         ),
                     )
                     .at(w[1].span.clone())
+                    .element(w[1].element.clone())
                     .related(w[0].span.clone(), "the other mapping"),
                 );
             }
         }
         Skill {
             name,
+            element: caex_element(sk),
             id: sk.attribute("ID").map(str::to_owned),
             params,
             mappings,
@@ -336,7 +349,8 @@ impl Reader<'_> {
                                     "parameter `{path}`: unknown AttributeDataType `{t}`; its values are treated as untyped"
                                 ),
                             )
-                            .at(super::xml::attr_span(self.file, a, "AttributeDataType")),
+                            .at(super::xml::attr_span(self.file, a, "AttributeDataType"))
+                            .element(caex_element(a)),
                         );
                     }
                     parsed
@@ -430,7 +444,8 @@ impl Reader<'_> {
                                     function.text
                                 ),
                             )
-                            .at(name_span.clone()),
+                            .at(name_span.clone())
+                            .element(elem.clone()),
                         );
                     } else {
                         args.push(MappedArg {
@@ -447,7 +462,8 @@ impl Reader<'_> {
                                 function.text
                             ),
                         )
-                        .at(name_span),
+                        .at(name_span)
+                        .element(elem.clone()),
                     );
                 }
                 for n in nested.into_iter().rev() {
@@ -458,6 +474,7 @@ impl Reader<'_> {
         }
         Some(FunctionMapping {
             function,
+            element: elem,
             order,
             args,
             span,
@@ -528,6 +545,7 @@ impl Reader<'_> {
         let ((command, cspan), (irl, ispan)) = (command?, irl?);
         Some(Function {
             name,
+            element: caex_element(f),
             id: f.attribute("ID").map(str::to_owned),
             command: Name::new(&command, cspan),
             irl: RefValue {
