@@ -228,6 +228,8 @@ pub fn needed_functions(
                         out.push((res, f));
                     }
                 }
+                // Present but malformed: reported by the reader.
+                None if resource.broken_functions.contains(&m.function.key) => {}
                 None => diags.push(
                     Diagnostic::error(
                         Code::UnknownFunction,
@@ -367,6 +369,9 @@ fn check_variables(
         let Some(var) = &p.variable else { continue };
         if !st.variables.iter().any(|v| v.name.key == var.key) {
             ok = false;
+            if st.invalid_variables.contains(&var.key) {
+                continue; // present but malformed: reported by the reader
+            }
             diags.push(
                 Diagnostic::error(
                     Code::MissingVariable,

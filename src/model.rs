@@ -59,6 +59,8 @@ pub struct Resource {
     pub id: Option<String>,
     pub skills: Vec<Skill>,
     pub functions: Vec<Function>,
+    /// Keys of functions that are present but malformed (reported): not "unknown".
+    pub broken_functions: Vec<String>,
 }
 
 impl Resource {
@@ -263,6 +265,8 @@ pub struct Step {
     /// `time@duration` in seconds.
     pub duration: Option<f64>,
     pub variables: Vec<Variable>,
+    /// Keys of variables that are present but malformed (reported): not "missing".
+    pub invalid_variables: Vec<String>,
 }
 
 #[derive(Debug)]

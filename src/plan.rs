@@ -120,6 +120,7 @@ pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
     let g = graph(sfc, diags);
     let el = &sfc.elements;
     let id = |i: usize| format!("localId {}", el[i].local_id);
+    let mut secondary = Vec::new();
 
     for (i, e) in el.iter().enumerate() {
         let (np, ns) = (g.preds[i].len(), g.succs[i].len());
@@ -184,18 +185,55 @@ pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
             ElementKind::Transition
             | ElementKind::SimultaneousDivergence
             | ElementKind::SimultaneousConvergence => {
+                let kind = &e.kind;
+                let unbalanced = |msg: String| {
+                    Diagnostic::error(Code::UnbalancedBranch, msg)
+                        .at(e.span.clone())
+                        .element(id(i))
+                };
                 if np > 1 && ns > 1 {
                     diags.push(
                         Diagnostic::error(
                             Code::NToM,
                             format!(
                                 "{} joins {np} inputs and splits into {ns} outputs at once; use a convergence and a divergence",
-                                e.kind.tag()
+                                kind.tag()
                             ),
                         )
                         .at(e.span.clone())
                         .element(id(i)),
                     );
+                } else {
+                    match kind {
+                        // Often a consequence of another fault (a cycle, a second start):
+                        // reported only when the flow has no other error.
+                        ElementKind::Transition if ns > 1 => secondary.push(unbalanced(format!(
+                            "transition splits into {ns} outputs ({}); simultaneous branches start with a simultaneousDivergence",
+                            list_ids(sfc, &g.succs[i])
+                        ))),
+                        ElementKind::Transition if np > 1 => secondary.push(unbalanced(format!(
+                            "transition joins {np} inputs ({}); simultaneous branches end with a simultaneousConvergence",
+                            list_ids(sfc, &g.preds[i])
+                        ))),
+                        ElementKind::SimultaneousDivergence if np > 1 => {
+                            diags.push(unbalanced(format!(
+                                "simultaneousDivergence has {np} inputs; it must have one"
+                            )))
+                        }
+                        ElementKind::SimultaneousDivergence if ns == 1 => diags.push(unbalanced(
+                            "simultaneousDivergence opens only one branch".to_owned(),
+                        )),
+                        ElementKind::SimultaneousConvergence if ns > 1 => {
+                            diags.push(unbalanced(format!(
+                                "simultaneousConvergence has {ns} outputs; it must have one"
+                            )))
+                        }
+                        ElementKind::SimultaneousConvergence if np == 1 => diags.push(unbalanced(
+                            "simultaneousConvergence joins only one branch: no divergence opened it"
+                                .to_owned(),
+                        )),
+                        _ => {}
+                    }
                 }
                 if np == 0 {
                     diags.push(
@@ -308,6 +346,11 @@ pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
         );
     }
 
+    if diags.error_count() == errors_before {
+        for d in secondary {
+            diags.push(d);
+        }
+    }
     if diags.error_count() > errors_before || el.is_empty() {
         if el.is_empty() {
             diags.push(

@@ -189,14 +189,16 @@ impl Reader<'_> {
             "skill",
         );
         let mut functions = Vec::new();
+        let mut broken_functions = Vec::new();
         for fd in children(r, "InternalElement").filter(|e| {
             caex_name(*e).is_some_and(|n| {
                 names::eq(n, "FunctionDescription") || names::eq(n, "FunctionDescriptions")
             })
         }) {
             for f in children(fd, "InternalElement") {
-                if let Some(f) = self.function(f) {
-                    functions.push(f);
+                match self.function(f) {
+                    Some(f) => functions.push(f),
+                    None => broken_functions.push(self.name_of(f).key),
                 }
             }
         }
@@ -210,6 +212,7 @@ impl Reader<'_> {
             id: r.attribute("ID").map(str::to_owned),
             skills,
             functions,
+            broken_functions,
         }
     }
 

@@ -166,7 +166,8 @@ fn element_name(file: FileId, node: Node, what: &str, diags: &mut Diagnostics) -
 }
 
 /// The element's own text (its text and CDATA children, not the `<parameter>` elements'
-/// content), and `E602` at the first non-ASCII character of it.
+/// content). Non-ASCII characters in `;` comments are transliterated (SPEC.md 5); elsewhere the
+/// first one is `E602`.
 fn element_text(
     file: FileId,
     source: &str,
@@ -176,25 +177,28 @@ fn element_text(
 ) -> String {
     let mut body = String::new();
     let mut reported = false;
+    let mut state = LexState::default();
     for t in node.children().filter(|c| c.is_text()) {
         let Some(s) = t.text() else { continue };
-        body.push_str(s);
-        if reported || s.is_ascii() {
+        let (clean, bad) = transliterate_comments(s, &mut state);
+        body.push_str(&clean);
+        let Some(i) = bad.filter(|_| !reported) else {
             continue;
-        }
+        };
         reported = true;
         let range = t.range();
         let raw = source.get(range.clone()).unwrap_or("");
-        // The first non-ASCII character as written, or else the character reference (`&#228;`)
-        // that produced it.
-        let (at, ch) = match raw.char_indices().find(|(_, c)| !c.is_ascii()) {
-            Some((i, c)) => (range.start + i, c),
-            None => (
-                range.start + raw.find("&#").unwrap_or(0),
-                s.chars().find(|c| !c.is_ascii()).unwrap_or('?'),
-            ),
+        let ch = s[i..].chars().next().unwrap_or('?');
+        // Where the character stands in the file: the same offset when the text has no
+        // references, else the first character reference (`&#228;`) that may have produced it.
+        let (at, len) = if raw == s {
+            (range.start + i, ch.len_utf8())
+        } else {
+            match raw.char_indices().find(|(_, c)| !c.is_ascii()) {
+                Some((j, c)) => (range.start + j, c.len_utf8()),
+                None => (range.start + raw.find("&#").unwrap_or(0), 1),
+            }
         };
-        let len = if raw.is_ascii() { 1 } else { ch.len_utf8() };
         diags.push(
             Diagnostic::error(
                 Code::NonAscii,
@@ -208,6 +212,48 @@ fn element_text(
         );
     }
     body
+}
+
+/// Where a KRL line scan stands: inside a string literal, inside a `;` comment.
+#[derive(Debug, Default)]
+struct LexState {
+    string: bool,
+    comment: bool,
+}
+
+/// Transliterates non-ASCII characters inside `;` comments; returns the text and the byte index
+/// (in `s`) of the first non-ASCII character outside comments.
+fn transliterate_comments(s: &str, st: &mut LexState) -> (String, Option<usize>) {
+    if s.is_ascii() {
+        // Keep the state right for the next text node.
+        for c in s.bytes() {
+            step(c as char, st);
+        }
+        return (s.to_owned(), None);
+    }
+    let mut out = String::with_capacity(s.len());
+    let mut bad = None;
+    for (i, c) in s.char_indices() {
+        if st.comment && !c.is_ascii() && c != '\n' {
+            out.push_str(&crate::names::transliterate(&c.to_string()));
+            continue;
+        }
+        if !c.is_ascii() && bad.is_none() {
+            bad = Some(i);
+        }
+        step(c, st);
+        out.push(c);
+    }
+    (out, bad)
+}
+
+fn step(c: char, st: &mut LexState) {
+    match c {
+        '\n' | '\r' => *st = LexState::default(),
+        '"' if !st.comment => st.string = !st.string,
+        ';' if !st.string => st.comment = true,
+        _ => {}
+    }
 }
 
 #[cfg(test)]
@@ -427,6 +473,21 @@ mod tests {
         assert_eq!(
             render(&irl.unwrap().calls[0], &["2"]),
             "IF 2 < 1 THEN\nENDIF"
+        );
+    }
+
+    #[test]
+    fn non_ascii_in_comments_is_transliterated() {
+        let text = "<irl><src><function-call name=\"W\"><parameter name=\"T\"/>\n  WAIT SEC T ; Wartezeit für Übergabe\n  MSG \"a;ä\" ; ok\n</function-call></src></irl>";
+        let (sources, irl, diags) = read(text);
+        let irl = irl.unwrap();
+        // The `ä` inside the string literal is code: E602 at its place.
+        assert_eq!(codes(&diags), vec!["E602"]);
+        assert_eq!(spanned(&sources, &diags[0]), "ä");
+        let out = render(&irl.calls[0], &["2"]);
+        assert!(
+            out.starts_with("WAIT SEC 2 ; Wartezeit fuer Uebergabe\n"),
+            "{out}"
         );
     }
 }

@@ -231,6 +231,7 @@ fn step(file: FileId, s: Node, diags: &mut Diagnostics) -> Step {
             .filter(|d| d.is_finite() && *d >= 0.0);
     }
     let mut variables = Vec::new();
+    let mut invalid_variables = Vec::new();
     let direct = children(s, "Variable");
     let nested = iwb.into_iter().flat_map(|i| children(i, "Variable"));
     for v in direct.chain(nested) {
@@ -251,6 +252,7 @@ fn step(file: FileId, s: Node, diags: &mut Diagnostics) -> Step {
                 .at(tag_span(file, v))
                 .element(local_id_label(s)),
             );
+            invalid_variables.push(crate::names::key(name));
             continue;
         };
         let value_span = Span::new(file, attr.range_value());
@@ -261,6 +263,7 @@ fn step(file: FileId, s: Node, diags: &mut Diagnostics) -> Step {
                 value_span,
             }),
             Err((offset, msg)) => {
+                invalid_variables.push(crate::names::key(name));
                 // Point into the raw value when it has no entity references (then offsets agree).
                 let raw_len = value_span.range.len();
                 let at = if raw_len == attr.value().len() {
@@ -288,6 +291,7 @@ fn step(file: FileId, s: Node, diags: &mut Diagnostics) -> Step {
         skill,
         duration,
         variables,
+        invalid_variables,
     }
 }
 

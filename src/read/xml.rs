@@ -99,11 +99,23 @@ pub fn parse<'a>(
         }
         Err(e) => {
             let pos = e.pos();
-            let off = sources.offset_of(file, pos.row as usize, pos.col as usize);
+            let off = match e {
+                // roxmltree has no position for this one: point at the declaration.
+                roxmltree::Error::DtdDetected => text.find("<!DOCTYPE").unwrap_or(0),
+                _ => sources.offset_of(file, pos.row as usize, pos.col as usize),
+            };
             let end = (off + 1).min(text.len()).max(off);
             diags.push(
-                Diagnostic::error(Code::XmlSyntax, format!("not well-formed XML: {}", e))
-                    .at(Span::new(file, off..end)),
+                Diagnostic::error(
+                    Code::XmlSyntax,
+                    match e {
+                        roxmltree::Error::DtdDetected => {
+                            "a document type declaration (DTD) is not accepted: entity definitions could expand without bound".to_owned()
+                        }
+                        _ => format!("not well-formed XML: {e}"),
+                    },
+                )
+                .at(Span::new(file, off..end)),
             );
             None
         }
