@@ -5,10 +5,11 @@
 //! [`resolve`] finds each step's resource and skill; [`needed_functions`] lists the functions
 //! those skills call; [`bind`] renders every call with the IRL templates.
 
+use std::borrow::Cow;
 use std::collections::HashMap;
 
 use crate::diag::{Code, Diagnostic, Diagnostics, Span};
-use crate::model::{Blackboard, ElementKind, Irl, Sfc, Step, Value, ValueType};
+use crate::model::{Blackboard, ElementKind, Irl, Sfc, Step, ValueType};
 
 /// Which resource and skill each step uses.
 #[derive(Debug, Default)]
@@ -99,7 +100,7 @@ pub fn resolve(
                             format!(
                                 "unknown resource `{}`; the blackboard has {}",
                                 rn.text,
-                                known(bb.resources.iter().map(|r| r.name.text.as_str()))
+                                known(bb.resources.iter().map(|r| r.name.text.as_ref()))
                             ),
                         )
                         .at(rn.span.clone())
@@ -161,7 +162,7 @@ pub fn resolve(
                         "resource `{}` has no skill `{}`; it offers {}",
                         resource.name.text,
                         skill_name.text,
-                        known(resource.skills.iter().map(|s| s.name.text.as_str()))
+                        known(resource.skills.iter().map(|s| s.name.text.as_ref()))
                     ),
                 )
                 .at(skill_name.span.clone())
@@ -238,7 +239,7 @@ pub fn needed_functions(
                             resource.skills[sk].name.text,
                             m.function.text,
                             resource.name.text,
-                            known(resource.functions.iter().map(|f| f.name.text.as_str()))
+                            known(resource.functions.iter().map(|f| f.name.text.as_ref()))
                         ),
                     )
                     .at(m.function.span.clone())
@@ -263,8 +264,8 @@ pub struct Bound {
 pub struct BoundStep {
     pub resource: usize,
     pub skill: usize,
-    /// One rendered call after another.
-    pub calls: Vec<String>,
+    /// The rendered calls, one after another, lines separated by `\n`.
+    pub code: String,
 }
 
 /// A function mapping made ready to render: the IRL call, and for each template parameter the
@@ -300,7 +301,8 @@ pub fn bind(
         steps: (0..sfc.elements.len()).map(|_| None).collect(),
         definitions: Vec::new(),
     };
-    let mut def_keys: Vec<String> = Vec::new();
+    let mut def_keys: Vec<&str> = Vec::new();
+    let mut values: Vec<Cow<str>> = Vec::new();
     for &i in &order.steps {
         let Some((res, sk)) = r.step_skill[i] else {
             continue;
@@ -313,14 +315,13 @@ pub fn bind(
             continue;
         };
         let skill = &bb.resources[res].skills[sk];
-        let label = format!("localId {}", e.local_id);
-        let mut ok = check_variables(st, skill, e.span.clone(), &label, diags);
-        let mut calls = Vec::with_capacity(p.calls.len());
+        let mut ok = check_variables(st, skill, e, diags);
+        let mut code = String::new();
         for pc in &p.calls {
             let call = &irls[pc.irl].calls[pc.call];
-            let mut values: Vec<String> = Vec::with_capacity(pc.args.len());
+            values.clear();
             for &pi in &pc.args {
-                match value_of(st, skill, pi, &label) {
+                match value_of(st, skill, pi, e.local_id) {
                     Ok(v) => values.push(v),
                     Err(Some(d)) => {
                         diags.push(*d);
@@ -330,17 +331,17 @@ pub fn bind(
                 }
             }
             if ok {
-                let refs: Vec<&str> = values.iter().map(String::as_str).collect();
-                let mut s = String::new();
-                call.template.render(&refs, &mut s);
-                calls.push(s);
-                if let Some(d) = irls[pc.irl]
-                    .definitions
-                    .iter()
-                    .position(|d| d.name.key == call.name.key)
-                    && !def_keys.contains(&call.name.key)
+                if !code.is_empty() {
+                    code.push('\n');
+                }
+                call.template.render(&values, &mut code);
+                if !def_keys.contains(&&*call.name.key)
+                    && let Some(d) = irls[pc.irl]
+                        .definitions
+                        .iter()
+                        .position(|d| d.name.key == call.name.key)
                 {
-                    def_keys.push(call.name.key.clone());
+                    def_keys.push(&call.name.key);
                     bound.definitions.push((pc.irl, d));
                 }
             }
@@ -349,19 +350,22 @@ pub fn bind(
             bound.steps[i] = Some(BoundStep {
                 resource: res,
                 skill: sk,
-                calls,
+                code,
             });
         }
     }
     bound
 }
 
+fn label(e: &crate::model::Element) -> String {
+    format!("localId {}", e.local_id)
+}
+
 /// Reports missing variables (`E314`) and extra ones (`W303`). False when one is missing.
 fn check_variables(
     st: &Step,
     skill: &crate::model::Skill,
-    span: Span,
-    label: &str,
+    e: &crate::model::Element,
     diags: &mut Diagnostics,
 ) -> bool {
     let mut ok = true;
@@ -380,8 +384,8 @@ fn check_variables(
                         var.text, skill.name.text, p.path.text
                     ),
                 )
-                .at(span.clone())
-                .element(label.to_owned()),
+                .at(e.span.clone())
+                .element(label(e)),
             );
         }
     }
@@ -400,7 +404,7 @@ fn check_variables(
                     ),
                 )
                 .at(v.name.span.clone())
-                .element(label.to_owned()),
+                .element(label(e)),
             );
         }
     }
@@ -408,13 +412,15 @@ fn check_variables(
 }
 
 /// The emitted token for skill parameter `pi` at this step. `Err(None)`: the variable is
-/// missing (reported elsewhere).
-fn value_of(
-    st: &Step,
+/// missing (reported elsewhere). Allocates only for an error or a value that changes (a boolean
+/// or string literal, a number spelled differently).
+fn value_of<'a>(
+    st: &'a Step,
     skill: &crate::model::Skill,
     pi: usize,
-    label: &str,
-) -> Result<String, Option<Box<Diagnostic>>> {
+    local_id: u64,
+) -> Result<Cow<'a, str>, Option<Box<Diagnostic>>> {
+    use crate::read::sfc::{Lookup, lookup};
     let p = &skill.params[pi];
     let Some(var_name) = &p.variable else {
         return Err(None);
@@ -422,88 +428,93 @@ fn value_of(
     let Some(var) = st.variables.iter().find(|v| v.name.key == var_name.key) else {
         return Err(None);
     };
-    let mut v = &var.value;
-    let mut path = var.name.text.clone();
-    for &ix in &p.indices {
-        match v {
-            Value::List(items) => match items.get(ix) {
-                Some(item) => {
-                    v = item;
-                    path.push_str(&format!("[{ix}]"));
-                }
-                None => {
-                    return Err(Some(Box::new(
-                        Diagnostic::error(
-                            Code::BadIndex,
-                            format!(
-                                "parameter `{}` reads `{path}[{ix}]`, but `{path}` has {} item{}",
-                                p.path.text,
-                                items.len(),
-                                if items.len() == 1 { "" } else { "s" }
-                            ),
-                        )
-                        .at(var.value_span.clone())
-                        .element(label.to_owned())
-                        .related(p.path.span.clone(), "the parameter's index"),
-                    )));
-                }
-            },
-            Value::Scalar(_) => {
-                return Err(Some(Box::new(
-                    Diagnostic::error(
-                        Code::BadIndex,
-                        format!(
-                            "parameter `{}` reads `{path}[{ix}]`, but `{path}` is one value, not a list",
-                            p.path.text
-                        ),
-                    )
-                    .at(var.value_span.clone())
-                    .element(label.to_owned()),
-                )));
-            }
+    let err = |code: Code, msg: String| {
+        Some(Box::new(
+            Diagnostic::error(code, msg)
+                .at(var.value_span.clone())
+                .element(format!("localId {local_id}")),
+        ))
+    };
+    // `Frame[1][0]` for messages, up to `depth` indexes.
+    let path = |depth: usize| {
+        let mut s = var.name.text.to_string();
+        for ix in &p.indices[..depth] {
+            s.push_str(&format!("[{ix}]"));
         }
-    }
-    let Value::Scalar(s) = v else {
-        return Err(Some(Box::new(
-            Diagnostic::error(
+        s
+    };
+    let s = match lookup(&var.raw, &p.indices) {
+        Lookup::Scalar(s) => s,
+        Lookup::OutOfRange { depth, len } => {
+            return Err(err(
                 Code::BadIndex,
                 format!(
-                    "parameter `{}` needs one value, but `{path}` is a list",
-                    p.path.text
+                    "parameter `{}` reads `{}[{}]`, but `{}` has {len} item{}",
+                    p.path.text,
+                    path(depth),
+                    p.indices[depth],
+                    path(depth),
+                    if len == 1 { "" } else { "s" }
                 ),
             )
-            .at(var.value_span.clone())
-            .element(label.to_owned()),
-        )));
+            .map(|d| Box::new(d.related(p.path.span.clone(), "the parameter's index"))));
+        }
+        Lookup::NotAList { depth } => {
+            return Err(err(
+                Code::BadIndex,
+                format!(
+                    "parameter `{}` reads `{}[{}]`, but `{}` is one value, not a list",
+                    p.path.text,
+                    path(depth),
+                    p.indices[depth],
+                    path(depth)
+                ),
+            ));
+        }
+        Lookup::List => {
+            return Err(err(
+                Code::BadIndex,
+                format!(
+                    "parameter `{}` needs one value, but `{}` is a list",
+                    p.path.text,
+                    path(p.indices.len())
+                ),
+            ));
+        }
     };
-    typed_token(s, p.ty).map_err(|why| {
-        let code = if p.ty.is_some() && !why.starts_with("non-ASCII") {
-            Code::TypeMismatch
-        } else if why.starts_with("non-ASCII") {
-            Code::NonAscii
-        } else {
-            Code::UnsafeValue
-        };
-        Some(Box::new(
-            Diagnostic::error(
+    match typed_token(s, p.ty) {
+        Ok(t) => Ok(t),
+        Err(why) => {
+            let code = if why.starts_with("non-ASCII") {
+                Code::NonAscii
+            } else if p.ty.is_some() {
+                Code::TypeMismatch
+            } else {
+                Code::UnsafeValue
+            };
+            Err(err(
                 code,
-                format!("`{path}` = `{s}` for parameter `{}`: {why}", p.path.text),
-            )
-            .at(var.value_span.clone())
-            .element(label.to_owned()),
-        ))
-    })
+                format!(
+                    "`{}` = `{s}` for parameter `{}`: {why}",
+                    path(p.indices.len()),
+                    p.path.text
+                ),
+            ))
+        }
+    }
 }
 
 /// Checks a value against its type (or, untyped, the safe-token rule) and returns the KRL token.
-pub fn typed_token(s: &str, ty: Option<ValueType>) -> Result<String, String> {
+/// Numbers are written in a conservative KRL spelling: no `+` sign, a digit on both sides of the
+/// decimal point, `E` for the exponent (`+.5e3` → `0.5E3`).
+pub fn typed_token(s: &str, ty: Option<ValueType>) -> Result<Cow<'_, str>, String> {
     match ty {
-        Some(ValueType::Double) if is_number(s, true) => Ok(s.to_owned()),
-        Some(ValueType::Decimal) if is_number(s, false) => Ok(s.to_owned()),
-        Some(ValueType::Integer) if is_integer(s) => Ok(s.to_owned()),
+        Some(ValueType::Double) if is_number(s, true) => Ok(krl_number(s)),
+        Some(ValueType::Decimal) if is_number(s, false) => Ok(krl_number(s)),
+        Some(ValueType::Integer) if is_integer(s) => Ok(krl_number(s)),
         Some(ValueType::Boolean) => match s.to_ascii_lowercase().as_str() {
-            "true" | "1" => Ok("TRUE".to_owned()),
-            "false" | "0" => Ok("FALSE".to_owned()),
+            "true" | "1" => Ok(Cow::Borrowed("TRUE")),
+            "false" | "0" => Ok(Cow::Borrowed("FALSE")),
             _ => Err("not an xs:boolean (true, false, 1 or 0)".to_owned()),
         },
         Some(ValueType::String) => {
@@ -516,13 +527,15 @@ pub fn typed_token(s: &str, ty: Option<ValueType>) -> Result<String, String> {
             } else if s.chars().any(|c| c.is_ascii_control()) {
                 Err("a string value must not contain control characters".to_owned())
             } else {
-                Ok(format!("\"{s}\""))
+                Ok(Cow::Owned(format!("\"{s}\"")))
             }
         }
         Some(t) => Err(format!("not an {}", t.xs_name())),
         None => {
-            if is_safe_token(s) {
-                Ok(s.to_owned())
+            if is_number(s, true) {
+                Ok(krl_number(s))
+            } else if is_safe_token(s) {
+                Ok(Cow::Borrowed(s))
             } else if !s.is_ascii() {
                 Err("non-ASCII character in a value (KRL code is ASCII)".to_owned())
             } else {
@@ -530,6 +543,45 @@ pub fn typed_token(s: &str, ty: Option<ValueType>) -> Result<String, String> {
             }
         }
     }
+}
+
+/// A number (already checked by [`is_number`]) in KRL spelling; borrowed when unchanged.
+fn krl_number(s: &str) -> Cow<'_, str> {
+    let b = s.as_bytes();
+    let needs = s.starts_with('+')
+        || s.contains("E+")
+        || s.contains('e')
+        || b.windows(2).any(|w| {
+            (w[1] == b'.' && !w[0].is_ascii_digit()) || (w[0] == b'.' && !w[1].is_ascii_digit())
+        })
+        || s.starts_with('.')
+        || s.ends_with('.');
+    if !needs {
+        return Cow::Borrowed(s);
+    }
+    let body = s.strip_prefix('+').unwrap_or(s);
+    let (sign, body) = match body.strip_prefix('-') {
+        Some(rest) => ("-", rest),
+        None => ("", body),
+    };
+    let (mant, exp) = match body.find(['e', 'E']) {
+        Some(i) => (&body[..i], Some(&body[i + 1..])),
+        None => (body, None),
+    };
+    let mut out = String::with_capacity(s.len() + 2);
+    out.push_str(sign);
+    if mant.starts_with('.') {
+        out.push('0');
+    }
+    out.push_str(mant);
+    if mant.ends_with('.') {
+        out.push('0');
+    }
+    if let Some(e) = exp {
+        out.push('E');
+        out.push_str(e.strip_prefix('+').unwrap_or(e));
+    }
+    Cow::Owned(out)
 }
 
 fn is_integer(s: &str) -> bool {
@@ -650,12 +702,12 @@ fn prepare(
         let mut wanted: Vec<&str> = m
             .args
             .iter()
-            .map(|a| a.function_param.key.as_str())
+            .map(|a| a.function_param.key.as_ref())
             .collect();
         wanted.sort_unstable();
         wanted.dedup();
         let fits = |c: usize| {
-            let mut have: Vec<&str> = irl.calls[c].params.iter().map(|p| p.key.as_str()).collect();
+            let mut have: Vec<&str> = irl.calls[c].params.iter().map(|p| p.key.as_ref()).collect();
             have.sort_unstable();
             have == wanted
         };
@@ -675,7 +727,7 @@ fn prepare(
                     let ps: Vec<&str> = irl.calls[c]
                         .params
                         .iter()
-                        .map(|p| p.text.as_str())
+                        .map(|p| p.text.as_ref())
                         .collect();
                     format!("({})", ps.join(", "))
                 })
@@ -687,7 +739,7 @@ fn prepare(
                     f.command.text,
                     m.args
                         .iter()
-                        .map(|a| a.function_param.text.as_str())
+                        .map(|a| a.function_param.text.as_ref())
                         .collect::<Vec<_>>()
                         .join(", "),
                     shapes.join(", ")
@@ -723,7 +775,7 @@ fn prepare(
                                 "mapping fills parameter `{}` of `{}`, which its IRL template does not have (it has {})",
                                 a.function_param.text,
                                 call.name.text,
-                                known(call.params.iter().map(|p| p.text.as_str()))
+                                known(call.params.iter().map(|p| p.text.as_ref()))
                             ),
                         )
                         .at(a.function_param.span.clone())
@@ -782,11 +834,19 @@ mod tests {
     #[test]
     fn typed_values() {
         use ValueType::*;
-        assert_eq!(typed_token("1.5e3", Some(Double)).unwrap(), "1.5e3");
-        assert_eq!(typed_token("-.5", Some(Double)).unwrap(), "-.5");
+        assert_eq!(typed_token("1.5e3", Some(Double)).unwrap(), "1.5E3");
+        assert_eq!(typed_token("-.5", Some(Double)).unwrap(), "-0.5");
+        assert_eq!(typed_token("+5.", Some(Double)).unwrap(), "5.0");
+        assert_eq!(typed_token("2E+3", Some(Double)).unwrap(), "2E3");
+        assert_eq!(typed_token("-12.50", Some(Decimal)).unwrap(), "-12.50");
+        assert!(matches!(
+            typed_token("12.5", Some(Double)).unwrap(),
+            Cow::Borrowed(_)
+        ));
+        assert_eq!(typed_token("+.5", None).unwrap(), "0.5");
         assert!(typed_token("1.5e", Some(Double)).is_err());
         assert!(typed_token("1e3", Some(Decimal)).is_err());
-        assert_eq!(typed_token("+12", Some(Integer)).unwrap(), "+12");
+        assert_eq!(typed_token("+12", Some(Integer)).unwrap(), "12");
         assert!(typed_token("1.0", Some(Integer)).is_err());
         assert_eq!(typed_token("True", Some(Boolean)).unwrap(), "TRUE");
         assert_eq!(typed_token("0", Some(Boolean)).unwrap(), "FALSE");

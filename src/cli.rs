@@ -141,6 +141,11 @@ fn run(a: Args) -> u8 {
         confine_to: None,
     };
     let c = compile::compile(&fs, blackboard, &opts);
+    if std::env::var_os("SKILLPOST_TIMINGS").is_some() {
+        for (stage, d) in &c.timings {
+            eprintln!("timing: {stage:<16} {:>8.1} ms", d.as_secs_f64() * 1000.0);
+        }
+    }
     print_listings(&c, &print, &mut stdout);
     report(&c.diagnostics, &c.sources, a.format, warnings);
     if c.io_failure {

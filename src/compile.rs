@@ -59,6 +59,8 @@ pub struct Compilation {
     pub irls: Vec<Irl>,
     /// Skill steps that produce code.
     pub skill_steps: usize,
+    /// Wall time per stage, in order (`read-blackboard`, `read-sfc`, `plan`, `bind`, `emit`).
+    pub timings: Vec<(&'static str, std::time::Duration)>,
 }
 
 impl Compilation {
@@ -160,6 +162,12 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             .map(|p| read::normalize(&absolute(p))),
     };
     let mut out = Compilation::default();
+    let mut clock = std::time::Instant::now();
+    let mut lap = |out: &mut Compilation, stage: &'static str| {
+        let now = std::time::Instant::now();
+        out.timings.push((stage, now - clock));
+        clock = now;
+    };
 
     if !crate::names::is_krl_name(&opts.program) {
         cx.diags.push(Diagnostic::error(
@@ -186,6 +194,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
     let Some(bb) = read_blackboard(&cx.sources, bb_file, &mut cx.diags) else {
         return finish(cx, out);
     };
+    lap(&mut out, "read-blackboard");
 
     // The output template.
     let template = match &opts.template {
@@ -207,7 +216,9 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         .clone()
         .and_then(|r| cx.load_ref(&r.value, &r.span))
         .and_then(|f| read_sfc(&cx.sources, f, &mut cx.diags));
+    lap(&mut out, "read-sfc");
     let plan = sfc.as_ref().and_then(|s| plan::plan(s, &mut cx.diags));
+    lap(&mut out, "plan");
 
     // Bind, loading the IRL files the used skills need.
     let mut irls: Vec<Irl> = Vec::new();
@@ -239,6 +250,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         }
         let bound = bind::bind(&bb, sfc, &order, &res, &irls, &fn_irl, &mut cx.diags);
         out.skill_steps = bound.steps.iter().filter(|s| s.is_some()).count();
+        lap(&mut out, "bind");
         if !cx.diags.has_errors()
             && let (Some(template), Some(plan)) = (&template, &plan)
         {
@@ -260,6 +272,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                     })
                     .collect();
             }
+            lap(&mut out, "emit");
         }
     }
 

@@ -30,21 +30,29 @@ pub struct SourceFile {
     pub text: String,
     /// Whether the file started with a UTF-8 BOM.
     pub bom: bool,
-    line_starts: Vec<usize>,
+    /// Byte offsets of line starts, computed on the first diagnostic that needs them.
+    line_starts: std::sync::OnceLock<Vec<usize>>,
+}
+
+impl SourceFile {
+    fn line_starts(&self) -> &[usize] {
+        self.line_starts.get_or_init(|| {
+            std::iter::once(0)
+                .chain(memchr_iter(b'\n', self.text.as_bytes()).map(|i| i + 1))
+                .collect()
+        })
+    }
 }
 
 impl Sources {
     /// Adds a file and returns its id.
     pub fn add(&mut self, path: PathBuf, display: String, text: String, bom: bool) -> FileId {
-        let line_starts = std::iter::once(0)
-            .chain(memchr_iter(b'\n', text.as_bytes()).map(|i| i + 1))
-            .collect();
         self.files.push(SourceFile {
             path,
             display,
             text,
             bom,
-            line_starts,
+            line_starts: std::sync::OnceLock::new(),
         });
         self.files.len() - 1
     }
@@ -68,11 +76,12 @@ impl Sources {
     pub fn line_col(&self, id: FileId, offset: usize) -> (usize, usize) {
         let f = &self.files[id];
         let offset = offset.min(f.text.len());
-        let line = match f.line_starts.binary_search(&offset) {
+        let starts = f.line_starts();
+        let line = match starts.binary_search(&offset) {
             Ok(l) => l,
             Err(l) => l - 1,
         };
-        let start = f.line_starts[line];
+        let start = starts[line];
         let col = f
             .text
             .get(start..offset)
@@ -84,7 +93,7 @@ impl Sources {
     /// Byte offset of a 1-based line and column (as roxmltree reports them).
     pub fn offset_of(&self, id: FileId, line: usize, col: usize) -> usize {
         let f = &self.files[id];
-        let Some(&start) = f.line_starts.get(line.saturating_sub(1)) else {
+        let Some(&start) = f.line_starts().get(line.saturating_sub(1)) else {
             return f.text.len();
         };
         let rest = &f.text[start..];

@@ -5,22 +5,49 @@
 
 use crate::diag::{FileId, Span};
 use std::ops::Range;
+use std::sync::Arc;
 
-/// A name as written, with its comparison key ([`crate::names::key`]) and its place.
+/// A name as written, with its comparison key ([`crate::names::key`]) and its place. The strings
+/// are shared (`Arc`), so a name repeated 100,000 times in an SFC is stored once.
 #[derive(Debug, Clone)]
 pub struct Name {
-    pub text: String,
-    pub key: String,
+    pub text: Arc<str>,
+    pub key: Arc<str>,
     pub span: Span,
 }
 
 impl Name {
     pub fn new(text: &str, span: Span) -> Self {
         Name {
-            text: text.trim().to_owned(),
-            key: crate::names::key(text),
+            text: Arc::from(text.trim()),
+            key: Arc::from(crate::names::key(text)),
             span,
         }
+    }
+}
+
+/// Shares the strings of names read many times (step types, resources, skills, variables).
+#[derive(Debug, Default)]
+pub struct Interner {
+    map: std::collections::HashMap<Box<str>, (Arc<str>, Arc<str>)>,
+}
+
+impl Interner {
+    /// A [`Name`] for `raw` (as written) at `span`, its strings shared with earlier ones.
+    pub fn name(&mut self, raw: &str, span: Span) -> Name {
+        let (text, key) = self.strings(raw);
+        Name { text, key, span }
+    }
+
+    /// The shared trimmed text and key of `raw`.
+    pub fn strings(&mut self, raw: &str) -> (Arc<str>, Arc<str>) {
+        if let Some((t, k)) = self.map.get(raw) {
+            return (t.clone(), k.clone());
+        }
+        let t: Arc<str> = Arc::from(raw.trim());
+        let k: Arc<str> = Arc::from(crate::names::key(raw));
+        self.map.insert(raw.into(), (t.clone(), k.clone()));
+        (t, k)
     }
 }
 
@@ -60,15 +87,15 @@ pub struct Resource {
     pub skills: Vec<Skill>,
     pub functions: Vec<Function>,
     /// Keys of functions that are present but malformed (reported): not "unknown".
-    pub broken_functions: Vec<String>,
+    pub broken_functions: Vec<Arc<str>>,
 }
 
 impl Resource {
     pub fn skill(&self, key: &str) -> Option<usize> {
-        self.skills.iter().position(|s| s.name.key == key)
+        self.skills.iter().position(|s| &*s.name.key == key)
     }
     pub fn function(&self, key: &str) -> Option<usize> {
-        self.functions.iter().position(|f| f.name.key == key)
+        self.functions.iter().position(|f| &*f.name.key == key)
     }
 }
 
@@ -88,7 +115,7 @@ pub struct Skill {
 
 impl Skill {
     pub fn param(&self, key: &str) -> Option<usize> {
-        self.params.iter().position(|p| p.path.key == key)
+        self.params.iter().position(|p| &*p.path.key == key)
     }
 
     /// The SFC variables the skill needs (the top-level parameters' values), deduplicated by key.
@@ -98,10 +125,10 @@ impl Skill {
         for p in &self.params {
             if p.indices.is_empty()
                 && let Some(v) = &p.variable
-                && !seen.contains(&v.key.as_str())
+                && !seen.contains(&&*v.key)
             {
                 seen.push(&v.key);
-                out.push(v.text.as_str());
+                out.push(&*v.text);
             }
         }
         out
@@ -258,7 +285,7 @@ impl ElementKind {
 #[derive(Debug)]
 pub struct Step {
     /// The step's `name`: its step type (`P2P`), informative.
-    pub name: String,
+    pub name: Arc<str>,
     pub initial: bool,
     pub resource: Option<Name>,
     pub skill: Option<Name>,
@@ -266,15 +293,24 @@ pub struct Step {
     pub duration: Option<f64>,
     pub variables: Vec<Variable>,
     /// Keys of variables that are present but malformed (reported): not "missing".
-    pub invalid_variables: Vec<String>,
+    pub invalid_variables: Vec<Arc<str>>,
 }
 
 #[derive(Debug)]
 pub struct Variable {
     pub name: Name,
-    pub value: Value,
+    /// The value as written, trimmed; its syntax was checked by the reader. Items are looked up
+    /// without building a tree ([`crate::read::sfc::lookup`]); [`Variable::value`] builds one.
+    pub raw: String,
     /// The `Value` attribute's value.
     pub value_span: Span,
+}
+
+impl Variable {
+    /// The value as a tree (for listings).
+    pub fn value(&self) -> Value {
+        crate::read::sfc::parse_value(&self.raw).unwrap_or(Value::Scalar(self.raw.clone()))
+    }
 }
 
 /// An SFC variable's value: `(a, (b, c))` nests lists, anything else is one trimmed value.

@@ -24,7 +24,7 @@ pub fn blackboard(bb: &Blackboard) -> String {
                 s.id.as_deref().unwrap_or("")
             );
             for m in &s.mappings {
-                let args: Vec<&str> = m.args.iter().map(|a| a.skill_param.text.as_str()).collect();
+                let args: Vec<&str> = m.args.iter().map(|a| a.skill_param.text.as_ref()).collect();
                 let _ = writeln!(
                     o,
                     "                -> {} ({})   [order {}]",
@@ -116,7 +116,8 @@ pub fn sfc(sfc: &Sfc) -> String {
                     let _ = writeln!(o, "            Skill:      {}", s.text);
                 }
                 for v in &st.variables {
-                    let kind = match v.value {
+                    let value = v.value();
+                    let kind = match value {
                         Value::Scalar(_) => "(Value)",
                         Value::List(_) => "(List) ",
                     };
@@ -124,7 +125,7 @@ pub fn sfc(sfc: &Sfc) -> String {
                         o,
                         "            {:<19} {kind}    = {}",
                         format!("{}:", v.name.text.to_uppercase()),
-                        value_text(&v.value)
+                        value_text(&value)
                     );
                 }
             }

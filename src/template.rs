@@ -275,7 +275,7 @@ impl Template {
 
     /// Renders with `values[i]` for `params[i]` into `out` (lines joined by '\n', no trailing
     /// newline). Never panics; a missing value renders as nothing.
-    pub fn render(&self, values: &[&str], out: &mut String) {
+    pub fn render<S: AsRef<str>>(&self, values: &[S], out: &mut String) {
         debug_assert_eq!(values.len(), self.used.len(), "one value per parameter");
         out.reserve(self.lits.len() + 8 * values.len());
         for piece in &self.pieces {
@@ -283,7 +283,7 @@ impl Template {
                 Piece::Lit(s, e) => out.push_str(&self.lits[s..e]),
                 Piece::Param(p) => {
                     if let Some(v) = values.get(p) {
-                        out.push_str(v);
+                        out.push_str(v.as_ref());
                     }
                 }
             }
@@ -587,7 +587,7 @@ mod tests {
         let t = Template::compile("", &[]);
         assert_eq!(t.param_count(), 0);
         let mut out = String::from("x");
-        t.render(&[], &mut out);
+        t.render::<&str>(&[], &mut out);
         assert_eq!(out, "x");
     }
 

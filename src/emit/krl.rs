@@ -244,14 +244,12 @@ fn emit_blocks(
                     number, st.name, skill.name.text, res.name.text, e.local_id
                 )));
                 out.push_str(nl);
-                for call in &bs.calls {
-                    for line in call.split('\n') {
-                        if !line.is_empty() {
-                            out.push_str(&template.step_indent);
-                            out.push_str(line);
-                        }
-                        out.push_str(nl);
+                for line in bs.code.split('\n') {
+                    if !line.is_empty() {
+                        out.push_str(&template.step_indent);
+                        out.push_str(line);
                     }
+                    out.push_str(nl);
                 }
                 out.push_str(";ENDFOLD");
                 out.push_str(nl);

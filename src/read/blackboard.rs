@@ -274,6 +274,20 @@ impl Reader<'_> {
     ) {
         let own = caex_name(a).unwrap_or("").trim();
         let name_span = super::xml::attr_span(self.file, a, "Name");
+        if prefix.map_or(0, |p| p.matches('.').count() + 1) >= super::xml::MAX_DEPTH {
+            self.diags.push(
+                Diagnostic::error(
+                    Code::Unsupported,
+                    format!(
+                        "skill parameters nested deeper than {} levels are not supported",
+                        super::xml::MAX_DEPTH
+                    ),
+                )
+                .at(name_span)
+                .element(caex_element(a)),
+            );
+            return;
+        }
         if own.contains('.') {
             self.diags.push(
                 Diagnostic::error(

@@ -16,7 +16,7 @@ use crate::template::{Template, dedent, params_from_brackets};
 /// not an `<irl>` document; every other problem is pushed into `diags`.
 pub fn read_irl(sources: &Sources, file: FileId, diags: &mut Diagnostics) -> Option<Irl> {
     let doc = parse(sources, file, diags)?;
-    let text = sources.get(file).text.as_str();
+    let text = sources.get(file).text.as_ref();
     let root = doc.root_element();
     if root.tag_name().name() != "irl" {
         diags.push(
@@ -141,7 +141,7 @@ fn read_call(file: FileId, text: &str, node: Node, diags: &mut Diagnostics) -> O
             );
         }
     }
-    let names: Vec<String> = params.iter().map(|p| p.text.clone()).collect();
+    let names: Vec<String> = params.iter().map(|p| p.text.to_string()).collect();
     let template = Template::compile(&joined, &names);
     Some(IrlCall {
         name,
@@ -298,19 +298,19 @@ mod tests {
         assert!(diags.is_empty(), "{diags:?}");
         let irl = irl.unwrap();
         assert_eq!(irl.info.as_deref(), Some("KUKA KR15-2"));
-        let names: Vec<&str> = irl.calls.iter().map(|c| c.name.text.as_str()).collect();
+        let names: Vec<&str> = irl.calls.iter().map(|c| c.name.text.as_ref()).collect();
         assert_eq!(names, ["SetVelCP", "PTP", "LIN"]);
 
         let set = &irl.calls[0];
-        assert_eq!(set.name.key, "setvelcp");
+        assert_eq!(&*set.name.key, "setvelcp");
         assert_eq!(&KR15_2[set.name.span.range.clone()], "SetVelCP");
         assert_eq!(set.params.len(), 1);
-        assert_eq!(set.params[0].text, "VALUE");
+        assert_eq!(&*set.params[0].text, "VALUE");
         assert_eq!(&KR15_2[set.params[0].span.range.clone()], "VALUE");
         assert_eq!(render(set, &["0.5"]), "SetVelCP (0.5)");
 
         let ptp = &irl.calls[1];
-        let p: Vec<&str> = ptp.params.iter().map(|p| p.text.as_str()).collect();
+        let p: Vec<&str> = ptp.params.iter().map(|p| p.text.as_ref()).collect();
         assert_eq!(p, ["X", "Y", "Z", "A", "B", "C"]);
         assert_eq!(
             render(ptp, &["100", "200", "300", "0", "90", "0"]),
@@ -325,7 +325,7 @@ mod tests {
 
         assert_eq!(irl.definitions.len(), 1);
         let d = &irl.definitions[0];
-        assert_eq!(d.name.text, "SetVelCP");
+        assert_eq!(&*d.name.text, "SetVelCP");
         assert_eq!(
             d.lines,
             [
@@ -346,7 +346,7 @@ mod tests {
         let irl = irl.unwrap();
         assert!(irl.info.is_none());
         let ptp = &irl.calls[0];
-        let p: Vec<&str> = ptp.params.iter().map(|p| p.text.as_str()).collect();
+        let p: Vec<&str> = ptp.params.iter().map(|p| p.text.as_ref()).collect();
         assert_eq!(p, ["PX", "PY"]);
         assert_eq!(&text[ptp.params[0].span.range.clone()], "<function-call");
         assert_eq!(render(ptp, &["1", "2"]), "PTP {X 1, Y 2}");
@@ -364,7 +364,7 @@ mod tests {
         let irl = irl.unwrap();
         assert_eq!(irl.calls.len(), 2);
         assert_eq!(irl.calls[0].name.key, irl.calls[1].name.key);
-        assert_eq!(irl.calls[1].name.text, "MOVE");
+        assert_eq!(&*irl.calls[1].name.text, "MOVE");
         assert_eq!(irl.calls[0].template.param_count(), 1);
         assert_eq!(render(&irl.calls[1], &["1", "2"]), "M (1, 2)");
     }
@@ -412,7 +412,7 @@ mod tests {
         // Reported once per template, and the call is kept.
         let irl = irl.unwrap();
         assert_eq!(irl.calls.len(), 1);
-        assert_eq!(irl.calls[0].name.text, "Grüß");
+        assert_eq!(&*irl.calls[0].name.text, "Grüß");
 
         // In a definition, and through a character reference.
         let text =
@@ -445,7 +445,7 @@ mod tests {
         );
         let irl = irl.unwrap();
         assert_eq!(irl.calls.len(), 1);
-        assert_eq!(irl.calls[0].name.text, "LIN");
+        assert_eq!(&*irl.calls[0].name.text, "LIN");
         assert!(irl.definitions.is_empty());
     }
 

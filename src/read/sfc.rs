@@ -7,7 +7,7 @@ use roxmltree::Node;
 
 use super::xml::{attr_span, child, children, tag_span};
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
-use crate::model::{Element, ElementKind, FileHeader, Name, Sfc, Step, Value, Variable};
+use crate::model::{Element, ElementKind, FileHeader, Interner, Sfc, Step, Value, Variable};
 
 /// Lists nest at most this deep in a variable's value.
 pub const MAX_LIST_DEPTH: usize = 32;
@@ -69,8 +69,9 @@ pub fn read_sfc(sources: &Sources, file: FileId, diags: &mut Diagnostics) -> Opt
     };
 
     let mut elements = Vec::new();
+    let mut names = Interner::default();
     for e in sfc.children().filter(|c| c.is_element()) {
-        if let Some(el) = element(file, e, diags) {
+        if let Some(el) = element(file, e, &mut names, diags) {
             elements.push(el);
         }
     }
@@ -83,10 +84,15 @@ pub fn read_sfc(sources: &Sources, file: FileId, diags: &mut Diagnostics) -> Opt
     })
 }
 
-fn element(file: FileId, e: Node, diags: &mut Diagnostics) -> Option<Element> {
+fn element(
+    file: FileId,
+    e: Node,
+    names: &mut Interner,
+    diags: &mut Diagnostics,
+) -> Option<Element> {
     let tag = e.tag_name().name();
     let kind = match tag {
-        "step" => ElementKind::Step(Box::new(step(file, e, diags))),
+        "step" => ElementKind::Step(Box::new(step(file, e, names, diags))),
         "transition" => {
             condition(file, e, diags);
             ElementKind::Transition
@@ -205,36 +211,57 @@ fn condition(file: FileId, t: Node, diags: &mut Diagnostics) {
     }
 }
 
-fn step(file: FileId, s: Node, diags: &mut Diagnostics) -> Step {
-    let iwb = children(s, "addData")
-        .flat_map(|a| children(a, "data"))
-        .find_map(|d| child(d, "iwb"));
-    let named = |n: Option<Node>| -> Option<Name> {
-        let n = n?;
-        let v = n.attribute("name")?;
-        Some(Name::new(v, attr_span(file, n, "name")))
-    };
+fn step(file: FileId, s: Node, names: &mut Interner, diags: &mut Diagnostics) -> Step {
+    let mut iwb = None;
+    let mut variables = Vec::new();
+    let mut invalid_variables = Vec::new();
+    let mut var_nodes: Vec<Node> = Vec::new();
+    for c in s.children().filter(|c| c.is_element()) {
+        match c.tag_name().name() {
+            "addData" if iwb.is_none() => {
+                iwb = children(c, "data").find_map(|d| child(d, "iwb"));
+            }
+            "Variable" => var_nodes.push(c),
+            _ => {}
+        }
+    }
     let mut resource = None;
     let mut skill = None;
     let mut duration = None;
     if let Some(iwb) = iwb {
-        resource = named(
-            child(iwb, "ressources")
-                .and_then(|r| child(r, "ressource"))
-                .or_else(|| child(iwb, "resources").and_then(|r| child(r, "resource"))),
-        )
-        .filter(|n| !n.key.is_empty());
-        skill = named(child(iwb, "skill")).filter(|n| !n.key.is_empty());
-        duration = child(iwb, "time")
-            .and_then(|t| t.attribute("duration"))
-            .and_then(|d| d.trim().parse::<f64>().ok())
-            .filter(|d| d.is_finite() && *d >= 0.0);
+        for c in iwb.children().filter(|c| c.is_element()) {
+            match c.tag_name().name() {
+                "ressources" | "resources" if resource.is_none() => {
+                    resource = c
+                        .children()
+                        .find(|r| {
+                            r.is_element()
+                                && matches!(r.tag_name().name(), "ressource" | "resource")
+                        })
+                        .and_then(|r| {
+                            let v = r.attribute("name")?;
+                            Some(names.name(v, attr_span(file, r, "name")))
+                        })
+                        .filter(|n| !n.key.is_empty());
+                }
+                "skill" if skill.is_none() => {
+                    skill = c
+                        .attribute("name")
+                        .map(|v| names.name(v, attr_span(file, c, "name")))
+                        .filter(|n| !n.key.is_empty());
+                }
+                "time" if duration.is_none() => {
+                    duration = c
+                        .attribute("duration")
+                        .and_then(|d| d.trim().parse::<f64>().ok())
+                        .filter(|d| d.is_finite() && *d >= 0.0);
+                }
+                "Variable" => var_nodes.push(c),
+                _ => {}
+            }
+        }
     }
-    let mut variables = Vec::new();
-    let mut invalid_variables = Vec::new();
-    let direct = children(s, "Variable");
-    let nested = iwb.into_iter().flat_map(|i| children(i, "Variable"));
-    for v in direct.chain(nested) {
+    for v in var_nodes {
         let Some(name) = v.attribute("name") else {
             diags.push(
                 Diagnostic::error(Code::BadVariableSyntax, "Variable without `name`")
@@ -252,18 +279,18 @@ fn step(file: FileId, s: Node, diags: &mut Diagnostics) -> Step {
                 .at(tag_span(file, v))
                 .element(local_id_label(s)),
             );
-            invalid_variables.push(crate::names::key(name));
+            invalid_variables.push(names.strings(name).1);
             continue;
         };
         let value_span = Span::new(file, attr.range_value());
-        match parse_value(attr.value()) {
-            Ok(value) => variables.push(Variable {
-                name: Name::new(name, attr_span(file, v, "name")),
-                value,
+        match check_value(attr.value()) {
+            Ok(()) => variables.push(Variable {
+                name: names.name(name, attr_span(file, v, "name")),
+                raw: attr.value().trim().to_owned(),
                 value_span,
             }),
             Err((offset, msg)) => {
-                invalid_variables.push(crate::names::key(name));
+                invalid_variables.push(names.strings(name).1);
                 // Point into the raw value when it has no entity references (then offsets agree).
                 let raw_len = value_span.range.len();
                 let at = if raw_len == attr.value().len() {
@@ -283,7 +310,7 @@ fn step(file: FileId, s: Node, diags: &mut Diagnostics) -> Step {
         }
     }
     Step {
-        name: s.attribute("name").unwrap_or("").to_owned(),
+        name: names.strings(s.attribute("name").unwrap_or("")).0,
         initial: s
             .attribute("initialStep")
             .is_some_and(|v| v.trim() == "true" || v.trim() == "1"),
@@ -295,20 +322,108 @@ fn step(file: FileId, s: Node, diags: &mut Diagnostics) -> Step {
     }
 }
 
+/// What a list lookup found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Lookup<'a> {
+    /// One value.
+    Scalar(&'a str),
+    /// A list (where one value was looked for).
+    List,
+    /// The index at `depth` is past the end of a list of `len` items.
+    OutOfRange { depth: usize, len: usize },
+    /// The index at `depth` was applied to one value, not a list.
+    NotAList { depth: usize },
+}
+
+/// Looks up `indices` in a value whose syntax [`check_value`] accepted, without allocating.
+pub fn lookup<'a>(raw: &'a str, indices: &[usize]) -> Lookup<'a> {
+    let mut cur = raw.trim();
+    for (depth, &ix) in indices.iter().enumerate() {
+        if !cur.starts_with('(') {
+            return Lookup::NotAList { depth };
+        }
+        match items(cur).nth(ix) {
+            Some(item) => cur = item,
+            None => {
+                return Lookup::OutOfRange {
+                    depth,
+                    len: items(cur).count(),
+                };
+            }
+        }
+    }
+    if cur.starts_with('(') {
+        Lookup::List
+    } else {
+        Lookup::Scalar(cur)
+    }
+}
+
+/// The trimmed items of a well-formed list `( … )`.
+fn items(list: &str) -> impl Iterator<Item = &str> {
+    let inner = list
+        .strip_prefix('(')
+        .and_then(|l| l.strip_suffix(')'))
+        .unwrap_or("");
+    let empty = inner.trim().is_empty();
+    let b = inner.as_bytes();
+    let mut start = 0;
+    let mut i = 0;
+    let mut done = empty;
+    std::iter::from_fn(move || {
+        if done {
+            return None;
+        }
+        let (mut depth, mut in_str) = (0usize, false);
+        while i < b.len() {
+            match b[i] {
+                b'"' => in_str = !in_str,
+                b'(' if !in_str => depth += 1,
+                b')' if !in_str => depth = depth.saturating_sub(1),
+                b',' if !in_str && depth == 0 => break,
+                _ => {}
+            }
+            i += 1;
+        }
+        let item = inner[start..i].trim();
+        if i >= b.len() {
+            done = true;
+        } else {
+            i += 1;
+            start = i;
+        }
+        Some(item)
+    })
+}
+
+/// Checks a value's syntax (the rules of [`parse_value`]) without building it.
+pub fn check_value(text: &str) -> Result<(), (usize, String)> {
+    parse(text, false).map(|_| ())
+}
+
 /// Parses a variable's value: `(a, b, (c, d))` is a (nested) list of trimmed items, `()` is
 /// empty, anything else is one trimmed value. Commas inside `"..."` do not split. Errors carry
 /// the byte offset in `text`.
 pub fn parse_value(text: &str) -> Result<Value, (usize, String)> {
+    parse(text, true)
+}
+
+fn parse(text: &str, build: bool) -> Result<Value, (usize, String)> {
     let lead = text.len() - text.trim_start().len();
     let t = text.trim();
     if !t.starts_with('(') {
-        return Ok(Value::Scalar(t.to_owned()));
+        return Ok(Value::Scalar(if build {
+            t.to_owned()
+        } else {
+            String::new()
+        }));
     }
     let mut p = ListParser {
         s: t.as_bytes(),
         text: t,
         i: 0,
         base: lead,
+        build,
     };
     let v = p.list(0)?;
     p.skip_ws();
@@ -323,6 +438,8 @@ struct ListParser<'a> {
     text: &'a str,
     i: usize,
     base: usize,
+    /// Build the value (else only check the syntax, allocating nothing).
+    build: bool,
 }
 
 impl ListParser<'_> {
@@ -353,7 +470,10 @@ impl ListParser<'_> {
             self.skip_ws();
             match self.s.get(self.i) {
                 Some(b'(') => {
-                    items.push(self.list(depth + 1)?);
+                    let v = self.list(depth + 1)?;
+                    if self.build {
+                        items.push(v);
+                    }
                     self.skip_ws();
                 }
                 Some(b',') | Some(b')') => return Err(self.err("empty list item")),
@@ -375,7 +495,9 @@ impl ListParser<'_> {
                         }
                         self.i += 1;
                     }
-                    items.push(Value::Scalar(self.text[start..self.i].trim().to_owned()));
+                    if self.build {
+                        items.push(Value::Scalar(self.text[start..self.i].trim().to_owned()));
+                    }
                 }
             }
             match self.s.get(self.i) {
@@ -423,6 +545,22 @@ mod tests {
             Value::List(vec![s("\"a,b\""), s("c")])
         );
         assert_eq!(parse_value("abc def").unwrap(), s("abc def"));
+    }
+
+    #[test]
+    fn lookups() {
+        let v = "( 100, (1, \"a,b\"), (), 7 )";
+        assert!(check_value(v).is_ok());
+        assert_eq!(lookup(v, &[0]), Lookup::Scalar("100"));
+        assert_eq!(lookup(v, &[1, 1]), Lookup::Scalar("\"a,b\""));
+        assert_eq!(lookup(v, &[1]), Lookup::List);
+        assert_eq!(lookup(v, &[3]), Lookup::Scalar("7"));
+        assert_eq!(lookup(v, &[4]), Lookup::OutOfRange { depth: 0, len: 4 });
+        assert_eq!(lookup(v, &[2, 0]), Lookup::OutOfRange { depth: 1, len: 0 });
+        assert_eq!(lookup(v, &[0, 0]), Lookup::NotAList { depth: 1 });
+        assert_eq!(lookup("0.5", &[]), Lookup::Scalar("0.5"));
+        assert_eq!(lookup("0.5", &[0]), Lookup::NotAList { depth: 0 });
+        assert_eq!(lookup("()", &[]), Lookup::List);
     }
 
     #[test]

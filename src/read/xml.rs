@@ -12,8 +12,9 @@ use crate::load::FileSource;
 /// this only bites far beyond the file-size limit).
 pub const NODES_LIMIT: u32 = 50_000_000;
 
-/// Maximum element nesting depth accepted in any input.
-pub const MAX_DEPTH: usize = 256;
+/// Maximum nesting of CAEX attributes (the only element nesting the readers recurse into;
+/// roxmltree itself parses iteratively, so deep documents cannot overflow the stack).
+pub const MAX_DEPTH: usize = 64;
 
 /// Reads a file through `fs` into `sources`. On failure pushes an `E101` diagnostic located at
 /// `origin` (the `refURI` that named the file), or naming the path when there is no origin.
@@ -47,15 +48,16 @@ pub fn load(
             return None;
         }
     };
-    let (bom, body) = match bytes.strip_prefix(b"\xEF\xBB\xBF") {
-        Some(rest) => (true, rest),
-        None => (false, &bytes[..]),
-    };
-    match std::str::from_utf8(body) {
-        Ok(text) => Some(sources.add(path.to_owned(), display, text.to_owned(), bom)),
+    let mut bytes = bytes;
+    let bom = bytes.starts_with(b"\xEF\xBB\xBF");
+    if bom {
+        bytes.drain(..3);
+    }
+    match String::from_utf8(bytes) {
+        Ok(text) => Some(sources.add(path.to_owned(), display, text, bom)),
         Err(e) => {
-            let valid = e.valid_up_to();
-            let lossy = String::from_utf8_lossy(body).into_owned();
+            let valid = e.utf8_error().valid_up_to();
+            let lossy = String::from_utf8_lossy(e.as_bytes()).into_owned();
             let id = sources.add(path.to_owned(), display.clone(), lossy, bom);
             // The lossy text has the same bytes up to `valid`, so the offset holds.
             diags.push(
@@ -71,32 +73,20 @@ pub fn load(
 }
 
 /// Parses a file's text as XML, without DTDs (no entity expansion attacks, no external
-/// entities), and checks the nesting depth. A syntax error becomes `E102` at its line and column.
+/// entities). A syntax error becomes `E102` at its line and column.
 pub fn parse<'a>(
     sources: &'a Sources,
     file: FileId,
     diags: &mut Diagnostics,
 ) -> Option<Document<'a>> {
-    let text = sources.get(file).text.as_str();
+    let text = sources.get(file).text.as_ref();
     let opts = ParsingOptions {
         allow_dtd: false,
         nodes_limit: NODES_LIMIT,
         ..ParsingOptions::default()
     };
     match Document::parse_with_options(text, opts) {
-        Ok(doc) => {
-            if let Some(deep) = too_deep(&doc) {
-                diags.push(
-                    Diagnostic::error(
-                        Code::XmlSyntax,
-                        format!("XML nesting deeper than {MAX_DEPTH} levels"),
-                    )
-                    .at(Span::new(file, deep.range().start..deep.range().start + 1)),
-                );
-                return None;
-            }
-            Some(doc)
-        }
+        Ok(doc) => Some(doc),
         Err(e) => {
             let pos = e.pos();
             let off = match e {
@@ -120,20 +110,6 @@ pub fn parse<'a>(
             None
         }
     }
-}
-
-fn too_deep<'a, 'i>(doc: &'a Document<'i>) -> Option<Node<'a, 'i>> {
-    // Iterative walk with an explicit depth: no recursion on input.
-    let mut stack = vec![(doc.root(), 0usize)];
-    while let Some((n, d)) = stack.pop() {
-        if d > MAX_DEPTH {
-            return Some(n);
-        }
-        for c in n.children().filter(|c| c.is_element()) {
-            stack.push((c, d + 1));
-        }
-    }
-    None
 }
 
 /// Element children with this local name.

@@ -1,0 +1,1035 @@
+//! Projects that must compile: every folder under `fixtures/ok/` is copied to a temporary folder
+//! and compiled with the binary (`skillpost --warn [args] <BLACKBOARD> <PROGRAM>`).
+//!
+//! Each case folder holds the project's files and a `case.toml`:
+//!
+//! ```toml
+//! program = "Name"             # the <PROGRAM> argument
+//! blackboard = "Cell.aml"      # optional; default: the single *.aml in the folder
+//! args = ["--lf"]              # optional extra arguments
+//! tc6_valid = ["sfc.xml"]      # optional; SFC files that must validate against tc6_xml_v201.xsd
+//! stderr_contains = ["W204"]   # optional; text the compiler's stderr must contain
+//! ```
+//!
+//! For every case the test checks, through the binary only:
+//! - exit status 0, and exactly `<PROGRAM>.src` and `<PROGRAM>.dat` added to the folder;
+//! - snapshots (`tests/snapshots/`) of the `.src`, the `.dat` (line ends made visible: `⏎` marks a
+//!   CRLF) and the region of the blackboard the write-back changed;
+//! - the blackboard differs from the input only inside the write-back target's `<Value>`, which
+//!   now holds `<PROGRAM>.src` (or only by the inserted `<Value>` element when the target had
+//!   none; or not at all when there is no target);
+//! - the blackboard before and after, and the `tc6_valid` SFC files, validate against the XSDs in
+//!   `../shared/schemas/` with `xmllint` (skipped, with a note, when either is missing);
+//! - a second run over unchanged inputs exits 0 and rewrites nothing (modification times kept);
+//! - the `.src`/`.dat` pass a KRL structure check ([`check_krl`]).
+
+use std::collections::BTreeMap;
+use std::fs;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::{Duration, SystemTime};
+
+use serde::Deserialize;
+
+/// One `case.toml`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CaseToml {
+    program: String,
+    blackboard: Option<String>,
+    #[serde(default)]
+    args: Vec<String>,
+    #[serde(default)]
+    tc6_valid: Vec<String>,
+    #[serde(default)]
+    stderr_contains: Vec<String>,
+}
+
+macro_rules! cases {
+    ($($test:ident => $dir:literal,)*) => {
+        /// The case folders, sorted; [`every_case_folder_has_a_test`] keeps this list complete.
+        const CASES: &[&str] = &[$($dir),*];
+        $(
+            #[test]
+            fn $test() {
+                run_case($dir);
+            }
+        )*
+    };
+}
+
+cases! {
+    caex3_english => "caex3-english",
+    lf_output => "lf-output",
+    mappings_overloads => "mappings-overloads",
+    no_writeback_target => "no-writeback-target",
+    reference_sample => "reference-sample",
+    subfolders => "subfolders",
+    typed_values => "typed-values",
+    umlauts => "umlauts",
+    writeback_insert_value => "writeback-insert-value",
+}
+
+fn repo() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn ok_dir() -> PathBuf {
+    repo().join("fixtures/ok")
+}
+
+#[test]
+fn every_case_folder_has_a_test() {
+    let mut dirs: Vec<String> = fs::read_dir(ok_dir())
+        .unwrap()
+        .map(|e| e.unwrap())
+        .filter(|e| e.file_type().unwrap().is_dir())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    dirs.sort();
+    let mut sorted = CASES.to_vec();
+    sorted.sort();
+    assert_eq!(CASES, sorted.as_slice(), "keep the case list sorted");
+    assert_eq!(
+        dirs, sorted,
+        "fixtures/ok/ and the case list in tests/ok_fixtures.rs differ"
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Running one case
+// ---------------------------------------------------------------------------------------------
+
+fn run_case(name: &str) {
+    let case_dir = ok_dir().join(name);
+    let toml_text = fs::read_to_string(case_dir.join("case.toml"))
+        .unwrap_or_else(|e| panic!("{name}: case.toml: {e}"));
+    let case: CaseToml =
+        toml::from_str(&toml_text).unwrap_or_else(|e| panic!("{name}: case.toml: {e}"));
+
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    copy_dir(&case_dir, dir);
+
+    let bb_name = match &case.blackboard {
+        Some(b) => b.clone(),
+        None => single_aml(dir),
+    };
+    let bb = dir.join(&bb_name);
+    let original = fs::read(&bb).unwrap();
+    let lf = case.args.iter().any(|a| a == "--lf");
+    let src_path = dir.join(format!("{}.src", case.program));
+    let dat_path = dir.join(format!("{}.dat", case.program));
+
+    let schemas = schema_dir();
+    if let Some(s) = &schemas {
+        let xsd = caex_schema(s, &original);
+        xmllint(&xsd, &bb).unwrap_or_else(|e| panic!("{name}: input blackboard: {e}"));
+        for f in &case.tc6_valid {
+            xmllint(&s.join("tc6_xml_v201.xsd"), &dir.join(f))
+                .unwrap_or_else(|e| panic!("{name}: {f}: {e}"));
+        }
+    }
+
+    // Run 1.
+    let before = listing(dir);
+    let out = run(dir, &case, &bb_name);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{name}: run 1 failed:\n{stderr}"
+    );
+    for s in &case.stderr_contains {
+        assert!(stderr.contains(s), "{name}: stderr lacks `{s}`:\n{stderr}");
+    }
+    let after = listing(dir);
+    let added: Vec<&String> = after.keys().filter(|k| !before.contains_key(*k)).collect();
+    // `.dat` sorts before `.src`, as in the BTreeMap.
+    let expected_added = [
+        format!("{}.dat", case.program),
+        format!("{}.src", case.program),
+    ];
+    assert_eq!(
+        added,
+        expected_added.iter().collect::<Vec<_>>(),
+        "{name}: run 1 should add exactly the .src and .dat"
+    );
+
+    // The outputs.
+    let src = fs::read(&src_path).unwrap();
+    let dat = fs::read(&dat_path).unwrap();
+    let src_text = String::from_utf8(src.clone())
+        .unwrap_or_else(|_| panic!("{name}: the .src is not UTF-8 (let alone ASCII)"));
+    let dat_text = String::from_utf8(dat.clone())
+        .unwrap_or_else(|_| panic!("{name}: the .dat is not UTF-8 (let alone ASCII)"));
+    if let Err(e) = check_krl(&src_text, &dat_text, &case.program, lf) {
+        panic!("{name}: KRL structure check: {e}\n--- .src ---\n{src_text}");
+    }
+
+    // The write-back.
+    let written = fs::read(&bb).unwrap();
+    let region = check_write_back(name, &bb_name, &original, &written, &case.program);
+    if let Some(s) = &schemas {
+        let xsd = caex_schema(s, &written);
+        xmllint(&xsd, &bb).unwrap_or_else(|e| panic!("{name}: written-back blackboard: {e}"));
+    }
+
+    // Snapshots.
+    let program = &case.program;
+    insta::with_settings!({
+        description => format!("fixtures/ok/{name}: {program}.src"),
+        omit_expression => true,
+    }, {
+        insta::assert_snapshot!(format!("{name}__src"), visible(&src_text));
+    });
+    insta::with_settings!({
+        description => format!("fixtures/ok/{name}: {program}.dat"),
+        omit_expression => true,
+    }, {
+        insta::assert_snapshot!(format!("{name}__dat"), visible(&dat_text));
+    });
+    insta::with_settings!({
+        description => format!("fixtures/ok/{name}: the write-back into {bb_name}"),
+        omit_expression => true,
+    }, {
+        insta::assert_snapshot!(format!("{name}__blackboard"), region);
+    });
+
+    // Run 2 over unchanged inputs: nothing is rewritten.
+    let fixed = SystemTime::UNIX_EPOCH + Duration::new(1_000_000_000, 123_456_789);
+    let watched = [&src_path, &dat_path, &bb];
+    for p in watched {
+        fs::File::options()
+            .write(true)
+            .open(p)
+            .unwrap()
+            .set_modified(fixed)
+            .unwrap();
+    }
+    let mtimes: Vec<SystemTime> = watched.iter().map(|p| mtime(p)).collect();
+    let out2 = run(dir, &case, &bb_name);
+    let stderr2 = String::from_utf8_lossy(&out2.stderr).into_owned();
+    assert_eq!(
+        out2.status.code(),
+        Some(0),
+        "{name}: run 2 failed:\n{stderr2}"
+    );
+    for (p, m) in watched.iter().zip(&mtimes) {
+        assert_eq!(
+            mtime(p),
+            *m,
+            "{name}: run 2 rewrote {} although nothing changed:\n{stderr2}",
+            p.display()
+        );
+    }
+    assert_eq!(fs::read(&src_path).unwrap(), src, "{name}: .src changed");
+    assert_eq!(fs::read(&dat_path).unwrap(), dat, "{name}: .dat changed");
+    assert_eq!(
+        fs::read(&bb).unwrap(),
+        written,
+        "{name}: blackboard changed"
+    );
+    assert_eq!(listing(dir), after, "{name}: run 2 left files behind");
+}
+
+fn run(dir: &Path, case: &CaseToml, bb: &str) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .arg("--warn")
+        .args(&case.args)
+        .arg(bb)
+        .arg(&case.program)
+        .current_dir(dir)
+        .output()
+        .unwrap()
+}
+
+fn mtime(p: &Path) -> SystemTime {
+    fs::metadata(p).unwrap().modified().unwrap()
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    for e in fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let target = to.join(e.file_name());
+        if e.file_type().unwrap().is_dir() {
+            fs::create_dir(&target).unwrap();
+            copy_dir(&e.path(), &target);
+        } else {
+            fs::copy(e.path(), &target).unwrap();
+        }
+    }
+}
+
+/// Every file below `dir` (relative path with `/`) and its size.
+fn listing(dir: &Path) -> BTreeMap<String, u64> {
+    fn walk(root: &Path, dir: &Path, out: &mut BTreeMap<String, u64>) {
+        for e in fs::read_dir(dir).unwrap() {
+            let e = e.unwrap();
+            let p = e.path();
+            if e.file_type().unwrap().is_dir() {
+                walk(root, &p, out);
+            } else {
+                let rel = p.strip_prefix(root).unwrap().to_string_lossy();
+                out.insert(rel.replace('\\', "/"), e.metadata().unwrap().len());
+            }
+        }
+    }
+    let mut out = BTreeMap::new();
+    walk(dir, dir, &mut out);
+    out
+}
+
+fn single_aml(dir: &Path) -> String {
+    let amls: Vec<String> = fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.to_ascii_lowercase().ends_with(".aml"))
+        .collect();
+    assert_eq!(amls.len(), 1, "expected one *.aml in {}", dir.display());
+    amls[0].clone()
+}
+
+/// Line ends made visible: `⏎` marks a CRLF; a lone CR shows as `␍`.
+fn visible(text: &str) -> String {
+    text.replace("\r\n", "⏎\n").replace('\r', "␍")
+}
+
+// ---------------------------------------------------------------------------------------------
+// The write-back
+// ---------------------------------------------------------------------------------------------
+
+/// The write-back target's `Value` element, found independently of the compiler (SPEC.md 2:
+/// hierarchy `Blackboard` (or the only one) → `Code` → `KRL code` (else the first
+/// ExternalDataConnector) → `refURI` → `Value`). `None`: no target at all; `Some(None)`: the
+/// `refURI` attribute has no `Value`; `Some(Some((element, content)))`: the byte ranges of the
+/// `Value` element and of its content.
+type ValueRanges = Option<(Range<usize>, Range<usize>)>;
+
+fn target_value(bytes: &[u8]) -> Option<ValueRanges> {
+    let (offset, text) = match bytes.strip_prefix(b"\xEF\xBB\xBF") {
+        Some(rest) => (3, std::str::from_utf8(rest).unwrap()),
+        None => (0, std::str::from_utf8(bytes).unwrap()),
+    };
+    let doc = roxmltree::Document::parse(text).unwrap();
+    let named = |n: &roxmltree::Node, want: &str| {
+        n.attribute("Name")
+            .is_some_and(|v| v.trim().to_lowercase() == want.to_lowercase())
+    };
+    let hierarchies = elems(doc.root_element(), "InstanceHierarchy");
+    let h = match hierarchies.iter().find(|h| named(h, "Blackboard")) {
+        Some(h) => *h,
+        None if hierarchies.len() == 1 => hierarchies[0],
+        None => return None,
+    };
+    let code = elems(h, "InternalElement")
+        .into_iter()
+        .find(|e| named(e, "Code"))?;
+    let ifaces = elems(code, "ExternalInterface");
+    let iface = ifaces.iter().find(|i| named(i, "KRL code")).or_else(|| {
+        ifaces.iter().find(|i| {
+            i.attribute("RefBaseClassPath")
+                .is_some_and(|p| p.contains("ExternalDataConnector"))
+        })
+    })?;
+    let attr = elems(*iface, "Attribute")
+        .into_iter()
+        .find(|a| named(a, "refURI"))?;
+    let Some(value) = elems(attr, "Value").into_iter().next() else {
+        return Some(None);
+    };
+    let r = value.range();
+    let whole = &text[r.clone()];
+    assert!(
+        !whole.ends_with("/>"),
+        "a self-closing <Value/> target is not supported by this test"
+    );
+    let start = r.start + whole.find('>').unwrap() + 1;
+    let end = r.start + whole.rfind("</").unwrap();
+    Some(Some((
+        r.start + offset..r.end + offset,
+        start + offset..end + offset,
+    )))
+}
+
+/// The element children of `n` with local name `tag`.
+fn elems<'a, 'i>(n: roxmltree::Node<'a, 'i>, tag: &str) -> Vec<roxmltree::Node<'a, 'i>> {
+    n.children()
+        .filter(|c| c.is_element() && c.tag_name().name() == tag)
+        .collect()
+}
+
+/// The line (with its line break) holding `bytes[at..end]`, line ends made visible.
+fn line_around(bytes: &[u8], at: usize, end: usize) -> String {
+    let s = bytes[..at]
+        .iter()
+        .rposition(|&b| b == b'\n')
+        .map_or(0, |p| p + 1);
+    let e = bytes[end..]
+        .iter()
+        .position(|&b| b == b'\n')
+        .map_or(bytes.len(), |p| end + p + 1);
+    visible(&String::from_utf8_lossy(&bytes[s..e]))
+}
+
+fn line_number(bytes: &[u8], at: usize) -> usize {
+    bytes[..at].iter().filter(|&&b| b == b'\n').count() + 1
+}
+
+/// Asserts the write-back changed only the target value (to `<program>.src`; or inserted the
+/// missing `<Value>` element and nothing else), and describes the change for the snapshot.
+fn check_write_back(
+    case: &str,
+    bb_name: &str,
+    original: &[u8],
+    written: &[u8],
+    program: &str,
+) -> String {
+    let new_value = format!("{program}.src");
+    let mut report = format!(
+        "{bb_name}: {} bytes, BOM: {}, line ends: {}\n",
+        written.len(),
+        if written.starts_with(b"\xEF\xBB\xBF") {
+            "yes"
+        } else {
+            "no"
+        },
+        line_ends(written)
+    );
+    let Some(target) = target_value(original) else {
+        assert_eq!(
+            written, original,
+            "{case}: a blackboard without write-back target must stay untouched"
+        );
+        report.push_str("no write-back target: unchanged\n");
+        return report;
+    };
+    let Some((_, target)) = target else {
+        // No `Value`: the written file must hold exactly the original plus the `Value` element.
+        let Some(Some((element, content))) = target_value(written) else {
+            panic!("{case}: the write-back did not insert a <Value> into the target");
+        };
+        assert_eq!(
+            &written[content.clone()],
+            new_value.as_bytes(),
+            "{case}: the inserted value is not `{new_value}`"
+        );
+        let mut rest = written[..element.start].to_vec();
+        rest.extend_from_slice(&written[element.end..]);
+        assert!(
+            rest == original,
+            "{case}: the write-back changed more than inserting the <Value> element"
+        );
+        report.push_str(&format!(
+            "no <Value> in the target: inserted `{}` at byte {} (line {})\n",
+            String::from_utf8_lossy(&written[element.clone()]),
+            element.start,
+            line_number(written, element.start)
+        ));
+        report.push_str(&format!(
+            "- {}",
+            line_around(original, element.start, element.start).trim_start()
+        ));
+        report.push_str(&format!(
+            "+ {}",
+            line_around(written, element.start, element.end).trim_start()
+        ));
+        return report;
+    };
+
+    // Everything before the old value's start and after its end is identical; the new value is
+    // `<program>.src`.
+    assert_eq!(
+        written.len(),
+        original.len() - target.len() + new_value.len(),
+        "{case}: the blackboard's length changed by more than the value"
+    );
+    let prefix = common_prefix(original, written);
+    let suffix = common_prefix(
+        &original.iter().rev().copied().collect::<Vec<_>>(),
+        &written.iter().rev().copied().collect::<Vec<_>>(),
+    );
+    assert!(
+        prefix >= target.start,
+        "{case}: the blackboard changed at byte {prefix}, before the target value at {}",
+        target.start
+    );
+    assert!(
+        suffix >= original.len() - target.end,
+        "{case}: the blackboard changed at byte {} from the end, after the target value",
+        suffix
+    );
+    assert_eq!(
+        &written[target.start..target.start + new_value.len()],
+        new_value.as_bytes(),
+        "{case}: the target value is not `{new_value}`"
+    );
+    report.push_str(&format!(
+        "value at bytes {}..{} (line {}): `{}` -> `{}`\n",
+        target.start,
+        target.end,
+        line_number(original, target.start),
+        String::from_utf8_lossy(&original[target.clone()]),
+        new_value
+    ));
+    report.push_str(&format!(
+        "- {}",
+        line_around(original, target.start, target.end).trim_start()
+    ));
+    report.push_str(&format!(
+        "+ {}",
+        line_around(written, target.start, target.start + new_value.len()).trim_start()
+    ));
+    report
+}
+
+fn common_prefix(a: &[u8], b: &[u8]) -> usize {
+    a.iter().zip(b).take_while(|(x, y)| x == y).count()
+}
+
+fn line_ends(bytes: &[u8]) -> &'static str {
+    let lf = bytes.iter().filter(|&&b| b == b'\n').count();
+    let crlf = bytes.windows(2).filter(|w| w == b"\r\n").count();
+    match (crlf, lf) {
+        (0, 0) => "none",
+        (0, _) => "LF",
+        (c, l) if c == l => "CRLF",
+        _ => "mixed",
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Schemas
+// ---------------------------------------------------------------------------------------------
+
+/// The schema folder, when it and `xmllint` are there; otherwise says why the check is skipped.
+fn schema_dir() -> Option<PathBuf> {
+    let dir = repo().join("../shared/schemas");
+    if !dir.is_dir() {
+        println!("schema check skipped: {} does not exist", dir.display());
+        return None;
+    }
+    match Command::new("xmllint").arg("--version").output() {
+        Ok(o) if o.status.success() => Some(dir),
+        Ok(o) => {
+            println!(
+                "schema check skipped: `xmllint --version` failed with {}",
+                o.status
+            );
+            None
+        }
+        Err(e) => {
+            println!("schema check skipped: xmllint is not installed ({e})");
+            None
+        }
+    }
+}
+
+/// The CAEX XSD for the blackboard's `SchemaVersion`.
+fn caex_schema(dir: &Path, bytes: &[u8]) -> PathBuf {
+    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+    let text = std::str::from_utf8(bytes).unwrap();
+    let doc = roxmltree::Document::parse(text).unwrap();
+    match doc.root_element().attribute("SchemaVersion") {
+        Some("2.15") => dir.join("CAEX_ClassModel_V2.15.xsd"),
+        Some("3.0") => dir.join("CAEX_ClassModel_V.3.0.xsd"),
+        v => panic!("unexpected CAEX SchemaVersion {v:?}"),
+    }
+}
+
+fn xmllint(xsd: &Path, file: &Path) -> Result<(), String> {
+    let o = Command::new("xmllint")
+        .arg("--noout")
+        .arg("--schema")
+        .arg(xsd)
+        .arg(file)
+        .output()
+        .map_err(|e| format!("cannot run xmllint: {e}"))?;
+    if o.status.success() {
+        Ok(())
+    } else {
+        Err(format!(
+            "does not validate against {}:\n{}",
+            xsd.display(),
+            String::from_utf8_lossy(&o.stderr)
+        ))
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// KRL structure check
+// ---------------------------------------------------------------------------------------------
+
+/// A KRL name: a letter or `_`, then letters, digits or `_`, at most 24 characters.
+fn is_krl_name(s: &str) -> bool {
+    let b = s.as_bytes();
+    !b.is_empty()
+        && b.len() <= 24
+        && (b[0].is_ascii_alphabetic() || b[0] == b'_')
+        && b.iter().all(|c| c.is_ascii_alphanumeric() || *c == b'_')
+}
+
+/// Splits `text` into lines, checking that it is ASCII without control characters (tabs
+/// allowed) and that every line, the last included, ends in CRLF (or LF when `lf`).
+fn split_lines<'t>(text: &'t str, lf: bool, what: &str) -> Result<Vec<&'t str>, String> {
+    if text.is_empty() {
+        return Err(format!("{what} is empty"));
+    }
+    let mut lines = Vec::new();
+    let mut rest = text;
+    let mut n = 0;
+    while !rest.is_empty() {
+        n += 1;
+        let Some(i) = rest.find('\n') else {
+            return Err(format!(
+                "{what} line {n}: no line break at the end of the file"
+            ));
+        };
+        let (line, ending) = match rest[..i].strip_suffix('\r') {
+            Some(l) => (l, "CRLF"),
+            None => (&rest[..i], "LF"),
+        };
+        let wanted = if lf { "LF" } else { "CRLF" };
+        if ending != wanted {
+            return Err(format!(
+                "{what} line {n} ends in {ending}, expected {wanted} (mixed line endings)"
+            ));
+        }
+        if let Some(c) = line.chars().find(|c| !c.is_ascii()) {
+            return Err(format!("{what} line {n}: non-ASCII character `{c}`"));
+        }
+        if let Some(c) = line.chars().find(|c| c.is_ascii_control() && *c != '\t') {
+            return Err(format!("{what} line {n}: control character {:?}", c));
+        }
+        lines.push(line);
+        rest = &rest[i + 1..];
+    }
+    Ok(lines)
+}
+
+/// The code part of a KRL line: without a `;` comment (outside string literals); string
+/// contents blanked so keywords inside them do not count.
+fn code_of(line: &str) -> Result<String, String> {
+    let mut out = String::with_capacity(line.len());
+    let mut in_str = false;
+    for c in line.chars() {
+        match c {
+            '"' => {
+                in_str = !in_str;
+                out.push('"');
+            }
+            ';' if !in_str => break,
+            _ if in_str => out.push(' '),
+            _ => out.push(c),
+        }
+    }
+    if in_str {
+        return Err("unterminated string literal".to_owned());
+    }
+    Ok(out.trim().to_owned())
+}
+
+/// The words of a code line (runs of letters, digits, `_`, `$`, `#`), upper-cased.
+fn words_of(code: &str) -> Vec<String> {
+    code.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_' || c == '$' || c == '#'))
+        .filter(|w| !w.is_empty())
+        .map(str::to_ascii_uppercase)
+        .collect()
+}
+
+/// The name declared by `DEF name(...)` (`rest` is the text after `DEF`).
+fn def_name(rest: &str) -> Result<&str, String> {
+    let rest = rest.trim_start();
+    let Some(paren) = rest.find('(') else {
+        return Err(format!("`DEF {rest}` has no parameter list"));
+    };
+    if !rest.trim_end().ends_with(')') {
+        return Err(format!("`DEF {rest}`: parameter list not closed"));
+    }
+    let name = rest[..paren].trim();
+    if !is_krl_name(name) {
+        return Err(format!("DEF name `{name}` is not a valid KRL name"));
+    }
+    Ok(name)
+}
+
+/// Checks the structure of a generated `.src`/`.dat` pair for `program`: ASCII; CRLF (or LF)
+/// line endings on every line; header lines (`&...`) only before the first `DEF`; `DEF name( )`
+/// / `END` balanced and not nested, every statement inside one, the first `DEF` named like the
+/// program; `IF`/`ENDIF` (with `THEN`, `ELSE` only inside), `FOR`/`ENDFOR`, `WHILE`/`ENDWHILE`,
+/// `LOOP`/`ENDLOOP`, `SWITCH`/`ENDSWITCH`, `REPEAT`/`UNTIL` balanced inside each `DEF` (comments
+/// and string contents ignored); `;FOLD`/`;ENDFOLD` balanced and closed before `DEF`/`END`; every
+/// name a valid KRL name; the `.dat` one `DEFDAT <program>` ... `ENDDAT`.
+fn check_krl(src: &str, dat: &str, program: &str, lf: bool) -> Result<(), String> {
+    if !is_krl_name(program) {
+        return Err(format!("program name `{program}` is not a valid KRL name"));
+    }
+
+    // .src
+    let lines = split_lines(src, lf, ".src")?;
+    let mut open_def: Option<(String, usize)> = None;
+    let mut defs: Vec<String> = Vec::new();
+    let mut blocks: Vec<(&str, usize)> = Vec::new();
+    let mut folds: Vec<usize> = Vec::new();
+    for (i, raw) in lines.iter().enumerate() {
+        let n = i + 1;
+        let err = |m: String| format!(".src line {n}: {m}: `{raw}`");
+        let t = raw.trim();
+        let upper = t.to_ascii_uppercase();
+        if upper.starts_with(";FOLD") {
+            folds.push(n);
+            continue;
+        }
+        if upper.starts_with(";ENDFOLD") {
+            if folds.pop().is_none() {
+                return Err(err("`;ENDFOLD` without `;FOLD`".into()));
+            }
+            continue;
+        }
+        let code = code_of(t).map_err(&err)?;
+        if code.is_empty() {
+            continue;
+        }
+        if code.starts_with('&') {
+            if !defs.is_empty() {
+                return Err(err("header line after the first DEF".into()));
+            }
+            continue;
+        }
+        let words = words_of(&code);
+        let mut first = words.first().map(String::as_str).unwrap_or("");
+        let mut body = code.as_str();
+        if first == "GLOBAL" && matches!(words.get(1).map(String::as_str), Some("DEF")) {
+            first = "DEF";
+            body = body.trim_start()[6..].trim_start();
+        }
+        match first {
+            "DEF" => {
+                if let Some((name, at)) = &open_def {
+                    return Err(err(format!("DEF inside DEF `{name}` (line {at})")));
+                }
+                if let Some(f) = folds.last() {
+                    return Err(err(format!("DEF inside the ;FOLD of line {f}")));
+                }
+                let name = def_name(&body[3..]).map_err(&err)?;
+                if defs.is_empty() && name != program {
+                    return Err(err(format!(
+                        "the first DEF is `{name}`, not the program `{program}`"
+                    )));
+                }
+                if defs.iter().any(|d| d.eq_ignore_ascii_case(name)) {
+                    return Err(err(format!("DEF `{name}` defined twice")));
+                }
+                defs.push(name.to_owned());
+                open_def = Some((name.to_owned(), n));
+            }
+            "END" => {
+                if open_def.is_none() {
+                    return Err(err("END without DEF".into()));
+                }
+                if let Some((kw, at)) = blocks.last() {
+                    return Err(err(format!("END while {kw} of line {at} is open")));
+                }
+                if let Some(f) = folds.last() {
+                    return Err(err(format!("END inside the ;FOLD of line {f}")));
+                }
+                if words.len() != 1 {
+                    return Err(err("END followed by more".into()));
+                }
+                open_def = None;
+            }
+            _ => {
+                if open_def.is_none() {
+                    return Err(err("statement outside a DEF".into()));
+                }
+                let close = |blocks: &mut Vec<(&str, usize)>, opener: &str| match blocks.pop() {
+                    Some((kw, _)) if kw == opener => Ok(()),
+                    Some((kw, at)) => Err(err(format!(
+                        "{first} closes {kw} of line {at}, expected {opener}"
+                    ))),
+                    None => Err(err(format!("{first} without {opener}"))),
+                };
+                match first {
+                    "IF" => {
+                        if words.last().map(String::as_str) != Some("THEN") {
+                            return Err(err("IF without THEN".into()));
+                        }
+                        blocks.push(("IF", n));
+                    }
+                    "ELSE" if !matches!(blocks.last(), Some(("IF", _))) => {
+                        return Err(err("ELSE outside IF".into()));
+                    }
+                    "FOR" | "WHILE" | "LOOP" | "SWITCH" | "REPEAT" => {
+                        let kw = ["FOR", "WHILE", "LOOP", "SWITCH", "REPEAT"]
+                            .into_iter()
+                            .find(|k| *k == first)
+                            .unwrap();
+                        blocks.push((kw, n));
+                    }
+                    "CASE" | "DEFAULT" if !matches!(blocks.last(), Some(("SWITCH", _))) => {
+                        return Err(err(format!("{first} outside SWITCH")));
+                    }
+                    "ENDIF" => close(&mut blocks, "IF")?,
+                    "ENDFOR" => close(&mut blocks, "FOR")?,
+                    "ENDWHILE" => close(&mut blocks, "WHILE")?,
+                    "ENDLOOP" => close(&mut blocks, "LOOP")?,
+                    "ENDSWITCH" => close(&mut blocks, "SWITCH")?,
+                    "UNTIL" => close(&mut blocks, "REPEAT")?,
+                    _ => {}
+                }
+            }
+        }
+    }
+    if let Some((name, at)) = open_def {
+        return Err(format!(".src: DEF `{name}` of line {at} has no END"));
+    }
+    if let Some(at) = folds.last() {
+        return Err(format!(".src: ;FOLD of line {at} has no ;ENDFOLD"));
+    }
+    if defs.is_empty() {
+        return Err(".src has no DEF".to_owned());
+    }
+
+    // .dat
+    let lines = split_lines(dat, lf, ".dat")?;
+    let mut state = 0; // 0 before DEFDAT, 1 inside, 2 after ENDDAT
+    for (i, raw) in lines.iter().enumerate() {
+        let n = i + 1;
+        let code = code_of(raw.trim()).map_err(|m| format!(".dat line {n}: {m}"))?;
+        if code.is_empty() {
+            continue;
+        }
+        let words = words_of(&code);
+        let first = words.first().map(String::as_str).unwrap_or("");
+        match (state, first) {
+            (0, _) if code.starts_with('&') => {}
+            (0, "DEFDAT") => {
+                let name = code.split_whitespace().nth(1).unwrap_or("");
+                if !is_krl_name(name) {
+                    return Err(format!(".dat line {n}: `{name}` is not a valid KRL name"));
+                }
+                if name != program {
+                    return Err(format!(
+                        ".dat line {n}: DEFDAT `{name}`, but the program is `{program}`"
+                    ));
+                }
+                let rest: Vec<&String> = words.iter().skip(2).collect();
+                if !(rest.is_empty() || rest == ["PUBLIC"]) {
+                    return Err(format!(".dat line {n}: unexpected text after DEFDAT"));
+                }
+                state = 1;
+            }
+            (1, "ENDDAT") if words.len() == 1 => state = 2,
+            (1, "DEFDAT") => return Err(format!(".dat line {n}: DEFDAT inside DEFDAT")),
+            (1, _) => {}
+            (0, _) => return Err(format!(".dat line {n}: `{raw}` before DEFDAT")),
+            _ => return Err(format!(".dat line {n}: `{raw}` after ENDDAT")),
+        }
+    }
+    match state {
+        0 => Err(".dat has no DEFDAT".to_owned()),
+        1 => Err(".dat: DEFDAT without ENDDAT".to_owned()),
+        _ => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod write_back_check {
+    use super::check_write_back;
+
+    const BB: &str = "<?xml version=\"1.0\"?>\r\n<CAEXFile SchemaVersion=\"2.15\">\r\n  \
+        <InstanceHierarchy Name=\"Blackboard\">\r\n    <InternalElement Name=\"Code\">\r\n      \
+        <ExternalInterface Name=\"KRL code\">\r\n        <Attribute Name=\"refURI\">\
+        <Value>old.src</Value></Attribute>\r\n      </ExternalInterface>\r\n    \
+        </InternalElement>\r\n  </InstanceHierarchy>\r\n</CAEXFile>\r\n";
+
+    fn check(written: &str) -> String {
+        check_write_back("t", "bb.aml", BB.as_bytes(), written.as_bytes(), "prog")
+    }
+
+    #[test]
+    fn accepts_a_value_change() {
+        let r = check(&BB.replace("old.src", "prog.src"));
+        assert!(r.contains("`old.src` -> `prog.src`"), "{r}");
+    }
+
+    #[test]
+    #[should_panic(expected = "changed at byte")]
+    fn rejects_a_change_before_the_value() {
+        check(&BB.replace("old.src", "prog.src").replace("1.0", "1.1"));
+    }
+
+    #[test]
+    #[should_panic(expected = "from the end")]
+    fn rejects_a_change_after_the_value() {
+        check(
+            &BB.replace("old.src", "prog.src")
+                .replace("</CAEXFile>\r\n", "</CAEXFile>\n\r"),
+        );
+    }
+
+    #[test]
+    #[should_panic(expected = "length changed")]
+    fn rejects_lost_line_endings() {
+        check(&BB.replace("old.src", "prog.src").replace("\r\n", "\n"));
+    }
+
+    #[test]
+    #[should_panic(expected = "is not `prog.src`")]
+    fn rejects_a_wrong_value() {
+        check(&BB.replace("old.src", "PROG.src"));
+    }
+
+    #[test]
+    #[should_panic(expected = "more than inserting")]
+    fn rejects_an_insertion_with_other_changes() {
+        let no_value = BB.replace("<Value>old.src</Value>", "");
+        let written = BB
+            .replace("old.src", "prog.src")
+            .replace("Blackboard", "blackboard");
+        check_write_back(
+            "t",
+            "bb.aml",
+            no_value.as_bytes(),
+            written.as_bytes(),
+            "prog",
+        );
+    }
+
+    #[test]
+    #[should_panic(expected = "must stay untouched")]
+    fn rejects_a_change_without_target() {
+        let no_target = BB.replace("\"Code\"", "\"Geometry\"");
+        let written = no_target.replace("old.src", "prog.src");
+        check_write_back(
+            "t",
+            "bb.aml",
+            no_target.as_bytes(),
+            written.as_bytes(),
+            "prog",
+        );
+    }
+}
+
+#[cfg(test)]
+mod krl_check {
+    use super::check_krl;
+
+    const DAT: &str = "&ACCESS RVP\r\nDEFDAT prog\r\nENDDAT\r\n";
+
+    fn src(body: &str) -> String {
+        format!("&ACCESS RVP\r\n&REL 1\r\nDEF prog( )\r\n{body}END\r\n")
+    }
+
+    fn crlf(s: &str) -> String {
+        s.replace('\n', "\r\n")
+    }
+
+    fn ok(src: &str) {
+        if let Err(e) = check_krl(src, DAT, "prog", false) {
+            panic!("rejected a valid program: {e}\n{src}");
+        }
+    }
+
+    fn rejects(src: &str, why: &str) {
+        match check_krl(src, DAT, "prog", false) {
+            Ok(()) => panic!("accepted an invalid program ({why}):\n{src}"),
+            Err(e) => assert!(e.contains(why), "expected `{why}`, got `{e}`"),
+        }
+    }
+
+    #[test]
+    fn accepts_a_valid_program() {
+        ok(&src(&crlf(
+            ";FOLD INI\n  BAS (#INITMOV,0)\n;ENDFOLD (INI)\nIF $IN[1] THEN\n  \
+             FOR I = 1 TO 3\n    WAIT SEC 0.1\n  ENDFOR\nELSE\n  LOOP\n    EXIT\n  ENDLOOP\n\
+             ENDIF\nWHILE FALSE\nENDWHILE\nSWITCH N\nCASE 1\n  HALT\nDEFAULT\nENDSWITCH\n\
+             REPEAT\nUNTIL TRUE\nWAIT FOR $IN[2] ; FOR in a WAIT does not open a block\n",
+        )));
+        let with_def = format!(
+            "{}\r\nDEF Helper(X:IN)\r\n  DECL REAL X\r\nEND\r\n",
+            src("")
+        );
+        ok(&with_def);
+        let lf = src("  PTP HOME\r\n").replace("\r\n", "\n");
+        check_krl(&lf, &DAT.replace("\r\n", "\n"), "prog", true).unwrap();
+    }
+
+    #[test]
+    fn keywords_in_comments_and_strings_do_not_count() {
+        ok(&src(&crlf(
+            "  ; IF this were code THEN\n  MSG = \"IF x THEN ; ENDFOR\"\n  X = 1 ; ENDIF\n",
+        )));
+    }
+
+    #[test]
+    fn rejects_unbalanced_blocks() {
+        rejects(&src(&crlf("IF A THEN\n")), "IF of line 4 is open");
+        rejects(&src(&crlf("ENDIF\n")), "ENDIF without IF");
+        rejects(&src(&crlf("FOR I = 1 TO 2\nENDLOOP\n")), "expected LOOP");
+        rejects(&src(&crlf("WHILE TRUE\n")), "WHILE of line 4 is open");
+        rejects(&src(&crlf("SWITCH N\nENDIF\n")), "expected IF");
+        rejects(&src(&crlf("ELSE\n")), "ELSE outside IF");
+        rejects(&src(&crlf("IF A\nENDIF\n")), "IF without THEN");
+        rejects(&src(&crlf("LOOP\n")), "LOOP of line 4 is open");
+    }
+
+    #[test]
+    fn rejects_unbalanced_defs() {
+        rejects(
+            &crlf("DEF prog( )\nDEF inner( )\nEND\nEND\n"),
+            "DEF inside DEF",
+        );
+        rejects(&crlf("DEF prog( )\n  PTP HOME\n"), "has no END");
+        rejects(&crlf("DEF prog( )\nEND\nEND\n"), "END without DEF");
+        rejects(&crlf("DEF prog( )\nEND\nPTP HOME\n"), "outside a DEF");
+        rejects(&crlf("DEF other( )\nEND\n"), "not the program");
+        rejects(&crlf("&ACCESS RVP\n"), "no DEF");
+        rejects(&crlf("DEF prog( )\nEND\n&REL 1\n"), "header line after");
+    }
+
+    #[test]
+    fn rejects_unbalanced_folds() {
+        rejects(&src(&crlf(";FOLD A\n")), "END inside the ;FOLD");
+        rejects(&src(&crlf(";ENDFOLD\n")), "without `;FOLD`");
+        rejects(&format!("{};FOLD B\r\n", src("")), "has no ;ENDFOLD");
+    }
+
+    #[test]
+    fn rejects_bad_names() {
+        rejects(&crlf("DEF 1prog( )\nEND\n"), "not a valid KRL name");
+        rejects(
+            &format!("{}DEF abcdefghijklmnopqrstuvwxy( )\r\nEND\r\n", src("")),
+            "not a valid KRL name",
+        );
+        assert!(check_krl(&src(""), DAT, "abcdefghijklmnopqrstuvwxy", false).is_err());
+        assert!(check_krl(&src(""), DAT, "prog-1", false).is_err());
+        let e = check_krl(&src(""), &DAT.replace("prog", "other"), "prog", false).unwrap_err();
+        assert!(e.contains("DEFDAT `other`"), "{e}");
+    }
+
+    #[test]
+    fn rejects_bad_dat() {
+        let e = check_krl(&src(""), "DEFDAT prog\r\n", "prog", false).unwrap_err();
+        assert!(e.contains("without ENDDAT"), "{e}");
+        let e = check_krl(&src(""), "ENDDAT\r\n", "prog", false).unwrap_err();
+        assert!(e.contains("before DEFDAT"), "{e}");
+        let e = check_krl(&src(""), "DEFDAT prog\r\nENDDAT\r\nX\r\n", "prog", false).unwrap_err();
+        assert!(e.contains("after ENDDAT"), "{e}");
+    }
+
+    #[test]
+    fn rejects_bad_bytes_and_line_endings() {
+        rejects(&src("  PTP HOME\n"), "mixed line endings");
+        rejects(
+            &src("  PTP HOME\r\n").replace("END\r\n", "END"),
+            "no line break",
+        );
+        rejects(&src("  ; Größe\r\n"), "non-ASCII");
+        rejects(&src("  X = 1\x0c\r\n"), "control character");
+        rejects(&src("  MSG = \"open\r\n"), "unterminated string");
+        let crlf_in_lf = check_krl(&src(""), DAT, "prog", true).unwrap_err();
+        assert!(crlf_in_lf.contains("expected LF"), "{crlf_in_lf}");
+    }
+}
