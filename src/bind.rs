@@ -7,6 +7,7 @@
 
 use std::borrow::Cow;
 use std::collections::HashMap;
+use std::sync::Arc;
 
 use crate::diag::{Code, Diagnostic, Diagnostics, Span};
 use crate::model::{Blackboard, ElementKind, Irl, Sfc, Step, ValueType};
@@ -303,6 +304,7 @@ pub fn bind(
     };
     let mut def_keys: Vec<&str> = Vec::new();
     let mut values: Vec<Cow<str>> = Vec::new();
+    let mut extras = Extras::default();
     for &i in &order.steps {
         let Some((res, sk)) = r.step_skill[i] else {
             continue;
@@ -315,7 +317,7 @@ pub fn bind(
             continue;
         };
         let skill = &bb.resources[res].skills[sk];
-        let mut ok = check_variables(st, skill, e, diags);
+        let mut ok = check_variables(st, skill, e, &mut extras, diags);
         let mut code = String::new();
         for pc in &p.calls {
             let call = &irls[pc.irl].calls[pc.call];
@@ -354,6 +356,7 @@ pub fn bind(
             });
         }
     }
+    extras.report(diags);
     bound
 }
 
@@ -366,6 +369,7 @@ fn check_variables(
     st: &Step,
     skill: &crate::model::Skill,
     e: &crate::model::Element,
+    extras: &mut Extras,
     diags: &mut Diagnostics,
 ) -> bool {
     let mut ok = true;
@@ -395,20 +399,66 @@ fn check_variables(
             .iter()
             .any(|p| p.variable.as_ref().is_some_and(|n| n.key == v.name.key));
         if !used {
-            diags.push(
-                Diagnostic::warning(
-                    Code::ExtraVariable,
-                    format!(
-                        "variable `{}` is not used by skill `{}`",
-                        v.name.text, skill.name.text
-                    ),
-                )
-                .at(v.name.span.clone())
-                .element(label(e)),
-            );
+            extras.add(skill, v, e);
         }
     }
     ok
+}
+
+/// Variables no skill parameter reads, one warning per skill and variable (a work plan in the
+/// original format repeats them at every step).
+#[derive(Default)]
+struct Extras {
+    /// `(skill name key, variable key)` → first place, local ids, count.
+    list: Vec<(Arc<str>, Arc<str>, Diagnostic, Vec<u64>)>,
+}
+
+impl Extras {
+    fn add(
+        &mut self,
+        skill: &crate::model::Skill,
+        v: &crate::model::Variable,
+        e: &crate::model::Element,
+    ) {
+        if let Some(entry) = self
+            .list
+            .iter_mut()
+            .find(|(s, k, _, _)| *s == skill.name.key && *k == v.name.key)
+        {
+            entry.3.push(e.local_id);
+            return;
+        }
+        let d = Diagnostic::warning(
+            Code::ExtraVariable,
+            format!(
+                "variable `{}` is not used by skill `{}`",
+                v.name.text, skill.name.text
+            ),
+        )
+        .at(v.name.span.clone())
+        .element(label(e));
+        self.list.push((
+            skill.name.key.clone(),
+            v.name.key.clone(),
+            d,
+            vec![e.local_id],
+        ));
+    }
+
+    fn report(self, diags: &mut Diagnostics) {
+        for (_, _, mut d, ids) in self.list {
+            if ids.len() > 1 {
+                let shown: Vec<String> = ids.iter().take(5).map(u64::to_string).collect();
+                d.message.push_str(&format!(
+                    " (at {} steps: localId {}{})",
+                    ids.len(),
+                    shown.join(", "),
+                    if ids.len() > 5 { ", ..." } else { "" }
+                ));
+            }
+            diags.push(d);
+        }
+    }
 }
 
 /// The emitted token for skill parameter `pi` at this step. `Err(None)`: the variable is

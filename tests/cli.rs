@@ -75,6 +75,12 @@ fn validate_writes_nothing_and_shows_warnings() {
     let e = stderr(&o);
     assert!(e.contains("warning[W303]"), "{e}");
     assert!(e.contains("Input validation successful!"), "{e}");
+    // One warning per skill and unused variable, not one per step.
+    assert_eq!(e.matches("warning[W303]").count(), 3, "{e}");
+    assert!(
+        e.contains("variable `JointConfig` is not used by skill `Move PTP` (at 2 steps: localId 3, 6)"),
+        "{e}"
+    );
 }
 
 #[test]
