@@ -409,8 +409,15 @@ fn check_variables(
 /// original format repeats them at every step).
 #[derive(Default)]
 struct Extras {
-    /// `(skill name key, variable key)` → first place, local ids, count.
-    list: Vec<(Arc<str>, Arc<str>, Diagnostic, Vec<u64>)>,
+    list: Vec<Extra>,
+}
+
+/// One unused variable of one skill: the warning for its first place, and every step's id.
+struct Extra {
+    skill: Arc<str>,
+    variable: Arc<str>,
+    first: Diagnostic,
+    steps: Vec<u64>,
 }
 
 impl Extras {
@@ -423,9 +430,9 @@ impl Extras {
         if let Some(entry) = self
             .list
             .iter_mut()
-            .find(|(s, k, _, _)| *s == skill.name.key && *k == v.name.key)
+            .find(|x| x.skill == skill.name.key && x.variable == v.name.key)
         {
-            entry.3.push(e.local_id);
+            entry.steps.push(e.local_id);
             return;
         }
         let d = Diagnostic::warning(
@@ -437,16 +444,21 @@ impl Extras {
         )
         .at(v.name.span.clone())
         .element(label(e));
-        self.list.push((
-            skill.name.key.clone(),
-            v.name.key.clone(),
-            d,
-            vec![e.local_id],
-        ));
+        self.list.push(Extra {
+            skill: skill.name.key.clone(),
+            variable: v.name.key.clone(),
+            first: d,
+            steps: vec![e.local_id],
+        });
     }
 
     fn report(self, diags: &mut Diagnostics) {
-        for (_, _, mut d, ids) in self.list {
+        for Extra {
+            first: mut d,
+            steps: ids,
+            ..
+        } in self.list
+        {
             if ids.len() > 1 {
                 let shown: Vec<String> = ids.iter().take(5).map(u64::to_string).collect();
                 d.message.push_str(&format!(

@@ -1,325 +1,784 @@
 //! The SFC (PLCopen TC6 XML 2.01, 2.00 or 1.0; namespaces ignored): the program's elements,
 //! their connections, and the skill steps' data (SPEC.md section 3).
 //!
-//! The reader only extracts; the graph rules are checked by [`crate::plan`].
+//! The SFC is the one input that grows with the product (100,000 steps make 78 MB), so it is read
+//! in one streaming pass (`quick-xml`), without building a document tree: the model is all that
+//! is kept. Byte positions are taken from the reader and from the attribute slices, which point
+//! into the text. The graph rules are checked by [`crate::plan`].
 
-use roxmltree::Node;
+use std::ops::Range;
 
-use super::xml::{attr_span, child, children, tag_span};
+use quick_xml::events::{BytesStart, Event};
+
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
-use crate::model::{Element, ElementKind, FileHeader, Interner, Sfc, Step, Value, Variable};
+use crate::model::{Element, ElementKind, FileHeader, Interner, Name, Sfc, Step, Value, Variable};
 
 /// Lists nest at most this deep in a variable's value.
 pub const MAX_LIST_DEPTH: usize = 32;
 
-/// Reads the SFC file. `None` when there is no usable program body.
+/// Reads the SFC file. `None` when the file is not well-formed or has no usable program body.
 pub fn read_sfc(sources: &Sources, file: FileId, diags: &mut Diagnostics) -> Option<Sfc> {
-    let doc = super::xml::parse(sources, file, diags)?;
-    let root = doc.root_element();
-    if root.tag_name().name() != "project" {
-        diags.push(
-            Diagnostic::error(
-                Code::XmlWrongRoot,
-                format!(
-                    "not a PLCopen XML file: the root element is `{}`, not `project`",
-                    root.tag_name().name()
-                ),
-            )
-            .at(tag_span(file, root)),
-        );
-        return None;
-    }
-    let header = child(root, "fileHeader")
-        .map(|h| FileHeader {
-            company_name: h.attribute("companyName").map(str::to_owned),
-            product_name: h.attribute("productName").map(str::to_owned),
-            product_version: h.attribute("productVersion").map(str::to_owned),
-            creation_date_time: h.attribute("creationDateTime").map(str::to_owned),
-        })
-        .unwrap_or_default();
-
-    let pous: Vec<Node> = child(root, "types")
-        .and_then(|t| child(t, "pous"))
-        .map(|p| children(p, "pou").collect())
-        .unwrap_or_default();
-    let pou = pous
-        .iter()
-        .copied()
-        .find(|p| p.attribute("pouType") == Some("program"))
-        .or_else(|| pous.first().copied());
-    let sfc = pou
-        .and_then(|p| child(p, "body"))
-        .and_then(|b| child(b, "SFC"));
-    let Some(sfc) = sfc else {
-        let at = pou.unwrap_or(root);
-        diags.push(
-            Diagnostic::error(
-                Code::NoSfcBody,
-                match pou {
-                    None => "the SFC file has no `pou` (types/pous/pou)".to_owned(),
-                    Some(p) => format!(
-                        "pou `{}` has no SFC body (body/SFC)",
-                        p.attribute("name").unwrap_or("")
-                    ),
-                },
-            )
-            .at(tag_span(file, at)),
-        );
-        return None;
-    };
-
-    let mut elements = Vec::new();
-    let mut names = Interner::default();
-    for e in sfc.children().filter(|c| c.is_element()) {
-        if let Some(el) = element(file, e, &mut names, diags) {
-            elements.push(el);
-        }
-    }
-    Some(Sfc {
+    let text = sources.get(file).text.as_str();
+    let mut r = Stream {
+        text,
         file,
-        header,
-        pou_name: pou.and_then(|p| p.attribute("name")).map(str::to_owned),
-        elements,
-        span: Some(tag_span(file, sfc)),
-    })
-}
-
-fn element(
-    file: FileId,
-    e: Node,
-    names: &mut Interner,
-    diags: &mut Diagnostics,
-) -> Option<Element> {
-    let tag = e.tag_name().name();
-    let kind = match tag {
-        "step" => ElementKind::Step(Box::new(step(file, e, names, diags))),
-        "transition" => {
-            condition(file, e, diags);
-            ElementKind::Transition
-        }
-        "simultaneousDivergence" => ElementKind::SimultaneousDivergence,
-        "simultaneousConvergence" => ElementKind::SimultaneousConvergence,
-        "selectionDivergence" => ElementKind::SelectionDivergence,
-        "selectionConvergence" => ElementKind::SelectionConvergence,
-        "jumpStep" => ElementKind::JumpStep,
-        "macroStep" => ElementKind::MacroStep,
-        _ => {
-            let what = if tag == "actionBlock" {
-                "action block".to_owned()
-            } else {
-                format!("`{tag}` element")
-            };
-            diags.push(
-                Diagnostic::warning(Code::Ignored, format!("{what} ignored"))
-                    .at(tag_span(file, e))
-                    .element(local_id_label(e)),
-            );
-            return None;
-        }
+        names: Interner::default(),
+        found: Vec::new(),
     };
-    let local_id = match e.attribute("localId").map(|v| v.trim().parse::<u64>()) {
-        Some(Ok(id)) => id,
-        Some(Err(_)) => {
+    let before = diags.error_count();
+    let mut local = Diagnostics::default();
+    let outcome = r.run(&mut local);
+    match outcome {
+        Err(d) => {
+            // Not well-formed: only the syntax error counts (the rest may be an artefact of it).
+            diags.push(*d);
+            None
+        }
+        Ok(Outcome::WrongRoot(span, name)) => {
             diags.push(
                 Diagnostic::error(
-                    Code::BadLocalId,
-                    format!(
-                        "`{tag}` has localId `{}`, which is not a number from 0 to {}",
-                        e.attribute("localId").unwrap_or(""),
-                        u64::MAX
-                    ),
+                    Code::XmlWrongRoot,
+                    format!("not a PLCopen XML file: the root element is `{name}`, not `project`"),
                 )
-                .at(attr_span(file, e, "localId")),
+                .at(span),
             );
-            return None;
+            None
         }
-        None => {
-            diags.push(
-                Diagnostic::error(Code::BadLocalId, format!("`{tag}` without localId"))
-                    .at(tag_span(file, e)),
-            );
-            return None;
+        Ok(Outcome::Done {
+            header,
+            root,
+            first_pou,
+        }) => {
+            for d in local.into_vec() {
+                diags.push(d);
+            }
+            let _ = before;
+            let chosen = r
+                .found
+                .iter()
+                .position(|p| p.program)
+                .or(if r.found.is_empty() { None } else { Some(0) });
+            let Some(i) = chosen else {
+                diags.push(
+                    Diagnostic::error(
+                        Code::NoSfcBody,
+                        match &first_pou {
+                            None => "the SFC file has no `pou` (types/pous/pou)".to_owned(),
+                            Some((_, name)) => {
+                                format!("pou `{name}` has no SFC body (body/SFC)")
+                            }
+                        },
+                    )
+                    .at(first_pou.map(|(s, _)| s).unwrap_or(root)),
+                );
+                return None;
+            };
+            let pou = r.found.swap_remove(i);
+            Some(Sfc {
+                file,
+                header,
+                pou_name: pou.name,
+                elements: pou.elements,
+                span: Some(pou.sfc_span),
+            })
         }
-    };
-    let x = child(e, "position")
-        .and_then(|p| p.attribute("x"))
-        .and_then(|x| x.trim().parse::<f64>().ok())
-        .filter(|x| x.is_finite())
-        .unwrap_or(0.0);
-    let mut inputs = Vec::new();
-    for cpi in children(e, "connectionPointIn") {
-        for c in children(cpi, "connection") {
-            match c.attribute_node("refLocalId") {
-                Some(a) => match a.value().trim().parse::<u64>() {
-                    Ok(r) => inputs.push((r, a.range_value())),
-                    Err(_) => diags.push(
+    }
+}
+
+enum Outcome {
+    WrongRoot(Span, String),
+    Done {
+        header: FileHeader,
+        /// The root element's tag.
+        root: Span,
+        /// The first pou's tag and name (for "no SFC body").
+        first_pou: Option<(Span, String)>,
+    },
+}
+
+/// A pou whose SFC body was read.
+struct Pou {
+    name: Option<String>,
+    program: bool,
+    sfc_span: Span,
+    elements: Vec<Element>,
+}
+
+struct Stream<'t> {
+    text: &'t str,
+    file: FileId,
+    names: Interner,
+    found: Vec<Pou>,
+}
+
+/// An attribute: its local name, value (entities resolved) and the raw value's byte range.
+struct Attr<'t> {
+    name: &'t str,
+    value: std::borrow::Cow<'t, str>,
+    range: Range<usize>,
+}
+
+/// The element being read (a direct child of `SFC`), with what its descendants contributed.
+struct Building<'t> {
+    tag: &'t str,
+    span: Span,
+    depth: usize,
+    attrs: Vec<Attr<'t>>,
+    x: Option<f64>,
+    inputs: Vec<(u64, Range<usize>)>,
+    bad_inputs: Vec<Diagnostic>,
+    /// `Variable` elements: direct ones, then those in `iwb`.
+    direct_vars: Vec<(Span, Vec<Attr<'t>>)>,
+    iwb_vars: Vec<(Span, Vec<Attr<'t>>)>,
+    iwb: IwbState,
+    resource: Option<Name>,
+    resources_seen: bool,
+    skill: Option<Name>,
+    duration: Option<f64>,
+    time_seen: bool,
+    condition: Option<Span>,
+    condition_done: bool,
+    inline: Option<String>,
+}
+
+#[derive(PartialEq, Eq, Clone, Copy)]
+enum IwbState {
+    Before,
+    Inside,
+    Done,
+}
+
+impl<'t> Stream<'t> {
+    fn span(&self, r: Range<usize>) -> Span {
+        Span::new(self.file, r)
+    }
+
+    /// The byte offset of `s` in the text (it is a slice of it), or `fallback`.
+    fn offset_of(&self, s: &str, fallback: usize) -> usize {
+        let base = self.text.as_ptr() as usize;
+        let p = s.as_ptr() as usize;
+        if p >= base && p + s.len() <= base + self.text.len() {
+            p - base
+        } else {
+            fallback
+        }
+    }
+
+    fn syntax_error(&self, at: usize, msg: String) -> Box<Diagnostic> {
+        let at = at.min(self.text.len());
+        let end = (at + 1).min(self.text.len()).max(at);
+        Box::new(
+            Diagnostic::error(Code::XmlSyntax, format!("not well-formed XML: {msg}"))
+                .at(self.span(at..end)),
+        )
+    }
+
+    /// The local name of a start tag, as a slice of the text.
+    fn local_name(&self, e: &BytesStart<'t>) -> &'t str {
+        let raw = e.name();
+        let full: &str = raw.as_ref();
+        let start = self.offset_of(full, usize::MAX);
+        let local = full.rsplit(':').next().unwrap_or(full);
+        if start == usize::MAX {
+            return "";
+        }
+        let off = start + (full.len() - local.len());
+        &self.text[off..off + local.len()]
+    }
+
+    fn attrs(&self, e: &BytesStart<'t>, tag_at: usize) -> Result<Vec<Attr<'t>>, Box<Diagnostic>> {
+        let mut out = Vec::new();
+        for a in e.attributes() {
+            let a = a.map_err(|err| self.syntax_error(tag_at, err.to_string()))?;
+            let key_raw: &str = a.key.as_ref();
+            let key_at = self.offset_of(key_raw, tag_at);
+            let local = key_raw.rsplit(':').next().unwrap_or(key_raw);
+            let name_at = key_at + (key_raw.len() - local.len());
+            let name: &'t str = self.text.get(name_at..name_at + local.len()).unwrap_or("");
+            let raw_at = self.offset_of(&a.value, tag_at);
+            let range = raw_at..raw_at + a.value.len();
+            let value = match &a.value {
+                std::borrow::Cow::Borrowed(_) => {
+                    let raw: &'t str = self.text.get(range.clone()).unwrap_or("");
+                    if raw.contains('&') || raw.contains(['\t', '\n', '\r']) {
+                        std::borrow::Cow::Owned(
+                            a.normalized_value(quick_xml::XmlVersion::Implicit1_0)
+                                .map_err(|err| self.syntax_error(raw_at, err.to_string()))?
+                                .into_owned(),
+                        )
+                    } else {
+                        std::borrow::Cow::Borrowed(raw)
+                    }
+                }
+                std::borrow::Cow::Owned(_) => std::borrow::Cow::Owned(
+                    a.normalized_value(quick_xml::XmlVersion::Implicit1_0)
+                        .map_err(|err| self.syntax_error(raw_at, err.to_string()))?
+                        .into_owned(),
+                ),
+            };
+            out.push(Attr { name, value, range });
+        }
+        Ok(out)
+    }
+
+    fn run(&mut self, diags: &mut Diagnostics) -> Result<Outcome, Box<Diagnostic>> {
+        let mut reader = quick_xml::Reader::from_str(self.text);
+        // Stack of open elements' local names.
+        let mut stack: Vec<&'t str> = Vec::new();
+        let mut header = FileHeader::default();
+        let mut root = self.span(0..0);
+        let mut first_pou: Option<(Span, String)> = None;
+        // The pou being read, if its SFC is wanted: (name, program, pou depth).
+        let mut pou: Option<(Option<String>, bool, usize)> = None;
+        let mut want_pou = false;
+        let mut body_seen = false;
+        let mut sfc: Option<(Span, usize, Vec<Element>)> = None;
+        let mut sfc_done = false;
+        let mut building: Option<Building<'t>> = None;
+        let mut seen_root = false;
+        loop {
+            let at = reader.buffer_position() as usize;
+            let ev = match reader.read_event() {
+                Ok(ev) => ev,
+                Err(e) => {
+                    return Err(self.syntax_error(reader.error_position() as usize, e.to_string()));
+                }
+            };
+            let (start, empty) = match ev {
+                Event::Start(e) => (e, false),
+                Event::Empty(e) => (e, true),
+                Event::End(_) => {
+                    let depth = stack.len();
+                    stack.pop();
+                    if let Some(b) = &building
+                        && depth == b.depth
+                    {
+                        let b = building.take().expect("checked");
+                        if let Some(el) = self.finish(b, diags)
+                            && let Some((_, _, els)) = &mut sfc
+                        {
+                            els.push(el);
+                        }
+                    } else if let Some(b) = &mut building {
+                        end_inside(b, &stack);
+                    } else if let Some((span, d, els)) = &sfc
+                        && depth == *d
+                    {
+                        // `</SFC>`
+                        let (name, program, _) = pou.clone().unwrap_or((None, false, 0));
+                        let _ = (span, els);
+                        let (span, _, els) = sfc.take().expect("checked");
+                        self.found.push(Pou {
+                            name,
+                            program,
+                            sfc_span: span,
+                            elements: els,
+                        });
+                        sfc_done = true;
+                    } else if let Some((_, _, d)) = &pou
+                        && depth == *d
+                    {
+                        pou = None;
+                        want_pou = false;
+                    }
+                    continue;
+                }
+                Event::Text(t) => {
+                    if let Some(b) = &mut building
+                        && b.inline.is_some()
+                        && in_inline(b, &stack)
+                    {
+                        let s = t.xml_content(quick_xml::XmlVersion::Implicit1_0);
+                        b.inline.as_mut().expect("checked").push_str(&s);
+                    }
+                    continue;
+                }
+                Event::CData(t) => {
+                    if let Some(b) = &mut building
+                        && b.inline.is_some()
+                        && in_inline(b, &stack)
+                    {
+                        let s = t.xml_content(quick_xml::XmlVersion::Implicit1_0);
+                        b.inline.as_mut().expect("checked").push_str(&s);
+                    }
+                    continue;
+                }
+                Event::GeneralRef(r) => {
+                    let ch = match r.resolve_char_ref() {
+                        Ok(Some(c)) => Some(c),
+                        Ok(None) => match &*r {
+                            "lt" => Some('<'),
+                            "gt" => Some('>'),
+                            "amp" => Some('&'),
+                            "apos" => Some('\''),
+                            "quot" => Some('"'),
+                            other => {
+                                return Err(self.syntax_error(
+                                    at,
+                                    format!("unknown entity reference `&{other};`"),
+                                ));
+                            }
+                        },
+                        Err(e) => return Err(self.syntax_error(at, e.to_string())),
+                    };
+                    if let (Some(c), Some(b)) = (ch, &mut building)
+                        && b.inline.is_some()
+                        && in_inline(b, &stack)
+                    {
+                        b.inline.as_mut().expect("checked").push(c);
+                    }
+                    continue;
+                }
+                Event::DocType(_) => {
+                    return Err(Box::new(
+                        Diagnostic::error(
+                            Code::XmlSyntax,
+                            "a document type declaration (DTD) is not accepted: entity definitions could expand without bound",
+                        )
+                        .at(self.span(at..at + 9.min(self.text.len() - at))),
+                    ));
+                }
+                Event::Eof => {
+                    if let Some(open) = stack.last() {
+                        return Err(self.syntax_error(
+                            self.text.len(),
+                            format!("the file ends inside `<{open}>`"),
+                        ));
+                    }
+                    if !seen_root {
+                        return Err(self.syntax_error(0, "no root element".to_owned()));
+                    }
+                    return Ok(Outcome::Done {
+                        header,
+                        root,
+                        first_pou,
+                    });
+                }
+                _ => continue,
+            };
+            let name = self.local_name(&start);
+            let tag = self.span(at..(at + 1 + name.len()).min(self.text.len()));
+            if stack.is_empty() {
+                if seen_root {
+                    return Err(self.syntax_error(at, "a second root element".to_owned()));
+                }
+                seen_root = true;
+                root = tag.clone();
+                if name != "project" {
+                    // Read no further: the caller reports E103 (the rest may be any XML).
+                    return Ok(Outcome::WrongRoot(tag, name.to_owned()));
+                }
+            }
+            let depth = stack.len() + 1;
+            // The element's place, relative to the document.
+            let path = PathKind::of(&stack, name);
+            if let Some(b) = &mut building {
+                let attrs = if wants_attrs(b, &stack, name) {
+                    self.attrs(&start, at)?
+                } else {
+                    Vec::new()
+                };
+                self.inside(b, &stack, name, tag, attrs);
+                if empty {
+                    end_inside(b, &stack);
+                } else {
+                    stack.push(name);
+                }
+                continue;
+            }
+            match path {
+                PathKind::FileHeader => {
+                    for a in self.attrs(&start, at)? {
+                        let v = Some(a.value.into_owned());
+                        match a.name {
+                            "companyName" => header.company_name = v,
+                            "productName" => header.product_name = v,
+                            "productVersion" => header.product_version = v,
+                            "creationDateTime" => header.creation_date_time = v,
+                            _ => {}
+                        }
+                    }
+                }
+                PathKind::Pou => {
+                    let attrs = self.attrs(&start, at)?;
+                    let get = |n: &str| {
+                        attrs
+                            .iter()
+                            .find(|a| a.name == n)
+                            .map(|a| a.value.to_string())
+                    };
+                    let pname = get("name");
+                    let program = get("pouType").as_deref() == Some("program");
+                    if first_pou.is_none() {
+                        first_pou = Some((tag.clone(), pname.clone().unwrap_or_default()));
+                    }
+                    let have_program = self.found.iter().any(|p| p.program);
+                    want_pou = !have_program && (program || self.found.is_empty());
+                    if want_pou && !empty {
+                        pou = Some((pname, program, depth));
+                        body_seen = false;
+                        sfc_done = false;
+                    }
+                }
+                PathKind::Body if want_pou && pou.is_some() => {
+                    if body_seen {
+                        // Only the first body counts.
+                        want_pou = false;
+                    }
+                    body_seen = true;
+                }
+                PathKind::Sfc if want_pou && pou.is_some() && !sfc_done && sfc.is_none() => {
+                    if empty {
+                        let (pname, program, _) = pou.clone().expect("checked");
+                        self.found.push(Pou {
+                            name: pname,
+                            program,
+                            sfc_span: tag,
+                            elements: Vec::new(),
+                        });
+                        sfc_done = true;
+                    } else {
+                        sfc = Some((tag, depth, Vec::new()));
+                    }
+                }
+                _ => {
+                    if let Some((_, d, els)) = &mut sfc
+                        && depth == *d + 1
+                    {
+                        let attrs = self.attrs(&start, at)?;
+                        let b = Building {
+                            tag: name,
+                            span: tag,
+                            depth,
+                            attrs,
+                            x: None,
+                            inputs: Vec::new(),
+                            bad_inputs: Vec::new(),
+                            direct_vars: Vec::new(),
+                            iwb_vars: Vec::new(),
+                            iwb: IwbState::Before,
+                            resource: None,
+                            resources_seen: false,
+                            skill: None,
+                            duration: None,
+                            time_seen: false,
+                            condition: None,
+                            condition_done: false,
+                            inline: None,
+                        };
+                        if empty {
+                            if let Some(el) = self.finish(b, diags) {
+                                els.push(el);
+                            }
+                        } else {
+                            building = Some(b);
+                        }
+                    }
+                }
+            }
+            if !empty {
+                stack.push(name);
+            }
+        }
+    }
+
+    /// A descendant of the element being built, at `stack` (which ends below the element).
+    fn inside(
+        &mut self,
+        b: &mut Building<'t>,
+        stack: &[&'t str],
+        name: &'t str,
+        tag: Span,
+        attrs: Vec<Attr<'t>>,
+    ) {
+        let rel = &stack[b.depth..];
+        let get = |n: &str| attrs.iter().find(|a| a.name == n);
+        match (rel, name) {
+            ([], "position") if b.x.is_none() => {
+                b.x = Some(
+                    get("x")
+                        .and_then(|a| a.value.trim().parse::<f64>().ok())
+                        .filter(|x| x.is_finite())
+                        .unwrap_or(0.0),
+                );
+            }
+            (["connectionPointIn"], "connection") => match get("refLocalId") {
+                Some(a) => match a.value.trim().parse::<u64>() {
+                    Ok(r) => b.inputs.push((r, a.range.clone())),
+                    Err(_) => b.bad_inputs.push(
                         Diagnostic::error(
                             Code::DanglingReference,
-                            format!("refLocalId `{}` is not a number", a.value()),
+                            format!("refLocalId `{}` is not a number", a.value),
                         )
-                        .at(Span::new(file, a.range_value()))
-                        .element(format!("localId {local_id}")),
+                        .at(self.span(a.range.clone())),
                     ),
                 },
-                None => diags.push(
+                None => b.bad_inputs.push(
                     Diagnostic::error(Code::DanglingReference, "connection without refLocalId")
-                        .at(tag_span(file, c))
-                        .element(format!("localId {local_id}")),
+                        .at(tag),
                 ),
+            },
+            ([], "Variable") => b.direct_vars.push((tag, attrs)),
+            (["addData", "data"], "iwb") if b.iwb == IwbState::Before => {
+                b.iwb = IwbState::Inside;
             }
-        }
-    }
-    Some(Element {
-        local_id,
-        kind,
-        span: tag_span(file, e),
-        x,
-        inputs,
-    })
-}
-
-fn local_id_label(e: Node) -> String {
-    format!("localId {}", e.attribute("localId").unwrap_or("?"))
-}
-
-fn condition(file: FileId, t: Node, diags: &mut Diagnostics) {
-    let Some(c) = child(t, "condition") else {
-        return;
-    };
-    let text = child(c, "inline").map(|i| {
-        i.descendants()
-            .filter(|n| n.is_text())
-            .filter_map(|n| n.text())
-            .collect::<String>()
-    });
-    let is_true = text
-        .as_deref()
-        .is_some_and(|s| s.trim().eq_ignore_ascii_case("TRUE"));
-    if !is_true {
-        let what = match text {
-            Some(s) => format!("condition `{}`", s.trim()),
-            None => "a condition that is not an inline `TRUE`".to_owned(),
-        };
-        diags.push(
-            Diagnostic::warning(
-                Code::Ignored,
-                format!("transition with {what} ignored: transitions always fire"),
-            )
-            .at(tag_span(file, c))
-            .element(local_id_label(t)),
-        );
-    }
-}
-
-fn step(file: FileId, s: Node, names: &mut Interner, diags: &mut Diagnostics) -> Step {
-    let mut iwb = None;
-    let mut variables = Vec::new();
-    let mut invalid_variables = Vec::new();
-    let mut var_nodes: Vec<Node> = Vec::new();
-    for c in s.children().filter(|c| c.is_element()) {
-        match c.tag_name().name() {
-            "addData" if iwb.is_none() => {
-                iwb = children(c, "data").find_map(|d| child(d, "iwb"));
+            (["addData", "data", "iwb"], _) if b.iwb == IwbState::Inside => match name {
+                "ressources" | "resources" if !b.resources_seen => b.resources_seen = true,
+                "skill" if b.skill.is_none() => {
+                    b.skill = get("name")
+                        .map(|a| self.names.name(&a.value, self.span(a.range.clone())))
+                        .filter(|n| !n.key.is_empty());
+                }
+                "time" if !b.time_seen => {
+                    b.time_seen = true;
+                    b.duration = get("duration")
+                        .and_then(|a| a.value.trim().parse::<f64>().ok())
+                        .filter(|d| d.is_finite() && *d >= 0.0);
+                }
+                "Variable" => b.iwb_vars.push((tag, attrs)),
+                _ => {}
+            },
+            (["addData", "data", "iwb", "ressources" | "resources"], "ressource" | "resource")
+                if b.iwb == IwbState::Inside && b.resource.is_none() =>
+            {
+                b.resource = get("name")
+                    .map(|a| self.names.name(&a.value, self.span(a.range.clone())))
+                    .filter(|n| !n.key.is_empty());
             }
-            "Variable" => var_nodes.push(c),
+            ([], "condition") if b.condition.is_none() && !b.condition_done => {
+                b.condition = Some(tag);
+            }
+            (["condition"], "inline") if b.condition.is_some() && b.inline.is_none() => {
+                b.inline = Some(String::new());
+            }
             _ => {}
         }
     }
-    let mut resource = None;
-    let mut skill = None;
-    let mut duration = None;
-    if let Some(iwb) = iwb {
-        for c in iwb.children().filter(|c| c.is_element()) {
-            match c.tag_name().name() {
-                "ressources" | "resources" if resource.is_none() => {
-                    resource = c
-                        .children()
-                        .find(|r| {
-                            r.is_element()
-                                && matches!(r.tag_name().name(), "ressource" | "resource")
-                        })
-                        .and_then(|r| {
-                            let v = r.attribute("name")?;
-                            Some(names.name(v, attr_span(file, r, "name")))
-                        })
-                        .filter(|n| !n.key.is_empty());
+
+    /// The element is complete: check it and turn it into the model.
+    fn finish(&mut self, b: Building<'t>, diags: &mut Diagnostics) -> Option<Element> {
+        let file = self.file;
+        let attr = |n: &str| b.attrs.iter().find(|a| a.name == n);
+        let id_label = || {
+            format!(
+                "localId {}",
+                attr("localId").map(|a| &*a.value).unwrap_or("?")
+            )
+        };
+        let kind = match b.tag {
+            "step" => ElementKind::Step(Box::new(self.step(&b, diags))),
+            "transition" => {
+                if let Some(c) = &b.condition {
+                    let is_true = b
+                        .inline
+                        .as_deref()
+                        .is_some_and(|s| s.trim().eq_ignore_ascii_case("TRUE"));
+                    if !is_true {
+                        let what = match &b.inline {
+                            Some(s) => format!("condition `{}`", s.trim()),
+                            None => "a condition that is not an inline `TRUE`".to_owned(),
+                        };
+                        diags.push(
+                            Diagnostic::warning(
+                                Code::Ignored,
+                                format!("transition with {what} ignored: transitions always fire"),
+                            )
+                            .at(c.clone())
+                            .element(id_label()),
+                        );
+                    }
                 }
-                "skill" if skill.is_none() => {
-                    skill = c
-                        .attribute("name")
-                        .map(|v| names.name(v, attr_span(file, c, "name")))
-                        .filter(|n| !n.key.is_empty());
-                }
-                "time" if duration.is_none() => {
-                    duration = c
-                        .attribute("duration")
-                        .and_then(|d| d.trim().parse::<f64>().ok())
-                        .filter(|d| d.is_finite() && *d >= 0.0);
-                }
-                "Variable" => var_nodes.push(c),
-                _ => {}
+                ElementKind::Transition
             }
-        }
-    }
-    for v in var_nodes {
-        let Some(name) = v.attribute("name") else {
-            diags.push(
-                Diagnostic::error(Code::BadVariableSyntax, "Variable without `name`")
-                    .at(tag_span(file, v))
-                    .element(local_id_label(s)),
-            );
-            continue;
-        };
-        let Some(attr) = v.attribute_node("Value") else {
-            diags.push(
-                Diagnostic::error(
-                    Code::BadVariableSyntax,
-                    format!("Variable `{name}` without `Value`"),
-                )
-                .at(tag_span(file, v))
-                .element(local_id_label(s)),
-            );
-            invalid_variables.push(names.strings(name).1);
-            continue;
-        };
-        let value_span = Span::new(file, attr.range_value());
-        match check_value(attr.value()) {
-            Ok(()) => variables.push(Variable {
-                name: names.name(name, attr_span(file, v, "name")),
-                raw: attr.value().trim().to_owned(),
-                value_span,
-            }),
-            Err((offset, msg)) => {
-                invalid_variables.push(names.strings(name).1);
-                // Point into the raw value when it has no entity references (then offsets agree).
-                let raw_len = value_span.range.len();
-                let at = if raw_len == attr.value().len() {
-                    value_span.range.start + offset.min(raw_len)
+            "simultaneousDivergence" => ElementKind::SimultaneousDivergence,
+            "simultaneousConvergence" => ElementKind::SimultaneousConvergence,
+            "selectionDivergence" => ElementKind::SelectionDivergence,
+            "selectionConvergence" => ElementKind::SelectionConvergence,
+            "jumpStep" => ElementKind::JumpStep,
+            "macroStep" => ElementKind::MacroStep,
+            tag => {
+                let what = if tag == "actionBlock" {
+                    "action block".to_owned()
                 } else {
-                    value_span.range.start
+                    format!("`{tag}` element")
                 };
                 diags.push(
-                    Diagnostic::error(Code::BadVariableSyntax, format!("variable `{name}`: {msg}"))
-                        .at(Span::new(
-                            file,
-                            at..(at + 1).min(value_span.range.end.max(at)),
-                        ))
-                        .element(local_id_label(s)),
+                    Diagnostic::warning(Code::Ignored, format!("{what} ignored"))
+                        .at(b.span.clone())
+                        .element(id_label()),
                 );
+                return None;
+            }
+        };
+        let local_id = match attr("localId").map(|a| (a.value.trim().parse::<u64>(), a)) {
+            Some((Ok(id), _)) => id,
+            Some((Err(_), a)) => {
+                diags.push(
+                    Diagnostic::error(
+                        Code::BadLocalId,
+                        format!(
+                            "`{}` has localId `{}`, which is not a number from 0 to {}",
+                            b.tag,
+                            a.value,
+                            u64::MAX
+                        ),
+                    )
+                    .at(Span::new(file, a.range.clone())),
+                );
+                return None;
+            }
+            None => {
+                diags.push(
+                    Diagnostic::error(Code::BadLocalId, format!("`{}` without localId", b.tag))
+                        .at(b.span.clone()),
+                );
+                return None;
+            }
+        };
+        for d in b.bad_inputs {
+            diags.push(d.element(format!("localId {local_id}")));
+        }
+        Some(Element {
+            local_id,
+            kind,
+            span: b.span,
+            x: b.x.unwrap_or(0.0),
+            inputs: b.inputs,
+        })
+    }
+
+    fn step(&mut self, b: &Building<'t>, diags: &mut Diagnostics) -> Step {
+        let file = self.file;
+        let label = || {
+            format!(
+                "localId {}",
+                b.attrs
+                    .iter()
+                    .find(|a| a.name == "localId")
+                    .map(|a| &*a.value)
+                    .unwrap_or("?")
+            )
+        };
+        let mut variables = Vec::new();
+        let mut invalid_variables = Vec::new();
+        for (tag, attrs) in b.direct_vars.iter().chain(b.iwb_vars.iter()) {
+            let get = |n: &str| attrs.iter().find(|a| a.name == n);
+            let Some(name) = get("name") else {
+                diags.push(
+                    Diagnostic::error(Code::BadVariableSyntax, "Variable without `name`")
+                        .at(tag.clone())
+                        .element(label()),
+                );
+                continue;
+            };
+            let Some(value) = get("Value") else {
+                diags.push(
+                    Diagnostic::error(
+                        Code::BadVariableSyntax,
+                        format!("Variable `{}` without `Value`", name.value),
+                    )
+                    .at(tag.clone())
+                    .element(label()),
+                );
+                invalid_variables.push(self.names.strings(&name.value).1);
+                continue;
+            };
+            let value_span = Span::new(file, value.range.clone());
+            match check_value(&value.value) {
+                Ok(()) => variables.push(Variable {
+                    name: self
+                        .names
+                        .name(&name.value, Span::new(file, name.range.clone())),
+                    raw: value.value.trim().to_owned(),
+                    value_span,
+                }),
+                Err((offset, msg)) => {
+                    invalid_variables.push(self.names.strings(&name.value).1);
+                    // Point into the raw value when it has no references (then offsets agree).
+                    let raw_len = value.range.len();
+                    let at = if raw_len == value.value.len() {
+                        value.range.start + offset.min(raw_len)
+                    } else {
+                        value.range.start
+                    };
+                    diags.push(
+                        Diagnostic::error(
+                            Code::BadVariableSyntax,
+                            format!("variable `{}`: {msg}", name.value),
+                        )
+                        .at(Span::new(file, at..(at + 1).min(value.range.end.max(at))))
+                        .element(label()),
+                    );
+                }
             }
         }
+        let attr = |n: &str| b.attrs.iter().find(|a| a.name == n);
+        Step {
+            name: self
+                .names
+                .strings(attr("name").map(|a| &*a.value).unwrap_or(""))
+                .0,
+            initial: attr("initialStep")
+                .is_some_and(|a| a.value.trim() == "true" || a.value.trim() == "1"),
+            resource: b.resource.clone(),
+            skill: b.skill.clone(),
+            duration: b.duration,
+            variables,
+            invalid_variables,
+        }
     }
-    Step {
-        name: names.strings(s.attribute("name").unwrap_or("")).0,
-        initial: s
-            .attribute("initialStep")
-            .is_some_and(|v| v.trim() == "true" || v.trim() == "1"),
-        resource,
-        skill,
-        duration,
-        variables,
-        invalid_variables,
+}
+
+/// Where an element stands in the document, for the parts read outside SFC elements.
+enum PathKind {
+    FileHeader,
+    Pou,
+    Body,
+    Sfc,
+    Other,
+}
+
+impl PathKind {
+    fn of(stack: &[&str], name: &str) -> Self {
+        match (stack, name) {
+            (["project"], "fileHeader") => PathKind::FileHeader,
+            (["project", "types", "pous"], "pou") => PathKind::Pou,
+            (["project", "types", "pous", "pou"], "body") => PathKind::Body,
+            (["project", "types", "pous", "pou", "body"], "SFC") => PathKind::Sfc,
+            _ => PathKind::Other,
+        }
     }
+}
+
+/// Whether a descendant's attributes are needed (most are not: skip the work).
+fn wants_attrs(b: &Building, stack: &[&str], name: &str) -> bool {
+    let rel = &stack[b.depth..];
+    matches!(
+        (rel, name),
+        ([], "position")
+            | (["connectionPointIn"], "connection")
+            | ([], "Variable")
+            | (["addData", "data", "iwb"], _)
+            | (["addData", "data", "iwb", _], _)
+    )
+}
+
+/// An element inside the one being built closed; `stack` is what remains open.
+fn end_inside(b: &mut Building, stack: &[&str]) {
+    let rel = &stack[b.depth.min(stack.len())..];
+    match rel {
+        // `</iwb>` closed: only the first iwb counts.
+        ["addData", "data"] if b.iwb == IwbState::Inside => b.iwb = IwbState::Done,
+        // `</condition>` closed: only the first condition counts.
+        [] if b.condition.is_some() => b.condition_done = true,
+        _ => {}
+    }
+}
+
+/// Whether the stack is inside the element's `condition/inline`.
+fn in_inline(b: &Building, stack: &[&str]) -> bool {
+    let rel = &stack[b.depth.min(stack.len())..];
+    rel.len() >= 2 && rel[0] == "condition" && rel[1] == "inline"
 }
 
 /// What a list lookup found.
