@@ -78,7 +78,9 @@ fn validate_writes_nothing_and_shows_warnings() {
     // One warning per skill and unused variable, not one per step.
     assert_eq!(e.matches("warning[W303]").count(), 3, "{e}");
     assert!(
-        e.contains("variable `JointConfig` is not used by skill `Move PTP` (at 2 steps: localId 3, 6)"),
+        e.contains(
+            "variable `JointConfig` is not used by skill `Move PTP` (at 2 steps: localId 3, 6)"
+        ),
         "{e}"
     );
 }
