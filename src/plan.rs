@@ -59,20 +59,86 @@ impl Plan {
     }
 }
 
-/// The flow graph: predecessors and successors by element index.
+/// The flow graph: predecessors and successors by element index, in compact (CSR) form: one
+/// array of edges per direction and an offset per element.
 #[derive(Debug, Default)]
 pub struct Graph {
-    pub preds: Vec<Vec<usize>>,
-    pub succs: Vec<Vec<usize>>,
+    pred_at: Vec<usize>,
+    pred: Vec<usize>,
+    succ_at: Vec<usize>,
+    succ: Vec<usize>,
+}
+
+impl Graph {
+    /// The elements connected into element `i`.
+    pub fn preds(&self, i: usize) -> &[usize] {
+        &self.pred[self.pred_at[i]..self.pred_at[i + 1]]
+    }
+
+    /// The elements element `i` connects to.
+    pub fn succs(&self, i: usize) -> &[usize] {
+        &self.succ[self.succ_at[i]..self.succ_at[i + 1]]
+    }
+
+    /// The number of elements.
+    pub fn len(&self) -> usize {
+        self.pred_at.len().saturating_sub(1)
+    }
+
+    /// Whether there are no elements.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// Finds elements by localId: a direct table when the ids are dense (as planning tools write
+/// them), a hash map otherwise.
+enum Ids {
+    Dense(Vec<u32>),
+    Sparse(HashMap<u64, usize>),
+}
+
+impl Ids {
+    const NONE: u32 = u32::MAX;
+
+    fn new(sfc: &Sfc) -> Self {
+        let n = sfc.elements.len();
+        let max = sfc.elements.iter().map(|e| e.local_id).max().unwrap_or(0);
+        if n < Self::NONE as usize && max < (4 * n as u64 + 1024) {
+            Ids::Dense(vec![Self::NONE; max as usize + 1])
+        } else {
+            Ids::Sparse(HashMap::with_capacity(n))
+        }
+    }
+
+    fn get(&self, id: u64) -> Option<usize> {
+        match self {
+            Ids::Dense(t) => t
+                .get(id as usize)
+                .copied()
+                .filter(|&v| v != Self::NONE)
+                .map(|v| v as usize),
+            Ids::Sparse(m) => m.get(&id).copied(),
+        }
+    }
+
+    fn insert(&mut self, id: u64, i: usize) {
+        match self {
+            Ids::Dense(t) => t[id as usize] = i as u32,
+            Ids::Sparse(m) => {
+                m.insert(id, i);
+            }
+        }
+    }
 }
 
 /// Builds the graph and reports duplicate and dangling ids. Connections that name nothing are
-/// dropped from the graph.
+/// dropped from the graph, and so are repeated ones.
 pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
     let n = sfc.elements.len();
-    let mut ids: HashMap<u64, usize> = HashMap::with_capacity(n);
+    let mut ids = Ids::new(sfc);
     for (i, e) in sfc.elements.iter().enumerate() {
-        if let Some(&first) = ids.get(&e.local_id) {
+        if let Some(first) = ids.get(e.local_id) {
             diags.push(
                 Diagnostic::error(
                     Code::BadLocalId,
@@ -86,17 +152,19 @@ pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
             ids.insert(e.local_id, i);
         }
     }
-    let mut g = Graph {
-        preds: vec![Vec::new(); n],
-        succs: vec![Vec::new(); n],
-    };
-    for (i, e) in sfc.elements.iter().enumerate() {
+    // Edges (producer, consumer), predecessors in document order of the connections.
+    let mut pred_at = Vec::with_capacity(n + 1);
+    let mut pred = Vec::with_capacity(n);
+    let mut succ_count = vec![0usize; n];
+    for e in sfc.elements.iter() {
+        pred_at.push(pred.len());
+        let first = pred.len();
         for (r, range) in &e.inputs {
-            match ids.get(r) {
-                Some(&p) => {
-                    if !g.preds[i].contains(&p) {
-                        g.preds[i].push(p);
-                        g.succs[p].push(i);
+            match ids.get(*r) {
+                Some(p) => {
+                    if !pred[first..].contains(&p) {
+                        pred.push(p);
+                        succ_count[p] += 1;
                     }
                 }
                 None => diags.push(
@@ -110,7 +178,29 @@ pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
             }
         }
     }
-    g
+    pred_at.push(pred.len());
+    // Successors: counting sort by producer; consumers in element order.
+    let mut succ_at = Vec::with_capacity(n + 1);
+    let mut total = 0;
+    for c in &succ_count {
+        succ_at.push(total);
+        total += c;
+    }
+    succ_at.push(total);
+    let mut fill = succ_at.clone();
+    let mut succ = vec![0usize; total];
+    for i in 0..n {
+        for &p in &pred[pred_at[i]..pred_at[i + 1]] {
+            succ[fill[p]] = i;
+            fill[p] += 1;
+        }
+    }
+    Graph {
+        pred_at,
+        pred,
+        succ_at,
+        succ,
+    }
 }
 
 /// Checks the graph rules and builds the program tree. `None` when the flow has errors (all of
@@ -123,7 +213,7 @@ pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
     let mut secondary = Vec::new();
 
     for (i, e) in el.iter().enumerate() {
-        let (np, ns) = (g.preds[i].len(), g.succs[i].len());
+        let (np, ns) = (g.preds(i).len(), g.succs(i).len());
         match &e.kind {
             ElementKind::SelectionDivergence | ElementKind::SelectionConvergence => {
                 diags.push(
@@ -166,7 +256,7 @@ pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
                         .element(id(i)),
                     );
                 }
-                for &p in &g.preds[i] {
+                for &p in g.preds(i) {
                     if el[p].kind.is_step() {
                         diags.push(
                             Diagnostic::error(
@@ -209,11 +299,11 @@ pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
                         // reported only when the flow has no other error.
                         ElementKind::Transition if ns > 1 => secondary.push(unbalanced(format!(
                             "transition splits into {ns} outputs ({}); simultaneous branches start with a simultaneousDivergence",
-                            list_ids(sfc, &g.succs[i])
+                            list_ids(sfc, g.succs(i))
                         ))),
                         ElementKind::Transition if np > 1 => secondary.push(unbalanced(format!(
                             "transition joins {np} inputs ({}); simultaneous branches end with a simultaneousConvergence",
-                            list_ids(sfc, &g.preds[i])
+                            list_ids(sfc, g.preds(i))
                         ))),
                         ElementKind::SimultaneousDivergence if np > 1 => {
                             diags.push(unbalanced(format!(
@@ -266,10 +356,10 @@ pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
     }
 
     let starts: Vec<usize> = (0..el.len())
-        .filter(|&i| el[i].kind.is_step() && g.preds[i].is_empty())
+        .filter(|&i| el[i].kind.is_step() && g.preds(i).is_empty())
         .collect();
     let ends: Vec<usize> = (0..el.len())
-        .filter(|&i| el[i].kind.is_step() && g.succs[i].is_empty())
+        .filter(|&i| el[i].kind.is_step() && g.succs(i).is_empty())
         .collect();
     let file_span = sfc.span.clone();
     match starts.as_slice() {
@@ -401,13 +491,13 @@ fn list_ids(sfc: &Sfc, idx: &[usize]) -> String {
 
 /// Kahn's algorithm; returns an element on a cycle, if any.
 fn find_cycle(g: &Graph) -> Option<usize> {
-    let n = g.preds.len();
-    let mut indeg: Vec<usize> = g.preds.iter().map(Vec::len).collect();
+    let n = g.len();
+    let mut indeg: Vec<usize> = (0..n).map(|i| g.preds(i).len()).collect();
     let mut queue: Vec<usize> = (0..n).filter(|&i| indeg[i] == 0).collect();
     let mut seen = 0;
     while let Some(i) = queue.pop() {
         seen += 1;
-        for &s in &g.succs[i] {
+        for &s in g.succs(i) {
             indeg[s] -= 1;
             if indeg[s] == 0 {
                 queue.push(s);
@@ -426,7 +516,7 @@ fn find_cycle(g: &Graph) -> Option<usize> {
             return Some(cur);
         }
         visited[cur] = true;
-        cur = *g.preds[cur].iter().find(|&&p| indeg[p] > 0)?;
+        cur = *g.preds(cur).iter().find(|&&p| indeg[p] > 0)?;
     }
 }
 
@@ -450,14 +540,14 @@ impl Walker<'_> {
         let el = &self.sfc.elements;
         let mut out = Vec::new();
         loop {
-            if !entered && self.g.preds[cur].len() > 1 {
+            if !entered && self.g.preds(cur).len() > 1 {
                 return (out, Some(cur));
             }
             entered = false;
             if el[cur].kind.is_step() {
                 out.push(Block::Step(cur));
             }
-            let succs = &self.g.succs[cur];
+            let succs = self.g.succs(cur);
             match succs.len() {
                 0 => return (out, None),
                 1 => cur = succs[0],
@@ -472,7 +562,7 @@ impl Walker<'_> {
                         );
                         return (out, None);
                     }
-                    let mut heads = succs.clone();
+                    let mut heads = succs.to_vec();
                     // Left to right by x; ties in document order (the index is document order).
                     heads.sort_by(|&a, &b| el[a].x.total_cmp(&el[b].x).then(a.cmp(&b)));
                     let mut branches = Vec::with_capacity(heads.len());
@@ -498,14 +588,14 @@ impl Walker<'_> {
                         );
                         return (out, None);
                     };
-                    if self.g.preds[conv].len() != branches.len() {
+                    if self.g.preds(conv).len() != branches.len() {
                         self.fail(
                             conv,
                             Code::UnbalancedBranch,
                             format!(
                                 "{} joins {} inputs, but the divergence localId {} opened {} branches",
                                 el[conv].kind.tag(),
-                                self.g.preds[conv].len(),
+                                self.g.preds(conv).len(),
                                 el[cur].local_id,
                                 branches.len()
                             ),
