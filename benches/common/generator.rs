@@ -1,0 +1,563 @@
+//! Generates large projects in the original tool's format (like
+//! `reference/original-sample/`): one resource `KUKA KR15-2` with the skills `Move PTP` (mapped
+//! to `SetToolPathVelocity` + `PTP`) and `Move LIN` (mapped to `LIN`), and an SFC of alternating
+//! `P2P`/`LIN` steps with `Frame`, `Velocity` and `JointConfig` as direct `<Variable>` children.
+//! Optionally every `branch_every` main-line steps a `branch_width`-way simultaneous branch, whose
+//! first branch holds a nested branch (one level).
+//!
+//! Shared by `examples/generate.rs`, `benches/compile.rs` and any test:
+//! `#[path = "../benches/common/generator.rs"] mod generator;`. Output is deterministic: the same
+//! [`Spec`] gives the same bytes (a fixed pseudo-random sequence, no `rand`).
+//!
+//! Size: about 690 bytes per flat step (step + transition), so 100 000 steps give about 69 MB,
+//! the size of the original tool's 100k-step project (68 MB).
+#![allow(dead_code)]
+
+use std::fmt::Write as _;
+use std::fs;
+use std::io::{self, BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+/// What to generate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Spec {
+    /// Skill steps (the `Start` and `End` steps not counted).
+    pub steps: usize,
+    /// Every this many main-line steps a simultaneous branch; 0 = none.
+    pub branch_every: usize,
+    /// Branches per simultaneous divergence (at least 2 when branching).
+    pub branch_width: usize,
+}
+
+impl Spec {
+    pub fn flat(steps: usize) -> Self {
+        Spec {
+            steps,
+            branch_every: 0,
+            branch_width: 0,
+        }
+    }
+
+    pub fn branched(steps: usize, every: usize, width: usize) -> Self {
+        Spec {
+            steps,
+            branch_every: every,
+            branch_width: width,
+        }
+    }
+}
+
+/// A generated project on disk.
+#[derive(Debug, Clone)]
+pub struct Project {
+    pub dir: PathBuf,
+    pub blackboard: PathBuf,
+    pub sfc: PathBuf,
+    pub irl: PathBuf,
+    pub stats: Stats,
+}
+
+/// What the SFC holds.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Stats {
+    /// Bytes of the SFC file.
+    pub sfc_bytes: u64,
+    /// Skill steps written (equals [`Spec::steps`]).
+    pub skill_steps: usize,
+    /// SFC elements (steps, transitions, divergences, convergences).
+    pub elements: usize,
+    /// Simultaneous divergences.
+    pub branches: usize,
+}
+
+pub const BLACKBOARD_FILE: &str = "Blackboard.aml";
+pub const SFC_FILE: &str = "sfc.xml";
+pub const IRL_FILE: &str = "kr15-2.irl";
+
+/// Writes `Blackboard.aml`, `sfc.xml` and `kr15-2.irl` into `dir` (created if needed).
+pub fn write_project(dir: &Path, spec: &Spec) -> io::Result<Project> {
+    fs::create_dir_all(dir)?;
+    let blackboard = dir.join(BLACKBOARD_FILE);
+    let sfc = dir.join(SFC_FILE);
+    let irl = dir.join(IRL_FILE);
+    fs::write(&blackboard, blackboard_text(SFC_FILE, IRL_FILE))?;
+    fs::write(&irl, IRL)?;
+    let mut w = BufWriter::with_capacity(1 << 20, fs::File::create(&sfc)?);
+    let stats = write_sfc(&mut w, spec)?;
+    w.into_inner().map_err(|e| e.into_error())?.sync_all()?;
+    Ok(Project {
+        dir: dir.to_owned(),
+        blackboard,
+        sfc,
+        irl,
+        stats,
+    })
+}
+
+/// The SFC as a string.
+pub fn sfc_text(spec: &Spec) -> String {
+    let mut v = Vec::new();
+    write_sfc(&mut v, spec).expect("writing to a Vec does not fail");
+    String::from_utf8(v).expect("the generator writes ASCII")
+}
+
+/// Writes the SFC.
+pub fn write_sfc(w: &mut impl Write, spec: &Spec) -> io::Result<Stats> {
+    let mut g = Gen {
+        w,
+        buf: String::with_capacity(4096),
+        next_id: 1,
+        row: 0,
+        rng: Rng(0x5EED_0F1B_2015),
+        stats: Stats::default(),
+        bytes: 0,
+        err: None,
+    };
+    g.raw(SFC_HEAD);
+    let start = g.special_step("Start", None);
+    let mut last = start;
+    let mut since_branch = 0usize;
+    let block = if spec.branch_every > 0 && spec.branch_width >= 2 {
+        block_size(spec.branch_width, 0)
+    } else {
+        usize::MAX
+    };
+    while g.stats.skill_steps < spec.steps {
+        let left = spec.steps - g.stats.skill_steps;
+        let t = g.transition(last);
+        if since_branch == spec.branch_every && block <= left {
+            last = g.branch(t, spec.branch_width, 0);
+            since_branch = 0;
+        } else {
+            last = g.skill_step(Pred::Plain(t), 0);
+            since_branch += 1;
+        }
+    }
+    let t = g.transition(last);
+    g.special_step("End", Some(t));
+    g.raw(SFC_TAIL);
+    g.flush();
+    if let Some(e) = g.err {
+        return Err(e);
+    }
+    g.stats.sfc_bytes = g.bytes;
+    Ok(g.stats)
+}
+
+/// Nested branches go this deep (0 = the main line's branch).
+const MAX_DEPTH: usize = 1;
+
+/// Steps of branch `j` (before any nested branch): 1 or 2.
+fn branch_len(j: usize) -> usize {
+    1 + j % 2
+}
+
+/// Skill steps in one branch block at `depth`.
+fn block_size(width: usize, depth: usize) -> usize {
+    (0..width)
+        .map(|j| {
+            branch_len(j)
+                + if j == 0 && depth < MAX_DEPTH {
+                    // A nested block sits between the first branch's steps, which get one more.
+                    1 + block_size(width, depth + 1)
+                } else {
+                    0
+                }
+        })
+        .sum()
+}
+
+/// A connection into an element.
+#[derive(Clone, Copy)]
+enum Pred {
+    Plain(u64),
+    /// From a simultaneous divergence's output `branch{n}`.
+    Branch(u64, usize),
+}
+
+struct Gen<'w, W: Write> {
+    w: &'w mut W,
+    buf: String,
+    next_id: u64,
+    row: u64,
+    rng: Rng,
+    stats: Stats,
+    bytes: u64,
+    /// The first write error; later writes are skipped.
+    err: Option<io::Error>,
+}
+
+impl<W: Write> Gen<'_, W> {
+    fn id(&mut self) -> u64 {
+        let id = self.next_id;
+        self.next_id += 1;
+        self.stats.elements += 1;
+        id
+    }
+
+    fn y(&mut self) -> u64 {
+        self.row += 1;
+        self.row * 40
+    }
+
+    fn raw(&mut self, s: &str) {
+        self.buf.push_str(s);
+    }
+
+    fn flush(&mut self) {
+        if self.err.is_none() {
+            self.bytes += self.buf.len() as u64;
+            if let Err(e) = self.w.write_all(self.buf.as_bytes()) {
+                self.err = Some(e);
+            }
+        }
+        self.buf.clear();
+    }
+
+    fn maybe_flush(&mut self) {
+        if self.buf.len() > 3000 {
+            self.flush();
+        }
+    }
+
+    fn conn_in(&mut self, p: Pred) {
+        let b = &mut self.buf;
+        match p {
+            Pred::Plain(id) => {
+                let _ = write!(
+                    b,
+                    "<connectionPointIn><connection refLocalId=\"{id}\"/></connectionPointIn>"
+                );
+            }
+            Pred::Branch(id, n) => {
+                let _ = write!(
+                    b,
+                    "<connectionPointIn><connection refLocalId=\"{id}\" formalParameter=\"branch{n}\"/></connectionPointIn>"
+                );
+            }
+        }
+    }
+
+    fn special_step(&mut self, name: &str, pred: Option<u64>) -> u64 {
+        let id = self.id();
+        let y = self.y();
+        let _ = write!(
+            self.buf,
+            "<step localId=\"{id}\" name=\"{name}\" initialStep=\"true\">\n <position x=\"0\" y=\"{y}\"/>\n "
+        );
+        match pred {
+            Some(p) => self.conn_in(Pred::Plain(p)),
+            None => self.raw("<connectionPointOut formalParameter=\"\"/>"),
+        }
+        self.raw("\n</step>\n");
+        self.maybe_flush();
+        id
+    }
+
+    fn skill_step(&mut self, pred: Pred, column: usize) -> u64 {
+        let id = self.id();
+        let y = self.y();
+        let lin = self.stats.skill_steps % 2 == 1;
+        self.stats.skill_steps += 1;
+        let (kind, skill) = if lin {
+            ("LIN", "Move LIN")
+        } else {
+            ("P2P", "Move PTP")
+        };
+        let x = column * 200;
+        let r = &mut self.rng;
+        // Millimetres with one decimal, whole degrees: a reachable-looking KR15 workspace.
+        let fx = r.range(-12000, 12000) as f64 / 10.0;
+        let fy = r.range(-12000, 12000) as f64 / 10.0;
+        let fz = r.range(0, 15000) as f64 / 10.0;
+        let (a, b, c) = (r.range(-180, 180), r.range(-90, 90), r.range(-180, 180));
+        let vel = r.range(5, 100) as f64 / 100.0;
+        let dur = r.range(2, 16) as f64 / 4.0;
+        let (j1, j2) = (r.range(0, 7), r.range(0, 63));
+        let _ = write!(
+            self.buf,
+            "<step localId=\"{id}\" name=\"{kind}\">\n <position x=\"{x}\" y=\"{y}\"/>\n "
+        );
+        self.conn_in(pred);
+        let _ = write!(
+            self.buf,
+            "\n <connectionPointOut formalParameter=\"\"/>\n \
+             <addData><data name=\"iwb\" handleUnknown=\"preserve\"><iwb>\
+             <time duration=\"{dur}\"/><ressources><ressource name=\"KUKA KR15-2\"/></ressources>\
+             <skill name=\"{skill}\"/></iwb></data></addData>\n \
+             <Variable name=\"Frame\" Value=\"({fx}, {fy}, {fz}, {a}, {b}, {c})\"/>\n \
+             <Variable name=\"Velocity\" Value=\"{vel}\"/>\n \
+             <Variable name=\"JointConfig\" Value=\"({j1}, {j2})\"/>\n</step>\n"
+        );
+        self.maybe_flush();
+        id
+    }
+
+    fn transition(&mut self, pred: u64) -> u64 {
+        let id = self.id();
+        let y = self.y();
+        let _ = write!(
+            self.buf,
+            "<transition localId=\"{id}\">\n <position x=\"0\" y=\"{y}\"/>\n "
+        );
+        self.conn_in(Pred::Plain(pred));
+        self.raw(
+            "<connectionPointOut/>\n \
+             <condition><inline name=\"\"><ST><xhtml:p>TRUE</xhtml:p></ST></inline></condition>\n\
+             </transition>\n",
+        );
+        self.maybe_flush();
+        id
+    }
+
+    /// A `width`-way simultaneous branch after transition `pred`; returns the convergence.
+    fn branch(&mut self, pred: u64, width: usize, depth: usize) -> u64 {
+        self.stats.branches += 1;
+        let div = self.id();
+        let y = self.y();
+        let _ = write!(
+            self.buf,
+            "<simultaneousDivergence localId=\"{div}\">\n <position x=\"0\" y=\"{y}\"/>\n "
+        );
+        self.conn_in(Pred::Plain(pred));
+        for n in 0..width {
+            let _ = write!(
+                self.buf,
+                "\n <connectionPointOut formalParameter=\"branch{n}\"/>"
+            );
+        }
+        self.raw("\n</simultaneousDivergence>\n");
+        let mut lasts = Vec::with_capacity(width);
+        for j in 0..width {
+            let column = depth * width + j;
+            let mut last = self.skill_step(Pred::Branch(div, j), column);
+            if j == 0 && depth < MAX_DEPTH {
+                let t = self.transition(last);
+                let conv = self.branch(t, width, depth + 1);
+                let t = self.transition(conv);
+                last = self.skill_step(Pred::Plain(t), column);
+            }
+            for _ in 1..branch_len(j) {
+                let t = self.transition(last);
+                last = self.skill_step(Pred::Plain(t), column);
+            }
+            lasts.push(last);
+        }
+        let conv = self.id();
+        let y = self.y();
+        let _ = write!(
+            self.buf,
+            "<simultaneousConvergence localId=\"{conv}\">\n <position x=\"0\" y=\"{y}\"/>"
+        );
+        for l in lasts {
+            self.raw("\n ");
+            self.conn_in(Pred::Plain(l));
+        }
+        self.raw("\n <connectionPointOut/>\n</simultaneousConvergence>\n");
+        self.maybe_flush();
+        conv
+    }
+}
+
+/// SplitMix64: a fixed, portable pseudo-random sequence.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform-ish in `lo..=hi`.
+    fn range(&mut self, lo: i64, hi: i64) -> i64 {
+        lo + (self.next() % (hi - lo + 1) as u64) as i64
+    }
+}
+
+const SFC_HEAD: &str = r#"<?xml version="1.0" encoding="utf-8"?>
+<!-- GENERATED by examples/generate.rs (benches/common/generator.rs) in the original tool's format;
+     see reference/original-sample/sfc.xml. -->
+<project xmlns="http://www.plcopen.org/xml/tc6_0201" xmlns:xhtml="http://www.w3.org/1999/xhtml">
+  <fileHeader companyName="iwb" productName="Generated" productVersion="1" creationDateTime="2015-05-26T12:00:00"/>
+  <contentHeader name="Generated">
+    <coordinateInfo>
+      <fbd><scaling x="1" y="1"/></fbd>
+      <ld><scaling x="1" y="1"/></ld>
+      <sfc><scaling x="1" y="1"/></sfc>
+    </coordinateInfo>
+  </contentHeader>
+  <types>
+    <dataTypes/>
+    <pous>
+      <pou name="Generated" pouType="program">
+        <body>
+          <SFC>
+"#;
+
+const SFC_TAIL: &str = r#"          </SFC>
+        </body>
+      </pou>
+    </pous>
+  </types>
+  <instances><configurations/></instances>
+</project>
+"#;
+
+/// The IRL file (the sample's `kr15-2.irl`).
+pub const IRL: &str = "<irl>
+\t<info name=\"KUKA KR15-2\"/>
+\t<def>
+\t\t<definition name=\"SetVelCP\">
+\t\t\t<parameter name=\"VALUE\"/>
+\t\t\tDEF SetVelCP(VALUE:IN)
+\t\t\t\tDECL REAL VALUE
+\t\t\t\t$VEL.CP = VALUE
+\t\t\t\tRETURN
+\t\t\tEND
+\t\t</definition>
+\t</def>
+\t<src>
+\t\t<function-call name=\"SetVelCP\">
+\t\t\t<parameter name=\"VALUE\"/>
+\t\t\tSetVelCP (VALUE)
+\t\t</function-call>
+\t\t<function-call name=\"PTP\">
+\t\t\t<parameter name=\"X\"/>
+\t\t\t<parameter name=\"Y\"/>
+\t\t\t<parameter name=\"Z\"/>
+\t\t\t<parameter name=\"A\"/>
+\t\t\t<parameter name=\"B\"/>
+\t\t\t<parameter name=\"C\"/>
+\t\t\tPTP {X, Y, Z, A, B, C}
+\t\t</function-call>
+\t\t<function-call name=\"LIN\">
+\t\t\t<parameter name=\"X\"/>
+\t\t\t<parameter name=\"Y\"/>
+\t\t\t<parameter name=\"Z\"/>
+\t\t\t<parameter name=\"A\"/>
+\t\t\t<parameter name=\"B\"/>
+\t\t\t<parameter name=\"C\"/>
+\t\t\tLIN {X, Y, Z, A, B, C}
+\t\t</function-call>
+\t</src>
+</irl>
+";
+
+/// The blackboard (the sample's `Blackboard.aml`), naming the SFC and the IRL file by these
+/// `refURI`s (relative to the blackboard's folder, e.g. `../sfc.xml`).
+pub fn blackboard_text(sfc_ref: &str, irl_ref: &str) -> String {
+    BLACKBOARD
+        .replace("{{SFC}}", sfc_ref)
+        .replace("{{IRL}}", irl_ref)
+}
+
+const BLACKBOARD: &str = r#"<?xml version="1.0" encoding="utf-8"?>
+<CAEXFile FileName="Blackboard.aml" SchemaVersion="2.15" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" xsi:noNamespaceSchemaLocation="CAEX_ClassModel_V2.15.xsd">
+  <!-- GENERATED by examples/generate.rs: reference/original-sample/Blackboard.aml -->
+  <InstanceHierarchy Name="Blackboard">
+    <InternalElement Name="Ressourcen" ID="{00000000-0000-0000-0000-000000000001}">
+      <InternalElement Name="KUKA KR15-2" ID="{00000000-0000-0000-0000-000000000002}">
+        <InternalElement Name="Skills" ID="{00000000-0000-0000-0000-000000000003}">
+          <InternalElement Name="Move PTP" ID="{00000000-0000-0000-0000-000000000004}">
+            <Attribute Name="Velocity" AttributeDataType="xs:double" Unit="m/s">
+              <Description>TCP movement speed</Description>
+              <Value>Velocity</Value>
+            </Attribute>
+            <Attribute Name="End Position" AttributeDataType="xs:string">
+              <Description>Frame Object</Description>
+              <Value>Frame</Value>
+              <Attribute Name="x" AttributeDataType="xs:double"><Description>x coordinate of destination</Description><Value>0</Value></Attribute>
+              <Attribute Name="y" AttributeDataType="xs:double"><Value>1</Value></Attribute>
+              <Attribute Name="z" AttributeDataType="xs:double"><Value>2</Value></Attribute>
+              <Attribute Name="a" AttributeDataType="xs:double"><Value>3</Value></Attribute>
+              <Attribute Name="b" AttributeDataType="xs:double"><Value>4</Value></Attribute>
+              <Attribute Name="c" AttributeDataType="xs:double"><Value>5</Value></Attribute>
+            </Attribute>
+            <ExternalInterface Name="FunctionMapping" ID="{00000000-0000-0000-0000-000000000005}" RefBaseClassPath="IWB StateModelInterfaceLib/SkillMapping">
+              <Attribute Name="Name" AttributeDataType="xs:string"><Description>Name of the mapped Function</Description><Value>SetToolPathVelocity</Value></Attribute>
+              <Attribute Name="Order"><Description>Execution order of function</Description><Value>0</Value></Attribute>
+              <Attribute Name="Mapping"><Description>Attribute name mapping</Description>
+                <Attribute Name="Velocity" AttributeDataType="xs:string"><Value>value</Value></Attribute>
+              </Attribute>
+            </ExternalInterface>
+            <ExternalInterface Name="FunctionMapping" ID="{00000000-0000-0000-0000-000000000006}" RefBaseClassPath="IWB StateModelInterfaceLib/SkillMapping">
+              <Attribute Name="Name" AttributeDataType="xs:string"><Value>PTP</Value></Attribute>
+              <Attribute Name="Order"><Value>1</Value></Attribute>
+              <Attribute Name="Mapping">
+                <Attribute Name="End Position">
+                  <Attribute Name="x"><Value>X</Value></Attribute>
+                  <Attribute Name="y"><Value>Y</Value></Attribute>
+                  <Attribute Name="z"><Value>Z</Value></Attribute>
+                  <Attribute Name="a"><Value>A</Value></Attribute>
+                  <Attribute Name="b"><Value>B</Value></Attribute>
+                  <Attribute Name="c"><Value>C</Value></Attribute>
+                </Attribute>
+              </Attribute>
+            </ExternalInterface>
+          </InternalElement>
+          <InternalElement Name="Move LIN" ID="{00000000-0000-0000-0000-000000000007}">
+            <Attribute Name="End Position" AttributeDataType="xs:string">
+              <Value>Frame</Value>
+              <Attribute Name="x" AttributeDataType="xs:double"><Value>0</Value></Attribute>
+              <Attribute Name="y" AttributeDataType="xs:double"><Value>1</Value></Attribute>
+              <Attribute Name="z" AttributeDataType="xs:double"><Value>2</Value></Attribute>
+              <Attribute Name="a" AttributeDataType="xs:double"><Value>3</Value></Attribute>
+              <Attribute Name="b" AttributeDataType="xs:double"><Value>4</Value></Attribute>
+              <Attribute Name="c" AttributeDataType="xs:double"><Value>5</Value></Attribute>
+            </Attribute>
+            <ExternalInterface Name="FunctionMapping" ID="{00000000-0000-0000-0000-000000000008}" RefBaseClassPath="IWB StateModelInterfaceLib/SkillMapping">
+              <Attribute Name="Name"><Value>LIN</Value></Attribute>
+              <Attribute Name="Order"><Value>0</Value></Attribute>
+              <Attribute Name="Mapping">
+                <Attribute Name="End Position">
+                  <Attribute Name="x"><Value>X</Value></Attribute>
+                  <Attribute Name="y"><Value>Y</Value></Attribute>
+                  <Attribute Name="z"><Value>Z</Value></Attribute>
+                  <Attribute Name="a"><Value>A</Value></Attribute>
+                  <Attribute Name="b"><Value>B</Value></Attribute>
+                  <Attribute Name="c"><Value>C</Value></Attribute>
+                </Attribute>
+              </Attribute>
+            </ExternalInterface>
+          </InternalElement>
+        </InternalElement>
+        <InternalElement Name="FunctionDescription" ID="{00000000-0000-0000-0000-000000000009}">
+          <InternalElement Name="PTP" ID="{00000000-0000-0000-0000-000000000010}">
+            <Attribute Name="x" AttributeDataType="xs:double"><Description>x coordinate destination</Description><Value>0.0</Value></Attribute>
+            <Attribute Name="Description" AttributeDataType="xs:string"><Value>Execute motion to destination</Value></Attribute>
+            <ExternalInterface Name="FunctionDataInterface" ID="{00000000-0000-0000-0000-000000000011}" RefBaseClassPath="IWB StateModelInterfaceLib/FunctionLogic">
+              <Attribute Name="Name" AttributeDataType="xs:string"><Description>Name of the function to call</Description><Value>PTP</Value></Attribute>
+              <Attribute Name="refURI" AttributeDataType="xs:anyURI"><Description>Path to IRL File</Description><Value>{{IRL}}</Value></Attribute>
+            </ExternalInterface>
+          </InternalElement>
+          <InternalElement Name="LIN" ID="{00000000-0000-0000-0000-000000000012}">
+            <ExternalInterface Name="FunctionDataInterface" ID="{00000000-0000-0000-0000-000000000013}" RefBaseClassPath="IWB StateModelInterfaceLib/FunctionLogic">
+              <Attribute Name="Name" AttributeDataType="xs:string"><Value>LIN</Value></Attribute>
+              <Attribute Name="refURI" AttributeDataType="xs:anyURI"><Value>{{IRL}}</Value></Attribute>
+            </ExternalInterface>
+          </InternalElement>
+          <InternalElement Name="SetToolPathVelocity" ID="{00000000-0000-0000-0000-000000000014}">
+            <ExternalInterface Name="FunctionDataInterface" ID="{00000000-0000-0000-0000-000000000015}" RefBaseClassPath="IWB StateModelInterfaceLib/FunctionLogic">
+              <Attribute Name="Name" AttributeDataType="xs:string"><Value>SetVelCP</Value></Attribute>
+              <Attribute Name="refURI" AttributeDataType="xs:anyURI"><Value>{{IRL}}</Value></Attribute>
+            </ExternalInterface>
+          </InternalElement>
+        </InternalElement>
+      </InternalElement>
+    </InternalElement>
+    <InternalElement Name="Process Sequenz" ID="{00000000-0000-0000-0000-000000000016}">
+      <ExternalInterface Name="SFC Benutzereingabe" ID="{00000000-0000-0000-0000-000000000017}" RefBaseClassPath="AutomationMLInterfaceClassLib/AutomationMLBaseInterface/ExternalDataConnector">
+        <Attribute Name="refURI" AttributeDataType="xs:anyURI"><Value>{{SFC}}</Value></Attribute>
+      </ExternalInterface>
+    </InternalElement>
+    <InternalElement Name="Code" ID="{00000000-0000-0000-0000-000000000018}">
+      <ExternalInterface Name="KRL code" ID="{00000000-0000-0000-0000-000000000019}" RefBaseClassPath="AutomationMLInterfaceClassLib/AutomationMLBaseInterface/ExternalDataConnector">
+        <Attribute Name="refURI" AttributeDataType="xs:anyURI"><Value>none</Value></Attribute>
+      </ExternalInterface>
+    </InternalElement>
+  </InstanceHierarchy>
+</CAEXFile>
+"#;

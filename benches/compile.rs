@@ -1,0 +1,557 @@
+//! Compile-time benchmark on generated projects (`harness = false`; no bench framework).
+//!
+//! ```text
+//! cargo bench --bench compile               # every case
+//! cargo bench --bench compile -- 100k       # cases whose label contains `100k`
+//! ```
+//!
+//! For each case it generates a project (`benches/common/generator.rs`) into a temporary folder,
+//! warms up once, then runs several iterations, alternating:
+//! - **floor**: a bare `roxmltree::Document::parse` of the SFC text already in memory (what a
+//!   DOM-based reader costs at least), and a bare `quick-xml` pass over it (every event, every
+//!   start tag's attributes split, nothing unescaped or kept: what a streaming reader costs at
+//!   least);
+//! - **compile**: `compile::compile` from the blackboard path (reads every file), then
+//!   **write**: `compile::apply` into a fresh project folder (outputs + write-back);
+//! - **stages**: the same pipeline called stage by stage through the public functions, to see
+//!   where the time goes (its outputs are checked against `compile`'s).
+//!
+//! Peak memory: the bench runs itself once more per case as a child process (Linux: `VmHWM` from
+//! `/proc/self/status`) for the floor (read the SFC + parse) and for compile + apply; the release
+//! binary's own figure comes from `bench/run.sh` (`/usr/bin/time -v`).
+//!
+//! It prints markdown tables of medians.
+
+use std::collections::HashMap;
+use std::hint::black_box;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use skillpost::bind;
+use skillpost::compile::{self, Options};
+use skillpost::diag::{Diagnostics, Sources};
+use skillpost::emit::krl::OutputTemplate;
+use skillpost::emit::{EmitInput, OutputFile};
+use skillpost::load::FsSource;
+use skillpost::model::Irl;
+use skillpost::plan;
+use skillpost::read::{self, blackboard::read_blackboard, irl::read_irl, sfc::read_sfc, xml};
+
+#[path = "common/generator.rs"]
+mod generator;
+
+use generator::Spec;
+
+struct Case {
+    label: &'static str,
+    spec: Spec,
+    iters: usize,
+}
+
+const CASES: &[Case] = &[
+    Case {
+        label: "1k",
+        spec: Spec {
+            steps: 1_000,
+            branch_every: 0,
+            branch_width: 0,
+        },
+        iters: 30,
+    },
+    Case {
+        label: "10k",
+        spec: Spec {
+            steps: 10_000,
+            branch_every: 0,
+            branch_width: 0,
+        },
+        iters: 15,
+    },
+    Case {
+        label: "100k",
+        spec: Spec {
+            steps: 100_000,
+            branch_every: 0,
+            branch_width: 0,
+        },
+        iters: 5,
+    },
+    Case {
+        label: "100k-branched",
+        spec: Spec {
+            steps: 100_000,
+            branch_every: 50,
+            branch_width: 3,
+        },
+        iters: 5,
+    },
+];
+
+/// Stage names, in pipeline order.
+const STAGES: &[&str] = &[
+    "blackboard",
+    "load sfc",
+    "read_sfc",
+    "plan",
+    "bind",
+    "emit",
+    "sort diags",
+    "drop",
+];
+
+/// Set in a child process: `floor` or `compile`, with the file as the argument.
+const CHILD_ENV: &str = "SKILLPOST_BENCH_CHILD";
+
+#[derive(Default)]
+struct Samples {
+    floor: Vec<Duration>,
+    stream_floor: Vec<Duration>,
+    compile: Vec<Duration>,
+    write: Vec<Duration>,
+    stages: Vec<Vec<Duration>>,
+    diagnostics: usize,
+}
+
+struct Row {
+    label: &'static str,
+    stats: generator::Stats,
+    iters: usize,
+    floor: Duration,
+    stream_floor: Duration,
+    compile: Duration,
+    write: Duration,
+    stages: Vec<Duration>,
+    floor_peak: Option<Peak>,
+    compile_peak: Option<Peak>,
+    diagnostics: usize,
+}
+
+/// What a child process reports.
+#[derive(Debug, Clone, Copy, Default)]
+struct Peak {
+    /// Peak resident set size, kB.
+    rss_kb: u64,
+    /// The SFC's roxmltree nodes and attributes (floor only).
+    nodes: u64,
+    attributes: u64,
+}
+
+fn main() {
+    if let Ok(mode) = std::env::var(CHILD_ENV) {
+        let path = std::env::args_os().nth(1).expect("child: a file argument");
+        child(&mode, Path::new(&path));
+        return;
+    }
+    // `cargo bench` passes `--bench`; any other argument filters the cases by label.
+    let filters: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with("--"))
+        .collect();
+    let tmp = tempfile::Builder::new()
+        .prefix("skillpost-bench-")
+        .tempdir()
+        .expect("temporary folder");
+    let mut rows = Vec::new();
+    for case in CASES {
+        if !filters.is_empty() && !filters.iter().any(|f| case.label.contains(f.as_str())) {
+            continue;
+        }
+        rows.push(run_case(case, tmp.path()));
+    }
+    print_tables(&rows);
+}
+
+fn run_case(case: &Case, tmp: &Path) -> Row {
+    let dir = tmp.join(case.label);
+    let t = Instant::now();
+    let project = generator::write_project(&dir, &case.spec).expect("generate the project");
+    eprintln!(
+        "{}: generated {} steps, {:.1} MB in {:.2} s; {} iterations",
+        case.label,
+        project.stats.skill_steps,
+        project.stats.sfc_bytes as f64 / 1e6,
+        t.elapsed().as_secs_f64(),
+        case.iters
+    );
+    let text = std::fs::read_to_string(&project.sfc).expect("read the SFC");
+    let mut s = Samples {
+        stages: vec![Vec::new(); STAGES.len()],
+        ..Default::default()
+    };
+    // Iteration 0 warms up (page cache, allocator) and checks the staged pipeline against
+    // `compile`; it is not counted.
+    for i in 0..=case.iters {
+        let floor = floor(&text);
+        let stream_floor = stream_floor(&text);
+        let run = dir.join(format!("run-{i}"));
+        let bb = fresh_project(&run);
+        let (compile, write, outputs, diagnostics) = compile_and_apply(&bb);
+        s.diagnostics = diagnostics;
+        let (stages, staged) = stages(&bb);
+        if i == 0 {
+            assert_eq!(
+                outputs, staged,
+                "the staged pipeline no longer matches compile::compile"
+            );
+            assert!(
+                outputs.iter().any(|(e, t)| *e == "src" && t.len() > 100),
+                "no .src output"
+            );
+        } else {
+            s.floor.push(floor);
+            s.stream_floor.push(stream_floor);
+            s.compile.push(compile);
+            s.write.push(write);
+            for (k, d) in stages.into_iter().enumerate() {
+                s.stages[k].push(d);
+            }
+        }
+        std::fs::remove_dir_all(&run).expect("remove the run folder");
+    }
+    drop(text);
+    let floor_peak = peak("floor", &project.sfc);
+    let run = dir.join("run-peak");
+    let compile_peak = peak("compile", &fresh_project(&run));
+    std::fs::remove_dir_all(&dir).expect("remove the project");
+    Row {
+        label: case.label,
+        stats: project.stats,
+        iters: case.iters,
+        floor: median(&mut s.floor),
+        stream_floor: median(&mut s.stream_floor),
+        compile: median(&mut s.compile),
+        write: median(&mut s.write),
+        stages: s.stages.iter_mut().map(|v| median(v)).collect(),
+        floor_peak,
+        compile_peak,
+        diagnostics: s.diagnostics,
+    }
+}
+
+/// Runs this bench again as a child process in `mode` on `file`; `None` where `/proc` is missing.
+fn peak(mode: &str, file: &Path) -> Option<Peak> {
+    let exe = std::env::current_exe().ok()?;
+    let out = std::process::Command::new(exe)
+        .env(CHILD_ENV, mode)
+        .arg(file)
+        .output()
+        .ok()?;
+    assert!(
+        out.status.success(),
+        "child `{mode}` failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let mut f = text.split_whitespace().map(|w| w.parse::<u64>().ok());
+    Some(Peak {
+        rss_kb: f.next()??,
+        nodes: f.next()??,
+        attributes: f.next()??,
+    })
+}
+
+/// The child process: one measured run, then `rss_kb nodes attributes` on stdout.
+fn child(mode: &str, file: &Path) {
+    let (nodes, attributes) = match mode {
+        "floor" => {
+            let text = std::fs::read_to_string(file).expect("read the SFC");
+            let doc = roxmltree::Document::parse(&text).expect("parse the SFC");
+            let nodes = doc.descendants().count() as u64;
+            let attributes = doc.descendants().map(|n| n.attributes().len() as u64).sum();
+            (nodes, attributes)
+        }
+        "compile" => {
+            let c = compile::compile(&FsSource::default(), file, &options());
+            assert!(!c.has_errors(), "the generated project has errors");
+            compile::apply(&c).expect("write the outputs");
+            (0, 0)
+        }
+        _ => panic!("unknown child mode `{mode}`"),
+    };
+    match vm_hwm_kb() {
+        Some(kb) => println!("{kb} {nodes} {attributes}"),
+        None => println!("-"),
+    }
+}
+
+/// This process's peak resident set size (Linux).
+fn vm_hwm_kb() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    line.split_whitespace().nth(1)?.parse().ok()
+}
+
+/// A project folder of its own (so every write is a real one) whose blackboard names the shared
+/// SFC and IRL files one level up.
+fn fresh_project(run: &Path) -> PathBuf {
+    std::fs::create_dir_all(run).expect("create the run folder");
+    let bb = run.join(generator::BLACKBOARD_FILE);
+    let text = generator::blackboard_text(
+        &format!("../{}", generator::SFC_FILE),
+        &format!("../{}", generator::IRL_FILE),
+    );
+    std::fs::write(&bb, text).expect("write the blackboard");
+    bb
+}
+
+fn floor(text: &str) -> Duration {
+    let t = Instant::now();
+    let doc = roxmltree::Document::parse(text).expect("the generated SFC is well-formed");
+    black_box(&doc);
+    drop(doc);
+    t.elapsed()
+}
+
+fn stream_floor(text: &str) -> Duration {
+    use quick_xml::events::Event;
+    let t = Instant::now();
+    let mut reader = quick_xml::Reader::from_str(text);
+    let mut attributes = 0usize;
+    loop {
+        match reader
+            .read_event()
+            .expect("the generated SFC is well-formed")
+        {
+            Event::Start(e) | Event::Empty(e) => {
+                for a in e.attributes() {
+                    black_box(a.expect("well-formed attributes"));
+                    attributes += 1;
+                }
+            }
+            Event::Eof => break,
+            ev => {
+                black_box(ev);
+            }
+        }
+    }
+    black_box(attributes);
+    t.elapsed()
+}
+
+fn options() -> Options {
+    Options {
+        program: "p".into(),
+        ..Default::default()
+    }
+}
+
+/// `compile` then `apply`, timed separately; returns the outputs for the cross-check and the
+/// number of diagnostics (all warnings).
+fn compile_and_apply(bb: &Path) -> (Duration, Duration, Vec<(&'static str, String)>, usize) {
+    let t = Instant::now();
+    let c = compile::compile(&FsSource::default(), bb, &options());
+    let compile = t.elapsed();
+    assert!(!c.has_errors(), "the generated project has errors");
+    let t = Instant::now();
+    let applied = compile::apply(&c).expect("write the outputs");
+    let write = t.elapsed();
+    assert!(
+        applied.outputs.iter().all(|(_, w)| *w),
+        "an output was not written"
+    );
+    let outputs = c
+        .outputs
+        .iter()
+        .map(|(_, f)| (f.extension, f.text.clone()))
+        .collect();
+    (compile, write, outputs, c.diagnostics.len())
+}
+
+/// The pipeline of `compile::compile`, stage by stage (the built-in template, no confinement).
+fn stages(bb_path: &Path) -> (Vec<Duration>, Vec<(&'static str, String)>) {
+    let fs = FsSource::default();
+    let base = bb_path.parent().expect("the blackboard has a folder");
+    let mut sources = Sources::default();
+    let mut diags = Diagnostics::default();
+    let mut times = Vec::with_capacity(STAGES.len());
+    let mut lap = {
+        let mut t = Instant::now();
+        move |times: &mut Vec<Duration>| {
+            let now = Instant::now();
+            times.push(now - t);
+            t = now;
+        }
+    };
+
+    let bb_file = xml::load(
+        &fs,
+        bb_path,
+        bb_path.display().to_string(),
+        None,
+        &mut sources,
+        &mut diags,
+    )
+    .expect("load the blackboard");
+    let bb = read_blackboard(&sources, bb_file, &mut diags).expect("read the blackboard");
+    let template = OutputTemplate::builtin();
+    lap(&mut times);
+
+    let sfc_ref = bb.sfc_ref.clone().expect("an SFC reference");
+    let sfc_path = read::resolve_ref(base, &sfc_ref.value).expect("resolve the SFC");
+    let sfc_file = xml::load(
+        &fs,
+        &sfc_path,
+        sfc_path.display().to_string(),
+        Some(sfc_ref.span.clone()),
+        &mut sources,
+        &mut diags,
+    )
+    .expect("load the SFC");
+    lap(&mut times);
+
+    let sfc = read_sfc(&sources, sfc_file, &mut diags).expect("read the SFC");
+    lap(&mut times);
+
+    let plan = plan::plan(&sfc, &mut diags).expect("plan");
+    lap(&mut times);
+
+    let order = bind::StepOrder::planned(&plan);
+    let res = bind::resolve(&bb, &sfc, &order, &mut diags);
+    let needed = bind::needed_functions(&bb, &res, &mut diags);
+    let mut irls: Vec<Irl> = Vec::new();
+    let mut fn_irl = HashMap::new();
+    let mut by_file = HashMap::new();
+    for (r, f) in needed {
+        let func = &bb.resources[r].functions[f];
+        let path = read::resolve_ref(base, &func.irl.value).expect("resolve an IRL file");
+        let file = xml::load(
+            &fs,
+            &path,
+            path.display().to_string(),
+            Some(func.irl.span.clone()),
+            &mut sources,
+            &mut diags,
+        )
+        .expect("load an IRL file");
+        let idx = *by_file.entry(file).or_insert_with(|| {
+            read_irl(&sources, file, &mut diags).map(|irl| {
+                irls.push(irl);
+                irls.len() - 1
+            })
+        });
+        if let Some(i) = idx {
+            fn_irl.insert((r, f), i);
+        }
+    }
+    let bound = bind::bind(&bb, &sfc, &order, &res, &irls, &fn_irl, &mut diags);
+    lap(&mut times);
+
+    let input = EmitInput {
+        program: "p",
+        blackboard: &bb,
+        sfc: &sfc,
+        plan: &plan,
+        bound: &bound,
+        irls: &irls,
+        newline: "\r\n",
+    };
+    let files: Vec<OutputFile> =
+        skillpost::emit::krl::emit(&input, &template, &mut diags).expect("emit");
+    lap(&mut times);
+
+    diags.sort();
+    assert!(!diags.has_errors(), "the staged pipeline reported errors");
+    lap(&mut times);
+
+    let outputs = files
+        .iter()
+        .map(|f| (f.extension, f.text.clone()))
+        .collect();
+    drop((
+        files, bound, irls, res, order, plan, sfc, bb, diags, sources,
+    ));
+    lap(&mut times);
+    (times, outputs)
+}
+
+fn median(v: &mut [Duration]) -> Duration {
+    v.sort();
+    match v.len() {
+        0 => Duration::ZERO,
+        n if n % 2 == 1 => v[n / 2],
+        n => (v[n / 2 - 1] + v[n / 2]) / 2,
+    }
+}
+
+fn ms(d: Duration) -> String {
+    let ms = d.as_secs_f64() * 1e3;
+    if ms < 10.0 {
+        format!("{ms:.2}")
+    } else if ms < 100.0 {
+        format!("{ms:.1}")
+    } else {
+        format!("{ms:.0}")
+    }
+}
+
+fn print_tables(rows: &[Row]) {
+    println!();
+    println!(
+        "Medians. roxmltree floor = bare roxmltree::Document::parse of the SFC text in memory;"
+    );
+    println!(
+        "quick-xml floor = a bare quick-xml event pass over it; compile = compile::compile from"
+    );
+    println!("the blackboard path (reads every file); ratio = compile / roxmltree floor; write =");
+    println!("compile::apply into a fresh folder.");
+    println!();
+    println!(
+        "| case | steps | SFC MB | runs | roxmltree floor ms | quick-xml floor ms | compile ms | ratio | write ms | compile + write ms | roxmltree floor peak MB | compile peak MB |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    let mb = |p: Option<Peak>| match p {
+        Some(p) => format!("{:.0}", p.rss_kb as f64 / 1024.0),
+        None => "n/a".to_owned(),
+    };
+    for r in rows {
+        println!(
+            "| {} | {} | {:.1} | {} | {} | {} | {} | {:.2} | {} | {} | {} | {} |",
+            r.label,
+            r.stats.skill_steps,
+            r.stats.sfc_bytes as f64 / 1e6,
+            r.iters,
+            ms(r.floor),
+            ms(r.stream_floor),
+            ms(r.compile),
+            r.compile.as_secs_f64() / r.floor.as_secs_f64(),
+            ms(r.write),
+            ms(r.compile + r.write),
+            mb(r.floor_peak),
+            mb(r.compile_peak),
+        );
+    }
+    println!();
+    println!("Peak MB = peak resident set size of a child process doing only that (MiB).");
+    for r in rows {
+        let dom = match r.floor_peak {
+            Some(p) => format!("{} roxmltree nodes, {} attributes", p.nodes, p.attributes),
+            None => "DOM size n/a".to_owned(),
+        };
+        println!(
+            "{}: {} SFC elements, {}; compile reports {} warnings.",
+            r.label, r.stats.elements, dom, r.diagnostics
+        );
+    }
+    println!();
+    println!("Stages (ms, medians of the staged pipeline; `read_sfc` includes its XML parse,");
+    println!("`bind` includes resolve and the IRL files, `drop` frees everything):");
+    println!();
+    let mut head = String::from("| case |");
+    let mut rule = String::from("|---|");
+    for s in STAGES {
+        head.push_str(&format!(" {s} |"));
+        rule.push_str("---:|");
+    }
+    head.push_str(" sum |");
+    rule.push_str("---:|");
+    println!("{head}");
+    println!("{rule}");
+    for r in rows {
+        let mut line = format!("| {} |", r.label);
+        for d in &r.stages {
+            line.push_str(&format!(" {} |", ms(*d)));
+        }
+        line.push_str(&format!(" {} |", ms(r.stages.iter().sum())));
+        println!("{line}");
+    }
+}

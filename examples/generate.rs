@@ -1,0 +1,67 @@
+//! Generates a large project in the original tool's format, for benchmarks and load tests:
+//!
+//! ```text
+//! cargo run --release --example generate -- --steps 100000 --out /tmp/p100k
+//! cargo run --release --example generate -- --steps 100000 --branch-every 50 --branch-width 3 --out /tmp/p100k-b
+//! ./target/release/skillpost /tmp/p100k/Blackboard.aml out
+//! ```
+//!
+//! Writes `Blackboard.aml`, `sfc.xml` and `kr15-2.irl` into `--out`; the same arguments give the
+//! same bytes. The generator itself is `benches/common/generator.rs` (shared with the bench).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Parser;
+
+#[path = "../benches/common/generator.rs"]
+mod generator;
+
+/// Generate a skillpost project of N alternating PTP/LIN steps
+#[derive(Debug, Parser)]
+#[command(name = "generate")]
+struct Args {
+    /// Skill steps (Start and End not counted)
+    #[arg(long)]
+    steps: usize,
+    /// Every K main-line steps, a simultaneous branch (with one nested branch level); 0 = none
+    #[arg(long, value_name = "K", default_value_t = 0)]
+    branch_every: usize,
+    /// Branches per simultaneous divergence
+    #[arg(long, value_name = "W", default_value_t = 3, value_parser = clap::value_parser!(u32).range(2..))]
+    branch_width: u32,
+    /// Output folder (created if needed; existing files are overwritten)
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    let spec = generator::Spec {
+        steps: args.steps,
+        branch_every: args.branch_every,
+        branch_width: args.branch_width as usize,
+    };
+    let t = std::time::Instant::now();
+    match generator::write_project(&args.out, &spec) {
+        Ok(p) => {
+            let s = p.stats;
+            println!(
+                "{}: {} skill steps, {} SFC elements, {} simultaneous branches, SFC {} bytes ({:.1} MB, {:.0} bytes/step) in {:.2} s",
+                p.blackboard.display(),
+                s.skill_steps,
+                s.elements,
+                s.branches,
+                s.sfc_bytes,
+                s.sfc_bytes as f64 / 1e6,
+                s.sfc_bytes as f64 / s.skill_steps.max(1) as f64,
+                t.elapsed().as_secs_f64()
+            );
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("generate: {}: {e}", args.out.display());
+            ExitCode::from(2)
+        }
+    }
+}
