@@ -157,7 +157,12 @@ fn run(a: Args) -> u8 {
     if a.validate {
         return status(&c, "Input validation successful!", a.format);
     }
-    match compile::apply(&c) {
+    let result = compile::apply(&c);
+    // The process ends next: leave the (possibly very large) compilation to the OS instead of
+    // freeing it piece by piece.
+    std::mem::forget(c.sources);
+    std::mem::forget(c.sfc);
+    match result {
         Ok(applied) => {
             for (path, written) in &applied.outputs {
                 eprintln!(

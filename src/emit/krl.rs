@@ -3,6 +3,8 @@
 //! The fixed text (header, initialisation, closing) comes from an [`OutputTemplate`]: the
 //! built-in `templates/krl.toml` or the user's copy.
 
+use std::fmt::Write as _;
+
 use serde::Deserialize;
 
 use super::{EmitInput, OutputFile};
@@ -157,42 +159,47 @@ pub fn emit(
             .replace("{{comment}}", &comment)
     };
 
-    // Steps.
-    let mut steps = String::new();
-    let mut number = 0usize;
-    emit_blocks(input, template, &input.plan.body, &mut number, &mut steps);
-
-    // Definitions.
-    let mut defs = String::new();
-    for &(irl, d) in &input.bound.definitions {
-        let def = &input.irls[irl].definitions[d];
-        defs.push_str(nl);
-        for l in &def.lines {
-            defs.push_str(l);
-            defs.push_str(nl);
-        }
-    }
-
-    let fill = |body: &str, blocks: &[(&str, &str)]| {
-        let mut out =
-            String::with_capacity(body.len() + blocks.iter().map(|b| b.1.len()).sum::<usize>());
-        // The TOML multi-line string starts after its first newline; a trailing newline ends
-        // the last line.
-        for line in body.lines() {
-            let t = line.trim();
-            if let Some((_, text)) = blocks.iter().find(|(name, _)| {
-                t.len() == name.len() + 4 && t[2..t.len() - 2] == **name && t.starts_with("{{")
-            }) {
-                out.push_str(text);
-            } else {
-                out.push_str(&inline(line));
-                out.push_str(nl);
+    // The placeholder lines' blocks are written straight into the output.
+    let block = block_name;
+    let steps_estimate = input
+        .bound
+        .steps
+        .iter()
+        .flatten()
+        .map(|b| b.code.len() + 80)
+        .sum::<usize>();
+    let mut src = String::with_capacity(template.src.len() + steps_estimate + 1024);
+    for line in template.src.lines() {
+        match block(line) {
+            Some("steps") => {
+                let mut number = 0usize;
+                emit_blocks(input, template, &input.plan.body, &mut number, &mut src);
+            }
+            Some("definitions") => {
+                for &(irl, d) in &input.bound.definitions {
+                    let def = &input.irls[irl].definitions[d];
+                    src.push_str(nl);
+                    for l in &def.lines {
+                        src.push_str(l);
+                        src.push_str(nl);
+                    }
+                }
+            }
+            Some(_) => {}
+            None => {
+                src.push_str(&inline(line));
+                src.push_str(nl);
             }
         }
-        out
-    };
-    let src = fill(&template.src, &[("steps", &steps), ("definitions", &defs)]);
-    let dat = fill(&template.dat, &[("declarations", "")]);
+    }
+    let mut dat = String::with_capacity(template.dat.len() + 256);
+    for line in template.dat.lines() {
+        // No declarations yet: the block is empty.
+        if block(line).is_none() {
+            dat.push_str(&inline(line));
+            dat.push_str(nl);
+        }
+    }
 
     for (ext, text) in [("src", &src), ("dat", &dat)] {
         if let Some(pos) = text.find(|c: char| !c.is_ascii()) {
@@ -218,6 +225,14 @@ pub fn emit(
     ])
 }
 
+/// The block placeholder a template line holds, if it is one.
+fn block_name(line: &str) -> Option<&str> {
+    let t = line.trim();
+    t.strip_prefix("{{")
+        .and_then(|r| r.strip_suffix("}}"))
+        .filter(|n| matches!(*n, "steps" | "definitions" | "declarations"))
+}
+
 fn emit_blocks(
     input: &EmitInput,
     template: &OutputTemplate,
@@ -239,10 +254,19 @@ fn emit_blocks(
                 *number += 1;
                 let res = &input.blackboard.resources[bs.resource];
                 let skill = &res.skills[bs.skill];
-                out.push_str(&transliterate(&format!(
+                let ascii =
+                    st.name.is_ascii() && skill.name.text.is_ascii() && res.name.text.is_ascii();
+                let title_at = out.len();
+                let _ = write!(
+                    out,
                     ";FOLD {} {}: {} @ {} (localId {})",
                     number, st.name, skill.name.text, res.name.text, e.local_id
-                )));
+                );
+                if !ascii || out[title_at..].contains(['\r', '\n']) {
+                    let title = transliterate(&out[title_at..]);
+                    out.truncate(title_at);
+                    out.push_str(&title);
+                }
                 out.push_str(nl);
                 for line in bs.code.split('\n') {
                     if !line.is_empty() {

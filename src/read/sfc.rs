@@ -123,13 +123,15 @@ struct Building<'t> {
     tag: &'t str,
     span: Span,
     depth: usize,
-    attrs: Vec<Attr<'t>>,
+    /// `localId`, `name`, `initialStep`.
+    attrs: [Option<Attr<'t>>; 3],
     x: Option<f64>,
     inputs: Vec<(u64, Range<usize>)>,
     bad_inputs: Vec<Diagnostic>,
     /// `Variable` elements: direct ones, then those in `iwb`.
-    direct_vars: Vec<(Span, Vec<Attr<'t>>)>,
-    iwb_vars: Vec<(Span, Vec<Attr<'t>>)>,
+    /// `name`, `Value`.
+    direct_vars: Vec<(Span, [Option<Attr<'t>>; 2])>,
+    iwb_vars: Vec<(Span, [Option<Attr<'t>>; 2])>,
     iwb: IwbState,
     resource: Option<Name>,
     resources_seen: bool,
@@ -186,37 +188,48 @@ impl<'t> Stream<'t> {
         &self.text[off..off + local.len()]
     }
 
-    fn attrs(&self, e: &BytesStart<'t>, tag_at: usize) -> Result<Vec<Attr<'t>>, Box<Diagnostic>> {
-        let mut out = Vec::new();
+    /// The attributes named `names` (local names), in that order; others are skipped (not
+    /// unescaped). No allocation unless a value has references to resolve.
+    fn pick<const N: usize>(
+        &self,
+        e: &BytesStart<'t>,
+        tag_at: usize,
+        names: [&str; N],
+    ) -> Result<[Option<Attr<'t>>; N], Box<Diagnostic>> {
+        let mut out: [Option<Attr<'t>>; N] = std::array::from_fn(|_| None);
         for a in e.attributes() {
             let a = a.map_err(|err| self.syntax_error(tag_at, err.to_string()))?;
             let key_raw: &str = a.key.as_ref();
+            let local = match key_raw.rfind(':') {
+                Some(i) => &key_raw[i + 1..],
+                None => key_raw,
+            };
+            let Some(slot) = names.iter().position(|n| *n == local) else {
+                continue;
+            };
+            if out[slot].is_some() {
+                continue;
+            }
             let key_at = self.offset_of(key_raw, tag_at);
-            let local = key_raw.rsplit(':').next().unwrap_or(key_raw);
             let name_at = key_at + (key_raw.len() - local.len());
             let name: &'t str = self.text.get(name_at..name_at + local.len()).unwrap_or("");
             let raw_at = self.offset_of(&a.value, tag_at);
             let range = raw_at..raw_at + a.value.len();
-            let value = match &a.value {
-                std::borrow::Cow::Borrowed(_) => {
-                    let raw: &'t str = self.text.get(range.clone()).unwrap_or("");
-                    if raw.contains('&') || raw.contains(['\t', '\n', '\r']) {
-                        std::borrow::Cow::Owned(
-                            a.normalized_value(quick_xml::XmlVersion::Implicit1_0)
-                                .map_err(|err| self.syntax_error(raw_at, err.to_string()))?
-                                .into_owned(),
-                        )
-                    } else {
-                        std::borrow::Cow::Borrowed(raw)
-                    }
+            let raw: Option<&'t str> = match &a.value {
+                std::borrow::Cow::Borrowed(_) => self.text.get(range.clone()),
+                std::borrow::Cow::Owned(_) => None,
+            };
+            let value = match raw {
+                Some(raw) if !raw.contains(['&', '\t', '\n', '\r']) => {
+                    std::borrow::Cow::Borrowed(raw)
                 }
-                std::borrow::Cow::Owned(_) => std::borrow::Cow::Owned(
+                _ => std::borrow::Cow::Owned(
                     a.normalized_value(quick_xml::XmlVersion::Implicit1_0)
                         .map_err(|err| self.syntax_error(raw_at, err.to_string()))?
                         .into_owned(),
                 ),
             };
-            out.push(Attr { name, value, range });
+            out[slot] = Some(Attr { name, value, range });
         }
         Ok(out)
     }
@@ -373,12 +386,7 @@ impl<'t> Stream<'t> {
             // The element's place, relative to the document.
             let path = PathKind::of(&stack, name);
             if let Some(b) = &mut building {
-                let attrs = if wants_attrs(b, &stack, name) {
-                    self.attrs(&start, at)?
-                } else {
-                    Vec::new()
-                };
-                self.inside(b, &stack, name, tag, attrs);
+                self.inside(b, &stack, name, tag, &start, at)?;
                 if empty {
                     end_inside(b, &stack);
                 } else {
@@ -388,27 +396,27 @@ impl<'t> Stream<'t> {
             }
             match path {
                 PathKind::FileHeader => {
-                    for a in self.attrs(&start, at)? {
-                        let v = Some(a.value.into_owned());
-                        match a.name {
-                            "companyName" => header.company_name = v,
-                            "productName" => header.product_name = v,
-                            "productVersion" => header.product_version = v,
-                            "creationDateTime" => header.creation_date_time = v,
-                            _ => {}
-                        }
-                    }
+                    let [company, product, version, time] = self.pick(
+                        &start,
+                        at,
+                        [
+                            "companyName",
+                            "productName",
+                            "productVersion",
+                            "creationDateTime",
+                        ],
+                    )?;
+                    let v = |a: Option<Attr>| a.map(|a| a.value.into_owned());
+                    header.company_name = v(company);
+                    header.product_name = v(product);
+                    header.product_version = v(version);
+                    header.creation_date_time = v(time);
                 }
                 PathKind::Pou => {
-                    let attrs = self.attrs(&start, at)?;
-                    let get = |n: &str| {
-                        attrs
-                            .iter()
-                            .find(|a| a.name == n)
-                            .map(|a| a.value.to_string())
-                    };
-                    let pname = get("name");
-                    let program = get("pouType").as_deref() == Some("program");
+                    let [pou_name, pou_type] = self.pick(&start, at, ["name", "pouType"])?;
+                    let get = |a: &Option<Attr>| a.as_ref().map(|a| a.value.to_string());
+                    let pname = get(&pou_name);
+                    let program = get(&pou_type).as_deref() == Some("program");
                     if first_pou.is_none() {
                         first_pou = Some((tag.clone(), pname.clone().unwrap_or_default()));
                     }
@@ -445,7 +453,7 @@ impl<'t> Stream<'t> {
                     if let Some((_, d, els)) = &mut sfc
                         && depth == *d + 1
                     {
-                        let attrs = self.attrs(&start, at)?;
+                        let attrs = self.pick(&start, at, ["localId", "name", "initialStep"])?;
                         let b = Building {
                             tag: name,
                             span: tag,
@@ -489,21 +497,21 @@ impl<'t> Stream<'t> {
         stack: &[&'t str],
         name: &'t str,
         tag: Span,
-        attrs: Vec<Attr<'t>>,
-    ) {
+        start: &BytesStart<'t>,
+        at: usize,
+    ) -> Result<(), Box<Diagnostic>> {
         let rel = &stack[b.depth..];
-        let get = |n: &str| attrs.iter().find(|a| a.name == n);
         match (rel, name) {
             ([], "position") if b.x.is_none() => {
+                let [x] = self.pick(start, at, ["x"])?;
                 b.x = Some(
-                    get("x")
-                        .and_then(|a| a.value.trim().parse::<f64>().ok())
+                    x.and_then(|a| a.value.trim().parse::<f64>().ok())
                         .filter(|x| x.is_finite())
                         .unwrap_or(0.0),
                 );
             }
-            (["connectionPointIn"], "connection") => match get("refLocalId") {
-                Some(a) => match a.value.trim().parse::<u64>() {
+            (["connectionPointIn"], "connection") => match self.pick(start, at, ["refLocalId"])? {
+                [Some(a)] => match a.value.trim().parse::<u64>() {
                     Ok(r) => b.inputs.push((r, a.range.clone())),
                     Err(_) => b.bad_inputs.push(
                         Diagnostic::error(
@@ -513,35 +521,44 @@ impl<'t> Stream<'t> {
                         .at(self.span(a.range.clone())),
                     ),
                 },
-                None => b.bad_inputs.push(
+                [None] => b.bad_inputs.push(
                     Diagnostic::error(Code::DanglingReference, "connection without refLocalId")
                         .at(tag),
                 ),
             },
-            ([], "Variable") => b.direct_vars.push((tag, attrs)),
+            ([], "Variable") => {
+                let attrs = self.pick(start, at, ["name", "Value"])?;
+                b.direct_vars.push((tag, attrs));
+            }
             (["addData", "data"], "iwb") if b.iwb == IwbState::Before => {
                 b.iwb = IwbState::Inside;
             }
             (["addData", "data", "iwb"], _) if b.iwb == IwbState::Inside => match name {
                 "ressources" | "resources" if !b.resources_seen => b.resources_seen = true,
                 "skill" if b.skill.is_none() => {
-                    b.skill = get("name")
+                    let [n] = self.pick(start, at, ["name"])?;
+                    b.skill = n
                         .map(|a| self.names.name(&a.value, self.span(a.range.clone())))
                         .filter(|n| !n.key.is_empty());
                 }
                 "time" if !b.time_seen => {
                     b.time_seen = true;
-                    b.duration = get("duration")
+                    let [d] = self.pick(start, at, ["duration"])?;
+                    b.duration = d
                         .and_then(|a| a.value.trim().parse::<f64>().ok())
                         .filter(|d| d.is_finite() && *d >= 0.0);
                 }
-                "Variable" => b.iwb_vars.push((tag, attrs)),
+                "Variable" => {
+                    let attrs = self.pick(start, at, ["name", "Value"])?;
+                    b.iwb_vars.push((tag, attrs));
+                }
                 _ => {}
             },
             (["addData", "data", "iwb", "ressources" | "resources"], "ressource" | "resource")
                 if b.iwb == IwbState::Inside && b.resource.is_none() =>
             {
-                b.resource = get("name")
+                let [n] = self.pick(start, at, ["name"])?;
+                b.resource = n
                     .map(|a| self.names.name(&a.value, self.span(a.range.clone())))
                     .filter(|n| !n.key.is_empty());
             }
@@ -553,12 +570,13 @@ impl<'t> Stream<'t> {
             }
             _ => {}
         }
+        Ok(())
     }
 
     /// The element is complete: check it and turn it into the model.
     fn finish(&mut self, b: Building<'t>, diags: &mut Diagnostics) -> Option<Element> {
         let file = self.file;
-        let attr = |n: &str| b.attrs.iter().find(|a| a.name == n);
+        let attr = |n: &str| b.attrs.iter().flatten().find(|a| a.name == n);
         let id_label = || {
             format!(
                 "localId {}",
@@ -654,6 +672,7 @@ impl<'t> Stream<'t> {
                 "localId {}",
                 b.attrs
                     .iter()
+                    .flatten()
                     .find(|a| a.name == "localId")
                     .map(|a| &*a.value)
                     .unwrap_or("?")
@@ -662,7 +681,7 @@ impl<'t> Stream<'t> {
         let mut variables = Vec::new();
         let mut invalid_variables = Vec::new();
         for (tag, attrs) in b.direct_vars.iter().chain(b.iwb_vars.iter()) {
-            let get = |n: &str| attrs.iter().find(|a| a.name == n);
+            let get = |n: &str| attrs.iter().flatten().find(|a| a.name == n);
             let Some(name) = get("name") else {
                 diags.push(
                     Diagnostic::error(Code::BadVariableSyntax, "Variable without `name`")
@@ -712,7 +731,7 @@ impl<'t> Stream<'t> {
                 }
             }
         }
-        let attr = |n: &str| b.attrs.iter().find(|a| a.name == n);
+        let attr = |n: &str| b.attrs.iter().flatten().find(|a| a.name == n);
         Step {
             name: self
                 .names
@@ -748,19 +767,6 @@ impl PathKind {
             _ => PathKind::Other,
         }
     }
-}
-
-/// Whether a descendant's attributes are needed (most are not: skip the work).
-fn wants_attrs(b: &Building, stack: &[&str], name: &str) -> bool {
-    let rel = &stack[b.depth..];
-    matches!(
-        (rel, name),
-        ([], "position")
-            | (["connectionPointIn"], "connection")
-            | ([], "Variable")
-            | (["addData", "data", "iwb"], _)
-            | (["addData", "data", "iwb", _], _)
-    )
 }
 
 /// An element inside the one being built closed; `stack` is what remains open.
