@@ -96,7 +96,37 @@ struct Ctx<'a> {
     confine: Option<PathBuf>,
 }
 
-impl Ctx<'_> {
+impl<'a> Ctx<'a> {
+    fn new(fs: &'a dyn FileSource, base: PathBuf, confine: Option<PathBuf>) -> Self {
+        Ctx {
+            fs: Recorder {
+                fs,
+                read: Default::default(),
+            },
+            sources: Sources::default(),
+            diags: Diagnostics::default(),
+            base,
+            confine,
+        }
+    }
+
+    /// Loads the file the command names (the blackboard, or the SFC with `--sfc`). When it
+    /// cannot be read at all, that is an I/O failure (exit status 2), not an input error.
+    fn load_top(&mut self, path: &Path, out: &mut Compilation) -> Option<crate::diag::FileId> {
+        let file = xml::load(
+            &self.fs,
+            path,
+            path.display().to_string(),
+            None,
+            &mut self.sources,
+            &mut self.diags,
+        );
+        if file.is_none() {
+            out.io_failure = self.sources.find(path).is_none();
+        }
+        file
+    }
+
     /// Resolves a `refURI` and loads the file; errors are located at the reference.
     fn load_ref(&mut self, value: &str, at: &Span) -> Option<crate::diag::FileId> {
         let path = match read::resolve_ref(&self.base, value) {
@@ -148,19 +178,13 @@ fn absolute(p: &Path) -> PathBuf {
 /// Compiles one project. Never writes; see [`apply`].
 pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compilation {
     let base = blackboard.parent().map(Path::to_owned).unwrap_or_default();
-    let mut cx = Ctx {
-        fs: Recorder {
-            fs,
-            read: Default::default(),
-        },
-        sources: Sources::default(),
-        diags: Diagnostics::default(),
+    let mut cx = Ctx::new(
+        fs,
         base,
-        confine: opts
-            .confine_to
+        opts.confine_to
             .as_ref()
             .map(|p| read::normalize(&absolute(p))),
-    };
+    );
     let mut out = Compilation::default();
     let mut clock = std::time::Instant::now();
     let mut lap = |out: &mut Compilation, stage: &'static str| {
@@ -179,16 +203,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         ));
     }
 
-    let bb_file = xml::load(
-        &cx.fs,
-        blackboard,
-        blackboard.display().to_string(),
-        None,
-        &mut cx.sources,
-        &mut cx.diags,
-    );
-    let Some(bb_file) = bb_file else {
-        out.io_failure = cx.sources.find(blackboard).is_none();
+    let Some(bb_file) = cx.load_top(blackboard, &mut out) else {
         return finish(cx, out);
     };
     let Some(bb) = read_blackboard(&cx.sources, bb_file, &mut cx.diags) else {
@@ -302,27 +317,9 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
 
 /// Checks an SFC file on its own (`--sfc`): read and plan, no blackboard.
 pub fn check_sfc(fs: &dyn FileSource, path: &Path) -> Compilation {
-    let mut cx = Ctx {
-        fs: Recorder {
-            fs,
-            read: Default::default(),
-        },
-        sources: Sources::default(),
-        diags: Diagnostics::default(),
-        base: PathBuf::new(),
-        confine: None,
-    };
+    let mut cx = Ctx::new(fs, PathBuf::new(), None);
     let mut out = Compilation::default();
-    let file = xml::load(
-        &cx.fs,
-        path,
-        path.display().to_string(),
-        None,
-        &mut cx.sources,
-        &mut cx.diags,
-    );
-    let Some(file) = file else {
-        out.io_failure = cx.sources.find(path).is_none();
+    let Some(file) = cx.load_top(path, &mut out) else {
         return finish(cx, out);
     };
     out.sfc = read_sfc(&cx.sources, file, &mut cx.diags);

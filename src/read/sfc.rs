@@ -297,23 +297,15 @@ impl<'t> Stream<'t> {
                     continue;
                 }
                 Event::Text(t) => {
-                    if let Some(b) = &mut building
-                        && b.inline.is_some()
-                        && in_inline(b, &stack)
-                    {
-                        let s = t.xml_content(quick_xml::XmlVersion::Implicit1_0);
-                        b.inline.as_mut().expect("checked").push_str(&s);
-                    }
+                    inline_text(&mut building, &stack, || {
+                        t.xml_content(quick_xml::XmlVersion::Implicit1_0)
+                    });
                     continue;
                 }
                 Event::CData(t) => {
-                    if let Some(b) = &mut building
-                        && b.inline.is_some()
-                        && in_inline(b, &stack)
-                    {
-                        let s = t.xml_content(quick_xml::XmlVersion::Implicit1_0);
-                        b.inline.as_mut().expect("checked").push_str(&s);
-                    }
+                    inline_text(&mut building, &stack, || {
+                        t.xml_content(quick_xml::XmlVersion::Implicit1_0)
+                    });
                     continue;
                 }
                 Event::GeneralRef(r) => {
@@ -781,6 +773,21 @@ fn end_inside(b: &mut Building, stack: &[&str]) {
     }
 }
 
+/// Adds text to the element's inline condition when the stack is inside it.
+fn inline_text<'s>(
+    building: &mut Option<Building>,
+    stack: &[&str],
+    text: impl FnOnce() -> std::borrow::Cow<'s, str>,
+) {
+    if let Some(b) = building
+        && b.inline.is_some()
+        && in_inline(b, stack)
+    {
+        let t = text();
+        b.inline.get_or_insert_default().push_str(&t);
+    }
+}
+
 /// Whether the stack is inside the element's `condition/inline`.
 fn in_inline(b: &Building, stack: &[&str]) -> bool {
     let rel = &stack[b.depth.min(stack.len())..];
@@ -1010,6 +1017,59 @@ mod tests {
             Value::List(vec![s("\"a,b\""), s("c")])
         );
         assert_eq!(parse_value("abc def").unwrap(), s("abc def"));
+    }
+
+    fn read(text: &str) -> (Option<Sfc>, Vec<Diagnostic>) {
+        let mut sources = Sources::default();
+        let f = sources.add("s.xml".into(), "s.xml".into(), text.to_owned(), false);
+        let mut d = Diagnostics::default();
+        let sfc = read_sfc(&sources, f, &mut d);
+        (sfc, d.into_vec())
+    }
+
+    #[test]
+    fn transition_conditions() {
+        let doc = |cond: &str| {
+            format!(
+                "<project xmlns=\"http://www.plcopen.org/xml/tc6_0201\"><types><pous><pou name=\"P\" pouType=\"program\"><body><SFC>\
+                 <transition localId=\"2\"><condition>{cond}</condition></transition>\
+                 </SFC></body></pou></pous></types></project>"
+            )
+        };
+        let (sfc, d) = read(&doc(
+            "<inline name=\"\"><ST><xhtml:p xmlns:xhtml=\"x\"> TRUE </xhtml:p></ST></inline>",
+        ));
+        assert_eq!(sfc.unwrap().elements.len(), 1);
+        assert!(d.is_empty(), "{d:?}");
+        let (_, d) = read(&doc("<inline><ST>a &lt; b<![CDATA[ && c]]></ST></inline>"));
+        assert_eq!(d.len(), 1);
+        assert_eq!(d[0].code, Code::Ignored);
+        assert!(
+            d[0].message.contains("condition `a < b && c`"),
+            "{}",
+            d[0].message
+        );
+        let (_, d) = read(&doc("<reference name=\"Cond1\"/>"));
+        assert!(
+            d[0].message.contains("not an inline `TRUE`"),
+            "{}",
+            d[0].message
+        );
+    }
+
+    #[test]
+    fn truncated_file_is_a_syntax_error() {
+        let (sfc, d) = read(
+            "<project><types><pous><pou name=\"P\"><body><SFC><step localId=\"1\" name=\"S\"/>",
+        );
+        assert!(sfc.is_none());
+        assert_eq!(d.len(), 1);
+        assert_eq!(d[0].code, Code::XmlSyntax);
+        assert!(
+            d[0].message.contains("ends inside `<SFC>`"),
+            "{}",
+            d[0].message
+        );
     }
 
     #[test]
