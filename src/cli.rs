@@ -22,7 +22,10 @@ use crate::load::FsSource;
     override_usage = "skillpost [OPTIONS] <BLACKBOARD> <PROGRAM>\n       skillpost --sfc [OPTIONS] <SFC>\n       skillpost --info [<BLACKBOARD>]",
     after_help = "Exit status: 0 success (warnings allowed), 1 the inputs have errors, 2 usage or I/O failure."
 )]
+#[command(args_conflicts_with_subcommands = true)]
 struct Args {
+    #[command(subcommand)]
+    command: Option<Command>,
     /// BLACKBOARD and PROGRAM (compile); SFC (with --sfc); optional BLACKBOARD (with --info)
     #[arg(value_name = "FILES")]
     inputs: Vec<PathBuf>,
@@ -59,6 +62,37 @@ struct Args {
     version: Option<bool>,
 }
 
+#[derive(Debug, clap::Subcommand)]
+enum Command {
+    /// The daemon: keep project folders compiled, emit JSON events (see docs/DAEMON.md)
+    Watch(WatchArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct WatchArgs {
+    /// Configuration file (TOML; see config/skillpost.toml); SIGHUP reads it again
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
+    /// Append the event stream to FILE instead of writing it to stdout
+    #[arg(long, value_name = "FILE")]
+    events: Option<PathBuf>,
+    /// Quiet period after the last change before compiling, in milliseconds (default 100)
+    #[arg(long, value_name = "MS", value_parser = clap::value_parser!(u64).range(1..=60000))]
+    settle: Option<u64>,
+    /// Format of the logs on stderr
+    #[arg(long, value_enum, default_value_t = LogFormat::Human)]
+    log_format: LogFormat,
+    /// Project folders (each holding one blackboard)
+    #[arg(value_name = "DIR")]
+    dirs: Vec<PathBuf>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum LogFormat {
+    Human,
+    Json,
+}
+
 /// Runs the command line; returns the exit status.
 pub fn main(args: impl IntoIterator<Item = OsString>) -> ExitCode {
     let args = match Args::try_parse_from(args) {
@@ -79,6 +113,9 @@ fn usage(msg: &str) -> u8 {
 }
 
 fn run(a: Args) -> u8 {
+    if let Some(Command::Watch(w)) = a.command {
+        return watch(w);
+    }
     let fs = FsSource::default();
     let print = |c: char| {
         a.print
@@ -249,5 +286,89 @@ fn status(c: &Compilation, ok_message: &str, format: Format) -> u8 {
             eprintln!("{ok_message}");
         }
         0
+    }
+}
+
+/// `skillpost watch`: logs to stderr, events to stdout or a file, signals to the daemon.
+fn watch(w: WatchArgs) -> u8 {
+    use crate::daemon::{self, Control, events::EventSink};
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal());
+    match w.log_format {
+        LogFormat::Human => builder.init(),
+        LogFormat::Json => builder.json().init(),
+    }
+    let sources = daemon::Sources {
+        config_file: w.config.clone(),
+        dirs: w.dirs.clone(),
+        events: w.events.clone(),
+        settle_ms: w.settle,
+    };
+    let config = match sources.load() {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return 2;
+        }
+    };
+    if config.projects.is_empty() && config.roots.is_empty() {
+        tracing::warn!("no projects and no roots configured; waiting for a reload (SIGHUP)");
+    }
+    let sink = match &config.events {
+        Some(path) => match EventSink::append(path) {
+            Ok(s) => s,
+            Err(e) => {
+                eprintln!("error: cannot open the event file {}: {e}", path.display());
+                return 2;
+            }
+        },
+        None => EventSink::stdout(),
+    };
+    let runtime = match tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("error: cannot start the runtime: {e}");
+            return 2;
+        }
+    };
+    let result = runtime.block_on(async move {
+        let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
+        use tokio::signal::unix::{SignalKind, signal};
+        let (mut hup, mut term, mut int) = match (
+            signal(SignalKind::hangup()),
+            signal(SignalKind::terminate()),
+            signal(SignalKind::interrupt()),
+        ) {
+            (Ok(h), Ok(t), Ok(i)) => (h, t, i),
+            _ => return Err("cannot install signal handlers".to_owned()),
+        };
+        tokio::spawn(async move {
+            loop {
+                let msg = tokio::select! {
+                    _ = hup.recv() => Control::Reload,
+                    _ = term.recv() => Control::Stop("SIGTERM".into()),
+                    _ = int.recv() => Control::Stop("SIGINT".into()),
+                };
+                let stop = matches!(msg, Control::Stop(_));
+                if tx.send(msg).is_err() || stop {
+                    break;
+                }
+            }
+        });
+        daemon::run(config, sources, std::sync::Arc::new(sink), rx).await
+    });
+    match result {
+        Ok(()) => 0,
+        Err(e) => {
+            eprintln!("error: {e}");
+            2
+        }
     }
 }

@@ -355,6 +355,9 @@ codes! {
     NonAscii = "E602",
     /// The output template cannot be used.
     BadTemplate = "E603",
+    /// An output or the blackboard cannot be written (disk full, permissions); the daemon
+    /// reports it in `compile-failed`, the command line exits with status 2.
+    CannotWrite = "E604",
 
     /// The hierarchy is not named `Blackboard` (the only one was used).
     HierarchyNotNamed = "W201",

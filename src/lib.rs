@@ -13,6 +13,7 @@
 //! - [`emit`]: a language profile turns the bound program into text (KRL first).
 //! - [`write`]: atomic output files and the byte-preserving blackboard write-back.
 //! - [`compile`]: the whole pipeline for one project: inputs in, outputs + diagnostics out.
+//! - [`daemon`]: `skillpost watch`, the long-running service over the same pipeline.
 //! - [`print`]: the `-pB`/`-pS`/`-pF`/`-pO` and `--info` listings.
 //! - [`diag`]: diagnostics, their codes and their rendering.
 //! - [`names`]: case-insensitive name keys, KRL names, transliteration.
@@ -21,6 +22,7 @@
 pub mod bind;
 pub mod cli;
 pub mod compile;
+pub mod daemon;
 pub mod diag;
 pub mod emit;
 pub mod load;

@@ -33,7 +33,10 @@ use serde::Deserialize;
 use skillpost::diag::Code;
 
 /// E-codes no fixture needs to cover, each with the reason. Keep this list as short as possible.
-const UNCOVERED: &[(&str, &str)] = &[];
+const UNCOVERED: &[(&str, &str)] = &[(
+    "E604",
+    "a write failure, not an input error: tests/cli.rs (exit 2) and the daemon tests cover it",
+)];
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -1,0 +1,272 @@
+//! Directory watches: notify's native backend (inotify) where the file system reports changes,
+//! polling where it does not (NFS, SMB/CIFS, FUSE, or when inotify watches run out).
+//!
+//! Every watch is a non-recursive watch on a directory, counted per user, so a directory shared
+//! by several projects (a common IRL folder) is watched once. Events and errors arrive on one
+//! channel as [`WatchMsg`].
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use notify::{PollWatcher, RecommendedWatcher, RecursiveMode, Watcher};
+use tokio::sync::mpsc::UnboundedSender;
+
+/// What the watchers report.
+#[derive(Debug)]
+pub enum WatchMsg {
+    Event(notify::Event),
+    Error(notify::Error),
+}
+
+/// How a directory is watched.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Backend {
+    Native,
+    Poll,
+}
+
+impl Backend {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Backend::Native => "inotify",
+            Backend::Poll => "poll",
+        }
+    }
+}
+
+/// Why a directory could not be watched natively, or not at all.
+#[derive(Debug)]
+pub enum WatchFailure {
+    /// The directory does not exist (yet).
+    Missing,
+    /// Another error (permissions, ...).
+    Other(String),
+}
+
+/// The file-system kinds without (reliable) change notification, by `statfs` magic number.
+pub fn needs_polling(dir: &Path) -> Option<&'static str> {
+    let st = rustix::fs::statfs(dir).ok()?;
+    // `f_type` is signed on some targets; compare as u32 bit patterns.
+    match st.f_type as u32 {
+        0x6969 => Some("nfs"),
+        0x517B => Some("smb"),
+        0xFF53_4D42 => Some("cifs"),
+        0xFE53_4D42 => Some("smb2"),
+        0x6573_5546 => Some("fuse"),
+        0x0102_1997 => Some("9p"),
+        0x7366_746E | 0x5346_414F => Some("afs"),
+        _ => None,
+    }
+}
+
+/// The daemon's watches.
+pub struct Watchers {
+    tx: UnboundedSender<WatchMsg>,
+    native: Option<RecommendedWatcher>,
+    poll: Option<PollWatcher>,
+    poll_interval: Duration,
+    dirs: HashMap<PathBuf, (usize, Backend)>,
+}
+
+impl Watchers {
+    pub fn new(tx: UnboundedSender<WatchMsg>, poll_interval: Duration) -> Self {
+        let t = tx.clone();
+        let native = RecommendedWatcher::new(
+            move |r: notify::Result<notify::Event>| {
+                let _ = t.send(match r {
+                    Ok(e) => WatchMsg::Event(e),
+                    Err(e) => WatchMsg::Error(e),
+                });
+            },
+            notify::Config::default(),
+        )
+        .map_err(|e| tracing::warn!("native file watching unavailable, polling instead: {e}"))
+        .ok();
+        Watchers {
+            tx,
+            native,
+            poll: None,
+            poll_interval,
+            dirs: HashMap::new(),
+        }
+    }
+
+    fn poller(&mut self) -> Result<&mut PollWatcher, WatchFailure> {
+        if self.poll.is_none() {
+            let t = self.tx.clone();
+            let w = PollWatcher::new(
+                move |r: notify::Result<notify::Event>| {
+                    let _ = t.send(match r {
+                        Ok(e) => WatchMsg::Event(e),
+                        Err(e) => WatchMsg::Error(e),
+                    });
+                },
+                notify::Config::default()
+                    .with_poll_interval(self.poll_interval)
+                    .with_compare_contents(false),
+            )
+            .map_err(|e| WatchFailure::Other(e.to_string()))?;
+            self.poll = Some(w);
+        }
+        Ok(self.poll.as_mut().expect("just set"))
+    }
+
+    /// Watches `dir` for one more user. `poll` forces polling. Returns the backend used, and the
+    /// reason when that is polling although native watching was asked for.
+    pub fn add(
+        &mut self,
+        dir: &Path,
+        poll: bool,
+    ) -> Result<(Backend, Option<String>), WatchFailure> {
+        if let Some((n, b)) = self.dirs.get_mut(dir) {
+            *n += 1;
+            return Ok((*b, None));
+        }
+        if !dir.is_dir() {
+            return Err(WatchFailure::Missing);
+        }
+        let (backend, why) = self.start(dir, poll)?;
+        self.dirs.insert(dir.to_owned(), (1, backend));
+        Ok((backend, why))
+    }
+
+    fn start(&mut self, dir: &Path, poll: bool) -> Result<(Backend, Option<String>), WatchFailure> {
+        let mut why = if poll {
+            Some("polling requested".to_owned())
+        } else {
+            needs_polling(dir).map(|fs| format!("{fs} file system: no change notification"))
+        };
+        if why.is_none() {
+            match self.native.as_mut() {
+                Some(w) => match w.watch(dir, RecursiveMode::NonRecursive) {
+                    Ok(()) => return Ok((Backend::Native, None)),
+                    Err(e) => match e.kind {
+                        notify::ErrorKind::MaxFilesWatch => {
+                            why = Some(
+                                "inotify watches exhausted (fs.inotify.max_user_watches)".into(),
+                            )
+                        }
+                        notify::ErrorKind::PathNotFound => return Err(WatchFailure::Missing),
+                        notify::ErrorKind::Io(ref io)
+                            if io.kind() == std::io::ErrorKind::NotFound =>
+                        {
+                            return Err(WatchFailure::Missing);
+                        }
+                        _ => why = Some(format!("native watch failed: {e}")),
+                    },
+                },
+                None => why = Some("native file watching unavailable".into()),
+            }
+        }
+        self.poller()?
+            .watch(dir, RecursiveMode::NonRecursive)
+            .map_err(|e| WatchFailure::Other(e.to_string()))?;
+        Ok((Backend::Poll, why))
+    }
+
+    /// One user fewer; the watch ends with the last one.
+    pub fn remove(&mut self, dir: &Path) {
+        let Some((n, b)) = self.dirs.get_mut(dir) else {
+            return;
+        };
+        *n -= 1;
+        if *n > 0 {
+            return;
+        }
+        let b = *b;
+        self.dirs.remove(dir);
+        let _ = match b {
+            Backend::Native => self.native.as_mut().map(|w| w.unwatch(dir)),
+            Backend::Poll => self.poll.as_mut().map(|w| w.unwatch(dir)),
+        };
+    }
+
+    /// Renews the watch of a directory that was deleted and created again (the kernel dropped
+    /// the old watch with the old directory).
+    pub fn renew(&mut self, dir: &Path, poll: bool) -> Result<Backend, WatchFailure> {
+        let Some(&(n, b)) = self.dirs.get(dir) else {
+            return self.add(dir, poll).map(|(b, _)| b);
+        };
+        let _ = match b {
+            Backend::Native => self.native.as_mut().map(|w| w.unwatch(dir)),
+            Backend::Poll => self.poll.as_mut().map(|w| w.unwatch(dir)),
+        };
+        let (backend, _) = self.start(dir, poll)?;
+        self.dirs.insert(dir.to_owned(), (n, backend));
+        Ok(backend)
+    }
+
+    /// The number of directories watched.
+    #[allow(clippy::len_without_is_empty)]
+    pub fn len(&self) -> usize {
+        self.dirs.len()
+    }
+}
+
+/// Files that never start a compile: our own temporary files and editors' backup, swap and
+/// temporary files. (A save by rename still reports the final name, which is what counts.)
+pub fn is_noise(path: &Path) -> bool {
+    let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
+        return false;
+    };
+    (name.starts_with(".skillpost-") && name.ends_with(".tmp"))
+        || name.ends_with('~')
+        || name.starts_with(".#")
+        || (name.starts_with('#') && name.ends_with('#'))
+        || name.ends_with(".swp")
+        || name.ends_with(".swx")
+        || name.ends_with(".swo")
+        || name == "4913"
+        || name.ends_with("___jb_tmp___")
+        || name.ends_with("___jb_old___")
+        || name.ends_with(".tmp")
+        || name.ends_with(".bak")
+        || name.ends_with(".orig")
+        || name.starts_with(".goutputstream-")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn noise() {
+        for n in [
+            ".skillpost-ab12.tmp",
+            "sfc.xml~",
+            ".sfc.xml.swp",
+            "4913",
+            ".#sfc.xml",
+            "sfc.xml___jb_tmp___",
+            "sfc.xml.tmp",
+        ] {
+            assert!(is_noise(Path::new(n)), "{n}");
+        }
+        for n in ["sfc.xml", "Zelle_A.aml", "kr15-2.irl", "tmp.xml"] {
+            assert!(!is_noise(Path::new(n)), "{n}");
+        }
+    }
+
+    #[test]
+    fn local_folders_are_watched_natively() {
+        let d = tempfile::tempdir().unwrap();
+        assert_eq!(needs_polling(d.path()), None);
+        let (tx, _rx) = tokio::sync::mpsc::unbounded_channel();
+        let mut w = Watchers::new(tx, Duration::from_millis(200));
+        assert_eq!(w.add(d.path(), false).unwrap().0, Backend::Native);
+        assert_eq!(w.add(d.path(), false).unwrap().0, Backend::Native);
+        assert_eq!(w.len(), 1);
+        w.remove(d.path());
+        assert_eq!(w.len(), 1);
+        w.remove(d.path());
+        assert_eq!(w.len(), 0);
+        let (b, why) = w.add(d.path(), true).unwrap();
+        assert_eq!(b, Backend::Poll);
+        assert!(why.is_some());
+        assert!(matches!(
+            w.add(&d.path().join("missing"), false),
+            Err(WatchFailure::Missing)
+        ));
+    }
+}
