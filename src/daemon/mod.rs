@@ -130,6 +130,10 @@ pub async fn run(
     for p in d.projects.values_mut() {
         p.sched.immediately(now);
     }
+    if d.projects.is_empty() {
+        d.ready = true;
+        let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
+    }
     d.notify_status();
 
     let watchdog = sd_notify_watchdog();
