@@ -1048,12 +1048,12 @@ fn half_written(c: &Compilation, read: &HashMap<PathBuf, Option<u64>>) -> bool {
         if !matches!(d.code, Code::XmlSyntax | Code::FileUnreadable) {
             return false;
         }
-        let Some(file) = d
-            .span
-            .as_ref()
-            .map(|s| c.sources.get(s.file).path.clone())
-            .or_else(|| d.path.clone())
-        else {
+        // An unreadable file's diagnostic points at the `refURI` naming it; its path is the file.
+        let Some(file) = d.path.clone().or_else(|| {
+            d.span
+                .as_ref()
+                .map(|s| c.sources.get(s.file).path.clone())
+        }) else {
             return false;
         };
         let now_hash = hash_file(&file);
