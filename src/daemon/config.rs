@@ -1,7 +1,39 @@
 //! The daemon's configuration (SPEC.md section 7): a TOML file and the command line.
-//! (being written: parsing, validation with line/column, discovery)
+//!
+//! The file (see `config/skillpost.toml` for a commented example):
+//!
+//! ```toml
+//! events = "/var/log/skillpost/events.jsonl"   # optional
+//! settle_ms = 100                              # optional, 1..=60000
+//! allow_outside = false                        # optional
+//! [[project]]
+//! path = "cells/Zelle_A"
+//! blackboard = "Zelle_A.aml"   # optional
+//! program = "Zelle_A"          # optional
+//! [[root]]
+//! path = "/srv/planning/projects"
+//! ```
+//!
+//! Relative paths in the file are relative to the file's folder; all paths in a [`Config`] are
+//! absolute and lexically normalised (`.` and `..` removed, symlinks not resolved). `~` is not
+//! expanded (a service has no home directory): a path starting with `~/` is an error. Unknown
+//! keys, wrong types, empty paths, `settle_ms` outside [`SETTLE_MS_RANGE`] and two entries naming
+//! the same folder are errors located by line and column.
 
-use std::path::PathBuf;
+use std::ffi::OsStr;
+use std::fmt;
+use std::ops::{Range, RangeInclusive};
+use std::path::{Component, Path, PathBuf};
+use std::time::Duration;
+
+use serde::Deserialize;
+use toml::Spanned;
+
+/// The quiet period when neither the file nor the command line sets one.
+pub const DEFAULT_SETTLE_MS: u64 = 100;
+
+/// The allowed values of `settle_ms` / `--settle`.
+pub const SETTLE_MS_RANGE: RangeInclusive<u64> = 1..=60_000;
 
 /// The whole configuration, paths absolute.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -31,9 +63,15 @@ pub struct ProjectSpec {
     pub program: Option<String>,
 }
 
-// TEMPORARY minimal versions, replaced by the full module (same signatures).
-use std::path::Path;
+impl Config {
+    /// The quiet period: `settle_ms`, else [`DEFAULT_SETTLE_MS`], capped to [`SETTLE_MS_RANGE`].
+    pub fn settle(&self) -> Duration {
+        let ms = self.settle_ms.unwrap_or(DEFAULT_SETTLE_MS);
+        Duration::from_millis(ms.clamp(*SETTLE_MS_RANGE.start(), *SETTLE_MS_RANGE.end()))
+    }
+}
 
+/// A configuration problem, located when it comes from the file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ConfigError {
     pub file: Option<PathBuf>,
@@ -42,89 +80,860 @@ pub struct ConfigError {
     pub message: String,
 }
 
-impl std::fmt::Display for ConfigError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}", self.message)
+impl fmt::Display for ConfigError {
+    /// `file:line:column: message`; the parts that are unknown are left out.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if let Some(file) = &self.file {
+            write!(f, "{}", file.display())?;
+            if let Some(line) = self.line {
+                write!(f, ":{line}")?;
+                if let Some(column) = self.column {
+                    write!(f, ":{column}")?;
+                }
+            }
+            write!(f, ": ")?;
+        } else if let Some(line) = self.line {
+            write!(f, "{line}")?;
+            if let Some(column) = self.column {
+                write!(f, ":{column}")?;
+            }
+            write!(f, ": ")?;
+        }
+        f.write_str(&self.message)
     }
 }
 
+impl std::error::Error for ConfigError {}
+
+/// Reads and checks a configuration file. Relative paths in it are resolved against the file's
+/// folder (made absolute: if the file path itself is relative, join with the current dir first).
 pub fn load(path: &Path) -> Result<Config, ConfigError> {
-    Err(ConfigError {
-        file: Some(path.to_owned()),
+    let file = absolute(path);
+    let text = std::fs::read_to_string(&file).map_err(|e| ConfigError {
+        file: Some(file.clone()),
         line: None,
         column: None,
-        message: "configuration files are not supported yet".into(),
-    })
+        message: format!("cannot read the configuration: {e}"),
+    })?;
+    parse(&text, &file)
 }
 
-pub fn discover(root: &Path) -> Vec<PathBuf> {
-    let mut out: Vec<PathBuf> = std::fs::read_dir(root)
-        .into_iter()
-        .flatten()
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| p.is_dir())
-        .filter(|p| {
-            std::fs::read_dir(p)
-                .into_iter()
-                .flatten()
-                .flatten()
-                .any(|e| {
-                    e.path()
-                        .extension()
-                        .is_some_and(|x| x.eq_ignore_ascii_case("aml"))
-                })
-        })
-        .collect();
-    out.sort();
-    out
-}
+/// Parses configuration text as if read from `file`.
+pub fn parse(text: &str, file: &Path) -> Result<Config, ConfigError> {
+    let file = absolute(file);
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let base = file.parent().map(Path::to_path_buf).unwrap_or_default();
+    let at = |span: Option<Range<usize>>, message: String| {
+        let (line, column) = match span {
+            Some(span) => {
+                let (l, c) = line_column(text, span.start);
+                (Some(l), Some(c))
+            }
+            None => (None, None),
+        };
+        ConfigError {
+            file: Some(file.clone()),
+            line,
+            column,
+            message,
+        }
+    };
 
-pub fn resolve(spec: &ProjectSpec) -> Result<(PathBuf, String), String> {
-    let bb = match &spec.blackboard {
-        Some(b) => spec.path.join(b),
-        None => {
-            let found: Vec<PathBuf> = std::fs::read_dir(&spec.path)
-                .map_err(|e| format!("cannot read {}: {e}", spec.path.display()))?
-                .flatten()
-                .map(|e| e.path())
-                .filter(|p| p.extension().is_some_and(|x| x.eq_ignore_ascii_case("aml")))
-                .collect();
-            match found.as_slice() {
-                [one] => one.clone(),
-                [] => return Err(format!("no *.aml in {}", spec.path.display())),
-                _ => return Err(format!("several *.aml in {}", spec.path.display())),
+    let raw: RawConfig = toml::from_str(text).map_err(|e| at(e.span(), toml_message(&e)))?;
+
+    // A path from the file: not empty, no `~`, resolved against the file's folder.
+    let path = |value: &Spanned<String>, key: &str| -> Result<PathBuf, ConfigError> {
+        let s = value.get_ref();
+        if s.trim().is_empty() {
+            return Err(at(Some(value.span()), format!("`{key}` is empty")));
+        }
+        if s == "~" || s.starts_with("~/") {
+            return Err(at(
+                Some(value.span()),
+                format!(
+                    "`{key}` starts with `~`, which is not expanded (a service has no home \
+                     directory): write the absolute path"
+                ),
+            ));
+        }
+        Ok(normalize(&base.join(s)))
+    };
+
+    let events = raw.events.as_ref().map(|e| path(e, "events")).transpose()?;
+
+    let settle_ms = match &raw.settle_ms {
+        None => None,
+        Some(v) => {
+            let n = *v.get_ref();
+            match u64::try_from(n) {
+                Ok(n) if SETTLE_MS_RANGE.contains(&n) => Some(n),
+                _ => {
+                    return Err(at(
+                        Some(v.span()),
+                        format!(
+                            "`settle_ms` is {n}, expected {}..={} (milliseconds)",
+                            SETTLE_MS_RANGE.start(),
+                            SETTLE_MS_RANGE.end()
+                        ),
+                    ));
+                }
             }
         }
     };
-    let program = spec.program.clone().unwrap_or_else(|| {
-        bb.file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default()
-    });
-    Ok((bb, program))
+
+    let mut projects: Vec<ProjectSpec> = Vec::new();
+    let mut seen: Vec<(PathBuf, &Spanned<String>)> = Vec::new();
+    for p in &raw.project {
+        let dir = path(&p.path, "path")?;
+        if let Some((_, first)) = seen.iter().find(|(d, _)| *d == dir) {
+            return Err(duplicate(&at, "project", &dir, first, &p.path, text));
+        }
+        let blackboard = match &p.blackboard {
+            None => None,
+            Some(b) => Some(blackboard_path(b).map_err(|m| at(Some(b.span()), m))?),
+        };
+        seen.push((dir.clone(), &p.path));
+        projects.push(ProjectSpec {
+            path: dir,
+            blackboard,
+            program: p.program.clone(),
+        });
+    }
+
+    let mut roots: Vec<PathBuf> = Vec::new();
+    let mut seen: Vec<(PathBuf, &Spanned<String>)> = Vec::new();
+    for r in &raw.root {
+        let dir = path(&r.path, "path")?;
+        if let Some((_, first)) = seen.iter().find(|(d, _)| *d == dir) {
+            return Err(duplicate(&at, "root", &dir, first, &r.path, text));
+        }
+        seen.push((dir.clone(), &r.path));
+        roots.push(dir);
+    }
+
+    Ok(Config {
+        file: Some(file.clone()),
+        events,
+        settle_ms,
+        allow_outside: raw.allow_outside,
+        projects,
+        roots,
+    })
 }
 
+/// The project folders of a root: its direct subfolders holding at least one `*.aml` file
+/// (case-insensitive extension), sorted by path. Unreadable entries are skipped. Not recursive.
+///
+/// Symlinked subfolders count (their targets are read); hidden subfolders (`.snapshot`, `.git`,
+/// …) do not, and neither do hidden files (see [`is_blackboard_name`]).
+pub fn discover(root: &Path) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(root) else {
+        return Vec::new();
+    };
+    let mut found: Vec<PathBuf> = entries
+        .filter_map(Result::ok)
+        .filter(|e| !is_hidden(&e.file_name()))
+        .map(|e| e.path())
+        .filter(|p| p.is_dir() && !blackboards(p).unwrap_or_default().is_empty())
+        .collect();
+    found.sort();
+    found
+}
+
+/// Which blackboard and program a project uses: the explicit blackboard (relative to the
+/// folder), else the single `*.aml` in the folder (error when none or several: say which);
+/// program = explicit, else the blackboard's file stem (`Zelle_A.aml` → `Zelle_A`), unchanged
+/// (an invalid KRL name is reported later by the compiler, E601).
+pub fn resolve(spec: &ProjectSpec) -> Result<(PathBuf, String), String> {
+    let blackboard = match &spec.blackboard {
+        Some(b) => normalize(&spec.path.join(b)),
+        None => {
+            let found = blackboards(&spec.path).map_err(|e| {
+                format!(
+                    "cannot read the project folder {}: {e}",
+                    spec.path.display()
+                )
+            })?;
+            match found.as_slice() {
+                [] => {
+                    return Err(format!(
+                        "no blackboard (*.aml) in the project folder {}",
+                        spec.path.display()
+                    ));
+                }
+                [one] => one.clone(),
+                several => {
+                    let names: Vec<String> = several
+                        .iter()
+                        .map(|p| p.file_name().unwrap_or_default().to_string_lossy().into())
+                        .collect();
+                    return Err(format!(
+                        "{} blackboards in the project folder {}: {}; name the one to use with \
+                         `blackboard = \"…\"` in a [[project]] entry",
+                        several.len(),
+                        spec.path.display(),
+                        names.join(", ")
+                    ));
+                }
+            }
+        }
+    };
+    let program = match &spec.program {
+        Some(p) => p.clone(),
+        None => blackboard
+            .file_stem()
+            .unwrap_or_default()
+            .to_string_lossy()
+            .into_owned(),
+    };
+    Ok((blackboard, program))
+}
+
+/// The command line merged over the file: `dirs` become projects (made absolute against the
+/// current directory), `events`/`settle` from the command line win over the file's.
+///
+/// A folder that is already a project of the file is not added again (the file's entry, with
+/// its `blackboard`/`program`, stays). `settle_ms` is taken as given: the command line checks
+/// it against [`SETTLE_MS_RANGE`].
 pub fn merge(
     file: Option<Config>,
     dirs: &[PathBuf],
     events: Option<PathBuf>,
     settle_ms: Option<u64>,
 ) -> Config {
-    let mut c = file.unwrap_or_default();
-    let cwd = std::env::current_dir().unwrap_or_default();
-    for d in dirs {
-        c.projects.push(ProjectSpec {
-            path: cwd.join(d),
-            blackboard: None,
-            program: None,
-        });
+    let mut config = file.unwrap_or_default();
+    for dir in dirs {
+        let dir = absolute(dir);
+        if !config.projects.iter().any(|p| p.path == dir) {
+            config.projects.push(ProjectSpec {
+                path: dir,
+                blackboard: None,
+                program: None,
+            });
+        }
     }
-    if events.is_some() {
-        c.events = events.map(|e| cwd.join(e));
+    if let Some(events) = events {
+        config.events = Some(absolute(&events));
     }
     if settle_ms.is_some() {
-        c.settle_ms = settle_ms;
+        config.settle_ms = settle_ms;
     }
-    c
+    config
+}
+
+/// Whether a file name names a blackboard: ends in `.aml` (any case) and is not hidden (editor
+/// lock and swap files such as `.#Zelle_A.aml` start with a dot).
+pub fn is_blackboard_name(name: &OsStr) -> bool {
+    let name = name.to_string_lossy();
+    !name.starts_with('.')
+        && name.len() > 4
+        && name
+            .get(name.len() - 4..)
+            .is_some_and(|ext| ext.eq_ignore_ascii_case(".aml"))
+}
+
+/// The blackboards directly in `dir` (regular files, symlinks followed), sorted.
+fn blackboards(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let mut found: Vec<PathBuf> = std::fs::read_dir(dir)?
+        .filter_map(Result::ok)
+        .filter(|e| is_blackboard_name(&e.file_name()))
+        .map(|e| e.path())
+        .filter(|p| p.is_file())
+        .collect();
+    found.sort();
+    Ok(found)
+}
+
+fn is_hidden(name: &OsStr) -> bool {
+    name.as_encoded_bytes().first() == Some(&b'.')
+}
+
+/// An explicit blackboard: relative to the project folder and staying inside it (the outputs are
+/// written beside it).
+fn blackboard_path(value: &Spanned<String>) -> Result<PathBuf, String> {
+    let s = value.get_ref();
+    if s.trim().is_empty() {
+        return Err("`blackboard` is empty".into());
+    }
+    let p = Path::new(s);
+    if p.is_absolute() || p.components().any(|c| !matches!(c, Component::Normal(_))) {
+        return Err(format!(
+            "`blackboard` must be a path inside the project folder, relative to it \
+             (no leading `/`, `~`, `.` or `..`): {s:?}"
+        ));
+    }
+    if s == "~" || s.starts_with("~/") {
+        return Err(format!(
+            "`blackboard` starts with `~`, which is not expanded: {s:?}"
+        ));
+    }
+    Ok(p.to_path_buf())
+}
+
+fn duplicate<F>(
+    at: &F,
+    what: &str,
+    dir: &Path,
+    first: &Spanned<String>,
+    second: &Spanned<String>,
+    text: &str,
+) -> ConfigError
+where
+    F: Fn(Option<Range<usize>>, String) -> ConfigError,
+{
+    let (line, column) = line_column(text, first.span().start);
+    at(
+        Some(second.span()),
+        format!(
+            "duplicate [[{what}]]: {:?} is the folder {}, already named by {:?} at line {line}, \
+             column {column}",
+            second.get_ref(),
+            dir.display(),
+            first.get_ref()
+        ),
+    )
+}
+
+/// `path` made absolute against the current directory, then normalised.
+fn absolute(path: &Path) -> PathBuf {
+    if path.is_absolute() {
+        normalize(path)
+    } else {
+        match std::env::current_dir() {
+            Ok(cwd) => normalize(&cwd.join(path)),
+            Err(_) => normalize(path),
+        }
+    }
+}
+
+/// Removes `.` and resolves `..` lexically (symlinks are not followed; `..` above the root stays
+/// at the root).
+fn normalize(path: &Path) -> PathBuf {
+    let mut out = PathBuf::new();
+    for c in path.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                if matches!(out.components().next_back(), Some(Component::Normal(_))) {
+                    out.pop();
+                } else if !out.has_root() {
+                    out.push("..");
+                }
+            }
+            other => out.push(other.as_os_str()),
+        }
+    }
+    out
+}
+
+/// The parser's message, with serde's type names put in the file's terms.
+fn toml_message(e: &toml::de::Error) -> String {
+    e.message()
+        .trim_end()
+        .replace("expected i64", "expected an integer")
+        .replace(
+            "expected a sequence",
+            "expected a list of tables (write `[[project]]` or `[[root]]` with double brackets)",
+        )
+}
+
+/// 1-based line and column (in characters) of a byte offset.
+fn line_column(text: &str, offset: usize) -> (usize, usize) {
+    let mut offset = offset.min(text.len());
+    while !text.is_char_boundary(offset) {
+        offset -= 1;
+    }
+    let before = &text[..offset];
+    let line = before.matches('\n').count() + 1;
+    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+    let column = before[line_start..].chars().count() + 1;
+    (line, column)
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConfig {
+    events: Option<Spanned<String>>,
+    settle_ms: Option<Spanned<i64>>,
+    #[serde(default)]
+    allow_outside: bool,
+    #[serde(default)]
+    project: Vec<RawProject>,
+    #[serde(default)]
+    root: Vec<RawRoot>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawProject {
+    path: Spanned<String>,
+    blackboard: Option<Spanned<String>>,
+    program: Option<String>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRoot {
+    path: Spanned<String>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::fs;
+
+    fn file() -> PathBuf {
+        PathBuf::from("/etc/skillpost/skillpost.toml")
+    }
+
+    fn err(text: &str) -> ConfigError {
+        parse(text, &file()).expect_err("should be rejected")
+    }
+
+    fn spec(path: &Path) -> ProjectSpec {
+        ProjectSpec {
+            path: path.to_path_buf(),
+            blackboard: None,
+            program: None,
+        }
+    }
+
+    #[test]
+    fn valid_file_with_all_keys() {
+        let text = r#"
+events = "/var/log/skillpost/events.jsonl"
+settle_ms = 250
+allow_outside = true
+
+[[project]]
+path = "/srv/cells/Zelle_A"
+blackboard = "Zelle_A.aml"
+program = "ZELLE_A"
+
+[[project]]
+path = "/srv/cells/Zelle_B"
+
+[[root]]
+path = "/srv/planning/projects"
+"#;
+        let c = parse(text, &file()).unwrap();
+        assert_eq!(
+            c,
+            Config {
+                file: Some(file()),
+                events: Some("/var/log/skillpost/events.jsonl".into()),
+                settle_ms: Some(250),
+                allow_outside: true,
+                projects: vec![
+                    ProjectSpec {
+                        path: "/srv/cells/Zelle_A".into(),
+                        blackboard: Some("Zelle_A.aml".into()),
+                        program: Some("ZELLE_A".into()),
+                    },
+                    spec(Path::new("/srv/cells/Zelle_B")),
+                ],
+                roots: vec!["/srv/planning/projects".into()],
+            }
+        );
+        assert_eq!(c.settle(), Duration::from_millis(250));
+    }
+
+    #[test]
+    fn the_example_in_config_is_valid_and_sets_every_key() {
+        let text = include_str!("../../config/skillpost.toml");
+        let c = parse(text, &file()).unwrap();
+        assert!(c.events.is_some());
+        assert!(c.settle_ms.is_some());
+        assert!(!c.projects.is_empty() && !c.roots.is_empty());
+        let p = &c.projects[0];
+        assert!(p.blackboard.is_some() && p.program.is_some());
+        for key in [
+            "events",
+            "settle_ms",
+            "allow_outside",
+            "[[project]]",
+            "[[root]]",
+        ] {
+            assert!(
+                text.contains(&format!("\n{key}")),
+                "{key} is set in the example"
+            );
+        }
+        for key in ["path", "blackboard", "program"] {
+            assert!(
+                text.contains(&format!("\n{key} = ")),
+                "{key} is set in the example"
+            );
+        }
+    }
+
+    #[test]
+    fn empty_file_is_an_empty_config() {
+        let c = parse("# nothing\n", &file()).unwrap();
+        assert_eq!(
+            c,
+            Config {
+                file: Some(file()),
+                ..Config::default()
+            }
+        );
+        assert_eq!(c.settle(), Duration::from_millis(DEFAULT_SETTLE_MS));
+    }
+
+    #[test]
+    fn relative_paths_resolve_against_the_files_folder() {
+        let text = r#"
+events = "log/events.jsonl"
+[[project]]
+path = "cells/./Zelle_A"
+[[project]]
+path = "../other/Zelle_B"
+[[root]]
+path = "."
+"#;
+        let c = parse(text, Path::new("/opt/plan/conf/skillpost.toml")).unwrap();
+        assert_eq!(
+            c.events.as_deref(),
+            Some(Path::new("/opt/plan/conf/log/events.jsonl"))
+        );
+        assert_eq!(
+            c.projects[0].path,
+            PathBuf::from("/opt/plan/conf/cells/Zelle_A")
+        );
+        assert_eq!(c.projects[1].path, PathBuf::from("/opt/plan/other/Zelle_B"));
+        assert_eq!(c.roots, vec![PathBuf::from("/opt/plan/conf")]);
+    }
+
+    #[test]
+    fn load_makes_a_relative_file_path_absolute() {
+        let dir = tempfile::tempdir().unwrap();
+        fs::write(
+            dir.path().join("s.toml"),
+            "[[project]]\npath = \"cells/A\"\n",
+        )
+        .unwrap();
+        let c = load(&dir.path().join("s.toml")).unwrap();
+        assert_eq!(c.file.as_deref(), Some(dir.path().join("s.toml").as_path()));
+        assert_eq!(c.projects[0].path, dir.path().join("cells/A"));
+
+        // A relative file name: against the current directory.
+        let cwd = std::env::current_dir().unwrap();
+        let c = parse("[[root]]\npath = \"r\"\n", Path::new("conf/s.toml")).unwrap();
+        assert_eq!(c.roots, vec![cwd.join("conf/r")]);
+        assert_eq!(c.file, Some(cwd.join("conf/s.toml")));
+    }
+
+    #[test]
+    fn load_of_a_missing_file_names_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let e = load(&dir.path().join("nope.toml")).unwrap_err();
+        assert_eq!(e.file, Some(dir.path().join("nope.toml")));
+        assert_eq!(e.line, None);
+        assert!(e.message.contains("cannot read"), "{e}");
+    }
+
+    #[test]
+    fn unknown_key_at_top_level() {
+        let e = err("settle_ms = 100\n  setle = 5\n");
+        assert_eq!((e.line, e.column), (Some(2), Some(3)), "{e}");
+        assert!(e.message.contains("unknown field `setle`"), "{e}");
+        assert_eq!(
+            e.to_string(),
+            format!("/etc/skillpost/skillpost.toml:2:3: {}", e.message)
+        );
+    }
+
+    #[test]
+    fn unknown_key_inside_project() {
+        let e = err("[[project]]\npath = \"a\"\n\n[[project]]\npath = \"b\"\nprogam = \"X\"\n");
+        assert_eq!((e.line, e.column), (Some(6), Some(1)), "{e}");
+        assert!(e.message.contains("unknown field `progam`"), "{e}");
+        assert!(e.message.contains("program"), "lists the known keys: {e}");
+    }
+
+    #[test]
+    fn unknown_key_column_counts_characters() {
+        let e = err("[[root]]\npath = \"Zelle_ä\"; Größe = 1\n");
+        // A syntax error after a value: located after the multi-byte characters.
+        assert_eq!(e.line, Some(2), "{e}");
+        assert_eq!(e.column, Some(17), "{e}");
+        let e = err("[[root]]\npath = \"ä\"\n\"größe\" = 1\n");
+        assert_eq!((e.line, e.column), (Some(3), Some(1)), "{e}");
+        let e = err("[[root]]\npath = \"ä\"\nx = { \"größe\" = 1 }\n");
+        assert_eq!(e.line, Some(3), "{e}");
+    }
+
+    #[test]
+    fn wrong_types() {
+        let e = err("settle_ms = \"fast\"\n");
+        assert_eq!((e.line, e.column), (Some(1), Some(13)), "{e}");
+        assert!(e.message.contains("invalid type"), "{e}");
+        assert!(e.message.contains("expected an integer"), "{e}");
+        let e = err("allow_outside = \"yes\"\n");
+        assert_eq!((e.line, e.column), (Some(1), Some(17)), "{e}");
+        let e = err("[[project]]\npath = 3\n");
+        assert_eq!((e.line, e.column), (Some(2), Some(8)), "{e}");
+        let e = err("project = \"x\"\n");
+        assert_eq!(e.line, Some(1), "{e}");
+        let e = err("[project]\npath = \"x\"\n");
+        assert!(e.message.contains("[[project]]"), "{e}");
+        let e = err("[[project]]\nblackboard = \"a.aml\"\n");
+        assert!(e.message.contains("missing field `path`"), "{e}");
+        assert_eq!(e.line, Some(1), "{e}");
+    }
+
+    #[test]
+    fn syntax_error_is_located() {
+        let e = err("events = \"a\"\nsettle_ms = \n");
+        assert_eq!(e.line, Some(2), "{e}");
+    }
+
+    #[test]
+    fn settle_out_of_range() {
+        for (text, col) in [
+            ("settle_ms = 0\n", 13),
+            ("settle_ms =   60001\n", 15),
+            ("settle_ms = -5\n", 13),
+        ] {
+            let e = err(&format!("# c\n{text}"));
+            assert_eq!((e.line, e.column), (Some(2), Some(col)), "{e}");
+            assert!(e.message.contains("1..=60000"), "{e}");
+        }
+        assert_eq!(
+            parse("settle_ms = 60000", &file()).unwrap().settle_ms,
+            Some(60000)
+        );
+        assert_eq!(parse("settle_ms = 1", &file()).unwrap().settle_ms, Some(1));
+    }
+
+    #[test]
+    fn empty_and_home_paths() {
+        let e = err("[[project]]\npath = \"a\"\n[[project]]\npath = \"\"\n");
+        assert_eq!((e.line, e.column), (Some(4), Some(8)), "{e}");
+        assert!(e.message.contains("empty"), "{e}");
+        let e = err("[[root]]\npath = \"  \"\n");
+        assert_eq!((e.line, e.column), (Some(2), Some(8)), "{e}");
+        let e = err("events = \"\"\n");
+        assert_eq!((e.line, e.column), (Some(1), Some(10)), "{e}");
+        let e = err("[[root]]\npath = \"~/projects\"\n");
+        assert_eq!((e.line, e.column), (Some(2), Some(8)), "{e}");
+        assert!(e.message.contains("not expanded"), "{e}");
+        // A folder merely named `~x` is an ordinary relative path.
+        let c = parse("[[root]]\npath = \"~x\"\n", &file()).unwrap();
+        assert_eq!(c.roots, vec![PathBuf::from("/etc/skillpost/~x")]);
+    }
+
+    #[test]
+    fn bad_blackboard() {
+        for bb in ["/abs/a.aml", "../a.aml", "./a.aml", "", "~/a.aml"] {
+            let e = err(&format!(
+                "[[project]]\npath = \"p\"\nblackboard = \"{bb}\"\n"
+            ));
+            assert_eq!((e.line, e.column), (Some(3), Some(14)), "{bb}: {e}");
+        }
+        let c = parse(
+            "[[project]]\npath = \"p\"\nblackboard = \"sub/B.AML\"\n",
+            &file(),
+        )
+        .unwrap();
+        assert_eq!(c.projects[0].blackboard, Some("sub/B.AML".into()));
+    }
+
+    #[test]
+    fn duplicate_projects_name_both() {
+        let e = err(
+            "[[project]]\npath = \"cells/A\"\n[[project]]\npath = \"/etc/skillpost/cells/x/../A\"\n",
+        );
+        assert_eq!((e.line, e.column), (Some(4), Some(8)), "{e}");
+        assert!(e.message.contains("\"cells/A\""), "{e}");
+        assert!(e.message.contains("/etc/skillpost/cells/x/../A"), "{e}");
+        assert!(e.message.contains("line 2, column 8"), "{e}");
+        let e = err("[[root]]\npath = \"r\"\n[[root]]\npath = \"./r\"\n");
+        assert_eq!((e.line, e.column), (Some(4), Some(8)), "{e}");
+        assert!(e.message.contains("[[root]]"), "{e}");
+    }
+
+    #[test]
+    fn crlf_and_bom() {
+        let e = err("\u{feff}events = \"a\"\r\nfoo = 1\r\n");
+        assert_eq!((e.line, e.column), (Some(2), Some(1)), "{e}");
+        let c = parse("\u{feff}settle_ms = 5\r\n", &file()).unwrap();
+        assert_eq!(c.settle_ms, Some(5));
+    }
+
+    #[test]
+    fn display_without_location() {
+        let e = ConfigError {
+            file: None,
+            line: None,
+            column: None,
+            message: "boom".into(),
+        };
+        assert_eq!(e.to_string(), "boom");
+        let e = ConfigError {
+            file: Some("/x.toml".into()),
+            line: None,
+            column: None,
+            message: "boom".into(),
+        };
+        assert_eq!(e.to_string(), "/x.toml: boom");
+    }
+
+    #[test]
+    fn discover_finds_direct_subfolders_with_a_blackboard() {
+        let root = tempfile::tempdir().unwrap();
+        let r = root.path();
+        for d in [
+            "b_upper",
+            "a_lower",
+            "empty",
+            "other",
+            "nested",
+            ".snapshot",
+        ] {
+            fs::create_dir(r.join(d)).unwrap();
+        }
+        fs::write(r.join("a_lower/a.aml"), "").unwrap();
+        fs::write(r.join("b_upper/A.AML"), "").unwrap();
+        fs::write(r.join("other/notes.txt"), "").unwrap();
+        fs::write(r.join("other/.#x.aml"), "").unwrap();
+        fs::create_dir(r.join("other/x.aml")).unwrap(); // a folder, not a blackboard
+        fs::create_dir(r.join("nested/deeper")).unwrap();
+        fs::write(r.join("nested/deeper/n.aml"), "").unwrap();
+        fs::write(r.join(".snapshot/s.aml"), "").unwrap();
+        fs::write(r.join("file.aml"), "").unwrap(); // a file, not a folder
+        assert_eq!(discover(r), vec![r.join("a_lower"), r.join("b_upper")]);
+        assert!(discover(&r.join("missing")).is_empty());
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn discover_follows_symlinked_folders_and_skips_broken_ones() {
+        let root = tempfile::tempdir().unwrap();
+        let elsewhere = tempfile::tempdir().unwrap();
+        fs::write(elsewhere.path().join("c.aml"), "").unwrap();
+        std::os::unix::fs::symlink(elsewhere.path(), root.path().join("linked")).unwrap();
+        std::os::unix::fs::symlink("/nonexistent/x", root.path().join("broken")).unwrap();
+        assert_eq!(discover(root.path()), vec![root.path().join("linked")]);
+    }
+
+    #[test]
+    fn resolve_none_one_several_explicit() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+
+        let e = resolve(&spec(d)).unwrap_err();
+        assert!(e.contains("no blackboard"), "{e}");
+        assert!(e.contains(&d.display().to_string()), "{e}");
+
+        fs::write(d.join("Zelle_A.aml"), "").unwrap();
+        fs::write(d.join("Zelle_A.aml~"), "").unwrap();
+        fs::write(d.join(".Zelle_A.aml"), "").unwrap();
+        assert_eq!(
+            resolve(&spec(d)).unwrap(),
+            (d.join("Zelle_A.aml"), "Zelle_A".to_string())
+        );
+
+        fs::write(d.join("b.AML"), "").unwrap();
+        let e = resolve(&spec(d)).unwrap_err();
+        assert!(e.contains("2 blackboards"), "{e}");
+        assert!(e.contains("Zelle_A.aml, b.AML"), "{e}");
+
+        let explicit = ProjectSpec {
+            path: d.to_path_buf(),
+            blackboard: Some("b.AML".into()),
+            program: None,
+        };
+        assert_eq!(
+            resolve(&explicit).unwrap(),
+            (d.join("b.AML"), "b".to_string())
+        );
+        let both = ProjectSpec {
+            program: Some("Not a KRL name!".into()),
+            ..explicit
+        };
+        assert_eq!(
+            resolve(&both).unwrap(),
+            (d.join("b.AML"), "Not a KRL name!".to_string())
+        );
+
+        let e = resolve(&spec(&d.join("missing"))).unwrap_err();
+        assert!(e.contains("cannot read"), "{e}");
+    }
+
+    #[test]
+    fn merge_precedence() {
+        let cwd = std::env::current_dir().unwrap();
+        let file = Config {
+            file: Some("/etc/s.toml".into()),
+            events: Some("/var/log/e.jsonl".into()),
+            settle_ms: Some(300),
+            allow_outside: true,
+            projects: vec![ProjectSpec {
+                path: "/srv/A".into(),
+                blackboard: Some("A.aml".into()),
+                program: Some("PA".into()),
+            }],
+            roots: vec!["/srv/root".into()],
+        };
+
+        // Nothing on the command line: the file as is.
+        assert_eq!(merge(Some(file.clone()), &[], None, None), file);
+
+        let m = merge(
+            Some(file.clone()),
+            &["/srv/A".into(), "rel/B".into(), "/srv/C/".into()],
+            Some("ev.jsonl".into()),
+            Some(50),
+        );
+        assert_eq!(m.events, Some(cwd.join("ev.jsonl")));
+        assert_eq!(m.settle_ms, Some(50));
+        assert!(m.allow_outside);
+        assert_eq!(m.roots, file.roots);
+        assert_eq!(m.file, file.file);
+        assert_eq!(
+            m.projects,
+            vec![
+                file.projects[0].clone(),
+                spec(&cwd.join("rel/B")),
+                spec(Path::new("/srv/C")),
+            ]
+        );
+
+        // No file: only the command line.
+        let m = merge(None, &["x".into()], None, None);
+        assert_eq!(
+            m,
+            Config {
+                projects: vec![spec(&cwd.join("x"))],
+                ..Config::default()
+            }
+        );
+    }
+
+    #[test]
+    fn settle_is_capped() {
+        let c = Config {
+            settle_ms: Some(10_000_000),
+            ..Config::default()
+        };
+        assert_eq!(c.settle(), Duration::from_millis(60_000));
+        let c = Config {
+            settle_ms: Some(0),
+            ..Config::default()
+        };
+        assert_eq!(c.settle(), Duration::from_millis(1));
+    }
+
+    #[test]
+    fn blackboard_names() {
+        assert!(is_blackboard_name(OsStr::new("a.aml")));
+        assert!(is_blackboard_name(OsStr::new("A.AmL")));
+        assert!(!is_blackboard_name(OsStr::new(".aml")));
+        assert!(!is_blackboard_name(OsStr::new(".#a.aml")));
+        assert!(!is_blackboard_name(OsStr::new("a.aml~")));
+        assert!(!is_blackboard_name(OsStr::new("a.aml.swp")));
+        assert!(!is_blackboard_name(OsStr::new("ä.xml")));
+        assert!(is_blackboard_name(OsStr::new("Zelle_ä.aml")));
+    }
 }

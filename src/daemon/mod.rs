@@ -1049,11 +1049,11 @@ fn half_written(c: &Compilation, read: &HashMap<PathBuf, Option<u64>>) -> bool {
             return false;
         }
         // An unreadable file's diagnostic points at the `refURI` naming it; its path is the file.
-        let Some(file) = d.path.clone().or_else(|| {
-            d.span
-                .as_ref()
-                .map(|s| c.sources.get(s.file).path.clone())
-        }) else {
+        let Some(file) = d
+            .path
+            .clone()
+            .or_else(|| d.span.as_ref().map(|s| c.sources.get(s.file).path.clone()))
+        else {
             return false;
         };
         let now_hash = hash_file(&file);
