@@ -209,7 +209,8 @@ struct Project {
     changed: BTreeSet<PathBuf>,
     /// Files being written (modified, not yet closed), with when that was first seen.
     writing: HashMap<PathBuf, Instant>,
-    trigger: &'static str,
+    /// Why the next compile runs: the first reason of the burst counts.
+    trigger: Option<&'static str>,
     retries: u32,
     missing: bool,
     /// Compile without the hash check (startup, rescan of a new project, retry).
@@ -401,7 +402,7 @@ impl Daemon {
             sched: Scheduler::new(settle, max_wait_of(settle)),
             changed: BTreeSet::new(),
             writing: HashMap::new(),
-            trigger: "startup",
+            trigger: Some("startup"),
             retries: 0,
             missing: false,
             force: true,
@@ -510,6 +511,13 @@ impl Daemon {
                 continue;
             }
             if p.sched.fire(now) {
+                if p.missing {
+                    // Its folder is gone (reported): nothing to compile until it is back.
+                    p.sched.finished(now);
+                    p.changed.clear();
+                    p.trigger = None;
+                    continue;
+                }
                 self.queue.push(k);
             }
         }
@@ -535,7 +543,7 @@ impl Daemon {
                 Some(p.inputs.clone())
             },
             changed,
-            trigger: p.trigger,
+            trigger: p.trigger.take().unwrap_or("change"),
             may_retry: p.retries < MAX_RETRIES,
             confine: !self.config.allow_outside,
             run_id,
@@ -606,7 +614,7 @@ impl Daemon {
                 self.set_watches(&mut p, dirs);
                 let follow_up = p.sched.finished(now);
                 if again && !follow_up {
-                    p.trigger = "write-back-skipped";
+                    p.trigger.get_or_insert("write-back-skipped");
                     p.force = true;
                     p.sched.change(now);
                 }
@@ -651,7 +659,7 @@ impl Daemon {
             json!({"reason": reason, "error": error}),
         );
         for p in self.projects.values_mut() {
-            p.trigger = "rescan";
+            p.trigger.get_or_insert("rescan");
             p.sched.change(now);
         }
     }
@@ -708,7 +716,7 @@ impl Daemon {
                 }
                 let p = self.projects.get_mut(&k).expect("key from the map");
                 p.changed.insert(path.clone());
-                p.trigger = "change";
+                p.trigger.get_or_insert("change");
                 p.sched.change(now);
             }
         }
@@ -748,7 +756,7 @@ impl Daemon {
                     settle,
                 );
                 if let Some(p) = self.projects.get_mut(&folder) {
-                    p.trigger = "new-project";
+                    p.trigger = Some("new-project");
                     p.sched.change(now);
                 }
             }
@@ -778,7 +786,7 @@ impl Daemon {
                     json!({"backend": p.backend.as_str(), "reason": "the project folder is back"}),
                 );
             }
-            p.trigger = "folder-created";
+            p.trigger.get_or_insert("folder-created");
             p.force = true;
             p.sched.change(now);
         } else if !p.missing {
@@ -820,7 +828,7 @@ impl Daemon {
                     Some(&Self::key_str(&k)),
                     json!({"backend": p.backend.as_str(), "reason": "the project folder is back"}),
                 );
-                p.trigger = "folder-created";
+                p.trigger = Some("folder-created");
                 p.force = true;
                 p.sched.change(now);
             }

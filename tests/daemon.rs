@@ -1,0 +1,1187 @@
+//! The daemon as a user runs it: `skillpost watch` is started as a real process on temporary
+//! folders, driven with real file operations and signals, and judged by its event stream
+//! (`--events FILE`, one JSON object per line) and by the files it writes.
+//!
+//! Every test is bounded in time: waits poll the event file until a deadline, and the daemon is
+//! killed by a guard ([`Daemon`]'s `Drop`) even when an assertion fails.
+
+use std::fs;
+use std::os::unix::fs::MetadataExt;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::thread::sleep;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+/// The quiet period the tests run the daemon with (ms).
+const SETTLE_MS: u64 = 50;
+/// The longest any expected event may take to appear.
+const WAIT: Duration = Duration::from_secs(5);
+/// The project files copied from the reference sample.
+const FILES: [&str; 3] = ["Blackboard.aml", "sfc.xml", "kr15-2.irl"];
+
+// ---------------------------------------------------------------------------------------------
+// Workspace: a temporary folder with project copies.
+// ---------------------------------------------------------------------------------------------
+
+fn sample() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/ok/reference-sample")
+}
+
+fn sample_text(name: &str) -> String {
+    fs::read_to_string(sample().join(name)).unwrap()
+}
+
+/// The reference sample's SFC with the first PTP's x set to `x` (originally 100).
+fn sfc_with_x(x: u32) -> String {
+    let orig = sample_text("sfc.xml");
+    assert!(orig.contains("(100, 200, 300,"));
+    orig.replace("(100, 200, 300,", &format!("({x}, 200, 300,"))
+}
+
+/// What the `.src` holds for that x.
+fn ptp_with_x(x: u32) -> String {
+    format!("PTP {{X {x}, Y 200, Z 300")
+}
+
+/// A temporary folder (canonical path) with `ws/` for the projects and `ev.jsonl` for events.
+struct Workspace {
+    _tmp: tempfile::TempDir,
+    root: PathBuf,
+}
+
+impl Workspace {
+    fn new() -> Self {
+        let tmp = tempfile::tempdir().unwrap();
+        let root = tmp.path().canonicalize().unwrap();
+        fs::create_dir(root.join("ws")).unwrap();
+        Workspace { _tmp: tmp, root }
+    }
+
+    fn ws(&self) -> PathBuf {
+        self.root.join("ws")
+    }
+
+    fn events(&self) -> PathBuf {
+        self.root.join("ev.jsonl")
+    }
+
+    /// A fresh copy of the reference sample as `ws/<name>`.
+    fn project(&self, name: &str) -> PathBuf {
+        let dir = self.ws().join(name);
+        copy_project(&dir);
+        dir
+    }
+
+    /// Starts `skillpost watch --events ev.jsonl --settle 50 <args>` in the workspace.
+    fn watch(&self, args: &[&str]) -> Daemon {
+        let settle = SETTLE_MS.to_string();
+        let ev = self.events();
+        let mut all = vec!["--events", ev.to_str().unwrap(), "--settle", &settle];
+        all.extend_from_slice(args);
+        Daemon::start(&self.root, &all, self.events())
+    }
+
+    /// Starts `skillpost watch --config <file>`; the events file comes from the configuration.
+    fn watch_config(&self, config: &Path) -> Daemon {
+        Daemon::start(
+            &self.root,
+            &["--config", config.to_str().unwrap()],
+            self.events(),
+        )
+    }
+
+    /// Writes a configuration file `skillpost.toml` in the workspace root.
+    fn config(&self, text: &str) -> PathBuf {
+        let p = self.root.join("skillpost.toml");
+        fs::write(&p, text).unwrap();
+        p
+    }
+}
+
+/// Copies the reference sample's inputs into `dir` (created), as `cp -r` would.
+fn copy_project(dir: &Path) {
+    fs::create_dir_all(dir).unwrap();
+    for f in FILES {
+        fs::copy(sample().join(f), dir.join(f)).unwrap();
+    }
+}
+
+fn src_of(project: &Path) -> PathBuf {
+    project.join("Blackboard.src")
+}
+
+fn dat_of(project: &Path) -> PathBuf {
+    project.join("Blackboard.dat")
+}
+
+fn read_string(p: &Path) -> String {
+    fs::read_to_string(p).unwrap_or_default()
+}
+
+/// Polls `cond` until it holds or `timeout` passes; returns whether it held.
+fn wait_until(timeout: Duration, mut cond: impl FnMut() -> bool) -> bool {
+    let deadline = Instant::now() + timeout;
+    loop {
+        if cond() {
+            return true;
+        }
+        if Instant::now() >= deadline {
+            return false;
+        }
+        sleep(Duration::from_millis(20));
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The daemon process and its event stream.
+// ---------------------------------------------------------------------------------------------
+
+/// A running `skillpost watch`; killed when dropped, so no process outlives a test.
+struct Daemon {
+    child: Child,
+    events: PathBuf,
+    stderr: PathBuf,
+    exited: Option<ExitStatus>,
+}
+
+impl Daemon {
+    fn start(cwd: &Path, args: &[&str], events: PathBuf) -> Self {
+        let stderr = cwd.join("stderr.log");
+        let child = Command::new(env!("CARGO_BIN_EXE_skillpost"))
+            .arg("watch")
+            .args(args)
+            .current_dir(cwd)
+            .env("RUST_LOG", "info")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(fs::File::create(&stderr).unwrap())
+            .spawn()
+            .unwrap();
+        let mut d = Daemon {
+            child,
+            events,
+            stderr,
+            exited: None,
+        };
+        // Signals sent before the handlers are installed would kill the process: `started` is
+        // emitted after they are.
+        d.wait_for("started", WAIT, |e| is(e, "started"));
+        d
+    }
+
+    fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// Every complete event line so far.
+    fn events(&self) -> Vec<Value> {
+        let text = read_string(&self.events);
+        let mut out = Vec::new();
+        let mut rest = text.as_str();
+        while let Some(i) = rest.find('\n') {
+            let line = &rest[..i];
+            rest = &rest[i + 1..];
+            match serde_json::from_str(line) {
+                Ok(v) => out.push(v),
+                Err(e) => self.fail(&format!("event line is not JSON ({e}): {line}")),
+            }
+        }
+        out
+    }
+
+    /// The `seq` of the last event so far (0 before any).
+    fn mark(&self) -> u64 {
+        self.events().last().map(seq).unwrap_or(0)
+    }
+
+    /// Waits until an event matching `pred` appears; returns every event seen by then.
+    fn wait_for(
+        &mut self,
+        what: &str,
+        timeout: Duration,
+        pred: impl Fn(&Value) -> bool,
+    ) -> Vec<Value> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let evs = self.events();
+            if evs.iter().any(&pred) {
+                return evs;
+            }
+            if self.exited.is_none() {
+                self.exited = self.child.try_wait().unwrap();
+            }
+            if let Some(st) = self.exited {
+                self.fail(&format!(
+                    "the daemon exited ({st}) while waiting for {what}"
+                ));
+            }
+            if Instant::now() >= deadline {
+                self.fail(&format!("timed out after {timeout:?} waiting for {what}"));
+            }
+            sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Sends a signal with `kill(1)`.
+    fn signal(&self, sig: &str) {
+        let st = Command::new("kill")
+            .args([format!("-{sig}"), self.pid().to_string()])
+            .status()
+            .unwrap();
+        assert!(st.success(), "kill -{sig} failed");
+    }
+
+    /// Waits for the process to exit.
+    fn wait_exit(&mut self, timeout: Duration) -> ExitStatus {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(st) = self.exited {
+                return st;
+            }
+            self.exited = self.child.try_wait().unwrap();
+            if self.exited.is_none() && Instant::now() >= deadline {
+                self.fail(&format!("the daemon did not exit within {timeout:?}"));
+            }
+            sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Panics with the event stream and the daemon's log.
+    fn fail(&self, msg: &str) -> ! {
+        panic!(
+            "{msg}\n--- events ---\n{}--- stderr ---\n{}",
+            read_string(&self.events),
+            read_string(&self.stderr)
+        );
+    }
+
+    /// Waits for the startup compile of each project (success and write-back), then lets the
+    /// daemon see the events of its own writes, so that later assertions start from quiet.
+    fn startup(&mut self, projects: &[&Path]) {
+        for p in projects {
+            let p = p.to_path_buf();
+            self.wait_for(
+                &format!("startup write-back of {}", p.display()),
+                WAIT,
+                |e| is_for(e, "write-back", &p),
+            );
+        }
+        sleep(Duration::from_millis(SETTLE_MS * 6));
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        if self.exited.is_none() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+// Event predicates.
+
+fn seq(e: &Value) -> u64 {
+    e["seq"].as_u64().unwrap()
+}
+
+fn is(e: &Value, event: &str) -> bool {
+    e["event"] == event
+}
+
+fn project_is(e: &Value, project: &Path) -> bool {
+    e["project"].as_str() == Some(project.to_str().unwrap())
+}
+
+fn is_for(e: &Value, event: &str, project: &Path) -> bool {
+    is(e, event) && project_is(e, project)
+}
+
+/// `event` for `project` after the mark `since`.
+fn is_after(e: &Value, event: &str, project: &Path, since: u64) -> bool {
+    seq(e) > since && is_for(e, event, project)
+}
+
+fn count_after(evs: &[Value], event: &str, project: &Path, since: u64) -> usize {
+    evs.iter()
+        .filter(|e| is_after(e, event, project, since))
+        .count()
+}
+
+fn dump(evs: &[Value]) -> String {
+    evs.iter().map(|e| format!("{e}\n")).collect()
+}
+
+// ---------------------------------------------------------------------------------------------
+// 1. Startup
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn startup_compiles_every_project() {
+    let w = Workspace::new();
+    let projects: Vec<PathBuf> = ["A", "B", "C"].iter().map(|n| w.project(n)).collect();
+    let args: Vec<&str> = projects.iter().map(|p| p.to_str().unwrap()).collect();
+    let mut d = w.watch(&args);
+    for p in &projects {
+        d.wait_for(
+            &format!("compile-succeeded of {}", p.display()),
+            WAIT,
+            |e| is_for(e, "compile-succeeded", p),
+        );
+    }
+    let evs = d.events();
+    let rescans: Vec<&Value> = evs.iter().filter(|e| is(e, "rescan")).collect();
+    assert_eq!(rescans.len(), 1, "{}", dump(&evs));
+    assert_eq!(rescans[0]["reason"], "startup");
+    assert_eq!(evs[0]["event"], "started", "started comes first");
+    for p in &projects {
+        assert!(
+            evs.iter().any(|e| is_for(e, "watching", p)),
+            "{}",
+            dump(&evs)
+        );
+        let ok = evs
+            .iter()
+            .find(|e| is_for(e, "compile-succeeded", p))
+            .unwrap();
+        let outs: Vec<&str> = ok["outputs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|o| o["path"].as_str().unwrap())
+            .collect();
+        assert!(outs.contains(&src_of(p).to_str().unwrap()), "{ok}");
+        assert!(outs.contains(&dat_of(p).to_str().unwrap()), "{ok}");
+        assert!(src_of(p).is_file() && dat_of(p).is_file());
+        assert!(read_string(&src_of(p)).contains(&ptp_with_x(100)));
+        assert!(
+            evs.iter()
+                .all(|e| !is_for(e, "compile-failed", p) && !is_for(e, "watch-degraded", p)),
+            "{}",
+            dump(&evs)
+        );
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// 2.-3. Edits
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn in_place_edit_recompiles() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let mut d = w.watch(&[a.to_str().unwrap()]);
+    d.startup(&[&a]);
+    let sfc = a.join("sfc.xml");
+    let ino = fs::metadata(&sfc).unwrap().ino();
+    let m = d.mark();
+    fs::write(&sfc, sfc_with_x(123)).unwrap();
+    assert_eq!(fs::metadata(&sfc).unwrap().ino(), ino, "edited in place");
+
+    let evs = d.wait_for("compile-succeeded after the edit", WAIT, |e| {
+        is_after(e, "compile-succeeded", &a, m)
+    });
+    let detected = evs
+        .iter()
+        .find(|e| is_after(e, "change-detected", &a, m))
+        .unwrap_or_else(|| panic!("no change-detected:\n{}", dump(&evs)));
+    let paths: Vec<&str> = detected["paths"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p.as_str().unwrap())
+        .collect();
+    assert_eq!(paths, [sfc.to_str().unwrap()], "{detected}");
+    let started = evs
+        .iter()
+        .find(|e| is_after(e, "compile-started", &a, m))
+        .unwrap();
+    assert_eq!(started["trigger"], "change", "{started}");
+    assert!(read_string(&src_of(&a)).contains(&ptp_with_x(123)));
+    assert!(!read_string(&src_of(&a)).contains(&ptp_with_x(100)));
+}
+
+/// Saves `content` to `file` like an editor that writes a new file and renames it over the old
+/// one, with the usual litter: vim's `4913` probe, a `~` backup, a `.tmp` temporary.
+fn rename_save_tmp(file: &Path, content: &str) {
+    let dir = file.parent().unwrap();
+    let name = file.file_name().unwrap().to_str().unwrap();
+    let probe = dir.join("4913");
+    fs::write(&probe, "").unwrap();
+    fs::remove_file(&probe).unwrap();
+    let backup = dir.join(format!("{name}~"));
+    fs::copy(file, &backup).unwrap();
+    let tmp = dir.join(format!("{name}.tmp"));
+    fs::write(&tmp, content).unwrap();
+    fs::rename(&tmp, file).unwrap();
+    fs::remove_file(&backup).unwrap();
+}
+
+/// Saves like vim with `backupcopy=no`: the original is renamed to the backup, a new file is
+/// written under the name, the backup is deleted.
+fn rename_save_vim(file: &Path, content: &str) {
+    let dir = file.parent().unwrap();
+    let name = file.file_name().unwrap().to_str().unwrap();
+    let probe = dir.join("4913");
+    fs::write(&probe, "").unwrap();
+    fs::remove_file(&probe).unwrap();
+    let backup = dir.join(format!("{name}~"));
+    fs::rename(file, &backup).unwrap();
+    fs::write(file, content).unwrap();
+    fs::remove_file(&backup).unwrap();
+}
+
+#[test]
+fn rename_save_compiles_once() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let mut d = w.watch(&[a.to_str().unwrap()]);
+    d.startup(&[&a]);
+    let sfc = a.join("sfc.xml");
+    type Save = fn(&Path, &str);
+    let saves: [(&str, Save, u32); 2] = [
+        ("tmp + rename", rename_save_tmp, 201),
+        ("vim", rename_save_vim, 202),
+    ];
+    for (how, save, x) in saves {
+        let m = d.mark();
+        let ino = fs::metadata(&sfc).unwrap().ino();
+        save(&sfc, &sfc_with_x(x));
+        assert_ne!(fs::metadata(&sfc).unwrap().ino(), ino, "{how}: a new file");
+        d.wait_for(&format!("{how}: compile-succeeded"), WAIT, |e| {
+            is_after(e, "compile-succeeded", &a, m)
+        });
+        // Many quiet periods: anything else the save set off has happened by then.
+        sleep(Duration::from_millis(SETTLE_MS * 12));
+        let evs = d.events();
+        assert_eq!(
+            count_after(&evs, "compile-started", &a, m),
+            1,
+            "{how}: exactly one compile\n{}",
+            dump(&evs)
+        );
+        assert_eq!(
+            count_after(&evs, "compile-failed", &a, m),
+            0,
+            "{how}\n{}",
+            dump(&evs)
+        );
+        assert!(
+            read_string(&src_of(&a)).contains(&ptp_with_x(x)),
+            "{how}: the new content is compiled"
+        );
+        assert!(!a.join("sfc.xml~").exists() && !a.join("sfc.xml.tmp").exists());
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// 4.-5. Nothing to do
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn touch_read_and_same_bytes_start_nothing() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let mut d = w.watch(&[a.to_str().unwrap()]);
+    d.startup(&[&a]);
+    let m = d.mark();
+    let sfc = a.join("sfc.xml");
+    let st = Command::new("touch").arg(&sfc).status().unwrap();
+    assert!(st.success());
+    let st = Command::new("touch")
+        .arg(a.join("Blackboard.aml"))
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let st = Command::new("cat")
+        .arg(&sfc)
+        .arg(a.join("kr15-2.irl"))
+        .stdout(Stdio::null())
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let _ = fs::read(a.join("Blackboard.aml")).unwrap();
+    // A save that leaves the bytes the same (in place, and by rename).
+    let same = fs::read(&sfc).unwrap();
+    fs::write(&sfc, &same).unwrap();
+    rename_save_tmp(&a.join("kr15-2.irl"), &sample_text("kr15-2.irl"));
+    sleep(Duration::from_millis(1000));
+    let evs = d.events();
+    for ev in ["change-detected", "compile-started", "write-back"] {
+        assert_eq!(count_after(&evs, ev, &a, m), 0, "{ev}\n{}", dump(&evs));
+    }
+}
+
+#[test]
+fn own_writes_start_nothing() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let b = w.project("B");
+    let mut d = w.watch(&[a.to_str().unwrap(), b.to_str().unwrap()]);
+    d.startup(&[&a, &b]);
+    sleep(Duration::from_millis(2000));
+    let evs = d.events();
+    for p in [&a, &b] {
+        assert_eq!(
+            count_after(&evs, "compile-started", p, 0),
+            1,
+            "{}",
+            dump(&evs)
+        );
+        assert_eq!(
+            count_after(&evs, "change-detected", p, 0),
+            0,
+            "{}",
+            dump(&evs)
+        );
+        let wb: Vec<&Value> = evs.iter().filter(|e| is_for(e, "write-back", p)).collect();
+        assert_eq!(wb.len(), 1, "{}", dump(&evs));
+        assert_eq!(wb[0]["written"], true);
+        assert_eq!(wb[0]["value"], "Blackboard.src");
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// 6.-8. Writers in progress, broken files, bursts
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn slow_writer_is_waited_for() {
+    use std::io::Write;
+    let w = Workspace::new();
+    let a = w.project("A");
+    let mut d = w.watch(&[a.to_str().unwrap()]);
+    d.startup(&[&a]);
+    let m = d.mark();
+    let content = sfc_with_x(606);
+    // Cut inside an element: the first half alone is not well-formed.
+    let cut = content.find("<transition localId=\"4\">").unwrap() + 5;
+    let mut f = fs::File::create(a.join("sfc.xml")).unwrap();
+    f.write_all(&content.as_bytes()[..cut]).unwrap();
+    f.flush().unwrap();
+    sleep(Duration::from_millis(SETTLE_MS * 3));
+    f.write_all(&content.as_bytes()[cut..]).unwrap();
+    f.flush().unwrap();
+    drop(f);
+    d.wait_for("compile-succeeded", WAIT, |e| {
+        is_after(e, "compile-succeeded", &a, m)
+    });
+    sleep(Duration::from_millis(SETTLE_MS * 6));
+    let evs = d.events();
+    assert_eq!(
+        count_after(&evs, "compile-failed", &a, m),
+        0,
+        "{}",
+        dump(&evs)
+    );
+    assert!(read_string(&src_of(&a)).contains(&ptp_with_x(606)));
+}
+
+#[test]
+fn broken_file_fails_keeps_outputs_then_recovers() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let mut d = w.watch(&[a.to_str().unwrap()]);
+    d.startup(&[&a]);
+    let src_before = fs::read(src_of(&a)).unwrap();
+    let dat_before = fs::read(dat_of(&a)).unwrap();
+    let m = d.mark();
+    let broken = sfc_with_x(707).replace("</SFC>", "</SFX>");
+    let bad_line = broken.lines().position(|l| l.contains("</SFX>")).unwrap() as u64 + 1;
+    fs::write(a.join("sfc.xml"), &broken).unwrap();
+    // Retried while the file is fresh (up to 3 times), then reported.
+    let evs = d.wait_for("compile-failed", Duration::from_secs(8), |e| {
+        is_after(e, "compile-failed", &a, m)
+    });
+    let failed = evs
+        .iter()
+        .find(|e| is_after(e, "compile-failed", &a, m))
+        .unwrap();
+    let diags = failed["diagnostics"].as_array().unwrap();
+    let diag = diags
+        .iter()
+        .find(|x| x["file"].as_str().is_some_and(|f| f.ends_with("sfc.xml")))
+        .unwrap_or_else(|| panic!("no diagnostic in sfc.xml: {failed}"));
+    assert_eq!(diag["severity"], "error", "{diag}");
+    assert_eq!(diag["code"], "E102", "{diag}");
+    assert_eq!(diag["line"].as_u64(), Some(bad_line), "{diag}");
+    assert!(diag["column"].as_u64().is_some_and(|c| c >= 1), "{diag}");
+    assert_eq!(
+        count_after(&evs, "compile-failed", &a, m),
+        1,
+        "one report\n{}",
+        dump(&evs)
+    );
+    assert_eq!(fs::read(src_of(&a)).unwrap(), src_before, ".src unchanged");
+    assert_eq!(fs::read(dat_of(&a)).unwrap(), dat_before, ".dat unchanged");
+
+    let m = d.mark();
+    fs::write(a.join("sfc.xml"), sfc_with_x(708)).unwrap();
+    d.wait_for("compile-succeeded after the fix", WAIT, |e| {
+        is_after(e, "compile-succeeded", &a, m)
+    });
+    assert!(read_string(&src_of(&a)).contains(&ptp_with_x(708)));
+}
+
+#[test]
+fn burst_of_saves_gives_few_compiles_and_the_last_content() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let mut d = w.watch(&[a.to_str().unwrap()]);
+    d.startup(&[&a]);
+    let m = d.mark();
+    let sfc = a.join("sfc.xml");
+    let t0 = Instant::now();
+    for i in 0..50 {
+        fs::write(&sfc, sfc_with_x(1000 + i)).unwrap();
+        sleep(Duration::from_millis(20));
+    }
+    let burst = t0.elapsed();
+    let last = ptp_with_x(1049);
+    if !wait_until(WAIT, || read_string(&src_of(&a)).contains(&last)) {
+        d.fail("the last value never reached the .src");
+    }
+    sleep(Duration::from_millis(SETTLE_MS * 10));
+    let evs = d.events();
+    let n = count_after(&evs, "compile-started", &a, m);
+    assert!(
+        (1..=10).contains(&n),
+        "{n} compiles for a burst of {burst:?}\n{}",
+        dump(&evs)
+    );
+    assert_eq!(
+        count_after(&evs, "compile-failed", &a, m),
+        0,
+        "{}",
+        dump(&evs)
+    );
+    let last_result = evs
+        .iter()
+        .rev()
+        .find(|e| is_after(e, "compile-succeeded", &a, m) || is_after(e, "compile-failed", &a, m))
+        .unwrap();
+    assert_eq!(last_result["event"], "compile-succeeded");
+    assert!(read_string(&src_of(&a)).contains(&last));
+}
+
+// ---------------------------------------------------------------------------------------------
+// 9. Another writer of the blackboard
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn other_writers_blackboard_edit_is_kept() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let mut d = w.watch(&[a.to_str().unwrap()]);
+    d.startup(&[&a]);
+    let bb = a.join("Blackboard.aml");
+    let now = read_string(&bb);
+    let right = "<Value>Blackboard.src</Value>";
+    assert!(now.contains(right), "startup write-back");
+    // The other writer adds a comment, changes an unrelated attribute, and puts a stale value
+    // into the write-back target.
+    let comment = "<!-- edited by the planner: 7f3a -->";
+    let (first, rest) = now.split_once('\n').unwrap();
+    let edited = format!("{first}\n{comment}\n{rest}")
+        .replace("Unit=\"m/s\"", "Unit=\"mm/s\"")
+        .replace(right, "<Value>stale.src</Value>");
+    let m = d.mark();
+    fs::write(&bb, &edited).unwrap();
+
+    let evs = d.wait_for("write-back after the edit", WAIT, |e| {
+        is_after(e, "write-back", &a, m)
+    });
+    assert!(
+        evs.iter().any(|e| is_after(e, "compile-succeeded", &a, m)),
+        "{}",
+        dump(&evs)
+    );
+    let detected = evs
+        .iter()
+        .find(|e| is_after(e, "change-detected", &a, m))
+        .unwrap();
+    assert!(
+        detected["paths"]
+            .as_array()
+            .unwrap()
+            .contains(&Value::from(bb.to_str().unwrap())),
+        "{detected}"
+    );
+    let wb = evs
+        .iter()
+        .find(|e| is_after(e, "write-back", &a, m))
+        .unwrap();
+    assert_eq!(wb["value"], "Blackboard.src", "{wb}");
+    assert_eq!(wb["written"], true, "{wb}");
+    sleep(Duration::from_millis(SETTLE_MS * 6));
+    let after = read_string(&bb);
+    assert!(
+        after.contains(comment),
+        "the other writer's comment is kept"
+    );
+    assert!(after.contains("Unit=\"mm/s\""));
+    assert_eq!(
+        after,
+        edited.replace("<Value>stale.src</Value>", right),
+        "only the write-back value changed"
+    );
+}
+
+/// A writer that keeps editing the blackboard (read, add a comment, write in place) while the
+/// daemon compiles and writes back: no edit of the writer is ever lost, and the daemon ends with
+/// the right write-back value.
+#[test]
+fn blackboard_writer_racing_the_daemon_loses_nothing() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let mut d = w.watch(&[a.to_str().unwrap()]);
+    d.startup(&[&a]);
+    let bb = a.join("Blackboard.aml");
+    let right = "<Value>Blackboard.src</Value>";
+    let m = d.mark();
+    // Pauses around the quiet period, so compiles run while the writer goes on.
+    let n = 24;
+    for i in 0..n {
+        let now = read_string(&bb);
+        let mut edited = now.replace("</CAEXFile>", &format!("<!-- edit {i} -->\n</CAEXFile>"));
+        if i == 0 {
+            edited = edited.replace(right, "<Value>stale.src</Value>");
+        }
+        fs::write(&bb, edited).unwrap();
+        sleep(Duration::from_millis(
+            SETTLE_MS / 2 + (i as u64 * 7) % SETTLE_MS,
+        ));
+    }
+    let all_there = |t: &str| (0..n).all(|i| t.contains(&format!("<!-- edit {i} -->")));
+    let ok = wait_until(WAIT, || {
+        let t = read_string(&bb);
+        t.contains(right) && all_there(&t)
+    });
+    sleep(Duration::from_millis(SETTLE_MS * 6));
+    let t = read_string(&bb);
+    if !ok || !all_there(&t) || !t.contains(right) {
+        let lost: Vec<usize> = (0..n)
+            .filter(|i| !t.contains(&format!("<!-- edit {i} -->")))
+            .collect();
+        d.fail(&format!(
+            "edits lost: {lost:?}; value right: {}",
+            t.contains(right)
+        ));
+    }
+    let evs = d.events();
+    assert!(
+        evs.iter()
+            .any(|e| is_after(e, "write-back", &a, m) && e["written"] == true),
+        "{}",
+        dump(&evs)
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// 10. The project folder deleted and created again
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn deleted_and_recreated_project_folder_is_picked_up() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let b = w.project("B");
+    let mut d = w.watch(&[a.to_str().unwrap(), b.to_str().unwrap()]);
+    d.startup(&[&a, &b]);
+    let m = d.mark();
+    fs::remove_dir_all(&a).unwrap();
+    d.wait_for("watch-degraded", WAIT, |e| {
+        is_after(e, "watch-degraded", &a, m)
+    });
+    sleep(Duration::from_millis(SETTLE_MS * 4));
+    // A folder known to be gone is not compiled (no error noise about its files).
+    let evs = d.events();
+    assert_eq!(
+        count_after(&evs, "compile-failed", &a, m),
+        0,
+        "{}",
+        dump(&evs)
+    );
+    assert_eq!(
+        count_after(&evs, "compile-started", &a, m),
+        0,
+        "{}",
+        dump(&evs)
+    );
+    let m = d.mark();
+    copy_project(&a);
+    let evs = d.wait_for(
+        "compile-succeeded after re-creation",
+        Duration::from_secs(8),
+        |e| is_after(e, "compile-succeeded", &a, m),
+    );
+    let started = evs
+        .iter()
+        .find(|e| is_after(e, "compile-started", &a, m))
+        .expect("a compile started");
+    assert_eq!(started["trigger"], "folder-created", "{}", dump(&evs));
+    assert!(src_of(&a).is_file() && dat_of(&a).is_file());
+    assert!(read_string(&a.join("Blackboard.aml")).contains("<Value>Blackboard.src</Value>"));
+
+    // Once more, the new folder moved into place (`mv A.new A`) with a new value.
+    let m = d.mark();
+    fs::remove_dir_all(&a).unwrap();
+    d.wait_for("watch-degraded (2)", WAIT, |e| {
+        is_after(e, "watch-degraded", &a, m)
+    });
+    let staged = w.ws().join("A.new");
+    copy_project(&staged);
+    fs::write(staged.join("sfc.xml"), sfc_with_x(1010)).unwrap();
+    sleep(Duration::from_millis(SETTLE_MS * 4));
+    let m = d.mark();
+    fs::rename(&staged, &a).unwrap();
+    d.wait_for(
+        "compile-succeeded after the folder was moved in",
+        Duration::from_secs(8),
+        |e| is_after(e, "compile-succeeded", &a, m),
+    );
+    assert!(read_string(&src_of(&a)).contains(&ptp_with_x(1010)));
+
+    // The other project was not disturbed.
+    let evs = d.events();
+    assert_eq!(
+        count_after(&evs, "compile-started", &b, 0),
+        1,
+        "{}",
+        dump(&evs)
+    );
+}
+
+#[test]
+fn project_folder_missing_at_startup_is_picked_up() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let late = w.ws().join("Late");
+    let mut d = w.watch(&[a.to_str().unwrap(), late.to_str().unwrap()]);
+    d.wait_for("watch-degraded for the missing folder", WAIT, |e| {
+        is_for(e, "watch-degraded", &late)
+    });
+    d.startup(&[&a]);
+    let m = d.mark();
+    copy_project(&late);
+    d.wait_for(
+        "compile-succeeded once the folder exists",
+        Duration::from_secs(8),
+        |e| is_after(e, "compile-succeeded", &late, m),
+    );
+    assert!(src_of(&late).is_file() && dat_of(&late).is_file());
+}
+
+// ---------------------------------------------------------------------------------------------
+// 11.-13. Signals
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn sighup_adds_a_project() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let b = w.project("B");
+    let base = "settle_ms = 50\nevents = \"ev.jsonl\"\n\n[[project]]\npath = \"ws/A\"\n";
+    let cfg = w.config(base);
+    let mut d = w.watch_config(&cfg);
+    d.startup(&[&a]);
+    assert!(!src_of(&b).exists(), "B is not a project yet");
+    let m = d.mark();
+    fs::write(
+        &cfg,
+        format!("{base}\n[[project]]\npath = \"ws/B\"\nprogram = \"Zelle_B\"\n"),
+    )
+    .unwrap();
+    d.signal("HUP");
+    let evs = d.wait_for("reloaded", WAIT, |e| seq(e) > m && is(e, "reloaded"));
+    let r = evs
+        .iter()
+        .find(|e| seq(e) > m && is(e, "reloaded"))
+        .unwrap();
+    assert_eq!(r["added"], serde_json::json!([b.to_str().unwrap()]), "{r}");
+    assert_eq!(r["removed"], serde_json::json!([]), "{r}");
+    assert_eq!(r["projects"], 2, "{r}");
+    let evs = d.wait_for("B compiles", WAIT, |e| is_after(e, "write-back", &b, m));
+    assert!(
+        evs.iter().any(|e| is_after(e, "compile-succeeded", &b, m)),
+        "{}",
+        dump(&evs)
+    );
+    assert!(b.join("Zelle_B.src").is_file() && b.join("Zelle_B.dat").is_file());
+    assert!(read_string(&b.join("Blackboard.aml")).contains("<Value>Zelle_B.src</Value>"));
+    assert_eq!(
+        count_after(&evs, "compile-started", &a, m),
+        0,
+        "an unchanged project is not compiled again\n{}",
+        dump(&evs)
+    );
+
+    // Dropping A: reported, and A's edits no longer compile (B's still do).
+    let m = d.mark();
+    fs::write(
+        &cfg,
+        "settle_ms = 50\nevents = \"ev.jsonl\"\n\n[[project]]\npath = \"ws/B\"\nprogram = \"Zelle_B\"\n",
+    )
+    .unwrap();
+    d.signal("HUP");
+    let evs = d.wait_for("reloaded (2)", WAIT, |e| seq(e) > m && is(e, "reloaded"));
+    let r = evs
+        .iter()
+        .find(|e| seq(e) > m && is(e, "reloaded"))
+        .unwrap();
+    assert_eq!(
+        r["removed"],
+        serde_json::json!([a.to_str().unwrap()]),
+        "{r}"
+    );
+    assert_eq!(r["added"], serde_json::json!([]), "{r}");
+    assert_eq!(r["projects"], 1, "{r}");
+    let m = d.mark();
+    fs::write(a.join("sfc.xml"), sfc_with_x(1111)).unwrap();
+    fs::write(b.join("sfc.xml"), sfc_with_x(1112)).unwrap();
+    d.wait_for("B compiles", WAIT, |e| {
+        is_after(e, "compile-succeeded", &b, m)
+    });
+    sleep(Duration::from_millis(SETTLE_MS * 6));
+    let evs = d.events();
+    assert!(
+        !evs.iter().any(|e| seq(e) > m && project_is(e, &a)),
+        "{}",
+        dump(&evs)
+    );
+    assert!(!read_string(&src_of(&a)).contains(&ptp_with_x(1111)));
+}
+
+#[test]
+fn sighup_with_an_invalid_config_keeps_running() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let base = "settle_ms = 50\nevents = \"ev.jsonl\"\n[[project]]\npath = \"ws/A\"\n";
+    let cfg = w.config(base);
+    let mut d = w.watch_config(&cfg);
+    d.startup(&[&a]);
+    let m = d.mark();
+    // Line 5, column 3: an unknown key.
+    fs::write(&cfg, format!("{base}  colour = \"blue\"\n")).unwrap();
+    d.signal("HUP");
+    let evs = d.wait_for("reload-failed", WAIT, |e| {
+        seq(e) > m && is(e, "reload-failed")
+    });
+    let r = evs
+        .iter()
+        .find(|e| seq(e) > m && is(e, "reload-failed"))
+        .unwrap();
+    assert_eq!(r["line"], 5, "{r}");
+    assert_eq!(r["column"], 3, "{r}");
+    assert_eq!(r["file"], cfg.to_str().unwrap(), "{r}");
+    assert!(r["error"].as_str().unwrap().contains("colour"), "{r}");
+    assert!(!evs.iter().any(|e| seq(e) > m && is(e, "reloaded")));
+
+    // Still running, with the old configuration.
+    let m = d.mark();
+    fs::write(a.join("sfc.xml"), sfc_with_x(1212)).unwrap();
+    d.wait_for("compile-succeeded after the failed reload", WAIT, |e| {
+        is_after(e, "compile-succeeded", &a, m)
+    });
+    assert!(read_string(&src_of(&a)).contains(&ptp_with_x(1212)));
+}
+
+#[test]
+fn sigint_stops_cleanly() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let mut d = w.watch(&[a.to_str().unwrap()]);
+    d.startup(&[&a]);
+    d.signal("INT");
+    assert_eq!(d.wait_exit(WAIT).code(), Some(0), "exit status");
+    let evs = d.events();
+    let last = evs.last().unwrap();
+    assert_eq!(last["event"], "stopped", "{}", dump(&evs));
+    assert_eq!(last["reason"], "SIGINT");
+}
+
+#[test]
+fn sigterm_stops_cleanly() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let mut d = w.watch(&[a.to_str().unwrap()]);
+    d.startup(&[&a]);
+    d.signal("TERM");
+    let st = d.wait_exit(WAIT);
+    assert_eq!(st.code(), Some(0), "exit status");
+    let evs = d.events();
+    let last = evs.last().unwrap();
+    assert_eq!(last["event"], "stopped", "{}", dump(&evs));
+    assert_eq!(last["reason"], "SIGTERM");
+    assert_eq!(evs.iter().filter(|e| is(e, "stopped")).count(), 1);
+    // The envelope, on every line of the whole stream.
+    for (i, e) in evs.iter().enumerate() {
+        assert_eq!(e["schema"], "skillpost.event/1", "{e}");
+        assert_eq!(seq(e), i as u64 + 1, "seq counts lines: {e}");
+        let ts = e["ts"].as_str().unwrap();
+        assert!(ts.ends_with('Z') && ts.contains('T'), "{e}");
+        assert!(
+            ["info", "warn", "error"].contains(&e["level"].as_str().unwrap()),
+            "{e}"
+        );
+        if e["event"].as_str().unwrap().starts_with("compile-") || is(e, "write-back") {
+            assert!(project_is(e, &a), "{e}");
+        }
+        assert!(
+            e.as_object().unwrap().values().all(|v| !v.is_null()),
+            "no nulls: {e}"
+        );
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// 14. Roots
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn root_projects_at_startup_and_later() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let b = w.project("B");
+    let cfg = w.config("settle_ms = 50\nevents = \"ev.jsonl\"\n\n[[root]]\npath = \"ws\"\n");
+    let mut d = w.watch_config(&cfg);
+    d.startup(&[&a, &b]);
+    let m = d.mark();
+    // Like `cp -r template ws/C`: the folder first, then its files right away.
+    let c = w.ws().join("C");
+    copy_project(&c);
+    let evs = d.wait_for("C compiles", Duration::from_secs(8), |e| {
+        is_after(e, "compile-succeeded", &c, m)
+    });
+    let watching = evs
+        .iter()
+        .find(|e| is_after(e, "watching", &c, m))
+        .unwrap_or_else(|| panic!("no watching for C:\n{}", dump(&evs)));
+    assert_eq!(watching["root"], w.ws().to_str().unwrap(), "{watching}");
+    let started = evs
+        .iter()
+        .find(|e| is_after(e, "compile-started", &c, m))
+        .expect("C compiled");
+    assert_eq!(started["trigger"], "new-project", "{}", dump(&evs));
+    assert!(src_of(&c).is_file() && dat_of(&c).is_file());
+    for p in [&a, &b] {
+        assert_eq!(
+            count_after(&evs, "compile-started", p, m),
+            0,
+            "{}",
+            dump(&evs)
+        );
+    }
+
+    // An empty subfolder that gets its blackboard later.
+    let e = w.ws().join("E");
+    fs::create_dir(&e).unwrap();
+    sleep(Duration::from_millis(SETTLE_MS * 6));
+    let m = d.mark();
+    copy_project(&e);
+    d.wait_for("E compiles", Duration::from_secs(8), |ev| {
+        is_after(ev, "compile-succeeded", &e, m)
+    });
+    assert!(src_of(&e).is_file());
+}
+
+// ---------------------------------------------------------------------------------------------
+// 15. A shared IRL file outside the project folders
+// ---------------------------------------------------------------------------------------------
+
+/// `ws/lib/kr15-2.irl` and projects whose blackboards refer to it as `../lib/kr15-2.irl`.
+fn shared_irl_projects(w: &Workspace, names: &[&str]) -> Vec<PathBuf> {
+    let lib = w.ws().join("lib");
+    fs::create_dir_all(&lib).unwrap();
+    fs::copy(sample().join("kr15-2.irl"), lib.join("kr15-2.irl")).unwrap();
+    names
+        .iter()
+        .map(|n| {
+            let p = w.project(n);
+            fs::remove_file(p.join("kr15-2.irl")).unwrap();
+            let bb = p.join("Blackboard.aml");
+            let text = read_string(&bb).replace(
+                "<Value>kr15-2.irl</Value>",
+                "<Value>../lib/kr15-2.irl</Value>",
+            );
+            fs::write(&bb, text).unwrap();
+            p
+        })
+        .collect()
+}
+
+#[test]
+fn shared_irl_outside_recompiles_every_user() {
+    let w = Workspace::new();
+    let ps = shared_irl_projects(&w, &["A", "B"]);
+    let cfg = w.config(
+        "settle_ms = 50\nevents = \"ev.jsonl\"\nallow_outside = true\n\n\
+         [[project]]\npath = \"ws/A\"\n\n[[project]]\npath = \"ws/B\"\n",
+    );
+    let mut d = w.watch_config(&cfg);
+    let refs: Vec<&Path> = ps.iter().map(PathBuf::as_path).collect();
+    d.startup(&refs);
+    let m = d.mark();
+    let irl = w.ws().join("lib/kr15-2.irl");
+    let text = read_string(&irl).replace("PTP {X, Y, Z, A, B, C}", "PTP {X, Y, Z, A, B, C} C_PTP");
+    fs::write(&irl, text).unwrap();
+    for p in &ps {
+        let evs = d.wait_for(&format!("{} recompiles", p.display()), WAIT, |e| {
+            is_after(e, "compile-succeeded", p, m)
+        });
+        let detected = evs
+            .iter()
+            .find(|e| is_after(e, "change-detected", p, m))
+            .unwrap();
+        assert!(
+            detected["paths"]
+                .as_array()
+                .unwrap()
+                .contains(&Value::from(irl.to_str().unwrap())),
+            "{detected}"
+        );
+        assert!(
+            read_string(&src_of(p)).contains("C 0} C_PTP"),
+            "{}",
+            p.display()
+        );
+    }
+}
+
+#[test]
+fn irl_outside_is_refused_without_allow_outside() {
+    let w = Workspace::new();
+    let ps = shared_irl_projects(&w, &["A"]);
+    let a = &ps[0];
+    let mut d = w.watch(&[a.to_str().unwrap()]);
+    let evs = d.wait_for("compile-failed", WAIT, |e| is_for(e, "compile-failed", a));
+    let failed = evs.iter().find(|e| is_for(e, "compile-failed", a)).unwrap();
+    let diag = failed["diagnostics"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|x| x["code"] == "E104")
+        .unwrap_or_else(|| panic!("no E104: {failed}"));
+    assert!(
+        diag["message"]
+            .as_str()
+            .unwrap()
+            .contains(a.to_str().unwrap()),
+        "names the project folder: {diag}"
+    );
+    assert!(
+        diag["file"]
+            .as_str()
+            .is_some_and(|f| f.ends_with("Blackboard.aml")),
+        "{diag}"
+    );
+    assert!(!src_of(a).exists(), "no output");
+    assert!(
+        !evs.iter().any(|e| is_for(e, "compile-succeeded", a)),
+        "{}",
+        dump(&evs)
+    );
+}
