@@ -83,6 +83,20 @@ impl Workspace {
         Daemon::start(&self.root, &all, self.events())
     }
 
+    /// Starts `skillpost watch` with polling instead of inotify (as on NFS/SMB/FUSE).
+    fn watch_polling(&self, args: &[&str]) -> Daemon {
+        let settle = SETTLE_MS.to_string();
+        let ev = self.events();
+        let mut all = vec!["--events", ev.to_str().unwrap(), "--settle", &settle];
+        all.extend_from_slice(args);
+        Daemon::start_env(
+            &self.root,
+            &all,
+            self.events(),
+            &[("SKILLPOST_FORCE_POLL", "1")],
+        )
+    }
+
     /// Starts `skillpost watch --config <file>`; the events file comes from the configuration.
     fn watch_config(&self, config: &Path) -> Daemon {
         Daemon::start(
@@ -148,12 +162,17 @@ struct Daemon {
 
 impl Daemon {
     fn start(cwd: &Path, args: &[&str], events: PathBuf) -> Self {
+        Self::start_env(cwd, args, events, &[])
+    }
+
+    fn start_env(cwd: &Path, args: &[&str], events: PathBuf, env: &[(&str, &str)]) -> Self {
         let stderr = cwd.join("stderr.log");
         let child = Command::new(env!("CARGO_BIN_EXE_skillpost"))
             .arg("watch")
             .args(args)
             .current_dir(cwd)
             .env("RUST_LOG", "info")
+            .envs(env.iter().copied())
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(fs::File::create(&stderr).unwrap())
@@ -368,6 +387,40 @@ fn startup_compiles_every_project() {
 // ---------------------------------------------------------------------------------------------
 // 2.-3. Edits
 // ---------------------------------------------------------------------------------------------
+
+#[test]
+fn polling_fallback_is_announced_and_still_compiles_changes() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let mut d = w.watch_polling(&[a.to_str().unwrap()]);
+    d.startup(&[&a]);
+    let evs = d.events();
+    let watching = evs.iter().find(|e| is_for(e, "watching", &a)).unwrap();
+    assert_eq!(watching["backend"], "poll", "{}", dump(&evs));
+    let degraded = evs
+        .iter()
+        .find(|e| is_for(e, "watch-degraded", &a))
+        .unwrap_or_else(|| panic!("no watch-degraded:\n{}", dump(&evs)));
+    assert_eq!(degraded["backend"], "poll", "{degraded}");
+    // Polled every second (contents compared): an edit within the same second is still seen,
+    // and only once.
+    let m = d.mark();
+    fs::write(a.join("sfc.xml"), sfc_with_x(321)).unwrap();
+    let evs = d.wait_for(
+        "compile-succeeded while polling",
+        Duration::from_secs(8),
+        |e| is_after(e, "compile-succeeded", &a, m),
+    );
+    assert!(read_string(&src_of(&a)).contains(&ptp_with_x(321)));
+    sleep(Duration::from_millis(1500));
+    let evs2 = d.events();
+    assert_eq!(
+        count_after(&evs2, "compile-started", &a, m),
+        1,
+        "{}",
+        dump(&evs)
+    );
+}
 
 #[test]
 fn in_place_edit_recompiles() {

@@ -93,16 +93,18 @@ pub async fn run(
     let force_poll = std::env::var_os("SKILLPOST_FORCE_POLL").is_some();
     let mut d = Daemon {
         sink: sink.clone(),
-        watchers: Watchers::new(wtx, Duration::from_millis(500)),
+        watchers: Watchers::new(wtx, Duration::from_secs(1)),
         projects: BTreeMap::new(),
+        by_dir: HashMap::new(),
         roots: BTreeMap::new(),
         done: dtx,
         run_seq: 0,
         running: 0,
-        parallel: std::thread::available_parallelism()
+        // Compiles of small projects mostly wait for fsync: twice the cores, at least 4.
+        parallel: (2 * std::thread::available_parallelism()
             .map(|n| n.get())
-            .unwrap_or(2)
-            .max(2),
+            .unwrap_or(2))
+        .max(4),
         queue: Vec::new(),
         config: Config::default(),
         sources,
@@ -150,7 +152,14 @@ pub async fn run(
             }
         };
         tokio::select! {
-            Some(msg) = wrx.recv() => d.on_watch(msg, Instant::now()),
+            Some(msg) = wrx.recv() => {
+                // Take every waiting event at once: one pass of the loop per batch.
+                let now = Instant::now();
+                d.on_watch(msg, now);
+                while let Ok(msg) = wrx.try_recv() {
+                    d.on_watch(msg, now);
+                }
+            }
             Some(r) = drx.recv() => d.on_done(r, Instant::now()),
             c = control.recv() => match c {
                 Some(Control::Reload) => d.reload(Instant::now()),
@@ -203,6 +212,9 @@ struct Project {
     outputs: BTreeSet<PathBuf>,
     /// The directories watched for this project.
     watched: BTreeSet<PathBuf>,
+    /// The directories whose events can concern this project (its folder and its inputs'
+    /// folders): its entries in [`Daemon::by_dir`].
+    indexed: BTreeSet<PathBuf>,
     backend: Backend,
     sched: Scheduler,
     /// Paths changed since the last compile started.
@@ -242,6 +254,8 @@ struct Daemon {
     sink: Arc<EventSink>,
     watchers: Watchers,
     projects: BTreeMap<PathBuf, Project>,
+    /// Directory → the projects an event in it can concern, so an event never scans them all.
+    by_dir: HashMap<PathBuf, BTreeSet<PathBuf>>,
     /// Roots and the subfolders watched in them.
     roots: BTreeMap<PathBuf, BTreeSet<PathBuf>>,
     done: mpsc::UnboundedSender<Report>,
@@ -398,6 +412,7 @@ impl Daemon {
             inputs: HashMap::new(),
             outputs: BTreeSet::new(),
             watched: BTreeSet::new(),
+            indexed: BTreeSet::new(),
             backend: Backend::Native,
             sched: Scheduler::new(settle, max_wait_of(settle)),
             changed: BTreeSet::new(),
@@ -424,6 +439,7 @@ impl Daemon {
                 "backend": p.backend.as_str(),
             }),
         );
+        self.reindex(&mut p);
         self.projects.insert(key, p);
     }
 
@@ -431,6 +447,14 @@ impl Daemon {
         if let Some(p) = self.projects.remove(key) {
             for d in &p.watched {
                 self.watchers.remove(d);
+            }
+            for d in &p.indexed {
+                if let Some(set) = self.by_dir.get_mut(d) {
+                    set.remove(key);
+                    if set.is_empty() {
+                        self.by_dir.remove(d);
+                    }
+                }
             }
             self.queue.retain(|k| k != key);
         }
@@ -481,6 +505,32 @@ impl Daemon {
             self.watchers.remove(d);
             p.watched.remove(d);
         }
+    }
+
+    /// Updates [`Daemon::by_dir`] for a project: its folder and the folders of its inputs.
+    fn reindex(&mut self, p: &mut Project) {
+        let key = p.spec.path.clone();
+        let mut dirs: BTreeSet<PathBuf> = p
+            .inputs
+            .keys()
+            .filter_map(|f| f.parent().map(Path::to_owned))
+            .collect();
+        dirs.insert(key.clone());
+        for d in p.indexed.difference(&dirs) {
+            if let Some(set) = self.by_dir.get_mut(d) {
+                set.remove(&key);
+                if set.is_empty() {
+                    self.by_dir.remove(d);
+                }
+            }
+        }
+        for d in dirs.difference(&p.indexed) {
+            self.by_dir
+                .entry(d.clone())
+                .or_default()
+                .insert(key.clone());
+        }
+        p.indexed = dirs;
     }
 
     fn next_deadline(&self) -> Option<Instant> {
@@ -612,6 +662,7 @@ impl Daemon {
                 p.inputs = inputs;
                 p.outputs = outputs.into_iter().collect();
                 self.set_watches(&mut p, dirs);
+                self.reindex(&mut p);
                 let follow_up = p.sched.finished(now);
                 if again && !follow_up {
                     p.trigger.get_or_insert("write-back-skipped");
@@ -666,55 +717,59 @@ impl Daemon {
 
     fn route(&mut self, e: &notify::Event, now: Instant) {
         use notify::EventKind as K;
-        use notify::event::{AccessKind, AccessMode, ModifyKind};
+        use notify::event::{AccessKind, AccessMode, MetadataKind, ModifyKind};
         let kind = e.kind;
         // Reads and metadata-only changes (`touch`, chmod) never change bytes.
         let closed_write = matches!(kind, K::Access(AccessKind::Close(AccessMode::Write)));
         if matches!(kind, K::Access(_)) && !closed_write {
             return;
         }
-        if matches!(kind, K::Modify(ModifyKind::Metadata(_))) {
+        // Polling reports a new write time (the content hash then tells a `touch` from an edit);
+        // other metadata (attributes, permissions; inotify's `touch`) never change bytes.
+        if matches!(kind, K::Modify(ModifyKind::Metadata(m)) if m != MetadataKind::WriteTime) {
             return;
         }
         let data_write = matches!(
             kind,
             K::Modify(ModifyKind::Data(_)) | K::Modify(ModifyKind::Any)
         );
+        // Only these say that a project folder itself came or went.
+        let structural = matches!(
+            kind,
+            K::Create(_) | K::Remove(_) | K::Modify(ModifyKind::Name(_)) | K::Any | K::Other
+        );
         for path in &e.paths {
             if watch::is_noise(path) {
                 continue;
             }
             self.route_roots(path, now);
-            let keys: Vec<PathBuf> = self.projects.keys().cloned().collect();
+            if structural && self.projects.contains_key(path) {
+                self.folder_event(path, now);
+            }
+            let Some(keys) = path.parent().and_then(|d| self.by_dir.get(d)) else {
+                continue;
+            };
+            let keys: Vec<PathBuf> = keys.iter().cloned().collect();
             for k in keys {
-                let p = self.projects.get_mut(&k).expect("key from the map");
+                let Some(p) = self.projects.get_mut(&k) else {
+                    continue;
+                };
                 if p.outputs.contains(path) {
                     continue;
                 }
                 let is_input = p.inputs.contains_key(path);
-                let in_folder = path.parent() == Some(k.as_path());
-                let new_blackboard = in_folder
-                    && path
-                        .extension()
-                        .is_some_and(|x| x.eq_ignore_ascii_case("aml"));
-                let folder_itself = path == &k;
-                if !(is_input || new_blackboard || folder_itself) {
+                let new_blackboard = path.parent() == Some(k.as_path())
+                    && path.file_name().is_some_and(config::is_blackboard_name);
+                if !(is_input || new_blackboard) {
                     continue;
                 }
                 // Polling reports no closes: only native watches track open writes.
                 if data_write && p.backend == Backend::Native {
                     p.writing.entry(path.clone()).or_insert(now);
-                } else if closed_write {
-                    p.writing.remove(path);
                 } else {
-                    // Created, removed or renamed: whatever was being written is complete.
+                    // Closed, created, removed or renamed: the write is complete.
                     p.writing.remove(path);
                 }
-                if folder_itself {
-                    self.folder_event(&k, now);
-                    continue;
-                }
-                let p = self.projects.get_mut(&k).expect("key from the map");
                 p.changed.insert(path.clone());
                 p.trigger.get_or_insert("change");
                 p.sched.change(now);
@@ -744,7 +799,7 @@ impl Daemon {
             } else if !folder.exists() && self.roots.get_mut(&root).expect("root").remove(&folder) {
                 self.watchers.remove(&folder);
             }
-            if !self.projects.contains_key(&folder) && config::discover(&root).contains(&folder) {
+            if !self.projects.contains_key(&folder) && holds_blackboard(&folder) {
                 let settle = settle_of(&self.config);
                 self.add_project(
                     ProjectSpec {
@@ -870,6 +925,15 @@ impl Daemon {
         }
         self.notify_status();
     }
+}
+
+/// Whether a folder holds a blackboard (what makes a root's subfolder a project).
+fn holds_blackboard(folder: &Path) -> bool {
+    std::fs::read_dir(folder)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .any(|e| config::is_blackboard_name(&e.file_name()) && e.path().is_file())
 }
 
 fn failure_text(e: &WatchFailure) -> String {

@@ -102,9 +102,11 @@ impl Watchers {
                         Err(e) => WatchMsg::Error(e),
                     });
                 },
+                // notify's poller compares write times in whole seconds: without comparing
+                // contents, an edit in the same second as the one before would be missed.
                 notify::Config::default()
                     .with_poll_interval(self.poll_interval)
-                    .with_compare_contents(false),
+                    .with_compare_contents(true),
             )
             .map_err(|e| WatchFailure::Other(e.to_string()))?;
             self.poll = Some(w);
