@@ -1056,6 +1056,96 @@ fn sigint_stops_cleanly() {
     assert_eq!(last["reason"], "SIGINT");
 }
 
+/// Reads every systemd notification the daemon sends until `until` is among them.
+fn notifications_until(sock: &std::os::unix::net::UnixDatagram, until: &str) -> Vec<String> {
+    let mut got = Vec::new();
+    let deadline = Instant::now() + WAIT;
+    let mut buf = [0u8; 4096];
+    while Instant::now() < deadline {
+        if let Ok(n) = sock.recv(&mut buf) {
+            let msg = String::from_utf8_lossy(&buf[..n]).into_owned();
+            let done = msg.lines().any(|l| l == until);
+            got.push(msg);
+            if done {
+                return got;
+            }
+        }
+    }
+    panic!("no {until} within {WAIT:?}; got {got:?}");
+}
+
+#[test]
+fn systemd_readiness_status_watchdog_and_stopping() {
+    use std::os::unix::net::UnixDatagram;
+    let w = Workspace::new();
+    let a = w.project("A");
+    let sock_path = w.ws().join("notify.sock");
+    let sock = UnixDatagram::bind(&sock_path).unwrap();
+    sock.set_read_timeout(Some(Duration::from_millis(100)))
+        .unwrap();
+    let settle = SETTLE_MS.to_string();
+    let ev = w.events();
+    let mut d = Daemon::start_env(
+        &w.root,
+        &[
+            "--events",
+            ev.to_str().unwrap(),
+            "--settle",
+            &settle,
+            a.to_str().unwrap(),
+        ],
+        w.events(),
+        // A 400 ms watchdog: the daemon pings every 200 ms.
+        &[
+            ("NOTIFY_SOCKET", sock_path.to_str().unwrap()),
+            ("WATCHDOG_USEC", "400000"),
+        ],
+    );
+    let got = notifications_until(&sock, "READY=1");
+    // Ready only after the startup compile.
+    let evs = d.events();
+    assert!(
+        evs.iter().any(|e| is_for(e, "compile-succeeded", &a)),
+        "{}",
+        dump(&evs)
+    );
+    assert!(
+        got.iter()
+            .any(|m| m.starts_with("STATUS=watching 1 project")),
+        "{got:?}"
+    );
+    let pings = notifications_until(&sock, "WATCHDOG=1");
+    assert!(!pings.is_empty());
+    d.signal("TERM");
+    notifications_until(&sock, "STOPPING=1");
+    assert_eq!(d.wait_exit(WAIT).code(), Some(0));
+}
+
+#[test]
+fn json_logs_on_stderr() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let mut d = w.watch(&["--log-format", "json", a.to_str().unwrap()]);
+    d.startup(&[&a]);
+    d.signal("TERM");
+    assert_eq!(d.wait_exit(WAIT).code(), Some(0));
+    let log = fs::read_to_string(&d.stderr).unwrap();
+    let lines: Vec<Value> = log
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|line| serde_json::from_str(line).unwrap_or_else(|e| panic!("not JSON ({e}): {line}")))
+        .collect();
+    // At least the start and the stop are logged, as JSON objects with level and fields.
+    assert!(lines.len() >= 2, "{log}");
+    for v in &lines {
+        assert!(v.get("level").is_some() && v.get("fields").is_some(), "{v}");
+    }
+    assert!(
+        lines.iter().any(|v| v["fields"]["message"] == "stopped"),
+        "{log}"
+    );
+}
+
 #[test]
 fn sigterm_stops_cleanly() {
     let w = Workspace::new();

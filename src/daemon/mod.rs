@@ -122,6 +122,12 @@ pub async fn run(
         }),
     );
     d.apply_config(config, Instant::now());
+    tracing::info!(
+        projects = d.projects.len(),
+        roots = d.roots.len(),
+        "skillpost {} watching",
+        crate::VERSION
+    );
     d.sink.emit(
         "rescan",
         Level::Info,
@@ -185,6 +191,7 @@ pub async fn run(
             None => break,
         }
     }
+    tracing::info!(reason = %stop_reason, "stopped");
     sink.emit("stopped", Level::Info, None, json!({"reason": stop_reason}));
     Ok(())
 }
