@@ -85,6 +85,16 @@ const CASES: &[Case] = &[
         },
         iters: 5,
     },
+    // Issue 4's shape: every 4 main-line steps a 4-way branch (with a nested one).
+    Case {
+        label: "100k-branched-4x4",
+        spec: Spec {
+            steps: 100_000,
+            branch_every: 4,
+            branch_width: 4,
+        },
+        iters: 5,
+    },
 ];
 
 /// Stage names, in pipeline order.
