@@ -615,12 +615,7 @@ impl Daemon {
             // A panic is a bug, never input: report it and keep serving the other projects.
             let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| job.run()))
                 .unwrap_or_else(|_| {
-                    sink.emit(
-                        "compile-failed",
-                        Level::Error,
-                        Some(&key.display().to_string()),
-                        json!({"run_id": run_id, "diagnostics": [{"severity": "error", "code": "E000", "message": "internal error (a bug in skillpost): the compile panicked; see the log"}]}),
-                    );
+                    emit_failed(&sink, &key, run_id, 0, json!([{"severity": "error", "code": "E000", "message": "internal error (a bug in skillpost): the compile panicked; see the log"}]));
                     Outcome::Failed
                 });
             let _ = done.send(Report { key, outcome });
@@ -950,6 +945,22 @@ fn failure_text(e: &WatchFailure) -> String {
     }
 }
 
+/// The `compile-failed` event.
+fn emit_failed(
+    sink: &EventSink,
+    key: &Path,
+    run_id: u64,
+    duration_ms: u64,
+    diagnostics: serde_json::Value,
+) {
+    sink.emit(
+        "compile-failed",
+        Level::Error,
+        Some(&key.display().to_string()),
+        json!({"run_id": run_id, "duration_ms": duration_ms, "diagnostics": diagnostics}),
+    );
+}
+
 /// One compile, run on a blocking thread.
 struct Job {
     key: PathBuf,
@@ -967,6 +978,11 @@ struct Job {
 impl Job {
     fn project(&self) -> String {
         self.key.display().to_string()
+    }
+
+    /// Emits `compile-failed` with these diagnostics (JSON objects as `--format json` prints).
+    fn failed(&self, duration_ms: u64, diagnostics: serde_json::Value) {
+        emit_failed(&self.sink, &self.key, self.run_id, duration_ms, diagnostics);
     }
 
     fn run(self) -> Outcome {
@@ -1000,16 +1016,7 @@ impl Job {
         let (blackboard, program) = match config::resolve(&self.spec) {
             Ok(x) => x,
             Err(why) => {
-                self.sink.emit(
-                    "compile-failed",
-                    Level::Error,
-                    Some(&project),
-                    json!({
-                        "run_id": self.run_id,
-                        "duration_ms": 0,
-                        "diagnostics": [{"severity": "error", "code": "E101", "message": why, "file": self.key.display().to_string()}],
-                    }),
-                );
+                self.failed(0, json!([{"severity": "error", "code": Code::FileUnreadable.as_str(), "message": why, "file": project}]));
                 return Outcome::Failed;
             }
         };
@@ -1038,12 +1045,7 @@ impl Job {
                 return Outcome::Retry;
             }
             let diags: Vec<_> = c.diagnostics.iter().map(|d| d.locate(&c.sources)).collect();
-            self.sink.emit(
-                "compile-failed",
-                Level::Error,
-                Some(&project),
-                json!({"run_id": self.run_id, "duration_ms": ms(), "diagnostics": diags}),
-            );
+            self.failed(ms(), json!(diags));
             return Outcome::Compiled {
                 inputs,
                 outputs: Vec::new(),
@@ -1053,16 +1055,7 @@ impl Job {
         let applied = match compile::apply(&c) {
             Ok(a) => a,
             Err(e) => {
-                self.sink.emit(
-                    "compile-failed",
-                    Level::Error,
-                    Some(&project),
-                    json!({
-                        "run_id": self.run_id,
-                        "duration_ms": ms(),
-                        "diagnostics": [{"severity": "error", "code": Code::CannotWrite.as_str(), "message": format!("cannot write: {e}")}],
-                    }),
-                );
+                self.failed(ms(), json!([{"severity": "error", "code": Code::CannotWrite.as_str(), "message": format!("cannot write: {e}")}]));
                 return Outcome::Compiled {
                     inputs,
                     outputs: c.outputs.iter().map(|(p, _)| p.clone()).collect(),
