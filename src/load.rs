@@ -16,7 +16,8 @@ pub trait FileSource {
     fn read(&self, path: &Path) -> std::io::Result<Vec<u8>>;
 }
 
-/// Reads regular files from disk, refusing anything else and anything too large.
+/// Reads regular files from disk, refusing anything else (directories, FIFOs, devices such as
+/// `/dev/zero`) and anything larger than `max_file_size`.
 #[derive(Debug, Clone)]
 pub struct FsSource {
     pub max_file_size: u64,
@@ -33,7 +34,13 @@ impl Default for FsSource {
 impl FileSource for FsSource {
     fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
         use std::io::{Error, ErrorKind};
-        let file = std::fs::File::open(path)?;
+        use std::os::unix::fs::OpenOptionsExt;
+        // Non-blocking: opening a FIFO named by a `refURI` must not wait for a writer. The file
+        // type is checked on the open handle (no race with a rename in between).
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(rustix::fs::OFlags::NONBLOCK.bits() as i32)
+            .open(path)?;
         let meta = file.metadata()?;
         if meta.is_dir() {
             return Err(Error::new(ErrorKind::InvalidInput, "is a directory"));
@@ -82,5 +89,38 @@ impl FileSource for MemSource {
             .get(path)
             .cloned()
             .ok_or_else(|| std::io::Error::new(std::io::ErrorKind::NotFound, "not found"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refuses_what_is_not_a_regular_file() {
+        let d = tempfile::tempdir().unwrap();
+        let fs = FsSource::default();
+        let err = |p: &Path| fs.read(p).unwrap_err().to_string();
+        assert!(err(d.path()).contains("directory"));
+        assert!(err(Path::new("/dev/zero")).contains("not a regular file"));
+        // A FIFO without a writer: refused at once, not waited on.
+        let fifo = d.path().join("pipe.xml");
+        rustix::fs::mknodat(
+            rustix::fs::CWD,
+            &fifo,
+            rustix::fs::FileType::Fifo,
+            rustix::fs::Mode::from_raw_mode(0o600),
+            0,
+        )
+        .unwrap();
+        let t = std::time::Instant::now();
+        assert!(err(&fifo).contains("not a regular file"));
+        assert!(t.elapsed() < std::time::Duration::from_secs(1));
+        // Size limit.
+        let big = d.path().join("big.xml");
+        std::fs::write(&big, vec![b'a'; 100]).unwrap();
+        let small = FsSource { max_file_size: 10 };
+        assert!(small.read(&big).unwrap_err().to_string().contains("limit"));
+        assert_eq!(FsSource::default().read(&big).unwrap().len(), 100);
     }
 }

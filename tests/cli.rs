@@ -270,3 +270,34 @@ fn user_template_replaces_the_builtin_one() {
         "{src}"
     );
 }
+
+#[test]
+fn refuri_naming_a_fifo_or_a_device_is_an_error_not_a_hang() {
+    let p = project();
+    let fifo = p.path().join("pipe.xml");
+    let st = Command::new("mkfifo").arg(&fifo).status().unwrap();
+    assert!(st.success());
+    let bb = p.path().join("Blackboard.aml");
+    let original = std::fs::read_to_string(&bb).unwrap();
+    for target in ["pipe.xml", "/dev/zero"] {
+        std::fs::write(
+            &bb,
+            original.replace(
+                "<Value>sfc.xml</Value>",
+                &format!("<Value>{target}</Value>"),
+            ),
+        )
+        .unwrap();
+        let t = std::time::Instant::now();
+        let o = run(&["--format", "short", "Blackboard.aml", "out"], p.path());
+        assert!(t.elapsed() < std::time::Duration::from_secs(5), "{target}");
+        assert_eq!(o.status.code(), Some(1), "{target}: {}", stderr(&o));
+        let e = stderr(&o);
+        assert!(
+            e.contains("error[E101]") && e.contains("not a regular file"),
+            "{e}"
+        );
+        assert!(e.contains("Blackboard.aml:"), "located at the refURI: {e}");
+        assert!(!p.path().join("out.src").exists());
+    }
+}
