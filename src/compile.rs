@@ -78,6 +78,10 @@ struct Recorder<'a> {
 }
 
 impl FileSource for Recorder<'_> {
+    fn real_path(&self, path: &Path) -> Option<PathBuf> {
+        self.fs.real_path(path)
+    }
+
     fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
         let mut r = self.read.borrow_mut();
         if !r.iter().any(|p| p == path) {
@@ -127,6 +131,18 @@ impl<'a> Ctx<'a> {
         file
     }
 
+    /// Whether `path` stays inside `root`: by its text, and, where the file system can tell,
+    /// with symbolic links resolved (a link inside the folder pointing out of it leaves it).
+    fn inside(&self, path: &Path, root: &Path) -> bool {
+        if !read::normalize(&absolute(path)).starts_with(root) {
+            return false;
+        }
+        match (self.fs.real_path(path), self.fs.real_path(root)) {
+            (Some(real), Some(real_root)) => real.starts_with(real_root),
+            _ => true,
+        }
+    }
+
     /// Resolves a `refURI` and loads the file; errors are located at the reference.
     fn load_ref(&mut self, value: &str, at: &Span) -> Option<crate::diag::FileId> {
         let path = match read::resolve_ref(&self.base, value) {
@@ -139,7 +155,7 @@ impl<'a> Ctx<'a> {
             }
         };
         if let Some(root) = &self.confine
-            && !read::normalize(&absolute(&path)).starts_with(root)
+            && !self.inside(&path, root)
         {
             self.diags.push(
                 Diagnostic::error(

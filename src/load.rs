@@ -14,6 +14,12 @@ pub const DEFAULT_MAX_FILE_SIZE: u64 = 256 * 1024 * 1024;
 pub trait FileSource {
     /// Reads a whole file.
     fn read(&self, path: &Path) -> std::io::Result<Vec<u8>>;
+
+    /// The path with every symbolic link resolved, if the source knows it (for confining a
+    /// project to its folder). `None`: take the path as it is.
+    fn real_path(&self, _path: &Path) -> Option<PathBuf> {
+        None
+    }
 }
 
 /// Reads regular files from disk, refusing anything else (directories, FIFOs, devices such as
@@ -32,6 +38,10 @@ impl Default for FsSource {
 }
 
 impl FileSource for FsSource {
+    fn real_path(&self, path: &Path) -> Option<PathBuf> {
+        std::fs::canonicalize(path).ok()
+    }
+
     fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
         use std::io::{Error, ErrorKind};
         use std::os::unix::fs::OpenOptionsExt;

@@ -1328,3 +1328,28 @@ fn irl_outside_is_refused_without_allow_outside() {
         dump(&evs)
     );
 }
+
+#[test]
+fn symlink_leaving_the_project_folder_is_refused() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    // The IRL file inside the folder is a link to a file outside it.
+    let outside = w.ws().join("elsewhere.irl");
+    fs::rename(a.join("kr15-2.irl"), &outside).unwrap();
+    std::os::unix::fs::symlink(&outside, a.join("kr15-2.irl")).unwrap();
+    let mut d = w.watch(&[a.to_str().unwrap()]);
+    let evs = d.wait_for("compile-failed", WAIT, |e| is_for(e, "compile-failed", &a));
+    let failed = evs
+        .iter()
+        .find(|e| is_for(e, "compile-failed", &a))
+        .unwrap();
+    assert!(
+        failed["diagnostics"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|x| x["code"] == "E104"),
+        "{failed}"
+    );
+    assert!(!src_of(&a).exists(), "no output");
+}

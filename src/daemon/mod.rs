@@ -304,6 +304,10 @@ struct Hashing {
 }
 
 impl FileSource for Hashing {
+    fn real_path(&self, path: &Path) -> Option<PathBuf> {
+        self.fs.real_path(path)
+    }
+
     fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
         let r = self.fs.read(path);
         let h = r.as_ref().ok().map(|b| hash_bytes(b));
