@@ -417,6 +417,7 @@ impl Daemon {
 
     fn add_project(&mut self, spec: ProjectSpec, origin: Origin, settle: Duration) {
         let key = spec.path.clone();
+        remove_stale_temporaries(&key);
         let mut p = Project {
             spec,
             origin,
@@ -930,6 +931,25 @@ impl Daemon {
             ),
         }
         self.notify_status();
+    }
+}
+
+/// Removes the temporary files an interrupted run of ours left in a project folder (a crash or
+/// `kill -9` between writing and renaming). Only `.skillpost-*.tmp` files are touched; they are
+/// never anything but ours, and the daemon writes none while it sets a project up.
+fn remove_stale_temporaries(folder: &Path) {
+    for e in std::fs::read_dir(folder).into_iter().flatten().flatten() {
+        let name = e.file_name();
+        let Some(name) = name.to_str() else { continue };
+        if name.starts_with(".skillpost-")
+            && name.ends_with(".tmp")
+            && e.file_type().is_ok_and(|t| t.is_file())
+        {
+            match std::fs::remove_file(e.path()) {
+                Ok(()) => tracing::info!("removed a stale temporary file {}", e.path().display()),
+                Err(err) => tracing::warn!("cannot remove {}: {err}", e.path().display()),
+            }
+        }
     }
 }
 
