@@ -301,3 +301,71 @@ fn refuri_naming_a_fifo_or_a_device_is_an_error_not_a_hang() {
         assert!(!p.path().join("out.src").exists());
     }
 }
+
+/// Hostile inputs: each a clear, located error (or a normal result), quickly, never a crash.
+#[test]
+fn hostile_inputs_give_clear_errors_quickly() {
+    let p = project();
+    let sfc_path = p.path().join("sfc.xml");
+    let bb_path = p.path().join("Blackboard.aml");
+    let sfc = std::fs::read_to_string(&sfc_path).unwrap();
+    let bb = std::fs::read_to_string(&bb_path).unwrap();
+    let check = |what: &str, code: Option<&str>| {
+        let t = std::time::Instant::now();
+        let o = run(&["--format", "short", "Blackboard.aml", "out"], p.path());
+        assert!(
+            t.elapsed() < std::time::Duration::from_secs(10),
+            "{what}: too slow"
+        );
+        let e = stderr(&o);
+        assert!(!e.contains("panicked"), "{what}: {e}");
+        match code {
+            Some(c) => {
+                assert_eq!(o.status.code(), Some(1), "{what}: {e}");
+                assert!(e.contains(&format!("error[{c}]")), "{what}: {e}");
+            }
+            None => assert!(matches!(o.status.code(), Some(0 | 1)), "{what}: {e}"),
+        }
+    };
+    // 200,000 nested elements inside a step's addData: the readers do not recurse.
+    let deep = format!("{}{}", "<x>".repeat(200_000), "</x>".repeat(200_000));
+    std::fs::write(
+        &sfc_path,
+        sfc.replacen("<addData>", &format!("<addData>{deep}"), 1),
+    )
+    .unwrap();
+    check("deep nesting", None);
+    // A localId that does not fit in 64 bits.
+    std::fs::write(
+        &sfc_path,
+        sfc.replacen("localId=\"3\"", "localId=\"99999999999999999999999\"", 1),
+    )
+    .unwrap();
+    check("huge localId", Some("E302"));
+    std::fs::write(&sfc_path, &sfc).unwrap();
+    // A list index that does not fit in a machine word.
+    std::fs::write(
+        &bb_path,
+        bb.replacen("<Value>0</Value>", "<Value>18446744073709551616</Value>", 1),
+    )
+    .unwrap();
+    check("huge index", Some("E205"));
+    // Billion laughs: a DTD is refused before any entity is expanded.
+    let laughs = "<!DOCTYPE lolz [<!ENTITY lol \"lol\"><!ENTITY lol2 \"&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;\"><!ENTITY lol3 \"&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;\">]>";
+    std::fs::write(&bb_path, bb.replacen("?>", &format!("?>{laughs}"), 1)).unwrap();
+    check("billion laughs in the blackboard", Some("E102"));
+    std::fs::write(&bb_path, &bb).unwrap();
+    std::fs::write(&sfc_path, sfc.replacen("?>", &format!("?>{laughs}"), 1)).unwrap();
+    check("billion laughs in the SFC", Some("E102"));
+    // A list value nested beyond the limit.
+    std::fs::write(
+        &sfc_path,
+        sfc.replacen(
+            "Value=\"(100, 200, 300, 0, 90, 0)\"",
+            &format!("Value=\"{}1{}\"", "(".repeat(10_000), ")".repeat(10_000)),
+            1,
+        ),
+    )
+    .unwrap();
+    check("deep list", Some("E315"));
+}
