@@ -57,6 +57,9 @@ struct Args {
     /// Use this output template instead of the built-in one (see templates/krl.toml)
     #[arg(long, value_name = "FILE")]
     template: Option<PathBuf>,
+    /// Refuse input files larger than MB MiB (default 256)
+    #[arg(long, value_name = "MB", value_parser = clap::value_parser!(u64).range(1..=4096))]
+    max_file_size: Option<u64>,
     /// Print version
     #[arg(long, action = clap::ArgAction::Version)]
     version: Option<bool>,
@@ -116,7 +119,11 @@ fn run(a: Args) -> u8 {
     if let Some(Command::Watch(w)) = a.command {
         return watch(w);
     }
-    let fs = FsSource::default();
+    let fs = FsSource {
+        max_file_size: a
+            .max_file_size
+            .map_or(crate::load::DEFAULT_MAX_FILE_SIZE, |mb| mb * 1024 * 1024),
+    };
     let print = |c: char| {
         a.print
             .iter()

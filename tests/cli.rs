@@ -369,3 +369,35 @@ fn hostile_inputs_give_clear_errors_quickly() {
     .unwrap();
     check("deep list", Some("E315"));
 }
+
+#[test]
+fn input_larger_than_the_limit_is_refused() {
+    let p = project();
+    let sfc_path = p.path().join("sfc.xml");
+    let sfc = std::fs::read_to_string(&sfc_path).unwrap();
+    let padding = format!("<!-- {} -->", "x".repeat(1_200_000));
+    std::fs::write(&sfc_path, sfc.replacen("?>", &format!("?>{padding}"), 1)).unwrap();
+    // Under the default limit (256 MiB) it compiles.
+    let o = run(&["--validate", "Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    // With a 1 MiB limit: a located error, nothing written.
+    let o = run(
+        &[
+            "--max-file-size",
+            "1",
+            "--format",
+            "short",
+            "Blackboard.aml",
+            "out",
+        ],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    assert!(
+        e.contains("error[E101]") && e.contains("limit of 1048576 bytes"),
+        "{e}"
+    );
+    assert!(e.contains("Blackboard.aml:"), "located at the refURI: {e}");
+    assert!(!p.path().join("out.src").exists());
+}

@@ -32,6 +32,9 @@ use toml::Spanned;
 /// The quiet period when neither the file nor the command line sets one.
 pub const DEFAULT_SETTLE_MS: u64 = 100;
 
+/// The allowed values of `max_file_size_mb` / `--max-file-size` (MiB).
+pub const MAX_FILE_SIZE_MB_RANGE: std::ops::RangeInclusive<u64> = 1..=4096;
+
 /// The allowed values of `settle_ms` / `--settle`.
 pub const SETTLE_MS_RANGE: RangeInclusive<u64> = 1..=60_000;
 
@@ -46,6 +49,8 @@ pub struct Config {
     pub settle_ms: Option<u64>,
     /// Allow `refURI`s (and symlinks) that leave the project folder.
     pub allow_outside: bool,
+    /// The largest input file read, in MiB (default [`crate::load::DEFAULT_MAX_FILE_SIZE`]).
+    pub max_file_size_mb: Option<u64>,
     /// Explicit projects.
     pub projects: Vec<ProjectSpec>,
     /// Folders whose direct subfolders holding a blackboard are projects.
@@ -181,6 +186,26 @@ pub fn parse(text: &str, file: &Path) -> Result<Config, ConfigError> {
         }
     };
 
+    let max_file_size_mb = match &raw.max_file_size_mb {
+        None => None,
+        Some(v) => {
+            let n = *v.get_ref();
+            match u64::try_from(n) {
+                Ok(n) if MAX_FILE_SIZE_MB_RANGE.contains(&n) => Some(n),
+                _ => {
+                    return Err(at(
+                        Some(v.span()),
+                        format!(
+                            "`max_file_size_mb` is {n}, expected {}..={} (MiB)",
+                            MAX_FILE_SIZE_MB_RANGE.start(),
+                            MAX_FILE_SIZE_MB_RANGE.end()
+                        ),
+                    ));
+                }
+            }
+        }
+    };
+
     let mut projects: Vec<ProjectSpec> = Vec::new();
     let mut seen: Vec<(PathBuf, &Spanned<String>)> = Vec::new();
     for p in &raw.project {
@@ -216,6 +241,7 @@ pub fn parse(text: &str, file: &Path) -> Result<Config, ConfigError> {
         events,
         settle_ms,
         allow_outside: raw.allow_outside,
+        max_file_size_mb,
         projects,
         roots,
     })
@@ -457,6 +483,7 @@ struct RawConfig {
     settle_ms: Option<Spanned<i64>>,
     #[serde(default)]
     allow_outside: bool,
+    max_file_size_mb: Option<Spanned<i64>>,
     #[serde(default)]
     project: Vec<RawProject>,
     #[serde(default)]
@@ -504,6 +531,7 @@ mod tests {
 events = "/var/log/skillpost/events.jsonl"
 settle_ms = 250
 allow_outside = true
+max_file_size_mb = 64
 
 [[project]]
 path = "/srv/cells/Zelle_A"
@@ -524,6 +552,7 @@ path = "/srv/planning/projects"
                 events: Some("/var/log/skillpost/events.jsonl".into()),
                 settle_ms: Some(250),
                 allow_outside: true,
+                max_file_size_mb: Some(64),
                 projects: vec![
                     ProjectSpec {
                         path: "/srv/cells/Zelle_A".into(),
@@ -862,6 +891,13 @@ path = "."
     }
 
     #[test]
+    fn max_file_size_out_of_range_is_located() {
+        let e = parse("\nmax_file_size_mb = 0\n", &file()).unwrap_err();
+        assert_eq!((e.line, e.column), (Some(2), Some(20)), "{e}");
+        assert!(e.message.contains("1..=4096"), "{e}");
+    }
+
+    #[test]
     fn merge_precedence() {
         let cwd = std::env::current_dir().unwrap();
         let file = Config {
@@ -869,6 +905,7 @@ path = "."
             events: Some("/var/log/e.jsonl".into()),
             settle_ms: Some(300),
             allow_outside: true,
+            max_file_size_mb: None,
             projects: vec![ProjectSpec {
                 path: "/srv/A".into(),
                 blackboard: Some("A.aml".into()),

@@ -608,6 +608,10 @@ impl Daemon {
             trigger: p.trigger.take().unwrap_or("change"),
             may_retry: p.retries < MAX_RETRIES,
             confine: !self.config.allow_outside,
+            max_file_size: self
+                .config
+                .max_file_size_mb
+                .map_or(crate::load::DEFAULT_MAX_FILE_SIZE, |mb| mb * 1024 * 1024),
             run_id,
             sink: self.sink.clone(),
         };
@@ -995,6 +999,7 @@ struct Job {
     trigger: &'static str,
     may_retry: bool,
     confine: bool,
+    max_file_size: u64,
     run_id: u64,
     sink: Arc<EventSink>,
 }
@@ -1052,7 +1057,9 @@ impl Job {
         );
         let started = std::time::Instant::now();
         let fs = Hashing {
-            fs: FsSource::default(),
+            fs: FsSource {
+                max_file_size: self.max_file_size,
+            },
             seen: Default::default(),
         };
         let opts = Options {
