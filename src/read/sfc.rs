@@ -967,8 +967,15 @@ impl ListParser<'_> {
                         }
                         self.i += 1;
                     }
+                    let item = self.text[start..self.i].trim();
+                    if item.is_empty() {
+                        // Whitespace that `skip_ws` leaves (e.g. a vertical tab) is still
+                        // whitespace: `(a, \u{b})` has an empty item like `(a, )`.
+                        self.i = start;
+                        return Err(self.err("empty list item"));
+                    }
                     if self.build {
-                        items.push(Value::Scalar(self.text[start..self.i].trim().to_owned()));
+                        items.push(Value::Scalar(item.to_owned()));
                     }
                 }
             }
@@ -1095,5 +1102,8 @@ mod tests {
         assert_eq!(parse_value("(1,,2)").unwrap_err().0, 3);
         assert_eq!(parse_value("(1) x").unwrap_err().0, 4);
         assert!(parse_value(&"(".repeat(100)).is_err());
+        // Found by fuzzing: an item of whitespace `skip_ws` does not skip is still empty.
+        assert_eq!(parse_value("( \"\"`,\u{b}\r )").unwrap_err().0, 6);
+        assert_eq!(check_value("( \"\"`,\u{b}\r )").unwrap_err().0, 6);
     }
 }
