@@ -167,7 +167,11 @@ impl<'t> Stream<'t> {
     }
 
     fn syntax_error(&self, at: usize, msg: String) -> Box<Diagnostic> {
-        let at = at.min(self.text.len());
+        // The parser's position may fall inside a multi-byte character: mark the character.
+        let mut at = at.min(self.text.len());
+        while !self.text.is_char_boundary(at) {
+            at -= 1;
+        }
         let end = (at + 1).min(self.text.len()).max(at);
         Box::new(
             Diagnostic::error(Code::XmlSyntax, format!("not well-formed XML: {msg}"))
@@ -235,6 +239,17 @@ impl<'t> Stream<'t> {
     }
 
     fn run(&mut self, diags: &mut Diagnostics) -> Result<Outcome, Box<Diagnostic>> {
+        // The loader strips one byte-order mark; another one is not XML (and the parser would
+        // skip it silently, shifting every position it reports).
+        if self.text.starts_with('\u{feff}') {
+            return Err(Box::new(
+                Diagnostic::error(
+                    Code::XmlSyntax,
+                    "not well-formed XML: a second byte-order mark at the start of the file",
+                )
+                .at(self.span(0..3)),
+            ));
+        }
         let mut reader = quick_xml::Reader::from_str(self.text);
         // Stack of open elements' local names.
         let mut stack: Vec<&'t str> = Vec::new();
@@ -1062,6 +1077,16 @@ mod tests {
             "{}",
             d[0].message
         );
+    }
+
+    #[test]
+    fn second_bom_is_a_located_syntax_error() {
+        // Found by fuzzing: two byte-order marks, then garbage.
+        let (sfc, d) = read("\u{feff}]]<essoe\u{16}reso");
+        assert!(sfc.is_none());
+        assert_eq!(d.len(), 1);
+        assert_eq!(d[0].code, Code::XmlSyntax);
+        assert_eq!(d[0].span.as_ref().unwrap().range, 0..3);
     }
 
     #[test]
