@@ -651,7 +651,7 @@ fn scan_attribute(s: &[u8]) -> Result<AttrShape, String> {
             }
             Token::End { name: n, end } => match open.pop() {
                 Some(o) => {
-                    if s[o] != s[n.clone()] {
+                    if !same_name(&s[o], &s[n.clone()]) {
                         return Err(not_attr("mismatched end tag"));
                     }
                     if open.is_empty()
@@ -662,7 +662,7 @@ fn scan_attribute(s: &[u8]) -> Result<AttrShape, String> {
                     }
                 }
                 None => {
-                    if s[n] != s[name.clone()] {
+                    if !same_name(&s[n], &s[name.clone()]) {
                         return Err(not_attr("mismatched end tag"));
                     }
                     if end != s.len() {
@@ -760,6 +760,13 @@ fn escape(value: &str) -> Result<String, String> {
         }
     }
     Ok(out)
+}
+
+/// Whether a start and an end tag's names match as the XML parser reads them: an empty prefix
+/// (`<:Attribute>`) is no prefix (found by fuzzing: roxmltree pairs `<Attribute>` with
+/// `</:Attribute>`, so the splice must too).
+fn same_name(a: &[u8], b: &[u8]) -> bool {
+    a.strip_prefix(b":").unwrap_or(a) == b.strip_prefix(b":").unwrap_or(b)
 }
 
 #[cfg(test)]
@@ -1484,5 +1491,19 @@ mod tests {
         let e = write_back(&p, SAMPLE.as_bytes(), false, 0..5, "x").unwrap_err();
         assert_eq!(e.kind(), io::ErrorKind::InvalidInput);
         assert_eq!(fs::read_to_string(&p).unwrap(), SAMPLE);
+    }
+
+    #[test]
+    fn empty_prefix_pairs_like_the_parser_pairs_it() {
+        for doc in ["<Attribute></:Attribute>", "<:Attribute></Attribute>"] {
+            assert!(roxmltree::Document::parse(doc).is_ok());
+            let new = splice_value(doc, 0..doc.len(), "x").unwrap().unwrap();
+            let d = roxmltree::Document::parse(&new).unwrap();
+            let v = d
+                .descendants()
+                .find(|n| n.tag_name().name() == "Value")
+                .unwrap();
+            assert_eq!(v.text(), Some("x"), "{new}");
+        }
     }
 }
