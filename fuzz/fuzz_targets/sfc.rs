@@ -1,0 +1,48 @@
+//! The SFC reader: bytes → `read::xml::load` → `read_sfc` (the streaming reader) → `plan::plan`
+//! → the listings; every variable the reader accepted parses and looks up; the diagnostics in
+//! every format.
+#![no_main]
+
+mod common;
+
+use libfuzzer_sys::fuzz_target;
+use skillpost::model::ElementKind;
+use skillpost::read::sfc::{Lookup, lookup, parse_value, read_sfc};
+use skillpost::{plan, print};
+
+fuzz_target!(|data: &[u8]| {
+    let (sources, mut diags, file) = common::load("/p/sfc.xml", data);
+    let sfc = file.and_then(|f| read_sfc(&sources, f, &mut diags));
+    if let Some(sfc) = &sfc {
+        let _ = print::sfc(sfc);
+        for e in &sfc.elements {
+            if let ElementKind::Step(step) = &e.kind {
+                for v in &step.variables {
+                    // The reader keeps only values whose syntax it checked.
+                    assert!(
+                        parse_value(&v.raw).is_ok(),
+                        "the reader kept a malformed value: {:?}",
+                        v.raw
+                    );
+                    let _ = v.value();
+                    for path in [&[][..], &[0], &[1, 0], &[0, 2, 1]] {
+                        if let Lookup::Scalar(s) = lookup(&v.raw, path) {
+                            assert!(v.raw.contains(s));
+                        }
+                    }
+                }
+            }
+        }
+        if let Some(p) = plan::plan(sfc, &mut diags) {
+            let steps = p.steps();
+            for &i in &steps {
+                assert!(sfc.elements[i].kind.is_step(), "plan step {i} is not a step");
+            }
+            let _ = print::flow(sfc, &p);
+            let _ = print::order(sfc, &p);
+        }
+    }
+    let mut diags = diags;
+    diags.sort();
+    common::render_all(&diags.into_vec(), &sources);
+});
