@@ -36,7 +36,10 @@ fuzz_target!(|data: &[u8]| {
         if let Some(p) = plan::plan(sfc, &mut diags) {
             let steps = p.steps();
             for &i in &steps {
-                assert!(sfc.elements[i].kind.is_step(), "plan step {i} is not a step");
+                assert!(
+                    sfc.elements[i].kind.is_step(),
+                    "plan step {i} is not a step"
+                );
             }
             let _ = print::flow(sfc, &p);
             let _ = print::order(sfc, &p);

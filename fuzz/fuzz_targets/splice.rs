@@ -35,7 +35,11 @@ fuzz_target!(|data: &[u8]| {
     let Some((value, part)) = rest.split_once('\0') else {
         return;
     };
-    let doc = if sel & 1 == 1 { wrap(part) } else { part.to_owned() };
+    let doc = if sel & 1 == 1 {
+        wrap(part)
+    } else {
+        part.to_owned()
+    };
     let pick = (sel >> 1) as usize;
 
     if let Some(xml) = common::parse_xml(&doc) {
@@ -60,7 +64,9 @@ fn wrap(attr: &str) -> String {
 
 fn representable(value: &str) -> bool {
     value.chars().all(|c| {
-        !(((c as u32) < 0x20 && !matches!(c, '\t' | '\n' | '\r')) || c == '\u{FFFE}' || c == '\u{FFFF}')
+        !(((c as u32) < 0x20 && !matches!(c, '\t' | '\n' | '\r'))
+            || c == '\u{FFFE}'
+            || c == '\u{FFFF}')
     })
 }
 
@@ -80,7 +86,12 @@ fn shape(attr: roxmltree::Node) -> (Vec<String>, Option<usize>) {
 
 fn attributes(node: roxmltree::Node) -> Vec<(String, String)> {
     node.attributes()
-        .map(|a| (format!("{:?}", a.namespace()) + a.name(), a.value().to_owned()))
+        .map(|a| {
+            (
+                format!("{:?}", a.namespace()) + a.name(),
+                a.value().to_owned(),
+            )
+        })
         .collect()
 }
 
@@ -104,7 +115,10 @@ fn well_formed(doc: &str, attr: roxmltree::Node, value: &str) {
         }
         Ok(Some(new)) => new,
     };
-    assert_ne!(before, want, "rewrote a value the reader already reads as right");
+    assert_ne!(
+        before, want,
+        "rewrote a value the reader already reads as right"
+    );
     outside_unchanged(doc, &new, &range);
     let Some(xml) = common::parse_xml(&new) else {
         panic!("the spliced document is not well-formed:\n{new}");
@@ -116,11 +130,22 @@ fn well_formed(doc: &str, attr: roxmltree::Node, value: &str) {
         panic!("no element at the Attribute's start after the splice:\n{new}");
     };
     assert_eq!(a2.tag_name(), attr.tag_name());
-    assert_eq!(attributes(a2), attributes(attr), "the Attribute's attributes changed");
-    assert_eq!(common::reader_value(a2), want, "the value does not read back:\n{new}");
+    assert_eq!(
+        attributes(a2),
+        attributes(attr),
+        "the Attribute's attributes changed"
+    );
+    assert_eq!(
+        common::reader_value(a2),
+        want,
+        "the value does not read back:\n{new}"
+    );
     let (names1, value1) = shape(attr);
     let (names2, value2) = shape(a2);
-    assert_eq!(names1, names2, "the Attribute's other children changed:\n{new}");
+    assert_eq!(
+        names1, names2,
+        "the Attribute's other children changed:\n{new}"
+    );
     let value2 = value2.expect("a Value after the splice");
     match value1 {
         Some(i) => assert_eq!(value2, i, "the Value moved"),
@@ -151,8 +176,16 @@ fn outside_unchanged(doc: &str, new: &str, range: &Range<usize>) {
     let (d, n) = (doc.as_bytes(), new.as_bytes());
     let tail = d.len() - range.end;
     assert!(n.len() >= range.start + tail, "the result is too short");
-    assert_eq!(&n[..range.start], &d[..range.start], "bytes before the range changed");
-    assert_eq!(&n[n.len() - tail..], &d[range.end..], "bytes after the range changed");
+    assert_eq!(
+        &n[..range.start],
+        &d[..range.start],
+        "bytes before the range changed"
+    );
+    assert_eq!(
+        &n[n.len() - tail..],
+        &d[range.end..],
+        "bytes after the range changed"
+    );
 }
 
 fn any_range(doc: &str, pick: usize, value: &str) {
