@@ -166,13 +166,28 @@ impl Daemon {
     }
 
     fn start_env(cwd: &Path, args: &[&str], events: PathBuf, env: &[(&str, &str)]) -> Self {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_skillpost"));
+        cmd.arg("watch").args(args).envs(env.iter().copied());
+        Self::start_command(cmd, cwd, events)
+    }
+
+    /// Starts `skillpost watch <args>` in a user namespace of its own (`unshare --user
+    /// --map-root-user`) after running the shell command `setup` there; the namespace's inotify
+    /// limits (`/proc/sys/user/max_inotify_*`) can be lowered without touching the machine's.
+    fn start_unshared(cwd: &Path, args: &[&str], events: PathBuf, setup: &str) -> Self {
+        let mut cmd = Command::new("unshare");
+        cmd.args(["--user", "--map-root-user", "sh", "-c"])
+            .arg(format!("{setup} && exec \"$0\" watch \"$@\""))
+            .arg(env!("CARGO_BIN_EXE_skillpost"))
+            .args(args);
+        Self::start_command(cmd, cwd, events)
+    }
+
+    fn start_command(mut cmd: Command, cwd: &Path, events: PathBuf) -> Self {
         let stderr = cwd.join("stderr.log");
-        let child = Command::new(env!("CARGO_BIN_EXE_skillpost"))
-            .arg("watch")
-            .args(args)
+        let child = cmd
             .current_dir(cwd)
             .env("RUST_LOG", "info")
-            .envs(env.iter().copied())
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(fs::File::create(&stderr).unwrap())
@@ -1352,4 +1367,122 @@ fn symlink_leaving_the_project_folder_is_refused() {
         "{failed}"
     );
     assert!(!src_of(&a).exists(), "no output");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Watch limits: exhausted inotify resources and a full event queue
+// ---------------------------------------------------------------------------------------------
+
+/// Whether this machine lets an unprivileged user namespace be created and its inotify limits
+/// be set (both tests below need it; containers may forbid it).
+fn user_namespace_limits_available() -> bool {
+    Command::new("unshare")
+        .args(["--user", "--map-root-user", "sh", "-c"])
+        .arg("echo 5 > /proc/sys/user/max_inotify_watches")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+/// Starts the daemon with the namespace limit `limit` set to `value`, checks that the project
+/// is polled with a `watch-degraded` naming `reason`, and that an edit is still compiled.
+fn degraded_watch_still_compiles(limit: &str, value: u32, reason: &str) {
+    if !user_namespace_limits_available() {
+        eprintln!("skipped: no user namespaces here (unshare --user --map-root-user failed)");
+        return;
+    }
+    let w = Workspace::new();
+    let a = w.project("A");
+    let settle = SETTLE_MS.to_string();
+    let ev = w.events();
+    let mut d = Daemon::start_unshared(
+        &w.root,
+        &[
+            "--events",
+            ev.to_str().unwrap(),
+            "--settle",
+            &settle,
+            a.to_str().unwrap(),
+        ],
+        w.events(),
+        &format!("echo {value} > /proc/sys/user/{limit}"),
+    );
+    d.startup(&[&a]);
+    let evs = d.events();
+    let degraded = evs
+        .iter()
+        .find(|e| is_for(e, "watch-degraded", &a))
+        .unwrap_or_else(|| panic!("no watch-degraded:\n{}", dump(&evs)));
+    assert_eq!(degraded["backend"], "poll", "{degraded}");
+    assert!(
+        degraded["reason"].as_str().unwrap().contains(reason),
+        "{degraded}"
+    );
+    let watching = evs.iter().find(|e| is_for(e, "watching", &a)).unwrap();
+    assert_eq!(watching["backend"], "poll", "{}", dump(&evs));
+    let m = d.mark();
+    fs::write(a.join("sfc.xml"), sfc_with_x(654)).unwrap();
+    d.wait_for(
+        "compile-succeeded while polling",
+        Duration::from_secs(8),
+        |e| is_after(e, "compile-succeeded", &a, m),
+    );
+    assert!(read_string(&src_of(&a)).contains(&ptp_with_x(654)));
+}
+
+#[test]
+fn exhausted_inotify_watches_fall_back_to_polling() {
+    degraded_watch_still_compiles("max_inotify_watches", 0, "max_user_watches");
+}
+
+#[test]
+fn no_inotify_instance_falls_back_to_polling() {
+    degraded_watch_still_compiles(
+        "max_inotify_instances",
+        0,
+        "native file watching unavailable",
+    );
+}
+
+/// The kernel's event queue overflows while the daemon is stopped (SIGSTOP): the edit made
+/// after the queue was full has no event of its own, and only the rescan finds it.
+#[test]
+fn event_queue_overflow_rescans_and_finds_the_lost_change() {
+    let max: usize = fs::read_to_string("/proc/sys/fs/inotify/max_queued_events")
+        .ok()
+        .and_then(|s| s.trim().parse().ok())
+        .unwrap_or(usize::MAX);
+    if max > 100_000 {
+        eprintln!("skipped: fs.inotify.max_queued_events is {max}; too many files to overflow it");
+        return;
+    }
+    let w = Workspace::new();
+    let a = w.project("A");
+    let mut d = w.watch(&[a.to_str().unwrap()]);
+    d.startup(&[&a]);
+    let m = d.mark();
+    d.signal("STOP");
+    // Each new file queues at least one event (create; then modify and close-write).
+    for i in 0..max + 1000 {
+        fs::write(a.join(format!("noise-{i}.txt")), b"x").unwrap();
+    }
+    fs::write(a.join("sfc.xml"), sfc_with_x(987)).unwrap();
+    d.signal("CONT");
+    let evs = d.wait_for("rescan (overflow)", Duration::from_secs(20), |e| {
+        seq(e) > m && is(e, "rescan") && e["reason"] == "overflow"
+    });
+    let evs = d.wait_for("compile-succeeded after the rescan", WAIT, |e| {
+        is_after(e, "compile-succeeded", &a, m)
+    });
+    let started = evs
+        .iter()
+        .find(|e| is_after(e, "compile-started", &a, m))
+        .unwrap();
+    assert_eq!(started["trigger"], "rescan", "{}", dump(&evs));
+    assert!(
+        read_string(&src_of(&a)).contains(&ptp_with_x(987)),
+        "{}",
+        dump(&evs)
+    );
 }
