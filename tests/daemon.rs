@@ -1469,7 +1469,7 @@ fn event_queue_overflow_rescans_and_finds_the_lost_change() {
     }
     fs::write(a.join("sfc.xml"), sfc_with_x(987)).unwrap();
     d.signal("CONT");
-    let evs = d.wait_for("rescan (overflow)", Duration::from_secs(20), |e| {
+    d.wait_for("rescan (overflow)", Duration::from_secs(20), |e| {
         seq(e) > m && is(e, "rescan") && e["reason"] == "overflow"
     });
     let evs = d.wait_for("compile-succeeded after the rescan", WAIT, |e| {
