@@ -37,6 +37,26 @@ impl Default for FsSource {
     }
 }
 
+/// Opens a regular file for reading, without blocking: opening a FIFO (named by a `refURI`, or
+/// sitting in a polled folder) must not wait for a writer. The file type is checked on the open
+/// handle, so a rename in between cannot slip another kind of file in.
+pub fn open_regular(path: &Path) -> std::io::Result<(std::fs::File, std::fs::Metadata)> {
+    use std::io::{Error, ErrorKind};
+    use std::os::unix::fs::OpenOptionsExt;
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(rustix::fs::OFlags::NONBLOCK.bits() as i32)
+        .open(path)?;
+    let meta = file.metadata()?;
+    if meta.is_dir() {
+        return Err(Error::new(ErrorKind::InvalidInput, "is a directory"));
+    }
+    if !meta.is_file() {
+        return Err(Error::new(ErrorKind::InvalidInput, "is not a regular file"));
+    }
+    Ok((file, meta))
+}
+
 impl FileSource for FsSource {
     fn real_path(&self, path: &Path) -> Option<PathBuf> {
         std::fs::canonicalize(path).ok()
@@ -44,20 +64,7 @@ impl FileSource for FsSource {
 
     fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
         use std::io::{Error, ErrorKind};
-        use std::os::unix::fs::OpenOptionsExt;
-        // Non-blocking: opening a FIFO named by a `refURI` must not wait for a writer. The file
-        // type is checked on the open handle (no race with a rename in between).
-        let file = std::fs::OpenOptions::new()
-            .read(true)
-            .custom_flags(rustix::fs::OFlags::NONBLOCK.bits() as i32)
-            .open(path)?;
-        let meta = file.metadata()?;
-        if meta.is_dir() {
-            return Err(Error::new(ErrorKind::InvalidInput, "is a directory"));
-        }
-        if !meta.is_file() {
-            return Err(Error::new(ErrorKind::InvalidInput, "is not a regular file"));
-        }
+        let (file, meta) = open_regular(path)?;
         if meta.len() > self.max_file_size {
             return Err(Error::new(
                 ErrorKind::InvalidData,

@@ -22,6 +22,7 @@
 
 pub mod config;
 pub mod events;
+mod poll;
 pub mod settle;
 mod watch;
 

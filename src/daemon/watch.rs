@@ -1,5 +1,5 @@
 //! Directory watches: notify's native backend (inotify) where the file system reports changes,
-//! polling where it does not (NFS, SMB/CIFS, FUSE, or when inotify watches run out).
+//! polling ([`StatPoller`]) where it does not (NFS, SMB/CIFS, FUSE, or when inotify runs out).
 //!
 //! Every watch is a non-recursive watch on a directory, counted per user, so a directory shared
 //! by several projects (a common IRL folder) is watched once. Events and errors arrive on one
@@ -9,7 +9,9 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use notify::{PollWatcher, RecommendedWatcher, RecursiveMode, Watcher};
+use notify::{RecommendedWatcher, RecursiveMode, Watcher};
+
+use super::poll::StatPoller;
 use tokio::sync::mpsc::UnboundedSender;
 
 /// What the watchers report.
@@ -64,7 +66,7 @@ pub fn needs_polling(dir: &Path) -> Option<&'static str> {
 pub struct Watchers {
     tx: UnboundedSender<WatchMsg>,
     native: Option<RecommendedWatcher>,
-    poll: Option<PollWatcher>,
+    poll: Option<StatPoller>,
     poll_interval: Duration,
     dirs: HashMap<PathBuf, (usize, Backend)>,
 }
@@ -92,21 +94,17 @@ impl Watchers {
         }
     }
 
-    fn poller(&mut self) -> Result<&mut PollWatcher, WatchFailure> {
+    fn poller(&mut self) -> Result<&mut StatPoller, WatchFailure> {
         if self.poll.is_none() {
             let t = self.tx.clone();
-            let w = PollWatcher::new(
+            let w = StatPoller::new(
                 move |r: notify::Result<notify::Event>| {
                     let _ = t.send(match r {
                         Ok(e) => WatchMsg::Event(e),
                         Err(e) => WatchMsg::Error(e),
                     });
                 },
-                // notify's poller compares write times in whole seconds: without comparing
-                // contents, an edit in the same second as the one before would be missed.
-                notify::Config::default()
-                    .with_poll_interval(self.poll_interval)
-                    .with_compare_contents(true),
+                self.poll_interval,
             )
             .map_err(|e| WatchFailure::Other(e.to_string()))?;
             self.poll = Some(w);
@@ -161,9 +159,13 @@ impl Watchers {
                 None => why = Some("native file watching unavailable".into()),
             }
         }
-        self.poller()?
-            .watch(dir, RecursiveMode::NonRecursive)
-            .map_err(|e| WatchFailure::Other(e.to_string()))?;
+        self.poller()?.watch(dir).map_err(|e| {
+            if e.kind() == std::io::ErrorKind::NotFound {
+                WatchFailure::Missing
+            } else {
+                WatchFailure::Other(e.to_string())
+            }
+        })?;
         Ok((Backend::Poll, why))
     }
 
@@ -180,7 +182,10 @@ impl Watchers {
         self.dirs.remove(dir);
         let _ = match b {
             Backend::Native => self.native.as_mut().map(|w| w.unwatch(dir)),
-            Backend::Poll => self.poll.as_mut().map(|w| w.unwatch(dir)),
+            Backend::Poll => self.poll.as_mut().map(|w| {
+                w.unwatch(dir);
+                Ok(())
+            }),
         };
     }
 
@@ -192,7 +197,10 @@ impl Watchers {
         };
         let _ = match b {
             Backend::Native => self.native.as_mut().map(|w| w.unwatch(dir)),
-            Backend::Poll => self.poll.as_mut().map(|w| w.unwatch(dir)),
+            Backend::Poll => self.poll.as_mut().map(|w| {
+                w.unwatch(dir);
+                Ok(())
+            }),
         };
         let (backend, _) = self.start(dir, poll)?;
         self.dirs.insert(dir.to_owned(), (n, backend));
