@@ -1486,3 +1486,35 @@ fn event_queue_overflow_rescans_and_finds_the_lost_change() {
         dump(&evs)
     );
 }
+
+/// A project's IRL file is a symbolic link to a shared library file outside the folder (allowed
+/// by `allow_outside`): an edit of the library file itself recompiles the project, although no
+/// event names the link.
+#[test]
+fn edit_behind_a_symlink_recompiles() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let lib = w.root.join("lib");
+    fs::create_dir(&lib).unwrap();
+    let shared = lib.join("shared.irl");
+    fs::rename(a.join("kr15-2.irl"), &shared).unwrap();
+    std::os::unix::fs::symlink(&shared, a.join("kr15-2.irl")).unwrap();
+    let cfg = w.config(
+        "settle_ms = 50\nevents = \"ev.jsonl\"\nallow_outside = true\n\n\
+         [[project]]\npath = \"ws/A\"\n",
+    );
+    let mut d = w.watch_config(&cfg);
+    d.startup(&[&a]);
+    let m = d.mark();
+    let text =
+        read_string(&shared).replace("PTP {X, Y, Z, A, B, C}", "PTP {X, Y, Z, A, B, C} C_PTP");
+    fs::write(&shared, text).unwrap();
+    let evs = d.wait_for("the project recompiles", WAIT, |e| {
+        is_after(e, "compile-succeeded", &a, m)
+    });
+    assert!(
+        read_string(&src_of(&a)).contains("C 0} C_PTP"),
+        "{}",
+        dump(&evs)
+    );
+}

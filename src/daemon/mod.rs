@@ -1070,6 +1070,7 @@ impl Job {
         };
         let c = compile::compile(&fs, &blackboard, &opts);
         let mut inputs = fs.seen.into_inner().unwrap_or_else(|p| p.into_inner());
+        add_link_targets(&mut inputs);
         let ms = || started.elapsed().as_millis() as u64;
         if c.has_errors() {
             if self.may_retry && half_written(&c, &inputs) {
@@ -1141,6 +1142,24 @@ impl Job {
             outputs: c.outputs.iter().map(|(p, _)| p.clone()).collect(),
             again,
         }
+    }
+}
+
+/// Adds, for every input reached through a symbolic link (the file or a folder on its path), the
+/// file the link resolves to, with the same hash: an edit of that file is an event in its own
+/// folder, which names the target, not the link. Its folder is then watched and routed like any
+/// input's. (A link in the middle of a chain that is pointed elsewhere is not seen until the
+/// next event of the project.)
+fn add_link_targets(inputs: &mut HashMap<PathBuf, Option<u64>>) {
+    let targets: Vec<(PathBuf, Option<u64>)> = inputs
+        .iter()
+        .filter_map(|(path, hash)| {
+            let real = std::fs::canonicalize(path).ok()?;
+            (real != *path).then_some((real, *hash))
+        })
+        .collect();
+    for (real, hash) in targets {
+        inputs.entry(real).or_insert(hash);
     }
 }
 
