@@ -366,12 +366,17 @@ pub struct Applied {
 
 /// Writes the outputs (atomically, only when their bytes change), then the write-back.
 pub fn apply(c: &Compilation) -> std::io::Result<Applied> {
-    let mut outputs = Vec::new();
-    for (path, f) in &c.outputs {
-        let o = crate::write::write_if_changed(path, f.text.as_bytes())
-            .map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", path.display())))?;
-        outputs.push((path.clone(), o == crate::write::WriteOutcome::Written));
-    }
+    // The `.src` and `.dat` only work as a pair: both are replaced or neither is.
+    let files: Vec<(&Path, &[u8])> = c
+        .outputs
+        .iter()
+        .map(|(p, f)| (p.as_path(), f.text.as_bytes()))
+        .collect();
+    let outputs = crate::write::write_all_if_changed(&files)?
+        .into_iter()
+        .zip(&c.outputs)
+        .map(|(o, (p, _))| (p.clone(), o == crate::write::WriteOutcome::Written))
+        .collect();
     let write_back = match &c.write_back {
         Some(wb) => Some(
             crate::write::write_back(

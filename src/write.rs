@@ -3,6 +3,8 @@
 //! - [`write_if_changed`] writes a file through a temporary file and a rename, and leaves a file
 //!   that already holds the bytes alone (not even its mtime changes), so file watchers see no
 //!   event for an unchanged output.
+//! - [`write_all_if_changed`] does the same for several files as one change (the `.src` and
+//!   `.dat` pair): every changed file is replaced, or none is.
 //! - [`splice_value`] puts a value into the write-back target's `Value` by changing only the
 //!   bytes of that value (SPEC.md 5, "Write-back"); it is a pure function on the text.
 //! - [`write_back`] joins the two: it writes the spliced blackboard only if the file still holds
@@ -190,12 +192,35 @@ enum Replaced {
 
 /// The atomic replacement behind [`write_if_changed`] and [`write_back`]. `still_ok` is asked,
 /// with the resolved target path, after the temporary file is synced and right before the
-/// rename; `false` removes the temporary file and leaves the target alone.
+/// rename; `false` leaves the target alone.
 fn replace_file(
     path: &Path,
     bytes: &[u8],
     still_ok: &mut dyn FnMut(&Path) -> io::Result<bool>,
 ) -> io::Result<Replaced> {
+    let Some(staged) = stage(path, bytes)? else {
+        return Ok(Replaced::Unchanged);
+    };
+    if !still_ok(&staged.target)? {
+        return Ok(Replaced::Refused);
+    }
+    staged.commit()?;
+    Ok(Replaced::Written)
+}
+
+/// New bytes for a file, written and synced to a temporary file in the target's folder, ready
+/// to be renamed over it. Dropping it removes the temporary file.
+struct Staged {
+    /// The file to replace (a symbolic link resolved).
+    target: PathBuf,
+    dir: PathBuf,
+    /// Whether the target exists (and is a regular file).
+    existed: bool,
+    tmp: tempfile::NamedTempFile,
+}
+
+/// Stages `bytes` for `path`; `None` when the file already holds exactly these bytes.
+fn stage(path: &Path, bytes: &[u8]) -> io::Result<Option<Staged>> {
     let target = resolve_link(path)?;
     let existing = match fs::metadata(&target) {
         Ok(m) => Some(m),
@@ -211,7 +236,7 @@ fn replace_file(
         }
         if m.len() == bytes.len() as u64 {
             match fs::read(&target) {
-                Ok(old) if old == bytes => return Ok(Replaced::Unchanged),
+                Ok(old) if old == bytes => return Ok(None),
                 Ok(_) => {}
                 Err(e) if e.kind() == io::ErrorKind::NotFound => {}
                 Err(e) => return Err(e),
@@ -230,19 +255,154 @@ fn replace_file(
     tmp.as_file_mut().write_all(bytes)?;
     set_metadata(tmp.as_file(), existing.as_ref())?;
     tmp.as_file().sync_all()?;
-    if !still_ok(&target)? {
-        return Ok(Replaced::Refused);
+    Ok(Some(Staged {
+        target,
+        dir,
+        existed: existing.is_some(),
+        tmp,
+    }))
+}
+
+impl Staged {
+    /// Renames the temporary file over the target. On failure the temporary file is removed.
+    fn commit(self) -> io::Result<()> {
+        // On failure the `PersistError` hands the temporary file back; dropping it removes it.
+        self.tmp.persist(&self.target).map_err(|e| e.error)?;
+        sync_dir(&self.dir);
+        Ok(())
     }
-    // On failure the `PersistError` hands the temporary file back; dropping it removes it.
-    tmp.persist(&target).map_err(|e| e.error)?;
+}
+
+/// Best effort, see the doc comment of [`write_if_changed`].
+fn sync_dir(dir: &Path) {
     #[cfg(unix)]
-    {
-        // Best effort, see the doc comment of `write_if_changed`.
-        if let Ok(d) = fs::File::open(&dir) {
-            let _ = d.sync_all();
+    if let Ok(d) = fs::File::open(dir) {
+        let _ = d.sync_all();
+    }
+    #[cfg(not(unix))]
+    let _ = dir;
+}
+
+/// Writes several files as one change (a program's `.src` and `.dat`, which only work as a
+/// pair): each file is written like [`write_if_changed`] does, and either every changed file is
+/// replaced or none is.
+///
+/// 1. Every file's new bytes are staged (temporary file written and synced); files that already
+///    hold their bytes are left out. Any error: the temporary files are removed, nothing else
+///    was touched.
+/// 2. Every file about to be replaced gets a second name, `.skillpost-<random>.tmp` in its
+///    folder (a hard link, or a copy where links are refused), to put it back with. Any error:
+///    as in 1.
+/// 3. The renames, in the order given. If one fails, the files already renamed are put back
+///    (their second name renamed over them; a file that did not exist before is removed), and
+///    the error says so. Only if putting one back fails too does the error name the file that
+///    still holds the previous version.
+///
+/// A crash (`kill -9`, power loss) between two renames of step 3 can still leave one new and
+/// one old file, each whole; the daemon compiles every project when it starts and writes the
+/// pair again, as does the next command-line run. Stale second names are temporary files and are
+/// removed like those.
+///
+/// Errors name the file they concern.
+pub fn write_all_if_changed(files: &[(&Path, &[u8])]) -> io::Result<Vec<WriteOutcome>> {
+    write_all_with_hook(files, &mut |_| {})
+}
+
+/// [`write_all_if_changed`] with a hook run before each rename of step 3 (tests use it to make a
+/// rename fail).
+fn write_all_with_hook(
+    files: &[(&Path, &[u8])],
+    before_rename: &mut dyn FnMut(&Path),
+) -> io::Result<Vec<WriteOutcome>> {
+    let named =
+        |path: &Path, e: io::Error| io::Error::new(e.kind(), format!("{}: {e}", path.display()));
+    let mut outcomes = Vec::with_capacity(files.len());
+    let mut staged = Vec::new();
+    for (path, bytes) in files {
+        let s = stage(path, bytes).map_err(|e| named(path, e))?;
+        outcomes.push(if s.is_some() {
+            WriteOutcome::Written
+        } else {
+            WriteOutcome::Unchanged
+        });
+        staged.extend(s);
+    }
+    let mut backups = Vec::with_capacity(staged.len());
+    for s in &staged {
+        backups.push(if s.existed {
+            Some(second_name(&s.target, &s.dir).map_err(|e| named(&s.target, e))?)
+        } else {
+            None
+        });
+    }
+    let targets: Vec<(PathBuf, PathBuf)> = staged
+        .iter()
+        .map(|s| (s.target.clone(), s.dir.clone()))
+        .collect();
+    for (k, s) in staged.into_iter().enumerate() {
+        before_rename(&s.target);
+        if let Err(e) = s.tmp.persist(&s.target).map_err(|e| e.error) {
+            let mut msg = format!("{}: {e}", targets[k].0.display());
+            for j in (0..k).rev() {
+                let (target, dir) = &targets[j];
+                match put_back(backups[j].take(), target) {
+                    Ok(()) => {
+                        msg.push_str(&format!("; {} was put back as it was", target.display()))
+                    }
+                    Err(why) => msg.push_str(&format!(
+                        "; {} could not be put back: {why}",
+                        target.display()
+                    )),
+                }
+                sync_dir(dir);
+            }
+            return Err(io::Error::new(e.kind(), msg));
+        }
+        sync_dir(&targets[k].1);
+    }
+    Ok(outcomes)
+}
+
+/// Undoes the rename over `target`: its second name goes back (or, when it had none because it
+/// did not exist, the new file is removed). The error says where the previous version is kept.
+fn put_back(second: Option<tempfile::TempPath>, target: &Path) -> Result<(), String> {
+    let Some(second) = second else {
+        return fs::remove_file(target).map_err(|e| e.to_string());
+    };
+    // From here the second name is no longer removed on drop: it may be all that is left.
+    let second = second.keep().map_err(|e| e.error.to_string())?;
+    fs::rename(&second, target)
+        .map_err(|e| format!("{e}; the previous version is kept as {}", second.display()))
+}
+
+/// A second name for `target` in `dir`, removed when dropped: a hard link, or a copy where the
+/// file system or the kernel (`fs.protected_hardlinks`) refuses the link.
+fn second_name(target: &Path, dir: &Path) -> io::Result<tempfile::TempPath> {
+    second_name_with(target, dir, &|from, to| fs::hard_link(from, to))
+}
+
+/// [`second_name`] with the link operation given (tests make it fail).
+fn second_name_with(
+    target: &Path,
+    dir: &Path,
+    link: &dyn Fn(&Path, &Path) -> io::Result<()>,
+) -> io::Result<tempfile::TempPath> {
+    let builder = {
+        let mut b = tempfile::Builder::new();
+        b.prefix(".skillpost-").suffix(".tmp");
+        b
+    };
+    match builder.make_in(dir, |p| link(target, p)) {
+        Ok(f) => Ok(f.into_temp_path()),
+        Err(_) => {
+            let mut copy = builder.tempfile_in(dir)?;
+            let mut from = fs::File::open(target)?;
+            io::copy(&mut from, copy.as_file_mut())?;
+            set_metadata(copy.as_file(), Some(&from.metadata()?))?;
+            copy.as_file().sync_all()?;
+            Ok(copy.into_temp_path())
         }
     }
-    Ok(Replaced::Written)
 }
 
 /// The file a symbolic link finally points to; any other path as it is.
@@ -1505,5 +1665,103 @@ mod tests {
                 .unwrap();
             assert_eq!(v.text(), Some("x"), "{new}");
         }
+    }
+
+    // ---- several files as one change ---------------------------------------------------------
+
+    /// A folder with `a.src` and `a.dat` holding "old src" and "old dat".
+    fn pair() -> (tempfile::TempDir, PathBuf, PathBuf) {
+        let t = tempfile::tempdir().unwrap();
+        let (src, dat) = (t.path().join("a.src"), t.path().join("a.dat"));
+        fs::write(&src, "old src").unwrap();
+        fs::write(&dat, "old dat").unwrap();
+        (t, src, dat)
+    }
+
+    /// A hook that replaces `victim` by a folder right before its rename, so the rename fails.
+    fn sabotage(victim: PathBuf) -> impl FnMut(&Path) {
+        move |p: &Path| {
+            if p == victim {
+                let _ = fs::remove_file(p);
+                fs::create_dir(p).unwrap();
+                fs::write(p.join("x"), "x").unwrap();
+            }
+        }
+    }
+
+    #[test]
+    fn pair_written_together_and_unchanged_left_alone() {
+        let (t, src, dat) = pair();
+        let out = write_all_if_changed(&[(&src, b"new src"), (&dat, b"old dat")]).unwrap();
+        assert_eq!(out, [WriteOutcome::Written, WriteOutcome::Unchanged]);
+        assert_eq!(fs::read_to_string(&src).unwrap(), "new src");
+        assert_eq!(fs::read_to_string(&dat).unwrap(), "old dat");
+        let out = write_all_if_changed(&[(&src, b"new src"), (&dat, b"new dat")]).unwrap();
+        assert_eq!(out, [WriteOutcome::Unchanged, WriteOutcome::Written]);
+        assert!(temp_leftovers(t.path()).is_empty(), "no second names left");
+    }
+
+    #[test]
+    fn a_failed_second_rename_puts_the_first_file_back() {
+        let (t, src, dat) = pair();
+        #[cfg(unix)]
+        set_mode(&src, 0o640);
+        let err = write_all_with_hook(
+            &[(&src, b"new src"), (&dat, b"new dat")],
+            &mut sabotage(dat.clone()),
+        )
+        .unwrap_err();
+        let msg = err.to_string();
+        assert!(msg.starts_with(&format!("{}: ", dat.display())), "{msg}");
+        assert!(msg.contains("a.src was put back as it was"), "{msg}");
+        assert_eq!(fs::read_to_string(&src).unwrap(), "old src");
+        #[cfg(unix)]
+        assert_eq!(mode(&src), 0o640, "the same file, mode and all");
+        assert!(
+            temp_leftovers(t.path()).is_empty(),
+            "{:?}",
+            temp_leftovers(t.path())
+        );
+    }
+
+    #[test]
+    fn a_failed_second_rename_removes_a_first_file_that_was_new() {
+        let t = tempfile::tempdir().unwrap();
+        let (src, dat) = (t.path().join("a.src"), t.path().join("a.dat"));
+        let err = write_all_with_hook(
+            &[(&src, b"new src"), (&dat, b"new dat")],
+            &mut sabotage(dat.clone()),
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("put back"), "{err}");
+        assert!(!src.exists(), "the new file is gone again");
+        assert!(temp_leftovers(t.path()).is_empty());
+    }
+
+    #[test]
+    fn a_second_file_that_cannot_be_staged_leaves_the_first_untouched() {
+        let (t, src, dat) = pair();
+        fs::remove_file(&dat).unwrap();
+        fs::create_dir(&dat).unwrap();
+        let err = write_all_if_changed(&[(&src, b"new src"), (&dat, b"new dat")]).unwrap_err();
+        assert!(err.to_string().contains("not a regular file"), "{err}");
+        assert_eq!(fs::read_to_string(&src).unwrap(), "old src");
+        assert!(temp_leftovers(t.path()).is_empty());
+    }
+
+    #[test]
+    fn second_name_is_a_copy_with_the_mode_where_links_fail() {
+        let (t, src, _) = pair();
+        #[cfg(unix)]
+        set_mode(&src, 0o604);
+        let refuse = |_: &Path, _: &Path| Err(io::Error::from(io::ErrorKind::PermissionDenied));
+        let second = second_name_with(&src, t.path(), &refuse).unwrap();
+        assert_eq!(fs::metadata(&second).unwrap().len(), 7);
+        fs::write(&src, "changed").unwrap();
+        assert_eq!(fs::read_to_string(&second).unwrap(), "old src");
+        #[cfg(unix)]
+        assert_eq!(mode(&second), 0o604);
+        drop(second);
+        assert!(temp_leftovers(t.path()).is_empty());
     }
 }

@@ -264,14 +264,47 @@ fn command_line_on_a_full_disk_exits_2_and_leaves_no_partial_file() {
     );
     assert!(temporaries(&p).is_empty(), "{:?}", temporaries(&p));
     assert_eq!(fs::read(p.join("Blackboard.aml")).unwrap(), bb_before);
-    // Whatever output exists is whole (the .src is written first; it may fit).
-    if let Ok(src) = fs::read_to_string(p.join("out.src")) {
-        assert!(src.ends_with("END\r\n"), "partial .src");
+    // The pair is written together or not at all.
+    assert!(!p.join("out.src").exists(), "no .src without its .dat");
+    assert!(!p.join("out.dat").exists());
+}
+
+/// One output of the pair cannot be replaced (an immutable file, as a file owned by someone
+/// else in a sticky folder would be): the other is not written either.
+#[test]
+fn an_output_that_cannot_be_replaced_keeps_the_pair_unwritten() {
+    for locked in ["out.dat", "out.src"] {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("p");
+        copy_project(&p);
+        let bb_before = fs::read(p.join("Blackboard.aml")).unwrap();
+        fs::write(p.join(locked), "stale\r\n").unwrap();
+        let Some(_imm) = Immutable::set(&p.join(locked)) else {
+            eprintln!("skipped: chattr +i is not available here");
+            return;
+        };
+        let o = Command::new(env!("CARGO_BIN_EXE_skillpost"))
+            .args(["Blackboard.aml", "out"])
+            .current_dir(&p)
+            .output()
+            .unwrap();
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{locked}: {e}");
+        assert!(
+            e.contains(locked) && e.contains("not permitted"),
+            "{locked}: {e}"
+        );
+        assert_eq!(fs::read_to_string(p.join(locked)).unwrap(), "stale\r\n");
+        let other = if locked == "out.dat" {
+            "out.src"
+        } else {
+            "out.dat"
+        };
+        assert!(
+            !p.join(other).exists(),
+            "{locked} locked, {other} written: {e}"
+        );
+        assert!(temporaries(&p).is_empty(), "{:?}", temporaries(&p));
+        assert_eq!(fs::read(p.join("Blackboard.aml")).unwrap(), bb_before);
     }
-    assert!(
-        !p.join("out.dat").exists()
-            || fs::read_to_string(p.join("out.dat"))
-                .unwrap()
-                .ends_with("ENDDAT\r\n")
-    );
 }
