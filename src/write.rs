@@ -358,7 +358,15 @@ fn write_all_with_hook(
             }
             return Err(io::Error::new(e.kind(), msg));
         }
-        sync_dir(&targets[k].1);
+    }
+    // The second names go first (they are only needed until the last rename), then the
+    // folders are synced once each.
+    drop(backups);
+    let mut dirs: Vec<&PathBuf> = targets.iter().map(|(_, d)| d).collect();
+    dirs.sort();
+    dirs.dedup();
+    for d in dirs {
+        sync_dir(d);
     }
     Ok(outcomes)
 }

@@ -132,8 +132,13 @@ fn wait_compiled(ws: &Path, v: u32, seed: u64, it: u32) {
         let done = PROJECTS.iter().all(|p| {
             fs::read_to_string(ws.join(p).join("Blackboard.src")).is_ok_and(|t| t.contains(&want))
         });
-        if done {
+        // The daemon removes its temporary files (of the pair's renames) right after writing
+        // the `.src`; a stale one would stay.
+        if done && PROJECTS.iter().all(|p| temporaries(&ws.join(p)).is_empty()) {
             return;
+        }
+        if done && Instant::now() >= deadline {
+            return; // the caller reports the temporaries left
         }
         assert!(
             Instant::now() < deadline,
