@@ -134,15 +134,8 @@ impl StatPoller {
         let listing = list(dir)?;
         let mut entries = HashMap::new();
         for (name, stamp) in listing {
-            let hash = self.shared.hash_of(&dir.join(&name), stamp);
-            entries.insert(
-                name,
-                Entry {
-                    stamp,
-                    hash,
-                    hash_until: Some(now + COARSE_CLOCK),
-                },
-            );
+            let entry = self.shared.changed_entry(&dir.join(&name), stamp, now);
+            entries.insert(name, entry);
         }
         state.entries = Some(entries);
         self.generation += 1;
@@ -194,6 +187,16 @@ impl Shared {
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
                 Err(_) => return None,
             }
+        }
+    }
+
+    /// The entry of a file seen new or changed at `now`: hashed, and hashed again at every scan
+    /// of the next [`COARSE_CLOCK`].
+    fn changed_entry(&self, path: &Path, stamp: Stamp, now: Instant) -> Entry {
+        Entry {
+            stamp,
+            hash: self.hash_of(path, stamp),
+            hash_until: Some(now + COARSE_CLOCK),
         }
     }
 
@@ -261,22 +264,14 @@ impl Shared {
             let entry = match before.remove(&name) {
                 None => {
                     events.push(event(EventKind::Create(CreateKind::Any), path.clone()));
-                    Entry {
-                        stamp,
-                        hash: self.hash_of(&path, stamp),
-                        hash_until: Some(now + COARSE_CLOCK),
-                    }
+                    self.changed_entry(&path, stamp, now)
                 }
                 Some(e) if e.stamp != stamp => {
                     events.push(event(
                         EventKind::Modify(ModifyKind::Data(DataChange::Any)),
                         path.clone(),
                     ));
-                    Entry {
-                        stamp,
-                        hash: self.hash_of(&path, stamp),
-                        hash_until: Some(now + COARSE_CLOCK),
-                    }
+                    self.changed_entry(&path, stamp, now)
                 }
                 Some(e) => match e.hash_until {
                     Some(until) if now <= until => {
