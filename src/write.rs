@@ -248,10 +248,7 @@ fn stage(path: &Path, bytes: &[u8]) -> io::Result<Option<Staged>> {
         _ => PathBuf::from("."),
     };
     // Dropping `tmp` (every early return below) removes the temporary file.
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".skillpost-")
-        .suffix(".tmp")
-        .tempfile_in(&dir)?;
+    let mut tmp = temp_builder().tempfile_in(&dir)?;
     tmp.as_file_mut().write_all(bytes)?;
     set_metadata(tmp.as_file(), existing.as_ref())?;
     tmp.as_file().sync_all()?;
@@ -271,6 +268,14 @@ impl Staged {
         sync_dir(&self.dir);
         Ok(())
     }
+}
+
+/// Names our temporary files `.skillpost-<random>.tmp`: the daemon removes stale ones by that
+/// pattern, and its watchers ignore them.
+fn temp_builder() -> tempfile::Builder<'static, 'static> {
+    let mut b = tempfile::Builder::new();
+    b.prefix(".skillpost-").suffix(".tmp");
+    b
 }
 
 /// Best effort, see the doc comment of [`write_if_changed`].
@@ -395,11 +400,7 @@ fn second_name_with(
     dir: &Path,
     link: &dyn Fn(&Path, &Path) -> io::Result<()>,
 ) -> io::Result<tempfile::TempPath> {
-    let builder = {
-        let mut b = tempfile::Builder::new();
-        b.prefix(".skillpost-").suffix(".tmp");
-        b
-    };
+    let builder = temp_builder();
     match builder.make_in(dir, |p| link(target, p)) {
         Ok(f) => Ok(f.into_temp_path()),
         Err(_) => {

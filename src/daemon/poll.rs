@@ -129,15 +129,18 @@ impl StatPoller {
     /// Starts polling `dir`. Its present state is taken now (no events for it), so a change
     /// made after this returns is reported.
     pub fn watch(&mut self, dir: &Path) -> std::io::Result<()> {
-        let mut state = DirState::default();
         let now = Instant::now();
-        let listing = list(dir)?;
-        let mut entries = HashMap::new();
-        for (name, stamp) in listing {
-            let entry = self.shared.changed_entry(&dir.join(&name), stamp, now);
-            entries.insert(name, entry);
-        }
-        state.entries = Some(entries);
+        let entries = list(dir)?
+            .into_iter()
+            .map(|(name, stamp)| {
+                let entry = self.shared.changed_entry(&dir.join(&name), stamp, now);
+                (name, entry)
+            })
+            .collect();
+        let state = DirState {
+            entries: Some(entries),
+            failing: false,
+        };
         self.generation += 1;
         self.shared
             .lock()
@@ -334,15 +337,19 @@ mod tests {
     use std::fs;
     use std::sync::mpsc::Receiver;
 
+    /// A poller whose thread scans only every hour: scans happen through `scan_now`.
     fn poller() -> (StatPoller, Receiver<notify::Result<Event>>) {
+        poller_every(Duration::from_secs(3600))
+    }
+
+    fn poller_every(interval: Duration) -> (StatPoller, Receiver<notify::Result<Event>>) {
         let (tx, rx) = mpsc::channel();
         let tx = Mutex::new(tx);
-        // An interval far beyond the test: scans happen only through `scan_now`.
         let p = StatPoller::new(
             move |e| {
                 let _ = tx.lock().unwrap().send(e);
             },
-            Duration::from_secs(3600),
+            interval,
         )
         .unwrap();
         (p, rx)
@@ -498,15 +505,7 @@ mod tests {
     fn the_thread_scans_every_interval_and_stops_on_drop() {
         let t = tempfile::tempdir().unwrap();
         let d = t.path();
-        let (tx, rx) = mpsc::channel();
-        let tx = Mutex::new(tx);
-        let mut p = StatPoller::new(
-            move |e| {
-                let _ = tx.lock().unwrap().send(e);
-            },
-            Duration::from_millis(20),
-        )
-        .unwrap();
+        let (mut p, rx) = poller_every(Duration::from_millis(20));
         p.watch(d).unwrap();
         fs::write(d.join("a"), "1").unwrap();
         let e = rx.recv_timeout(Duration::from_secs(5)).unwrap().unwrap();

@@ -73,18 +73,9 @@ pub struct Watchers {
 
 impl Watchers {
     pub fn new(tx: UnboundedSender<WatchMsg>, poll_interval: Duration) -> Self {
-        let t = tx.clone();
-        let native = RecommendedWatcher::new(
-            move |r: notify::Result<notify::Event>| {
-                let _ = t.send(match r {
-                    Ok(e) => WatchMsg::Event(e),
-                    Err(e) => WatchMsg::Error(e),
-                });
-            },
-            notify::Config::default(),
-        )
-        .map_err(|e| tracing::warn!("native file watching unavailable, polling instead: {e}"))
-        .ok();
+        let native = RecommendedWatcher::new(forward(tx.clone()), notify::Config::default())
+            .map_err(|e| tracing::warn!("native file watching unavailable, polling instead: {e}"))
+            .ok();
         Watchers {
             tx,
             native,
@@ -96,17 +87,8 @@ impl Watchers {
 
     fn poller(&mut self) -> Result<&mut StatPoller, WatchFailure> {
         if self.poll.is_none() {
-            let t = self.tx.clone();
-            let w = StatPoller::new(
-                move |r: notify::Result<notify::Event>| {
-                    let _ = t.send(match r {
-                        Ok(e) => WatchMsg::Event(e),
-                        Err(e) => WatchMsg::Error(e),
-                    });
-                },
-                self.poll_interval,
-            )
-            .map_err(|e| WatchFailure::Other(e.to_string()))?;
+            let w = StatPoller::new(forward(self.tx.clone()), self.poll_interval)
+                .map_err(|e| WatchFailure::Other(e.to_string()))?;
             self.poll = Some(w);
         }
         Ok(self.poll.as_mut().expect("just set"))
@@ -180,13 +162,7 @@ impl Watchers {
         }
         let b = *b;
         self.dirs.remove(dir);
-        let _ = match b {
-            Backend::Native => self.native.as_mut().map(|w| w.unwatch(dir)),
-            Backend::Poll => self.poll.as_mut().map(|w| {
-                w.unwatch(dir);
-                Ok(())
-            }),
-        };
+        self.unwatch(dir, b);
     }
 
     /// Renews the watch of a directory that was deleted and created again (the kernel dropped
@@ -195,22 +171,45 @@ impl Watchers {
         let Some(&(n, b)) = self.dirs.get(dir) else {
             return self.add(dir, poll).map(|(b, _)| b);
         };
-        let _ = match b {
-            Backend::Native => self.native.as_mut().map(|w| w.unwatch(dir)),
-            Backend::Poll => self.poll.as_mut().map(|w| {
-                w.unwatch(dir);
-                Ok(())
-            }),
-        };
+        self.unwatch(dir, b);
         let (backend, _) = self.start(dir, poll)?;
         self.dirs.insert(dir.to_owned(), (n, backend));
         Ok(backend)
+    }
+
+    /// Ends the watch of `dir` by the backend that has it (errors ignored: the watch may be gone
+    /// with the directory).
+    fn unwatch(&mut self, dir: &Path, backend: Backend) {
+        match backend {
+            Backend::Native => {
+                if let Some(w) = self.native.as_mut() {
+                    let _ = w.unwatch(dir);
+                }
+            }
+            Backend::Poll => {
+                if let Some(w) = self.poll.as_mut() {
+                    w.unwatch(dir);
+                }
+            }
+        }
     }
 
     /// The number of directories watched.
     #[allow(clippy::len_without_is_empty)]
     pub fn len(&self) -> usize {
         self.dirs.len()
+    }
+}
+
+/// The event handler of both backends: every event and error onto the daemon's channel.
+fn forward(
+    tx: UnboundedSender<WatchMsg>,
+) -> impl Fn(notify::Result<notify::Event>) + Send + Sync + 'static {
+    move |r| {
+        let _ = tx.send(match r {
+            Ok(e) => WatchMsg::Event(e),
+            Err(e) => WatchMsg::Error(e),
+        });
     }
 }
 
