@@ -76,25 +76,36 @@ impl Workspace {
 
     /// Starts `skillpost watch --events ev.jsonl --settle 50 <args>` in the workspace.
     fn watch(&self, args: &[&str]) -> Daemon {
-        let settle = SETTLE_MS.to_string();
-        let ev = self.events();
-        let mut all = vec!["--events", ev.to_str().unwrap(), "--settle", &settle];
-        all.extend_from_slice(args);
-        Daemon::start(&self.root, &all, self.events())
+        self.watch_with(args, |all| Daemon::start(&self.root, all, self.events()))
     }
 
     /// Starts `skillpost watch` with polling instead of inotify (as on NFS/SMB/FUSE).
     fn watch_polling(&self, args: &[&str]) -> Daemon {
+        self.watch_with(args, |all| {
+            Daemon::start_env(
+                &self.root,
+                all,
+                self.events(),
+                &[("SKILLPOST_FORCE_POLL", "1")],
+            )
+        })
+    }
+
+    /// Starts `skillpost watch` in a user namespace of its own after the shell command `setup`
+    /// (see [`Daemon::start_unshared`]).
+    fn watch_unshared(&self, args: &[&str], setup: &str) -> Daemon {
+        self.watch_with(args, |all| {
+            Daemon::start_unshared(&self.root, all, self.events(), setup)
+        })
+    }
+
+    /// Calls `start` with `--events ev.jsonl --settle 50 <args>`.
+    fn watch_with(&self, args: &[&str], start: impl FnOnce(&[&str]) -> Daemon) -> Daemon {
         let settle = SETTLE_MS.to_string();
         let ev = self.events();
         let mut all = vec!["--events", ev.to_str().unwrap(), "--settle", &settle];
         all.extend_from_slice(args);
-        Daemon::start_env(
-            &self.root,
-            &all,
-            self.events(),
-            &[("SKILLPOST_FORCE_POLL", "1")],
-        )
+        start(&all)
     }
 
     /// Starts `skillpost watch --config <file>`; the events file comes from the configuration.
@@ -1394,18 +1405,8 @@ fn degraded_watch_still_compiles(limit: &str, value: u32, reason: &str) {
     }
     let w = Workspace::new();
     let a = w.project("A");
-    let settle = SETTLE_MS.to_string();
-    let ev = w.events();
-    let mut d = Daemon::start_unshared(
-        &w.root,
-        &[
-            "--events",
-            ev.to_str().unwrap(),
-            "--settle",
-            &settle,
-            a.to_str().unwrap(),
-        ],
-        w.events(),
+    let mut d = w.watch_unshared(
+        &[a.to_str().unwrap()],
         &format!("echo {value} > /proc/sys/user/{limit}"),
     );
     d.startup(&[&a]);
