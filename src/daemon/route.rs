@@ -1,0 +1,226 @@
+//! Routing of file events: which project an event concerns, whether it can have changed an
+//! input, new projects in roots, and project folders that come and go.
+
+use std::path::{Path, PathBuf};
+
+use tokio::time::Instant;
+
+use super::config::{self, ProjectSpec};
+use super::events::Event;
+use super::project::{Origin, holds_blackboard};
+use super::watch::{self, Backend, WatchMsg};
+use super::{Daemon, settle_of};
+
+impl Daemon {
+    pub(super) fn on_watch(&mut self, msg: WatchMsg, now: Instant) {
+        match msg {
+            WatchMsg::Error(e) => {
+                tracing::warn!("watcher error: {e}");
+                self.rescan("watcher-error", Some(e.to_string()), now);
+            }
+            WatchMsg::Event(e) => {
+                if e.need_rescan() {
+                    self.rescan("overflow", None, now);
+                    return;
+                }
+                self.route(&e, now);
+            }
+        }
+    }
+
+    /// Every project checks its inputs again (a compile only where bytes changed).
+    pub(super) fn rescan(&mut self, reason: &str, error: Option<String>, now: Instant) {
+        self.sink.emit(
+            None,
+            Event::Rescan {
+                reason: reason.into(),
+                projects: None,
+                error,
+            },
+        );
+        for p in self.projects.values_mut() {
+            p.trigger.get_or_insert("rescan");
+            p.sched.change(now);
+        }
+    }
+
+    pub(super) fn route(&mut self, e: &notify::Event, now: Instant) {
+        use notify::EventKind as K;
+        use notify::event::{AccessKind, AccessMode, MetadataKind, ModifyKind};
+        let kind = e.kind;
+        // Reads and metadata-only changes (`touch`, chmod) never change bytes.
+        let closed_write = matches!(kind, K::Access(AccessKind::Close(AccessMode::Write)));
+        if matches!(kind, K::Access(_)) && !closed_write {
+            return;
+        }
+        // Polling reports a new write time (the content hash then tells a `touch` from an edit);
+        // other metadata (attributes, permissions; inotify's `touch`) never change bytes.
+        if matches!(kind, K::Modify(ModifyKind::Metadata(m)) if m != MetadataKind::WriteTime) {
+            return;
+        }
+        let data_write = matches!(
+            kind,
+            K::Modify(ModifyKind::Data(_)) | K::Modify(ModifyKind::Any)
+        );
+        // Only these say that a project folder itself came or went.
+        let structural = matches!(
+            kind,
+            K::Create(_) | K::Remove(_) | K::Modify(ModifyKind::Name(_)) | K::Any | K::Other
+        );
+        for path in &e.paths {
+            if watch::is_noise(path) {
+                continue;
+            }
+            self.route_roots(path, now);
+            if structural && self.projects.contains_key(path) {
+                self.folder_event(path, now);
+            }
+            let Some(keys) = path.parent().and_then(|d| self.by_dir.get(d)) else {
+                continue;
+            };
+            let keys: Vec<PathBuf> = keys.iter().cloned().collect();
+            for k in keys {
+                let Some(p) = self.projects.get_mut(&k) else {
+                    continue;
+                };
+                if p.outputs.contains(path) {
+                    continue;
+                }
+                let is_input = p.inputs.contains_key(path);
+                let new_blackboard = path.parent() == Some(k.as_path())
+                    && path.file_name().is_some_and(config::is_blackboard_name);
+                if !(is_input || new_blackboard) {
+                    continue;
+                }
+                // Polling reports no closes: only native watches track open writes.
+                if data_write && p.backend == Backend::Native {
+                    p.writing.entry(path.clone()).or_insert(now);
+                } else {
+                    // Closed, created, removed or renamed: the write is complete.
+                    p.writing.remove(path);
+                }
+                p.changed.insert(path.clone());
+                p.trigger.get_or_insert("change");
+                p.sched.change(now);
+            }
+        }
+    }
+
+    /// An event inside a root: a new subfolder, or a blackboard appearing in one.
+    pub(super) fn route_roots(&mut self, path: &Path, now: Instant) {
+        let Some(parent) = path.parent() else { return };
+        let roots: Vec<PathBuf> = self.roots.keys().cloned().collect();
+        for root in roots {
+            let folder = if parent == root {
+                path.to_owned()
+            } else if parent.parent() == Some(root.as_path()) {
+                parent.to_owned()
+            } else {
+                continue;
+            };
+            if folder.is_dir() && !self.roots[&root].contains(&folder) {
+                if self.watchers.add(&folder, self.force_poll).is_ok() {
+                    self.roots
+                        .get_mut(&root)
+                        .expect("root")
+                        .insert(folder.clone());
+                }
+            } else if !folder.exists() && self.roots.get_mut(&root).expect("root").remove(&folder) {
+                self.watchers.remove(&folder);
+            }
+            if !self.projects.contains_key(&folder) && holds_blackboard(&folder) {
+                let settle = settle_of(&self.config);
+                self.add_project(
+                    ProjectSpec {
+                        path: folder.clone(),
+                        blackboard: None,
+                        program: None,
+                    },
+                    Origin::Root(root.clone()),
+                    settle,
+                );
+                if let Some(p) = self.projects.get_mut(&folder) {
+                    p.trigger = Some("new-project");
+                    p.sched.change(now);
+                }
+            }
+        }
+    }
+
+    /// The project folder itself was created, removed or renamed.
+    pub(super) fn folder_event(&mut self, key: &Path, now: Instant) {
+        let Some(mut p) = self.projects.remove(key) else {
+            return;
+        };
+        if key.is_dir() {
+            let was_missing = p.missing;
+            match self.watchers.renew(key, self.force_poll) {
+                Ok(b) => {
+                    p.missing = false;
+                    p.backend = b;
+                    p.watched.insert(key.to_owned());
+                }
+                Err(_) => p.missing = true,
+            }
+            if was_missing && !p.missing {
+                self.sink
+                    .emit(Some(&Self::key_str(key)), folder_back(p.backend));
+            }
+            p.trigger.get_or_insert("folder-created");
+            p.force = true;
+            p.sched.change(now);
+        } else if !p.missing {
+            p.missing = true;
+            self.sink.emit(
+                Some(&Self::key_str(key)),
+                Event::WatchDegraded {
+                    root: None,
+                    reason: "the project folder was removed; waiting for it".into(),
+                    backend: Some("none"),
+                },
+            );
+        }
+        self.projects.insert(key.to_owned(), p);
+    }
+
+    /// Missing project folders that appeared without an event we saw (their parent was missing
+    /// too): watch and compile them.
+    pub(super) fn look_for_missing(&mut self, now: Instant) {
+        let missing: Vec<PathBuf> = self
+            .projects
+            .iter()
+            .filter(|(k, p)| p.missing && k.is_dir())
+            .map(|(k, _)| k.clone())
+            .collect();
+        for k in missing {
+            let Some(mut p) = self.projects.remove(&k) else {
+                continue;
+            };
+            let mut dirs = p.watched.clone();
+            dirs.insert(k.clone());
+            if let Some(parent) = k.parent() {
+                dirs.insert(parent.to_owned());
+            }
+            p.watched.remove(&k);
+            self.set_watches(&mut p, dirs);
+            if !p.missing {
+                self.sink
+                    .emit(Some(&Self::key_str(&k)), folder_back(p.backend));
+                p.trigger = Some("folder-created");
+                p.force = true;
+                p.sched.change(now);
+            }
+            self.projects.insert(k, p);
+        }
+    }
+}
+
+/// The `watching` event of a project folder that came back.
+pub(super) fn folder_back(backend: Backend) -> Event {
+    Event::Watching {
+        root: None,
+        blackboard: None,
+        backend: backend.as_str(),
+        reason: Some("the project folder is back".into()),
+    }
+}
