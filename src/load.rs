@@ -57,34 +57,41 @@ pub fn open_regular(path: &Path) -> std::io::Result<(std::fs::File, std::fs::Met
     Ok((file, meta))
 }
 
+/// Reads a whole regular file of at most `max` bytes, without blocking: the one read of the
+/// daemon's (inputs, content hashes, half-written checks, the configuration) and of
+/// [`FsSource`]. A FIFO, a device (`/dev/zero`), a directory or a larger file is an error at
+/// once; nothing is read past `max + 1` bytes, so a file that grows meanwhile cannot fill memory.
+pub fn read_limited(path: &Path, max: u64) -> std::io::Result<Vec<u8>> {
+    use std::io::{Error, ErrorKind};
+    let (file, meta) = open_regular(path)?;
+    if meta.len() > max {
+        return Err(Error::new(
+            ErrorKind::InvalidData,
+            format!(
+                "is {} bytes, more than the limit of {max} bytes",
+                meta.len()
+            ),
+        ));
+    }
+    let mut buf = Vec::with_capacity(meta.len() as usize + 1);
+    // Read at most one byte past the limit, in case the file grew since the metadata call.
+    file.take(max + 1).read_to_end(&mut buf)?;
+    if buf.len() as u64 > max {
+        return Err(Error::new(
+            ErrorKind::InvalidData,
+            format!("is larger than the limit of {max} bytes"),
+        ));
+    }
+    Ok(buf)
+}
+
 impl FileSource for FsSource {
     fn real_path(&self, path: &Path) -> Option<PathBuf> {
         std::fs::canonicalize(path).ok()
     }
 
     fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
-        use std::io::{Error, ErrorKind};
-        let (file, meta) = open_regular(path)?;
-        if meta.len() > self.max_file_size {
-            return Err(Error::new(
-                ErrorKind::InvalidData,
-                format!(
-                    "is {} bytes, more than the limit of {} bytes",
-                    meta.len(),
-                    self.max_file_size
-                ),
-            ));
-        }
-        let mut buf = Vec::with_capacity(meta.len() as usize + 1);
-        // Read at most one byte past the limit, in case the file grew since the metadata call.
-        file.take(self.max_file_size + 1).read_to_end(&mut buf)?;
-        if buf.len() as u64 > self.max_file_size {
-            return Err(Error::new(
-                ErrorKind::InvalidData,
-                format!("is larger than the limit of {} bytes", self.max_file_size),
-            ));
-        }
-        Ok(buf)
+        read_limited(path, self.max_file_size)
     }
 }
 

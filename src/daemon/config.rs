@@ -35,6 +35,9 @@ pub const DEFAULT_SETTLE_MS: u64 = 100;
 /// The allowed values of `max_file_size_mb` / `--max-file-size` (MiB).
 pub const MAX_FILE_SIZE_MB_RANGE: std::ops::RangeInclusive<u64> = 1..=4096;
 
+/// The largest configuration file read (1 MiB).
+pub const MAX_CONFIG_SIZE: u64 = 1024 * 1024;
+
 /// The allowed values of `settle_ms` / `--settle`.
 pub const SETTLE_MS_RANGE: RangeInclusive<u64> = 1..=60_000;
 
@@ -114,12 +117,17 @@ impl std::error::Error for ConfigError {}
 /// folder (made absolute: if the file path itself is relative, join with the current dir first).
 pub fn load(path: &Path) -> Result<Config, ConfigError> {
     let file = absolute(path);
-    let text = std::fs::read_to_string(&file).map_err(|e| ConfigError {
+    let error = |message: String| ConfigError {
         file: Some(file.clone()),
         line: None,
         column: None,
-        message: format!("cannot read the configuration: {e}"),
-    })?;
+        message,
+    };
+    // Non-blocking and size-limited: a FIFO must not block a reload, `/dev/zero` not fill memory.
+    let bytes = crate::load::read_limited(&file, MAX_CONFIG_SIZE)
+        .map_err(|e| error(format!("cannot read the configuration: {e}")))?;
+    let text = String::from_utf8(bytes)
+        .map_err(|e| error(format!("the configuration is not UTF-8: {e}")))?;
     parse(&text, &file)
 }
 

@@ -42,8 +42,15 @@ pub(super) fn hash_bytes(b: &[u8]) -> u64 {
     h.finish()
 }
 
+/// The hash of a file's bytes; `None` for anything but a readable regular file. Read through
+/// [`crate::load::read_limited`]: a FIFO or device among the inputs is refused at once (a
+/// blocking read hung the project's compile for good), and nothing past the largest file size a
+/// configuration can allow is read.
 pub(super) fn hash_file(p: &Path) -> Option<u64> {
-    std::fs::read(p).ok().map(|b| hash_bytes(&b))
+    let max = config::MAX_FILE_SIZE_MB_RANGE.end() * 1024 * 1024;
+    crate::load::read_limited(p, max)
+        .ok()
+        .map(|b| hash_bytes(&b))
 }
 
 /// Reads files like [`FsSource`] and keeps the hash of every file's bytes.

@@ -68,12 +68,14 @@ impl Daemon {
             K::Create(_) | K::Remove(_) | K::Modify(ModifyKind::Name(_)) | K::Any | K::Other
         );
         for path in &e.paths {
-            if watch::is_noise(path) {
-                continue;
-            }
-            self.route_roots(path, now);
-            if structural && self.projects.contains_key(path) {
-                self.folder_event(path, now);
+            // Editor noise (`x.xml~`, `4913`, `*.swp`, `*.tmp`) starts nothing, unless it is an
+            // input: a file is tracked by what the last compile read, whatever its name.
+            let noise = watch::is_noise(path);
+            if !noise {
+                self.route_roots(path, now);
+                if structural && self.projects.contains_key(path) {
+                    self.folder_event(path, now);
+                }
             }
             let Some(keys) = path.parent().and_then(|d| self.by_dir.get(d)) else {
                 continue;
@@ -87,7 +89,8 @@ impl Daemon {
                     continue;
                 }
                 let is_input = p.inputs.contains_key(path);
-                let new_blackboard = path.parent() == Some(k.as_path())
+                let new_blackboard = !noise
+                    && path.parent() == Some(k.as_path())
                     && path.file_name().is_some_and(config::is_blackboard_name);
                 if !(is_input || new_blackboard) {
                     continue;
