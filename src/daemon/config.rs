@@ -6,6 +6,7 @@
 //! events = "/var/log/skillpost/events.jsonl"   # optional
 //! settle_ms = 100                              # optional, 1..=60000
 //! allow_outside = false                        # optional
+//! forget_after_s = 30                          # optional, 1..=86400
 //! [[project]]
 //! path = "cells/Zelle_A"
 //! blackboard = "Zelle_A.aml"   # optional
@@ -38,6 +39,12 @@ pub const MAX_FILE_SIZE_MB_RANGE: std::ops::RangeInclusive<u64> = 1..=4096;
 /// The largest configuration file read (1 MiB).
 pub const MAX_CONFIG_SIZE: u64 = 1024 * 1024;
 
+/// How long a root's project folder may be gone before the project is forgotten (seconds).
+pub const DEFAULT_FORGET_AFTER_S: u64 = 30;
+
+/// The allowed values of `forget_after_s`.
+pub const FORGET_AFTER_S_RANGE: RangeInclusive<u64> = 1..=86_400;
+
 /// The allowed values of `settle_ms` / `--settle`.
 pub const SETTLE_MS_RANGE: RangeInclusive<u64> = 1..=60_000;
 
@@ -54,6 +61,9 @@ pub struct Config {
     pub allow_outside: bool,
     /// The largest input file read, in MiB (default [`crate::load::DEFAULT_MAX_FILE_SIZE`]).
     pub max_file_size_mb: Option<u64>,
+    /// A root's project whose folder has been gone this many seconds is forgotten (default
+    /// [`DEFAULT_FORGET_AFTER_S`]).
+    pub forget_after_s: Option<u64>,
     /// Explicit projects.
     pub projects: Vec<ProjectSpec>,
     /// Folders whose direct subfolders holding a blackboard are projects.
@@ -72,6 +82,11 @@ pub struct ProjectSpec {
 }
 
 impl Config {
+    /// How long a root's project folder may be gone before the project is forgotten.
+    pub fn forget_after(&self) -> Duration {
+        Duration::from_secs(self.forget_after_s.unwrap_or(DEFAULT_FORGET_AFTER_S))
+    }
+
     /// The quiet period: `settle_ms`, else [`DEFAULT_SETTLE_MS`], capped to [`SETTLE_MS_RANGE`].
     pub fn settle(&self) -> Duration {
         let ms = self.settle_ms.unwrap_or(DEFAULT_SETTLE_MS);
@@ -214,6 +229,26 @@ pub fn parse(text: &str, file: &Path) -> Result<Config, ConfigError> {
         }
     };
 
+    let forget_after_s = match &raw.forget_after_s {
+        None => None,
+        Some(v) => {
+            let n = *v.get_ref();
+            match u64::try_from(n) {
+                Ok(n) if FORGET_AFTER_S_RANGE.contains(&n) => Some(n),
+                _ => {
+                    return Err(at(
+                        Some(v.span()),
+                        format!(
+                            "`forget_after_s` is {n}, expected {}..={} (seconds)",
+                            FORGET_AFTER_S_RANGE.start(),
+                            FORGET_AFTER_S_RANGE.end()
+                        ),
+                    ));
+                }
+            }
+        }
+    };
+
     let mut projects: Vec<ProjectSpec> = Vec::new();
     let mut seen: Vec<(PathBuf, &Spanned<String>)> = Vec::new();
     for p in &raw.project {
@@ -250,6 +285,7 @@ pub fn parse(text: &str, file: &Path) -> Result<Config, ConfigError> {
         settle_ms,
         allow_outside: raw.allow_outside,
         max_file_size_mb,
+        forget_after_s,
         projects,
         roots,
     })
@@ -492,6 +528,7 @@ struct RawConfig {
     #[serde(default)]
     allow_outside: bool,
     max_file_size_mb: Option<Spanned<i64>>,
+    forget_after_s: Option<Spanned<i64>>,
     #[serde(default)]
     project: Vec<RawProject>,
     #[serde(default)]
@@ -540,6 +577,7 @@ events = "/var/log/skillpost/events.jsonl"
 settle_ms = 250
 allow_outside = true
 max_file_size_mb = 64
+forget_after_s = 120
 
 [[project]]
 path = "/srv/cells/Zelle_A"
@@ -561,6 +599,7 @@ path = "/srv/planning/projects"
                 settle_ms: Some(250),
                 allow_outside: true,
                 max_file_size_mb: Some(64),
+                forget_after_s: Some(120),
                 projects: vec![
                     ProjectSpec {
                         path: "/srv/cells/Zelle_A".into(),
@@ -588,6 +627,7 @@ path = "/srv/planning/projects"
             "events",
             "settle_ms",
             "allow_outside",
+            "forget_after_s",
             "[[project]]",
             "[[root]]",
         ] {
@@ -899,6 +939,48 @@ path = "."
     }
 
     #[test]
+    fn forget_after_out_of_range_is_located() {
+        let e = parse("\nforget_after_s = 0\n", &file()).unwrap_err();
+        assert_eq!((e.line, e.column), (Some(2), Some(18)));
+        assert!(e.message.contains("forget_after_s"), "{e}");
+        let c = parse("forget_after_s = 5\n", &file()).unwrap();
+        assert_eq!(c.forget_after(), Duration::from_secs(5));
+        assert_eq!(
+            Config::default().forget_after(),
+            Duration::from_secs(DEFAULT_FORGET_AFTER_S)
+        );
+    }
+
+    #[test]
+    fn a_fifo_or_device_as_the_configuration_is_refused_at_once() {
+        let d = tempfile::tempdir().unwrap();
+        let fifo = d.path().join("skillpost.toml");
+        rustix::fs::mknodat(
+            rustix::fs::CWD,
+            &fifo,
+            rustix::fs::FileType::Fifo,
+            rustix::fs::Mode::from_raw_mode(0o600),
+            0,
+        )
+        .unwrap();
+        let t = std::time::Instant::now();
+        let e = load(&fifo).unwrap_err();
+        assert!(e.message.contains("not a regular file"), "{e}");
+        let link = d.path().join("zero.toml");
+        std::os::unix::fs::symlink("/dev/zero", &link).unwrap();
+        assert!(
+            load(&link)
+                .unwrap_err()
+                .message
+                .contains("not a regular file")
+        );
+        let big = d.path().join("big.toml");
+        std::fs::write(&big, vec![b'#'; MAX_CONFIG_SIZE as usize + 1]).unwrap();
+        assert!(load(&big).unwrap_err().message.contains("limit"));
+        assert!(t.elapsed() < Duration::from_secs(1));
+    }
+
+    #[test]
     fn max_file_size_out_of_range_is_located() {
         let e = parse("\nmax_file_size_mb = 0\n", &file()).unwrap_err();
         assert_eq!((e.line, e.column), (Some(2), Some(20)), "{e}");
@@ -914,6 +996,7 @@ path = "."
             settle_ms: Some(300),
             allow_outside: true,
             max_file_size_mb: None,
+            forget_after_s: None,
             projects: vec![ProjectSpec {
                 path: "/srv/A".into(),
                 blackboard: Some("A.aml".into()),

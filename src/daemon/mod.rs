@@ -27,6 +27,7 @@
 pub mod config;
 pub mod events;
 mod job;
+pub mod lock;
 mod poll;
 mod project;
 mod route;
@@ -95,12 +96,23 @@ pub async fn run(
     let (wtx, mut wrx) = mpsc::unbounded_channel();
     let (dtx, mut drx) = mpsc::unbounded_channel();
     let force_poll = std::env::var_os("SKILLPOST_FORCE_POLL").is_some();
+    // One daemon per folder: a second one on any of these folders stops here (exit status 2).
+    let mut locks = lock::Locks::new(lock::runtime_dir());
+    for folder in config.projects.iter().map(|p| p.path.clone()).chain(
+        config
+            .roots
+            .iter()
+            .flat_map(|r| std::iter::once(r.clone()).chain(config::discover(r))),
+    ) {
+        locks.acquire(&folder)?;
+    }
     let mut d = Daemon {
         sink: sink.clone(),
         watchers: Watchers::new(wtx, Duration::from_secs(1)),
         projects: BTreeMap::new(),
         by_dir: HashMap::new(),
         roots: BTreeMap::new(),
+        locks,
         done: dtx,
         run_seq: 0,
         running: 0,
@@ -219,7 +231,9 @@ struct Daemon {
     /// Directory → the projects an event in it can concern, so an event never scans them all.
     by_dir: HashMap<PathBuf, BTreeSet<PathBuf>>,
     /// Roots and the subfolders watched in them.
-    roots: BTreeMap<PathBuf, BTreeSet<PathBuf>>,
+    roots: BTreeMap<PathBuf, project::Root>,
+    /// The folders this daemon keeps (one daemon per folder).
+    locks: lock::Locks,
     done: mpsc::UnboundedSender<Report>,
     run_seq: u64,
     running: usize,
@@ -278,7 +292,9 @@ impl Daemon {
                     p.trigger = None;
                     continue;
                 }
-                self.queue.push(k);
+                if self.claim_blackboard(&k, now) {
+                    self.queue.push(k);
+                }
             }
         }
         while self.running < self.parallel && !self.queue.is_empty() {

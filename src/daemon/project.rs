@@ -21,6 +21,19 @@ pub(super) enum Origin {
     Root(PathBuf),
 }
 
+/// A `[[root]]`: its watched subfolders, or the ancestor watched while it does not exist.
+#[derive(Debug, Default)]
+pub(super) struct Root {
+    pub(super) subs: BTreeSet<PathBuf>,
+    /// While the root does not exist: its nearest existing ancestor, watched to see it come.
+    pub(super) anchor: Option<PathBuf>,
+    /// The root directory's (device, inode) while it is watched: a root deleted and created
+    /// again (a new inode; the kernel ended the old watch) is watched anew.
+    pub(super) id: Option<(u64, u64)>,
+    /// Subfolders whose lock another daemon holds (reported once).
+    pub(super) locked_out: BTreeSet<PathBuf>,
+}
+
 pub(super) struct Project {
     pub(super) spec: ProjectSpec,
     pub(super) origin: Origin,
@@ -43,6 +56,12 @@ pub(super) struct Project {
     pub(super) trigger: Option<&'static str>,
     pub(super) retries: u32,
     pub(super) missing: bool,
+    /// Since when the folder is known to be missing (set by the periodic check).
+    pub(super) missing_since: Option<Instant>,
+    /// The canonical blackboard of the compile started last: no other project may compile it.
+    pub(super) claim: Option<PathBuf>,
+    /// Not compiled because another project compiles the same blackboard.
+    pub(super) refused: bool,
     /// Compile without the hash check (startup, rescan of a new project, retry).
     pub(super) force: bool,
 }
@@ -91,6 +110,9 @@ impl Daemon {
                 self.unwatch_root(&r);
             }
         }
+        for r in self.roots.values_mut() {
+            r.locked_out.clear();
+        }
         for r in &config.roots {
             if !self.roots.contains_key(r) {
                 self.watch_root(r);
@@ -108,8 +130,9 @@ impl Daemon {
                     p.sched.set_timing(settle, max_wait_of(settle));
                 }
                 None => {
-                    self.add_project(spec, origin, settle);
-                    added.push(k);
+                    if self.add_project(spec, origin, settle) {
+                        added.push(k);
+                    }
                 }
             }
         }
@@ -117,40 +140,320 @@ impl Daemon {
         (added, removed)
     }
 
+    /// Starts keeping a root: locked, watched (or its nearest existing ancestor while it does
+    /// not exist).
     pub(super) fn watch_root(&mut self, root: &Path) {
-        let mut subs = BTreeSet::new();
-        match self.watchers.add(root, self.force_poll) {
-            Ok(_) => {
-                for e in std::fs::read_dir(root).into_iter().flatten().flatten() {
-                    let p = e.path();
-                    if p.is_dir() && self.watchers.add(&p, self.force_poll).is_ok() {
-                        subs.insert(p);
-                    }
-                }
-            }
-            Err(e) => self.sink.emit(
+        if let Err(why) = self.locks.acquire(root) {
+            self.sink.emit(
                 None,
                 Event::WatchDegraded {
                     root: Some(root.display().to_string()),
-                    reason: failure_text(&e),
+                    reason: why,
                     backend: None,
                 },
-            ),
+            );
+            return;
         }
-        self.roots.insert(root.to_owned(), subs);
+        self.roots.insert(root.to_owned(), Root::default());
+        self.attach_root(root, None);
+    }
+
+    /// Watches a root and its subfolders; when it does not exist, its nearest existing ancestor
+    /// instead, with a `watch-degraded` event (`why` says what happened to it). Returns whether
+    /// the root itself is watched.
+    fn attach_root(&mut self, root: &Path, why: Option<&str>) -> bool {
+        let poll = self.force_poll;
+        match self.watchers.add_renewed(root, poll) {
+            Ok(_) => {
+                let mut subs = BTreeSet::new();
+                for e in std::fs::read_dir(root).into_iter().flatten().flatten() {
+                    let p = e.path();
+                    if p.is_dir() && self.watchers.add_renewed(&p, poll).is_ok() {
+                        subs.insert(p);
+                    }
+                }
+                let r = self.roots.get_mut(root).expect("root");
+                r.subs = subs;
+                r.anchor = None;
+                r.id = dir_id(root);
+                true
+            }
+            Err(WatchFailure::Missing) => {
+                let anchor = nearest_existing_ancestor(root);
+                if let Some(a) = &anchor {
+                    let _ = self.watchers.add(a, poll);
+                }
+                self.sink.emit(
+                    None,
+                    Event::WatchDegraded {
+                        root: Some(root.display().to_string()),
+                        reason: format!(
+                            "{}; watching {} for it",
+                            why.unwrap_or("the root does not exist"),
+                            anchor
+                                .as_deref()
+                                .map_or("nothing".into(), |a| a.display().to_string())
+                        ),
+                        backend: Some("none"),
+                    },
+                );
+                let r = self.roots.get_mut(root).expect("root");
+                r.anchor = anchor;
+                r.id = None;
+                false
+            }
+            Err(e) => {
+                self.sink.emit(
+                    None,
+                    Event::WatchDegraded {
+                        root: Some(root.display().to_string()),
+                        reason: failure_text(&e),
+                        backend: None,
+                    },
+                );
+                false
+            }
+        }
+    }
+
+    /// Ends a root's watches (its subfolders, itself or the ancestor watched for it).
+    fn detach_root(&mut self, root: &Path) {
+        let Some(r) = self.roots.get_mut(root) else {
+            return;
+        };
+        let subs = std::mem::take(&mut r.subs);
+        let anchor = r.anchor.take();
+        let watched = r.id.take().is_some();
+        for s in subs {
+            self.watchers.remove(&s);
+        }
+        if watched {
+            self.watchers.remove(root);
+        }
+        if let Some(a) = anchor {
+            self.watchers.remove(&a);
+        }
     }
 
     pub(super) fn unwatch_root(&mut self, root: &Path) {
-        if let Some(subs) = self.roots.remove(root) {
-            for s in subs {
-                self.watchers.remove(&s);
+        self.detach_root(root);
+        self.roots.remove(root);
+        self.locks.release(root);
+    }
+
+    /// Checks whether a root went, came, or was replaced, and follows it: a root that went is
+    /// waited for from its nearest existing ancestor; one that came (or came back, or was
+    /// replaced) is watched again and its projects found.
+    pub(super) fn check_root(&mut self, root: &Path, now: Instant) {
+        let Some(r) = self.roots.get(root) else {
+            return;
+        };
+        let current = dir_id(root);
+        match (r.id, current) {
+            (Some(a), Some(b)) if a == b => {}
+            (None, None) => {
+                // Still missing: follow the nearest existing ancestor deeper (or higher).
+                let anchor = nearest_existing_ancestor(root);
+                if anchor != r.anchor && r.anchor.is_some() {
+                    let old = self.roots.get_mut(root).expect("root").anchor.take();
+                    if let Some(old) = old {
+                        self.watchers.remove(&old);
+                    }
+                    if let Some(a) = &anchor {
+                        let _ = self.watchers.add(a, self.force_poll);
+                    }
+                    self.roots.get_mut(root).expect("root").anchor = anchor;
+                } else if r.anchor.is_none() {
+                    self.attach_root(root, None);
+                }
             }
-            self.watchers.remove(root);
+            (Some(_), None) => {
+                self.detach_root(root);
+                self.attach_root(root, Some("the root was removed"));
+            }
+            (_, Some(_)) => {
+                let replaced = r.id.is_some();
+                self.detach_root(root);
+                if self.attach_root(root, None) {
+                    let backend = self.watchers.backend_of(root).unwrap_or(Backend::Native);
+                    self.sink.emit(
+                        None,
+                        Event::Watching {
+                            root: Some(root.display().to_string()),
+                            blackboard: None,
+                            backend: backend.as_str(),
+                            reason: Some(
+                                if replaced {
+                                    "the root was replaced"
+                                } else {
+                                    "the root exists now"
+                                }
+                                .into(),
+                            ),
+                        },
+                    );
+                    self.discover_in(root, now);
+                    self.look_for_missing_folders(now);
+                }
+            }
         }
     }
 
-    pub(super) fn add_project(&mut self, spec: ProjectSpec, origin: Origin, settle: Duration) {
+    /// Adds the projects of a root that the table does not have yet.
+    fn discover_in(&mut self, root: &Path, now: Instant) {
+        let settle = settle_of(&self.config);
+        for dir in config::discover(root) {
+            if self.projects.contains_key(&dir)
+                || self
+                    .roots
+                    .get(root)
+                    .is_some_and(|r| r.locked_out.contains(&dir))
+            {
+                continue;
+            }
+            let spec = ProjectSpec {
+                path: dir.clone(),
+                blackboard: None,
+                program: None,
+            };
+            if self.add_project(spec, Origin::Root(root.to_owned()), settle)
+                && let Some(p) = self.projects.get_mut(&dir)
+            {
+                p.trigger = Some("new-project");
+                p.sched.change(now);
+            }
+        }
+    }
+
+    /// Forgets the projects of roots whose folder has been gone for longer than
+    /// `forget_after_s` (explicit projects are kept: the configuration names them), so folders
+    /// that come and go do not pile up. Also notices project folders gone without an event.
+    pub(super) fn forget_gone(&mut self, now: Instant) {
+        let gone: Vec<PathBuf> = self
+            .projects
+            .iter()
+            .filter(|(k, p)| !p.missing && !k.is_dir())
+            .map(|(k, _)| k.clone())
+            .collect();
+        for k in gone {
+            self.folder_event(&k, now);
+        }
+        let after = self.config.forget_after();
+        let mut forget = Vec::new();
+        for (k, p) in self.projects.iter_mut() {
+            if !p.missing {
+                p.missing_since = None;
+                continue;
+            }
+            let since = *p.missing_since.get_or_insert(now);
+            if matches!(p.origin, Origin::Root(_)) && now.duration_since(since) >= after {
+                forget.push(k.clone());
+            }
+        }
+        for k in forget {
+            self.drop_project(&k);
+            self.sink.emit(
+                Some(&Self::key_str(&k)),
+                Event::WatchDegraded {
+                    root: None,
+                    reason: format!(
+                        "the project folder has been gone for {} s: the project is forgotten \
+                         (found again if it comes back)",
+                        after.as_secs()
+                    ),
+                    backend: None,
+                },
+            );
+        }
+    }
+
+    /// Whether the project may compile its blackboard now: no other project compiles the same
+    /// file (by canonical path; a link or an alias folder). Two projects writing their own
+    /// outputs' paths into one blackboard would rewrite it back and forth for ever, so the one
+    /// that claimed it first keeps it and the other is refused with `compile-failed` (`E701`)
+    /// naming both, until the first is gone or the blackboards differ.
+    pub(super) fn claim_blackboard(&mut self, key: &Path, now: Instant) -> bool {
+        let Some(p) = self.projects.get(key) else {
+            return false;
+        };
+        let real = config::resolve(&p.spec)
+            .ok()
+            .and_then(|(b, _)| std::fs::canonicalize(b).ok());
+        let owner = real.as_ref().and_then(|r| {
+            self.projects
+                .iter()
+                .find(|(k, q)| k.as_path() != key && !q.missing && q.claim.as_ref() == Some(r))
+                .map(|(k, _)| k.clone())
+        });
+        let Some(owner) = owner else {
+            let p = self.projects.get_mut(key).expect("project");
+            p.claim = real;
+            p.refused = false;
+            return true;
+        };
+        let mut p = self.projects.remove(key).expect("project");
+        p.claim = None;
+        p.refused = true;
+        p.sched.finished(now);
+        p.changed.clear();
+        p.trigger = None;
+        p.force = true;
+        // Nothing of the other project's files concerns this one until it may compile again.
+        p.inputs.clear();
+        p.outputs.clear();
+        let mut dirs = BTreeSet::new();
+        dirs.insert(key.to_owned());
+        if let Some(parent) = key.parent() {
+            dirs.insert(parent.to_owned());
+        }
+        self.set_watches(&mut p, dirs);
+        self.reindex(&mut p);
+        self.projects.insert(key.to_owned(), p);
+        self.run_seq += 1;
+        self.sink.emit(
+            Some(&Self::key_str(key)),
+            Event::failed_with(
+                self.run_seq,
+                0,
+                SHARED_BLACKBOARD,
+                format!(
+                    "the blackboard {} is also the blackboard of the project {}: two projects \
+                     writing back into one blackboard would rewrite it back and forth, so this \
+                     project is not compiled; give each project its own blackboard",
+                    real.as_deref().unwrap_or(key).display(),
+                    owner.display()
+                ),
+            ),
+        );
+        false
+    }
+
+    /// Adds a project to the table and watches it. `false`: another daemon keeps its folder
+    /// (reported with `watch-degraded`); nothing of it is touched.
+    pub(super) fn add_project(
+        &mut self,
+        spec: ProjectSpec,
+        origin: Origin,
+        settle: Duration,
+    ) -> bool {
         let key = spec.path.clone();
+        if let Err(why) = self.locks.acquire(&key) {
+            if let Origin::Root(r) = &origin
+                && let Some(root) = self.roots.get_mut(r)
+            {
+                root.locked_out.insert(key.clone());
+            }
+            self.sink.emit(
+                Some(&Self::key_str(&key)),
+                Event::WatchDegraded {
+                    root: None,
+                    reason: why,
+                    backend: None,
+                },
+            );
+            return false;
+        }
+        // Only now that the folder is ours: another daemon's staged files are not stale.
         remove_stale_temporaries(&key);
         let mut p = Project {
             spec,
@@ -166,6 +469,9 @@ impl Daemon {
             trigger: Some("startup"),
             retries: 0,
             missing: false,
+            missing_since: None,
+            claim: None,
+            refused: false,
             force: true,
         };
         let mut dirs = BTreeSet::new();
@@ -189,10 +495,22 @@ impl Daemon {
         );
         self.reindex(&mut p);
         self.projects.insert(key, p);
+        true
     }
 
     pub(super) fn drop_project(&mut self, key: &Path) {
         if let Some(p) = self.projects.remove(key) {
+            self.locks.release(key);
+            if p.claim.is_some() {
+                // Its blackboard is free: a project refused for it may compile now.
+                let now = Instant::now();
+                for q in self.projects.values_mut().filter(|q| q.refused) {
+                    q.refused = false;
+                    q.force = true;
+                    q.trigger.get_or_insert("blackboard-released");
+                    q.sched.change(now);
+                }
+            }
             for d in &p.watched {
                 self.watchers.remove(d);
             }
@@ -312,6 +630,27 @@ pub(super) fn holds_blackboard(folder: &Path) -> bool {
         .flatten()
         .flatten()
         .any(|e| config::is_blackboard_name(&e.file_name()) && e.path().is_file())
+}
+
+/// The code of `compile-failed` for a project refused because another project compiles the same
+/// blackboard (a daemon-only code: the command line compiles one project).
+pub(super) const SHARED_BLACKBOARD: &str = "E701";
+
+/// A directory's (device, inode), `None` if it is not a directory.
+pub(super) fn dir_id(dir: &Path) -> Option<(u64, u64)> {
+    use std::os::unix::fs::MetadataExt;
+    std::fs::metadata(dir)
+        .ok()
+        .filter(|m| m.is_dir())
+        .map(|m| (m.dev(), m.ino()))
+}
+
+/// The nearest ancestor of `path` that is an existing directory.
+pub(super) fn nearest_existing_ancestor(path: &Path) -> Option<PathBuf> {
+    path.ancestors()
+        .skip(1)
+        .find(|a| a.is_dir())
+        .map(Path::to_owned)
 }
 
 pub(super) fn failure_text(e: &WatchFailure) -> String {

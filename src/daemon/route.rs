@@ -18,10 +18,20 @@ impl Daemon {
                 tracing::warn!("watcher error: {e}");
                 self.rescan("watcher-error", Some(e.to_string()), now);
             }
-            WatchMsg::Event(e) => {
+            WatchMsg::Event(mut e) => {
                 if e.need_rescan() {
                     self.rescan("overflow", None, now);
                     return;
+                }
+                // Watches are on canonical folders: give the paths under every name asked for.
+                if e.paths.len() == 1 {
+                    e.paths = self.watchers.expand(&e.paths[0]);
+                } else {
+                    e.paths = e
+                        .paths
+                        .iter()
+                        .flat_map(|p| self.watchers.expand(p))
+                        .collect();
                 }
                 self.route(&e, now);
             }
@@ -111,8 +121,23 @@ impl Daemon {
 
     /// An event inside a root: a new subfolder, or a blackboard appearing in one.
     pub(super) fn route_roots(&mut self, path: &Path, now: Instant) {
+        // A root itself, or a folder on the way to it, came or went.
+        let concerned: Vec<PathBuf> = self
+            .roots
+            .keys()
+            .filter(|r| r.starts_with(path))
+            .cloned()
+            .collect();
+        for r in concerned {
+            self.check_root(&r, now);
+        }
         let Some(parent) = path.parent() else { return };
-        let roots: Vec<PathBuf> = self.roots.keys().cloned().collect();
+        let roots: Vec<PathBuf> = self
+            .roots
+            .iter()
+            .filter(|(_, r)| r.id.is_some())
+            .map(|(k, _)| k.clone())
+            .collect();
         for root in roots {
             let folder = if parent == root {
                 path.to_owned()
@@ -121,19 +146,27 @@ impl Daemon {
             } else {
                 continue;
             };
-            if folder.is_dir() && !self.roots[&root].contains(&folder) {
+            if folder.is_dir() && !self.roots[&root].subs.contains(&folder) {
                 if self.watchers.add(&folder, self.force_poll).is_ok() {
                     self.roots
                         .get_mut(&root)
                         .expect("root")
+                        .subs
                         .insert(folder.clone());
                 }
-            } else if !folder.exists() && self.roots.get_mut(&root).expect("root").remove(&folder) {
-                self.watchers.remove(&folder);
+            } else if !folder.exists() {
+                let r = self.roots.get_mut(&root).expect("root");
+                r.locked_out.remove(&folder);
+                if r.subs.remove(&folder) {
+                    self.watchers.remove(&folder);
+                }
             }
-            if !self.projects.contains_key(&folder) && holds_blackboard(&folder) {
+            if !self.projects.contains_key(&folder)
+                && !self.roots[&root].locked_out.contains(&folder)
+                && holds_blackboard(&folder)
+            {
                 let settle = settle_of(&self.config);
-                self.add_project(
+                let added = self.add_project(
                     ProjectSpec {
                         path: folder.clone(),
                         blackboard: None,
@@ -142,7 +175,7 @@ impl Daemon {
                     Origin::Root(root.clone()),
                     settle,
                 );
-                if let Some(p) = self.projects.get_mut(&folder) {
+                if added && let Some(p) = self.projects.get_mut(&folder) {
                     p.trigger = Some("new-project");
                     p.sched.change(now);
                 }
@@ -186,9 +219,21 @@ impl Daemon {
         self.projects.insert(key.to_owned(), p);
     }
 
+    /// The periodic check (every `MISSING_RETRY`): roots that went, came or were replaced
+    /// without an event we saw, missing project folders that appeared, and projects of roots
+    /// gone for longer than `forget_after_s`.
+    pub(super) fn look_for_missing(&mut self, now: Instant) {
+        let roots: Vec<PathBuf> = self.roots.keys().cloned().collect();
+        for r in roots {
+            self.check_root(&r, now);
+        }
+        self.look_for_missing_folders(now);
+        self.forget_gone(now);
+    }
+
     /// Missing project folders that appeared without an event we saw (their parent was missing
     /// too): watch and compile them.
-    pub(super) fn look_for_missing(&mut self, now: Instant) {
+    pub(super) fn look_for_missing_folders(&mut self, now: Instant) {
         let missing: Vec<PathBuf> = self
             .projects
             .iter()

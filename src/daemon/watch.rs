@@ -5,7 +5,7 @@
 //! by several projects (a common IRL folder) is watched once. Events and errors arrive on one
 //! channel as [`WatchMsg`].
 
-use std::collections::HashMap;
+use std::collections::{BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -63,12 +63,23 @@ pub fn needs_polling(dir: &Path) -> Option<&'static str> {
 }
 
 /// The daemon's watches.
+///
+/// Watches are keyed by the directory's canonical path: inotify gives one watch per inode, so two
+/// paths to one folder (a symbolic-link alias of a project) would share it, and removing one
+/// would remove it for both. Each path asked for is counted by name and mapped to its canonical
+/// directory, which is watched once; [`Watchers::expand`] gives an event's path under every name
+/// it was asked for, so routing by the names works as before.
 pub struct Watchers {
     tx: UnboundedSender<WatchMsg>,
     native: Option<RecommendedWatcher>,
     poll: Option<StatPoller>,
     poll_interval: Duration,
+    /// Canonical directory → (users, backend).
     dirs: HashMap<PathBuf, (usize, Backend)>,
+    /// Directory as asked for → (users, its canonical directory).
+    names: HashMap<PathBuf, (usize, PathBuf)>,
+    /// Canonical directory → the names it was asked for by, where one differs from it.
+    aliases: HashMap<PathBuf, BTreeSet<PathBuf>>,
 }
 
 impl Watchers {
@@ -82,6 +93,8 @@ impl Watchers {
             poll: None,
             poll_interval,
             dirs: HashMap::new(),
+            names: HashMap::new(),
+            aliases: HashMap::new(),
         }
     }
 
@@ -101,16 +114,78 @@ impl Watchers {
         dir: &Path,
         poll: bool,
     ) -> Result<(Backend, Option<String>), WatchFailure> {
-        if let Some((n, b)) = self.dirs.get_mut(dir) {
+        if let Some((n, canonical)) = self.names.get_mut(dir)
+            && let Some((m, b)) = self.dirs.get_mut(canonical)
+        {
             *n += 1;
+            *m += 1;
             return Ok((*b, None));
         }
         if !dir.is_dir() {
             return Err(WatchFailure::Missing);
         }
-        let (backend, why) = self.start(dir, poll)?;
-        self.dirs.insert(dir.to_owned(), (1, backend));
-        Ok((backend, why))
+        let canonical = std::fs::canonicalize(dir).map_err(|e| {
+            if e.kind() == std::io::ErrorKind::NotFound {
+                WatchFailure::Missing
+            } else {
+                WatchFailure::Other(e.to_string())
+            }
+        })?;
+        let result = match self.dirs.get_mut(&canonical) {
+            Some((m, b)) => {
+                *m += 1;
+                (*b, None)
+            }
+            None => {
+                let (backend, why) = self.start(&canonical, poll)?;
+                self.dirs.insert(canonical.clone(), (1, backend));
+                (backend, why)
+            }
+        };
+        self.name(dir, canonical);
+        Ok(result)
+    }
+
+    /// Counts one user of `dir` by name (its watch is already counted).
+    fn name(&mut self, dir: &Path, canonical: PathBuf) {
+        if canonical != dir {
+            self.aliases
+                .entry(canonical.clone())
+                .or_default()
+                .insert(dir.to_owned());
+        }
+        self.names
+            .entry(dir.to_owned())
+            .and_modify(|(n, _)| *n += 1)
+            .or_insert((1, canonical));
+    }
+
+    /// Watches `dir` for one more user, renewing the watch if it exists already (the directory
+    /// may have been deleted and created again, which ends the kernel's watch).
+    pub fn add_renewed(
+        &mut self,
+        dir: &Path,
+        poll: bool,
+    ) -> Result<(Backend, Option<String>), WatchFailure> {
+        if self.names.contains_key(dir) {
+            self.renew(dir, poll)?;
+        }
+        self.add(dir, poll)
+    }
+
+    /// An event's path under every name its directory (or, for a watched directory itself, the
+    /// directory) was asked for: the path itself first.
+    pub fn expand(&self, path: &Path) -> Vec<PathBuf> {
+        let mut out = vec![path.to_owned()];
+        if let Some(names) = self.aliases.get(path) {
+            out.extend(names.iter().cloned());
+        }
+        if let (Some(parent), Some(file)) = (path.parent(), path.file_name())
+            && let Some(names) = self.aliases.get(parent)
+        {
+            out.extend(names.iter().map(|n| n.join(file)));
+        }
+        out
     }
 
     fn start(&mut self, dir: &Path, poll: bool) -> Result<(Backend, Option<String>), WatchFailure> {
@@ -153,27 +228,65 @@ impl Watchers {
 
     /// One user fewer; the watch ends with the last one.
     pub fn remove(&mut self, dir: &Path) {
-        let Some((n, b)) = self.dirs.get_mut(dir) else {
+        let Some((n, canonical)) = self.names.get_mut(dir) else {
             return;
         };
         *n -= 1;
-        if *n > 0 {
+        let canonical = canonical.clone();
+        if *n == 0 {
+            self.names.remove(dir);
+            if let Some(set) = self.aliases.get_mut(&canonical) {
+                set.remove(dir);
+                if set.is_empty() {
+                    self.aliases.remove(&canonical);
+                }
+            }
+        }
+        let Some((m, b)) = self.dirs.get_mut(&canonical) else {
+            return;
+        };
+        *m -= 1;
+        if *m > 0 {
             return;
         }
         let b = *b;
-        self.dirs.remove(dir);
-        self.unwatch(dir, b);
+        self.dirs.remove(&canonical);
+        self.unwatch(&canonical, b);
     }
 
     /// Renews the watch of a directory that was deleted and created again (the kernel dropped
-    /// the old watch with the old directory).
+    /// the old watch with the old directory). Its users and names are kept; the new directory
+    /// may resolve elsewhere (a link pointed to another folder meanwhile).
     pub fn renew(&mut self, dir: &Path, poll: bool) -> Result<Backend, WatchFailure> {
-        let Some(&(n, b)) = self.dirs.get(dir) else {
+        let Some((n, old)) = self.names.get(dir).cloned() else {
             return self.add(dir, poll).map(|(b, _)| b);
         };
-        self.unwatch(dir, b);
-        let (backend, _) = self.start(dir, poll)?;
-        self.dirs.insert(dir.to_owned(), (n, backend));
+        if let Some(&(_, b)) = self.dirs.get(&old) {
+            self.unwatch(&old, b);
+        }
+        let canonical = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_owned());
+        if canonical == old {
+            let (backend, _) = self.start(&old, poll).inspect_err(|_| {
+                // Gone again: counted, not watched; the next renewal starts it.
+                self.dirs.entry(old.clone()).or_insert((n, Backend::Native));
+            })?;
+            self.dirs.entry(old).or_insert((n, backend)).1 = backend;
+            return Ok(backend);
+        }
+        // Move this name's users from the old directory to the new one.
+        for _ in 0..n {
+            self.remove(dir);
+        }
+        if self.dirs.contains_key(&old)
+            && let Ok((b, _)) = self.start(&old, poll)
+        {
+            // Still used by other names: watch the old directory again.
+            self.dirs.get_mut(&old).expect("present").1 = b;
+        }
+        let (backend, _) = self.add(dir, poll)?;
+        for _ in 1..n {
+            let _ = self.add(dir, poll);
+        }
         Ok(backend)
     }
 
@@ -192,6 +305,12 @@ impl Watchers {
                 }
             }
         }
+    }
+
+    /// The backend watching `dir` (by the name it was asked for).
+    pub fn backend_of(&self, dir: &Path) -> Option<Backend> {
+        let (_, canonical) = self.names.get(dir)?;
+        self.dirs.get(canonical).map(|(_, b)| *b)
     }
 
     /// The number of directories watched.
