@@ -39,20 +39,23 @@ pub fn runtime_dir() -> PathBuf {
 /// The folder locks this daemon holds.
 pub(super) struct Locks {
     dir: PathBuf,
-    /// Folder as given → (its lock file, the open file holding the lock).
-    held: HashMap<PathBuf, (PathBuf, File)>,
+    /// Folder as given → its lock file (two names of one folder share it).
+    names: HashMap<PathBuf, PathBuf>,
+    /// Lock file → (the names holding it, the open file holding the lock).
+    held: HashMap<PathBuf, (usize, File)>,
 }
 
 impl Locks {
     pub(super) fn new(dir: PathBuf) -> Self {
         Locks {
             dir,
+            names: HashMap::new(),
             held: HashMap::new(),
         }
     }
 
     pub(super) fn holds(&self, folder: &Path) -> bool {
-        self.held.contains_key(folder)
+        self.names.contains_key(folder)
     }
 
     /// Takes the lock of `folder` (by its canonical path, or the path itself while it does not
@@ -64,6 +67,12 @@ impl Locks {
         }
         let real = std::fs::canonicalize(folder).unwrap_or_else(|_| folder.to_owned());
         let file = self.dir.join(lock_name(&real));
+        if let Some((n, _)) = self.held.get_mut(&file) {
+            // The same folder under another name: ours already.
+            *n += 1;
+            self.names.insert(folder.to_owned(), file);
+            return Ok(());
+        }
         std::fs::DirBuilder::new()
             .recursive(true)
             .mode(0o700)
@@ -113,7 +122,8 @@ impl Locks {
             let mut f = f;
             let _ = f.set_len(0);
             let _ = writeln!(f, "pid {}\n{}", std::process::id(), real.display());
-            self.held.insert(folder.to_owned(), (file, f));
+            self.held.insert(file.clone(), (1, f));
+            self.names.insert(folder.to_owned(), file);
             return Ok(());
         }
         Err(format!(
@@ -124,18 +134,24 @@ impl Locks {
 
     /// Releases the lock of `folder` (removing its file first, while the lock is still ours).
     pub(super) fn release(&mut self, folder: &Path) {
-        if let Some((file, f)) = self.held.remove(folder) {
+        let Some(file) = self.names.remove(folder) else {
+            return;
+        };
+        let Some((n, _)) = self.held.get_mut(&file) else {
+            return;
+        };
+        *n -= 1;
+        if *n == 0 {
             let _ = std::fs::remove_file(&file);
-            drop(f);
+            self.held.remove(&file);
         }
     }
 }
 
 impl Drop for Locks {
     fn drop(&mut self) {
-        let folders: Vec<PathBuf> = self.held.keys().cloned().collect();
-        for f in folders {
-            self.release(&f);
+        for file in self.held.keys() {
+            let _ = std::fs::remove_file(file);
         }
     }
 }
@@ -186,7 +202,11 @@ mod tests {
         let link = d.path().join("alias");
         std::os::unix::fs::symlink(&folder, &link).unwrap();
         assert!(b.acquire(&link).is_err());
+        // The holder itself may name it twice (an alias of a project it keeps).
+        a.acquire(&link).unwrap();
         a.release(&folder);
+        assert!(b.acquire(&link).is_err());
+        a.release(&link);
         b.acquire(&link).unwrap();
         assert_eq!(std::fs::read_dir(d.path().join("run")).unwrap().count(), 1);
         drop(b);

@@ -1,0 +1,399 @@
+//! The daemon in this process (`skillpost::daemon::run` with its control channel, events into a
+//! buffer; harness in tests/inproc/mod.rs): files that must never block it, roots and aliases
+//! that must never stop being watched, editor-like input names, a blackboard shared by two
+//! projects, one daemon per folder.
+
+mod inproc;
+
+use std::fs;
+use std::path::Path;
+use std::thread::sleep;
+use std::time::{Duration, Instant};
+
+use inproc::*;
+
+/// Diagnostics codes of a `compile-failed` event.
+fn codes(e: &serde_json::Value) -> Vec<String> {
+    e["diagnostics"]
+        .as_array()
+        .map(|a| {
+            a.iter()
+                .filter_map(|d| d["code"].as_str().map(str::to_owned))
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// Edits `project`'s SFC to x and waits for the compile that has it.
+fn edit_and_expect(d: &InProc, project: &Path, x: u32) {
+    let mark = d.mark();
+    fs::write(project.join("sfc.xml"), sfc_with_x(x)).unwrap();
+    d.wait_for(
+        &format!("recompile of {} with x {x}", project.display()),
+        WAIT,
+        |e| is_after(e, "compile-succeeded", project, mark),
+    );
+    assert!(read_string(&src_of(project)).contains(&ptp_with_x(x)));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Never block: FIFOs and devices
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn fifo_inputs_neither_hang_their_project_nor_starve_others() {
+    let w = Workspace::new();
+    let good = w.project("good");
+    // Ten projects whose SFC is a FIFO from the start (a compile reading it would wait for a
+    // writer for ever; so would the half-written check hashing it).
+    let mut bad = Vec::new();
+    for i in 0..10 {
+        let p = w.project(&format!("fifo{i}"));
+        fs::remove_file(p.join("sfc.xml")).unwrap();
+        mkfifo(&p.join("sfc.xml"));
+        bad.push(p);
+    }
+    // And one whose SFC becomes a FIFO after a good compile (its content hash is then checked).
+    let later = w.project("later");
+    let mut dirs: Vec<&Path> = bad.iter().map(|p| p.as_path()).collect();
+    dirs.push(&good);
+    dirs.push(&later);
+    let d = InProc::with_dirs(&dirs);
+    d.startup(&[&good, &later]);
+    for p in &bad {
+        let evs = d.wait_for(&format!("compile-failed of {}", p.display()), WAIT, |e| {
+            is_for(e, "compile-failed", p)
+        });
+        let e = evs.iter().find(|e| is_for(e, "compile-failed", p)).unwrap();
+        assert!(
+            e.to_string().contains("not a regular file"),
+            "the FIFO is named as such: {e}"
+        );
+    }
+    let mark = d.mark();
+    fs::remove_file(later.join("sfc.xml")).unwrap();
+    mkfifo(&later.join("sfc.xml"));
+    d.wait_for(
+        "compile-failed of the project whose SFC became a FIFO",
+        WAIT,
+        |e| is_after(e, "compile-failed", &later, mark),
+    );
+    // The healthy project is not starved: an edit compiles at once.
+    let t = Instant::now();
+    edit_and_expect(&d, &good, 111);
+    assert!(t.elapsed() < Duration::from_secs(3), "{:?}", t.elapsed());
+    // And the daemon stops promptly (a compile stuck on a FIFO would keep it).
+    let took = d.stop(Duration::from_secs(3));
+    assert!(took < Duration::from_secs(2), "stop took {took:?}");
+}
+
+#[test]
+fn fifo_or_device_as_the_configuration_fails_the_reload_and_the_daemon_goes_on() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let config = w.config(&format!("[[project]]\npath = \"{}\"\n", a.display()));
+    let d = InProc::with_config(&config);
+    d.startup(&[&a]);
+    for (what, make) in [
+        (
+            "a FIFO",
+            Box::new(|p: &Path| mkfifo(p)) as Box<dyn Fn(&Path)>,
+        ),
+        (
+            "a link to /dev/zero",
+            Box::new(|p: &Path| std::os::unix::fs::symlink("/dev/zero", p).unwrap()),
+        ),
+    ] {
+        fs::remove_file(&config).unwrap();
+        make(&config);
+        let mark = d.mark();
+        let t = Instant::now();
+        d.reload();
+        let evs = d.wait_for(&format!("reload-failed for {what}"), WAIT, |e| {
+            seq(e) > mark && is(e, "reload-failed")
+        });
+        assert!(
+            t.elapsed() < Duration::from_secs(1),
+            "{what}: {:?}",
+            t.elapsed()
+        );
+        let e = evs
+            .iter()
+            .find(|e| seq(e) > mark && is(e, "reload-failed"))
+            .unwrap();
+        assert!(
+            e["error"].as_str().unwrap().contains("not a regular file"),
+            "{what}: {e}"
+        );
+    }
+    // Still serving the old configuration.
+    edit_and_expect(&d, &a, 222);
+    d.stop(WAIT);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Watching that never silently stops
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn root_missing_at_start_then_created_deleted_and_created_again() {
+    let w = Workspace::new();
+    let root = w.ws().join("cells").join("root");
+    let config = w.config(&format!("[[root]]\npath = \"{}\"\n", root.display()));
+    let d = InProc::with_config(&config);
+    d.wait_for("watch-degraded for the missing root", WAIT, |e| {
+        is(e, "watch-degraded") && e["root"] == root.to_str().unwrap()
+    });
+    // Created later, two levels at once: the nearest existing ancestor is watched.
+    let a = root.join("A");
+    copy_project(&a);
+    d.wait_for("the new root's project compiled", WAIT, |e| {
+        is_for(e, "write-back", &a)
+    });
+    let evs = d.events();
+    assert!(
+        evs.iter()
+            .any(|e| is(e, "watching") && e["root"] == root.to_str().unwrap()),
+        "a `watching` event says the root is watched now\n{}",
+        dump(&evs)
+    );
+    sleep(Duration::from_millis(SETTLE_MS * 6));
+    edit_and_expect(&d, &a, 301);
+
+    // Deleted and created again (a new inode: the kernel ended the old watches).
+    let mark = d.mark();
+    fs::remove_dir_all(&root).unwrap();
+    d.wait_for("watch-degraded for the removed root", WAIT, |e| {
+        seq(e) > mark && is(e, "watch-degraded") && e["root"] == root.to_str().unwrap()
+    });
+    let b = root.join("B");
+    copy_project(&b);
+    d.wait_for("the re-created root's new project compiled", WAIT, |e| {
+        is_after(e, "write-back", &b, mark)
+    });
+    sleep(Duration::from_millis(SETTLE_MS * 6));
+    edit_and_expect(&d, &b, 302);
+    d.stop(WAIT);
+}
+
+#[test]
+fn root_replaced_between_two_checks_is_watched_again() {
+    let w = Workspace::new();
+    let root = w.ws().join("root");
+    let a = root.join("A");
+    copy_project(&a);
+    let config = w.config(&format!("[[root]]\npath = \"{}\"\n", root.display()));
+    let d = InProc::with_config(&config);
+    d.startup(&[&a]);
+    // Replaced by rename in one step: the path never disappears for a stat.
+    let new = w.ws().join("root.new");
+    copy_project(&new.join("A"));
+    let old = w.ws().join("root.old");
+    fs::rename(&root, &old).unwrap();
+    fs::rename(&new, &root).unwrap();
+    fs::remove_dir_all(&old).unwrap();
+    d.wait_for("the root is watched again", WAIT, |e| {
+        is(e, "watching") && e["root"] == root.to_str().unwrap()
+    });
+    sleep(Duration::from_millis(SETTLE_MS * 6));
+    edit_and_expect(&d, &a, 303);
+    // A project created in the new root is found.
+    let b = root.join("B");
+    copy_project(&b);
+    d.wait_for("the new project in the replaced root", WAIT, |e| {
+        is_for(e, "write-back", &b)
+    });
+    d.stop(WAIT);
+}
+
+#[test]
+fn removing_a_symlink_alias_by_reload_keeps_the_real_project_compiling() {
+    let w = Workspace::new();
+    let real = w.project("real");
+    let alias = w.ws().join("alias");
+    std::os::unix::fs::symlink(&real, &alias).unwrap();
+    let both = format!(
+        "[[project]]\npath = \"{}\"\n[[project]]\npath = \"{}\"\n",
+        real.display(),
+        alias.display()
+    );
+    let config = w.config(&both);
+    let d = InProc::with_config(&config);
+    // One folder, two names: one of them compiles, the other is refused (one blackboard).
+    let evs = d.wait_for("the alias refused", WAIT, |e| {
+        is(e, "compile-failed") && codes(e) == ["E701"]
+    });
+    let refused = evs.iter().find(|e| is(e, "compile-failed")).unwrap();
+    let msg = refused["diagnostics"][0]["message"].as_str().unwrap();
+    assert!(msg.contains("real") && msg.contains("alias"), "{msg}");
+    sleep(Duration::from_millis(SETTLE_MS * 6));
+
+    // Drop the alias: the real project (same inode, the same inotify watch) goes on.
+    w.config(&format!("[[project]]\npath = \"{}\"\n", real.display()));
+    let mark = d.mark();
+    d.reload();
+    d.wait_for("reloaded", WAIT, |e| seq(e) > mark && is(e, "reloaded"));
+    sleep(Duration::from_millis(SETTLE_MS * 6));
+    for x in [401, 402] {
+        edit_and_expect(&d, &real, x);
+    }
+
+    // And the other way round: alias kept, real removed.
+    w.config(&format!("[[project]]\npath = \"{}\"\n", alias.display()));
+    let mark = d.mark();
+    d.reload();
+    d.wait_for("the alias compiled", WAIT, |e| {
+        is_after(e, "compile-succeeded", &alias, mark)
+    });
+    sleep(Duration::from_millis(SETTLE_MS * 6));
+    edit_and_expect(&d, &alias, 403);
+    d.stop(WAIT);
+}
+
+#[test]
+fn inputs_with_editor_like_names_are_tracked() {
+    let w = Workspace::new();
+    let p = w.ws().join("P");
+    fs::create_dir_all(&p).unwrap();
+    let bb = sample_text("Blackboard.aml")
+        .replace(">sfc.xml<", ">plan.tmp<")
+        .replace(">kr15-2.irl<", ">robot.swp<");
+    fs::write(p.join("Blackboard.aml"), bb).unwrap();
+    fs::write(p.join("plan.tmp"), sample_text("sfc.xml")).unwrap();
+    fs::write(p.join("robot.swp"), sample_text("kr15-2.irl")).unwrap();
+    let d = InProc::with_dirs(&[&p]);
+    d.startup(&[&p]);
+    for x in [501, 502] {
+        let mark = d.mark();
+        fs::write(p.join("plan.tmp"), sfc_with_x(x)).unwrap();
+        d.wait_for("recompile after an edit of plan.tmp", WAIT, |e| {
+            is_after(e, "compile-succeeded", &p, mark)
+        });
+        assert!(read_string(&src_of(&p)).contains(&ptp_with_x(x)));
+    }
+    let mark = d.mark();
+    let irl = sample_text("kr15-2.irl");
+    assert!(irl.contains("\t\t\tSetVelCP (VALUE)"));
+    fs::write(
+        p.join("robot.swp"),
+        irl.replace("\t\t\tSetVelCP (VALUE)", "\t\t\tSetVelCP (VALUE) ; edited"),
+    )
+    .unwrap();
+    d.wait_for("recompile after an edit of robot.swp", WAIT, |e| {
+        is_after(e, "compile-succeeded", &p, mark)
+    });
+    assert!(read_string(&src_of(&p)).contains("; edited"));
+    // Real editor noise beside them still starts nothing.
+    sleep(Duration::from_millis(SETTLE_MS * 6));
+    let mark = d.mark();
+    for n in ["4913", "plan.tmp~", ".plan.tmp.swp", "other.tmp"] {
+        fs::write(p.join(n), "x").unwrap();
+    }
+    sleep(Duration::from_millis(SETTLE_MS * 8));
+    let evs = d.events();
+    assert_eq!(
+        count_after(&evs, "compile-started", &p, mark),
+        0,
+        "{}",
+        dump(&evs)
+    );
+    d.stop(WAIT);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Two projects, one blackboard; two daemons, one folder
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn a_blackboard_shared_by_two_projects_is_not_rewritten_back_and_forth() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let b = w.ws().join("B");
+    fs::create_dir(&b).unwrap();
+    for f in ["sfc.xml", "kr15-2.irl"] {
+        fs::copy(sample().join(f), b.join(f)).unwrap();
+    }
+    std::os::unix::fs::symlink(a.join("Blackboard.aml"), b.join("Blackboard.aml")).unwrap();
+    let config = w.config(&format!(
+        "allow_outside = true\n[[project]]\npath = \"{}\"\n[[project]]\npath = \"{}\"\n",
+        a.display(),
+        b.display()
+    ));
+    let d = InProc::with_config(&config);
+    let evs = d.wait_for("B refused", WAIT, |e| {
+        is_for(e, "compile-failed", &b) && codes(e) == ["E701"]
+    });
+    let e = evs
+        .iter()
+        .find(|e| is_for(e, "compile-failed", &b))
+        .unwrap();
+    let msg = e["diagnostics"][0]["message"].as_str().unwrap();
+    assert!(
+        msg.contains(a.to_str().unwrap()),
+        "names the other project: {msg}"
+    );
+    d.wait_for("A compiled", WAIT, |e| is_for(e, "write-back", &a));
+    // No edits for 3 s: at most the startup write-back, never a ping-pong.
+    sleep(Duration::from_secs(3));
+    let evs = d.events();
+    let written = evs
+        .iter()
+        .filter(|e| is(e, "write-back") && e["written"] == true)
+        .count();
+    assert!(written <= 1, "{written} write-backs\n{}", dump(&evs));
+    let compiles = evs.iter().filter(|e| is(e, "compile-started")).count();
+    assert!(compiles <= 2, "{compiles} compiles\n{}", dump(&evs));
+
+    // Give B its own blackboard: it compiles.
+    let mark = d.mark();
+    fs::remove_file(b.join("Blackboard.aml")).unwrap();
+    fs::copy(sample().join("Blackboard.aml"), b.join("Blackboard.aml")).unwrap();
+    d.wait_for("B compiled with its own blackboard", WAIT, |e| {
+        is_after(e, "compile-succeeded", &b, mark)
+    });
+    d.stop(WAIT);
+}
+
+#[test]
+fn a_second_daemon_on_the_same_folder_is_refused_and_touches_nothing() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let d = InProc::with_dirs(&[&a]);
+    d.startup(&[&a]);
+    // A file the first daemon has staged (it would be renamed into place next).
+    let staged = a.join(".skillpost-0123456789.tmp");
+    fs::write(&staged, "staged").unwrap();
+    // The second: the same folder under another name (a link), its own configuration.
+    let link = w.ws().join("link");
+    std::os::unix::fs::symlink(&a, &link).unwrap();
+    let sources = skillpost::daemon::Sources {
+        dirs: vec![link.clone()],
+        settle_ms: Some(SETTLE_MS),
+        ..Default::default()
+    };
+    let err = match InProc::try_start(sources.load().unwrap(), sources) {
+        Ok(_) => panic!("a second daemon started on the same folder"),
+        Err(e) => e,
+    };
+    assert!(err.contains("another skillpost daemon"), "{err}");
+    assert!(
+        err.contains(&format!("pid {}", std::process::id())),
+        "{err}"
+    );
+    assert_eq!(
+        read_string(&staged),
+        "staged",
+        "the first daemon's staged file is kept"
+    );
+    fs::remove_file(&staged).unwrap();
+    edit_and_expect(&d, &a, 601);
+    d.stop(WAIT);
+    // Stopped: the folder is free again.
+    let sources = skillpost::daemon::Sources {
+        dirs: vec![a.clone()],
+        settle_ms: Some(SETTLE_MS),
+        ..Default::default()
+    };
+    let again = InProc::start(sources.load().unwrap(), sources);
+    again.stop(WAIT);
+}
