@@ -1519,3 +1519,287 @@ fn edit_behind_a_symlink_recompiles() {
         dump(&evs)
     );
 }
+
+// ---------------------------------------------------------------------------------------------
+// 17. Trust: nothing blocks the daemon, nothing piles up, one daemon per folder
+// ---------------------------------------------------------------------------------------------
+
+/// A field of `/proc/<pid>/status` in kB (`VmRSS`, `VmHWM`).
+fn proc_kb(pid: u32, field: &str) -> u64 {
+    let status = read_string(Path::new(&format!("/proc/{pid}/status")));
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix(field)?.strip_prefix(':'))
+        .and_then(|v| v.split_whitespace().next()?.parse().ok())
+        .unwrap_or_else(|| panic!("no {field} in /proc/{pid}/status"))
+}
+
+fn mkfifo(path: &Path) {
+    rustix::fs::mknodat(
+        rustix::fs::CWD,
+        path,
+        rustix::fs::FileType::Fifo,
+        rustix::fs::Mode::from_raw_mode(0o644),
+        0,
+    )
+    .unwrap();
+}
+
+#[test]
+fn fifo_input_fails_its_project_and_sigterm_still_exits_at_once() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let f = w.project("F");
+    let mut d = w.watch(&[a.to_str().unwrap(), f.to_str().unwrap()]);
+    d.startup(&[&a, &f]);
+    // The SFC becomes a FIFO nobody writes: its hash check and the half-written check used to
+    // open it blocking, and the compile (and with it SIGTERM) waited for ever.
+    let m = d.mark();
+    fs::remove_file(f.join("sfc.xml")).unwrap();
+    mkfifo(&f.join("sfc.xml"));
+    d.wait_for("compile-failed of F", WAIT, |e| {
+        is_after(e, "compile-failed", &f, m)
+    });
+    let m = d.mark();
+    fs::write(a.join("sfc.xml"), sfc_with_x(700)).unwrap();
+    d.wait_for("A still compiles", WAIT, |e| {
+        is_after(e, "compile-succeeded", &a, m)
+    });
+    let t = Instant::now();
+    d.signal("TERM");
+    assert_eq!(d.wait_exit(Duration::from_secs(3)).code(), Some(0));
+    assert!(t.elapsed() < Duration::from_secs(2), "{:?}", t.elapsed());
+}
+
+#[test]
+fn configuration_fifo_or_dev_zero_fails_the_reload_with_bounded_memory() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let cfg = w.config("settle_ms = 50\nevents = \"ev.jsonl\"\n[[project]]\npath = \"ws/A\"\n");
+    let mut d = w.watch_config(&cfg);
+    d.startup(&[&a]);
+    fs::remove_file(&cfg).unwrap();
+    mkfifo(&cfg);
+    let m = d.mark();
+    d.signal("HUP");
+    let evs = d.wait_for("reload-failed (FIFO)", Duration::from_secs(2), |e| {
+        seq(e) > m && is(e, "reload-failed")
+    });
+    let e = evs.iter().rev().find(|e| is(e, "reload-failed")).unwrap();
+    assert!(
+        e["error"].as_str().unwrap().contains("not a regular file"),
+        "{e}"
+    );
+    fs::remove_file(&cfg).unwrap();
+    std::os::unix::fs::symlink("/dev/zero", &cfg).unwrap();
+    let m = d.mark();
+    d.signal("HUP");
+    let evs = d.wait_for("reload-failed (/dev/zero)", Duration::from_secs(2), |e| {
+        seq(e) > m && is(e, "reload-failed")
+    });
+    let e = evs.iter().rev().find(|e| is(e, "reload-failed")).unwrap();
+    assert!(
+        e["error"].as_str().unwrap().contains("not a regular file"),
+        "{e}"
+    );
+    // Reading /dev/zero to the end grew the daemon to 2 GB in 2 s.
+    sleep(Duration::from_millis(500));
+    let peak = proc_kb(d.pid(), "VmHWM");
+    assert!(peak < 64 * 1024, "peak RSS {peak} kB");
+    let m = d.mark();
+    fs::write(a.join("sfc.xml"), sfc_with_x(701)).unwrap();
+    d.wait_for("A still compiles", WAIT, |e| {
+        is_after(e, "compile-succeeded", &a, m)
+    });
+}
+
+#[test]
+fn a_second_daemon_on_the_same_folder_exits_2_and_touches_nothing() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let mut d = w.watch(&[a.to_str().unwrap()]);
+    d.startup(&[&a]);
+    // A file the first daemon could have staged right now (renamed into place next).
+    let staged = a.join(".skillpost-5f3a9c.tmp");
+    fs::write(&staged, "staged by the first daemon").unwrap();
+    let t = Instant::now();
+    let out = Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .current_dir(&w.root)
+        .args(["watch", "--events", "ev2.jsonl", a.to_str().unwrap()])
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    assert!(t.elapsed() < WAIT);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("another skillpost daemon"), "{stderr}");
+    assert!(stderr.contains(&format!("pid {}", d.pid())), "{stderr}");
+    assert_eq!(read_string(&staged), "staged by the first daemon");
+    assert!(read_string(&w.root.join("ev2.jsonl")).is_empty());
+    fs::remove_file(&staged).unwrap();
+    let m = d.mark();
+    fs::write(a.join("sfc.xml"), sfc_with_x(702)).unwrap();
+    d.wait_for("the first daemon goes on", WAIT, |e| {
+        is_after(e, "compile-succeeded", &a, m)
+    });
+}
+
+/// Reads an event file incrementally (the churn test's stream grows to megabytes).
+struct Tail {
+    path: PathBuf,
+    offset: usize,
+    counts: std::collections::HashMap<String, usize>,
+    durations: Vec<u64>,
+}
+
+impl Tail {
+    fn poll(&mut self) {
+        let bytes = fs::read(&self.path).unwrap_or_default();
+        let Some(end) = bytes.iter().rposition(|b| *b == b'\n') else {
+            return;
+        };
+        if end < self.offset {
+            return;
+        }
+        for line in bytes[self.offset..=end].split(|b| *b == b'\n') {
+            if line.is_empty() {
+                continue;
+            }
+            let e: Value = serde_json::from_slice(line).unwrap();
+            let mut name = e["event"].as_str().unwrap().to_owned();
+            if name == "watch-degraded"
+                && e["reason"]
+                    .as_str()
+                    .is_some_and(|r| r.contains("forgotten"))
+            {
+                name = "forgotten".into();
+            }
+            if name == "compile-succeeded" {
+                self.durations.push(e["duration_ms"].as_u64().unwrap());
+            }
+            *self.counts.entry(name).or_default() += 1;
+        }
+        self.offset = end + 1;
+    }
+
+    fn count(&self, name: &str) -> usize {
+        self.counts.get(name).copied().unwrap_or(0)
+    }
+
+    fn wait(&mut self, what: &str, timeout: Duration, mut cond: impl FnMut(&Tail) -> bool) {
+        let deadline = Instant::now() + timeout;
+        loop {
+            self.poll();
+            if cond(self) {
+                return;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "timed out waiting for {what}: {:?}",
+                self.counts
+            );
+            sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+/// Projects of a root created and deleted over and over: each is forgotten `forget_after_s`
+/// after its folder went, so memory stays flat. `SKILLPOST_CHURN_CYCLES` (default 2000) sets the
+/// number of create/delete cycles; the figures are printed (docs/RELIABILITY.md has those of
+/// 6,000 cycles).
+#[test]
+fn churn_of_root_projects_keeps_memory_flat() {
+    let cycles: usize = std::env::var("SKILLPOST_CHURN_CYCLES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(2000);
+    let batch = 500.min(cycles).max(1);
+    let w = Workspace::new();
+    let root = w.ws().join("root");
+    fs::create_dir(&root).unwrap();
+    let cfg = w.config(
+        "settle_ms = 20\nevents = \"ev.jsonl\"\nforget_after_s = 1\n[[root]]\npath = \"ws/root\"\n",
+    );
+    // glibc gives each thread that allocates concurrently an arena of its own (up to 8 per
+    // core) and keeps freed memory in it: RSS then steps up with the compile threads, not with
+    // the projects. Two arenas measure what the daemon keeps (the default can be measured with
+    // SKILLPOST_CHURN_ARENAS=default).
+    let arenas = std::env::var("SKILLPOST_CHURN_ARENAS").unwrap_or_else(|_| "2".into());
+    let env: Vec<(&str, &str)> = if arenas == "default" {
+        Vec::new()
+    } else {
+        vec![("MALLOC_ARENA_MAX", arenas.as_str())]
+    };
+    let d = Daemon::start_env(
+        &w.root,
+        &["--config", cfg.to_str().unwrap()],
+        w.events(),
+        &env,
+    );
+    let mut tail = Tail {
+        path: w.events(),
+        offset: 0,
+        counts: Default::default(),
+        durations: Vec::new(),
+    };
+    let started = Instant::now();
+    let mut baseline = None;
+    let mut made = 0;
+    let mut series = vec![(0, proc_kb(d.pid(), "VmRSS"))];
+    while made < cycles {
+        let n = batch.min(cycles - made);
+        let dirs: Vec<PathBuf> = (made..made + n)
+            .map(|i| root.join(format!("p{i}")))
+            .collect();
+        for dir in &dirs {
+            copy_project(dir);
+        }
+        made += n;
+        tail.wait("the batch's projects", Duration::from_secs(60), |t| {
+            t.count("watching") >= made
+        });
+        for dir in &dirs {
+            // The daemon may be writing its outputs meanwhile (ENOTEMPTY): again.
+            assert!(
+                wait_until(WAIT, || fs::remove_dir_all(dir).is_ok() || !dir.exists()),
+                "cannot remove {}",
+                dir.display()
+            );
+        }
+        // Measured with the batch forgotten: what is left is what the daemon keeps.
+        tail.wait("the batch forgotten", Duration::from_secs(30), |t| {
+            t.count("forgotten") >= made
+        });
+        series.push((made, proc_kb(d.pid(), "VmRSS")));
+        if baseline.is_none() && made >= cycles / 2 {
+            baseline = Some((made, proc_kb(d.pid(), "VmRSS"), tail.durations.len()));
+        }
+    }
+    let end = proc_kb(d.pid(), "VmRSS");
+    let (at, base, first_compiles) = baseline.unwrap();
+    let mean = |v: &[u64]| v.iter().sum::<u64>() as f64 / v.len().max(1) as f64;
+    let early = mean(&tail.durations[..first_compiles]);
+    let late = mean(&tail.durations[first_compiles..]);
+    let step = (series.len() / 12).max(1);
+    let shown: Vec<String> = series
+        .iter()
+        .step_by(step)
+        .map(|(n, kb)| format!("{n}:{kb}"))
+        .collect();
+    eprintln!("churn: RSS (cycles:kB) {}", shown.join(" "));
+    eprintln!(
+        "churn: {cycles} cycles in {:.1} s; RSS {base} kB after {at} cycles, {end} kB after \
+         {cycles}; compiles {} ({:.1} ms mean before, {:.1} ms after); events {:?}",
+        started.elapsed().as_secs_f64(),
+        tail.durations.len(),
+        early,
+        late,
+        tail.counts
+    );
+    assert!(
+        end <= base + 2 * 1024,
+        "RSS grew from {base} kB to {end} kB over {} cycles",
+        cycles - at
+    );
+    assert!(end < 40 * 1024, "RSS {end} kB");
+}
