@@ -1622,16 +1622,26 @@ fn a_second_daemon_on_the_same_folder_exits_2_and_touches_nothing() {
     // A file the first daemon could have staged right now (renamed into place next).
     let staged = a.join(".skillpost-5f3a9c.tmp");
     fs::write(&staged, "staged by the first daemon").unwrap();
-    let t = Instant::now();
-    let out = Command::new(env!("CARGO_BIN_EXE_skillpost"))
+    let log = w.root.join("stderr2.log");
+    let mut second = Command::new(env!("CARGO_BIN_EXE_skillpost"))
         .current_dir(&w.root)
         .args(["watch", "--events", "ev2.jsonl", a.to_str().unwrap()])
         .stdin(Stdio::null())
-        .output()
+        .stdout(Stdio::null())
+        .stderr(fs::File::create(&log).unwrap())
+        .spawn()
         .unwrap();
-    assert!(t.elapsed() < WAIT);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    let mut status = None;
+    wait_until(WAIT, || {
+        status = second.try_wait().unwrap();
+        status.is_some()
+    });
+    if status.is_none() {
+        let _ = second.kill();
+        let _ = second.wait();
+    }
+    let stderr = read_string(&log);
+    assert_eq!(status.and_then(|s| s.code()), Some(2), "{stderr}");
     assert!(stderr.contains("another skillpost daemon"), "{stderr}");
     assert!(stderr.contains(&format!("pid {}", d.pid())), "{stderr}");
     assert_eq!(read_string(&staged), "staged by the first daemon");
