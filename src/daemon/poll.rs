@@ -180,7 +180,10 @@ impl Shared {
         if !stamp.file {
             return None;
         }
-        let (mut f, _) = crate::load::open_regular(path).ok()?;
+        // Non-blocking, regular files only, and never past the largest input a configuration
+        // can allow (a file growing without end is not hashed for ever).
+        let (f, _) = crate::load::open_regular(path).ok()?;
+        let mut f = f.take(super::config::MAX_FILE_SIZE_MB_RANGE.end() * 1024 * 1024);
         let mut h = self.hasher.build_hasher();
         let mut buf = vec![0u8; 64 * 1024];
         loop {
