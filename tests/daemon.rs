@@ -199,6 +199,9 @@ impl Daemon {
         let child = cmd
             .current_dir(cwd)
             .env("RUST_LOG", "info")
+            // The lock files (one daemon per folder) in the workspace: `kill -9` leaves them.
+            .env_remove("RUNTIME_DIRECTORY")
+            .env("XDG_RUNTIME_DIR", cwd)
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(fs::File::create(&stderr).unwrap())
@@ -1626,6 +1629,8 @@ fn a_second_daemon_on_the_same_folder_exits_2_and_touches_nothing() {
     let mut second = Command::new(env!("CARGO_BIN_EXE_skillpost"))
         .current_dir(&w.root)
         .args(["watch", "--events", "ev2.jsonl", a.to_str().unwrap()])
+        .env_remove("RUNTIME_DIRECTORY")
+        .env("XDG_RUNTIME_DIR", &w.root)
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(fs::File::create(&log).unwrap())

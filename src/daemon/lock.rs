@@ -83,6 +83,20 @@ impl Locks {
                     self.dir.display()
                 )
             })?;
+        // In a shared temporary directory someone else could have made it first: only a folder
+        // of our own that nobody else can write to is used (and links are never followed).
+        let meta = std::fs::symlink_metadata(&self.dir)
+            .map_err(|e| format!("cannot use the lock directory {}: {e}", self.dir.display()))?;
+        if !meta.is_dir()
+            || meta.uid() != rustix::process::getuid().as_raw()
+            || meta.mode() & 0o022 != 0
+        {
+            return Err(format!(
+                "the lock directory {} is not a folder of this user that only it can write to; \
+                 set RUNTIME_DIRECTORY or XDG_RUNTIME_DIR",
+                self.dir.display()
+            ));
+        }
         for _ in 0..10 {
             let f = std::fs::OpenOptions::new()
                 .read(true)
@@ -90,6 +104,7 @@ impl Locks {
                 .create(true)
                 .truncate(false)
                 .mode(0o600)
+                .custom_flags(rustix::fs::OFlags::NOFOLLOW.bits() as i32)
                 .open(&file)
                 .map_err(|e| format!("cannot open the lock file {}: {e}", file.display()))?;
             match rustix::fs::flock(&f, rustix::fs::FlockOperation::NonBlockingLockExclusive) {
@@ -211,6 +226,17 @@ mod tests {
         assert_eq!(std::fs::read_dir(d.path().join("run")).unwrap().count(), 1);
         drop(b);
         assert_eq!(std::fs::read_dir(d.path().join("run")).unwrap().count(), 0);
+    }
+
+    #[test]
+    fn a_lock_directory_others_can_write_to_is_refused() {
+        use std::os::unix::fs::PermissionsExt;
+        let d = tempfile::tempdir().unwrap();
+        let run = d.path().join("run");
+        std::fs::create_dir(&run).unwrap();
+        std::fs::set_permissions(&run, std::fs::Permissions::from_mode(0o777)).unwrap();
+        let e = Locks::new(run).acquire(d.path()).unwrap_err();
+        assert!(e.contains("only it can write to"), "{e}");
     }
 
     #[test]

@@ -377,6 +377,41 @@ mod tests {
     }
 
     #[test]
+    fn two_names_of_one_folder_share_one_watch_and_removing_one_keeps_it() {
+        let d = tempfile::tempdir().unwrap();
+        let real = d.path().canonicalize().unwrap().join("real");
+        std::fs::create_dir(&real).unwrap();
+        let alias = real.with_file_name("alias");
+        std::os::unix::fs::symlink(&real, &alias).unwrap();
+        let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel();
+        let mut w = Watchers::new(tx, Duration::from_millis(200));
+        w.add(&real, false).unwrap();
+        w.add(&alias, false).unwrap();
+        assert_eq!(w.len(), 1, "one inode, one watch");
+        assert_eq!(
+            w.expand(&real.join("sfc.xml")),
+            vec![real.join("sfc.xml"), alias.join("sfc.xml")]
+        );
+        // Dropping the alias (a reload) must not end the real folder's watch.
+        w.remove(&alias);
+        assert_eq!(w.len(), 1);
+        assert_eq!(w.expand(&real.join("sfc.xml")), vec![real.join("sfc.xml")]);
+        std::fs::write(real.join("sfc.xml"), "x").unwrap();
+        let deadline = std::time::Instant::now() + Duration::from_secs(5);
+        let mut seen = false;
+        while !seen && std::time::Instant::now() < deadline {
+            match rx.try_recv() {
+                Ok(WatchMsg::Event(e)) => seen = e.paths.contains(&real.join("sfc.xml")),
+                Ok(WatchMsg::Error(e)) => panic!("{e}"),
+                Err(_) => std::thread::sleep(Duration::from_millis(10)),
+            }
+        }
+        assert!(seen, "the real folder is still watched");
+        w.remove(&real);
+        assert_eq!(w.len(), 0);
+    }
+
+    #[test]
     fn local_folders_are_watched_natively() {
         let d = tempfile::tempdir().unwrap();
         assert_eq!(needs_polling(d.path()), None);
