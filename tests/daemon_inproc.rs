@@ -397,3 +397,68 @@ fn a_second_daemon_on_the_same_folder_is_refused_and_touches_nothing() {
     let again = InProc::start(sources.load().unwrap(), sources);
     again.stop(WAIT);
 }
+
+// ---------------------------------------------------------------------------------------------
+// Forgetting, under the paused clock (the default 30 s pass at once)
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn root_projects_gone_are_forgotten_after_the_default_period_explicit_ones_never() {
+    let w = Workspace::new();
+    let root = w.ws().join("root");
+    let a = root.join("A");
+    copy_project(&a);
+    let e = w.project("E");
+    let config = w.config(&format!(
+        "[[root]]\npath = \"{}\"\n[[project]]\npath = \"{}\"\n",
+        root.display(),
+        e.display()
+    ));
+    let sources = skillpost::daemon::Sources {
+        config_file: Some(config.clone()),
+        settle_ms: Some(SETTLE_MS),
+        ..Default::default()
+    };
+    let d = InProc::start_paused(sources.load().unwrap(), sources);
+    for p in [&a, &e] {
+        d.wait_for("startup compile", WAIT, |ev| is_for(ev, "write-back", p));
+    }
+    fs::remove_dir_all(&a).unwrap();
+    fs::remove_dir_all(&e).unwrap();
+    let evs = d.wait_for("A forgotten", WAIT, |ev| {
+        is_for(ev, "watch-degraded", &a)
+            && ev["reason"]
+                .as_str()
+                .is_some_and(|r| r.contains("forgotten"))
+    });
+    let forgotten = evs
+        .iter()
+        .find(|ev| {
+            is_for(ev, "watch-degraded", &a) && ev["reason"].to_string().contains("forgotten")
+        })
+        .unwrap();
+    assert!(
+        forgotten["reason"].as_str().unwrap().contains("30 s"),
+        "the default period: {forgotten}"
+    );
+    // The explicit project is only reported missing, never forgotten, however long it is gone.
+    sleep(Duration::from_millis(300));
+    let evs = d.events();
+    assert!(
+        !evs.iter()
+            .any(|ev| is_for(ev, "watch-degraded", &e)
+                && ev["reason"].to_string().contains("forgotten")),
+        "{}",
+        dump(&evs)
+    );
+    // Back: the root's project is found again as a new project, the explicit one picked up.
+    let mark = d.mark();
+    copy_project(&a);
+    copy_project(&e);
+    for p in [&a, &e] {
+        d.wait_for("compiled again", WAIT, |ev| {
+            is_after(ev, "compile-succeeded", p, mark)
+        });
+    }
+    d.stop(WAIT);
+}

@@ -216,15 +216,34 @@ impl InProc {
     /// Runs the daemon on `config`; waits for `started`. `Err`: `run` returned before (with
     /// its error, e.g. another daemon keeps a folder).
     pub fn try_start(config: Config, sources: Sources) -> Result<Self, String> {
+        Self::spawn(config, sources, false)
+    }
+
+    /// Runs the daemon under tokio's paused clock: whenever it has nothing to do, its clock
+    /// jumps to its next timer, so the daemon's own periods (the 2 s checks, `forget_after_s`,
+    /// quiet periods) pass at once while file events still arrive in real time. For what
+    /// depends on the daemon's timers, not on how fast the kernel reports.
+    pub fn start_paused(config: Config, sources: Sources) -> Self {
+        Self::spawn(config, sources, true).unwrap_or_else(|e| panic!("the daemon stopped: {e}"))
+    }
+
+    fn spawn(config: Config, sources: Sources, paused: bool) -> Result<Self, String> {
         let buf = Buffer::default();
         let sink = Arc::new(EventSink::to(Box::new(buf.clone())));
         let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
         let thread = std::thread::spawn(move || {
-            let rt = tokio::runtime::Builder::new_multi_thread()
-                .worker_threads(2)
-                .enable_all()
-                .build()
-                .map_err(|e| e.to_string())?;
+            let rt = if paused {
+                tokio::runtime::Builder::new_current_thread()
+                    .enable_all()
+                    .start_paused(true)
+                    .build()
+            } else {
+                tokio::runtime::Builder::new_multi_thread()
+                    .worker_threads(2)
+                    .enable_all()
+                    .build()
+            }
+            .map_err(|e| e.to_string())?;
             rt.block_on(daemon::run(config, sources, sink, rx))
         });
         let d = InProc {
