@@ -82,6 +82,10 @@ impl Sources {
 pub const DEFAULT_SETTLE_MS: u64 = 100;
 /// Retries of a compile that failed on a file caught half-written.
 const MAX_RETRIES: u32 = 3;
+/// How long a stop (`SIGTERM`, `SIGINT`) waits for running compiles before it gives up on them
+/// (`stopped` with reason `timeout`, exit status 2); `SKILLPOST_STOP_TIMEOUT_MS` changes it.
+/// systemd's `TimeoutStopSec` must be longer than this plus [`events::FLUSH_TIMEOUT`].
+pub const STOP_TIMEOUT: Duration = Duration::from_secs(10);
 /// How often missing project folders are looked for again.
 const MISSING_RETRY: Duration = Duration::from_secs(2);
 
@@ -184,25 +188,87 @@ pub async fn run(
         }
     }
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
-    // Finish the running compiles; start no new ones.
-    d.queue.clear();
+    // Finish the running compiles, waiting at most the stop timeout (a second signal ends the
+    // wait at once); start no new ones.
+    let queued: BTreeSet<PathBuf> = d.queue.drain(..).collect();
+    let deadline = Instant::now() + stop_timeout();
     while d.running > 0 {
-        match drx.recv().await {
-            Some(r) => {
-                d.running -= 1;
-                d.finish_report(r, Instant::now());
-            }
-            None => break,
+        tokio::select! {
+            r = drx.recv() => match r {
+                Some(r) => {
+                    d.running -= 1;
+                    d.finish_report(r, Instant::now());
+                }
+                None => break,
+            },
+            _ = tokio::time::sleep_until(deadline) => break,
+            Some(Control::Stop(_)) = control.recv() => break,
         }
     }
-    tracing::info!(reason = %stop_reason, "stopped");
-    sink.emit(
-        None,
-        Event::Stopped {
-            reason: stop_reason,
-        },
-    );
-    Ok(())
+    let result = if d.running == 0 {
+        tracing::info!(reason = %stop_reason, "stopped");
+        sink.emit(
+            None,
+            Event::Stopped {
+                reason: stop_reason,
+                requested: None,
+                compiling: None,
+            },
+        );
+        Ok(())
+    } else {
+        let compiling: Vec<String> = d
+            .projects
+            .iter()
+            .filter(|(k, p)| p.sched.is_running() && !queued.contains(*k))
+            .map(|(k, _)| k.display().to_string())
+            .collect();
+        tracing::error!(
+            reason = %stop_reason,
+            "stopped with {} compile(s) still running: {}",
+            d.running,
+            compiling.join(", ")
+        );
+        sink.emit(
+            None,
+            Event::Stopped {
+                reason: "timeout".into(),
+                requested: Some(stop_reason),
+                compiling: Some(compiling),
+            },
+        );
+        Err(format!(
+            "stopped with {} compile(s) still running after {:?}",
+            d.running,
+            stop_timeout()
+        ))
+    };
+    // The last events out, bounded: a stalled reader of the stream cannot hold the process.
+    let waiting = sink.flush(events::FLUSH_TIMEOUT);
+    if waiting > 0 {
+        tracing::error!("{waiting} event(s) not written: the event stream is stalled");
+    }
+    result
+}
+
+/// How long a stop waits for running compiles: `SKILLPOST_STOP_TIMEOUT_MS`, else
+/// [`STOP_TIMEOUT`].
+fn stop_timeout() -> Duration {
+    std::env::var("SKILLPOST_STOP_TIMEOUT_MS")
+        .ok()
+        .and_then(|v| v.trim().parse().ok())
+        .map_or(STOP_TIMEOUT, Duration::from_millis)
+}
+
+/// Test hook: `SKILLPOST_TEST_HANG_MS` makes every compile sleep that long first (a hung compile
+/// for the shutdown tests). Not for production use.
+fn test_hook_hang() {
+    if let Some(ms) = std::env::var("SKILLPOST_TEST_HANG_MS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+    {
+        std::thread::sleep(Duration::from_millis(ms));
+    }
 }
 
 /// Half the watchdog interval systemd asks for (`WATCHDOG_USEC`), if it asks.
@@ -317,6 +383,7 @@ impl Daemon {
         self.running += 1;
         let done = self.done.clone();
         tokio::task::spawn_blocking(move || {
+            test_hook_hang();
             let key = job.key.clone();
             let sink = job.sink.clone();
             // A panic is a bug, never input: report it and keep serving the other projects.
@@ -404,7 +471,16 @@ impl Daemon {
     }
 
     fn reload(&mut self, now: Instant) {
-        match self.sources.load() {
+        let loaded = self.sources.load();
+        // The events file again (logrotate moved it away), or the one the configuration names now.
+        let events = match &loaded {
+            Ok(c) => c.events.clone(),
+            Err(_) => self.config.events.clone(),
+        };
+        if let Err(e) = self.sink.reopen(events.as_deref()) {
+            tracing::error!("cannot open the event file again (keeping the old one): {e}");
+        }
+        match loaded {
             Ok(c) => {
                 let (added, removed) = self.apply_config(c, now);
                 for k in &added {
