@@ -282,6 +282,8 @@ struct State {
     kind: Kind,
     /// The sink is gone: the writer ends once the queue is empty.
     closed: bool,
+    /// When dropping for a full queue was last logged.
+    warned_full: Option<Instant>,
 }
 
 struct Shared {
@@ -336,6 +338,7 @@ impl EventSink {
                 replace: None,
                 kind,
                 closed: false,
+                warned_full: None,
             }),
             work: Condvar::new(),
             idle: Condvar::new(),
@@ -346,6 +349,8 @@ impl EventSink {
             out,
             dirty: false,
             failing: false,
+            logged_failure: false,
+            warned_failure: None,
         };
         let spawned = std::thread::Builder::new()
             .name("skillpost-events".into())
@@ -364,7 +369,7 @@ impl EventSink {
         let mut st = self.shared.lock();
         st.seq += 1;
         if st.queue.len() >= self.shared.capacity {
-            if st.dropped_full == 0 {
+            if st.dropped_full == 0 && due(&mut st.warned_full) {
                 tracing::warn!(
                     "the event stream is not read fast enough: dropping events until it catches up"
                 );
@@ -470,8 +475,12 @@ struct Writer {
     out: Box<dyn Output>,
     /// The output does not end at a line boundary (a partial line that could not be taken back).
     dirty: bool,
-    /// Writing fails (logged once).
+    /// Writing fails.
     failing: bool,
+    /// This failure was logged (then its end is logged too).
+    logged_failure: bool,
+    /// When a failure was last logged.
+    warned_failure: Option<Instant>,
 }
 
 impl Writer {
@@ -521,7 +530,7 @@ impl Writer {
             for (reason, count) in report {
                 st.seq += 1;
                 let seq = st.seq;
-                tracing::warn!("{count} events were lost ({reason})");
+                tracing::debug!("{count} events were lost ({reason}); reported in the stream");
                 st.queue.push_back(Pending {
                     seq,
                     ts: SystemTime::now(),
@@ -569,14 +578,19 @@ impl Writer {
             }
         } else if done > pre {
             // Part of the line is out: take it back, else end it with the next line's newline.
-            self.dirty = !self.out.unwrite((done - pre) as u64);
+            let n = (done - pre) as u64;
+            self.dirty = !self.out.unwrite(n);
+            if self.dirty {
+                tracing::debug!("{n} bytes of a line are out; the next line starts a new one");
+            } else {
+                tracing::debug!("took back {n} bytes of a partial line");
+            }
         } else if done == pre {
             self.dirty = false;
         }
         match result {
             Ok(()) => {
-                if self.failing {
-                    self.failing = false;
+                if std::mem::take(&mut self.failing) && std::mem::take(&mut self.logged_failure) {
                     tracing::warn!("the event stream can be written again");
                 }
                 true
@@ -584,14 +598,31 @@ impl Writer {
             Err(e) => {
                 if !self.failing {
                     self.failing = true;
-                    tracing::error!(
-                        "cannot write the event stream: {e}; events are lost until it works again"
-                    );
+                    // A disk that is almost full fails and works by turns: logged once a minute.
+                    self.logged_failure = due(&mut self.warned_failure);
+                    if self.logged_failure {
+                        tracing::error!(
+                            "cannot write the event stream: {e}; events are lost until it works again"
+                        );
+                    }
                 }
                 false
             }
         }
     }
+}
+
+/// How often a trouble of the event stream is logged at most.
+const LOG_EVERY: Duration = Duration::from_secs(60);
+
+/// Whether a message last logged at `last` is due again; if so, `last` becomes now.
+fn due(last: &mut Option<Instant>) -> bool {
+    let now = Instant::now();
+    if last.is_some_and(|t| now.duration_since(t) < LOG_EVERY) {
+        return false;
+    }
+    *last = Some(now);
+    true
 }
 
 /// One event as a line: the envelope, then the event's fields (those that are `None` left out).
