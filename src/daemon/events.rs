@@ -10,8 +10,8 @@
 //!
 //! The event stream must never slow down or stop the daemon, and never be corrupted:
 //!
-//! - [`EventSink::emit`] only numbers the event and puts it in a bounded queue; one writer
-//!   thread turns events into lines and writes them. A reader that stops reading (a stalled
+//! - [`EventSink::emit`] turns the event into its line, numbers it and puts it in a queue
+//!   bounded in events and bytes; one writer thread writes the lines. A reader that stops reading (a stalled
 //!   stdout pipe) stops the writer thread, not the compiles. When the queue is full the event is
 //!   dropped and counted; once the writer has caught up (the queue is half empty again), an
 //!   `events-dropped` event says how many were lost. `seq` is given when the event is emitted,
@@ -206,6 +206,10 @@ impl Event {
 /// How many events wait for the writer at most, unless `SKILLPOST_EVENT_QUEUE` says otherwise.
 pub const DEFAULT_QUEUE: usize = 4096;
 
+/// How many bytes of lines wait for the writer at most (events with thousands of diagnostics
+/// are large); one event is always taken.
+pub const MAX_QUEUE_BYTES: usize = 16 << 20;
+
 /// How long the end of the daemon waits for the last events to be written.
 pub const FLUSH_TIMEOUT: Duration = Duration::from_secs(2);
 
@@ -261,16 +265,17 @@ enum Kind {
     Custom,
 }
 
-/// An event waiting for the writer.
+/// A line waiting for the writer.
 struct Pending {
-    seq: u64,
-    ts: SystemTime,
-    project: Option<String>,
-    event: Event,
+    line: Vec<u8>,
+    /// For an `events-dropped` line: its reason and count (put back when the line is lost).
+    report: Option<(&'static str, u64)>,
 }
 
 struct State {
     queue: VecDeque<Pending>,
+    /// The bytes of the lines in the queue.
+    bytes: usize,
     seq: u64,
     /// Events dropped because the queue was full / because their write failed, not yet reported.
     dropped_full: u64,
@@ -331,6 +336,7 @@ impl EventSink {
         let shared = Arc::new(Shared {
             state: Mutex::new(State {
                 queue: VecDeque::new(),
+                bytes: 0,
                 seq: 0,
                 dropped_full: 0,
                 dropped_failed: 0,
@@ -362,13 +368,15 @@ impl EventSink {
         EventSink { shared }
     }
 
-    /// Emits one event: numbers it and queues it for the writer; never waits for the output.
-    /// When the queue is full the event is dropped and counted (see `events-dropped`).
+    /// Emits one event: numbers it and queues its line for the writer; never waits for the
+    /// output. When the queue is full the event is dropped and counted (see `events-dropped`).
     pub fn emit(&self, project: Option<&str>, event: Event) {
-        let ts = SystemTime::now();
+        let (head, tail) = render(SystemTime::now(), project, &event);
         let mut st = self.shared.lock();
         st.seq += 1;
-        if st.queue.len() >= self.shared.capacity {
+        let full = st.queue.len() >= self.shared.capacity
+            || (st.bytes + head.len() + tail.len() > MAX_QUEUE_BYTES && !st.queue.is_empty());
+        if full {
             if st.dropped_full == 0 && due(&mut st.warned_full) {
                 tracing::warn!(
                     "the event stream is not read fast enough: dropping events until it catches up"
@@ -377,13 +385,9 @@ impl EventSink {
             st.dropped_full += 1;
             return;
         }
-        let seq = st.seq;
-        st.queue.push_back(Pending {
-            seq,
-            ts,
-            project: project.map(str::to_owned),
-            event,
-        });
+        let line = with_seq(head, st.seq, &tail);
+        st.bytes += line.len();
+        st.queue.push_back(Pending { line, report: None });
         drop(st);
         self.shared.work.notify_one();
     }
@@ -494,6 +498,7 @@ impl Writer {
                         self.dirty = false;
                     }
                     if let Some(p) = st.queue.pop_front() {
+                        st.bytes -= p.line.len();
                         st.busy = true;
                         break p;
                     }
@@ -503,23 +508,21 @@ impl Writer {
                     st = self.shared.work.wait(st).unwrap_or_else(|p| p.into_inner());
                 }
             };
-            let ok = self.write(&render(&pending));
+            let ok = self.write(&pending.line);
             let mut st = self.shared.lock();
             st.busy = false;
             if !ok {
                 st.dropped_failed += 1;
                 // A lost report of losses: its count is reported again with the next one.
-                match pending.event {
-                    Event::EventsDropped {
-                        count,
-                        reason: "queue-full",
-                    } => st.dropped_full += count,
-                    Event::EventsDropped { count, .. } => st.dropped_failed += count,
-                    _ => {}
+                match pending.report {
+                    Some(("queue-full", count)) => st.dropped_full += count,
+                    Some((_, count)) => st.dropped_failed += count,
+                    None => {}
                 }
             }
             // Caught up: report what was lost, as one more event after those queued.
-            let caught_up = st.queue.len() <= self.shared.capacity / 2;
+            let caught_up =
+                st.queue.len() <= self.shared.capacity / 2 && st.bytes <= MAX_QUEUE_BYTES / 2;
             let mut report = Vec::new();
             if st.dropped_full > 0 && caught_up {
                 report.push(("queue-full", std::mem::take(&mut st.dropped_full)));
@@ -529,13 +532,17 @@ impl Writer {
             }
             for (reason, count) in report {
                 st.seq += 1;
-                let seq = st.seq;
                 tracing::debug!("{count} events were lost ({reason}); reported in the stream");
+                let (head, tail) = render(
+                    SystemTime::now(),
+                    None,
+                    &Event::EventsDropped { count, reason },
+                );
+                let line = with_seq(head, st.seq, &tail);
+                st.bytes += line.len();
                 st.queue.push_back(Pending {
-                    seq,
-                    ts: SystemTime::now(),
-                    project: None,
-                    event: Event::EventsDropped { count, reason },
+                    line,
+                    report: Some((reason, count)),
                 });
             }
             if st.queue.is_empty() {
@@ -625,30 +632,43 @@ fn due(last: &mut Option<Instant>) -> bool {
     true
 }
 
-/// One event as a line: the envelope, then the event's fields (those that are `None` left out).
-fn render(p: &Pending) -> Vec<u8> {
-    let fields = serde_json::to_value(&p.event).unwrap_or(Value::Null);
-    let mut obj = Map::new();
-    obj.insert("schema".into(), json!(SCHEMA));
-    obj.insert(
+/// One event as the two parts of its line around `seq`: the envelope up to `ts`, and the rest
+/// (`event`, `level`, `project`, then the event's fields, those that are `None` left out).
+/// Done before the sink's lock is taken; [`with_seq`] joins them under it.
+fn render(ts: SystemTime, project: Option<&str>, event: &Event) -> (Vec<u8>, Vec<u8>) {
+    let mut head = Map::new();
+    head.insert("schema".into(), json!(SCHEMA));
+    head.insert(
         "ts".into(),
-        json!(humantime::format_rfc3339_millis(p.ts).to_string()),
+        json!(humantime::format_rfc3339_millis(ts).to_string()),
     );
-    obj.insert("seq".into(), json!(p.seq));
-    obj.insert("event".into(), json!(p.event.name()));
-    obj.insert("level".into(), json!(p.event.level().as_str()));
-    if let Some(project) = &p.project {
-        obj.insert("project".into(), json!(project));
+    let mut tail = Map::new();
+    tail.insert("event".into(), json!(event.name()));
+    tail.insert("level".into(), json!(event.level().as_str()));
+    if let Some(p) = project {
+        tail.insert("project".into(), json!(p));
     }
-    if let Value::Object(f) = fields {
+    if let Ok(Value::Object(f)) = serde_json::to_value(event) {
         // Absent is clearer than null in a log that people read.
         for (k, v) in f.into_iter().filter(|(k, v)| k != "event" && !v.is_null()) {
-            obj.insert(k, v);
+            tail.insert(k, v);
         }
     }
-    let mut line = serde_json::to_vec(&Value::Object(obj)).unwrap_or_default();
-    line.push(b'\n');
-    line
+    // `{"schema":…,"ts":"…"` and `"event":…}` (both objects are never empty).
+    let mut head = serde_json::to_vec(&Value::Object(head)).unwrap_or_default();
+    head.pop();
+    let mut tail = serde_json::to_vec(&Value::Object(tail)).unwrap_or_default();
+    tail.remove(0);
+    (head, tail)
+}
+
+/// The whole line: `head`, `,"seq":N,`, `tail`, newline.
+fn with_seq(mut head: Vec<u8>, seq: u64, tail: &[u8]) -> Vec<u8> {
+    head.reserve(tail.len() + 32);
+    head.extend_from_slice(format!(",\"seq\":{seq},").as_bytes());
+    head.extend_from_slice(tail);
+    head.push(b'\n');
+    head
 }
 
 #[cfg(test)]
@@ -705,6 +725,26 @@ mod tests {
             "{text}"
         );
         assert_eq!(lines[1]["project"], "A");
+        let keys: Vec<&str> = lines[1]
+            .as_object()
+            .unwrap()
+            .keys()
+            .map(String::as_str)
+            .collect();
+        assert_eq!(
+            keys,
+            [
+                "schema",
+                "ts",
+                "seq",
+                "event",
+                "level",
+                "project",
+                "run_id",
+                "duration_ms",
+                "diagnostics"
+            ]
+        );
         assert_eq!(lines[1]["level"], "error");
         let ts = lines[0]["ts"].as_str().unwrap();
         assert!(ts.ends_with('Z') && ts.len() == 24, "{ts}");
@@ -820,6 +860,36 @@ mod tests {
         let lines = json_lines(&buf.0.lock().unwrap());
         assert_eq!(lines.last().unwrap()["seq"], 16);
         check_seq(&lines);
+    }
+
+    #[test]
+    fn the_queue_is_bounded_in_bytes_too() {
+        let (tx, rx) = mpsc::channel();
+        let open = Arc::new((Mutex::new(false), Condvar::new()));
+        let buf = Buf::default();
+        let gate = Gate {
+            entered: tx,
+            open: open.clone(),
+            buf: buf.clone(),
+        };
+        let sink = EventSink::start(Box::new(Plain(Box::new(gate))), Kind::Custom, 100);
+        sink.emit(None, started());
+        rx.recv_timeout(Duration::from_secs(5)).unwrap();
+        let big = || Event::failed_with(1, 0, "E000", "x".repeat(MAX_QUEUE_BYTES / 2 + 1));
+        sink.emit(Some("big1"), big());
+        // Over the byte bound with the first one queued: dropped.
+        sink.emit(Some("big2"), big());
+        sink.emit(Some("small"), started());
+        *open.0.lock().unwrap() = true;
+        open.1.notify_all();
+        assert_eq!(sink.flush(Duration::from_secs(5)), 0);
+        let lines = json_lines(&buf.0.lock().unwrap());
+        let projects: Vec<&str> = lines
+            .iter()
+            .map(|l| l["project"].as_str().unwrap_or("-"))
+            .collect();
+        assert_eq!(projects, ["-", "big1", "small", "-"]);
+        assert_eq!(check_seq(&lines), 1);
     }
 
     /// A file-like output that fails on one write after accepting half of it, and can take
