@@ -541,6 +541,79 @@ fn sighup_switches_to_the_events_file_the_config_names_now() {
     assert_eq!(d.wait_exit(WAIT).code(), Some(0));
 }
 
+/// The logrotate configuration shown in docs/DAEMON.md, for the events file `ev`, with the
+/// `postrotate` reload replaced by `kill -HUP pid` (no systemd here) and no user to create for.
+fn documented_logrotate_config(ev: &Path, pid: u32) -> String {
+    let doc = include_str!("../docs/DAEMON.md");
+    let start = doc
+        .find("/var/log/skillpost/events.jsonl {")
+        .expect("a logrotate snippet in docs/DAEMON.md");
+    let end = start + doc[start..].find("```").unwrap();
+    let snippet = &doc[start..end];
+    assert!(snippet.contains("systemctl reload skillpost"), "{snippet}");
+    snippet
+        .replace("/var/log/skillpost/events.jsonl", ev.to_str().unwrap())
+        .replace("systemctl reload skillpost", &format!("kill -HUP {pid}"))
+        .replace("create 0640 skillpost skillpost", "create 0640")
+}
+
+#[test]
+fn logrotate_with_the_documented_configuration() {
+    let Ok(version) = Command::new("logrotate").arg("--version").output() else {
+        return skip("logrotate is not installed");
+    };
+    assert!(version.status.success());
+    let (_tmp, root) = workspace();
+    let ev = root.join("ev.jsonl");
+    let (mut d, a) = file_daemon(&root, &ev);
+    let conf = root.join("logrotate.conf");
+    fs::write(&conf, documented_logrotate_config(&ev, d.child.id())).unwrap();
+    let rotate = || {
+        let out = Command::new("logrotate")
+            .arg("-f")
+            .arg("-s")
+            .arg(root.join("logrotate.state"))
+            .arg(&conf)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "logrotate: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    rotate();
+    wait_for_event(&mut d, &ev, "reloaded after logrotate", |e| {
+        is(e, "reloaded")
+    });
+    edit(&a, 4713);
+    let new = wait_for_event(&mut d, &ev, "compile-succeeded after logrotate", |e| {
+        is(e, "compile-succeeded")
+    });
+    // `delaycompress`: the rotated file is still plain text, and ends with a whole line.
+    let old = parse_lines(
+        &fs::read_to_string(root.join("ev.jsonl.1")).unwrap(),
+        "ev.jsonl.1",
+    );
+    let all: Vec<Value> = old.into_iter().chain(new).collect();
+    check_seq(&all, "ev.jsonl.1 + ev.jsonl");
+    // Once more: the first rotation is compressed now, the daemon follows again.
+    rotate();
+    assert!(root.join("ev.jsonl.2.gz").is_file());
+    wait_for_event(&mut d, &ev, "reloaded after the second logrotate", |e| {
+        is(e, "reloaded")
+    });
+    edit(&a, 4714);
+    wait_for_event(
+        &mut d,
+        &ev,
+        "compile-succeeded after the second logrotate",
+        |e| is(e, "compile-succeeded"),
+    );
+    d.signal("TERM");
+    assert_eq!(d.wait_exit(WAIT).code(), Some(0));
+}
+
 #[test]
 fn copytruncate_keeps_whole_lines() {
     let (_tmp, root) = workspace();
