@@ -10,6 +10,7 @@
 //! - `project`: the project table (projects, their watched folders, the directory index).
 //! - `route`: file events → the projects they concern; roots; folders that come and go.
 //! - `job`: one compile on a blocking thread (hash check, compile, write, its events).
+//! - `stop`: the end: running compiles and the last events waited for, both bounded.
 //! - this module: the event loop. [`run`] takes its control channel as a parameter (stop and
 //!   reload), so tests drive it without signals; the command line connects the signals.
 //!
@@ -31,6 +32,7 @@ mod poll;
 mod project;
 mod route;
 pub mod settle;
+mod stop;
 mod watch;
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
@@ -45,6 +47,7 @@ use config::Config;
 use events::{Event, EventSink};
 use job::{Job, Outcome, Report};
 use project::Project;
+pub use stop::STOP_TIMEOUT;
 use watch::Watchers;
 
 /// What the command line (signals) or a test tells the daemon.
@@ -82,10 +85,6 @@ impl Sources {
 pub const DEFAULT_SETTLE_MS: u64 = 100;
 /// Retries of a compile that failed on a file caught half-written.
 const MAX_RETRIES: u32 = 3;
-/// How long a stop (`SIGTERM`, `SIGINT`) waits for running compiles before it gives up on them
-/// (`stopped` with reason `timeout`, exit status 2); `SKILLPOST_STOP_TIMEOUT_MS` changes it.
-/// systemd's `TimeoutStopSec` must be longer than this plus [`events::FLUSH_TIMEOUT`].
-pub const STOP_TIMEOUT: Duration = Duration::from_secs(10);
 /// How often missing project folders are looked for again.
 const MISSING_RETRY: Duration = Duration::from_secs(2);
 
@@ -187,88 +186,7 @@ pub async fn run(
             _ = missing_tick.tick() => d.look_for_missing(Instant::now()),
         }
     }
-    let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
-    // Finish the running compiles, waiting at most the stop timeout (a second signal ends the
-    // wait at once); start no new ones.
-    let queued: BTreeSet<PathBuf> = d.queue.drain(..).collect();
-    let deadline = Instant::now() + stop_timeout();
-    while d.running > 0 {
-        tokio::select! {
-            r = drx.recv() => match r {
-                Some(r) => {
-                    d.running -= 1;
-                    d.finish_report(r, Instant::now());
-                }
-                None => break,
-            },
-            _ = tokio::time::sleep_until(deadline) => break,
-            Some(Control::Stop(_)) = control.recv() => break,
-        }
-    }
-    let result = if d.running == 0 {
-        tracing::info!(reason = %stop_reason, "stopped");
-        sink.emit(
-            None,
-            Event::Stopped {
-                reason: stop_reason,
-                requested: None,
-                compiling: None,
-            },
-        );
-        Ok(())
-    } else {
-        let compiling: Vec<String> = d
-            .projects
-            .iter()
-            .filter(|(k, p)| p.sched.is_running() && !queued.contains(*k))
-            .map(|(k, _)| k.display().to_string())
-            .collect();
-        tracing::error!(
-            reason = %stop_reason,
-            "stopped with {} compile(s) still running: {}",
-            d.running,
-            compiling.join(", ")
-        );
-        sink.emit(
-            None,
-            Event::Stopped {
-                reason: "timeout".into(),
-                requested: Some(stop_reason),
-                compiling: Some(compiling),
-            },
-        );
-        Err(format!(
-            "stopped with {} compile(s) still running after {:?}",
-            d.running,
-            stop_timeout()
-        ))
-    };
-    // The last events out, bounded: a stalled reader of the stream cannot hold the process.
-    let waiting = sink.flush(events::FLUSH_TIMEOUT);
-    if waiting > 0 {
-        tracing::error!("{waiting} event(s) not written: the event stream is stalled");
-    }
-    result
-}
-
-/// How long a stop waits for running compiles: `SKILLPOST_STOP_TIMEOUT_MS`, else
-/// [`STOP_TIMEOUT`].
-fn stop_timeout() -> Duration {
-    std::env::var("SKILLPOST_STOP_TIMEOUT_MS")
-        .ok()
-        .and_then(|v| v.trim().parse().ok())
-        .map_or(STOP_TIMEOUT, Duration::from_millis)
-}
-
-/// Test hook: `SKILLPOST_TEST_HANG_MS` makes every compile sleep that long first (a hung compile
-/// for the shutdown tests). Not for production use.
-fn test_hook_hang() {
-    if let Some(ms) = std::env::var("SKILLPOST_TEST_HANG_MS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-    {
-        std::thread::sleep(Duration::from_millis(ms));
-    }
+    d.stop(stop_reason, drx, control).await
 }
 
 /// Half the watchdog interval systemd asks for (`WATCHDOG_USEC`), if it asks.
@@ -383,7 +301,7 @@ impl Daemon {
         self.running += 1;
         let done = self.done.clone();
         tokio::task::spawn_blocking(move || {
-            test_hook_hang();
+            stop::test_hook_hang();
             let key = job.key.clone();
             let sink = job.sink.clone();
             // A panic is a bug, never input: report it and keep serving the other projects.
