@@ -761,23 +761,34 @@ fn a_full_disk_never_leaves_half_a_line() {
 // systemd
 // ---------------------------------------------------------------------------------------------
 
-#[test]
-fn systemd_stop_timeout_exceeds_the_daemons_own_bounds() {
-    let unit = include_str!("../systemd/skillpost.service");
+/// A `Key=` value of the unit in seconds (`60s` or `60`).
+fn unit_seconds(unit: &str, key: &str) -> u64 {
     let value = unit
         .lines()
-        .filter_map(|l| l.trim().strip_prefix("TimeoutStopSec="))
+        .filter_map(|l| l.trim().strip_prefix(&format!("{key}=")))
         .next_back()
-        .expect("TimeoutStopSec= in the unit");
-    let secs: u64 = value
-        .trim()
-        .strip_suffix('s')
-        .unwrap_or(value.trim())
+        .unwrap_or_else(|| panic!("{key}= in the unit"));
+    let v = value.trim();
+    v.strip_suffix('s')
+        .unwrap_or(v)
         .parse()
-        .expect("TimeoutStopSec in seconds");
+        .unwrap_or_else(|_| panic!("{key}={v}: seconds expected"))
+}
+
+#[test]
+fn systemd_timeouts_exceed_the_daemons_own_bounds() {
+    let unit = include_str!("../systemd/skillpost.service");
     let own = skillpost::daemon::STOP_TIMEOUT + skillpost::daemon::events::FLUSH_TIMEOUT;
+    // systemd sends SIGKILL after TimeoutStopSec: the daemon's own bounds must end it first.
+    let stop = unit_seconds(unit, "TimeoutStopSec");
     assert!(
-        Duration::from_secs(secs) > own + Duration::from_secs(5),
-        "TimeoutStopSec={secs}s must exceed the daemon's stop timeout and final flush ({own:?})"
+        Duration::from_secs(stop) > own + Duration::from_secs(5),
+        "TimeoutStopSec={stop}s must exceed the daemon's stop timeout and final flush ({own:?})"
+    );
+    // No watchdog pings while stopping: the stop must end well within one watchdog interval.
+    let watchdog = unit_seconds(unit, "WatchdogSec");
+    assert!(
+        Duration::from_secs(watchdog) > own,
+        "WatchdogSec={watchdog}s must exceed the stop's bounds ({own:?})"
     );
 }
