@@ -345,6 +345,8 @@ fn watch(w: WatchArgs) -> u8 {
             return 2;
         }
     };
+    let sink = std::sync::Arc::new(sink);
+    let daemon_sink = sink.clone();
     let result = runtime.block_on(async move {
         let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
         use tokio::signal::unix::{SignalKind, signal};
@@ -356,6 +358,7 @@ fn watch(w: WatchArgs) -> u8 {
             (Ok(h), Ok(t), Ok(i)) => (h, t, i),
             _ => return Err("cannot install signal handlers".to_owned()),
         };
+        // Every signal is passed on: a second SIGTERM/SIGINT ends the wait for running compiles.
         tokio::spawn(async move {
             loop {
                 let msg = tokio::select! {
@@ -363,16 +366,23 @@ fn watch(w: WatchArgs) -> u8 {
                     _ = term.recv() => Control::Stop("SIGTERM".into()),
                     _ = int.recv() => Control::Stop("SIGINT".into()),
                 };
-                let stop = matches!(msg, Control::Stop(_));
-                if tx.send(msg).is_err() || stop {
+                if tx.send(msg).is_err() {
                     break;
                 }
             }
         });
-        daemon::run(config, sources, std::sync::Arc::new(sink), rx).await
+        daemon::run(config, sources, daemon_sink, rx).await
     });
+    // Compiles still running (a stop that timed out) are not waited for: the process ends.
+    runtime.shutdown_background();
+    // `run` flushed the events already (bounded): this only counts what is still waiting.
+    let waiting = sink.flush(std::time::Duration::ZERO);
     match result {
-        Ok(()) => 0,
+        Ok(()) if waiting == 0 => 0,
+        Ok(()) => {
+            eprintln!("error: {waiting} event(s) not written: the event stream is stalled");
+            2
+        }
         Err(e) => {
             eprintln!("error: {e}");
             2

@@ -5,11 +5,35 @@
 //! Every event the daemon can emit is a variant of [`Event`]; [`EventSink::emit`] is the one
 //! place that turns one into a line. docs/DAEMON.md's event table lists the same names and
 //! fields (a test keeps the two in sync).
+//!
+//! # The writer
+//!
+//! The event stream must never slow down or stop the daemon, and never be corrupted:
+//!
+//! - [`EventSink::emit`] turns the event into its line, numbers it and puts it in a queue
+//!   bounded in events and bytes; one writer thread writes the lines. A reader that stops reading (a stalled
+//!   stdout pipe) stops the writer thread, not the compiles. When the queue is full the event is
+//!   dropped and counted; once the writer has caught up (the queue is half empty again), an
+//!   `events-dropped` event says how many were lost. `seq` is given when the event is emitted,
+//!   so the lines' `seq` always grows, with a gap exactly where events were lost.
+//! - Each line is written with one `write` (continued only after a short write). When a write
+//!   fails (a full disk), the bytes of the line that did get out are taken back (the file is
+//!   truncated to its length before the line); where that is impossible (a pipe), the next line
+//!   starts with a newline, so it is a whole line of its own. Lines lost that way are counted
+//!   and reported by `events-dropped` once writing works again; the failure is logged once
+//!   (`tracing`), and once more when it is over.
+//! - [`EventSink::reopen`] opens the events file again (`SIGHUP` after logrotate moved it away)
+//!   or switches to the file the configuration names now; the writer takes the new file before
+//!   its next line. Files are opened with `O_APPEND`, so logrotate's `copytruncate` works too.
+//! - [`EventSink::flush`] waits, bounded, until every queued event is written: a stalled reader
+//!   cannot hold up the end of the process.
 
-use std::io::Write;
-use std::path::Path;
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::collections::VecDeque;
+use std::fs::File;
+use std::io::{Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::time::{Duration, Instant, SystemTime};
 
 use serde::Serialize;
 use serde_json::{Map, Value, json};
@@ -119,8 +143,21 @@ pub enum Event {
         line: Option<usize>,
         column: Option<usize>,
     },
+    /// The daemon stops: `reason` is the signal, or `timeout` when compiles were still running
+    /// after [`super::STOP_TIMEOUT`] (the process then exits with status 2).
     Stopped {
         reason: String,
+        /// With `timeout`: what asked the daemon to stop (`SIGTERM`, `SIGINT`).
+        requested: Option<String>,
+        /// With `timeout`: the projects whose compile was still running.
+        compiling: Option<Vec<String>>,
+    },
+    /// Events were lost: `queue-full` (the reader of the stream did not keep up) or
+    /// `write-error` (the events file could not be written, e.g. a full disk). The lines' `seq`
+    /// skips exactly `count` numbers for them.
+    EventsDropped {
+        count: u64,
+        reason: &'static str,
     },
 }
 
@@ -140,13 +177,15 @@ impl Event {
             Event::Reloaded { .. } => "reloaded",
             Event::ReloadFailed { .. } => "reload-failed",
             Event::Stopped { .. } => "stopped",
+            Event::EventsDropped { .. } => "events-dropped",
         }
     }
 
     /// The event's level.
     pub fn level(&self) -> Level {
         match self {
-            Event::WatchDegraded { .. } => Level::Warn,
+            Event::WatchDegraded { .. } | Event::EventsDropped { .. } => Level::Warn,
+            Event::Stopped { reason, .. } if reason == "timeout" => Level::Error,
             Event::Rescan { reason, .. } if reason != "startup" => Level::Warn,
             Event::WriteBack { skipped: true, .. } => Level::Warn,
             Event::CompileFailed { .. } | Event::ReloadFailed { .. } => Level::Error,
@@ -164,74 +203,479 @@ impl Event {
     }
 }
 
-/// Where events go. Shared by the daemon's tasks.
+/// How many events wait for the writer at most, unless `SKILLPOST_EVENT_QUEUE` says otherwise.
+pub const DEFAULT_QUEUE: usize = 4096;
+
+/// How many bytes of lines wait for the writer at most (events with thousands of diagnostics
+/// are large); one event is always taken.
+pub const MAX_QUEUE_BYTES: usize = 16 << 20;
+
+/// How long the end of the daemon waits for the last events to be written.
+pub const FLUSH_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// Where the lines go: a file (which can take back a partial line), or any writer.
+trait Output: Send {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize>;
+    fn flush(&mut self) -> std::io::Result<()>;
+    /// Takes back the last `n` bytes written; false where the output cannot (a pipe).
+    fn unwrite(&mut self, n: u64) -> bool;
+}
+
+impl Output for File {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        Write::write(self, buf)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+    fn unwrite(&mut self, n: u64) -> bool {
+        let Ok(meta) = self.metadata() else {
+            return false;
+        };
+        if !meta.is_file() || meta.len() < n {
+            return false;
+        }
+        let len = meta.len() - n;
+        // Not `O_APPEND` (stdout redirected with `>`): the offset must come back too.
+        self.set_len(len).is_ok() && self.seek(SeekFrom::Start(len)).is_ok()
+    }
+}
+
+/// Any writer (tests, or stdout when it cannot be duplicated).
+struct Plain(Box<dyn Write + Send>);
+
+impl Output for Plain {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0.write(buf)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.0.flush()
+    }
+    fn unwrite(&mut self, _n: u64) -> bool {
+        false
+    }
+}
+
+/// What kind of output a sink was made for, so that [`EventSink::reopen`] knows what to do.
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum Kind {
+    Stdout,
+    File(PathBuf),
+    /// A writer given by the caller: never replaced.
+    Custom,
+}
+
+/// A line waiting for the writer.
+struct Pending {
+    line: Vec<u8>,
+    /// For an `events-dropped` line: its reason and count (put back when the line is lost).
+    report: Option<(&'static str, u64)>,
+}
+
+struct State {
+    queue: VecDeque<Pending>,
+    /// The bytes of the lines in the queue.
+    bytes: usize,
+    seq: u64,
+    /// Events dropped because the queue was full / because their write failed, not yet reported.
+    dropped_full: u64,
+    dropped_failed: u64,
+    /// The writer is writing a line (taken from the queue).
+    busy: bool,
+    /// The output the writer takes before its next line.
+    replace: Option<Box<dyn Output>>,
+    kind: Kind,
+    /// The sink is gone: the writer ends once the queue is empty.
+    closed: bool,
+    /// When dropping for a full queue was last logged.
+    warned_full: Option<Instant>,
+}
+
+struct Shared {
+    state: Mutex<State>,
+    /// To the writer: an event, a new output, or the end.
+    work: Condvar,
+    /// From the writer: the queue is empty and nothing is being written.
+    idle: Condvar,
+    capacity: usize,
+}
+
+impl Shared {
+    fn lock(&self) -> MutexGuard<'_, State> {
+        self.state.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+/// Where events go. Shared by the daemon's tasks; see the module documentation.
 pub struct EventSink {
-    out: Mutex<Box<dyn Write + Send>>,
-    seq: AtomicU64,
+    shared: Arc<Shared>,
 }
 
 impl EventSink {
     /// Events on stdout.
     pub fn stdout() -> Self {
-        Self::to(Box::new(std::io::stdout()))
+        Self::start(stdout_output(), Kind::Stdout, queue_capacity())
     }
 
     /// Events appended to a file (created if missing).
     pub fn append(path: &Path) -> std::io::Result<Self> {
-        let f = std::fs::OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(path)?;
-        Ok(Self::to(Box::new(f)))
+        let f = open_append(path)?;
+        Ok(Self::start(
+            Box::new(f),
+            Kind::File(path.to_owned()),
+            queue_capacity(),
+        ))
     }
 
     /// Events into any writer (tests).
     pub fn to(out: Box<dyn Write + Send>) -> Self {
-        EventSink {
-            out: Mutex::new(out),
-            seq: AtomicU64::new(0),
+        Self::start(Box::new(Plain(out)), Kind::Custom, queue_capacity())
+    }
+
+    fn start(out: Box<dyn Output>, kind: Kind, capacity: usize) -> Self {
+        let shared = Arc::new(Shared {
+            state: Mutex::new(State {
+                queue: VecDeque::new(),
+                bytes: 0,
+                seq: 0,
+                dropped_full: 0,
+                dropped_failed: 0,
+                busy: false,
+                replace: None,
+                kind,
+                closed: false,
+                warned_full: None,
+            }),
+            work: Condvar::new(),
+            idle: Condvar::new(),
+            capacity: capacity.max(2),
+        });
+        let writer = Writer {
+            shared: shared.clone(),
+            out,
+            dirty: false,
+            failing: false,
+            logged_failure: false,
+            warned_failure: None,
+        };
+        let spawned = std::thread::Builder::new()
+            .name("skillpost-events".into())
+            .spawn(move || writer.run());
+        if let Err(e) = spawned {
+            // Without a writer events only pile up to the queue's bound and are counted.
+            tracing::error!("cannot start the event writer thread: {e}");
+        }
+        EventSink { shared }
+    }
+
+    /// Emits one event: numbers it and queues its line for the writer; never waits for the
+    /// output. When the queue is full the event is dropped and counted (see `events-dropped`).
+    pub fn emit(&self, project: Option<&str>, event: Event) {
+        let (head, tail) = render(SystemTime::now(), project, &event);
+        let mut st = self.shared.lock();
+        st.seq += 1;
+        let full = st.queue.len() >= self.shared.capacity
+            || (st.bytes + head.len() + tail.len() > MAX_QUEUE_BYTES && !st.queue.is_empty());
+        if full {
+            if st.dropped_full == 0 && due(&mut st.warned_full) {
+                tracing::warn!(
+                    "the event stream is not read fast enough: dropping events until it catches up"
+                );
+            }
+            st.dropped_full += 1;
+            return;
+        }
+        let line = with_seq(head, st.seq, &tail);
+        st.bytes += line.len();
+        st.queue.push_back(Pending { line, report: None });
+        drop(st);
+        self.shared.work.notify_one();
+    }
+
+    /// Opens the output again: the file `events` (created if missing; the same path again after
+    /// logrotate moved it away, or a new one), or stdout when `None`. The writer takes it before
+    /// its next line. A sink made by [`EventSink::to`] keeps its writer. On error the current
+    /// output is kept.
+    pub fn reopen(&self, events: Option<&Path>) -> std::io::Result<()> {
+        let kind = match events {
+            Some(p) => Kind::File(p.to_owned()),
+            None => Kind::Stdout,
+        };
+        {
+            let st = self.shared.lock();
+            if st.kind == Kind::Custom || (st.kind == Kind::Stdout && kind == Kind::Stdout) {
+                return Ok(());
+            }
+        }
+        let out: Box<dyn Output> = match events {
+            Some(p) => Box::new(open_append(p)?),
+            None => stdout_output(),
+        };
+        let mut st = self.shared.lock();
+        st.replace = Some(out);
+        st.kind = kind;
+        drop(st);
+        self.shared.work.notify_one();
+        Ok(())
+    }
+
+    /// Waits until every event emitted so far is written (or dropped), at most `timeout`.
+    /// Returns how many are still waiting (0: all out).
+    pub fn flush(&self, timeout: Duration) -> usize {
+        let deadline = Instant::now() + timeout;
+        let mut st = self.shared.lock();
+        loop {
+            let waiting = st.queue.len() + usize::from(st.busy);
+            let now = Instant::now();
+            if waiting == 0 || now >= deadline {
+                return waiting;
+            }
+            st = self
+                .shared
+                .idle
+                .wait_timeout(st, deadline - now)
+                .unwrap_or_else(|p| p.into_inner())
+                .0;
+        }
+    }
+}
+
+impl Drop for EventSink {
+    /// The writer writes what is queued, then ends (it is not waited for).
+    fn drop(&mut self) {
+        self.shared.lock().closed = true;
+        self.shared.work.notify_all();
+    }
+}
+
+fn open_append(path: &Path) -> std::io::Result<File> {
+    std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+}
+
+/// Stdout as a file of its own (a duplicate descriptor): unbuffered, one `write` per line, and a
+/// partial line can be taken back when stdout is a regular file.
+fn stdout_output() -> Box<dyn Output> {
+    use std::os::fd::AsFd;
+    match std::io::stdout().as_fd().try_clone_to_owned() {
+        Ok(fd) => Box::new(File::from(fd)),
+        Err(_) => Box::new(Plain(Box::new(std::io::stdout()))),
+    }
+}
+
+/// The queue bound: `SKILLPOST_EVENT_QUEUE`, else [`DEFAULT_QUEUE`].
+fn queue_capacity() -> usize {
+    std::env::var("SKILLPOST_EVENT_QUEUE")
+        .ok()
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or(DEFAULT_QUEUE)
+}
+
+/// The writer thread: takes events from the queue, writes them as lines.
+struct Writer {
+    shared: Arc<Shared>,
+    out: Box<dyn Output>,
+    /// The output does not end at a line boundary (a partial line that could not be taken back).
+    dirty: bool,
+    /// Writing fails.
+    failing: bool,
+    /// This failure was logged (then its end is logged too).
+    logged_failure: bool,
+    /// When a failure was last logged.
+    warned_failure: Option<Instant>,
+}
+
+impl Writer {
+    fn run(mut self) {
+        loop {
+            let pending = {
+                let mut st = self.shared.lock();
+                loop {
+                    if let Some(out) = st.replace.take() {
+                        self.out = out;
+                        self.dirty = false;
+                    }
+                    if let Some(p) = st.queue.pop_front() {
+                        st.bytes -= p.line.len();
+                        st.busy = true;
+                        break p;
+                    }
+                    if st.closed {
+                        return;
+                    }
+                    st = self.shared.work.wait(st).unwrap_or_else(|p| p.into_inner());
+                }
+            };
+            let ok = self.write(&pending.line);
+            let mut st = self.shared.lock();
+            st.busy = false;
+            if !ok {
+                st.dropped_failed += 1;
+                // A lost report of losses: its count is reported again with the next one.
+                match pending.report {
+                    Some(("queue-full", count)) => st.dropped_full += count,
+                    Some((_, count)) => st.dropped_failed += count,
+                    None => {}
+                }
+            }
+            // Caught up: report what was lost, as one more event after those queued.
+            let caught_up =
+                st.queue.len() <= self.shared.capacity / 2 && st.bytes <= MAX_QUEUE_BYTES / 2;
+            let mut report = Vec::new();
+            if st.dropped_full > 0 && caught_up {
+                report.push(("queue-full", std::mem::take(&mut st.dropped_full)));
+            }
+            if ok && st.dropped_failed > 0 {
+                report.push(("write-error", std::mem::take(&mut st.dropped_failed)));
+            }
+            for (reason, count) in report {
+                st.seq += 1;
+                tracing::debug!("{count} events were lost ({reason}); reported in the stream");
+                let (head, tail) = render(
+                    SystemTime::now(),
+                    None,
+                    &Event::EventsDropped { count, reason },
+                );
+                let line = with_seq(head, st.seq, &tail);
+                st.bytes += line.len();
+                st.queue.push_back(Pending {
+                    line,
+                    report: Some((reason, count)),
+                });
+            }
+            if st.queue.is_empty() {
+                self.shared.idle.notify_all();
+            }
         }
     }
 
-    /// Emits one event: the envelope, then the event's fields (those that are `None` left out).
-    pub fn emit(&self, project: Option<&str>, event: Event) {
-        let fields = serde_json::to_value(&event).unwrap_or(Value::Null);
-        let mut obj = Map::new();
-        obj.insert("schema".into(), json!(SCHEMA));
-        obj.insert(
-            "ts".into(),
-            json!(humantime::format_rfc3339_millis(std::time::SystemTime::now()).to_string()),
-        );
-        // The counter and the write happen under one lock, so `seq` grows line by line.
-        let mut out = self.out.lock().unwrap_or_else(|p| p.into_inner());
-        obj.insert(
-            "seq".into(),
-            json!(self.seq.fetch_add(1, Ordering::Relaxed) + 1),
-        );
-        obj.insert("event".into(), json!(event.name()));
-        obj.insert("level".into(), json!(event.level().as_str()));
-        if let Some(p) = project {
-            obj.insert("project".into(), json!(p));
+    /// Writes one line; true if it is out whole. After a failure no partial line stays behind.
+    fn write(&mut self, line: &[u8]) -> bool {
+        let pre = usize::from(self.dirty);
+        let mut buf = Vec::with_capacity(line.len() + pre);
+        if self.dirty {
+            buf.push(b'\n');
         }
-        if let Value::Object(f) = fields {
-            // Absent is clearer than null in a log that people read.
-            for (k, v) in f.into_iter().filter(|(k, v)| k != "event" && !v.is_null()) {
-                obj.insert(k, v);
+        buf.extend_from_slice(line);
+        let mut done = 0;
+        let mut result = Ok(());
+        while done < buf.len() {
+            match self.out.write(&buf[done..]) {
+                Ok(0) => {
+                    result = Err(std::io::Error::from(std::io::ErrorKind::WriteZero));
+                    break;
+                }
+                Ok(n) => done += n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => {
+                    result = Err(e);
+                    break;
+                }
             }
         }
-        let mut line = serde_json::to_string(&Value::Object(obj)).unwrap_or_default();
-        line.push('\n');
-        // A failing event stream must not stop the daemon; the error goes to the log.
-        if let Err(e) = out.write_all(line.as_bytes()).and_then(|_| out.flush()) {
-            tracing::error!("cannot write the event stream: {e}");
+        if result.is_ok() {
+            result = self.out.flush();
+            if result.is_err() {
+                // Buffered somewhere: how much of it got out is unknown.
+                self.dirty = true;
+            } else {
+                self.dirty = false;
+            }
+        } else if done > pre {
+            // Part of the line is out: take it back, else end it with the next line's newline.
+            let n = (done - pre) as u64;
+            self.dirty = !self.out.unwrite(n);
+            if self.dirty {
+                tracing::debug!("{n} bytes of a line are out; the next line starts a new one");
+            } else {
+                tracing::debug!("took back {n} bytes of a partial line");
+            }
+        } else if done == pre {
+            self.dirty = false;
+        }
+        match result {
+            Ok(()) => {
+                if std::mem::take(&mut self.failing) && std::mem::take(&mut self.logged_failure) {
+                    tracing::warn!("the event stream can be written again");
+                }
+                true
+            }
+            Err(e) => {
+                if !self.failing {
+                    self.failing = true;
+                    // A disk that is almost full fails and works by turns: logged once a minute.
+                    self.logged_failure = due(&mut self.warned_failure);
+                    if self.logged_failure {
+                        tracing::error!(
+                            "cannot write the event stream: {e}; events are lost until it works again"
+                        );
+                    }
+                }
+                false
+            }
         }
     }
+}
+
+/// How often a trouble of the event stream is logged at most.
+const LOG_EVERY: Duration = Duration::from_secs(60);
+
+/// Whether a message last logged at `last` is due again; if so, `last` becomes now.
+fn due(last: &mut Option<Instant>) -> bool {
+    let now = Instant::now();
+    if last.is_some_and(|t| now.duration_since(t) < LOG_EVERY) {
+        return false;
+    }
+    *last = Some(now);
+    true
+}
+
+/// One event as the two parts of its line around `seq`: the envelope up to `ts`, and the rest
+/// (`event`, `level`, `project`, then the event's fields, those that are `None` left out).
+/// Done before the sink's lock is taken; [`with_seq`] joins them under it.
+fn render(ts: SystemTime, project: Option<&str>, event: &Event) -> (Vec<u8>, Vec<u8>) {
+    let mut head = Map::new();
+    head.insert("schema".into(), json!(SCHEMA));
+    head.insert(
+        "ts".into(),
+        json!(humantime::format_rfc3339_millis(ts).to_string()),
+    );
+    let mut tail = Map::new();
+    tail.insert("event".into(), json!(event.name()));
+    tail.insert("level".into(), json!(event.level().as_str()));
+    if let Some(p) = project {
+        tail.insert("project".into(), json!(p));
+    }
+    if let Ok(Value::Object(f)) = serde_json::to_value(event) {
+        // Absent is clearer than null in a log that people read.
+        for (k, v) in f.into_iter().filter(|(k, v)| k != "event" && !v.is_null()) {
+            tail.insert(k, v);
+        }
+    }
+    // `{"schema":…,"ts":"…"` and `"event":…}` (both objects are never empty).
+    let mut head = serde_json::to_vec(&Value::Object(head)).unwrap_or_default();
+    head.pop();
+    let mut tail = serde_json::to_vec(&Value::Object(tail)).unwrap_or_default();
+    tail.remove(0);
+    (head, tail)
+}
+
+/// The whole line: `head`, `,"seq":N,`, `tail`, newline.
+fn with_seq(mut head: Vec<u8>, seq: u64, tail: &[u8]) -> Vec<u8> {
+    head.reserve(tail.len() + 32);
+    head.extend_from_slice(format!(",\"seq\":{seq},").as_bytes());
+    head.extend_from_slice(tail);
+    head.push(b'\n');
+    head
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::sync::Arc;
+    use std::collections::BTreeSet;
+    use std::sync::mpsc;
 
     #[derive(Clone, Default)]
     struct Buf(Arc<Mutex<Vec<u8>>>);
@@ -259,6 +703,7 @@ mod tests {
             },
         );
         sink.emit(Some("A"), Event::failed_with(3, 0, "E101", "gone".into()));
+        assert_eq!(sink.flush(Duration::from_secs(5)), 0);
         let text = String::from_utf8(buf.0.lock().unwrap().clone()).unwrap();
         let lines: Vec<Value> = text
             .lines()
@@ -280,9 +725,475 @@ mod tests {
             "{text}"
         );
         assert_eq!(lines[1]["project"], "A");
+        let keys: Vec<&str> = lines[1]
+            .as_object()
+            .unwrap()
+            .keys()
+            .map(String::as_str)
+            .collect();
+        assert_eq!(
+            keys,
+            [
+                "schema",
+                "ts",
+                "seq",
+                "event",
+                "level",
+                "project",
+                "run_id",
+                "duration_ms",
+                "diagnostics"
+            ]
+        );
         assert_eq!(lines[1]["level"], "error");
         let ts = lines[0]["ts"].as_str().unwrap();
         assert!(ts.ends_with('Z') && ts.len() == 24, "{ts}");
         assert!(humantime::parse_rfc3339(ts).is_ok());
+    }
+
+    fn started() -> Event {
+        Event::Started {
+            version: "x",
+            pid: 1,
+            config: None,
+        }
+    }
+
+    fn lines_of(bytes: &[u8]) -> Vec<String> {
+        String::from_utf8(bytes.to_vec())
+            .unwrap()
+            .lines()
+            .map(str::to_owned)
+            .collect()
+    }
+
+    fn json_lines(bytes: &[u8]) -> Vec<Value> {
+        lines_of(bytes)
+            .iter()
+            .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("not JSON ({e}): {l}")))
+            .collect()
+    }
+
+    /// `seq` grows line by line; every gap is accounted for by `events-dropped` (the sum of
+    /// their counts equals the sum of the gaps).
+    fn check_seq(lines: &[Value]) -> u64 {
+        let mut gaps = 0;
+        let mut reported = 0;
+        let mut last = 0;
+        for l in lines {
+            let seq = l["seq"].as_u64().unwrap();
+            assert!(seq > last, "seq {seq} after {last}");
+            gaps += seq - last - 1;
+            last = seq;
+            if l["event"] == "events-dropped" {
+                assert_eq!(l["level"], "warn");
+                reported += l["count"].as_u64().unwrap();
+            }
+        }
+        assert_eq!(gaps, reported, "gaps in seq = events-dropped counts");
+        reported
+    }
+
+    /// A writer that blocks in its first `write` until released (a stalled reader).
+    struct Gate {
+        entered: mpsc::Sender<()>,
+        open: Arc<(Mutex<bool>, Condvar)>,
+        buf: Buf,
+    }
+
+    impl Write for Gate {
+        fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+            let _ = self.entered.send(());
+            let (m, cv) = &*self.open;
+            let mut open = m.lock().unwrap();
+            while !*open {
+                open = cv.wait(open).unwrap();
+            }
+            self.buf.write(b)
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_full_queue_drops_counts_and_reports_once_caught_up() {
+        let (tx, rx) = mpsc::channel();
+        let open = Arc::new((Mutex::new(false), Condvar::new()));
+        let buf = Buf::default();
+        let gate = Gate {
+            entered: tx,
+            open: open.clone(),
+            buf: buf.clone(),
+        };
+        let sink = EventSink::start(Box::new(Plain(Box::new(gate))), Kind::Custom, 8);
+        // The first event is taken by the writer, which then hangs in `write`.
+        sink.emit(None, started());
+        rx.recv_timeout(Duration::from_secs(5)).unwrap();
+        // 8 fit in the queue, 5 are dropped; emitting never waits.
+        let t = Instant::now();
+        for i in 0..13 {
+            sink.emit(Some(&format!("P{i}")), started());
+        }
+        assert!(t.elapsed() < Duration::from_secs(1));
+        // A stalled writer: flush gives up after its timeout.
+        let t = Instant::now();
+        assert_eq!(sink.flush(Duration::from_millis(200)), 9);
+        assert!(t.elapsed() < Duration::from_secs(2));
+        *open.0.lock().unwrap() = true;
+        open.1.notify_all();
+        assert_eq!(sink.flush(Duration::from_secs(5)), 0);
+        let lines = json_lines(&buf.0.lock().unwrap());
+        assert_eq!(lines.len(), 1 + 8 + 1, "{lines:?}");
+        let dropped: Vec<&Value> = lines
+            .iter()
+            .filter(|l| l["event"] == "events-dropped")
+            .collect();
+        assert_eq!(dropped.len(), 1, "{lines:?}");
+        assert_eq!(dropped[0]["count"], 5);
+        assert_eq!(dropped[0]["reason"], "queue-full");
+        assert!(dropped[0].get("project").is_none());
+        assert_eq!(check_seq(&lines), 5);
+        // The events after the drop follow it.
+        sink.emit(None, started());
+        assert_eq!(sink.flush(Duration::from_secs(5)), 0);
+        let lines = json_lines(&buf.0.lock().unwrap());
+        assert_eq!(lines.last().unwrap()["seq"], 16);
+        check_seq(&lines);
+    }
+
+    #[test]
+    fn the_queue_is_bounded_in_bytes_too() {
+        let (tx, rx) = mpsc::channel();
+        let open = Arc::new((Mutex::new(false), Condvar::new()));
+        let buf = Buf::default();
+        let gate = Gate {
+            entered: tx,
+            open: open.clone(),
+            buf: buf.clone(),
+        };
+        let sink = EventSink::start(Box::new(Plain(Box::new(gate))), Kind::Custom, 100);
+        sink.emit(None, started());
+        rx.recv_timeout(Duration::from_secs(5)).unwrap();
+        let big = || Event::failed_with(1, 0, "E000", "x".repeat(MAX_QUEUE_BYTES / 2 + 1));
+        sink.emit(Some("big1"), big());
+        // Over the byte bound with the first one queued: dropped.
+        sink.emit(Some("big2"), big());
+        sink.emit(Some("small"), started());
+        *open.0.lock().unwrap() = true;
+        open.1.notify_all();
+        assert_eq!(sink.flush(Duration::from_secs(5)), 0);
+        let lines = json_lines(&buf.0.lock().unwrap());
+        let projects: Vec<&str> = lines
+            .iter()
+            .map(|l| l["project"].as_str().unwrap_or("-"))
+            .collect();
+        assert_eq!(projects, ["-", "big1", "small", "-"]);
+        assert_eq!(check_seq(&lines), 1);
+    }
+
+    /// A file-like output that fails on one write after accepting half of it, and can take
+    /// bytes back (like a file on a full disk).
+    struct HalfThenFail {
+        buf: Buf,
+        /// Which write (counting from 0) accepts half and then fails.
+        fail_at: Vec<usize>,
+        writes: usize,
+        failing: bool,
+        truncatable: bool,
+    }
+
+    impl Output for HalfThenFail {
+        fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+            if self.failing {
+                self.failing = false;
+                return Err(std::io::Error::other("No space left on device"));
+            }
+            let n = self.writes;
+            self.writes += 1;
+            if self.fail_at.contains(&n) {
+                // Half now, the error on the next call (as a full disk does).
+                self.failing = true;
+                let half = b.len() / 2;
+                self.buf.0.lock().unwrap().extend_from_slice(&b[..half]);
+                return Ok(half);
+            }
+            self.buf.0.lock().unwrap().extend_from_slice(b);
+            Ok(b.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+        fn unwrite(&mut self, n: u64) -> bool {
+            if !self.truncatable {
+                return false;
+            }
+            let mut v = self.buf.0.lock().unwrap();
+            let len = v.len() - n as usize;
+            v.truncate(len);
+            true
+        }
+    }
+
+    fn failing_sink(truncatable: bool) -> (EventSink, Buf) {
+        let buf = Buf::default();
+        let out = HalfThenFail {
+            buf: buf.clone(),
+            fail_at: vec![1, 3],
+            writes: 0,
+            failing: false,
+            truncatable,
+        };
+        (
+            EventSink::start(Box::new(out), Kind::Custom, DEFAULT_QUEUE),
+            buf,
+        )
+    }
+
+    #[test]
+    fn a_failed_write_is_taken_back() {
+        let (sink, buf) = failing_sink(true);
+        for i in 0..6 {
+            sink.emit(Some(&format!("P{i}")), started());
+            assert_eq!(sink.flush(Duration::from_secs(5)), 0);
+        }
+        // Every line whole. Lost: P1, then the first report of it (the 4th write); the second
+        // report counts both.
+        let lines = json_lines(&buf.0.lock().unwrap());
+        assert_eq!(check_seq(&lines), 2);
+        assert_eq!(
+            lines.iter().filter(|l| l["event"] == "started").count(),
+            5,
+            "{lines:?}"
+        );
+        let dropped: Vec<&Value> = lines
+            .iter()
+            .filter(|l| l["event"] == "events-dropped")
+            .collect();
+        assert!(dropped.iter().all(|d| d["reason"] == "write-error"));
+    }
+
+    #[test]
+    fn a_failed_write_that_cannot_be_taken_back_is_ended_by_the_next_line() {
+        let (sink, buf) = failing_sink(false);
+        for i in 0..6 {
+            sink.emit(Some(&format!("P{i}")), started());
+            assert_eq!(sink.flush(Duration::from_secs(5)), 0);
+        }
+        let bytes = buf.0.lock().unwrap().clone();
+        let lines = lines_of(&bytes);
+        // The half lines stand alone; every other line is a whole event.
+        let (whole, broken): (Vec<&String>, Vec<&String>) = lines
+            .iter()
+            .partition(|l| serde_json::from_str::<Value>(l).is_ok());
+        assert_eq!(broken.len(), 2, "{lines:?}");
+        assert!(broken.iter().all(|l| l.starts_with("{\"schema\"")));
+        let whole: Vec<Value> = whole
+            .iter()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        assert_eq!(check_seq(&whole), 2);
+        assert_eq!(whole.len(), 5 + 1);
+        assert!(bytes.ends_with(b"}\n"));
+    }
+
+    #[test]
+    fn reopen_follows_a_rotated_file() {
+        let tmp = tempfile::tempdir().unwrap();
+        let path = tmp.path().join("ev.jsonl");
+        let sink = EventSink::append(&path).unwrap();
+        sink.emit(None, started());
+        assert_eq!(sink.flush(Duration::from_secs(5)), 0);
+        let rotated = tmp.path().join("ev.jsonl.1");
+        std::fs::rename(&path, &rotated).unwrap();
+        // Until reopened, events go to the moved file.
+        sink.emit(None, started());
+        assert_eq!(sink.flush(Duration::from_secs(5)), 0);
+        sink.reopen(Some(&path)).unwrap();
+        sink.emit(None, started());
+        assert_eq!(sink.flush(Duration::from_secs(5)), 0);
+        let old = json_lines(&std::fs::read(&rotated).unwrap());
+        let new = json_lines(&std::fs::read(&path).unwrap());
+        assert_eq!(old.len(), 2);
+        assert_eq!(new.len(), 1);
+        assert_eq!(new[0]["seq"], 3);
+        // Deleted: created again.
+        std::fs::remove_file(&path).unwrap();
+        sink.reopen(Some(&path)).unwrap();
+        sink.emit(None, started());
+        assert_eq!(sink.flush(Duration::from_secs(5)), 0);
+        assert_eq!(json_lines(&std::fs::read(&path).unwrap())[0]["seq"], 4);
+        // A folder that does not exist: an error, and the old file is kept.
+        assert!(sink.reopen(Some(&tmp.path().join("no/ev.jsonl"))).is_err());
+        sink.emit(None, started());
+        assert_eq!(sink.flush(Duration::from_secs(5)), 0);
+        assert_eq!(json_lines(&std::fs::read(&path).unwrap()).len(), 2);
+    }
+
+    #[test]
+    fn a_custom_writer_is_kept_on_reopen() {
+        let buf = Buf::default();
+        let sink = EventSink::to(Box::new(buf.clone()));
+        sink.reopen(None).unwrap();
+        sink.emit(None, started());
+        assert_eq!(sink.flush(Duration::from_secs(5)), 0);
+        assert_eq!(json_lines(&buf.0.lock().unwrap()).len(), 1);
+    }
+
+    /// Every variant once, every optional field set.
+    fn every_event() -> Vec<Event> {
+        let s = || Some("x".to_owned());
+        vec![
+            Event::Started {
+                version: "x",
+                pid: 1,
+                config: s(),
+            },
+            Event::Watching {
+                root: s(),
+                blackboard: s(),
+                backend: "inotify",
+                reason: s(),
+            },
+            Event::WatchDegraded {
+                root: s(),
+                reason: "x".into(),
+                backend: Some("poll"),
+            },
+            Event::Rescan {
+                reason: "startup".into(),
+                projects: Some(1),
+                error: s(),
+            },
+            Event::ChangeDetected { paths: vec![] },
+            Event::CompileStarted {
+                run_id: 1,
+                trigger: "change",
+                changed: vec![],
+            },
+            Event::CompileSucceeded {
+                run_id: 1,
+                duration_ms: 1,
+                outputs: vec![],
+                counts: Counts {
+                    steps: 1,
+                    warnings: 0,
+                },
+                warnings: vec![],
+            },
+            Event::failed_with(1, 1, "E000", "x".into()),
+            Event::WriteBack {
+                run_id: 1,
+                file: "x".into(),
+                value: "x".into(),
+                written: true,
+                reason: s(),
+                skipped: false,
+            },
+            Event::Reloaded {
+                projects: 1,
+                added: vec![],
+                removed: vec![],
+            },
+            Event::ReloadFailed {
+                error: "x".into(),
+                file: s(),
+                line: Some(1),
+                column: Some(1),
+            },
+            Event::Stopped {
+                reason: "timeout".into(),
+                requested: s(),
+                compiling: Some(vec![]),
+            },
+            Event::EventsDropped {
+                count: 1,
+                reason: "queue-full",
+            },
+        ]
+    }
+
+    #[test]
+    fn every_variant_has_an_example() {
+        // A new variant breaks this match: add it to `every_event` (and to docs/DAEMON.md).
+        let ordinal = |e: &Event| match e {
+            Event::Started { .. } => 0,
+            Event::Watching { .. } => 1,
+            Event::WatchDegraded { .. } => 2,
+            Event::Rescan { .. } => 3,
+            Event::ChangeDetected { .. } => 4,
+            Event::CompileStarted { .. } => 5,
+            Event::CompileSucceeded { .. } => 6,
+            Event::CompileFailed { .. } => 7,
+            Event::WriteBack { .. } => 8,
+            Event::Reloaded { .. } => 9,
+            Event::ReloadFailed { .. } => 10,
+            Event::Stopped { .. } => 11,
+            Event::EventsDropped { .. } => 12,
+        };
+        let seen: BTreeSet<usize> = every_event().iter().map(ordinal).collect();
+        assert_eq!(seen, (0..13).collect());
+    }
+
+    /// The rows of docs/DAEMON.md's event table: (name, level, fields cell).
+    fn doc_rows() -> Vec<(String, String, String)> {
+        let doc = include_str!("../../docs/DAEMON.md");
+        let mut rows = Vec::new();
+        let mut in_table = false;
+        for line in doc.lines() {
+            if line.starts_with("| event | level | fields |") {
+                in_table = true;
+                continue;
+            }
+            if !in_table || line.starts_with("|---") {
+                continue;
+            }
+            if !line.starts_with('|') {
+                break;
+            }
+            let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+            rows.push((
+                cells[1].trim_matches('`').to_owned(),
+                cells[2].to_owned(),
+                cells[3..].join("|"),
+            ));
+        }
+        assert!(!rows.is_empty(), "no event table in docs/DAEMON.md");
+        rows
+    }
+
+    #[test]
+    fn docs_event_table_matches_the_code() {
+        let rows = doc_rows();
+        let events = every_event();
+        for e in &events {
+            let name = e.name();
+            let row = rows
+                .iter()
+                .find(|r| r.0 == name)
+                .unwrap_or_else(|| panic!("event `{name}` missing from docs/DAEMON.md"));
+            assert!(
+                row.1.contains(e.level().as_str()),
+                "docs/DAEMON.md: `{name}` has level {}, the table says {}",
+                e.level().as_str(),
+                row.1
+            );
+            let Value::Object(fields) = serde_json::to_value(e).unwrap() else {
+                panic!("{name} is not an object");
+            };
+            for f in fields.keys().filter(|k| *k != "event") {
+                assert!(
+                    row.2.contains(&format!("`{f}`")),
+                    "docs/DAEMON.md: field `{f}` of `{name}` missing from its row"
+                );
+            }
+        }
+        for r in &rows {
+            assert!(
+                events.iter().any(|e| e.name() == r.0),
+                "docs/DAEMON.md lists an event `{}` that the code does not have",
+                r.0
+            );
+        }
     }
 }

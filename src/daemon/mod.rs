@@ -10,6 +10,7 @@
 //! - `project`: the project table (projects, their watched folders, the directory index).
 //! - `route`: file events → the projects they concern; roots; folders that come and go.
 //! - `job`: one compile on a blocking thread (hash check, compile, write, its events).
+//! - `stop`: the end: running compiles and the last events waited for, both bounded.
 //! - this module: the event loop. [`run`] takes its control channel as a parameter (stop and
 //!   reload), so tests drive it without signals; the command line connects the signals.
 //!
@@ -32,6 +33,7 @@ mod poll;
 mod project;
 mod route;
 pub mod settle;
+mod stop;
 mod watch;
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
@@ -46,6 +48,7 @@ use config::Config;
 use events::{Event, EventSink};
 use job::{Job, Outcome, Report};
 use project::Project;
+pub use stop::STOP_TIMEOUT;
 use watch::Watchers;
 
 /// What the command line (signals) or a test tells the daemon.
@@ -195,26 +198,7 @@ pub async fn run(
             _ = missing_tick.tick() => d.look_for_missing(Instant::now()),
         }
     }
-    let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
-    // Finish the running compiles; start no new ones.
-    d.queue.clear();
-    while d.running > 0 {
-        match drx.recv().await {
-            Some(r) => {
-                d.running -= 1;
-                d.finish_report(r, Instant::now());
-            }
-            None => break,
-        }
-    }
-    tracing::info!(reason = %stop_reason, "stopped");
-    sink.emit(
-        None,
-        Event::Stopped {
-            reason: stop_reason,
-        },
-    );
-    Ok(())
+    d.stop(stop_reason, drx, control).await
 }
 
 /// Half the watchdog interval systemd asks for (`WATCHDOG_USEC`), if it asks.
@@ -333,6 +317,7 @@ impl Daemon {
         self.running += 1;
         let done = self.done.clone();
         tokio::task::spawn_blocking(move || {
+            stop::test_hook_hang();
             let key = job.key.clone();
             let sink = job.sink.clone();
             // A panic is a bug, never input: report it and keep serving the other projects.
@@ -420,7 +405,16 @@ impl Daemon {
     }
 
     fn reload(&mut self, now: Instant) {
-        match self.sources.load() {
+        let loaded = self.sources.load();
+        // The events file again (logrotate moved it away), or the one the configuration names now.
+        let events = match &loaded {
+            Ok(c) => c.events.clone(),
+            Err(_) => self.config.events.clone(),
+        };
+        if let Err(e) = self.sink.reopen(events.as_deref()) {
+            tracing::error!("cannot open the event file again (keeping the old one): {e}");
+        }
+        match loaded {
             Ok(c) => {
                 let (added, removed) = self.apply_config(c, now);
                 for k in &added {
