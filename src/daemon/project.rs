@@ -32,6 +32,9 @@ pub(super) struct Root {
     pub(super) id: Option<(u64, u64)>,
     /// Subfolders whose lock another daemon holds (reported once).
     pub(super) locked_out: BTreeSet<PathBuf>,
+    /// The (device, inode) of a root that exists but could not be watched (reported once; tried
+    /// again when it is another folder).
+    pub(super) failed: Option<(u64, u64)>,
 }
 
 pub(super) struct Project {
@@ -176,6 +179,7 @@ impl Daemon {
                 r.subs = subs;
                 r.anchor = None;
                 r.id = dir_id(root);
+                r.failed = None;
                 true
             }
             Err(WatchFailure::Missing) => {
@@ -211,6 +215,10 @@ impl Daemon {
                         backend: None,
                     },
                 );
+                let r = self.roots.get_mut(root).expect("root");
+                r.anchor = None;
+                r.id = None;
+                r.failed = dir_id(root);
                 false
             }
         }
@@ -251,6 +259,7 @@ impl Daemon {
         let current = dir_id(root);
         match (r.id, current) {
             (Some(a), Some(b)) if a == b => {}
+            (None, Some(b)) if r.failed == Some(b) => {}
             (None, None) => {
                 // Still missing: follow the nearest existing ancestor deeper (or higher).
                 let anchor = nearest_existing_ancestor(root);
