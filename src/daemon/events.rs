@@ -89,6 +89,9 @@ pub enum Event {
         backend: &'static str,
         /// Why a folder is watched again (it came back).
         reason: Option<String>,
+        /// The program name the project compiles to (`<program>.src`), when its blackboard is
+        /// known.
+        program: Option<String>,
     },
     WatchDegraded {
         root: Option<String>,
@@ -121,6 +124,16 @@ pub enum Event {
         duration_ms: u64,
         /// Diagnostics as `--format json` prints them.
         diagnostics: Vec<Value>,
+    },
+    /// The outcome of a run that failed on a file caught half-written: nothing is reported as an
+    /// error yet; a new run (`trigger` `retry`) follows after a quiet period.
+    CompileRetrying {
+        run_id: u64,
+        duration_ms: u64,
+        /// The file that was still being written.
+        file: Option<String>,
+        /// Which retry follows (1 to 3).
+        attempt: u32,
     },
     WriteBack {
         run_id: u64,
@@ -173,6 +186,7 @@ impl Event {
             Event::CompileStarted { .. } => "compile-started",
             Event::CompileSucceeded { .. } => "compile-succeeded",
             Event::CompileFailed { .. } => "compile-failed",
+            Event::CompileRetrying { .. } => "compile-retrying",
             Event::WriteBack { .. } => "write-back",
             Event::Reloaded { .. } => "reloaded",
             Event::ReloadFailed { .. } => "reload-failed",
@@ -1054,6 +1068,7 @@ mod tests {
                 blackboard: s(),
                 backend: "inotify",
                 reason: s(),
+                program: s(),
             },
             Event::WatchDegraded {
                 root: s(),
@@ -1082,6 +1097,12 @@ mod tests {
                 warnings: vec![],
             },
             Event::failed_with(1, 1, "E000", "x".into()),
+            Event::CompileRetrying {
+                run_id: 1,
+                duration_ms: 1,
+                file: s(),
+                attempt: 1,
+            },
             Event::WriteBack {
                 run_id: 1,
                 file: "x".into(),
@@ -1130,9 +1151,10 @@ mod tests {
             Event::ReloadFailed { .. } => 10,
             Event::Stopped { .. } => 11,
             Event::EventsDropped { .. } => 12,
+            Event::CompileRetrying { .. } => 13,
         };
         let seen: BTreeSet<usize> = every_event().iter().map(ordinal).collect();
-        assert_eq!(seen, (0..13).collect());
+        assert_eq!(seen, (0..14).collect());
     }
 
     /// The rows of docs/DAEMON.md's event table: (name, level, fields cell).

@@ -6,6 +6,7 @@ use std::collections::HashMap;
 use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU8, Ordering};
 use std::time::Duration;
 
 use crate::compile::{self, Compilation, Options};
@@ -75,6 +76,63 @@ impl FileSource for Hashing {
     }
 }
 
+/// How far a run got in its events: every `compile-started` gets exactly one outcome
+/// (`compile-succeeded`, `compile-failed`, `compile-retrying`) and every outcome has a
+/// `compile-started`. Shared with the panic handler, which completes what a panic cut short.
+#[derive(Debug, Default)]
+pub(super) struct Progress(AtomicU8);
+
+const STARTED: u8 = 1;
+const FINISHED: u8 = 2;
+
+impl Progress {
+    fn set(&self, state: u8) {
+        self.0.store(state, Ordering::SeqCst);
+    }
+
+    fn get(&self) -> u8 {
+        self.0.load(Ordering::SeqCst)
+    }
+}
+
+/// After a panic in a run (a bug, never input): `compile-started` if the run had not said it
+/// yet, then `compile-failed` with `E000`, unless the run had already given its outcome (then
+/// only the log says it).
+pub(super) fn after_panic(
+    sink: &EventSink,
+    key: &Path,
+    run_id: u64,
+    trigger: &'static str,
+    progress: &Progress,
+) {
+    let project = key.display().to_string();
+    let state = progress.get();
+    if state == FINISHED {
+        tracing::error!("{project}: run {run_id} panicked after its outcome (a bug)");
+        return;
+    }
+    if state < STARTED {
+        sink.emit(
+            Some(&project),
+            Event::CompileStarted {
+                run_id,
+                trigger,
+                changed: Vec::new(),
+            },
+        );
+    }
+    sink.emit(
+        Some(&project),
+        Event::failed_with(
+            run_id,
+            0,
+            "E000",
+            "internal error (a bug in skillpost): the compile panicked; see the log".into(),
+        ),
+    );
+    progress.set(FINISHED);
+}
+
 /// One compile, run on a blocking thread.
 pub(super) struct Job {
     pub(super) key: PathBuf,
@@ -84,10 +142,13 @@ pub(super) struct Job {
     pub(super) changed: Vec<PathBuf>,
     pub(super) trigger: &'static str,
     pub(super) may_retry: bool,
+    /// Which retry a half-written file would cause (1 for the first).
+    pub(super) attempt: u32,
     pub(super) confine: bool,
     pub(super) max_file_size: u64,
     pub(super) run_id: u64,
     pub(super) sink: Arc<EventSink>,
+    pub(super) progress: Arc<Progress>,
 }
 
 impl Job {
@@ -97,14 +158,34 @@ impl Job {
 
     /// Emits `compile-failed` with these diagnostics (JSON objects as `--format json` prints).
     pub(super) fn failed(&self, duration_ms: u64, diagnostics: Vec<serde_json::Value>) {
+        self.outcome(Event::CompileFailed {
+            run_id: self.run_id,
+            duration_ms,
+            diagnostics,
+        });
+    }
+
+    /// Emits `compile-started`.
+    fn started(&self) {
         self.sink.emit(
             Some(&self.project()),
-            Event::CompileFailed {
+            Event::CompileStarted {
                 run_id: self.run_id,
-                duration_ms,
-                diagnostics,
+                trigger: self.trigger,
+                changed: self
+                    .changed
+                    .iter()
+                    .map(|p| p.display().to_string())
+                    .collect(),
             },
         );
+        self.progress.set(STARTED);
+    }
+
+    /// Emits the run's one outcome.
+    fn outcome(&self, event: Event) {
+        self.sink.emit(Some(&self.project()), event);
+        self.progress.set(FINISHED);
     }
 
     pub(super) fn run(self) -> Outcome {
@@ -135,6 +216,7 @@ impl Job {
                 },
             );
         }
+        self.started();
         let (blackboard, program) = match config::resolve(&self.spec) {
             Ok(x) => x,
             Err(why) => {
@@ -145,18 +227,6 @@ impl Job {
                 return Outcome::Failed;
             }
         };
-        self.sink.emit(
-            Some(&project),
-            Event::CompileStarted {
-                run_id: self.run_id,
-                trigger: self.trigger,
-                changed: self
-                    .changed
-                    .iter()
-                    .map(|p| p.display().to_string())
-                    .collect(),
-            },
-        );
         let started = std::time::Instant::now();
         let fs = Hashing {
             fs: FsSource {
@@ -174,8 +244,16 @@ impl Job {
         add_link_targets(&mut inputs);
         let ms = || started.elapsed().as_millis() as u64;
         if c.has_errors() {
-            if self.may_retry && half_written(&c, &inputs) {
+            if self.may_retry
+                && let Some(file) = half_written(&c, &inputs)
+            {
                 tracing::info!("{project}: a file is still being written; trying again");
+                self.outcome(Event::CompileRetrying {
+                    run_id: self.run_id,
+                    duration_ms: ms(),
+                    file: Some(file.display().to_string()),
+                    attempt: self.attempt,
+                });
                 return Outcome::Retry;
             }
             let diags = c
@@ -193,15 +271,12 @@ impl Job {
         let applied = match compile::apply(&c) {
             Ok(a) => a,
             Err(e) => {
-                self.sink.emit(
-                    Some(&project),
-                    Event::failed_with(
-                        self.run_id,
-                        ms(),
-                        Code::CannotWrite.as_str(),
-                        format!("cannot write: {e}"),
-                    ),
-                );
+                self.outcome(Event::failed_with(
+                    self.run_id,
+                    ms(),
+                    Code::CannotWrite.as_str(),
+                    format!("cannot write: {e}"),
+                ));
                 return Outcome::Compiled {
                     inputs,
                     outputs: c.outputs.iter().map(|(p, _)| p.clone()).collect(),
@@ -215,26 +290,23 @@ impl Job {
             .filter(|d| d.severity == Severity::Warning)
             .map(|d| serde_json::json!(d.locate(&c.sources)))
             .collect();
-        self.sink.emit(
-            Some(&project),
-            Event::CompileSucceeded {
-                run_id: self.run_id,
-                duration_ms: ms(),
-                outputs: applied
-                    .outputs
-                    .iter()
-                    .map(|(p, w)| OutputInfo {
-                        path: p.display().to_string(),
-                        written: *w,
-                    })
-                    .collect(),
-                counts: Counts {
-                    steps: c.skill_steps,
-                    warnings: warnings.len(),
-                },
-                warnings,
+        self.outcome(Event::CompileSucceeded {
+            run_id: self.run_id,
+            duration_ms: ms(),
+            outputs: applied
+                .outputs
+                .iter()
+                .map(|(p, w)| OutputInfo {
+                    path: p.display().to_string(),
+                    written: *w,
+                })
+                .collect(),
+            counts: Counts {
+                steps: c.skill_steps,
+                warnings: warnings.len(),
             },
-        );
+            warnings,
+        });
         let mut again = false;
         if let (Some(wb), Some(outcome)) = (&c.write_back, &applied.write_back) {
             use crate::write::WriteBackOutcome as W;
@@ -291,20 +363,23 @@ pub(super) fn add_link_targets(inputs: &mut HashMap<PathBuf, Option<u64>>) {
 
 /// Whether the compile failed on a file caught while it was being written: a syntax error (or
 /// unreadable text) in a file whose bytes differ now from those read, or that was modified
-/// within the last second.
-pub(super) fn half_written(c: &Compilation, read: &HashMap<PathBuf, Option<u64>>) -> bool {
-    c.diagnostics.iter().any(|d| {
-        if !matches!(d.code, Code::XmlSyntax | Code::FileUnreadable) {
-            return false;
+/// within the last second. Returns that file.
+pub(super) fn half_written(
+    c: &Compilation,
+    read: &HashMap<PathBuf, Option<u64>>,
+) -> Option<PathBuf> {
+    c.diagnostics.iter().find_map(|d| {
+        if !matches!(
+            d.code,
+            Code::XmlSyntax | Code::FileUnreadable | Code::BadTemplate
+        ) {
+            return None;
         }
         // An unreadable file's diagnostic points at the `refURI` naming it; its path is the file.
-        let Some(file) = d
+        let file = d
             .path
             .clone()
-            .or_else(|| d.span.as_ref().map(|s| c.sources.get(s.file).path.clone()))
-        else {
-            return false;
-        };
+            .or_else(|| d.span.as_ref().map(|s| c.sources.get(s.file).path.clone()))?;
         let now_hash = hash_file(&file);
         let changed = read.get(&file).is_some_and(|h| *h != now_hash);
         let recent = std::fs::metadata(&file)
@@ -312,6 +387,6 @@ pub(super) fn half_written(c: &Compilation, read: &HashMap<PathBuf, Option<u64>>
             .ok()
             .and_then(|t| t.elapsed().ok())
             .is_some_and(|age| age < Duration::from_secs(1));
-        changed || recent
+        (changed || recent).then_some(file)
     })
 }

@@ -76,8 +76,10 @@ impl Sources {
             Some(f) => Some(config::load(f)?),
             None => None,
         };
+        let file_name = file.as_ref().and_then(|f| f.file.clone());
         let mut c = config::merge(file, &self.dirs, self.events.clone(), self.settle_ms);
-        c.file = self.config_file.clone();
+        // Absolute (as `started.config` reports it), whatever the command line said.
+        c.file = file_name;
         Ok(c)
     }
 }
@@ -117,7 +119,7 @@ pub async fn run(
         roots: BTreeMap::new(),
         locks,
         done: dtx,
-        run_seq: 0,
+        run_ids: HashMap::new(),
         running: 0,
         // Compiles of small projects mostly wait for fsync: twice the cores, at least 4.
         parallel: (2 * std::thread::available_parallelism()
@@ -201,6 +203,13 @@ pub async fn run(
     d.stop(stop_reason, drx, control).await
 }
 
+/// The next `run_id` of a project.
+fn next_run_id(run_ids: &mut HashMap<PathBuf, u64>, key: &Path) -> u64 {
+    let n = run_ids.entry(key.to_owned()).or_insert(0);
+    *n += 1;
+    *n
+}
+
 /// Half the watchdog interval systemd asks for (`WATCHDOG_USEC`), if it asks.
 fn sd_notify_watchdog() -> Option<Duration> {
     sd_notify::watchdog_enabled()
@@ -219,7 +228,9 @@ struct Daemon {
     /// The folders this daemon keeps (one daemon per folder).
     locks: lock::Locks,
     done: mpsc::UnboundedSender<Report>,
-    run_seq: u64,
+    /// The last `run_id` of each project: run_ids count a project's runs from 1, consecutively,
+    /// across reloads that drop and add it again (a forgotten root project starts again).
+    run_ids: HashMap<PathBuf, u64>,
     running: usize,
     /// At most this many compiles at once.
     parallel: usize,
@@ -291,9 +302,10 @@ impl Daemon {
         let Some(p) = self.projects.get_mut(key) else {
             return;
         };
-        self.run_seq += 1;
-        let run_id = self.run_seq;
+        let run_id = next_run_id(&mut self.run_ids, key);
         let changed: Vec<PathBuf> = std::mem::take(&mut p.changed).into_iter().collect();
+        let trigger = p.trigger.take().unwrap_or("change");
+        let progress = Arc::new(job::Progress::default());
         let job = Job {
             key: key.to_owned(),
             spec: p.spec.clone(),
@@ -303,8 +315,9 @@ impl Daemon {
                 Some(p.inputs.clone())
             },
             changed,
-            trigger: p.trigger.take().unwrap_or("change"),
+            trigger,
             may_retry: p.retries < MAX_RETRIES,
+            attempt: p.retries + 1,
             confine: !self.config.allow_outside,
             max_file_size: self
                 .config
@@ -312,6 +325,7 @@ impl Daemon {
                 .map_or(crate::load::DEFAULT_MAX_FILE_SIZE, |mb| mb * 1024 * 1024),
             run_id,
             sink: self.sink.clone(),
+            progress: progress.clone(),
         };
         p.force = false;
         self.running += 1;
@@ -323,16 +337,7 @@ impl Daemon {
             // A panic is a bug, never input: report it and keep serving the other projects.
             let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| job.run()))
                 .unwrap_or_else(|_| {
-                    sink.emit(
-                        Some(&key.display().to_string()),
-                        Event::failed_with(
-                            run_id,
-                            0,
-                            "E000",
-                            "internal error (a bug in skillpost): the compile panicked; see the log"
-                                .into(),
-                        ),
-                    );
+                    job::after_panic(&sink, &key, run_id, trigger, &progress);
                     Outcome::Failed
                 });
             let _ = done.send(Report { key, outcome });
@@ -361,6 +366,7 @@ impl Daemon {
             Outcome::Retry => {
                 p.retries += 1;
                 p.force = true;
+                p.trigger.get_or_insert("retry");
                 p.sched.finished(now);
                 p.sched.postpone(now);
             }
@@ -419,6 +425,7 @@ impl Daemon {
                 let (added, removed) = self.apply_config(c, now);
                 for k in &added {
                     if let Some(p) = self.projects.get_mut(k) {
+                        p.trigger = Some("reload");
                         p.sched.immediately(now);
                     }
                 }

@@ -128,6 +128,7 @@ impl Daemon {
                     if p.spec != spec {
                         p.spec = spec;
                         p.force = true;
+                        p.trigger = Some("reload");
                         p.sched.immediately(now);
                     }
                     p.sched.set_timing(settle, max_wait_of(settle));
@@ -152,7 +153,7 @@ impl Daemon {
                 Event::WatchDegraded {
                     root: Some(root.display().to_string()),
                     reason: why,
-                    backend: None,
+                    backend: Some("none"),
                 },
             );
             return;
@@ -212,7 +213,7 @@ impl Daemon {
                     Event::WatchDegraded {
                         root: Some(root.display().to_string()),
                         reason: failure_text(&e),
-                        backend: None,
+                        backend: Some("none"),
                     },
                 );
                 let r = self.roots.get_mut(root).expect("root");
@@ -299,6 +300,7 @@ impl Daemon {
                                 }
                                 .into(),
                             ),
+                            program: None,
                         },
                     );
                     self.discover_in(root, now);
@@ -361,6 +363,8 @@ impl Daemon {
         }
         for k in forget {
             self.drop_project(&k);
+            // A new project if it comes back: its run_ids start again at 1.
+            self.run_ids.remove(&k);
             self.sink.emit(
                 Some(&Self::key_str(&k)),
                 Event::WatchDegraded {
@@ -370,7 +374,7 @@ impl Daemon {
                          (found again if it comes back)",
                         after.as_secs()
                     ),
-                    backend: None,
+                    backend: Some("none"),
                 },
             );
         }
@@ -401,11 +405,14 @@ impl Daemon {
             return true;
         };
         let mut p = self.projects.remove(key).expect("project");
+        let trigger = p.trigger.take().unwrap_or("change");
+        let changed: Vec<String> = std::mem::take(&mut p.changed)
+            .iter()
+            .map(|c| c.display().to_string())
+            .collect();
         p.claim = None;
         p.refused = true;
         p.sched.finished(now);
-        p.changed.clear();
-        p.trigger = None;
         p.force = true;
         // Nothing of the other project's files concerns this one until it may compile again.
         p.inputs.clear();
@@ -418,11 +425,20 @@ impl Daemon {
         self.set_watches(&mut p, dirs);
         self.reindex(&mut p);
         self.projects.insert(key.to_owned(), p);
-        self.run_seq += 1;
+        // A run like any other: `compile-started`, then its outcome.
+        let run_id = super::next_run_id(&mut self.run_ids, key);
+        self.sink.emit(
+            Some(&Self::key_str(key)),
+            Event::CompileStarted {
+                run_id,
+                trigger,
+                changed,
+            },
+        );
         self.sink.emit(
             Some(&Self::key_str(key)),
             Event::failed_with(
-                self.run_seq,
+                run_id,
                 0,
                 SHARED_BLACKBOARD,
                 format!(
@@ -457,7 +473,7 @@ impl Daemon {
                 Event::WatchDegraded {
                     root: None,
                     reason: why,
-                    backend: None,
+                    backend: Some("none"),
                 },
             );
             return false;
@@ -489,19 +505,24 @@ impl Daemon {
             dirs.insert(parent.to_owned());
         }
         self.set_watches(&mut p, dirs);
-        let blackboard = config::resolve(&p.spec).ok().map(|(b, _)| b);
-        self.sink.emit(
-            Some(&Self::key_str(&key)),
-            Event::Watching {
-                root: match &p.origin {
-                    Origin::Root(r) => Some(r.display().to_string()),
-                    Origin::Explicit => None,
+        // Only a folder really watched is `watching`; a missing one was reported
+        // (`watch-degraded`) and says `watching` when it is back.
+        if p.watched.contains(&key) {
+            let resolved = config::resolve(&p.spec).ok();
+            self.sink.emit(
+                Some(&Self::key_str(&key)),
+                Event::Watching {
+                    root: match &p.origin {
+                        Origin::Root(r) => Some(r.display().to_string()),
+                        Origin::Explicit => None,
+                    },
+                    blackboard: resolved.as_ref().map(|(b, _)| b.display().to_string()),
+                    backend: p.backend.as_str(),
+                    reason: None,
+                    program: resolved.map(|(_, program)| program),
                 },
-                blackboard: blackboard.map(|b| b.display().to_string()),
-                backend: p.backend.as_str(),
-                reason: None,
-            },
-        );
+            );
+        }
         self.reindex(&mut p);
         self.projects.insert(key, p);
         true
@@ -575,6 +596,17 @@ impl Daemon {
                     }
                 }
                 Err(WatchFailure::Missing) => {}
+                Err(WatchFailure::Other(e)) if d == &key => {
+                    tracing::warn!("cannot watch {}: {e}", d.display());
+                    self.sink.emit(
+                        Some(&Self::key_str(&key)),
+                        Event::WatchDegraded {
+                            root: None,
+                            reason: format!("the project folder cannot be watched: {e}"),
+                            backend: Some("none"),
+                        },
+                    );
+                }
                 Err(WatchFailure::Other(e)) => {
                     tracing::warn!("cannot watch {}: {e}", d.display());
                 }

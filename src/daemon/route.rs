@@ -270,5 +270,6 @@ pub(super) fn folder_back(backend: Backend) -> Event {
         blackboard: None,
         backend: backend.as_str(),
         reason: Some("the project folder is back".into()),
+        program: None,
     }
 }
