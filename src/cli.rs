@@ -85,8 +85,9 @@ struct WatchArgs {
     /// Format of the logs on stderr
     #[arg(long, value_enum, default_value_t = LogFormat::Human)]
     log_format: LogFormat,
-    /// Project folders (each holding one blackboard)
-    #[arg(value_name = "DIR")]
+    /// Project folders (each holding one blackboard), or blackboards (their folder, with that
+    /// blackboard); each must exist
+    #[arg(value_name = "DIR|BLACKBOARD")]
     dirs: Vec<PathBuf>,
 }
 
@@ -309,9 +310,17 @@ fn watch(w: WatchArgs) -> u8 {
         LogFormat::Human => builder.init(),
         LogFormat::Json => builder.json().init(),
     }
+    let (dirs, blackboards) = match daemon::config::command_line_targets(&w.dirs) {
+        Ok(t) => t,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return 2;
+        }
+    };
     let sources = daemon::Sources {
         config_file: w.config.clone(),
-        dirs: w.dirs.clone(),
+        dirs,
+        blackboards,
         events: w.events.clone(),
         settle_ms: w.settle,
     };

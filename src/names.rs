@@ -31,6 +31,27 @@ pub fn is_krl_name(name: &str) -> bool {
         && b.iter().all(|c| c.is_ascii_alphanumeric() || *c == b'_')
 }
 
+/// Makes a KRL name of any text (a folder or file name): transliterated like a comment
+/// (`Ü` → `Ue`), every other character that is not a letter, digit or `_` replaced by `_`, `_`
+/// put before a leading digit, cut to 24 characters. A KRL name comes back unchanged.
+pub fn to_krl_name(text: &str) -> String {
+    let mut name: String = transliterate(text)
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    if !name.starts_with(|c: char| c.is_ascii_alphabetic() || c == '_') {
+        name.insert(0, '_');
+    }
+    name.truncate(24);
+    name
+}
+
 /// Transliterates text for a KRL comment: German umlauts and ß spelled out, other non-ASCII
 /// letters reduced to their base letter where known, anything else `?`. Control characters
 /// (line breaks) become spaces so a comment stays one line.
@@ -100,6 +121,25 @@ mod tests {
         assert!(!is_krl_name("a-b"));
         assert!(!is_krl_name(""));
         assert!(!is_krl_name("Zelle_Ä"));
+    }
+
+    #[test]
+    fn krl_names_from_any_text() {
+        for (text, name) in [
+            ("Zelle_A", "Zelle_A"),
+            ("Palletizing Cell", "Palletizing_Cell"),
+            ("Zelle_Übergabe", "Zelle_Uebergabe"),
+            ("2024-Linie.v2", "_2024_Linie_v2"),
+            ("", "_"),
+            ("日本", "__"),
+            (
+                "Schweißzelle Nord Halle 7 Linie 3",
+                "Schweisszelle_Nord_Halle",
+            ),
+        ] {
+            assert_eq!(to_krl_name(text), name, "{text}");
+            assert!(is_krl_name(&to_krl_name(text)), "{text}");
+        }
     }
 
     #[test]

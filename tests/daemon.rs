@@ -942,19 +942,36 @@ fn project_folder_missing_at_startup_is_picked_up() {
     let w = Workspace::new();
     let a = w.project("A");
     let late = w.ws().join("Late");
-    let mut d = w.watch(&[a.to_str().unwrap(), late.to_str().unwrap()]);
-    d.wait_for("watch-degraded for the missing folder", WAIT, |e| {
+    // Named in the configuration (on the command line a missing folder is an error).
+    let cfg = w.config(
+        "settle_ms = 50\nevents = \"ev.jsonl\"\n[[project]]\npath = \"ws/A\"\n[[project]]\npath = \"ws/Late\"\n",
+    );
+    let mut d = w.watch_config(&cfg);
+    let evs = d.wait_for("watch-degraded for the missing folder", WAIT, |e| {
         is_for(e, "watch-degraded", &late)
     });
+    let degraded = evs
+        .iter()
+        .find(|e| is_for(e, "watch-degraded", &late))
+        .unwrap();
+    assert_eq!(degraded["backend"], "none", "{degraded}");
     d.startup(&[&a]);
     let m = d.mark();
     copy_project(&late);
-    d.wait_for(
+    let evs = d.wait_for(
         "compile-succeeded once the folder exists",
         Duration::from_secs(8),
         |e| is_after(e, "compile-succeeded", &late, m),
     );
     assert!(src_of(&late).is_file() && dat_of(&late).is_file());
+    // `watching` only once it is watched: with the reason.
+    let watching: Vec<&Value> = evs
+        .iter()
+        .filter(|e| is_for(e, "watching", &late))
+        .collect();
+    assert_eq!(watching.len(), 1, "{}", dump(&evs));
+    assert!(seq(watching[0]) > m, "{}", dump(&evs));
+    assert_eq!(watching[0]["reason"], "the project folder is back");
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -7,12 +7,17 @@
 //! settle_ms = 100                              # optional, 1..=60000
 //! allow_outside = false                        # optional
 //! forget_after_s = 30                          # optional, 1..=86400
+//! template = "krl.toml"                       # optional, like --template
+//! line_endings = "lf"                          # optional, "crlf" (default) or "lf"
 //! [[project]]
 //! path = "cells/Zelle_A"
 //! blackboard = "Zelle_A.aml"   # optional
-//! program = "Zelle_A"          # optional
+//! program = "Zelle_A"          # optional: a KRL name or a pattern ("P_{folder}")
+//! template = "a.toml"          # optional (default: the global one)
+//! line_endings = "crlf"        # optional (default: the global one)
 //! [[root]]
 //! path = "/srv/planning/projects"
+//! program = "{folder}"         # optional, default "{blackboard}"; template, line_endings too
 //! ```
 //!
 //! Relative paths in the file are relative to the file's folder; all paths in a [`Config`] are
@@ -64,21 +69,120 @@ pub struct Config {
     /// A root's project whose folder has been gone this many seconds is forgotten (default
     /// [`DEFAULT_FORGET_AFTER_S`]).
     pub forget_after_s: Option<u64>,
-    /// Explicit projects.
+    /// The output template of every project that does not name its own (`template`; default:
+    /// the built-in one), absolute.
+    pub template: Option<PathBuf>,
+    /// LF line endings for every project that does not say otherwise (`line_endings = "lf"`;
+    /// default CRLF).
+    pub lf: bool,
+    /// Explicit projects, with the global `template`/`line_endings` already applied.
     pub projects: Vec<ProjectSpec>,
     /// Folders whose direct subfolders holding a blackboard are projects.
-    pub roots: Vec<PathBuf>,
+    pub roots: Vec<RootSpec>,
 }
 
 /// A `[[project]]` entry (or a folder named on the command line).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct ProjectSpec {
     /// The project folder.
     pub path: PathBuf,
     /// The blackboard, relative to the folder (default: the single `*.aml` in it).
     pub blackboard: Option<PathBuf>,
-    /// The program name (default: the blackboard's file stem).
+    /// The program name, or a pattern with `{folder}`/`{blackboard}` (see [`program_name`]);
+    /// default `{blackboard}`.
     pub program: Option<String>,
+    /// The output template (absolute; default: the built-in one), like `--template`.
+    pub template: Option<PathBuf>,
+    /// LF line endings instead of CRLF, like `--lf`.
+    pub lf: bool,
+}
+
+/// A `[[root]]` entry: its folder and what its projects get.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RootSpec {
+    pub path: PathBuf,
+    /// The program name pattern of its projects (default `{blackboard}`).
+    pub program: Option<String>,
+    /// The output template of its projects (the root's, else the global one).
+    pub template: Option<PathBuf>,
+    /// LF line endings for its projects (the root's setting, else the global one).
+    pub lf: bool,
+}
+
+impl RootSpec {
+    /// The spec of the project in its subfolder `dir`.
+    pub fn project(&self, dir: PathBuf) -> ProjectSpec {
+        ProjectSpec {
+            path: dir,
+            blackboard: None,
+            program: self.program.clone(),
+            template: self.template.clone(),
+            lf: self.lf,
+        }
+    }
+}
+
+/// The placeholders a `program` pattern may hold.
+pub const PROGRAM_PLACEHOLDERS: [&str; 2] = ["{folder}", "{blackboard}"];
+
+/// A project's program name, and where it came from when it had to be changed into a KRL name.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProgramName {
+    pub name: String,
+    /// The text the pattern gave (`Palletizing Cell`) when it was not a KRL name and `name` was
+    /// derived from it.
+    pub derived_from: Option<String>,
+}
+
+/// The program name of the project in `folder` compiling `blackboard`: `program` as written
+/// when it has no placeholder (a KRL name: the configuration checks it); otherwise the pattern
+/// (default `{blackboard}`) with `{folder}` (the folder's name) and `{blackboard}` (the
+/// blackboard's file name without `.aml`) filled in and made a KRL name by
+/// [`crate::names::to_krl_name`].
+pub fn program_name(program: Option<&str>, folder: &Path, blackboard: &Path) -> ProgramName {
+    let pattern = program.unwrap_or("{blackboard}");
+    if !pattern.contains('{') {
+        return ProgramName {
+            name: pattern.to_owned(),
+            derived_from: None,
+        };
+    }
+    let name_of = |p: &Path, stem: bool| {
+        let n = if stem { p.file_stem() } else { p.file_name() };
+        n.unwrap_or_default().to_string_lossy().into_owned()
+    };
+    let text = pattern
+        .replace("{folder}", &name_of(folder, false))
+        .replace("{blackboard}", &name_of(blackboard, true));
+    let name = crate::names::to_krl_name(&text);
+    ProgramName {
+        derived_from: (name != text).then_some(text),
+        name,
+    }
+}
+
+/// Checks a `program` value of the configuration: a KRL name, or a pattern whose only braces
+/// are [`PROGRAM_PLACEHOLDERS`]. The error says how to fix it.
+pub fn check_program(value: &str) -> Result<(), String> {
+    let mut rest = value.to_owned();
+    for p in PROGRAM_PLACEHOLDERS {
+        rest = rest.replace(p, "");
+    }
+    if rest.contains('{') || rest.contains('}') {
+        return Err(format!(
+            "`program` {value:?}: the only placeholders are {{folder}} (the project folder's \
+             name) and {{blackboard}} (the blackboard's file name without .aml)"
+        ));
+    }
+    if value.contains('{') || crate::names::is_krl_name(value) {
+        return Ok(());
+    }
+    Err(format!(
+        "`program` {value:?} is not a KRL name (a letter or `_`, then letters, digits or `_`, at \
+         most 24 characters): write it as one, e.g. {:?}, or use a pattern such as \
+         \"{{blackboard}}\", whose result is made a KRL name",
+        crate::names::to_krl_name(value)
+    ))
 }
 
 impl Config {
@@ -188,6 +292,33 @@ pub fn parse(text: &str, file: &Path) -> Result<Config, ConfigError> {
     };
 
     let events = raw.events.as_ref().map(|e| path(e, "events")).transpose()?;
+    let template = raw
+        .template
+        .as_ref()
+        .map(|t| path(t, "template"))
+        .transpose()?;
+    let lf = match &raw.line_endings {
+        Some(v) => line_endings(v).map_err(|m| at(Some(v.span()), m))?,
+        None => false,
+    };
+    // A project's or root's own settings, else the global ones.
+    let settings = |t: &Option<Spanned<String>>,
+                    le: &Option<Spanned<String>>,
+                    program: &Option<Spanned<String>>|
+     -> Result<(Option<PathBuf>, bool, Option<String>), ConfigError> {
+        let template = match t {
+            Some(t) => Some(path(t, "template")?),
+            None => template.clone(),
+        };
+        let lf = match le {
+            Some(v) => line_endings(v).map_err(|m| at(Some(v.span()), m))?,
+            None => lf,
+        };
+        if let Some(p) = program {
+            check_program(p.get_ref()).map_err(|m| at(Some(p.span()), m))?;
+        }
+        Ok((template, lf, program.as_ref().map(|p| p.get_ref().clone())))
+    };
 
     let settle_ms = match &raw.settle_ms {
         None => None,
@@ -261,14 +392,17 @@ pub fn parse(text: &str, file: &Path) -> Result<Config, ConfigError> {
             Some(b) => Some(blackboard_path(b).map_err(|m| at(Some(b.span()), m))?),
         };
         seen.push((dir.clone(), &p.path));
+        let (template, lf, program) = settings(&p.template, &p.line_endings, &p.program)?;
         projects.push(ProjectSpec {
             path: dir,
             blackboard,
-            program: p.program.clone(),
+            program,
+            template,
+            lf,
         });
     }
 
-    let mut roots: Vec<PathBuf> = Vec::new();
+    let mut roots: Vec<RootSpec> = Vec::new();
     let mut seen: Vec<(PathBuf, &Spanned<String>)> = Vec::new();
     for r in &raw.root {
         let dir = path(&r.path, "path")?;
@@ -276,7 +410,13 @@ pub fn parse(text: &str, file: &Path) -> Result<Config, ConfigError> {
             return Err(duplicate(&at, "root", &dir, first, &r.path, text));
         }
         seen.push((dir.clone(), &r.path));
-        roots.push(dir);
+        let (template, lf, program) = settings(&r.template, &r.line_endings, &r.program)?;
+        roots.push(RootSpec {
+            path: dir,
+            program,
+            template,
+            lf,
+        });
     }
 
     Ok(Config {
@@ -286,6 +426,8 @@ pub fn parse(text: &str, file: &Path) -> Result<Config, ConfigError> {
         allow_outside: raw.allow_outside,
         max_file_size_mb,
         forget_after_s,
+        template,
+        lf,
         projects,
         roots,
     })
@@ -310,11 +452,16 @@ pub fn discover(root: &Path) -> Vec<PathBuf> {
     found
 }
 
+/// Which blackboard and program a project uses; see [`resolve_project`].
+pub fn resolve(spec: &ProjectSpec) -> Result<(PathBuf, String), String> {
+    resolve_project(spec).map(|(b, p)| (b, p.name))
+}
+
 /// Which blackboard and program a project uses: the explicit blackboard (relative to the
 /// folder), else the single `*.aml` in the folder (error when none or several: say which);
-/// program = explicit, else the blackboard's file stem (`Zelle_A.aml` → `Zelle_A`), unchanged
-/// (an invalid KRL name is reported later by the compiler, E601).
-pub fn resolve(spec: &ProjectSpec) -> Result<(PathBuf, String), String> {
+/// the program by [`program_name`] (`Zelle_A.aml` → `Zelle_A`; `Palletizing Cell.aml` →
+/// `Palletizing_Cell`, derived).
+pub fn resolve_project(spec: &ProjectSpec) -> Result<(PathBuf, ProgramName), String> {
     let blackboard = match &spec.blackboard {
         Some(b) => normalize(&spec.path.join(b)),
         None => {
@@ -348,14 +495,7 @@ pub fn resolve(spec: &ProjectSpec) -> Result<(PathBuf, String), String> {
             }
         }
     };
-    let program = match &spec.program {
-        Some(p) => p.clone(),
-        None => blackboard
-            .file_stem()
-            .unwrap_or_default()
-            .to_string_lossy()
-            .into_owned(),
-    };
+    let program = program_name(spec.program.as_deref(), &spec.path, &blackboard);
     Ok((blackboard, program))
 }
 
@@ -377,8 +517,9 @@ pub fn merge(
         if !config.projects.iter().any(|p| p.path == dir) {
             config.projects.push(ProjectSpec {
                 path: dir,
-                blackboard: None,
-                program: None,
+                template: config.template.clone(),
+                lf: config.lf,
+                ..ProjectSpec::default()
             });
         }
     }
@@ -389,6 +530,57 @@ pub fn merge(
         config.settle_ms = settle_ms;
     }
     config
+}
+
+/// Sorts the arguments of `skillpost watch` into project folders and blackboards (a blackboard
+/// stands for its folder, with that blackboard). Unlike folders of the configuration file, which
+/// are waited for, an argument must exist: a typo fails at once, saying what was expected.
+pub fn command_line_targets(args: &[PathBuf]) -> Result<(Vec<PathBuf>, Vec<PathBuf>), String> {
+    let mut dirs = Vec::new();
+    let mut blackboards = Vec::new();
+    for arg in args {
+        match std::fs::metadata(arg) {
+            Ok(m) if m.is_dir() => dirs.push(arg.clone()),
+            Ok(m) if m.is_file() && arg.file_name().is_some_and(is_blackboard_name) => {
+                blackboards.push(arg.clone())
+            }
+            Ok(_) => {
+                return Err(format!(
+                    "{} is neither a project folder nor a blackboard (*.aml): `skillpost watch` \
+                     takes project folders (or their blackboards)",
+                    arg.display()
+                ));
+            }
+            Err(e) => {
+                return Err(format!(
+                    "no project folder {}: {e}; `skillpost watch` takes existing project folders \
+                     (or their blackboards); a folder that does not exist yet can be named in the \
+                     configuration file (`[[project]]`), where it is waited for",
+                    arg.display()
+                ));
+            }
+        }
+    }
+    Ok((dirs, blackboards))
+}
+
+/// Adds the project of a blackboard named on the command line: its folder, with that blackboard
+/// (and the global settings). A folder that is a project already keeps its entry.
+pub fn add_blackboard(config: &mut Config, blackboard: &Path) {
+    let blackboard = absolute(blackboard);
+    let (Some(dir), Some(name)) = (blackboard.parent(), blackboard.file_name()) else {
+        return;
+    };
+    if config.projects.iter().any(|p| p.path == dir) {
+        return;
+    }
+    config.projects.push(ProjectSpec {
+        path: dir.to_owned(),
+        blackboard: Some(PathBuf::from(name)),
+        template: config.template.clone(),
+        lf: config.lf,
+        ..ProjectSpec::default()
+    });
 }
 
 /// Whether a file name names a blackboard: ends in `.aml` (any case) and is not hidden (editor
@@ -520,10 +712,24 @@ fn line_column(text: &str, offset: usize) -> (usize, usize) {
     (line, column)
 }
 
+/// `line_endings`: `"crlf"` (the default) or `"lf"`; true for LF.
+fn line_endings(value: &Spanned<String>) -> Result<bool, String> {
+    match value.get_ref().as_str() {
+        "crlf" | "CRLF" => Ok(false),
+        "lf" | "LF" => Ok(true),
+        other => Err(format!(
+            "`line_endings` is {other:?}, expected \"crlf\" (the default, as the controller \
+             expects) or \"lf\""
+        )),
+    }
+}
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawConfig {
     events: Option<Spanned<String>>,
+    template: Option<Spanned<String>>,
+    line_endings: Option<Spanned<String>>,
     settle_ms: Option<Spanned<i64>>,
     #[serde(default)]
     allow_outside: bool,
@@ -540,13 +746,18 @@ struct RawConfig {
 struct RawProject {
     path: Spanned<String>,
     blackboard: Option<Spanned<String>>,
-    program: Option<String>,
+    program: Option<Spanned<String>>,
+    template: Option<Spanned<String>>,
+    line_endings: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawRoot {
     path: Spanned<String>,
+    program: Option<Spanned<String>>,
+    template: Option<Spanned<String>>,
+    line_endings: Option<Spanned<String>>,
 }
 
 #[cfg(test)]
@@ -565,8 +776,18 @@ mod tests {
     fn spec(path: &Path) -> ProjectSpec {
         ProjectSpec {
             path: path.to_path_buf(),
-            blackboard: None,
-            program: None,
+            ..ProjectSpec::default()
+        }
+    }
+
+    fn root_paths(c: &Config) -> Vec<PathBuf> {
+        c.roots.iter().map(|r| r.path.clone()).collect()
+    }
+
+    fn root(path: &str) -> RootSpec {
+        RootSpec {
+            path: path.into(),
+            ..RootSpec::default()
         }
     }
 
@@ -600,15 +821,18 @@ path = "/srv/planning/projects"
                 allow_outside: true,
                 max_file_size_mb: Some(64),
                 forget_after_s: Some(120),
+                template: None,
+                lf: false,
                 projects: vec![
                     ProjectSpec {
                         path: "/srv/cells/Zelle_A".into(),
                         blackboard: Some("Zelle_A.aml".into()),
                         program: Some("ZELLE_A".into()),
+                        ..ProjectSpec::default()
                     },
                     spec(Path::new("/srv/cells/Zelle_B")),
                 ],
-                roots: vec!["/srv/planning/projects".into()],
+                roots: vec![root("/srv/planning/projects")],
             }
         );
         assert_eq!(c.settle(), Duration::from_millis(250));
@@ -623,11 +847,15 @@ path = "/srv/planning/projects"
         assert!(!c.projects.is_empty() && !c.roots.is_empty());
         let p = &c.projects[0];
         assert!(p.blackboard.is_some() && p.program.is_some());
+        assert!(c.template.is_some());
+        assert!(c.roots[0].program.is_some());
         for key in [
             "events",
             "settle_ms",
             "allow_outside",
             "forget_after_s",
+            "template",
+            "line_endings",
             "[[project]]",
             "[[root]]",
         ] {
@@ -636,7 +864,7 @@ path = "/srv/planning/projects"
                 "{key} is set in the example"
             );
         }
-        for key in ["path", "blackboard", "program"] {
+        for key in ["path", "blackboard", "program", "template", "line_endings"] {
             assert!(
                 text.contains(&format!("\n{key} = ")),
                 "{key} is set in the example"
@@ -678,7 +906,7 @@ path = "."
             PathBuf::from("/opt/plan/conf/cells/Zelle_A")
         );
         assert_eq!(c.projects[1].path, PathBuf::from("/opt/plan/other/Zelle_B"));
-        assert_eq!(c.roots, vec![PathBuf::from("/opt/plan/conf")]);
+        assert_eq!(root_paths(&c), vec![PathBuf::from("/opt/plan/conf")]);
     }
 
     #[test]
@@ -696,7 +924,7 @@ path = "."
         // A relative file name: against the current directory.
         let cwd = std::env::current_dir().unwrap();
         let c = parse("[[root]]\npath = \"r\"\n", Path::new("conf/s.toml")).unwrap();
-        assert_eq!(c.roots, vec![cwd.join("conf/r")]);
+        assert_eq!(root_paths(&c), vec![cwd.join("conf/r")]);
         assert_eq!(c.file, Some(cwd.join("conf/s.toml")));
     }
 
@@ -797,7 +1025,7 @@ path = "."
         assert!(e.message.contains("not expanded"), "{e}");
         // A folder merely named `~x` is an ordinary relative path.
         let c = parse("[[root]]\npath = \"~x\"\n", &file()).unwrap();
-        assert_eq!(c.roots, vec![PathBuf::from("/etc/skillpost/~x")]);
+        assert_eq!(root_paths(&c), vec![PathBuf::from("/etc/skillpost/~x")]);
     }
 
     #[test]
@@ -919,7 +1147,7 @@ path = "."
         let explicit = ProjectSpec {
             path: d.to_path_buf(),
             blackboard: Some("b.AML".into()),
-            program: None,
+            ..ProjectSpec::default()
         };
         assert_eq!(
             resolve(&explicit).unwrap(),
@@ -936,6 +1164,125 @@ path = "."
 
         let e = resolve(&spec(&d.join("missing"))).unwrap_err();
         assert!(e.contains("cannot read"), "{e}");
+    }
+
+    #[test]
+    fn template_and_line_endings_global_per_project_and_per_root() {
+        let text = r#"
+template = "krl-team.toml"
+line_endings = "lf"
+[[project]]
+path = "A"
+[[project]]
+path = "B"
+template = "/opt/b.toml"
+line_endings = "crlf"
+[[root]]
+path = "r1"
+[[root]]
+path = "r2"
+line_endings = "CRLF"
+template = "t/r2.toml"
+"#;
+        let c = parse(text, &file()).unwrap();
+        assert_eq!(c.template, Some("/etc/skillpost/krl-team.toml".into()));
+        assert!(c.lf);
+        let a = &c.projects[0];
+        assert_eq!(a.template, Some("/etc/skillpost/krl-team.toml".into()));
+        assert!(a.lf);
+        let b = &c.projects[1];
+        assert_eq!(b.template, Some("/opt/b.toml".into()));
+        assert!(!b.lf);
+        let p1 = c.roots[0].project("/etc/skillpost/r1/X".into());
+        assert_eq!(p1.template, Some("/etc/skillpost/krl-team.toml".into()));
+        assert!(p1.lf);
+        let p2 = c.roots[1].project("/etc/skillpost/r2/Y".into());
+        assert_eq!(p2.template, Some("/etc/skillpost/t/r2.toml".into()));
+        assert!(!p2.lf);
+        assert_eq!(p2.path, PathBuf::from("/etc/skillpost/r2/Y"));
+
+        // The command line's folders get the global settings.
+        let m = merge(Some(c), &["/srv/C".into()], None, None);
+        let cli = m.projects.last().unwrap();
+        assert_eq!(cli.path, PathBuf::from("/srv/C"));
+        assert_eq!(cli.template, Some("/etc/skillpost/krl-team.toml".into()));
+        assert!(cli.lf);
+
+        // Defaults: built-in template, CRLF.
+        let c = parse("[[project]]\npath = \"A\"\n", &file()).unwrap();
+        assert_eq!(c.projects[0].template, None);
+        assert!(!c.projects[0].lf);
+    }
+
+    #[test]
+    fn bad_line_endings_and_templates_are_located() {
+        let e = err("\nline_endings = \"unix\"\n");
+        assert_eq!((e.line, e.column), (Some(2), Some(16)), "{e}");
+        assert!(
+            e.message.contains("\"crlf\"") && e.message.contains("\"lf\""),
+            "{e}"
+        );
+        let e = err("[[root]]\npath = \"r\"\nline_endings = \"cr\"\n");
+        assert_eq!((e.line, e.column), (Some(3), Some(16)), "{e}");
+        let e = err("[[project]]\npath = \"p\"\ntemplate = \"\"\n");
+        assert_eq!((e.line, e.column), (Some(3), Some(12)), "{e}");
+        let e = err("template = \"~/t.toml\"\n");
+        assert!(e.message.contains("not expanded"), "{e}");
+        let e = err("[[root]]\npath = \"r\"\ntemplat = \"t\"\n");
+        assert!(e.message.contains("unknown field `templat`"), "{e}");
+    }
+
+    #[test]
+    fn program_patterns() {
+        let c = parse(
+            "[[root]]\npath = \"r\"\nprogram = \"P_{folder}\"\n[[root]]\npath = \"s\"\n",
+            &file(),
+        )
+        .unwrap();
+        assert_eq!(c.roots[0].program.as_deref(), Some("P_{folder}"));
+        assert_eq!(c.roots[1].program, None);
+        for (text, col) in [
+            ("program = \"Zelle A\"", 11),
+            ("program = \"{ordner}\"", 11),
+            ("program = \"P_{folder\"", 11),
+            ("program = \"1abc\"", 11),
+        ] {
+            let e = err(&format!("[[root]]\npath = \"r\"\n{text}\n"));
+            assert_eq!((e.line, e.column), (Some(3), Some(col)), "{text}: {e}");
+        }
+        let e = err("[[project]]\npath = \"p\"\nprogram = \"Zelle A\"\n");
+        assert!(e.message.contains("not a KRL name"), "{e}");
+        assert!(e.message.contains("\"Zelle_A\""), "says how to fix it: {e}");
+        let e = err("[[root]]\npath = \"r\"\nprogram = \"{ordner}\"\n");
+        assert!(e.message.contains("{folder}"), "{e}");
+
+        let bb = Path::new("/r/Palletizing Cell/Palletizing Cell.aml");
+        let folder = Path::new("/r/Palletizing Cell");
+        assert_eq!(
+            program_name(None, folder, bb),
+            ProgramName {
+                name: "Palletizing_Cell".into(),
+                derived_from: Some("Palletizing Cell".into()),
+            }
+        );
+        let ok = Path::new("/r/x/Zelle_A.aml");
+        assert_eq!(
+            program_name(None, Path::new("/r/x"), ok),
+            ProgramName {
+                name: "Zelle_A".into(),
+                derived_from: None,
+            }
+        );
+        let p = program_name(Some("{folder}"), Path::new("/r/Zelle_Übergabe"), ok);
+        assert_eq!(p.name, "Zelle_Uebergabe");
+        assert_eq!(p.derived_from.as_deref(), Some("Zelle_Übergabe"));
+        let p = program_name(Some("Cell_{folder}_{blackboard}"), Path::new("/r/7"), ok);
+        assert_eq!(p.name, "Cell_7_Zelle_A");
+        assert_eq!(p.derived_from, None);
+        let p = program_name(Some("Main"), folder, bb);
+        assert_eq!(p.name, "Main");
+        let p = program_name(Some("{folder}"), Path::new("/r/2024 Linie"), ok);
+        assert_eq!(p.name, "_2024_Linie");
     }
 
     #[test]
@@ -997,12 +1344,15 @@ path = "."
             allow_outside: true,
             max_file_size_mb: None,
             forget_after_s: None,
+            template: None,
+            lf: false,
             projects: vec![ProjectSpec {
                 path: "/srv/A".into(),
                 blackboard: Some("A.aml".into()),
                 program: Some("PA".into()),
+                ..ProjectSpec::default()
             }],
-            roots: vec!["/srv/root".into()],
+            roots: vec![root("/srv/root")],
         };
 
         // Nothing on the command line: the file as is.

@@ -16,6 +16,10 @@ use crate::load::{FileSource, FsSource};
 use super::config::{self, ProjectSpec};
 use super::events::{Counts, Event, EventSink, OutputInfo};
 
+/// The code of the warning that a project's program name was derived (made a KRL name from a
+/// folder or blackboard name; a daemon-only code: the command line is given the name).
+pub(super) const PROGRAM_DERIVED: &str = "W701";
+
 /// A finished compile, sent back to the event loop.
 pub(super) struct Report {
     pub(super) key: PathBuf,
@@ -217,7 +221,7 @@ impl Job {
             );
         }
         self.started();
-        let (blackboard, program) = match config::resolve(&self.spec) {
+        let (blackboard, program) = match config::resolve_project(&self.spec) {
             Ok(x) => x,
             Err(why) => {
                 self.failed(
@@ -234,10 +238,24 @@ impl Job {
             },
             seen: Default::default(),
         };
+        let renamed = program.derived_from.as_ref().map(|from| {
+            serde_json::json!({
+                "severity": "warning",
+                "code": PROGRAM_DERIVED,
+                "message": format!(
+                    "`{from}` is not a KRL name: the program is called `{}` (outputs {0}.src and \
+                     {0}.dat); set `program` in the configuration to choose the name",
+                    program.name
+                ),
+                "file": blackboard.display().to_string(),
+            })
+        });
+        // Exactly what `skillpost [--template F] [--lf] BLACKBOARD PROGRAM` writes.
         let opts = Options {
-            program,
+            program: program.name,
+            lf: self.spec.lf,
+            template: self.spec.template.clone(),
             confine_to: self.confine.then(|| self.key.clone()),
-            ..Options::default()
         };
         let c = compile::compile(&fs, &blackboard, &opts);
         let mut inputs = fs.seen.into_inner().unwrap_or_else(|p| p.into_inner());
@@ -256,10 +274,13 @@ impl Job {
                 });
                 return Outcome::Retry;
             }
-            let diags = c
-                .diagnostics
-                .iter()
-                .map(|d| serde_json::json!(d.locate(&c.sources)))
+            let diags = renamed
+                .into_iter()
+                .chain(
+                    c.diagnostics
+                        .iter()
+                        .map(|d| serde_json::json!(d.locate(&c.sources))),
+                )
                 .collect();
             self.failed(ms(), diags);
             return Outcome::Compiled {
@@ -284,11 +305,14 @@ impl Job {
                 };
             }
         };
-        let warnings: Vec<_> = c
-            .diagnostics
-            .iter()
-            .filter(|d| d.severity == Severity::Warning)
-            .map(|d| serde_json::json!(d.locate(&c.sources)))
+        let warnings: Vec<_> = renamed
+            .into_iter()
+            .chain(
+                c.diagnostics
+                    .iter()
+                    .filter(|d| d.severity == Severity::Warning)
+                    .map(|d| serde_json::json!(d.locate(&c.sources))),
+            )
             .collect();
         self.outcome(Event::CompileSucceeded {
             run_id: self.run_id,

@@ -65,6 +65,8 @@ pub enum Control {
 pub struct Sources {
     pub config_file: Option<PathBuf>,
     pub dirs: Vec<PathBuf>,
+    /// Blackboards named on the command line: each one's folder is a project, with it.
+    pub blackboards: Vec<PathBuf>,
     pub events: Option<PathBuf>,
     pub settle_ms: Option<u64>,
 }
@@ -78,6 +80,9 @@ impl Sources {
         };
         let file_name = file.as_ref().and_then(|f| f.file.clone());
         let mut c = config::merge(file, &self.dirs, self.events.clone(), self.settle_ms);
+        for b in &self.blackboards {
+            config::add_blackboard(&mut c, b);
+        }
         // Absolute (as `started.config` reports it), whatever the command line said.
         c.file = file_name;
         Ok(c)
@@ -107,7 +112,7 @@ pub async fn run(
         config
             .roots
             .iter()
-            .flat_map(|r| std::iter::once(r.clone()).chain(config::discover(r))),
+            .flat_map(|r| std::iter::once(r.path.clone()).chain(config::discover(&r.path))),
     ) {
         locks.acquire(&folder)?;
     }

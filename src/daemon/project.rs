@@ -86,15 +86,10 @@ impl Daemon {
             wanted.insert(p.path.clone(), (p.clone(), Origin::Explicit));
         }
         for root in &config.roots {
-            for dir in config::discover(root) {
-                wanted.entry(dir.clone()).or_insert((
-                    ProjectSpec {
-                        path: dir,
-                        blackboard: None,
-                        program: None,
-                    },
-                    Origin::Root(root.clone()),
-                ));
+            for dir in config::discover(&root.path) {
+                wanted
+                    .entry(dir.clone())
+                    .or_insert((root.project(dir), Origin::Root(root.path.clone())));
             }
         }
         let removed: Vec<PathBuf> = self
@@ -109,7 +104,7 @@ impl Daemon {
         // Roots: watch each and its subfolders (a blackboard may appear in any of them).
         let old_roots: Vec<PathBuf> = self.roots.keys().cloned().collect();
         for r in old_roots {
-            if !config.roots.contains(&r) {
+            if !config.roots.iter().any(|c| c.path == r) {
                 self.unwatch_root(&r);
             }
         }
@@ -117,8 +112,8 @@ impl Daemon {
             r.locked_out.clear();
         }
         for r in &config.roots {
-            if !self.roots.contains_key(r) {
-                self.watch_root(r);
+            if !self.roots.contains_key(&r.path) {
+                self.watch_root(&r.path);
             }
         }
         let mut added = Vec::new();
@@ -310,6 +305,17 @@ impl Daemon {
         }
     }
 
+    /// The spec of the project in the subfolder `dir` of `root`, with the root's settings.
+    pub(super) fn root_project(&self, root: &Path, dir: PathBuf) -> ProjectSpec {
+        match self.config.roots.iter().find(|r| r.path == root) {
+            Some(r) => r.project(dir),
+            None => ProjectSpec {
+                path: dir,
+                ..ProjectSpec::default()
+            },
+        }
+    }
+
     /// Adds the projects of a root that the table does not have yet.
     fn discover_in(&mut self, root: &Path, now: Instant) {
         let settle = settle_of(&self.config);
@@ -322,11 +328,7 @@ impl Daemon {
             {
                 continue;
             }
-            let spec = ProjectSpec {
-                path: dir.clone(),
-                blackboard: None,
-                program: None,
-            };
+            let spec = self.root_project(root, dir.clone());
             if self.add_project(spec, Origin::Root(root.to_owned()), settle)
                 && let Some(p) = self.projects.get_mut(&dir)
             {
@@ -508,7 +510,17 @@ impl Daemon {
         // Only a folder really watched is `watching`; a missing one was reported
         // (`watch-degraded`) and says `watching` when it is back.
         if p.watched.contains(&key) {
-            let resolved = config::resolve(&p.spec).ok();
+            let resolved = config::resolve_project(&p.spec).ok();
+            if let Some((b, program)) = &resolved
+                && let Some(from) = &program.derived_from
+            {
+                tracing::warn!(
+                    "{}: `{from}` ({}) is not a KRL name: the program is called `{}`",
+                    key.display(),
+                    b.display(),
+                    program.name
+                );
+            }
             self.sink.emit(
                 Some(&Self::key_str(&key)),
                 Event::Watching {
@@ -519,7 +531,7 @@ impl Daemon {
                     blackboard: resolved.as_ref().map(|(b, _)| b.display().to_string()),
                     backend: p.backend.as_str(),
                     reason: None,
-                    program: resolved.map(|(_, program)| program),
+                    program: resolved.map(|(_, program)| program.name),
                 },
             );
         }

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use tokio::time::Instant;
 
-use super::config::{self, ProjectSpec};
+use super::config;
 use super::events::Event;
 use super::project::{Origin, holds_blackboard};
 use super::watch::{self, Backend, WatchMsg};
@@ -166,15 +166,8 @@ impl Daemon {
                 && holds_blackboard(&folder)
             {
                 let settle = settle_of(&self.config);
-                let added = self.add_project(
-                    ProjectSpec {
-                        path: folder.clone(),
-                        blackboard: None,
-                        program: None,
-                    },
-                    Origin::Root(root.clone()),
-                    settle,
-                );
+                let spec = self.root_project(&root, folder.clone());
+                let added = self.add_project(spec, Origin::Root(root.clone()), settle);
                 if added && let Some(p) = self.projects.get_mut(&folder) {
                     p.trigger = Some("new-project");
                     p.sched.change(now);
