@@ -1,0 +1,384 @@
+//! The daemon's configuration as a team uses it (issue 10, "Configuration"): `template` and
+//! `line_endings` write exactly what the command line writes, and follow edits and reloads;
+//! root projects whose folder or blackboard name is not a KRL name get a derived program name;
+//! `skillpost watch FILE` and `skillpost watch /typo` on the command line.
+
+mod inproc;
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use inproc::*;
+use serde_json::Value;
+
+fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_skillpost")
+}
+
+/// `skillpost [--template T] [--lf] <blackboard> <program>` through the binary.
+fn cli_compile(blackboard: &Path, program: &str, template: Option<&Path>, lf: bool) {
+    let mut cmd = Command::new(bin());
+    if let Some(t) = template {
+        cmd.arg("--template").arg(t);
+    }
+    if lf {
+        cmd.arg("--lf");
+    }
+    let out = cmd.arg(blackboard).arg(program).output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// The built-in template with a marker comment in the `.src` header.
+fn team_template(marker: &str) -> String {
+    let t = fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("templates/krl.toml"))
+        .unwrap();
+    assert!(t.contains("&REL 1\n&COMMENT {{comment}}\nDEF"));
+    t.replacen(
+        "&REL 1\n&COMMENT {{comment}}\nDEF",
+        &format!("&REL 1\n&COMMENT {{{{comment}}}}\n; {marker}\nDEF"),
+        1,
+    )
+}
+
+/// Asserts that the daemon's project `a` holds byte for byte what the command line wrote into
+/// the copy `b` (outputs and the written-back blackboard).
+fn assert_same_outputs(a: &Path, b: &Path, program: &str) {
+    for f in [
+        format!("{program}.src"),
+        format!("{program}.dat"),
+        "Blackboard.aml".into(),
+    ] {
+        let (x, y) = (fs::read(a.join(&f)).unwrap(), fs::read(b.join(&f)).unwrap());
+        assert!(
+            x == y,
+            "{f} differs:\n--- daemon\n{}\n--- command line\n{}",
+            String::from_utf8_lossy(&x),
+            String::from_utf8_lossy(&y)
+        );
+    }
+}
+
+fn started_after<'a>(evs: &'a [Value], project: &Path, since: u64) -> Vec<&'a Value> {
+    evs.iter()
+        .filter(|e| is_after(e, "compile-started", project, since))
+        .collect()
+}
+
+#[test]
+fn template_and_line_endings_write_what_the_command_line_writes_and_follow_changes() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let b = w.project("B"); // the command line's copy
+    let r = w.root.join("root");
+    copy_project(&r.join("C"));
+    let c_cli = w.project("C_cli");
+    let team = w.root.join("team.toml");
+    fs::write(&team, team_template("team v1")).unwrap();
+    let root_tpl = w.root.join("root.toml");
+    fs::write(&root_tpl, team_template("root template")).unwrap();
+    let config = |endings: &str| {
+        format!(
+            "template = \"team.toml\"\nline_endings = \"{endings}\"\n\
+             [[project]]\npath = \"ws/A\"\n\
+             [[root]]\npath = \"root\"\ntemplate = \"root.toml\"\nline_endings = \"crlf\"\n"
+        )
+    };
+    let cfg = w.config(&config("lf"));
+    let d = InProc::with_config(&cfg);
+    let c = r.join("C");
+    d.startup(&[&a, &c]);
+
+    // Global template + LF for A; the root's own template and CRLF for C.
+    cli_compile(&b.join("Blackboard.aml"), "Blackboard", Some(&team), true);
+    assert_same_outputs(&a, &b, "Blackboard");
+    let src = read_string(&src_of(&a));
+    assert!(src.contains("; team v1\n") && !src.contains('\r'), "{src}");
+    cli_compile(
+        &c_cli.join("Blackboard.aml"),
+        "Blackboard",
+        Some(&root_tpl),
+        false,
+    );
+    assert_same_outputs(&c, &c_cli, "Blackboard");
+    assert!(read_string(&src_of(&c)).contains("; root template\r\n"));
+
+    // The template is an input: editing it recompiles the projects using it (A), not C.
+    let mark = d.mark();
+    fs::write(&team, team_template("team v2")).unwrap();
+    let evs = d.wait_for("A recompiled for the new template", WAIT, |e| {
+        is_after(e, "compile-succeeded", &a, mark)
+    });
+    let changed = evs
+        .iter()
+        .find(|e| is_after(e, "change-detected", &a, mark))
+        .unwrap_or_else(|| panic!("{}", dump(&evs)));
+    assert_eq!(
+        changed["paths"],
+        serde_json::json!([team.to_str().unwrap()]),
+        "{changed}"
+    );
+    assert!(read_string(&src_of(&a)).contains("; team v2\n"));
+    cli_compile(&b.join("Blackboard.aml"), "Blackboard", Some(&team), true);
+    assert_same_outputs(&a, &b, "Blackboard");
+    std::thread::sleep(Duration::from_millis(SETTLE_MS * 6));
+    assert!(
+        started_after(&d.events(), &c, mark).is_empty(),
+        "C does not use the team template\n{}",
+        dump(&d.events())
+    );
+
+    // A broken template: E603 in compile-failed, the outputs stay; fixed: compiles again.
+    let mark = d.mark();
+    fs::write(&team, "src = 1\n").unwrap();
+    let evs = d.wait_for("compile-failed for the broken template", WAIT, |e| {
+        is_after(e, "compile-failed", &a, mark)
+    });
+    let failed = evs
+        .iter()
+        .find(|e| is_after(e, "compile-failed", &a, mark))
+        .unwrap();
+    assert!(failed.to_string().contains("E603"), "{failed}");
+    assert!(read_string(&src_of(&a)).contains("; team v2\n"));
+    let mark = d.mark();
+    fs::write(&team, team_template("team v3")).unwrap();
+    d.wait_for("A compiles again", WAIT, |e| {
+        is_after(e, "compile-succeeded", &a, mark)
+    });
+
+    // A reload that changes the line endings compiles A again (trigger `reload`): CRLF now.
+    let mark = d.mark();
+    fs::write(&cfg, config("crlf")).unwrap();
+    d.reload();
+    let evs = d.wait_for("A recompiled after the reload", WAIT, |e| {
+        is_after(e, "compile-succeeded", &a, mark)
+    });
+    let started = started_after(&evs, &a, mark);
+    assert_eq!(started[0]["trigger"], "reload", "{}", dump(&evs));
+    cli_compile(&b.join("Blackboard.aml"), "Blackboard", Some(&team), false);
+    assert_same_outputs(&a, &b, "Blackboard");
+    assert!(read_string(&src_of(&a)).contains("; team v3\r\n"));
+    std::thread::sleep(Duration::from_millis(SETTLE_MS * 6));
+    assert!(
+        started_after(&d.events(), &c, mark).is_empty(),
+        "C's settings did not change\n{}",
+        dump(&d.events())
+    );
+    d.stop(WAIT);
+}
+
+/// A copy of the sample in `dir` whose blackboard is called `name`.
+fn project_with_blackboard(dir: &Path, name: &str) -> PathBuf {
+    copy_project(dir);
+    fs::rename(dir.join("Blackboard.aml"), dir.join(name)).unwrap();
+    dir.join(name)
+}
+
+fn warning_codes(e: &Value) -> Vec<String> {
+    e["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w["code"].as_str().unwrap().to_owned())
+        .collect()
+}
+
+#[test]
+fn root_projects_with_names_that_are_not_krl_names_get_a_derived_program() {
+    let w = Workspace::new();
+    let r = w.root.join("cells");
+    let pal = r.join("Palletizing Cell");
+    project_with_blackboard(&pal, "Palletizing Cell.aml");
+    let ueb = r.join("Zelle_Übergabe");
+    project_with_blackboard(&ueb, "Zelle_Übergabe.aml");
+    let ok = r.join("Zelle_A");
+    project_with_blackboard(&ok, "Zelle_A.aml");
+    // A second root whose programs are named by a pattern.
+    let r2 = w.root.join("lines");
+    let l1 = r2.join("2024 Linie");
+    project_with_blackboard(&l1, "Blackboard.aml");
+    let cfg = w.config(
+        "[[root]]\npath = \"cells\"\n[[root]]\npath = \"lines\"\nprogram = \"L_{folder}\"\n",
+    );
+    let d = InProc::with_config(&cfg);
+    for (project, program, derived) in [
+        (&pal, "Palletizing_Cell", true),
+        (&ueb, "Zelle_Uebergabe", true),
+        (&ok, "Zelle_A", false),
+        (&l1, "L_2024_Linie", true),
+    ] {
+        let evs = d.wait_for(&format!("{program} compiled"), WAIT, |e| {
+            is_for(e, "write-back", project)
+        });
+        let watching = evs.iter().find(|e| is_for(e, "watching", project)).unwrap();
+        assert_eq!(watching["program"], program, "{watching}");
+        let done = evs
+            .iter()
+            .find(|e| is_for(e, "compile-succeeded", project))
+            .unwrap_or_else(|| panic!("{}", dump(&evs)));
+        assert_eq!(
+            warning_codes(done).contains(&"W701".to_owned()),
+            derived,
+            "{done}"
+        );
+        if derived {
+            let w701 = done["warnings"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|w| w["code"] == "W701")
+                .unwrap();
+            let msg = w701["message"].as_str().unwrap();
+            assert!(
+                msg.contains(&format!("`{program}`")) && msg.contains("`program`"),
+                "names the program used and how to choose another: {msg}"
+            );
+        }
+        assert!(project.join(format!("{program}.src")).is_file());
+        assert!(project.join(format!("{program}.dat")).is_file());
+        let bb = fs::read_dir(project)
+            .unwrap()
+            .flatten()
+            .find(|e| e.path().extension().is_some_and(|x| x == "aml"))
+            .unwrap()
+            .path();
+        assert!(
+            read_string(&bb).contains(&format!("<Value>{program}.src</Value>")),
+            "{program}"
+        );
+    }
+    // What the daemon wrote is what the command line writes with that name.
+    let copy = w.ws().join("pal_cli");
+    let bb = project_with_blackboard(&copy, "Palletizing Cell.aml");
+    cli_compile(&bb, "Palletizing_Cell", None, false);
+    for f in ["Palletizing_Cell.src", "Palletizing_Cell.dat"] {
+        assert_eq!(
+            fs::read(pal.join(f)).unwrap(),
+            fs::read(copy.join(f)).unwrap()
+        );
+    }
+    let evs = d.events();
+    assert!(
+        !evs.iter()
+            .any(|e| is(e, "compile-failed") || e.to_string().contains("E601")),
+        "{}",
+        dump(&evs)
+    );
+    d.stop(WAIT);
+}
+
+#[test]
+fn an_invalid_program_name_in_the_configuration_says_how_to_fix_it() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let cfg = w.config("[[project]]\npath = \"ws/A\"\n");
+    let d = InProc::with_config(&cfg);
+    d.startup(&[&a]);
+    let mark = d.mark();
+    fs::write(
+        &cfg,
+        "[[project]]\npath = \"ws/A\"\nprogram = \"Zelle A\"\n",
+    )
+    .unwrap();
+    d.reload();
+    let evs = d.wait_for("reload-failed", WAIT, |e| {
+        seq(e) > mark && is(e, "reload-failed")
+    });
+    let e = evs
+        .iter()
+        .find(|e| seq(e) > mark && is(e, "reload-failed"))
+        .unwrap();
+    assert_eq!(
+        (e["line"].as_u64(), e["column"].as_u64()),
+        (Some(3), Some(11))
+    );
+    let msg = e["error"].as_str().unwrap();
+    assert!(
+        msg.contains("not a KRL name")
+            && msg.contains("\"Zelle_A\"")
+            && msg.contains("{blackboard}"),
+        "{msg}"
+    );
+    d.stop(WAIT);
+
+    // At startup: exit status 2 with the same sentence.
+    let out = Command::new(bin())
+        .args(["watch", "--config"])
+        .arg(&cfg)
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains(":3:11:") && err.contains("\"Zelle_A\""),
+        "{err}"
+    );
+}
+
+#[test]
+fn watch_on_the_command_line_refuses_a_missing_folder_and_takes_a_blackboard() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    fs::write(a.join("notes.txt"), "x").unwrap();
+    for (arg, says) in [
+        (w.root.join("typo"), "no project folder"),
+        (
+            a.join("notes.txt"),
+            "neither a project folder nor a blackboard",
+        ),
+    ] {
+        let t = Instant::now();
+        let out = Command::new(bin())
+            .arg("watch")
+            .arg(&a)
+            .arg(&arg)
+            .stdin(Stdio::null())
+            .output()
+            .unwrap();
+        assert!(t.elapsed() < Duration::from_secs(5), "exits at once");
+        assert_eq!(out.status.code(), Some(2), "{}", arg.display());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains(says) && err.contains(arg.to_str().unwrap()),
+            "{err}"
+        );
+        assert!(out.stdout.is_empty(), "no events: {:?}", out.stdout);
+        assert!(!src_of(&a).exists(), "nothing compiled");
+    }
+
+    // A blackboard: its folder, with that blackboard (a second one in the folder is not used).
+    fs::copy(a.join("Blackboard.aml"), a.join("Other.aml")).unwrap();
+    let events = w.root.join("ev.jsonl");
+    let mut child = Command::new(bin())
+        .args(["watch", "--settle", "50", "--events"])
+        .arg(&events)
+        .arg(a.join("Blackboard.aml"))
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let done = wait_until(WAIT, || read_string(&events).contains("\"write-back\""));
+    let _ = child.kill();
+    let _ = child.wait();
+    let text = read_string(&events);
+    assert!(done, "{text}");
+    let evs: Vec<Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let watching = evs.iter().find(|e| is_for(e, "watching", &a)).unwrap();
+    assert_eq!(
+        watching["blackboard"],
+        a.join("Blackboard.aml").to_str().unwrap()
+    );
+    assert_eq!(watching["program"], "Blackboard");
+    assert!(evs.iter().any(|e| is_for(e, "compile-succeeded", &a)));
+    assert!(src_of(&a).is_file());
+}
