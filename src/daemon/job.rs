@@ -23,6 +23,8 @@ pub(super) const PROGRAM_DERIVED: &str = "W701";
 /// A finished compile, sent back to the event loop.
 pub(super) struct Report {
     pub(super) key: PathBuf,
+    /// The run's `run_id` (given back when nothing was compiled: no event used it).
+    pub(super) run_id: u64,
     pub(super) outcome: Outcome,
 }
 

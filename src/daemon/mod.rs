@@ -345,7 +345,11 @@ impl Daemon {
                     job::after_panic(&sink, &key, run_id, trigger, &progress);
                     Outcome::Failed
                 });
-            let _ = done.send(Report { key, outcome });
+            let _ = done.send(Report {
+                key,
+                run_id,
+                outcome,
+            });
         });
     }
 
@@ -360,6 +364,10 @@ impl Daemon {
     }
 
     fn finish_report(&mut self, r: Report, now: Instant) {
+        if matches!(r.outcome, Outcome::Unchanged) && self.run_ids.get(&r.key) == Some(&r.run_id) {
+            // No event named this run: the next one takes its run_id, so they stay consecutive.
+            self.run_ids.insert(r.key.clone(), r.run_id - 1);
+        }
         let Some(mut p) = self.projects.remove(&r.key) else {
             return;
         };
