@@ -382,3 +382,39 @@ fn watch_on_the_command_line_refuses_a_missing_folder_and_takes_a_blackboard() {
     assert!(evs.iter().any(|e| is_for(e, "compile-succeeded", &a)));
     assert!(src_of(&a).is_file());
 }
+
+#[test]
+fn started_names_the_configuration_by_its_absolute_path() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    w.config("settle_ms = 50\n[[project]]\npath = \"ws/A\"\n");
+    let events = w.root.join("ev.jsonl");
+    // A relative `--config`, from the workspace as the working directory.
+    let mut child = Command::new(bin())
+        .current_dir(&w.root)
+        .args([
+            "watch",
+            "--config",
+            "skillpost.toml",
+            "--events",
+            "ev.jsonl",
+        ])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let done = wait_until(WAIT, || read_string(&events).contains("\"write-back\""));
+    let _ = child.kill();
+    let _ = child.wait();
+    let text = read_string(&events);
+    assert!(done, "{text}");
+    let started: Value = serde_json::from_str(text.lines().next().unwrap()).unwrap();
+    assert_eq!(started["event"], "started");
+    assert_eq!(
+        started["config"],
+        w.root.join("skillpost.toml").to_str().unwrap(),
+        "{started}"
+    );
+    assert!(src_of(&a).is_file());
+}

@@ -213,7 +213,9 @@ fn wait_quiet(d: &InProc, quiet: Duration, limit: Duration) {
 }
 
 fn config_text(explicit: &[&str]) -> String {
-    let mut t = String::from("forget_after_s = 1\n[[root]]\npath = \"root\"\n");
+    let mut t = String::from(
+        "forget_after_s = 1\n[[root]]\npath = \"root\"\n[[root]]\npath = \"later/root\"\n",
+    );
     for p in explicit {
         t.push_str(&format!("[[project]]\npath = \"ws/{p}\"\n"));
     }
@@ -281,9 +283,11 @@ fn event_invariants_hold_over_a_long_mixed_run() {
                 copy_project(&ps[1]);
             }
             2 => {
-                // The missing folder appears; a new root project too.
+                // The missing folder appears; a new root project too; the missing root with a
+                // project.
                 copy_project(&late);
                 copy_project(&root.join("R3"));
+                copy_project(&w.root.join("later/root/L0"));
             }
             3 => {
                 // A root project gone long enough to be forgotten, then back (a new project).
@@ -340,7 +344,19 @@ fn event_invariants_hold_over_a_long_mixed_run() {
     assert!(seen.shared_blackboard > 0, "{seen:?}");
     assert!(seen.no_blackboard > 0, "{seen:?}");
     assert!(seen.reload_triggers >= 2, "{seen:?}");
-    assert!(seen.forgotten > 0 && seen.came_back >= 2, "{seen:?}");
+    assert!(seen.forgotten > 0 && seen.came_back >= 3, "{seen:?}");
+    let later = w.root.join("later/root");
+    let root_degraded = evs
+        .iter()
+        .find(|e| is(e, "watch-degraded") && e["root"] == later.to_str().unwrap())
+        .unwrap_or_else(|| panic!("{}", dump(&evs)));
+    assert_eq!(root_degraded["backend"], "none", "{root_degraded}");
+    assert!(
+        evs.iter()
+            .any(|e| is_for(e, "compile-succeeded", &later.join("L0"))),
+        "{}",
+        dump(&evs)
+    );
     for p in &ps {
         assert!(read_string(&src_of(p)).contains(&ptp_with_x(x)));
     }

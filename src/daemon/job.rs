@@ -416,3 +416,57 @@ pub(super) fn half_written(
         (changed || recent).then_some(file)
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+    use std::sync::Mutex;
+
+    #[derive(Clone, Default)]
+    struct Buf(Arc<Mutex<Vec<u8>>>);
+
+    impl Write for Buf {
+        fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+            self.0.lock().unwrap().extend_from_slice(b);
+            Ok(b.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    /// The events `after_panic` emits for a run that got to `state`: (event, run_id).
+    fn after_panic_at(state: u8) -> Vec<(String, u64)> {
+        let buf = Buf::default();
+        let sink = EventSink::to(Box::new(buf.clone()));
+        let progress = Progress::default();
+        progress.set(state);
+        after_panic(&sink, Path::new("/p"), 7, "change", &progress);
+        assert_eq!(progress.get(), FINISHED);
+        sink.flush(Duration::from_secs(2));
+        let text = String::from_utf8(buf.0.lock().unwrap().clone()).unwrap();
+        text.lines()
+            .map(|l| {
+                let v: serde_json::Value = serde_json::from_str(l).unwrap();
+                assert_eq!(v["project"], "/p");
+                (
+                    v["event"].as_str().unwrap().to_owned(),
+                    v["run_id"].as_u64().unwrap(),
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_panic_completes_the_run_with_exactly_one_outcome() {
+        let started = ("compile-started".to_owned(), 7);
+        let failed = ("compile-failed".to_owned(), 7);
+        // Before `compile-started` (e.g. in the hash check): the run is started, then failed.
+        assert_eq!(after_panic_at(0), vec![started, failed.clone()]);
+        // After it: only the outcome.
+        assert_eq!(after_panic_at(STARTED), vec![failed]);
+        // After the outcome (e.g. in the write-back): no second outcome.
+        assert_eq!(after_panic_at(FINISHED), vec![]);
+    }
+}
