@@ -332,6 +332,12 @@ codes! {
     MissingVariable = "E314",
     /// A variable's value is not a well-formed value or list.
     BadVariableSyntax = "E315",
+    /// A transition condition is not in the condition language (SPEC.md 3.1), or names a
+    /// signal of the wrong type.
+    BadCondition = "E316",
+    /// A jump without a usable target, or one that cannot be structured (not back to a step on
+    /// every path to it, not from the selection that decides the loop).
+    BadJump = "E317",
 
     /// An IRL file without `<src>`, or not an `<irl>` document.
     BadIrl = "E401",

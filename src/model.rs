@@ -254,12 +254,14 @@ pub struct Element {
 #[derive(Debug)]
 pub enum ElementKind {
     Step(Box<Step>),
-    Transition,
+    /// A transition and its condition; `None` when it always fires (absent or `TRUE`).
+    Transition(Option<Box<Condition>>),
     SimultaneousDivergence,
     SimultaneousConvergence,
     SelectionDivergence,
     SelectionConvergence,
-    JumpStep,
+    /// A jump to the step named `targetName` (`None` when the attribute is missing or empty).
+    JumpStep(Option<Box<Name>>),
     MacroStep,
 }
 
@@ -267,12 +269,12 @@ impl ElementKind {
     pub fn tag(&self) -> &'static str {
         match self {
             ElementKind::Step(_) => "step",
-            ElementKind::Transition => "transition",
+            ElementKind::Transition(_) => "transition",
             ElementKind::SimultaneousDivergence => "simultaneousDivergence",
             ElementKind::SimultaneousConvergence => "simultaneousConvergence",
             ElementKind::SelectionDivergence => "selectionDivergence",
             ElementKind::SelectionConvergence => "selectionConvergence",
-            ElementKind::JumpStep => "jumpStep",
+            ElementKind::JumpStep(_) => "jumpStep",
             ElementKind::MacroStep => "macroStep",
         }
     }
@@ -280,6 +282,18 @@ impl ElementKind {
     pub fn is_step(&self) -> bool {
         matches!(self, ElementKind::Step(_))
     }
+}
+
+/// A transition's condition (SPEC.md 3.1), parsed.
+#[derive(Debug)]
+pub struct Condition {
+    /// The inline ST text as written (trimmed), or the reference's name.
+    pub text: String,
+    pub expr: crate::cond::Expr,
+    /// The `condition` element's start tag.
+    pub span: Span,
+    /// Whether it was `condition/reference@name`.
+    pub reference: bool,
 }
 
 #[derive(Debug)]

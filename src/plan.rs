@@ -228,7 +228,17 @@ pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
                     .element(id(i)),
                 );
             }
-            ElementKind::JumpStep | ElementKind::MacroStep => {
+            ElementKind::Transition(Some(c)) => {
+                diags.push(
+                    Diagnostic::error(
+                        Code::Unsupported,
+                        format!("transition condition `{}` is not supported yet", c.text),
+                    )
+                    .at(c.span.clone())
+                    .element(id(i)),
+                );
+            }
+            ElementKind::JumpStep(_) | ElementKind::MacroStep => {
                 diags.push(
                     Diagnostic::error(
                         Code::Unsupported,
@@ -272,7 +282,7 @@ pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
                     }
                 }
             }
-            ElementKind::Transition
+            ElementKind::Transition(_)
             | ElementKind::SimultaneousDivergence
             | ElementKind::SimultaneousConvergence => {
                 let kind = &e.kind;
@@ -297,11 +307,11 @@ pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
                     match kind {
                         // Often a consequence of another fault (a cycle, a second start):
                         // reported only when the flow has no other error.
-                        ElementKind::Transition if ns > 1 => secondary.push(unbalanced(format!(
+                        ElementKind::Transition(_) if ns > 1 => secondary.push(unbalanced(format!(
                             "transition splits into {ns} outputs ({}); simultaneous branches start with a simultaneousDivergence",
                             list_ids(sfc, g.succs(i))
                         ))),
-                        ElementKind::Transition if np > 1 => secondary.push(unbalanced(format!(
+                        ElementKind::Transition(_) if np > 1 => secondary.push(unbalanced(format!(
                             "transition joins {np} inputs ({}); simultaneous branches end with a simultaneousConvergence",
                             list_ids(sfc, g.preds(i))
                         ))),
