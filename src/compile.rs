@@ -279,7 +279,8 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 fn_irl.insert((r, f), i);
             }
         }
-        let bound = bind::bind(&bb, sfc, &order, &res, &irls, &fn_irl, &mut cx.diags);
+        let mut bound = bind::bind(&bb, sfc, &order, &res, &irls, &fn_irl, &mut cx.diags);
+        bound.signals = bind::conditions(&bb, sfc, res.resource, &mut cx.diags);
         out.skill_steps = bound.steps.iter().filter(|s| s.is_some()).count();
         lap(&mut out, "bind");
         if !cx.diags.has_errors()

@@ -298,8 +298,10 @@ codes! {
     /// A function mapping without a usable `Name`, a bad `Order`, or a mapping path that is not a
     /// skill parameter.
     BadFunctionMapping = "E207",
-    /// Two resources, skills or functions with the same name.
+    /// Two resources, skills, functions or signals with the same name.
     DuplicateName = "E208",
+    /// A signal whose `IoType`, `Type`, `Number`, `Length` or `Address` cannot be used.
+    BadSignal = "E209",
 
     /// No program `pou` with an `SFC` body.
     NoSfcBody = "E301",
@@ -338,6 +340,8 @@ codes! {
     /// A jump without a usable target, or one that cannot be structured (not back to a step on
     /// every path to it, not from the selection that decides the loop).
     BadJump = "E317",
+    /// A condition names a signal the program's resource does not declare.
+    UnknownSignal = "E318",
 
     /// An IRL file without `<src>`, or not an `<irl>` document.
     BadIrl = "E401",

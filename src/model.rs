@@ -88,6 +88,10 @@ pub struct Resource {
     pub functions: Vec<Function>,
     /// Keys of functions that are present but malformed (reported): not "unknown".
     pub broken_functions: Vec<Arc<str>>,
+    /// The I/O signals transition conditions may name (SPEC.md 3.1), in document order.
+    pub signals: Vec<Signal>,
+    /// Keys of signals that are present but malformed (reported): not "unknown".
+    pub broken_signals: Vec<Arc<str>>,
 }
 
 impl Resource {
@@ -96,6 +100,41 @@ impl Resource {
     }
     pub fn function(&self, key: &str) -> Option<usize> {
         self.functions.iter().position(|f| &*f.name.key == key)
+    }
+    pub fn signal(&self, key: &str) -> Option<usize> {
+        self.signals.iter().position(|s| &*s.name.key == key)
+    }
+}
+
+/// An I/O signal of a resource: an `ExternalInterface` whose `RefBaseClassPath` ends in
+/// `SignalInterface` or `Channel` (SPEC.md 3.1).
+#[derive(Debug, Clone)]
+pub struct Signal {
+    pub name: Name,
+    /// The CAEX element, described for diagnostics.
+    pub element: String,
+    /// `IoType` `Output` (else an input).
+    pub output: bool,
+    pub kind: SignalKind,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SignalKind {
+    /// One bit: the I/O index `Number` (1-based, as KRL counts).
+    Bit(u32),
+    /// An integer of `length` bits from index `number` on, least significant first.
+    Group { number: u32, length: u32 },
+    /// A robot-language expression used as it stands (one safe token); `integer` per `Type`.
+    Address { text: String, integer: bool },
+}
+
+impl Signal {
+    /// Whether conditions see an integer (else a boolean).
+    pub fn is_integer(&self) -> bool {
+        matches!(
+            self.kind,
+            SignalKind::Group { .. } | SignalKind::Address { integer: true, .. }
+        )
     }
 }
 

@@ -6,7 +6,7 @@
 
 use std::fmt::Write as _;
 
-use crate::model::{Blackboard, ElementKind, Sfc, Value};
+use crate::model::{Blackboard, ElementKind, Sfc, Signal, SignalKind, Value};
 use crate::plan::{Block, Plan};
 
 /// `-pB`: resources, their skills with the calls they map, and functions with their IRL files.
@@ -49,8 +49,28 @@ pub fn blackboard(bb: &Blackboard) -> String {
                 f.irl.value, f.command.text
             );
         }
+        for s in &r.signals {
+            let _ = writeln!(o, "        (Signal) {:<40} {}", s.name.text, signal_text(s));
+        }
     }
     o
+}
+
+/// A signal in one line: direction, type and where it is (`input bit $IN[3]`).
+pub fn signal_text(s: &Signal) -> String {
+    let dir = if s.output { "output" } else { "input" };
+    let io = if s.output { "$OUT" } else { "$IN" };
+    match &s.kind {
+        SignalKind::Bit(n) => format!("{dir} bit {io}[{n}]"),
+        SignalKind::Group { number, length } => format!(
+            "{dir} integer {io}[{number}] TO {io}[{}] ({length} bits)",
+            number + length - 1
+        ),
+        SignalKind::Address { text, integer } => format!(
+            "{dir} {} at {text}",
+            if *integer { "integer" } else { "bit" }
+        ),
+    }
 }
 
 fn value_text(v: &Value) -> String {
@@ -241,6 +261,9 @@ pub fn info(bb: Option<&Blackboard>) -> String {
             let _ = writeln!(o, "{}", r.name.text);
             if r.skills.is_empty() {
                 let _ = writeln!(o, "  (no skills)");
+            }
+            for s in &r.signals {
+                let _ = writeln!(o, "  signal {:<21} {}", s.name.text, signal_text(s));
             }
             for s in &r.skills {
                 let vars = s.variables();
