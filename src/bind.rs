@@ -31,7 +31,7 @@ pub struct StepOrder {
     pub steps: Vec<usize>,
     /// The start and end steps, which may name no skill; `None` when unknown (then any step may
     /// name no skill without an error, since the flow errors are reported already).
-    pub start_end: Option<(usize, usize)>,
+    pub start_end: Option<(usize, Option<usize>)>,
 }
 
 impl StepOrder {
@@ -75,7 +75,7 @@ pub fn resolve(
         let Some(skill_name) = &st.skill else {
             if order
                 .start_end
-                .is_some_and(|(start, end)| i != start && i != end)
+                .is_some_and(|(start, end)| i != start && Some(i) != end)
             {
                 diags.push(
                     Diagnostic::error(

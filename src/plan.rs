@@ -1,17 +1,21 @@
-//! SFC graph checks and the ordered program tree (SPEC.md section 3, "Rules").
+//! SFC graph checks and the ordered program tree (SPEC.md sections 3 and 3.1).
 //!
-//! The tree is a sequence of [`Block`]s; simultaneous branches become [`Block::Parallel`] with
-//! their branches already in emission order (left to right by the x of each branch head, ties in
-//! document order). Selection branches and loops will be further variants of [`Block`]; until
-//! then they are `E313` errors, so every consumer's `match` is exhaustive today and is told by the
-//! compiler where to handle them tomorrow.
+//! [`plan`] runs in parts, each with its own tests: [`graph`] (ids and connections),
+//! [`check_nodes`] (each element's inputs and outputs), [`resolve_jumps`] (jump targets),
+//! [`start_end`] (found after the jumps are resolved), [`find_cycle`] (a cycle of connections,
+//! not of jumps) and the walk, which recognises the structure: sequences, guarded transitions
+//! ([`Block::Wait`]), simultaneous branches ([`Block::Parallel`]), selection branches
+//! ([`Block::Choice`]) and loops closed by a jump back ([`Block::Loop`]). Branches are in
+//! emission order: left to right by the x of each branch head, ties in document order; for
+//! selections that order is their priority.
 
 use std::collections::HashMap;
+use std::sync::Arc;
 
 use crate::diag::{Code, Diagnostic, Diagnostics, Span};
 use crate::model::{ElementKind, Sfc};
 
-/// Simultaneous branches nest at most this deep.
+/// Branches and loops nest at most this deep.
 pub const MAX_NESTING: usize = 128;
 
 /// One entry of the program tree. Indexes are into [`Sfc::elements`].
@@ -19,12 +23,53 @@ pub const MAX_NESTING: usize = 128;
 pub enum Block {
     /// A step.
     Step(usize),
+    /// A transition with a condition in a sequence: the program waits until it holds.
+    Wait(usize),
     /// Simultaneous branches, in emission order. On one robot they run one after another.
     Parallel {
         divergence: usize,
         convergence: usize,
         branches: Vec<Vec<Block>>,
     },
+    /// Selection branches in priority order: the first whose first transition's condition
+    /// holds is taken. `convergence` is `None` for the selection that decides a loop when its
+    /// branches do not join again.
+    Choice {
+        divergence: usize,
+        convergence: Option<usize>,
+        branches: Vec<Branch>,
+    },
+    /// A loop back to the step `head` (the body's first block). It repeats until a branch of
+    /// its last block (a [`Block::Choice`]) ends in [`BranchEnd::Leave`]; `endless` when none
+    /// does (a cyclic chart).
+    Loop {
+        head: usize,
+        /// The jumpSteps that close the loop.
+        jumps: Vec<usize>,
+        body: Vec<Block>,
+        endless: bool,
+    },
+}
+
+/// One selection branch.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Branch {
+    /// The branch's first transition: its condition selects the branch.
+    pub transition: usize,
+    /// What runs after the transition fired.
+    pub body: Vec<Block>,
+    pub end: BranchEnd,
+}
+
+/// How a selection branch ends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BranchEnd {
+    /// At the selection's convergence: the program goes on after it.
+    Join,
+    /// In a jump (the element) back to the enclosing loop's head: the loop goes round again.
+    Repeat(usize),
+    /// The loop is left: the program goes on after it.
+    Leave,
 }
 
 /// The planned program.
@@ -34,28 +79,41 @@ pub struct Plan {
     pub body: Vec<Block>,
     /// The start step.
     pub start: usize,
-    /// The end step.
-    pub end: usize,
+    /// The end step; `None` for a cyclic chart (it ends in jumps only).
+    pub end: Option<usize>,
 }
 
 impl Plan {
-    /// Steps in execution order.
+    /// Steps in program order (each once; loop bodies once).
     pub fn steps(&self) -> Vec<usize> {
-        fn walk(blocks: &[Block], out: &mut Vec<usize>) {
-            for b in blocks {
-                match b {
-                    Block::Step(i) => out.push(*i),
-                    Block::Parallel { branches, .. } => {
-                        for br in branches {
-                            walk(br, out);
-                        }
-                    }
+        let mut out = Vec::new();
+        visit(&self.body, &mut |b| {
+            if let Block::Step(i) = b {
+                out.push(*i);
+            }
+        });
+        out
+    }
+}
+
+/// Calls `f` for every block, depth first in program order.
+pub fn visit(blocks: &[Block], f: &mut dyn FnMut(&Block)) {
+    for b in blocks {
+        f(b);
+        match b {
+            Block::Step(_) | Block::Wait(_) => {}
+            Block::Parallel { branches, .. } => {
+                for br in branches {
+                    visit(br, f);
                 }
             }
+            Block::Choice { branches, .. } => {
+                for br in branches {
+                    visit(&br.body, f);
+                }
+            }
+            Block::Loop { body, .. } => visit(body, f),
         }
-        let mut out = Vec::new();
-        walk(&self.body, &mut out);
-        out
     }
 }
 
@@ -207,46 +265,82 @@ pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
 /// them reported).
 pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
     let errors_before = diags.error_count();
-    let g = graph(sfc, diags);
     let el = &sfc.elements;
-    let id = |i: usize| format!("localId {}", el[i].local_id);
-    let mut secondary = Vec::new();
+    if !el.iter().any(|e| e.kind.is_step()) {
+        // The root cause, once: no start, no end and no steps are one fault.
+        diags.push(
+            Diagnostic::error(Code::StartStep, "the SFC body has no steps")
+                .at_opt(sfc.span.clone()),
+        );
+        return None;
+    }
+    let g = graph(sfc, diags);
+    let secondary = check_nodes(sfc, &g, diags);
+    let jumps = resolve_jumps(sfc, diags);
+    let ends = start_end(sfc, &g, &jumps, diags);
+    if let Some(c) = find_cycle(&g) {
+        diags.push(
+            Diagnostic::error(
+                Code::Cycle,
+                "the flow has a cycle of connections through this element; close loops with a jumpStep back to the step",
+            )
+            .at(el[c].span.clone())
+            .element(label(sfc, c)),
+        );
+    }
+    if diags.error_count() == errors_before {
+        for d in secondary {
+            diags.push(d);
+        }
+    }
+    if diags.error_count() > errors_before {
+        return None;
+    }
+    let (start, end) = ends?;
+    walk(sfc, &g, &jumps, start, diags).map(|body| Plan { body, start, end })
+}
 
+fn label(sfc: &Sfc, i: usize) -> String {
+    format!("localId {}", sfc.elements[i].local_id)
+}
+
+/// Checks each element's inputs and outputs. Returns the diagnostics that are often a
+/// consequence of another fault, to be reported only when there is no other error.
+pub fn check_nodes(sfc: &Sfc, g: &Graph, diags: &mut Diagnostics) -> Vec<Diagnostic> {
+    let el = &sfc.elements;
+    let id = |i: usize| label(sfc, i);
+    let mut secondary = Vec::new();
     for (i, e) in el.iter().enumerate() {
         let (np, ns) = (g.preds(i).len(), g.succs(i).len());
+        let err = |code: Code, msg: String| {
+            Diagnostic::error(code, msg)
+                .at(e.span.clone())
+                .element(id(i))
+        };
         match &e.kind {
-            ElementKind::SelectionDivergence | ElementKind::SelectionConvergence => {
-                diags.push(
-                    Diagnostic::error(
-                        Code::Unsupported,
+            ElementKind::MacroStep => {
+                diags.push(err(
+                    Code::Unsupported,
+                    "macroStep is not supported yet".to_owned(),
+                ));
+            }
+            ElementKind::JumpStep(_) => {
+                if np != 1 {
+                    diags.push(err(
+                        Code::BadJump,
+                        format!("jumpStep has {np} inputs; it follows exactly one transition"),
+                    ));
+                }
+                if ns > 0 {
+                    diags.push(err(
+                        Code::BadJump,
                         format!(
-                            "{} is not supported yet: skillpost emits one fixed sequence (only simultaneous branches)",
-                            e.kind.tag()
+                            "jumpStep is followed by {} ({}); a jump ends its branch",
+                            ns,
+                            list_ids(sfc, g.succs(i))
                         ),
-                    )
-                    .at(e.span.clone())
-                    .element(id(i)),
-                );
-            }
-            ElementKind::Transition(Some(c)) => {
-                diags.push(
-                    Diagnostic::error(
-                        Code::Unsupported,
-                        format!("transition condition `{}` is not supported yet", c.text),
-                    )
-                    .at(c.span.clone())
-                    .element(id(i)),
-                );
-            }
-            ElementKind::JumpStep(_) | ElementKind::MacroStep => {
-                diags.push(
-                    Diagnostic::error(
-                        Code::Unsupported,
-                        format!("{} is not supported yet", e.kind.tag()),
-                    )
-                    .at(e.span.clone())
-                    .element(id(i)),
-                );
+                    ));
+                }
             }
             ElementKind::Step(_) => {
                 if np > 1 || ns > 1 {
@@ -255,131 +349,208 @@ pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
                     } else {
                         ("successors", ns)
                     };
-                    diags.push(
-                        Diagnostic::error(
-                            Code::StepFanInOut,
-                            format!(
-                                "step has {n} {what}; a step has at most one (branches need a divergence or convergence)"
-                            ),
-                        )
-                        .at(e.span.clone())
-                        .element(id(i)),
-                    );
+                    diags.push(err(
+                        Code::StepFanInOut,
+                        format!(
+                            "step has {n} {what}; a step has at most one (branches need a divergence or convergence)"
+                        ),
+                    ));
                 }
                 for &p in g.preds(i) {
                     if el[p].kind.is_step() {
-                        diags.push(
-                            Diagnostic::error(
-                                Code::StepToStep,
-                                format!(
-                                    "step follows step localId {} without a transition between them",
-                                    el[p].local_id
-                                ),
-                            )
-                            .at(e.span.clone())
-                            .element(id(i)),
-                        );
+                        diags.push(err(
+                            Code::StepToStep,
+                            format!(
+                                "step follows step localId {} without a transition between them",
+                                el[p].local_id
+                            ),
+                        ));
                     }
                 }
             }
-            ElementKind::Transition(_)
-            | ElementKind::SimultaneousDivergence
-            | ElementKind::SimultaneousConvergence => {
-                let kind = &e.kind;
-                let unbalanced = |msg: String| {
-                    Diagnostic::error(Code::UnbalancedBranch, msg)
-                        .at(e.span.clone())
-                        .element(id(i))
-                };
+            kind => {
+                let unbalanced = |msg: String| err(Code::UnbalancedBranch, msg);
+                let tag = kind.tag();
                 if np > 1 && ns > 1 {
-                    diags.push(
-                        Diagnostic::error(
-                            Code::NToM,
-                            format!(
-                                "{} joins {np} inputs and splits into {ns} outputs at once; use a convergence and a divergence",
-                                kind.tag()
-                            ),
-                        )
-                        .at(e.span.clone())
-                        .element(id(i)),
-                    );
+                    diags.push(err(
+                        Code::NToM,
+                        format!(
+                            "{tag} joins {np} inputs and splits into {ns} outputs at once; use a convergence and a divergence"
+                        ),
+                    ));
                 } else {
+                    let (sim, div) = match kind {
+                        ElementKind::SimultaneousDivergence => (true, true),
+                        ElementKind::SimultaneousConvergence => (true, false),
+                        ElementKind::SelectionDivergence => (false, true),
+                        ElementKind::SelectionConvergence => (false, false),
+                        _ => (false, false),
+                    };
+                    let branches = if sim { "simultaneous" } else { "selection" };
+                    let opens = if sim {
+                        "a simultaneousDivergence"
+                    } else {
+                        "a selectionDivergence"
+                    };
+                    let closes = if sim {
+                        "a simultaneousConvergence"
+                    } else {
+                        "a selectionConvergence"
+                    };
                     match kind {
                         // Often a consequence of another fault (a cycle, a second start):
                         // reported only when the flow has no other error.
                         ElementKind::Transition(_) if ns > 1 => secondary.push(unbalanced(format!(
-                            "transition splits into {ns} outputs ({}); simultaneous branches start with a simultaneousDivergence",
+                            "transition splits into {ns} outputs ({}); branches start with a simultaneousDivergence or a selectionDivergence",
                             list_ids(sfc, g.succs(i))
                         ))),
                         ElementKind::Transition(_) if np > 1 => secondary.push(unbalanced(format!(
-                            "transition joins {np} inputs ({}); simultaneous branches end with a simultaneousConvergence",
+                            "transition joins {np} inputs ({}); branches end with a simultaneousConvergence or a selectionConvergence",
                             list_ids(sfc, g.preds(i))
                         ))),
-                        ElementKind::SimultaneousDivergence if np > 1 => {
-                            diags.push(unbalanced(format!(
-                                "simultaneousDivergence has {np} inputs; it must have one"
-                            )))
+                        ElementKind::Transition(_) => {}
+                        _ if div && np > 1 => {
+                            diags.push(unbalanced(format!("{tag} has {np} inputs; it must have one")))
                         }
-                        ElementKind::SimultaneousDivergence if ns == 1 => diags.push(unbalanced(
-                            "simultaneousDivergence opens only one branch".to_owned(),
-                        )),
-                        ElementKind::SimultaneousConvergence if ns > 1 => {
-                            diags.push(unbalanced(format!(
-                                "simultaneousConvergence has {ns} outputs; it must have one"
-                            )))
-                        }
-                        ElementKind::SimultaneousConvergence if np == 1 => diags.push(unbalanced(
-                            "simultaneousConvergence joins only one branch: no divergence opened it"
-                                .to_owned(),
-                        )),
+                        _ if div && ns == 1 => diags.push(unbalanced(format!(
+                            "{tag} opens only one branch"
+                        ))),
+                        _ if !div && ns > 1 => diags.push(unbalanced(format!(
+                            "{tag} has {ns} outputs; it must have one"
+                        ))),
+                        _ if !div && np == 1 => diags.push(unbalanced(format!(
+                            "{tag} joins only one branch: {opens} opens {branches} branches and {closes} joins them"
+                        ))),
                         _ => {}
+                    }
+                    if matches!(kind, ElementKind::SelectionDivergence) {
+                        for &h in g.succs(i) {
+                            if !matches!(el[h].kind, ElementKind::Transition(_)) {
+                                diags.push(unbalanced(format!(
+                                    "selection branch starts with {} localId {}; each selection branch starts with a transition (its condition)",
+                                    el[h].kind.tag(),
+                                    el[h].local_id
+                                )));
+                            }
+                        }
                     }
                 }
                 if np == 0 {
-                    diags.push(
-                        Diagnostic::error(
-                            Code::StartStep,
-                            format!(
-                                "{} has no input: the flow must start at a step",
-                                e.kind.tag()
-                            ),
-                        )
-                        .at(e.span.clone())
-                        .element(id(i)),
-                    );
+                    diags.push(err(
+                        Code::StartStep,
+                        format!("{tag} has no input: the flow must start at a step"),
+                    ));
                 }
                 if ns == 0 {
-                    diags.push(
-                        Diagnostic::error(
-                            Code::EndStep,
-                            format!(
-                                "{} has no output: the flow must end at a step",
-                                e.kind.tag()
-                            ),
-                        )
-                        .at(e.span.clone())
-                        .element(id(i)),
-                    );
+                    diags.push(err(
+                        Code::EndStep,
+                        format!("{tag} has no output: the flow must end at a step or a jump"),
+                    ));
                 }
             }
         }
     }
+    secondary
+}
 
-    let starts: Vec<usize> = (0..el.len())
+/// Each jumpStep's target step (by element index), `None` for other elements and for jumps
+/// whose target names no step or several (reported).
+pub fn resolve_jumps(sfc: &Sfc, diags: &mut Diagnostics) -> Vec<Option<usize>> {
+    let el = &sfc.elements;
+    let mut out = vec![None; el.len()];
+    if !el
+        .iter()
+        .any(|e| matches!(e.kind, ElementKind::JumpStep(_)))
+    {
+        return out;
+    }
+    let mut by_name: HashMap<Arc<str>, Vec<usize>> = HashMap::new();
+    for (i, e) in el.iter().enumerate() {
+        if let ElementKind::Step(st) = &e.kind {
+            by_name
+                .entry(Arc::from(crate::names::key(&st.name)))
+                .or_default()
+                .push(i);
+        }
+    }
+    for (i, e) in el.iter().enumerate() {
+        let ElementKind::JumpStep(Some(target)) = &e.kind else {
+            continue;
+        };
+        match by_name.get(&*target.key).map(Vec::as_slice) {
+            Some([t]) => out[i] = Some(*t),
+            None | Some([]) => diags.push(
+                Diagnostic::error(
+                    Code::BadJump,
+                    format!("jump target `{}` names no step", target.text),
+                )
+                .at(target.span.clone())
+                .element(label(sfc, i)),
+            ),
+            Some(several) => {
+                let mut d = Diagnostic::error(
+                    Code::BadJump,
+                    format!(
+                        "jump target `{}` names {} steps ({}); give the target step a name of its own",
+                        target.text,
+                        several.len(),
+                        list_ids(sfc, several)
+                    ),
+                )
+                .at(target.span.clone())
+                .element(label(sfc, i));
+                for &t in several.iter().take(4) {
+                    d = d.related(el[t].span.clone(), "a step of that name");
+                }
+                diags.push(d)
+            }
+        }
+    }
+    out
+}
+
+/// The start and the end step, found after the jumps are resolved: a step that only jumps lead
+/// to is not a second start (unless there is no other), and a chart that ends in jumps only has
+/// no end step (`None`). Reports a missing or repeated start or end.
+pub fn start_end(
+    sfc: &Sfc,
+    g: &Graph,
+    jumps: &[Option<usize>],
+    diags: &mut Diagnostics,
+) -> Option<(usize, Option<usize>)> {
+    let el = &sfc.elements;
+    let mut targeted = vec![false; el.len()];
+    for t in jumps.iter().flatten() {
+        targeted[*t] = true;
+    }
+    let has_jumps = el
+        .iter()
+        .any(|e| matches!(e.kind, ElementKind::JumpStep(_)));
+    let no_pred: Vec<usize> = (0..el.len())
         .filter(|&i| el[i].kind.is_step() && g.preds(i).is_empty())
         .collect();
+    let untargeted: Vec<usize> = no_pred.iter().copied().filter(|&i| !targeted[i]).collect();
+    let starts = if untargeted.is_empty() {
+        no_pred
+    } else {
+        untargeted
+    };
     let ends: Vec<usize> = (0..el.len())
         .filter(|&i| el[i].kind.is_step() && g.succs(i).is_empty())
         .collect();
-    let file_span = sfc.span.clone();
-    match starts.as_slice() {
-        [] => diags.push(
-            Diagnostic::error(
-                Code::StartStep,
-                "no start step: every step has a predecessor",
-            )
-            .at_opt(file_span.clone()),
-        ),
+    let mut ok = true;
+    let start = match starts.as_slice() {
+        [] => {
+            diags.push(
+                Diagnostic::error(
+                    Code::StartStep,
+                    "no start step: every step has a predecessor",
+                )
+                .at_opt(sfc.span.clone()),
+            );
+            ok = false;
+            0
+        }
         [s] => {
             if let ElementKind::Step(st) = &el[*s].kind
                 && !st.initial
@@ -390,9 +561,10 @@ pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
                         "the start step is not marked initialStep=\"true\"",
                     )
                     .at(el[*s].span.clone())
-                    .element(id(*s)),
+                    .element(label(sfc, *s)),
                 );
             }
+            *s
         }
         [first, rest @ ..] => {
             let mut d = Diagnostic::error(
@@ -404,19 +576,26 @@ pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
                 ),
             )
             .at(el[*first].span.clone())
-            .element(id(*first));
+            .element(label(sfc, *first));
             for r in rest.iter().take(8) {
                 d = d.related(el[*r].span.clone(), "another start step");
             }
             diags.push(d);
+            ok = false;
+            0
         }
-    }
-    match ends.as_slice() {
-        [] => diags.push(
-            Diagnostic::error(Code::EndStep, "no end step: every step has a successor")
-                .at_opt(file_span.clone()),
-        ),
-        [_] => {}
+    };
+    let end = match ends.as_slice() {
+        [] if has_jumps => None,
+        [] => {
+            diags.push(
+                Diagnostic::error(Code::EndStep, "no end step: every step has a successor")
+                    .at_opt(sfc.span.clone()),
+            );
+            ok = false;
+            None
+        }
+        [e] => Some(*e),
         [first, rest @ ..] => {
             let mut d = Diagnostic::error(
                 Code::EndStep,
@@ -427,64 +606,16 @@ pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
                 ),
             )
             .at(el[*first].span.clone())
-            .element(id(*first));
+            .element(label(sfc, *first));
             for r in rest.iter().take(8) {
                 d = d.related(el[*r].span.clone(), "another end step");
             }
             diags.push(d);
+            ok = false;
+            None
         }
-    }
-
-    if let Some(c) = find_cycle(&g) {
-        diags.push(
-            Diagnostic::error(
-                Code::Cycle,
-                "the flow has a cycle through this element; loops are not supported yet",
-            )
-            .at(el[c].span.clone())
-            .element(id(c)),
-        );
-    }
-
-    if diags.error_count() == errors_before {
-        for d in secondary {
-            diags.push(d);
-        }
-    }
-    if diags.error_count() > errors_before || el.is_empty() {
-        if el.is_empty() {
-            diags.push(
-                Diagnostic::error(Code::StartStep, "the SFC body has no steps").at_opt(file_span),
-            );
-        }
-        return None;
-    }
-    let (start, end) = (starts[0], ends[0]);
-    let mut w = Walker {
-        sfc,
-        g: &g,
-        diags,
-        failed: false,
     };
-    let (body, conv) = w.seq(start, true, 0);
-    if let Some(c) = conv {
-        w.diags.push(
-            Diagnostic::error(
-                Code::UnbalancedBranch,
-                format!(
-                    "{} joins branches that no divergence opened",
-                    el[c].kind.tag()
-                ),
-            )
-            .at(el[c].span.clone())
-            .element(id(c)),
-        );
-        w.failed = true;
-    }
-    if w.failed {
-        return None;
-    }
-    Some(Plan { body, start, end })
+    ok.then_some((start, end))
 }
 
 fn list_ids(sfc: &Sfc, idx: &[usize]) -> String {
@@ -499,8 +630,9 @@ fn list_ids(sfc: &Sfc, idx: &[usize]) -> String {
     s.join(", ")
 }
 
-/// Kahn's algorithm; returns an element on a cycle, if any.
-fn find_cycle(g: &Graph) -> Option<usize> {
+/// Kahn's algorithm; returns an element on a cycle of connections, if any (jumps are not
+/// connections).
+pub fn find_cycle(g: &Graph) -> Option<usize> {
     let n = g.len();
     let mut indeg: Vec<usize> = (0..n).map(|i| g.preds(i).len()).collect();
     let mut queue: Vec<usize> = (0..n).filter(|&i| indeg[i] == 0).collect();
@@ -530,98 +662,550 @@ fn find_cycle(g: &Graph) -> Option<usize> {
     }
 }
 
+/// Walks the checked graph from `start` and recognises its structure. `None` when a part cannot
+/// be structured (reported).
+pub fn walk(
+    sfc: &Sfc,
+    g: &Graph,
+    jumps: &[Option<usize>],
+    start: usize,
+    diags: &mut Diagnostics,
+) -> Option<Vec<Block>> {
+    let mut targeted = vec![false; sfc.elements.len()];
+    for t in jumps.iter().flatten() {
+        targeted[*t] = true;
+    }
+    let mut jumps_to: HashMap<usize, Vec<usize>> = HashMap::new();
+    for (j, t) in jumps.iter().enumerate() {
+        if let Some(t) = t {
+            jumps_to.entry(*t).or_default().push(j);
+        }
+    }
+    let mut w = Walker {
+        sfc,
+        g,
+        jumps,
+        targeted,
+        jumps_to,
+        loops: Vec::new(),
+        diags,
+        failed: false,
+    };
+    let (mut body, end) = w.seq(start, true, 0);
+    if w.failed {
+        return None;
+    }
+    match end {
+        End::Done | End::Endless => {}
+        End::Conv(c) => {
+            let el = &sfc.elements;
+            w.fail(
+                c,
+                Code::UnbalancedBranch,
+                format!(
+                    "{} joins branches that no divergence opened",
+                    el[c].kind.tag()
+                ),
+            );
+        }
+        End::Jump(j) => w.bad_jump(j, "it does not lead back to a step on every path to it"),
+        End::Decided { choice, .. } => {
+            // A selection with jumps to a loop head outside any loop cannot happen (the head
+            // would have opened the loop); keep the blocks for completeness.
+            body.push(*choice);
+        }
+    }
+    (!w.failed).then_some(body)
+}
+
+/// How a walked sequence ended.
+#[derive(Debug)]
+enum End {
+    /// At a convergence (not consumed).
+    Conv(usize),
+    /// At the end step.
+    Done,
+    /// At a jump (the element).
+    Jump(usize),
+    /// In an endless loop: nothing follows.
+    Endless,
+    /// At the selection that decides the innermost loop: the selection (its last block) and
+    /// what follows the loop.
+    Decided { choice: Box<Block>, after: After },
+}
+
+/// What follows a loop.
+#[derive(Debug)]
+enum After {
+    /// Nothing: every branch goes round again.
+    Nothing,
+    /// The exits joined at this convergence: go on from there.
+    From(usize),
+    /// The one exit branch's rest, already walked, and how it ended.
+    Tail(Vec<Block>, Box<End>),
+}
+
+/// An open loop.
+struct LoopCtx {
+    /// The loop's first step, the jumps' target.
+    head: usize,
+    /// The nesting depth of the sequence the loop stands in.
+    depth: usize,
+    /// The elements from which a jump back to `head` can be reached (without passing `head`):
+    /// the loop's body. A selection branch outside it leaves the loop.
+    body: std::collections::HashSet<usize>,
+}
+
 struct Walker<'a> {
     sfc: &'a Sfc,
     g: &'a Graph,
+    jumps: &'a [Option<usize>],
+    targeted: Vec<bool>,
+    /// The jumps to each target step.
+    jumps_to: HashMap<usize, Vec<usize>>,
+    /// The open loops, innermost last.
+    loops: Vec<LoopCtx>,
     diags: &'a mut Diagnostics,
     failed: bool,
 }
 
 impl Walker<'_> {
-    /// Walks a sequence from `cur` until the flow ends (returns `None`) or reaches a convergence
-    /// (an element with several inputs; returned, not consumed). `entered` says `cur` itself is
-    /// to be taken even if it is a convergence (we arrive there after its branches).
-    fn seq(
-        &mut self,
-        mut cur: usize,
-        mut entered: bool,
-        depth: usize,
-    ) -> (Vec<Block>, Option<usize>) {
+    /// Walks a sequence from `cur` until it ends. `entered` says `cur` itself is to be taken
+    /// even if it is a convergence (we arrive there after its branches) or a loop head that is
+    /// being opened.
+    fn seq(&mut self, mut cur: usize, mut entered: bool, depth: usize) -> (Vec<Block>, End) {
         let el = &self.sfc.elements;
         let mut out = Vec::new();
         loop {
+            if self.failed {
+                return (out, End::Done);
+            }
             if !entered && self.g.preds(cur).len() > 1 {
-                return (out, Some(cur));
+                return (out, End::Conv(cur));
+            }
+            if el[cur].kind.is_step()
+                && self.targeted[cur]
+                && !self.loops.iter().any(|l| l.head == cur)
+            {
+                let (blocks, end) = self.open_loop(cur, depth);
+                out.extend(blocks);
+                match end {
+                    Some(Ok(c)) => {
+                        cur = c;
+                        entered = true;
+                        continue;
+                    }
+                    Some(Err(end)) => return (out, end),
+                    None => return (out, End::Done),
+                }
             }
             entered = false;
-            if el[cur].kind.is_step() {
-                out.push(Block::Step(cur));
-            }
             let succs = self.g.succs(cur);
+            match &el[cur].kind {
+                ElementKind::Step(_) => out.push(Block::Step(cur)),
+                ElementKind::Transition(Some(_)) => out.push(Block::Wait(cur)),
+                ElementKind::JumpStep(_) => return (out, End::Jump(cur)),
+                _ => {}
+            }
             match succs.len() {
-                0 => return (out, None),
+                0 => return (out, End::Done),
                 1 => cur = succs[0],
                 _ => {
                     if depth >= MAX_NESTING {
                         self.fail(
                             cur,
                             Code::Unsupported,
-                            format!(
-                                "simultaneous branches nested deeper than {MAX_NESTING} levels"
-                            ),
+                            format!("branches and loops nested deeper than {MAX_NESTING} levels"),
                         );
-                        return (out, None);
+                        return (out, End::Done);
                     }
                     let mut heads = succs.to_vec();
                     // Left to right by x; ties in document order (the index is document order).
                     heads.sort_by(|&a, &b| el[a].x.total_cmp(&el[b].x).then(a.cmp(&b)));
-                    let mut branches = Vec::with_capacity(heads.len());
-                    let mut joins = Vec::with_capacity(heads.len());
-                    for h in heads {
-                        let (b, c) = self.seq(h, false, depth + 1);
-                        if self.failed {
-                            return (out, None);
-                        }
-                        branches.push(b);
-                        joins.push(c);
-                    }
-                    let first = joins[0];
-                    let Some(conv) = first.filter(|c| joins.iter().all(|j| *j == Some(*c))) else {
-                        self.fail(
-                            cur,
-                            Code::UnbalancedBranch,
-                            format!(
-                                "{} opens {} branches that do not all end in one convergence",
-                                el[cur].kind.tag(),
-                                branches.len()
-                            ),
-                        );
-                        return (out, None);
+                    let next = if matches!(el[cur].kind, ElementKind::SelectionDivergence) {
+                        self.selection(cur, heads, depth)
+                    } else {
+                        self.parallel(cur, heads, depth)
                     };
-                    if self.g.preds(conv).len() != branches.len() {
-                        self.fail(
-                            conv,
-                            Code::UnbalancedBranch,
-                            format!(
-                                "{} joins {} inputs, but the divergence localId {} opened {} branches",
-                                el[conv].kind.tag(),
-                                self.g.preds(conv).len(),
-                                el[cur].local_id,
-                                branches.len()
-                            ),
-                        );
-                        return (out, None);
+                    match next {
+                        Some(Ok((block, conv))) => {
+                            out.push(block);
+                            cur = conv;
+                            entered = true;
+                        }
+                        Some(Err(end)) => return (out, end),
+                        None => return (out, End::Done),
                     }
-                    out.push(Block::Parallel {
-                        divergence: cur,
-                        convergence: conv,
-                        branches,
-                    });
-                    cur = conv;
-                    entered = true;
                 }
             }
         }
+    }
+
+    /// Simultaneous branches from `div`: the block and the convergence to go on from.
+    #[allow(clippy::type_complexity)]
+    fn parallel(
+        &mut self,
+        div: usize,
+        heads: Vec<usize>,
+        depth: usize,
+    ) -> Option<Result<(Block, usize), End>> {
+        let el = &self.sfc.elements;
+        let mut branches = Vec::with_capacity(heads.len());
+        let mut joins = Vec::with_capacity(heads.len());
+        for h in heads {
+            let (b, end) = self.seq(h, false, depth + 1);
+            if self.failed {
+                return None;
+            }
+            match end {
+                End::Conv(c) => joins.push(c),
+                End::Jump(j) => {
+                    self.bad_jump(
+                        j,
+                        "it leaves a simultaneous branch, which must end in its convergence",
+                    );
+                    return None;
+                }
+                _ => {
+                    self.fail(
+                        div,
+                        Code::UnbalancedBranch,
+                        format!(
+                            "{} opens a branch that does not end in a simultaneousConvergence",
+                            el[div].kind.tag()
+                        ),
+                    );
+                    return None;
+                }
+            }
+            branches.push(b);
+        }
+        let conv = joins[0];
+        if joins.iter().any(|j| *j != conv) {
+            self.fail(
+                div,
+                Code::UnbalancedBranch,
+                format!(
+                    "{} opens {} branches that do not all end in one convergence",
+                    el[div].kind.tag(),
+                    branches.len()
+                ),
+            );
+            return None;
+        }
+        if !matches!(el[conv].kind, ElementKind::SimultaneousConvergence)
+            || self.g.preds(conv).len() != branches.len()
+        {
+            self.fail(
+                conv,
+                Code::UnbalancedBranch,
+                format!(
+                    "{} joins {} inputs, but the simultaneousDivergence localId {} opened {} branches",
+                    el[conv].kind.tag(),
+                    self.g.preds(conv).len(),
+                    el[div].local_id,
+                    branches.len()
+                ),
+            );
+            return None;
+        }
+        Some(Ok((
+            Block::Parallel {
+                divergence: div,
+                convergence: conv,
+                branches,
+            },
+            conv,
+        )))
+    }
+
+    /// Selection branches from `div`: the block and the convergence to go on from, or, for the
+    /// selection that decides the innermost loop, how the loop body ends.
+    #[allow(clippy::type_complexity)]
+    fn selection(
+        &mut self,
+        div: usize,
+        heads: Vec<usize>,
+        depth: usize,
+    ) -> Option<Result<(Block, usize), End>> {
+        let el = &self.sfc.elements;
+        let inner = self.loops.last().map(|l| (l.head, l.depth));
+        // At the innermost loop's own level, this selection may decide the loop: branches
+        // outside the loop's body leave it, and go on where the loop stands.
+        let deciding = inner.is_some_and(|(_, d)| d == depth);
+        // (transition, body, end, walked inside the loop) per branch, in priority order.
+        let mut walked = Vec::with_capacity(heads.len());
+        for h in heads {
+            let first = self.g.succs(h).first().copied();
+            let inside = !deciding || self.loops.last().is_some_and(|l| l.body.contains(&h));
+            let (b, end) = match first {
+                None => (Vec::new(), End::Done),
+                Some(f) if inside => self.seq(f, false, depth + 1),
+                Some(f) => {
+                    let ctx = self.loops.pop().expect("deciding needs a loop");
+                    let r = self.seq(f, false, depth);
+                    self.loops.push(ctx);
+                    r
+                }
+            };
+            if self.failed {
+                return None;
+            }
+            walked.push((h, b, end, inside));
+        }
+        let repeats: Vec<bool> = walked
+            .iter()
+            .map(|(_, _, e, _)| matches!(e, End::Jump(j) if inner.is_some_and(|(h, _)| self.jumps[*j] == Some(h))))
+            .collect();
+        // Jumps anywhere else cannot be structured.
+        for (k, (_, _, e, _)) in walked.iter().enumerate() {
+            if let End::Jump(j) = e
+                && !repeats[k]
+            {
+                let why = match self.jumps[*j] {
+                    Some(t) if self.loops.iter().any(|l| l.head == t) => {
+                        "it leaves an inner loop as well (KRL's EXIT leaves one loop)"
+                    }
+                    _ => {
+                        "it does not lead back to a step on every path to it (a forward jump, or into another branch)"
+                    }
+                };
+                self.bad_jump(*j, why);
+                return None;
+            }
+        }
+        if !repeats.iter().any(|r| *r) {
+            // An ordinary selection: every branch ends in one convergence.
+            let conv = match walked.first().map(|w| &w.2) {
+                Some(End::Conv(c)) => Some(*c),
+                _ => None,
+            };
+            let joined = conv.is_some_and(|c| {
+                walked.iter().all(|w| matches!(w.2, End::Conv(x) if x == c))
+                    && matches!(el[c].kind, ElementKind::SelectionConvergence)
+                    && self.g.preds(c).len() == walked.len()
+            });
+            let Some(conv) = conv.filter(|_| joined) else {
+                self.fail(
+                    div,
+                    Code::UnbalancedBranch,
+                    format!(
+                        "selectionDivergence opens {} branches that do not all end in one selectionConvergence joining just them",
+                        walked.len()
+                    ),
+                );
+                return None;
+            };
+            let branches = walked
+                .into_iter()
+                .map(|(t, body, _, _)| Branch {
+                    transition: t,
+                    body,
+                    end: BranchEnd::Join,
+                })
+                .collect();
+            return Some(Ok((
+                Block::Choice {
+                    divergence: div,
+                    convergence: Some(conv),
+                    branches,
+                },
+                conv,
+            )));
+        }
+        // The selection that decides the innermost loop: it must stand in the loop's own
+        // sequence, not inside another branch of it, and its other branches must leave the loop.
+        let first_repeat = walked
+            .iter()
+            .zip(&repeats)
+            .find_map(|((_, _, e, _), r)| match e {
+                End::Jump(j) if *r => Some(*j),
+                _ => None,
+            })
+            .expect("a repeat");
+        if !deciding {
+            self.bad_jump(
+                first_repeat,
+                "its selection lies inside another branch of the loop; only a selection in the loop's own sequence can decide it (KRL's EXIT leaves one loop)",
+            );
+            return None;
+        }
+        if let Some(k) = (0..walked.len()).find(|&k| !repeats[k] && walked[k].3) {
+            self.fail(
+                walked[k].0,
+                Code::BadJump,
+                format!(
+                    "this branch of the selection localId {} goes on in the loop while another branch jumps back: a loop is decided by one selection whose other branches leave it",
+                    el[div].local_id
+                ),
+            );
+            return None;
+        }
+        let exits: Vec<usize> = (0..walked.len()).filter(|&k| !repeats[k]).collect();
+        let mut after = After::Nothing;
+        let mut leave_bodies = true;
+        match exits.as_slice() {
+            [] => {}
+            [one] => {
+                leave_bodies = false;
+                let (_, body, end, _) = &mut walked[*one];
+                let body = std::mem::take(body);
+                let end = std::mem::replace(end, End::Done);
+                after = After::Tail(body, Box::new(end));
+            }
+            several => {
+                let conv = match &walked[several[0]].2 {
+                    End::Conv(c) => Some(*c),
+                    _ => None,
+                };
+                let joined = conv.is_some_and(|c| {
+                    several
+                        .iter()
+                        .all(|&k| matches!(walked[k].2, End::Conv(x) if x == c))
+                        && self.g.preds(c).len() == several.len()
+                });
+                let Some(conv) = conv.filter(|_| joined) else {
+                    self.fail(
+                        div,
+                        Code::UnbalancedBranch,
+                        format!(
+                            "selectionDivergence decides a loop, and its {} branches that leave it do not end in one selectionConvergence joining just them",
+                            several.len()
+                        ),
+                    );
+                    return None;
+                };
+                after = After::From(conv);
+            }
+        }
+        let branches = walked
+            .into_iter()
+            .enumerate()
+            .map(|(k, (t, body, end, _))| Branch {
+                transition: t,
+                body: if repeats[k] || leave_bodies {
+                    body
+                } else {
+                    Vec::new()
+                },
+                end: match end {
+                    End::Jump(j) if repeats[k] => BranchEnd::Repeat(j),
+                    _ => BranchEnd::Leave,
+                },
+            })
+            .collect();
+        Some(Err(End::Decided {
+            choice: Box::new(Block::Choice {
+                divergence: div,
+                convergence: None,
+                branches,
+            }),
+            after,
+        }))
+    }
+
+    /// Opens a loop at step `head`: its blocks and then `Ok(convergence)` to go on from, or
+    /// `Err(end)` when the sequence ends; `None` on failure.
+    #[allow(clippy::type_complexity)]
+    fn open_loop(&mut self, head: usize, depth: usize) -> (Vec<Block>, Option<Result<usize, End>>) {
+        if depth >= MAX_NESTING {
+            self.fail(
+                head,
+                Code::Unsupported,
+                format!("branches and loops nested deeper than {MAX_NESTING} levels"),
+            );
+            return (Vec::new(), None);
+        }
+        // The body: what can reach a jump back without passing the head.
+        let mut body_set = std::collections::HashSet::new();
+        let mut stack: Vec<usize> = self.jumps_to.get(&head).cloned().unwrap_or_default();
+        while let Some(x) = stack.pop() {
+            if x == head || !body_set.insert(x) {
+                continue;
+            }
+            stack.extend_from_slice(self.g.preds(x));
+        }
+        self.loops.push(LoopCtx {
+            head,
+            depth,
+            body: body_set,
+        });
+        let (mut body, end) = self.seq(head, true, depth);
+        self.loops.pop();
+        if self.failed {
+            return (Vec::new(), None);
+        }
+        let mut jumps = Vec::new();
+        let mut collect = |blocks: &[Block]| {
+            if let Some(Block::Choice { branches, .. }) = blocks.last() {
+                for b in branches {
+                    if let BranchEnd::Repeat(j) = b.end {
+                        jumps.push(j);
+                    }
+                }
+            }
+        };
+        match end {
+            End::Jump(j) if self.jumps[j] == Some(head) => {
+                // A jump back in the loop's own sequence: an endless loop.
+                let block = Block::Loop {
+                    head,
+                    jumps: vec![j],
+                    body,
+                    endless: true,
+                };
+                (vec![block], Some(Err(End::Endless)))
+            }
+            End::Decided { choice, after } => {
+                body.push(*choice);
+                collect(&body);
+                let endless = matches!(after, After::Nothing);
+                let block = Block::Loop {
+                    head,
+                    jumps,
+                    body,
+                    endless,
+                };
+                let mut out = vec![block];
+                let next = match after {
+                    After::Nothing => Err(End::Endless),
+                    After::From(c) => Ok(c),
+                    After::Tail(tail, end) => {
+                        out.extend(tail);
+                        match *end {
+                            End::Conv(c) => Err(End::Conv(c)),
+                            other => Err(other),
+                        }
+                    }
+                };
+                (out, Some(next))
+            }
+            // No jump back to the head on the way: its jumps come from elsewhere (reported
+            // where they are found); the steps are an ordinary sequence.
+            other => (body, Some(Err(other))),
+        }
+    }
+
+    fn bad_jump(&mut self, j: usize, why: &str) {
+        let el = &self.sfc.elements;
+        let target = match &el[j].kind {
+            ElementKind::JumpStep(Some(t)) => format!("`{}`", t.text),
+            _ => "?".to_owned(),
+        };
+        let target_id = self.jumps[j]
+            .map(|t| format!(" (localId {})", el[t].local_id))
+            .unwrap_or_default();
+        let mut d = Diagnostic::error(
+            Code::BadJump,
+            format!("the jump to step {target}{target_id} cannot be structured: {why}"),
+        )
+        .at(el[j].span.clone())
+        .element(format!("localId {}", el[j].local_id));
+        if let Some(t) = self.jumps[j] {
+            d = d.related(el[t].span.clone(), "the jump's target");
+        }
+        self.diags.push(d);
+        self.failed = true;
     }
 
     fn fail(&mut self, at: usize, code: Code, msg: String) {

@@ -4,6 +4,8 @@
 //! Each case folder holds the project's files and a `case.toml`:
 //!
 //! ```toml
+//! base = "flow"                # optional: fixtures/base/<base>/ is copied first, the case's
+//!                              # files over it (a case keeps only what it changes)
 //! program = "Name"             # the <PROGRAM> argument
 //! blackboard = "Cell.aml"      # optional; default: the single *.aml in the folder
 //! args = ["--lf"]              # optional extra arguments
@@ -36,6 +38,7 @@ use serde::Deserialize;
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct CaseToml {
+    base: Option<String>,
     program: String,
     blackboard: Option<String>,
     #[serde(default)]
@@ -61,6 +64,14 @@ macro_rules! cases {
 
 cases! {
     caex3_english => "caex3-english",
+    flow_cyclic => "flow-cyclic",
+    flow_guarded_sequence => "flow-guarded-sequence",
+    flow_loop_exit => "flow-loop-exit",
+    flow_parallel_in_selection => "flow-parallel-in-selection",
+    flow_reference_condition => "flow-reference-condition",
+    flow_selection_in_parallel => "flow-selection-in-parallel",
+    flow_selection_three_way => "flow-selection-three-way",
+    flow_selection_two_way => "flow-selection-two-way",
     lf_output => "lf-output",
     mappings_overloads => "mappings-overloads",
     no_writeback_target => "no-writeback-target",
@@ -110,6 +121,9 @@ fn run_case(name: &str) {
 
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
+    if let Some(base) = &case.base {
+        copy_dir(&repo().join("fixtures/base").join(base), dir);
+    }
     copy_dir(&case_dir, dir);
 
     let bb_name = match &case.blackboard {
@@ -254,7 +268,7 @@ fn copy_dir(from: &Path, to: &Path) {
         let e = e.unwrap();
         let target = to.join(e.file_name());
         if e.file_type().unwrap().is_dir() {
-            fs::create_dir(&target).unwrap();
+            fs::create_dir_all(&target).unwrap();
             copy_dir(&e.path(), &target);
         } else {
             fs::copy(e.path(), &target).unwrap();
