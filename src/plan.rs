@@ -1218,3 +1218,341 @@ impl Walker<'_> {
         self.failed = true;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diag::Sources;
+
+    fn conn(inputs: &[u64]) -> String {
+        let c: String = inputs
+            .iter()
+            .map(|i| format!("<connection refLocalId=\"{i}\"/>"))
+            .collect();
+        if inputs.is_empty() {
+            String::new()
+        } else {
+            format!("<connectionPointIn>{c}</connectionPointIn>")
+        }
+    }
+    fn st(id: u64, name: &str, inp: &[u64]) -> String {
+        format!(
+            "<step localId=\"{id}\" name=\"{name}\"{}><position x=\"0\" y=\"0\"/>{}</step>",
+            if inp.is_empty() {
+                " initialStep=\"true\""
+            } else {
+                ""
+            },
+            conn(inp)
+        )
+    }
+    fn tr(id: u64, inp: &[u64], cond: &str) -> String {
+        format!(
+            "<transition localId=\"{id}\"><position x=\"0\" y=\"0\"/>{}<condition><inline name=\"\"><ST>{cond}</ST></inline></condition></transition>",
+            conn(inp)
+        )
+    }
+    fn el(tag: &str, id: u64, inp: &[u64]) -> String {
+        format!(
+            "<{tag} localId=\"{id}\"><position x=\"0\" y=\"0\"/>{}</{tag}>",
+            conn(inp)
+        )
+    }
+    fn jmp(id: u64, inp: &[u64], target: &str) -> String {
+        format!(
+            "<jumpStep localId=\"{id}\" targetName=\"{target}\"><position x=\"0\" y=\"0\"/>{}</jumpStep>",
+            conn(inp)
+        )
+    }
+
+    /// Reads an SFC body and plans it: the plan (if any) and the diagnostics' codes and messages.
+    fn run(parts: &[String]) -> (Option<Plan>, Sfc, Vec<(Code, String)>) {
+        let text = format!(
+            "<project><types><pous><pou name=\"P\" pouType=\"program\"><body><SFC>{}</SFC></body></pou></pous></types></project>",
+            parts.concat()
+        );
+        let mut sources = Sources::default();
+        let f = sources.add("s.xml".into(), "s.xml".into(), text, false);
+        let mut d = Diagnostics::default();
+        let sfc = crate::read::sfc::read_sfc(&sources, f, &mut d).expect("readable");
+        let p = plan(&sfc, &mut d);
+        let msgs = d
+            .into_vec()
+            .into_iter()
+            .filter(|d| d.severity == crate::diag::Severity::Error)
+            .map(|d| (d.code, d.message))
+            .collect();
+        (p, sfc, msgs)
+    }
+
+    /// The tree with localIds: `S3` step, `W4` wait, `P(..|..)`, `C(..|..)` with `^` for a
+    /// repeat and `!` for a leave, `L3[..]` (`L3*[..]` endless).
+    fn shape(sfc: &Sfc, blocks: &[Block]) -> String {
+        let id = |i: usize| sfc.elements[i].local_id;
+        let mut out = Vec::new();
+        for b in blocks {
+            out.push(match b {
+                Block::Step(i) => format!("S{}", id(*i)),
+                Block::Wait(i) => format!("W{}", id(*i)),
+                Block::Parallel { branches, .. } => {
+                    let v: Vec<String> = branches.iter().map(|b| shape(sfc, b)).collect();
+                    format!("P({})", v.join("|"))
+                }
+                Block::Choice { branches, .. } => {
+                    let v: Vec<String> = branches
+                        .iter()
+                        .map(|b| {
+                            let end = match b.end {
+                                BranchEnd::Join => "",
+                                BranchEnd::Repeat(_) => "^",
+                                BranchEnd::Leave => "!",
+                            };
+                            format!("{}:{}{end}", id(b.transition), shape(sfc, &b.body))
+                        })
+                        .collect();
+                    format!("C({})", v.join("|"))
+                }
+                Block::Loop {
+                    head,
+                    body,
+                    endless,
+                    ..
+                } => format!(
+                    "L{}{}[{}]",
+                    id(*head),
+                    if *endless { "*" } else { "" },
+                    shape(sfc, body)
+                ),
+            });
+        }
+        out.join(" ")
+    }
+
+    fn planned(parts: &[String]) -> String {
+        let (p, sfc, msgs) = run(parts);
+        assert!(msgs.is_empty(), "{msgs:?}");
+        shape(&sfc, &p.expect("a plan").body)
+    }
+
+    #[test]
+    fn empty_body_is_one_error() {
+        let (p, _, msgs) = run(&[]);
+        assert!(p.is_none());
+        assert_eq!(msgs.len(), 1, "{msgs:?}");
+        assert!(msgs[0].1.contains("no steps"));
+    }
+
+    #[test]
+    fn node_checks() {
+        // A selection branch starting with a step; a jump followed by a step.
+        let (_, _, msgs) = run(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "A", &[2]),
+            el("selectionDivergence", 4, &[3]),
+            st(5, "B", &[4]),
+            tr(6, &[4], "x"),
+            jmp(7, &[6], "A"),
+            st(8, "C", &[7]),
+        ]);
+        assert!(
+            msgs.iter()
+                .any(|(c, m)| *c == Code::UnbalancedBranch
+                    && m.contains("starts with step localId 5")),
+            "{msgs:?}"
+        );
+        assert!(
+            msgs.iter()
+                .any(|(c, m)| *c == Code::BadJump && m.contains("a jump ends its branch")),
+            "{msgs:?}"
+        );
+    }
+
+    #[test]
+    fn jump_targets() {
+        let (_, _, msgs) = run(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "Twin", &[2]),
+            tr(4, &[3], "TRUE"),
+            st(5, "twin", &[4]),
+            tr(6, &[5], "a"),
+            el("selectionDivergence", 7, &[6]),
+            tr(8, &[7], "b"),
+            jmp(9, &[8], "TWIN"),
+            tr(10, &[7], "c"),
+            jmp(11, &[10], "Nobody"),
+        ]);
+        let jumps: Vec<&String> = msgs
+            .iter()
+            .filter(|(c, _)| *c == Code::BadJump)
+            .map(|(_, m)| m)
+            .collect();
+        assert!(jumps[0].contains("names 2 steps"), "{msgs:?}");
+        assert!(jumps[1].contains("`Nobody` names no step"), "{msgs:?}");
+    }
+
+    #[test]
+    fn start_and_end_after_jumps() {
+        // The start step is also the jump target and has no connection in: one start; the
+        // chart ends in a jump only: no end step, and no error.
+        let p = planned(&[
+            st(1, "Init", &[]),
+            tr(2, &[1], "go"),
+            st(3, "Work", &[2]),
+            tr(4, &[3], "TRUE"),
+            jmp(5, &[4], "Init"),
+        ]);
+        assert_eq!(p, "L1*[S1 W2 S3]");
+        // A step that only a jump leads to is not a second start: here the jump is forward,
+        // which the walk reports (not E307).
+        let (_, _, msgs) = run(&[
+            st(1, "Init", &[]),
+            tr(2, &[1], "TRUE"),
+            jmp(3, &[2], "Later"),
+            st(4, "Later", &[]),
+            tr(5, &[4], "TRUE"),
+            st(6, "End", &[5]),
+        ]);
+        assert!(msgs.iter().all(|(c, _)| *c != Code::StartStep), "{msgs:?}");
+        assert!(msgs.iter().any(|(c, _)| *c == Code::BadJump), "{msgs:?}");
+        // Without jumps a missing end is still an error.
+        let (_, _, msgs) = run(&[
+            st(1, "A", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "B", &[2, 4]),
+            tr(4, &[3], "TRUE"),
+        ]);
+        assert!(msgs.iter().any(|(c, _)| *c == Code::EndStep), "{msgs:?}");
+    }
+
+    #[test]
+    fn cycles_of_connections_are_not_loops() {
+        let (_, _, msgs) = run(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            el("selectionConvergence", 3, &[2, 8]),
+            st(4, "A", &[3]),
+            el("selectionDivergence", 5, &[4]),
+            tr(6, &[5], "done"),
+            st(7, "End", &[6]),
+            tr(8, &[5], "NOT done"),
+        ]);
+        assert!(
+            msgs.iter()
+                .any(|(c, m)| *c == Code::Cycle && m.contains("jumpStep")),
+            "{msgs:?}"
+        );
+    }
+
+    #[test]
+    fn walk_sequence_selection_parallel() {
+        let p = planned(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "A", &[2]),
+            tr(4, &[3], "ready"),
+            st(5, "B", &[4]),
+            el("selectionDivergence", 6, &[5]),
+            tr(7, &[6], "x"),
+            el("simultaneousDivergence", 8, &[7]),
+            st(9, "C", &[8]),
+            st(10, "D", &[8]),
+            el("simultaneousConvergence", 11, &[9, 10]),
+            tr(12, &[11], "TRUE"),
+            tr(13, &[6], "TRUE"),
+            el("selectionConvergence", 14, &[12, 13]),
+            st(15, "End", &[14]),
+        ]);
+        assert_eq!(p, "S1 S3 W4 S5 C(7:P(S9|S10)|13:) S15");
+    }
+
+    #[test]
+    fn walk_loop_with_exit() {
+        let p = planned(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "Pick", &[2]),
+            el("selectionDivergence", 4, &[3]),
+            tr(5, &[4], "more"),
+            st(6, "Count", &[5]),
+            tr(7, &[6], "TRUE"),
+            jmp(8, &[7], "Pick"),
+            tr(9, &[4], "NOT more"),
+            st(10, "Home", &[9]),
+            tr(11, &[10], "TRUE"),
+            st(12, "End", &[11]),
+        ]);
+        assert_eq!(p, "S1 L3[S3 C(5:S6^|9:!)] S10 S12");
+    }
+
+    #[test]
+    fn walk_nested_loops() {
+        // Rows of a pallet: the inner loop over Place, the outer over Row.
+        let p = planned(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "Row", &[2]),
+            tr(4, &[3], "TRUE"),
+            st(5, "Place", &[4]),
+            el("selectionDivergence", 6, &[5]),
+            tr(7, &[6], "NOT row_full"),
+            jmp(8, &[7], "Place"),
+            tr(9, &[6], "row_full"),
+            st(10, "Next", &[9]),
+            el("selectionDivergence", 11, &[10]),
+            tr(12, &[11], "NOT pallet_full"),
+            jmp(13, &[12], "Row"),
+            tr(14, &[11], "pallet_full"),
+            st(15, "End", &[14]),
+        ]);
+        assert_eq!(p, "S1 L3[S3 L5[S5 C(7:^|9:!)] S10 C(12:^|14:!)] S15");
+    }
+
+    #[test]
+    fn walk_exits_that_join() {
+        let p = planned(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "Pick", &[2]),
+            el("selectionDivergence", 4, &[3]),
+            tr(5, &[4], "a"),
+            jmp(6, &[5], "Pick"),
+            tr(7, &[4], "b"),
+            st(8, "B", &[7]),
+            tr(9, &[8], "TRUE"),
+            tr(10, &[4], "c"),
+            el("selectionConvergence", 11, &[9, 10]),
+            st(12, "End", &[11]),
+        ]);
+        assert_eq!(p, "S1 L3[S3 C(5:^|7:S8!|10:!)] S12");
+    }
+
+    #[test]
+    fn walk_rejects_a_loop_continued_past_its_decision() {
+        // Branch 9 goes on in the loop body while branch 5 jumps back, and jumps back again
+        // from a selection inside it: no KRL structure (EXIT leaves one loop, there is no
+        // CONTINUE).
+        let (p, _, msgs) = run(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "Pick", &[2]),
+            el("selectionDivergence", 4, &[3]),
+            tr(5, &[4], "a"),
+            jmp(6, &[5], "Pick"),
+            tr(9, &[4], "b"),
+            st(10, "B", &[9]),
+            el("selectionDivergence", 11, &[10]),
+            tr(12, &[11], "c"),
+            jmp(13, &[12], "Pick"),
+            tr(14, &[11], "NOT c"),
+            st(15, "End", &[14]),
+        ]);
+        assert!(p.is_none());
+        assert!(
+            msgs.iter()
+                .any(|(c, m)| *c == Code::BadJump && m.contains("inside another branch")),
+            "{msgs:?}"
+        );
+    }
+}
