@@ -156,9 +156,10 @@ fn run(a: Args) -> u8 {
         let _ = write!(stdout, "{}", crate::print::info(model.as_ref()));
         let list = diags.into_vec();
         report(&list, &sources, a.format, warnings);
+        // `--info` reports what it can: only a blackboard it cannot read at all fails it.
         return if file.is_none() && sources.find(bb).is_none() {
             2
-        } else if list.iter().any(|d| d.severity == diag::Severity::Error) {
+        } else if model.is_none() {
             1
         } else {
             0
@@ -254,6 +255,17 @@ fn print_listings(c: &Compilation, print: &dyn Fn(char) -> bool, out: &mut impl 
         }
         if print('O') {
             let _ = writeln!(out, "{}", crate::print::order(sfc, plan));
+        }
+    } else {
+        for (p, what) in [('F', "-pF"), ('O', "-pO")] {
+            if print(p) {
+                let why = if c.sfc.is_some() {
+                    "the SFC's flow has errors"
+                } else {
+                    "the SFC could not be read"
+                };
+                let _ = writeln!(out, "{what}: nothing to print: {why} (see the diagnostics)");
+            }
         }
     }
 }

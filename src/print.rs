@@ -97,6 +97,7 @@ pub fn sfc(sfc: &Sfc) -> String {
     .map(|v| v.as_deref().unwrap_or("?"))
     .collect();
     let _ = writeln!(o, "{}", parts.join(", "));
+    let _ = writeln!(o, "POU: {}", sfc.pou_name.as_deref().unwrap_or("?"));
     let mut succs: std::collections::HashMap<u64, Vec<u64>> = Default::default();
     for e in &sfc.elements {
         for (r, _) in &e.inputs {
@@ -152,6 +153,23 @@ pub fn sfc(sfc: &Sfc) -> String {
             k => {
                 let _ = writeln!(o, "Transition  ({})", k.tag());
                 let _ = writeln!(o, "            {conn}");
+                match k {
+                    ElementKind::Transition(Some(c)) => {
+                        let _ = writeln!(
+                            o,
+                            "            Condition:  {}{}",
+                            c.text,
+                            if c.reference { "   (reference)" } else { "" }
+                        );
+                    }
+                    ElementKind::Transition(None) => {
+                        let _ = writeln!(o, "            Condition:  TRUE");
+                    }
+                    ElementKind::JumpStep(Some(t)) => {
+                        let _ = writeln!(o, "            Target:     {}", t.text);
+                    }
+                    _ => {}
+                }
             }
         }
     }

@@ -401,3 +401,61 @@ fn input_larger_than_the_limit_is_refused() {
     assert!(e.contains("Blackboard.aml:"), "located at the refURI: {e}");
     assert!(!p.path().join("out.src").exists());
 }
+
+#[test]
+fn flow_listings_say_why_they_are_empty() {
+    let p = project();
+    // Two start steps: the flow cannot be planned.
+    let sfc = std::fs::read_to_string(p.path().join("sfc.xml")).unwrap();
+    let broken = sfc.replacen(
+        "<connectionPointIn><connection refLocalId=\"2\"/></connectionPointIn>",
+        "",
+        1,
+    );
+    std::fs::write(p.path().join("sfc.xml"), broken).unwrap();
+    let o = run(&["--sfc", "-pF", "-pO", "sfc.xml"], p.path());
+    assert_eq!(o.status.code(), Some(1));
+    let out = stdout(&o);
+    assert!(
+        out.contains("-pF: nothing to print: the SFC's flow has errors"),
+        "{out}"
+    );
+    assert!(out.contains("-pO: nothing to print"), "{out}");
+}
+
+#[test]
+fn info_reports_what_it_can() {
+    let p = project();
+    // No Process Sequence: an error for a compile, but `--info` does not need it.
+    let bb = std::fs::read_to_string(p.path().join("Blackboard.aml")).unwrap();
+    let cut = bb.replace("Name=\"Process Sequenz\"", "Name=\"Somewhere else\"");
+    std::fs::write(p.path().join("Blackboard.aml"), cut).unwrap();
+    let o = run(&["--info", "Blackboard.aml"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stdout(&o).contains("Move PTP"), "{}", stdout(&o));
+    assert!(stderr(&o).contains("E203"), "{}", stderr(&o));
+}
+
+#[test]
+fn action_blocks_are_one_warning_per_chart() {
+    let p = project();
+    let sfc = std::fs::read_to_string(p.path().join("sfc.xml")).unwrap();
+    let blocks = "<actionBlock localId=\"90\"><position x=\"0\" y=\"0\"/></actionBlock>\
+                  <actionBlock><position x=\"0\" y=\"0\"/></actionBlock>\
+                  <actionBlock localId=\"92\"><position x=\"0\" y=\"0\"/></actionBlock>";
+    std::fs::write(
+        p.path().join("sfc.xml"),
+        sfc.replacen("</SFC>", &format!("{blocks}</SFC>"), 1),
+    )
+    .unwrap();
+    let o = run(&["--sfc", "--format", "short", "sfc.xml"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert_eq!(e.matches("W304").count(), 1, "{e}");
+    assert!(
+        e.contains(
+            "3 action blocks ignored (localId 90, actionBlock no. 2 of the SFC body, localId 92)"
+        ),
+        "{e}"
+    );
+}

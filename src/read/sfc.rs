@@ -26,6 +26,7 @@ pub fn read_sfc(sources: &Sources, file: FileId, diags: &mut Diagnostics) -> Opt
         file,
         names: Interner::default(),
         found: Vec::new(),
+        ignored: Vec::new(),
     };
     let before = diags.error_count();
     let mut local = Diagnostics::default();
@@ -54,6 +55,7 @@ pub fn read_sfc(sources: &Sources, file: FileId, diags: &mut Diagnostics) -> Opt
             for d in local.into_vec() {
                 diags.push(d);
             }
+            report_ignored(&r.ignored, diags);
             let _ = before;
             let chosen = r
                 .found
@@ -111,6 +113,8 @@ struct Stream<'t> {
     file: FileId,
     names: Interner,
     found: Vec<Pou>,
+    /// Elements of the SFC body that are ignored: tag, place, label.
+    ignored: Vec<(String, Span, String)>,
 }
 
 /// An attribute: its local name, value (entities resolved) and the raw value's byte range.
@@ -648,16 +652,13 @@ impl<'t> Stream<'t> {
             }
             "macroStep" => ElementKind::MacroStep,
             tag => {
-                let what = if tag == "actionBlock" {
-                    "action block".to_owned()
-                } else {
-                    format!("`{tag}` element")
+                // Reported once per kind and chart (see `report_ignored`).
+                let n = self.ignored.iter().filter(|i| i.0 == tag).count() + 1;
+                let label = match attr("localId") {
+                    Some(a) => format!("localId {}", a.value.trim()),
+                    None => format!("{tag} no. {n} of the SFC body"),
                 };
-                diags.push(
-                    Diagnostic::warning(Code::Ignored, format!("{what} ignored"))
-                        .at(b.span.clone())
-                        .element(id_label()),
-                );
+                self.ignored.push((tag.to_owned(), b.span.clone(), label));
                 return None;
             }
         };
@@ -876,6 +877,40 @@ impl<'t> Stream<'t> {
             variables,
             invalid_variables,
         }
+    }
+}
+
+/// One warning per kind of ignored element (action blocks, unknown elements), naming them.
+fn report_ignored(ignored: &[(String, Span, String)], diags: &mut Diagnostics) {
+    let mut kinds: Vec<&str> = Vec::new();
+    for (tag, _, _) in ignored {
+        if !kinds.contains(&tag.as_str()) {
+            kinds.push(tag);
+        }
+    }
+    for kind in kinds {
+        let all: Vec<&(String, Span, String)> = ignored.iter().filter(|i| i.0 == kind).collect();
+        let what = if kind == "actionBlock" {
+            "action block".to_owned()
+        } else {
+            format!("`{kind}` element")
+        };
+        let labels: Vec<&str> = all.iter().take(8).map(|i| i.2.as_str()).collect();
+        let more = if all.len() > 8 { ", ..." } else { "" };
+        let msg = if all.len() == 1 {
+            format!("{what} ignored")
+        } else {
+            format!(
+                "{} {what}s ignored ({}{more})",
+                all.len(),
+                labels.join(", ")
+            )
+        };
+        diags.push(
+            Diagnostic::warning(Code::Ignored, msg)
+                .at(all[0].1.clone())
+                .element(all[0].2.clone()),
+        );
     }
 }
 
