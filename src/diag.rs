@@ -303,7 +303,7 @@ codes! {
     /// A signal whose `IoType`, `Type`, `Number`, `Length` or `Address` cannot be used.
     BadSignal = "E209",
 
-    /// No program `pou` with an `SFC` body.
+    /// No `pou` with an `SFC` body (or none of the name asked for).
     NoSfcBody = "E301",
     /// A `localId` is used twice or is not a number.
     BadLocalId = "E302",
@@ -327,8 +327,8 @@ codes! {
     UnknownResource = "E311",
     /// A step names a skill its resource does not offer (or none).
     UnknownSkill = "E312",
-    /// A construct that is not supported yet (selection branches, jump and macro steps, several
-    /// resources in one program, nesting deeper than the limit).
+    /// A construct that is not supported yet (macro steps, wired conditions, several resources
+    /// in one program, nesting deeper than the limit).
     Unsupported = "E313",
     /// A step lacks a variable its skill needs.
     MissingVariable = "E314",
@@ -383,8 +383,10 @@ codes! {
     ResourceInferred = "W302",
     /// A step has variables its skill does not use.
     ExtraVariable = "W303",
-    /// An ignored SFC element (action block, non-`TRUE` condition, unknown element).
+    /// Ignored SFC elements (action blocks, unknown elements), one warning per kind and chart.
     Ignored = "W304",
+    /// Several POUs have an SFC body and none was named: the one used and the others.
+    SeveralPous = "W305",
 }
 
 impl std::fmt::Display for Code {

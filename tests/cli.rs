@@ -459,3 +459,92 @@ fn action_blocks_are_one_warning_per_chart() {
         "{e}"
     );
 }
+
+/// An SFC file with three POUs with SFC bodies (a function block first) and one without.
+fn three_pous(dir: &Path) {
+    let body = |start: &str| {
+        format!(
+            "<body><SFC><step localId=\"1\" name=\"{start}\" initialStep=\"true\"><position x=\"0\" y=\"0\"/></step>\
+             <transition localId=\"2\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"1\"/></connectionPointIn></transition>\
+             <step localId=\"3\" name=\"End\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"2\"/></connectionPointIn></step></SFC></body>"
+        )
+    };
+    let text = format!(
+        "<project><types><pous>\
+         <pou name=\"Helper\" pouType=\"functionBlock\">{}</pou>\
+         <pou name=\"NoChart\" pouType=\"program\"><body><ST/></body></pou>\
+         <pou name=\"Main\" pouType=\"program\">{}</pou>\
+         <pou name=\"Other\" pouType=\"program\">{}</pou>\
+         </pous></types></project>",
+        body("HelperStart"),
+        body("MainStart"),
+        body("OtherStart")
+    );
+    std::fs::write(dir.join("pous.xml"), text).unwrap();
+}
+
+#[test]
+fn pou_choice() {
+    let p = project();
+    three_pous(p.path());
+    let o = run(&["--sfc", "-pS", "--format", "short", "pous.xml"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stdout(&o).contains("POU: Main"), "{}", stdout(&o));
+    let e = stderr(&o);
+    assert!(
+        e.contains("W305")
+            && e.contains(
+                "3 POUs have an SFC body; `Main` is used (the first program), not `Helper`, `Other`"
+            ),
+        "{e}"
+    );
+    let o = run(
+        &[
+            "--sfc", "-pS", "--pou", "other", "--format", "short", "pous.xml",
+        ],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stdout(&o).contains("POU: Other"), "{}", stdout(&o));
+    assert!(!stderr(&o).contains("W305"), "{}", stderr(&o));
+    let o = run(
+        &["--sfc", "--pou", "Nope", "--format", "short", "pous.xml"],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains(
+            "no POU named `Nope` with an SFC body; the POUs with one: `Helper`, `Main`, `Other`"
+        ),
+        "{}",
+        stderr(&o)
+    );
+    // The blackboard's reference names the POU with a #fragment.
+    let bb = std::fs::read_to_string(p.path().join("Blackboard.aml")).unwrap();
+    std::fs::write(
+        p.path().join("Blackboard.aml"),
+        bb.replace("<Value>sfc.xml</Value>", "<Value>pous.xml#Helper</Value>"),
+    )
+    .unwrap();
+    let o = run(&["--validate", "-pS", "Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stdout(&o).contains("POU: Helper"), "{}", stdout(&o));
+}
+
+#[test]
+fn no_sfc_body_names_the_pous_considered() {
+    let p = project();
+    std::fs::write(
+        p.path().join("none.xml"),
+        "<project><types><pous><pou name=\"A\" pouType=\"program\"><body><ST/></body></pou>\
+         <pou name=\"B\" pouType=\"functionBlock\"><body><FBD/></body></pou></pous></types></project>",
+    )
+    .unwrap();
+    let o = run(&["--sfc", "--format", "short", "none.xml"], p.path());
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("none of the 2 POUs (`A`, `B`) has an SFC body"),
+        "{}",
+        stderr(&o)
+    );
+}

@@ -20,8 +20,23 @@ pub const MAX_LIST_DEPTH: usize = 32;
 
 /// Reads the SFC file. `None` when the file is not well-formed or has no usable program body.
 pub fn read_sfc(sources: &Sources, file: FileId, diags: &mut Diagnostics) -> Option<Sfc> {
+    read_sfc_pou(sources, file, None, diags)
+}
+
+/// Reads the SFC file's POU named `pou` (`--pou`, or the reference's `#fragment`); without a
+/// name, the first program with an SFC body, else the first POU with one (SPEC.md 3). When
+/// several POUs have an SFC body and none was named, a warning names the one used and the
+/// others.
+pub fn read_sfc_pou(
+    sources: &Sources,
+    file: FileId,
+    pou: Option<&str>,
+    diags: &mut Diagnostics,
+) -> Option<Sfc> {
     let text = sources.get(file).text.as_str();
     let mut r = Stream {
+        wanted: pou.map(|p| p.trim().to_owned()).filter(|p| !p.is_empty()),
+        pous: Vec::new(),
         text,
         file,
         names: Interner::default(),
@@ -62,21 +77,61 @@ pub fn read_sfc(sources: &Sources, file: FileId, diags: &mut Diagnostics) -> Opt
                 .iter()
                 .position(|p| p.program)
                 .or(if r.found.is_empty() { None } else { Some(0) });
+            let with_sfc: Vec<&str> = r
+                .pous
+                .iter()
+                .filter(|p| p.1)
+                .map(|p| p.0.as_str())
+                .collect();
+            let list = |names: &[&str]| {
+                let v: Vec<String> = names.iter().take(12).map(|n| format!("`{n}`")).collect();
+                let more = if names.len() > 12 { ", ..." } else { "" };
+                format!("{}{more}", v.join(", "))
+            };
             let Some(i) = chosen else {
+                let all: Vec<&str> = r.pous.iter().map(|p| p.0.as_str()).collect();
+                let message = match (&r.wanted, &first_pou) {
+                    (Some(w), _) if !with_sfc.is_empty() => format!(
+                        "no POU named `{w}` with an SFC body; the POUs with one: {}",
+                        list(&with_sfc)
+                    ),
+                    (Some(w), Some(_)) => format!(
+                        "no POU named `{w}` with an SFC body; none of the {} POUs ({}) has one",
+                        all.len(),
+                        list(&all)
+                    ),
+                    (_, None) => "the SFC file has no `pou` (types/pous/pou)".to_owned(),
+                    (None, Some((_, name))) if all.len() == 1 => {
+                        format!("pou `{name}` has no SFC body (body/SFC)")
+                    }
+                    (None, Some(_)) => format!(
+                        "none of the {} POUs ({}) has an SFC body (body/SFC)",
+                        all.len(),
+                        list(&all)
+                    ),
+                };
                 diags.push(
-                    Diagnostic::error(
-                        Code::NoSfcBody,
-                        match &first_pou {
-                            None => "the SFC file has no `pou` (types/pous/pou)".to_owned(),
-                            Some((_, name)) => {
-                                format!("pou `{name}` has no SFC body (body/SFC)")
-                            }
-                        },
-                    )
-                    .at(first_pou.map(|(s, _)| s).unwrap_or(root)),
+                    Diagnostic::error(Code::NoSfcBody, message)
+                        .at(first_pou.map(|(s, _)| s).unwrap_or(root)),
                 );
                 return None;
             };
+            if r.wanted.is_none() && with_sfc.len() > 1 {
+                let used = r.found[i].name.clone().unwrap_or_default();
+                let others: Vec<&str> = with_sfc.iter().copied().filter(|n| *n != used).collect();
+                diags.push(
+                    Diagnostic::warning(
+                        Code::SeveralPous,
+                        format!(
+                            "{} POUs have an SFC body; `{used}` is used ({}), not {}: name the one meant with `--pou NAME` or `#NAME` after the SFC file's name in the blackboard",
+                            with_sfc.len(),
+                            if r.found[i].program { "the first program" } else { "the first with one" },
+                            list(&others)
+                        ),
+                    )
+                    .at(r.found[i].sfc_span.clone()),
+                );
+            }
             let pou = r.found.swap_remove(i);
             Some(Sfc {
                 file,
@@ -115,6 +170,10 @@ struct Stream<'t> {
     found: Vec<Pou>,
     /// Elements of the SFC body that are ignored: tag, place, label.
     ignored: Vec<(String, Span, String)>,
+    /// The POU asked for by name.
+    wanted: Option<String>,
+    /// Every POU: name, whether it has an SFC body.
+    pous: Vec<(String, bool)>,
 }
 
 /// An attribute: its local name, value (entities resolved) and the raw value's byte range.
@@ -410,6 +469,11 @@ impl<'t> Stream<'t> {
             let depth = stack.len() + 1;
             // The element's place, relative to the document.
             let path = PathKind::of(&stack, name);
+            if matches!(path, PathKind::Sfc)
+                && let Some(p) = self.pous.last_mut()
+            {
+                p.1 = true;
+            }
             if let Some(b) = &mut building {
                 self.inside(b, &stack, name, tag, &start, at)?;
                 if empty {
@@ -445,8 +509,15 @@ impl<'t> Stream<'t> {
                     if first_pou.is_none() {
                         first_pou = Some((tag.clone(), pname.clone().unwrap_or_default()));
                     }
+                    self.pous.push((pname.clone().unwrap_or_default(), false));
                     let have_program = self.found.iter().any(|p| p.program);
-                    want_pou = !have_program && (program || self.found.is_empty());
+                    want_pou = match &self.wanted {
+                        Some(w) => {
+                            self.found.is_empty()
+                                && pname.as_deref().is_some_and(|n| crate::names::eq(n, w))
+                        }
+                        None => !have_program && (program || self.found.is_empty()),
+                    };
                     if want_pou && !empty {
                         pou = Some((pname, program, depth));
                         body_seen = false;
