@@ -548,3 +548,28 @@ fn no_sfc_body_names_the_pous_considered() {
         stderr(&o)
     );
 }
+
+#[test]
+fn resources_below_grouping_elements_are_found() {
+    let p = project();
+    let bb = std::fs::read_to_string(p.path().join("Blackboard.aml")).unwrap();
+    // Ressourcen/Building/Line/KUKA KR15-2, and an empty grouping element beside it.
+    let open = "<InternalElement Name=\"KUKA KR15-2\"";
+    let at = bb.find(open).unwrap();
+    let close_at = bb[at..]
+        .find("\n    </InternalElement>\n    <InternalElement Name=\"Process")
+        .unwrap()
+        + at;
+    let nested = format!(
+        "{}<InternalElement Name=\"Building\"><InternalElement Name=\"Line 1\">{}</InternalElement></InternalElement>{}",
+        &bb[..at],
+        &bb[at..close_at],
+        &bb[close_at..]
+    );
+    std::fs::write(p.path().join("Blackboard.aml"), nested).unwrap();
+    let o = run(&["--validate", "Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let o = run(&["--info", "Blackboard.aml"], p.path());
+    assert!(stdout(&o).contains("KUKA KR15-2\n"), "{}", stdout(&o));
+    assert!(!stdout(&o).contains("Building"), "{}", stdout(&o));
+}

@@ -122,6 +122,48 @@ pub fn is_safe_address(s: &str) -> bool {
     ident && index_ok && !names::is_krl_keyword(name)
 }
 
+/// The resources under `Ressourcen`/`Resources` (SPEC.md 2): its children that have a child
+/// named `Skills` or `FunctionDescription(s)`, and at any depth below grouping elements (plant,
+/// line, cell) those that do; a child with no resource below it is a resource itself. Document
+/// order.
+fn resource_nodes<'a, 'i>(res: Node<'a, 'i>) -> Vec<Node<'a, 'i>> {
+    let is_resource = |n: Node| {
+        internal_element(
+            n,
+            &["Skills", "FunctionDescription", "FunctionDescriptions"],
+        )
+        .is_some()
+    };
+    let mut out = Vec::new();
+    for c in children(res, "InternalElement") {
+        if is_resource(c) {
+            out.push(c);
+            continue;
+        }
+        let mut found = Vec::new();
+        let mut stack: Vec<(Node, usize)> =
+            children(c, "InternalElement").map(|k| (k, 1)).collect();
+        stack.reverse();
+        while let Some((n, depth)) = stack.pop() {
+            if is_resource(n) {
+                found.push(n);
+            } else if depth < super::xml::MAX_DEPTH {
+                let mut kids: Vec<(Node, usize)> = children(n, "InternalElement")
+                    .map(|k| (k, depth + 1))
+                    .collect();
+                kids.reverse();
+                stack.extend(kids);
+            }
+        }
+        if found.is_empty() {
+            out.push(c);
+        } else {
+            out.extend(found);
+        }
+    }
+    out
+}
+
 struct Reader<'d> {
     file: FileId,
     diags: &'d mut Diagnostics,
@@ -161,7 +203,7 @@ impl Reader<'_> {
         let mut resources = Vec::new();
         match internal_element(h, &["Ressourcen", "Resources"]) {
             Some(res) => {
-                for r in children(res, "InternalElement") {
+                for r in resource_nodes(res) {
                     resources.push(self.resource(r));
                 }
                 self.check_unique(
