@@ -81,12 +81,14 @@ fn sequences(seed: u64, count: usize) -> Vec<Vec<Phase>> {
     let mut out = Vec::new();
     for _ in 0..count {
         let phases = 1 + (rng.next() % 12) as usize;
+        // How often a bit is set in this sequence: 1, 2 or 3 in 4.
+        let ones = 1 + rng.next() % 3;
         let mut seq = Vec::new();
         for _ in 0..phases {
             let mut p = Phase::new();
             for (name, io) in SIGNALS {
                 let v = match io {
-                    Io::Bit(_) => (rng.next() % 2) as i64,
+                    Io::Bit(_) => (rng.next() % 4 < ones) as i64,
                     // Mostly the values the fixtures compare with, sometimes others.
                     Io::Group(..) => [0, 1, 2, 3, 12, 15][(rng.next() % 6) as usize],
                 };
@@ -956,6 +958,8 @@ flow_cases! {
     flow_cyclic => "flow-cyclic",
     flow_guarded_sequence => "flow-guarded-sequence",
     flow_loop_exit => "flow-loop-exit",
+    flow_loop_joined_exits => "flow-loop-joined-exits",
+    flow_nested_loops => "flow-nested-loops",
     flow_parallel_in_selection => "flow-parallel-in-selection",
     flow_reference_condition => "flow-reference-condition",
     flow_selection_in_parallel => "flow-selection-in-parallel",

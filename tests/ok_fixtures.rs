@@ -67,6 +67,8 @@ cases! {
     flow_cyclic => "flow-cyclic",
     flow_guarded_sequence => "flow-guarded-sequence",
     flow_loop_exit => "flow-loop-exit",
+    flow_loop_joined_exits => "flow-loop-joined-exits",
+    flow_nested_loops => "flow-nested-loops",
     flow_parallel_in_selection => "flow-parallel-in-selection",
     flow_reference_condition => "flow-reference-condition",
     flow_selection_in_parallel => "flow-selection-in-parallel",
