@@ -464,13 +464,27 @@ pub fn resolve_jumps(sfc: &Sfc, diags: &mut Diagnostics) -> Vec<Option<usize>> {
     {
         return out;
     }
+    // Only the steps whose name some jump names are indexed (a quick length test first: the
+    // names of 100,000 steps are not all turned into keys).
     let mut by_name: HashMap<Arc<str>, Vec<usize>> = HashMap::new();
+    let mut lengths: Vec<usize> = Vec::new();
+    for e in el {
+        if let ElementKind::JumpStep(Some(t)) = &e.kind {
+            by_name.entry(t.key.clone()).or_default();
+            if !lengths.contains(&t.key.len()) {
+                lengths.push(t.key.len());
+            }
+        }
+    }
     for (i, e) in el.iter().enumerate() {
         if let ElementKind::Step(st) = &e.kind {
-            by_name
-                .entry(Arc::from(crate::names::key(&st.name)))
-                .or_default()
-                .push(i);
+            let name = st.name.trim();
+            if name.is_ascii() && !lengths.contains(&name.len()) {
+                continue;
+            }
+            if let Some(v) = by_name.get_mut(crate::names::key(name).as_str()) {
+                v.push(i);
+            }
         }
     }
     for (i, e) in el.iter().enumerate() {
@@ -752,8 +766,17 @@ struct LoopCtx {
     /// The nesting depth of the sequence the loop stands in.
     depth: usize,
     /// The elements from which a jump back to `head` can be reached (without passing `head`):
-    /// the loop's body. A selection branch outside it leaves the loop.
-    body: std::collections::HashSet<usize>,
+    /// the loop's body, as a bit set by element index. A selection branch outside it leaves the
+    /// loop.
+    body: Vec<u64>,
+}
+
+impl LoopCtx {
+    fn contains(&self, i: usize) -> bool {
+        self.body
+            .get(i >> 6)
+            .is_some_and(|w| (w >> (i & 63)) & 1 == 1)
+    }
 }
 
 struct Walker<'a> {
@@ -937,7 +960,7 @@ impl Walker<'_> {
         let mut walked = Vec::with_capacity(heads.len());
         for h in heads {
             let first = self.g.succs(h).first().copied();
-            let inside = !deciding || self.loops.last().is_some_and(|l| l.body.contains(&h));
+            let inside = !deciding || self.loops.last().is_some_and(|l| l.contains(h));
             let (b, end) = match first {
                 None => (Vec::new(), End::Done),
                 Some(f) if inside => self.seq(f, false, depth + 1),
@@ -1117,12 +1140,14 @@ impl Walker<'_> {
             return (Vec::new(), None);
         }
         // The body: what can reach a jump back without passing the head.
-        let mut body_set = std::collections::HashSet::new();
+        let mut body_set = vec![0u64; self.g.len().div_ceil(64)];
         let mut stack: Vec<usize> = self.jumps_to.get(&head).cloned().unwrap_or_default();
         while let Some(x) = stack.pop() {
-            if x == head || !body_set.insert(x) {
+            let (w, b) = (x >> 6, 1u64 << (x & 63));
+            if x == head || body_set[w] & b != 0 {
                 continue;
             }
+            body_set[w] |= b;
             stack.extend_from_slice(self.g.preds(x));
         }
         self.loops.push(LoopCtx {
