@@ -702,6 +702,8 @@ pub fn walk(
         targeted,
         jumps_to,
         loops: Vec::new(),
+        marks: vec![0; sfc.elements.len()],
+        next_loop: 0,
         diags,
         failed: false,
     };
@@ -755,28 +757,18 @@ enum After {
     Nothing,
     /// The exits joined at this convergence: go on from there.
     From(usize),
-    /// The one exit branch's rest, already walked, and how it ended.
-    Tail(Vec<Block>, Box<End>),
+    /// The one exit branch goes on from this element (`None`: it ends at its transition).
+    Continue(Option<usize>),
 }
 
 /// An open loop.
 struct LoopCtx {
     /// The loop's first step, the jumps' target.
     head: usize,
-    /// The nesting depth of the sequence the loop stands in.
+    /// The nesting depth of the loop's body.
     depth: usize,
-    /// The elements from which a jump back to `head` can be reached (without passing `head`):
-    /// the loop's body, as a bit set by element index. A selection branch outside it leaves the
-    /// loop.
-    body: Vec<u64>,
-}
-
-impl LoopCtx {
-    fn contains(&self, i: usize) -> bool {
-        self.body
-            .get(i >> 6)
-            .is_some_and(|w| (w >> (i & 63)) & 1 == 1)
-    }
+    /// The loop's number: the elements of its body carry it in [`Walker::marks`].
+    id: u32,
 }
 
 struct Walker<'a> {
@@ -788,6 +780,13 @@ struct Walker<'a> {
     jumps_to: HashMap<usize, Vec<usize>>,
     /// The open loops, innermost last.
     loops: Vec<LoopCtx>,
+    /// Per element, the number of the last loop whose body holds it: the elements from which a
+    /// jump back to the loop's head can be reached without passing the head. A selection branch
+    /// outside the body leaves the loop. (An inner loop's marks overwrite its outer loop's only
+    /// where the outer loop asks no more: the branches of the outer loop's deciding selection
+    /// come after the inner loop and cannot reach the inner loop's jumps.)
+    marks: Vec<u32>,
+    next_loop: u32,
     diags: &'a mut Diagnostics,
     failed: bool,
 }
@@ -813,9 +812,9 @@ impl Walker<'_> {
                 let (blocks, end) = self.open_loop(cur, depth);
                 out.extend(blocks);
                 match end {
-                    Some(Ok(c)) => {
+                    Some(Ok((c, ent))) => {
                         cur = c;
-                        entered = true;
+                        entered = ent;
                         continue;
                     }
                     Some(Err(end)) => return (out, end),
@@ -956,29 +955,44 @@ impl Walker<'_> {
         // At the innermost loop's own level, this selection may decide the loop: branches
         // outside the loop's body leave it, and go on where the loop stands.
         let deciding = inner.is_some_and(|(_, d)| d == depth);
-        // (transition, body, end, walked inside the loop) per branch, in priority order.
-        let mut walked = Vec::with_capacity(heads.len());
+        // (transition, body, end, inside the loop) per branch, in priority order. A branch that
+        // leaves the loop is walked later, if at all: one exit branch is the program's
+        // continuation after the loop and is walked there, in the sequence that holds the loop
+        // (not here: a chain of loops must not nest the walk).
+        let mut walked: Vec<(usize, Vec<Block>, End, bool)> = Vec::with_capacity(heads.len());
         for h in heads {
-            let first = self.g.succs(h).first().copied();
-            let inside = !deciding || self.loops.last().is_some_and(|l| l.contains(h));
-            let (b, end) = match first {
-                None => (Vec::new(), End::Done),
-                Some(f) if inside => self.seq(f, false, depth + 1),
-                Some(f) => {
-                    let ctx = self.loops.pop().expect("deciding needs a loop");
-                    let r = self.seq(f, false, depth);
-                    self.loops.push(ctx);
-                    r
-                }
+            let inside = !deciding || self.loops.last().is_some_and(|l| self.marks[h] == l.id);
+            let (b, end) = if inside {
+                self.branch_walk(h, depth)
+            } else {
+                (Vec::new(), End::Endless)
             };
             if self.failed {
                 return None;
             }
             walked.push((h, b, end, inside));
         }
+        let any_repeat = walked.iter().any(|(_, _, e, inside)| {
+            *inside && matches!(e, End::Jump(j) if inner.is_some_and(|(h, _)| self.jumps[*j] == Some(h)))
+        });
+        let outside = walked.iter().filter(|w| !w.3).count();
+        if !any_repeat || outside > 1 {
+            // The exits are walked here: to their convergence (or, without a jump back, as an
+            // ordinary selection), outside the loop.
+            for w in walked.iter_mut().filter(|w| !w.3) {
+                let ctx = self.loops.pop().expect("deciding needs a loop");
+                let (b, end) = self.branch_walk(w.0, depth);
+                self.loops.push(ctx);
+                if self.failed {
+                    return None;
+                }
+                w.1 = b;
+                w.2 = end;
+            }
+        }
         let repeats: Vec<bool> = walked
             .iter()
-            .map(|(_, _, e, _)| matches!(e, End::Jump(j) if inner.is_some_and(|(h, _)| self.jumps[*j] == Some(h))))
+            .map(|(_, _, e, inside)| *inside && matches!(e, End::Jump(j) if inner.is_some_and(|(h, _)| self.jumps[*j] == Some(h))))
             .collect();
         // Jumps anywhere else cannot be structured.
         for (k, (_, _, e, _)) in walked.iter().enumerate() {
@@ -1065,17 +1079,10 @@ impl Walker<'_> {
             return None;
         }
         let exits: Vec<usize> = (0..walked.len()).filter(|&k| !repeats[k]).collect();
-        let mut after = After::Nothing;
-        let mut leave_bodies = true;
-        match exits.as_slice() {
-            [] => {}
-            [one] => {
-                leave_bodies = false;
-                let (_, body, end, _) = &mut walked[*one];
-                let body = std::mem::take(body);
-                let end = std::mem::replace(end, End::Done);
-                after = After::Tail(body, Box::new(end));
-            }
+        let after = match exits.as_slice() {
+            [] => After::Nothing,
+            // The one exit is walked as what follows the loop.
+            [one] => After::Continue(self.g.succs(walked[*one].0).first().copied()),
             several => {
                 let conv = match &walked[several[0]].2 {
                     End::Conv(c) => Some(*c),
@@ -1098,19 +1105,15 @@ impl Walker<'_> {
                     );
                     return None;
                 };
-                after = After::From(conv);
+                After::From(conv)
             }
-        }
+        };
         let branches = walked
             .into_iter()
             .enumerate()
             .map(|(k, (t, body, end, _))| Branch {
                 transition: t,
-                body: if repeats[k] || leave_bodies {
-                    body
-                } else {
-                    Vec::new()
-                },
+                body,
                 end: match end {
                     End::Jump(j) if repeats[k] => BranchEnd::Repeat(j),
                     _ => BranchEnd::Leave,
@@ -1127,10 +1130,23 @@ impl Walker<'_> {
         }))
     }
 
-    /// Opens a loop at step `head`: its blocks and then `Ok(convergence)` to go on from, or
-    /// `Err(end)` when the sequence ends; `None` on failure.
+    /// Walks a selection branch from its transition `h` (whose condition selects it; it is not
+    /// waited for).
+    fn branch_walk(&mut self, h: usize, depth: usize) -> (Vec<Block>, End) {
+        match self.g.succs(h).first().copied() {
+            Some(f) => self.seq(f, false, depth + 1),
+            None => (Vec::new(), End::Done),
+        }
+    }
+
+    /// Opens a loop at step `head`: its blocks and then `Ok((element, entered))` to go on from,
+    /// or `Err(end)` when the sequence ends; `None` on failure.
     #[allow(clippy::type_complexity)]
-    fn open_loop(&mut self, head: usize, depth: usize) -> (Vec<Block>, Option<Result<usize, End>>) {
+    fn open_loop(
+        &mut self,
+        head: usize,
+        depth: usize,
+    ) -> (Vec<Block>, Option<Result<(usize, bool), End>>) {
         if depth >= MAX_NESTING {
             self.fail(
                 head,
@@ -1140,22 +1156,23 @@ impl Walker<'_> {
             return (Vec::new(), None);
         }
         // The body: what can reach a jump back without passing the head.
-        let mut body_set = vec![0u64; self.g.len().div_ceil(64)];
+        self.next_loop += 1;
+        let id = self.next_loop;
         let mut stack: Vec<usize> = self.jumps_to.get(&head).cloned().unwrap_or_default();
         while let Some(x) = stack.pop() {
-            let (w, b) = (x >> 6, 1u64 << (x & 63));
-            if x == head || body_set[w] & b != 0 {
+            if x == head || self.marks[x] == id {
                 continue;
             }
-            body_set[w] |= b;
+            self.marks[x] = id;
             stack.extend_from_slice(self.g.preds(x));
         }
+        // The body is a sequence one level deeper than the loop.
         self.loops.push(LoopCtx {
             head,
-            depth,
-            body: body_set,
+            depth: depth + 1,
+            id,
         });
-        let (mut body, end) = self.seq(head, true, depth);
+        let (mut body, end) = self.seq(head, true, depth + 1);
         self.loops.pop();
         if self.failed {
             return (Vec::new(), None);
@@ -1191,19 +1208,13 @@ impl Walker<'_> {
                     body,
                     endless,
                 };
-                let mut out = vec![block];
                 let next = match after {
                     After::Nothing => Err(End::Endless),
-                    After::From(c) => Ok(c),
-                    After::Tail(tail, end) => {
-                        out.extend(tail);
-                        match *end {
-                            End::Conv(c) => Err(End::Conv(c)),
-                            other => Err(other),
-                        }
-                    }
+                    After::From(c) => Ok((c, true)),
+                    After::Continue(Some(e)) => Ok((e, false)),
+                    After::Continue(None) => Err(End::Done),
                 };
-                (out, Some(next))
+                (vec![block], Some(next))
             }
             // No jump back to the head on the way: its jumps come from elsewhere (reported
             // where they are found); the steps are an ordinary sequence.
@@ -1579,5 +1590,93 @@ mod tests {
                 .any(|(c, m)| *c == Code::BadJump && m.contains("inside another branch")),
             "{msgs:?}"
         );
+    }
+
+    #[test]
+    fn a_chain_of_loops_does_not_nest_the_walk() {
+        // 20,000 loops one after another: each loop's exit is the next loop's way in. The walk
+        // goes on after each loop in the same sequence, so the stack does not grow with them.
+        let n = 20_000u64;
+        let mut parts = vec![st(1, "Start", &[]), tr(2, &[1], "TRUE")];
+        let mut prev = 2;
+        for k in 0..n {
+            let b = 10 + k * 10;
+            parts.push(st(b, &format!("L{k}"), &[prev]));
+            parts.push(el("selectionDivergence", b + 1, &[b]));
+            parts.push(tr(b + 2, &[b + 1], "again"));
+            parts.push(jmp(b + 3, &[b + 2], &format!("L{k}")));
+            parts.push(tr(b + 4, &[b + 1], "NOT again"));
+            prev = b + 4;
+        }
+        parts.push(st(5, "End", &[prev]));
+        let (p, _, msgs) = std::thread::Builder::new()
+            .stack_size(256 * 1024)
+            .spawn(move || {
+                let (p, sfc, msgs) = run(&parts);
+                (p.map(|p| p.body.len()), sfc.elements.len(), msgs)
+            })
+            .unwrap()
+            .join()
+            .unwrap();
+        assert!(msgs.is_empty(), "{:?}", &msgs[..msgs.len().min(3)]);
+        // Start, the loops, End.
+        assert_eq!(p, Some(n as usize + 2));
+    }
+
+    #[test]
+    fn nested_loops_deeper_than_the_limit_are_an_error() {
+        // Loop k's body holds loop k + 1; each is left to its parent's decision.
+        let n = MAX_NESTING as u64 + 10;
+        let mut parts = vec![st(1, "Start", &[]), tr(2, &[1], "TRUE")];
+        let mut prev = 2;
+        for k in 0..n {
+            let b = 10 + k * 10;
+            parts.push(st(b, &format!("L{k}"), &[prev]));
+            parts.push(tr(b + 1, &[b], "TRUE"));
+            prev = b + 1;
+        }
+        // Innermost first: each loop's deciding selection after the inner loop's exit.
+        let mut last = prev;
+        let mut last_is_step = false;
+        for k in (0..n).rev() {
+            let b = 10_000 + k * 10;
+            let s = if last_is_step {
+                last
+            } else {
+                parts.push(st(b, &format!("X{k}"), &[last]));
+                b
+            };
+            parts.push(el("selectionDivergence", b + 1, &[s]));
+            parts.push(tr(b + 2, &[b + 1], "again"));
+            parts.push(jmp(b + 3, &[b + 2], &format!("L{k}")));
+            parts.push(tr(b + 4, &[b + 1], "NOT again"));
+            last = b + 4;
+            last_is_step = false;
+        }
+        parts.push(st(5, "End", &[last]));
+        let (p, _, msgs) = run(&parts);
+        assert!(p.is_none());
+        assert!(
+            msgs.iter()
+                .any(|(c, m)| *c == Code::Unsupported && m.contains("nested deeper")),
+            "{msgs:?}"
+        );
+    }
+
+    #[test]
+    fn an_inner_exit_straight_back_to_the_outer_head() {
+        let p = planned(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "Row", &[2]),
+            tr(4, &[3], "TRUE"),
+            st(5, "Place", &[4]),
+            el("selectionDivergence", 6, &[5]),
+            tr(7, &[6], "more"),
+            jmp(8, &[7], "Place"),
+            tr(9, &[6], "NOT more"),
+            jmp(10, &[9], "Row"),
+        ]);
+        assert_eq!(p, "S1 L3*[S3 L5[S5 C(7:^|9:!)]]");
     }
 }
