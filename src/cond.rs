@@ -14,6 +14,10 @@ use std::ops::Range;
 /// Parentheses and `NOT`s nest at most this deep.
 pub const MAX_DEPTH: usize = 64;
 
+/// A condition has at most this many tokens (so a chain of operators cannot build a tree deep
+/// enough to exhaust the stack of the recursive passes over it).
+pub const MAX_TOKENS: usize = 1024;
+
 /// A condition expression. `span` is a byte range in the file the condition was read from.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Expr {
@@ -324,6 +328,12 @@ struct Parser<'t> {
 /// expression's spans are file ranges); errors are ranges of `text`.
 pub fn parse(text: &str, map: &dyn Fn(usize) -> usize) -> Result<Expr, SyntaxError> {
     let toks = Lexer::run(text)?;
+    if let Some((_, r)) = toks.get(MAX_TOKENS) {
+        return Err(SyntaxError {
+            at: r.clone(),
+            message: format!("the condition is longer than {MAX_TOKENS} tokens"),
+        });
+    }
     if toks.is_empty() {
         let t = text.len();
         return Err(SyntaxError {
@@ -679,6 +689,10 @@ mod tests {
         assert!(e(&deep).message.contains("deeper"));
         let nots = format!("{}a", "NOT ".repeat(100));
         assert!(e(&nots).message.contains("deeper"));
+        let long = vec!["a"; 600].join(" AND ");
+        assert!(e(&long).message.contains("longer than 1024 tokens"));
+        let fine = vec!["a"; 500].join(" OR ");
+        assert!(p(&fine).is_ok());
     }
 
     #[test]
