@@ -387,6 +387,8 @@ codes! {
     Ignored = "W304",
     /// Several POUs have an SFC body and none was named: the one used and the others.
     SeveralPous = "W305",
+    /// A selection branch right of an unconditional one: it is never taken.
+    BranchNeverTaken = "W306",
 }
 
 impl std::fmt::Display for Code {

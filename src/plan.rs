@@ -951,6 +951,25 @@ impl Walker<'_> {
         depth: usize,
     ) -> Option<Result<(Block, usize), End>> {
         let el = &self.sfc.elements;
+        // Branches after an unconditional one are never taken (they are still checked).
+        if let Some(k) = heads
+            .iter()
+            .position(|&h| matches!(el[h].kind, ElementKind::Transition(None)))
+        {
+            for &h in &heads[k + 1..] {
+                self.diags.push(
+                    Diagnostic::warning(
+                        Code::BranchNeverTaken,
+                        format!(
+                            "this selection branch is never taken: the branch of transition localId {} before it (left of it) has no condition and always wins",
+                            el[heads[k]].local_id
+                        ),
+                    )
+                    .at(el[h].span.clone())
+                    .element(format!("localId {}", el[h].local_id)),
+                );
+            }
+        }
         let inner = self.loops.last().map(|l| (l.head, l.depth));
         // At the innermost loop's own level, this selection may decide the loop: branches
         // outside the loop's body leave it, and go on where the loop stands.

@@ -573,3 +573,26 @@ fn resources_below_grouping_elements_are_found() {
     assert!(stdout(&o).contains("KUKA KR15-2\n"), "{}", stdout(&o));
     assert!(!stdout(&o).contains("Building"), "{}", stdout(&o));
 }
+
+#[test]
+fn branches_right_of_an_unconditional_one_are_never_taken() {
+    let p = project();
+    let sfc = "<project><types><pous><pou name=\"P\" pouType=\"program\"><body><SFC>\
+        <step localId=\"1\" name=\"Start\" initialStep=\"true\"><position x=\"0\" y=\"0\"/></step>\
+        <selectionDivergence localId=\"2\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"1\"/></connectionPointIn></selectionDivergence>\
+        <transition localId=\"3\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"2\"/></connectionPointIn><condition><inline name=\"\"><ST>a</ST></inline></condition></transition>\
+        <transition localId=\"4\"><position x=\"10\" y=\"0\"/><connectionPointIn><connection refLocalId=\"2\"/></connectionPointIn></transition>\
+        <transition localId=\"5\"><position x=\"20\" y=\"0\"/><connectionPointIn><connection refLocalId=\"2\"/></connectionPointIn><condition><inline name=\"\"><ST>b</ST></inline></condition></transition>\
+        <selectionConvergence localId=\"6\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"3\"/><connection refLocalId=\"4\"/><connection refLocalId=\"5\"/></connectionPointIn></selectionConvergence>\
+        <step localId=\"7\" name=\"End\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"6\"/></connectionPointIn></step>\
+        </SFC></body></pou></pous></types></project>";
+    std::fs::write(p.path().join("sel.xml"), sfc).unwrap();
+    let o = run(&["--sfc", "--format", "short", "sel.xml"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert_eq!(e.matches("W306").count(), 1, "{e}");
+    assert!(
+        e.contains("[localId 5]") && e.contains("transition localId 4"),
+        "{e}"
+    );
+}
