@@ -158,7 +158,7 @@ pub fn sfc(sfc: &Sfc) -> String {
                         let _ = writeln!(
                             o,
                             "            Condition:  {}{}",
-                            c.text,
+                            one_line(&c.text),
                             if c.reference { "   (reference)" } else { "" }
                         );
                     }
@@ -190,12 +190,16 @@ fn duration(sfc: &Sfc, i: usize) -> f64 {
     }
 }
 
-/// The condition of a transition as written (`TRUE` when it has none).
+/// The condition of a transition as written, on one line (`TRUE` when it has none).
 fn condition(sfc: &Sfc, t: usize) -> String {
     match &sfc.elements[t].kind {
-        ElementKind::Transition(Some(c)) => c.text.clone(),
+        ElementKind::Transition(Some(c)) => one_line(&c.text),
         _ => "TRUE".to_owned(),
     }
+}
+
+fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
 /// What the flow's total time means.

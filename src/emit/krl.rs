@@ -295,10 +295,16 @@ impl Writer<'_> {
         Some(crate::cond::render_krl(&c.expr, &signal))
     }
 
-    /// The condition as written, for comments.
+    /// The condition as written, for comments: on one line, without `;` (which would start a
+    /// comment inside the comment, and could look like a fold marker).
     fn condition_text(&self, t: usize) -> String {
         match &self.input.sfc.elements[t].kind {
-            ElementKind::Transition(Some(c)) => c.text.clone(),
+            ElementKind::Transition(Some(c)) => c
+                .text
+                .replace(';', ",")
+                .split_whitespace()
+                .collect::<Vec<_>>()
+                .join(" "),
             _ => "TRUE".to_owned(),
         }
     }

@@ -442,12 +442,15 @@ impl Reader<'_> {
                         }
                     },
                 };
-                if !names::is_krl_name(&name.text) || names::is_krl_keyword(&name.text) {
+                if !names::is_krl_name(&name.text)
+                    || names::is_krl_keyword(&name.text)
+                    || names::eq(&name.text, crate::emit::krl::BRANCH_VAR)
+                {
                     let span = name.span.clone();
                     bad(
                         self.diags,
                         span,
-                        "an integer signal is declared as a KRL SIGNAL of this name: it must be a KRL name (a letter or `_`, then letters, digits or `_`, at most 24 characters, not a keyword)".to_owned(),
+                        "an integer signal is declared as a KRL SIGNAL of this name: it must be a KRL name (a letter or `_`, then letters, digits or `_`, at most 24 characters, not a keyword nor `SKP_BRANCH`)".to_owned(),
                     );
                 }
                 SignalKind::Group { number, length }
