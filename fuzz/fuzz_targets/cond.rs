@@ -2,7 +2,8 @@
 //!
 //! - `parse` never panics; an error's range lies inside the text, on character boundaries;
 //! - a parsed condition printed back as ST (`Expr::to_st`, fully parenthesised) parses to a tree
-//!   that prints the same (the tree survives the round trip);
+//!   that prints the same (the tree survives the round trip), unless the added parentheses pass
+//!   the nesting or length limit;
 //! - the KRL rendering has balanced parentheses and no `=` without its `==`/`<=`/`>=`/`<>`;
 //! - `check` never panics, whatever the names resolve to.
 #![no_main]
@@ -24,10 +25,12 @@ fuzz_target!(|data: &[u8]| {
                 assert!(text.get(r.clone()).is_some(), "name span {r:?} in {text:?}");
             }
             let printed = e.to_st();
-            let again = parse(&printed, &|o| o).unwrap_or_else(|err| {
-                panic!("{printed:?} (from {text:?}) does not parse: {err:?}")
-            });
-            assert_eq!(again.to_st(), printed, "round trip of {text:?}");
+            match parse(&printed, &|o| o) {
+                Ok(again) => assert_eq!(again.to_st(), printed, "round trip of {text:?}"),
+                // The printed form has more parentheses: it may pass the limits the text kept.
+                Err(err) if err.message.contains("deeper") || err.message.contains("longer") => {}
+                Err(err) => panic!("{printed:?} (from {text:?}) does not parse: {err:?}"),
+            }
             let krl = render_krl(&e, &|n| format!("$IN[{}]", n.len()));
             let mut depth = 0i32;
             for c in krl.chars() {
