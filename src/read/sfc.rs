@@ -834,10 +834,12 @@ impl<'t> Stream<'t> {
             );
             return None;
         };
+        // As written, on one line (for messages, listings and comments).
+        let text = text.split_whitespace().collect::<Vec<_>>().join(" ");
         match parsed {
             Ok(e) if e.is_true() => None,
             Ok(expr) => Some(Box::new(Condition {
-                text: text.to_owned(),
+                text,
                 expr,
                 span: c.clone(),
                 reference,
@@ -855,6 +857,15 @@ impl<'t> Stream<'t> {
                     let e = map_offset(&b.inline_map, err.at.end.saturating_sub(1)) + 1;
                     s..e.max(s + 1)
                 };
+                // On character boundaries of the file, whatever the pieces' mapping gave.
+                let (mut s, mut e) = (at.start.min(self.text.len()), at.end.min(self.text.len()));
+                while !self.text.is_char_boundary(s) {
+                    s -= 1;
+                }
+                while !self.text.is_char_boundary(e) {
+                    e += 1;
+                }
+                let at = s..e.max(s);
                 diags.push(
                     Diagnostic::error(
                         Code::BadCondition,
