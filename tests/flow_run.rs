@@ -22,6 +22,9 @@ use std::process::Command;
 
 use skillpost::cond::{BinOp, Expr as StExpr, ExprKind};
 
+#[path = "common/krl_check.rs"]
+mod krl_syntax;
+
 /// How many actions are compared at most (endless programs).
 const MAX_ACTIONS: usize = 40;
 
@@ -1338,6 +1341,9 @@ fn random_charts_do_what_they_mean() {
         );
         let src = std::fs::read_to_string(tmp.path().join("R.src")).unwrap();
         let dat = std::fs::read_to_string(tmp.path().join("R.dat")).unwrap();
+        if let Err(e) = krl_syntax::check_krl(&src, &dat, "R", true) {
+            panic!("random chart {seed}: KRL structure check: {e}\n{src}");
+        }
         let chart = Chart::read(&sfc);
         let seen = check_compiled(
             &format!("random chart {seed}"),
