@@ -761,6 +761,13 @@ enum After {
     Continue(Option<usize>),
 }
 
+/// What follows branches: `Ok((block, convergence))` to go on from, or `Err(end)` when the
+/// sequence ends (a loop's deciding selection); `None` on failure (reported).
+type Branches = Option<Result<(Block, usize), End>>;
+
+/// Where the sequence goes on after a loop: `Ok((element, entered))`, or `Err(end)`.
+type GoOn = Result<(usize, bool), End>;
+
 /// An open loop.
 struct LoopCtx {
     /// The loop's first step, the jumps' target.
@@ -864,13 +871,7 @@ impl Walker<'_> {
     }
 
     /// Simultaneous branches from `div`: the block and the convergence to go on from.
-    #[allow(clippy::type_complexity)]
-    fn parallel(
-        &mut self,
-        div: usize,
-        heads: Vec<usize>,
-        depth: usize,
-    ) -> Option<Result<(Block, usize), End>> {
+    fn parallel(&mut self, div: usize, heads: Vec<usize>, depth: usize) -> Branches {
         let el = &self.sfc.elements;
         let mut branches = Vec::with_capacity(heads.len());
         let mut joins = Vec::with_capacity(heads.len());
@@ -943,13 +944,7 @@ impl Walker<'_> {
 
     /// Selection branches from `div`: the block and the convergence to go on from, or, for the
     /// selection that decides the innermost loop, how the loop body ends.
-    #[allow(clippy::type_complexity)]
-    fn selection(
-        &mut self,
-        div: usize,
-        heads: Vec<usize>,
-        depth: usize,
-    ) -> Option<Result<(Block, usize), End>> {
+    fn selection(&mut self, div: usize, heads: Vec<usize>, depth: usize) -> Branches {
         let el = &self.sfc.elements;
         // Branches after an unconditional one are never taken (they are still checked).
         if let Some(k) = heads
@@ -1160,12 +1155,7 @@ impl Walker<'_> {
 
     /// Opens a loop at step `head`: its blocks and then `Ok((element, entered))` to go on from,
     /// or `Err(end)` when the sequence ends; `None` on failure.
-    #[allow(clippy::type_complexity)]
-    fn open_loop(
-        &mut self,
-        head: usize,
-        depth: usize,
-    ) -> (Vec<Block>, Option<Result<(usize, bool), End>>) {
+    fn open_loop(&mut self, head: usize, depth: usize) -> (Vec<Block>, Option<GoOn>) {
         if depth >= MAX_NESTING {
             self.fail(
                 head,
