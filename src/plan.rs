@@ -776,6 +776,9 @@ struct LoopCtx {
     depth: usize,
     /// The loop's number: the elements of its body carry it in [`Walker::marks`].
     id: u32,
+    /// Branches that leave the loop from selections before its deciding one (they and the
+    /// deciding selection's exits must all join in one convergence).
+    mid_exits: usize,
 }
 
 struct Walker<'a> {
@@ -973,10 +976,26 @@ impl Walker<'_> {
         // leaves the loop is walked later, if at all: one exit branch is the program's
         // continuation after the loop and is walked there, in the sequence that holds the loop
         // (not here: a chain of loops must not nest the walk).
+        let inside_of: Vec<bool> = heads
+            .iter()
+            .map(|&h| !deciding || self.loops.last().is_some_and(|l| self.marks[h] == l.id))
+            .collect();
+        let n_outside = inside_of.iter().filter(|i| !**i).count();
+        // One branch goes on in the loop, the others leave it: either this selection decides
+        // the loop (the branch ends in the jump back) or it leaves the loop early and the branch
+        // is the rest of the loop's own sequence. Either way it is walked at the loop's level.
+        let single_inside = deciding && n_outside > 0 && n_outside + 1 == heads.len();
+        if single_inside && let Some(l) = self.loops.last_mut() {
+            l.mid_exits += n_outside;
+        }
         let mut walked: Vec<(usize, Vec<Block>, End, bool)> = Vec::with_capacity(heads.len());
-        for h in heads {
-            let inside = !deciding || self.loops.last().is_some_and(|l| self.marks[h] == l.id);
-            let (b, end) = if inside {
+        for (h, inside) in heads.into_iter().zip(inside_of) {
+            let (b, end) = if inside && single_inside {
+                match self.g.succs(h).first().copied() {
+                    Some(f) => self.seq(f, false, depth),
+                    None => (Vec::new(), End::Done),
+                }
+            } else if inside {
                 self.branch_walk(h, depth)
             } else {
                 (Vec::new(), End::Endless)
@@ -986,11 +1005,23 @@ impl Walker<'_> {
             }
             walked.push((h, b, end, inside));
         }
+        if single_inside {
+            let k = walked.iter().position(|w| w.3).expect("one inside");
+            if !matches!(walked[k].2, End::Decided { .. }) {
+                // Not an early exit: these are this selection's own exits.
+                if let Some(l) = self.loops.last_mut() {
+                    l.mid_exits -= n_outside;
+                }
+            } else {
+                return self.early_exit(div, walked, depth);
+            }
+        }
         let any_repeat = walked.iter().any(|(_, _, e, inside)| {
             *inside && matches!(e, End::Jump(j) if inner.is_some_and(|(h, _)| self.jumps[*j] == Some(h)))
         });
         let outside = walked.iter().filter(|w| !w.3).count();
-        if !any_repeat || outside > 1 {
+        let mids = self.loops.last().map_or(0, |l| l.mid_exits);
+        if !any_repeat || outside > 1 || (outside == 1 && mids > 0) {
             // The exits are walked here: to their convergence (or, without a jump back, as an
             // ordinary selection), outside the loop.
             for w in walked.iter_mut().filter(|w| !w.3) {
@@ -1095,8 +1126,8 @@ impl Walker<'_> {
         let exits: Vec<usize> = (0..walked.len()).filter(|&k| !repeats[k]).collect();
         let after = match exits.as_slice() {
             [] => After::Nothing,
-            // The one exit is walked as what follows the loop.
-            [one] => After::Continue(self.g.succs(walked[*one].0).first().copied()),
+            // The one exit is walked as what follows the loop (unless earlier exits join it).
+            [one] if mids == 0 => After::Continue(self.g.succs(walked[*one].0).first().copied()),
             several => {
                 let conv = match &walked[several[0]].2 {
                     End::Conv(c) => Some(*c),
@@ -1106,14 +1137,14 @@ impl Walker<'_> {
                     several
                         .iter()
                         .all(|&k| matches!(walked[k].2, End::Conv(x) if x == c))
-                        && self.g.preds(c).len() == several.len()
+                        && self.g.preds(c).len() == several.len() + mids
                 });
                 let Some(conv) = conv.filter(|_| joined) else {
                     self.fail(
                         div,
                         Code::UnbalancedBranch,
                         format!(
-                            "selectionDivergence decides a loop, and its {} branches that leave it do not end in one selectionConvergence joining just them",
+                            "selectionDivergence decides a loop, and its {} branches that leave it (with {mids} that leave it earlier) do not end in one selectionConvergence joining just them",
                             several.len()
                         ),
                     );
@@ -1141,6 +1172,93 @@ impl Walker<'_> {
                 branches,
             }),
             after,
+        }))
+    }
+
+    /// A selection before the loop's deciding one, with one branch going on in the loop (walked:
+    /// it ended at the deciding selection, `walked[k].2` is `End::Decided`) and the others
+    /// leaving it: they are walked to the convergence that joins every exit of the loop.
+    fn early_exit(
+        &mut self,
+        div: usize,
+        mut walked: Vec<(usize, Vec<Block>, End, bool)>,
+        depth: usize,
+    ) -> Branches {
+        let k = walked.iter().position(|w| w.3).expect("one inside");
+        let End::Decided { choice, after } = std::mem::replace(&mut walked[k].2, End::Endless)
+        else {
+            unreachable!("checked by the caller")
+        };
+        let total = self.loops.last().map_or(0, |l| l.mid_exits);
+        for w in walked.iter_mut().filter(|w| !w.3) {
+            let ctx = self.loops.pop().expect("an early exit needs a loop");
+            let (b, end) = self.branch_walk(w.0, depth);
+            self.loops.push(ctx);
+            if self.failed {
+                return None;
+            }
+            if let End::Jump(j) = end {
+                self.bad_jump(
+                    j,
+                    "it leaves a loop from a selection before the one that decides it; only its exits may follow",
+                );
+                return None;
+            }
+            w.1 = b;
+            w.2 = end;
+        }
+        let conv = walked.iter().find(|w| !w.3).and_then(|w| match w.2 {
+            End::Conv(c) => Some(c),
+            _ => None,
+        });
+        let joined = conv.is_some_and(|c| {
+            walked
+                .iter()
+                .filter(|w| !w.3)
+                .all(|w| matches!(w.2, End::Conv(x) if x == c))
+                && match &after {
+                    After::From(a) => *a == c,
+                    // The deciding selection has no exits of its own: every exit is early.
+                    After::Nothing => self.g.preds(c).len() == total,
+                    After::Continue(_) => false,
+                }
+        });
+        let Some(conv) = conv.filter(|_| joined) else {
+            self.fail(
+                div,
+                Code::UnbalancedBranch,
+                format!(
+                    "selectionDivergence leaves the loop before the selection that decides it; every branch that leaves the loop must end in one selectionConvergence (here {} of them)",
+                    total + walked.len().saturating_sub(1)
+                ),
+            );
+            return None;
+        };
+        let mut choice = Some(*choice);
+        let branches = walked
+            .into_iter()
+            .map(|(t, mut body, _, inside)| {
+                if inside && let Some(c) = choice.take() {
+                    body.push(c);
+                }
+                Branch {
+                    transition: t,
+                    body,
+                    end: if inside {
+                        BranchEnd::Join
+                    } else {
+                        BranchEnd::Leave
+                    },
+                }
+            })
+            .collect();
+        Some(Err(End::Decided {
+            choice: Box::new(Block::Choice {
+                divergence: div,
+                convergence: None,
+                branches,
+            }),
+            after: After::From(conv),
         }))
     }
 
@@ -1180,22 +1298,29 @@ impl Walker<'_> {
             head,
             depth: depth + 1,
             id,
+            mid_exits: 0,
         });
         let (mut body, end) = self.seq(head, true, depth + 1);
         self.loops.pop();
         if self.failed {
             return (Vec::new(), None);
         }
-        let mut jumps = Vec::new();
-        let mut collect = |blocks: &[Block]| {
-            if let Some(Block::Choice { branches, .. }) = blocks.last() {
-                for b in branches {
-                    if let BranchEnd::Repeat(j) = b.end {
-                        jumps.push(j);
+        // The jumps back to this loop's head (in its deciding selection, however nested).
+        let collect = |blocks: &[Block], jumps: &mut Vec<usize>, targets: &[Option<usize>]| {
+            visit(blocks, &mut |b| {
+                if let Block::Choice { branches, .. } = b {
+                    for br in branches {
+                        if let BranchEnd::Repeat(j) = br.end
+                            && targets[j] == Some(head)
+                            && !jumps.contains(&j)
+                        {
+                            jumps.push(j);
+                        }
                     }
                 }
-            }
+            });
         };
+        let mut jumps = Vec::new();
         match end {
             End::Jump(j) if self.jumps[j] == Some(head) => {
                 // A jump back in the loop's own sequence: an endless loop.
@@ -1209,7 +1334,7 @@ impl Walker<'_> {
             }
             End::Decided { choice, after } => {
                 body.push(*choice);
-                collect(&body);
+                collect(&body, &mut jumps, self.jumps);
                 let endless = matches!(after, After::Nothing);
                 let block = Block::Loop {
                     head,

@@ -9,7 +9,8 @@
 //!
 //! Besides the fixtures, 150 random structured charts (guarded sequences, selections with empty
 //! and unconditional branches, simultaneous branches, loops left by one branch or two that join,
-//! endless loops, nested in each other) are compiled and run the same way.
+//! loops left early by a selection before the deciding one, endless loops, nested in each
+//! other) are compiled and run the same way.
 //!
 //! Inputs change only when the robot acts: phase `k` of an input sequence holds while `k`
 //! actions have run (the last phase holds after). A wait whose condition is false with inputs
@@ -1015,6 +1016,7 @@ macro_rules! flow_cases {
 flow_cases! {
     flow_cyclic => "flow-cyclic",
     flow_guarded_sequence => "flow-guarded-sequence",
+    flow_loop_early_exit => "flow-loop-early-exit",
     flow_loop_exit => "flow-loop-exit",
     flow_loop_joined_exits => "flow-loop-joined-exits",
     flow_nested_loops => "flow-nested-loops",
@@ -1247,7 +1249,26 @@ impl ChartGen {
         let c = self.cond();
         let t = self.trans(tail, c, 0);
         let head = self.step(Some(t), true, 0);
-        let last = self.items(head, depth + 1);
+        let mut last = self.items(head, depth + 1);
+        // Sometimes a selection leaves the loop early; its exit joins the others later.
+        let mut early = Vec::new();
+        if !endless && self.pick(3) == 0 {
+            let div = self.node("selectionDivergence", &[last], 0);
+            let (xe, xg) = if self.pick(2) == 0 { (0, 10) } else { (10, 0) };
+            let ce = Some(CONDITIONS[self.pick(CONDITIONS.len() as u64) as usize]);
+            let te = self.trans(div, ce, xe);
+            if self.pick(2) == 0 {
+                let s = self.step(Some(te), true, xe);
+                let c = self.cond();
+                early.push(self.trans(s, c, xe));
+            } else {
+                early.push(te);
+            }
+            let cg = if xg > xe { None } else { self.cond() };
+            let tg = self.trans(div, cg, xg);
+            let sg = self.step(Some(tg), true, xg);
+            last = self.items(sg, depth + 1);
+        }
         if endless {
             let c = self.cond();
             let t = self.trans(last, c, 0);
@@ -1285,7 +1306,15 @@ impl ChartGen {
             let sa = self.step(Some(a), true, xs[1]);
             let ta = self.trans(sa, None, xs[1]);
             let b = self.trans(div, exit_cond, xs[2]);
-            let conv = self.node("selectionConvergence", &[ta, b], 0);
+            let mut ins = vec![ta, b];
+            ins.extend(early);
+            let conv = self.node("selectionConvergence", &ins, 0);
+            self.step(Some(conv), true, 0)
+        } else if !early.is_empty() {
+            let e = self.trans(div, exit_cond, xs[1]);
+            let mut ins = vec![e];
+            ins.extend(early);
+            let conv = self.node("selectionConvergence", &ins, 0);
             self.step(Some(conv), true, 0)
         } else {
             let e = self.trans(div, exit_cond, xs[1]);

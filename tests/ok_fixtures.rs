@@ -66,6 +66,7 @@ cases! {
     caex3_english => "caex3-english",
     flow_cyclic => "flow-cyclic",
     flow_guarded_sequence => "flow-guarded-sequence",
+    flow_loop_early_exit => "flow-loop-early-exit",
     flow_loop_exit => "flow-loop-exit",
     flow_loop_joined_exits => "flow-loop-joined-exits",
     flow_nested_loops => "flow-nested-loops",
