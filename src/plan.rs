@@ -1813,4 +1813,49 @@ mod tests {
         ]);
         assert_eq!(p, "S1 L3*[S3 L5[S5 C(7:^|9:!)]]");
     }
+
+    #[test]
+    fn walk_early_exit() {
+        // Selection 4 leaves the loop early (branch 9); selection 7 decides it; both exits join
+        // in 12.
+        let p = planned(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "Pick", &[2]),
+            el("selectionDivergence", 4, &[3]),
+            tr(5, &[4], "good"),
+            st(6, "Good", &[5]),
+            el("selectionDivergence", 7, &[6]),
+            tr(8, &[7], "more"),
+            jmp(13, &[8], "Pick"),
+            tr(10, &[7], "NOT more"),
+            tr(9, &[4], "NOT good"),
+            st(11, "Bad", &[9]),
+            tr(14, &[11], "TRUE"),
+            el("selectionConvergence", 12, &[10, 14]),
+            st(15, "End", &[12]),
+        ]);
+        assert_eq!(p, "S1 L3[S3 C(5:S6 C(8:^|10:!)|9:S11!)] S15");
+        // Steps on both exits before they join: they run before each EXIT.
+        let p = planned(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "Pick", &[2]),
+            el("selectionDivergence", 4, &[3]),
+            tr(5, &[4], "good"),
+            st(6, "Good", &[5]),
+            el("selectionDivergence", 7, &[6]),
+            tr(8, &[7], "more"),
+            jmp(13, &[8], "Pick"),
+            tr(10, &[7], "NOT more"),
+            st(16, "Done", &[10]),
+            tr(17, &[16], "TRUE"),
+            tr(9, &[4], "NOT good"),
+            st(11, "Bad", &[9]),
+            tr(14, &[11], "TRUE"),
+            el("selectionConvergence", 12, &[17, 14]),
+            st(15, "End", &[12]),
+        ]);
+        assert_eq!(p, "S1 L3[S3 C(5:S6 C(8:^|10:S16!)|9:S11!)] S15");
+    }
 }
