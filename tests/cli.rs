@@ -596,3 +596,43 @@ fn branches_right_of_an_unconditional_one_are_never_taken() {
         "{e}"
     );
 }
+
+#[test]
+fn a_template_without_declarations_cannot_take_them() {
+    // The two-way selection needs the SKP_BRANCH variable in the .dat.
+    let dir = tempfile::tempdir().unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
+    for from in [
+        root.join("base/flow"),
+        root.join("ok/flow-selection-two-way"),
+    ] {
+        for e in std::fs::read_dir(from).unwrap() {
+            let e = e.unwrap();
+            std::fs::copy(e.path(), dir.path().join(e.file_name())).unwrap();
+        }
+    }
+    let template = std::fs::read_to_string(root.join("../templates/krl.toml"))
+        .unwrap()
+        .replace("{{declarations}}\n", "");
+    std::fs::write(dir.path().join("t.toml"), template).unwrap();
+    let o = run(
+        &[
+            "--format",
+            "short",
+            "--template",
+            "t.toml",
+            "Blackboard.aml",
+            "out",
+        ],
+        dir.path(),
+    );
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains("E603")
+            && e.contains("DECL INT SKP_BRANCH=0")
+            && e.contains("`{{declarations}}`"),
+        "{e}"
+    );
+    assert!(!dir.path().join("out.src").exists());
+}

@@ -199,6 +199,22 @@ pub fn emit(
     }
     let mut dat = String::with_capacity(template.dat.len() + 256);
     let decls = declarations(input, writer.uses_branch_var);
+    if !decls.is_empty()
+        && !template
+            .dat
+            .lines()
+            .any(|l| block(l) == Some("declarations"))
+    {
+        // The program would use names nothing declares.
+        diags.push(Diagnostic::error(
+            Code::BadTemplate,
+            format!(
+                "output template: the program needs declarations in its .dat ({}), but `dat` has no `{{{{declarations}}}}` line",
+                decls.join("; ")
+            ),
+        ));
+        return None;
+    }
     for line in template.dat.lines() {
         match block(line) {
             Some("declarations") => {
