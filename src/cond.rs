@@ -310,6 +310,16 @@ impl Lexer {
                     ),
                 });
             }
+            if tok == Tok::Int && text[start..i].parse::<i32>().is_err() {
+                return Err(SyntaxError {
+                    at: start..i,
+                    message: format!(
+                        "{} is larger than a KRL integer (at most {})",
+                        describe(text, &(start..i)),
+                        i32::MAX
+                    ),
+                });
+            }
             l.toks.push((tok, start..i));
         }
         Ok(l.toks)
@@ -684,6 +694,12 @@ mod tests {
         assert_eq!(e("3a").at, 0..2);
         assert_eq!(e("a AND )").at, 6..7);
         assert!(e("(* open").message.contains("`*)`"));
+        assert!(
+            e("n = 2147483648")
+                .message
+                .contains("larger than a KRL integer")
+        );
+        assert!(p("n = 2147483647").is_ok());
         assert!(e("Grüße").message.contains("`ü`"));
         let deep = format!("{}a{}", "(".repeat(100), ")".repeat(100));
         assert!(e(&deep).message.contains("deeper"));
