@@ -793,6 +793,29 @@ pub fn conditions(
     used
 }
 
+/// Checks the conditions' types as far as they do not depend on names (`--sfc`: no
+/// blackboard, no signals): `3 AND TRUE` is an error, `a AND 3` too, `a AND b` is not.
+pub fn check_conditions_unresolved(sfc: &Sfc, diags: &mut Diagnostics) {
+    for e in &sfc.elements {
+        let ElementKind::Transition(Some(c)) = &e.kind else {
+            continue;
+        };
+        for err in crate::cond::check(&c.expr, &|_| None) {
+            if err.unknown {
+                continue;
+            }
+            diags.push(
+                Diagnostic::error(
+                    Code::BadCondition,
+                    format!("condition `{}`: {}", c.text, err.message),
+                )
+                .at(Span::new(sfc.file, err.at.clone()))
+                .element(format!("localId {}", e.local_id)),
+            );
+        }
+    }
+}
+
 /// Prepares a skill's calls: functions, IRL commands, overloads and parameter fit. Reports
 /// problems once per skill; `None` when the skill cannot be rendered.
 fn prepare(

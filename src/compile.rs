@@ -361,6 +361,10 @@ pub fn check_sfc_pou(fs: &dyn FileSource, path: &Path, pou: Option<&str>) -> Com
         return finish(cx, out);
     };
     out.sfc = read_sfc_pou(&cx.sources, file, pou, &mut cx.diags);
+    if let Some(sfc) = &out.sfc {
+        // Without a blackboard the names stay unresolved: only what the literals tell.
+        bind::check_conditions_unresolved(sfc, &mut cx.diags);
+    }
     out.plan = out.sfc.as_ref().and_then(|s| plan::plan(s, &mut cx.diags));
     finish(cx, out)
 }

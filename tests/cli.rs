@@ -636,3 +636,37 @@ fn a_template_without_declarations_cannot_take_them() {
     );
     assert!(!dir.path().join("out.src").exists());
 }
+
+#[test]
+fn sfc_check_reports_what_the_literals_tell() {
+    let p = project();
+    let sfc = std::fs::read_to_string(p.path().join("sfc.xml")).unwrap();
+    std::fs::write(
+        p.path().join("sfc.xml"),
+        sfc.replacen(
+            "<xhtml:p>TRUE</xhtml:p>",
+            "<xhtml:p>Part_OK AND 3</xhtml:p>",
+            1,
+        ),
+    )
+    .unwrap();
+    let o = run(&["--sfc", "--format", "short", "sfc.xml"], p.path());
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    assert!(
+        e.contains("E316") && e.contains("`AND` needs a boolean"),
+        "{e}"
+    );
+    // Names alone are not resolved without a blackboard.
+    std::fs::write(
+        p.path().join("sfc.xml"),
+        sfc.replacen(
+            "<xhtml:p>TRUE</xhtml:p>",
+            "<xhtml:p>Part_OK AND NOT Unknown</xhtml:p>",
+            1,
+        ),
+    )
+    .unwrap();
+    let o = run(&["--sfc", "sfc.xml"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+}
