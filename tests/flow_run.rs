@@ -292,8 +292,10 @@ impl Player<'_> {
     /// Runs from `id` until the flow ends or reaches a simultaneous convergence (returned).
     fn run(&mut self, mut id: u64) -> Stop {
         let c = self.chart;
+        let mut moves = 0usize;
         loop {
-            if self.actions.len() >= MAX_ACTIONS {
+            moves += 1;
+            if self.actions.len() >= MAX_ACTIONS || moves > 100_000 {
                 return Stop::Running;
             }
             let n = &c.nodes[&id];
@@ -1396,4 +1398,82 @@ fn random_charts_do_what_they_mean() {
     for kw in ["LOOP", "SWITCH", "IF ", "WAIT FOR"] {
         assert!(shapes.get(kw).copied().unwrap_or(0) > 10, "{shapes:?}");
     }
+}
+
+/// Charts that may not be structured: a random chart with one jump retargeted to a random step
+/// (forward, into another branch, out of a loop, ...). The compiler must never crash: it either
+/// refuses the chart with located errors (exit status 1) or compiles it into a program that does
+/// what the chart means.
+#[test]
+fn retargeted_jumps_are_refused_or_right() {
+    let tmp = tempfile::tempdir().unwrap();
+    copy_dir(&repo().join("fixtures/base/flow"), tmp.path());
+    let (mut refused, mut compiled) = (0, 0);
+    let mut codes = BTreeMap::new();
+    for seed in 1..=300u64 {
+        let text = ChartGen::chart(seed);
+        let steps: Vec<&str> = text
+            .match_indices("name=\"S")
+            .map(|(i, _)| {
+                let rest = &text[i + 6..];
+                &rest[..rest.find('"').unwrap()]
+            })
+            .collect();
+        let jumps: Vec<usize> = text
+            .match_indices("targetName=\"")
+            .map(|(i, _)| i + 12)
+            .collect();
+        if jumps.is_empty() || steps.is_empty() {
+            continue;
+        }
+        let mut rng = Rng(seed * 7919 + 1);
+        let at = jumps[(rng.next() % jumps.len() as u64) as usize];
+        let end = at + text[at..].find('"').unwrap();
+        let target = steps[(rng.next() % steps.len() as u64) as usize];
+        let mutated = format!("{}{target}{}", &text[..at], &text[end..]);
+        let sfc = tmp.path().join("sfc.xml");
+        std::fs::write(&sfc, &mutated).unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_skillpost"))
+            .args(["--lf", "--format", "short", "Blackboard.aml", "R"])
+            .current_dir(tmp.path())
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        match out.status.code() {
+            Some(0) => {
+                compiled += 1;
+                let src = std::fs::read_to_string(tmp.path().join("R.src")).unwrap();
+                let dat = std::fs::read_to_string(tmp.path().join("R.dat")).unwrap();
+                krl_syntax::check_krl(&src, &dat, "R", true)
+                    .unwrap_or_else(|e| panic!("retargeted chart {seed}: {e}\n{src}"));
+                let chart = Chart::read(&sfc);
+                check_compiled(
+                    &format!("retargeted chart {seed}"),
+                    &src,
+                    &dat,
+                    &chart,
+                    seed,
+                    40,
+                );
+            }
+            Some(1) => {
+                refused += 1;
+                for line in stderr.lines() {
+                    if let Some(i) = line.find("error[E") {
+                        *codes.entry(line[i + 6..i + 10].to_owned()).or_insert(0) += 1;
+                    }
+                }
+                assert!(
+                    stderr.contains("sfc.xml:"),
+                    "retargeted chart {seed}: an error without a place:\n{stderr}"
+                );
+            }
+            other => panic!("retargeted chart {seed}: exit status {other:?}\n{stderr}\n{mutated}"),
+        }
+    }
+    println!("retargeted jumps: {compiled} compiled, {refused} refused: {codes:?}");
+    assert!(
+        compiled > 10 && refused > 10,
+        "{compiled} compiled, {refused} refused"
+    );
 }
