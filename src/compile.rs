@@ -12,7 +12,7 @@ use crate::emit::{EmitInput, OutputFile};
 use crate::load::FileSource;
 use crate::model::{Blackboard, Irl, Sfc};
 use crate::plan::{self, Plan};
-use crate::read::{self, blackboard::read_blackboard, irl::read_irl, sfc::read_sfc, xml};
+use crate::read::{self, blackboard::read_blackboard, irl::read_irl, sfc::read_sfc_pou, xml};
 
 /// What to compile and how.
 #[derive(Debug, Clone, Default)]
@@ -25,6 +25,9 @@ pub struct Options {
     pub template: Option<PathBuf>,
     /// Refuse references that leave this folder (the daemon's project folder).
     pub confine_to: Option<PathBuf>,
+    /// The SFC POU to use (`--pou`); else the SFC reference's `#fragment`, else the first
+    /// program with an SFC body.
+    pub pou: Option<String>,
 }
 
 /// The write-back to do after a successful compile.
@@ -242,11 +245,15 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
     };
 
     // The SFC and its plan.
+    let pou = opts
+        .pou
+        .clone()
+        .or_else(|| bb.sfc_ref.as_ref().and_then(|r| fragment(&r.value)));
     let sfc = bb
         .sfc_ref
         .clone()
         .and_then(|r| cx.load_ref(&r.value, &r.span))
-        .and_then(|f| read_sfc(&cx.sources, f, &mut cx.diags));
+        .and_then(|f| read_sfc_pou(&cx.sources, f, pou.as_deref(), &mut cx.diags));
     lap(&mut out, "read-sfc");
     let plan = sfc.as_ref().and_then(|s| plan::plan(s, &mut cx.diags));
     lap(&mut out, "plan");
@@ -279,7 +286,8 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 fn_irl.insert((r, f), i);
             }
         }
-        let bound = bind::bind(&bb, sfc, &order, &res, &irls, &fn_irl, &mut cx.diags);
+        let mut bound = bind::bind(&bb, sfc, &order, &res, &irls, &fn_irl, &mut cx.diags);
+        bound.signals = bind::conditions(&bb, sfc, res.resource, &mut cx.diags);
         out.skill_steps = bound.steps.iter().filter(|s| s.is_some()).count();
         lap(&mut out, "bind");
         if !cx.diags.has_errors()
@@ -331,14 +339,32 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
     finish(cx, out)
 }
 
+/// The `#fragment` of a `refURI` (the SFC POU it names), percent-decoded.
+fn fragment(value: &str) -> Option<String> {
+    let v = value.trim().trim_matches('"');
+    let (_, f) = v.split_once('#')?;
+    let f = read::percent_decode(f).unwrap_or_else(|| f.to_owned());
+    let f = f.trim();
+    (!f.is_empty()).then(|| f.to_owned())
+}
+
 /// Checks an SFC file on its own (`--sfc`): read and plan, no blackboard.
 pub fn check_sfc(fs: &dyn FileSource, path: &Path) -> Compilation {
+    check_sfc_pou(fs, path, None)
+}
+
+/// [`check_sfc`] of the POU named `pou`.
+pub fn check_sfc_pou(fs: &dyn FileSource, path: &Path, pou: Option<&str>) -> Compilation {
     let mut cx = Ctx::new(fs, PathBuf::new(), None);
     let mut out = Compilation::default();
     let Some(file) = cx.load_top(path, &mut out) else {
         return finish(cx, out);
     };
-    out.sfc = read_sfc(&cx.sources, file, &mut cx.diags);
+    out.sfc = read_sfc_pou(&cx.sources, file, pou, &mut cx.diags);
+    if let Some(sfc) = &out.sfc {
+        // Without a blackboard the names stay unresolved: only what the literals tell.
+        bind::check_conditions_unresolved(sfc, &mut cx.diags);
+    }
     out.plan = out.sfc.as_ref().and_then(|s| plan::plan(s, &mut cx.diags));
     finish(cx, out)
 }
