@@ -39,6 +39,8 @@ pub struct WriteBack {
     pub bom: bool,
     /// The refURI `Attribute` element's range in the text after the BOM.
     pub attribute: Range<usize>,
+    /// Where the value goes in the text after the BOM, as the reader found it.
+    pub site: crate::write::SpliceSite,
     /// The value to write: the `.src` path relative to the blackboard, with `/`.
     pub value: String,
 }
@@ -329,6 +331,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             expected,
             bom: src.bom,
             attribute: wb.attribute.range.clone(),
+            site: wb.site.clone(),
             value: format!("{}.src", opts.program),
         });
     }
@@ -390,6 +393,28 @@ pub struct Applied {
     pub write_back: Option<crate::write::WriteBackOutcome>,
 }
 
+/// How often, and how long apart at first (doubling), the write-back is tried again while
+/// another program has the blackboard open: about 1.3 s in all.
+const IN_USE_TRIES: u32 = 6;
+const IN_USE_FIRST_WAIT: std::time::Duration = std::time::Duration::from_millis(40);
+
+/// The write-back, tried again a few times while another program has the blackboard open (an
+/// editor saving it holds it open for milliseconds); after that it is reported as skipped.
+fn write_back_retrying(wb: &WriteBack) -> std::io::Result<crate::write::WriteBackOutcome> {
+    let mut wait = IN_USE_FIRST_WAIT;
+    let mut tries = 1;
+    loop {
+        let outcome =
+            crate::write::write_back(&wb.blackboard, &wb.expected, wb.bom, &wb.site, &wb.value)?;
+        if outcome != crate::write::WriteBackOutcome::SkippedInUse || tries >= IN_USE_TRIES {
+            return Ok(outcome);
+        }
+        std::thread::sleep(wait);
+        wait *= 2;
+        tries += 1;
+    }
+}
+
 /// Writes the outputs (atomically, only when their bytes change), then the write-back.
 pub fn apply(c: &Compilation) -> std::io::Result<Applied> {
     // The `.src` and `.dat` only work as a pair: both are replaced or neither is.
@@ -404,18 +429,9 @@ pub fn apply(c: &Compilation) -> std::io::Result<Applied> {
         .map(|(o, (p, _))| (p.clone(), o == crate::write::WriteOutcome::Written))
         .collect();
     let write_back = match &c.write_back {
-        Some(wb) => Some(
-            crate::write::write_back(
-                &wb.blackboard,
-                &wb.expected,
-                wb.bom,
-                wb.attribute.clone(),
-                &wb.value,
-            )
-            .map_err(|e| {
-                std::io::Error::new(e.kind(), format!("{}: {e}", wb.blackboard.display()))
-            })?,
-        ),
+        Some(wb) => Some(write_back_retrying(wb).map_err(|e| {
+            std::io::Error::new(e.kind(), format!("{}: {e}", wb.blackboard.display()))
+        })?),
         None => None,
     };
     Ok(Applied {

@@ -238,14 +238,7 @@ impl Job {
         let mut again = false;
         if let (Some(wb), Some(outcome)) = (&c.write_back, &applied.write_back) {
             use crate::write::WriteBackOutcome as W;
-            let (written, reason) = match outcome {
-                W::Written => (true, None),
-                W::AlreadyRight => (false, Some("already right")),
-                W::SkippedChangedOnDisk => (
-                    false,
-                    Some("the blackboard changed on disk since it was read; compiling again"),
-                ),
-            };
+            let (written, reason) = (*outcome == W::Written, outcome.reason());
             if *outcome == W::Written {
                 // Our own write: its bytes are the new known state, so its event starts nothing.
                 inputs.insert(wb.blackboard.clone(), hash_file(&wb.blackboard));
