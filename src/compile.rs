@@ -103,6 +103,8 @@ struct Ctx<'a> {
     diags: Diagnostics,
     base: PathBuf,
     confine: Option<PathBuf>,
+    /// Every file a `refURI` named, with the reference (for [`check_outputs`]).
+    refs: Vec<(PathBuf, Span)>,
 }
 
 impl<'a> Ctx<'a> {
@@ -116,6 +118,7 @@ impl<'a> Ctx<'a> {
             diags: Diagnostics::default(),
             base,
             confine,
+            refs: Vec::new(),
         }
     }
 
@@ -174,6 +177,7 @@ impl<'a> Ctx<'a> {
             );
             return None;
         }
+        self.refs.push((path.clone(), at.clone()));
         let display = path.display().to_string();
         xml::load(
             &self.fs,
@@ -184,6 +188,65 @@ impl<'a> Ctx<'a> {
             &mut self.diags,
         )
     }
+}
+
+/// `E605` for every output that is also an input of this compile: a `refURI`'s file (located
+/// at the reference), the blackboard or the template. Paths are compared as written (after
+/// `.`/`..` are resolved) and, where the file system can tell, with symbolic links resolved, so
+/// `./X.src` and a link to `X.src` count. (The blackboard is the write-back's target, which is
+/// not an output; an *output* named like it is an error.)
+fn check_outputs(
+    cx: &mut Ctx,
+    outputs: &[(PathBuf, crate::emit::OutputFile)],
+    blackboard: &Path,
+    template: Option<&Path>,
+) {
+    if outputs.is_empty() {
+        return;
+    }
+    let mut inputs: Vec<(PathBuf, Option<Span>)> = vec![(blackboard.to_owned(), None::<Span>)];
+    inputs.extend(template.map(|t| (t.to_owned(), None)));
+    inputs.extend(cx.refs.iter().map(|(p, s)| (p.clone(), Some(s.clone()))));
+    let mut reported: Vec<(PathBuf, PathBuf)> = Vec::new();
+    for (out, _) in outputs {
+        let out_real = real_or_parent(&cx.fs, out);
+        for (input, at) in &inputs {
+            let same = read::normalize(&absolute(out)) == read::normalize(&absolute(input))
+                || (out_real.is_some() && out_real == real_or_parent(&cx.fs, input));
+            if !same || reported.iter().any(|(o, i)| o == out && i == input) {
+                continue;
+            }
+            reported.push((out.clone(), input.clone()));
+            let name = out.file_name().unwrap_or_default().to_string_lossy();
+            let d = Diagnostic::error(
+                Code::OutputIsInput,
+                format!(
+                    "the output `{name}` is also an input of this compile (`{}`); writing it would overwrite that input: rename the input or choose another program name",
+                    input.display()
+                ),
+            );
+            cx.diags.push(match at {
+                Some(span) => d.at(span.clone()),
+                None => match cx.sources.find(input) {
+                    Some(file) => d.at(Span::new(file, 0..0)),
+                    None => d.path(input),
+                },
+            });
+        }
+    }
+}
+
+/// The real path of a file, or of its folder joined with its name when the file does not exist
+/// (an output about to be created); `None` where the file system cannot tell.
+fn real_or_parent(fs: &dyn FileSource, p: &Path) -> Option<PathBuf> {
+    fs.real_path(p).or_else(|| {
+        let name = p.file_name()?;
+        let parent = match p.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        Some(fs.real_path(parent)?.join(name))
+    })
 }
 
 fn absolute(p: &Path) -> PathBuf {
@@ -316,6 +379,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             lap(&mut out, "emit");
         }
     }
+    check_outputs(&mut cx, &out.outputs, blackboard, opts.template.as_deref());
 
     if !cx.diags.has_errors()
         && let Some(wb) = &bb.write_back

@@ -368,6 +368,9 @@ codes! {
     /// An output or the blackboard cannot be written (disk full, permissions); the daemon
     /// reports it in `compile-failed`, the command line exits with status 2.
     CannotWrite = "E604",
+    /// An output (`<program>.src`/`.dat`) is also a file this compile reads (an IRL file, the
+    /// SFC, the template, the blackboard): writing it would overwrite an input.
+    OutputIsInput = "E605",
 
     /// The hierarchy is not named `Blackboard` (the only one was used).
     HierarchyNotNamed = "W201",
