@@ -45,6 +45,26 @@ pub struct WriteBack {
     pub value: String,
 }
 
+impl WriteBack {
+    /// The blackboard's bytes after this write-back (BOM included): what [`apply`] writes when
+    /// it writes. `None` when the value is already right or cannot be spliced.
+    pub fn new_bytes(&self) -> Option<Vec<u8>> {
+        let body = if self.bom {
+            self.expected.get(3..)?
+        } else {
+            &self.expected
+        };
+        let text = std::str::from_utf8(body).ok()?;
+        let new = crate::write::splice_at(text, &self.site, &self.value).ok()??;
+        let mut out = Vec::with_capacity(new.len() + 3);
+        if self.bom {
+            out.extend_from_slice(b"\xEF\xBB\xBF");
+        }
+        out.extend_from_slice(new.as_bytes());
+        Some(out)
+    }
+}
+
 /// Everything a compile produced.
 #[derive(Debug, Default)]
 pub struct Compilation {

@@ -49,9 +49,19 @@ pub struct Watch {
 impl Watch {
     /// Starts the daemon in `cwd` (events and log go there) and waits for `started`.
     pub fn start(cwd: &Path, settle_ms: u64, args: &[&str]) -> Watch {
+        Self::start_bin(
+            Path::new(env!("CARGO_BIN_EXE_skillpost")),
+            cwd,
+            settle_ms,
+            args,
+        )
+    }
+
+    /// [`Watch::start`] with another binary (an older build, to show a test catches its bug).
+    pub fn start_bin(bin: &Path, cwd: &Path, settle_ms: u64, args: &[&str]) -> Watch {
         let events = cwd.join("events.jsonl");
         let stderr = cwd.join("stderr.log");
-        let child = Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        let child = Command::new(bin)
             .arg("watch")
             .arg("--events")
             .arg(&events)
