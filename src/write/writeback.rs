@@ -70,6 +70,10 @@
 //! build; the ignored test `window` measures it). The race test never hit it (see
 //! docs/RELIABILITY.md).
 //!
+//! A crash (`kill -9`, power loss) between the exchange and the swap back of a raced save
+//! leaves that save under the temporary name, which the daemon removes as stale when it starts:
+//! a window of microseconds that needs a crash and a save at once.
+//!
 //! # `SIGIO`
 //!
 //! A lease break sends the holder `SIGIO`, whose default action terminates the process. Before
@@ -118,9 +122,9 @@ impl WriteBackOutcome {
             WriteBackOutcome::SkippedChangedOnDisk => {
                 Some("the blackboard changed on disk since it was read; compiling again")
             }
-            WriteBackOutcome::SkippedInUse => {
-                Some("another program has the blackboard open; trying again later")
-            }
+            WriteBackOutcome::SkippedInUse => Some(
+                "another program has the blackboard open; not written (the next compile tries again)",
+            ),
             WriteBackOutcome::SkippedHardLinked => Some(
                 "the blackboard has several names (hard links); writing it would split them, so the value is not written",
             ),
