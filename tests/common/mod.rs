@@ -70,6 +70,9 @@ impl Watch {
             .args(args)
             .current_dir(cwd)
             .env("RUST_LOG", "info")
+            // The daemon's folder locks stay in the test's workspace.
+            .env_remove("RUNTIME_DIRECTORY")
+            .env("XDG_RUNTIME_DIR", cwd)
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(fs::File::create(&stderr).unwrap())
