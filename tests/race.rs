@@ -8,8 +8,9 @@
 //! compiled** when the daemon goes quiet with the save's wrong value in the file (its own-write
 //! bookkeeping took the save for its own write). Both must be zero.
 //!
-//! Two modes: rename saves (write a temporary file, rename it over the blackboard) and in-place
-//! saves (open with truncation, write). `SKILLPOST_RACE_SAVES` saves per mode (default 150);
+//! Three modes: rename saves (write a temporary file, rename it over the blackboard), in-place
+//! saves (open with truncation, write), and a writer that opens the file as soon as the staged
+//! file appears and truncates and writes through that descriptor 0–2 ms later. `SKILLPOST_RACE_SAVES` saves per mode (default 150);
 //! `SKILLPOST_RACE_BIN` runs another binary (an older build, to show the test catches its bug).
 
 mod common;
@@ -26,10 +27,13 @@ use notify::{EventKind, RecursiveMode, Watcher as _};
 const QUIET: Duration = Duration::from_secs(4);
 const RIGHT: &str = "<Value>Blackboard.src</Value>";
 
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 enum Mode {
     Rename,
     InPlace,
+    /// The writer opens the file at once when the staged file appears, and truncates and writes
+    /// 0–2 ms later: it has the file open while the write-back starts.
+    OpenEarly,
 }
 
 fn saves() -> usize {
@@ -72,7 +76,7 @@ fn save(p: &Path, text: &str, mode: Mode) {
             fs::write(&tmp, text).unwrap();
             fs::rename(&tmp, p).unwrap();
         }
-        Mode::InPlace => {
+        Mode::InPlace | Mode::OpenEarly => {
             let mut f = fs::File::options()
                 .write(true)
                 .truncate(true)
@@ -145,11 +149,15 @@ fn race(mode: Mode) -> Figures {
     // Save 1 starts the chain.
     save(&bb, &version(&base, 1), mode);
     let mut latest = 1;
+    let mut early: Option<fs::File> = None;
     while latest < n {
         while rx.try_recv().is_ok() {}
         match rx.recv_timeout(QUIET) {
             Ok(at) => {
                 triggers += 1;
+                if mode == Mode::OpenEarly {
+                    early = fs::File::options().write(true).open(&bb).ok();
+                }
                 let wait = Duration::from_micros(rng.next() % 2001);
                 while at.elapsed() < wait {
                     std::hint::spin_loop();
@@ -175,7 +183,14 @@ fn race(mode: Mode) -> Figures {
             _ => {}
         }
         latest += 1;
-        save(&bb, &version(&base, latest), mode);
+        match early.take() {
+            Some(mut f) => {
+                // The file opened before: truncate and write through that descriptor.
+                f.set_len(0).unwrap();
+                f.write_all(version(&base, latest).as_bytes()).unwrap();
+            }
+            None => save(&bb, &version(&base, latest), mode),
+        }
     }
     // The last save: compiled and written back.
     let last_save = Instant::now();
@@ -240,4 +255,9 @@ fn rename_saves_racing_the_write_back_are_never_lost() {
 #[test]
 fn in_place_saves_racing_the_write_back_are_never_lost() {
     check(race(Mode::InPlace), Mode::InPlace);
+}
+
+#[test]
+fn saves_through_a_descriptor_opened_early_are_never_lost() {
+    check(race(Mode::OpenEarly), Mode::OpenEarly);
 }

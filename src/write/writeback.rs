@@ -13,17 +13,19 @@
 //!
 //! # The design
 //!
-//! 1. Open the blackboard read-only and take a Linux **write lease** on it (`F_SETLEASE
-//!    F_WRLCK`, [`fdlease`]). The kernel grants it only when no other descriptor has the file
-//!    open: a program that has it open (an editor about to write into it) makes the write-back
-//!    *skip* ([`WriteBackOutcome::SkippedInUse`]); the daemon tries again later. While we hold
-//!    it, any other `open` or `truncate` of the file *breaks* it: the opener is blocked in
-//!    `open` until we release the lease, and `F_GETLEASE` shows the break, so no write can reach
-//!    the file unseen.
-//! 2. Read the bytes **through that descriptor** and compare them with what the compile read;
+//! 1. Stage the new bytes in `.skillpost-<random>.tmp` in the same folder (mode and owner of
+//!    the blackboard), `fsync`: before the blackboard is touched, so the lease below is held
+//!    for microseconds, never for an `fsync`.
+//! 2. Open the blackboard read-only (the inode the staged file took its mode from, else skip)
+//!    and take a Linux **write lease** on it (`F_SETLEASE F_WRLCK`, [`fdlease`]). The kernel
+//!    grants it only when no other descriptor has the file open: a program that has it open
+//!    (an editor about to write into it) makes the write-back *skip*
+//!    ([`WriteBackOutcome::SkippedInUse`]; `compile::apply` tries a few times first). While we
+//!    hold it, any other `open` or `truncate` of the file *breaks* it: the opener is blocked in
+//!    `open` until we release the lease, and `F_GETLEASE` shows the break, so no write can
+//!    reach the file unseen.
+//! 3. Read the bytes **through that descriptor** and compare them with what the compile read;
 //!    different: skip ([`WriteBackOutcome::SkippedChangedOnDisk`]).
-//! 3. Stage the new bytes in `.skillpost-<random>.tmp` in the same folder (mode and owner of
-//!    the blackboard), `fsync`.
 //! 4. Lease broken meanwhile: skip. Otherwise **exchange** the staged file and the blackboard
 //!    (`renameat2(RENAME_EXCHANGE)`): the name now holds the new file, the temporary name holds
 //!    whatever held the name an instant before, which is still a whole file.
@@ -31,7 +33,7 @@
 //!    would have put another one there); the lease released and taken again at once (taking it
 //!    fails if anyone opened the old file, for instance a writer that was blocked in `open`
 //!    by the lease); and still the expected bytes, read through our descriptor.
-//! 6. All good: remove the old file, `fsync` the folder, close (which drops the lease).
+//! 6. All good: remove the old file, close (which drops the lease), `fsync` the folder.
 //!    Otherwise **swap back**: exchange again, so the name holds what we took away. If what
 //!    comes back is not our new file, a writer replaced it with a newer save meanwhile: that
 //!    one is put at the name (exchange once more), and so on, until what comes back is the file
@@ -187,9 +189,9 @@ impl Default for Opts {
 /// Where [`write_back_with`] calls its hook (tests change the file there).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Point<'a> {
-    /// The file is open, leased (if possible) and read; nothing staged yet.
+    /// The new file is staged and synced, the blackboard open, leased (if possible) and read.
     Read,
-    /// The new file is staged and synced, right before the exchange.
+    /// Right before the last lease check and the exchange.
     BeforeExchange,
     /// Right after the exchange; the argument is the temporary name, now the old file.
     AfterExchange(&'a Path),
@@ -248,6 +250,31 @@ pub(crate) fn write_back_with(
 
     let target = resolve_link(path)?;
     let dir = parent_dir(&target);
+    let before = match fs::symlink_metadata(&target) {
+        Ok(m) => m,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => {
+            return Ok(WriteBackOutcome::SkippedChangedOnDisk);
+        }
+        Err(e) => return Err(e),
+    };
+    if before.file_type().is_symlink() {
+        // A link swapped in since it was resolved.
+        return Ok(WriteBackOutcome::SkippedChangedOnDisk);
+    }
+    if !before.is_file() {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!("{} is not a regular file", target.display()),
+        ));
+    }
+    if before.nlink() > 1 {
+        return Ok(WriteBackOutcome::SkippedHardLinked);
+    }
+    // Staged (written and synced) before the lease, so the lease is held for microseconds, not
+    // for an `fsync`: an editor opening the file meanwhile waits that long at most.
+    let tmp = stage_in(&dir, &new_bytes, Some(&before))?;
+    let new_id = id(&tmp.as_file().metadata()?);
+    let old_id = id(&before);
     // Never through a link swapped in meanwhile: `target` is the resolved file.
     let file = match fs::File::options()
         .read(true)
@@ -264,11 +291,9 @@ pub(crate) fn write_back_with(
         Err(e) => return Err(e),
     };
     let meta = file.metadata()?;
-    if !meta.is_file() {
-        return Err(io::Error::new(
-            io::ErrorKind::InvalidInput,
-            format!("{} is not a regular file", target.display()),
-        ));
+    if id(&meta) != old_id {
+        // Replaced since the staged file took its mode and owner: a save.
+        return Ok(WriteBackOutcome::SkippedChangedOnDisk);
     }
     let leased = if opts.lease {
         match lease::take(&file) {
@@ -288,9 +313,6 @@ pub(crate) fn write_back_with(
         return Ok(WriteBackOutcome::SkippedHardLinked);
     }
     hook(Point::Read);
-    let tmp = stage_in(&dir, &new_bytes, Some(&meta))?;
-    let new_id = id(&tmp.as_file().metadata()?);
-    let old_id = id(&meta);
     hook(Point::BeforeExchange);
     if leased && !lease::intact(&file) {
         return Ok(WriteBackOutcome::SkippedInUse);
@@ -333,16 +355,18 @@ pub(crate) fn write_back_with(
     ok = ok && holds(&file, expected)?;
     hook(Point::Checked);
     if ok {
-        // `tmp` names the old file: dropping it removes it.
+        // `tmp` names the old file: dropping it removes it. Then the lease goes (closing the
+        // file), then the folder is synced.
         drop(tmp);
-        sync_dir(&dir);
         drop(file);
+        sync_dir(&dir);
         return Ok(WriteBackOutcome::Written);
     }
     swap_back(&tmp, &target, new_id, out_id, hook)?;
     drop(tmp);
-    sync_dir(&dir);
+    // Only now: a writer held in `open` by the lease gets the file that is at the name again.
     drop(file);
+    sync_dir(&dir);
     Ok(WriteBackOutcome::SkippedChangedOnDisk)
 }
 
