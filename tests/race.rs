@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 use notify::{EventKind, RecursiveMode, Watcher as _};
 
 /// How long the daemon may stay quiet before a save counts as not compiled.
-const QUIET: Duration = Duration::from_secs(4);
+const QUIET: Duration = Duration::from_secs(8);
 const RIGHT: &str = "<Value>Blackboard.src</Value>";
 
 #[derive(Clone, Copy, Debug, PartialEq)]
