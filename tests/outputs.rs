@@ -185,3 +185,88 @@ fn daemon_refuses_an_input_named_like_an_output() {
     assert_eq!(fs::read(proj.join("Cell.src")).unwrap(), irl);
     assert!(!proj.join("Cell.dat").exists());
 }
+
+// ---- the write-back's refusals, through the daemon -------------------------------------------
+
+#[test]
+fn daemon_does_not_split_a_hard_linked_blackboard() {
+    let t = tempfile::tempdir().unwrap();
+    let proj = t.path().join("proj");
+    fs::create_dir(&proj).unwrap();
+    common::copy_sample(&proj);
+    let other = t.path().join("second-name.aml");
+    fs::hard_link(proj.join("Blackboard.aml"), &other).unwrap();
+    let before = fs::read(&other).unwrap();
+    let mut w = common::Watch::start(t.path(), 50, &[proj.to_str().unwrap()]);
+    let evs = w.wait_for("write-back", Duration::from_secs(20), |e| {
+        e["event"] == "write-back"
+    });
+    let wb = evs.iter().find(|e| e["event"] == "write-back").unwrap();
+    assert_eq!(wb["written"], false, "{wb}");
+    assert!(
+        wb["reason"].as_str().unwrap().contains("hard links"),
+        "{wb}"
+    );
+    assert_eq!(wb["level"], "warn", "{wb}");
+    // Not retried in a loop, and both names still one file with the old bytes.
+    std::thread::sleep(Duration::from_millis(800));
+    let starts = w
+        .events()
+        .iter()
+        .filter(|e| e["event"] == "compile-started")
+        .count();
+    assert_eq!(starts, 1, "{:?}", w.events());
+    use std::os::unix::fs::MetadataExt as _;
+    let (a, b) = (
+        fs::metadata(proj.join("Blackboard.aml")).unwrap(),
+        fs::metadata(&other).unwrap(),
+    );
+    assert_eq!(a.ino(), b.ino());
+    assert_eq!(fs::read(&other).unwrap(), before);
+}
+
+#[test]
+fn daemon_waits_for_a_program_holding_the_blackboard_open() {
+    let t = tempfile::tempdir().unwrap();
+    let proj = t.path().join("proj");
+    fs::create_dir(&proj).unwrap();
+    common::copy_sample(&proj);
+    let bb = proj.join("Blackboard.aml");
+    // Another program has the blackboard open (for writing) during the startup compile.
+    let held = fs::File::options().append(true).open(&bb).unwrap();
+    let mut w = common::Watch::start(t.path(), 50, &[proj.to_str().unwrap()]);
+    let evs = w.wait_for("write-back", Duration::from_secs(20), |e| {
+        e["event"] == "write-back"
+    });
+    let wb = evs.iter().find(|e| e["event"] == "write-back").unwrap();
+    if wb["written"] == true {
+        // No lease here (it would have been refused): the fallback wrote.
+        common::skip("no file lease on this file system: the write-back cannot see open files");
+        return;
+    }
+    assert!(
+        wb["reason"]
+            .as_str()
+            .unwrap()
+            .contains("has the blackboard open"),
+        "{wb}"
+    );
+    assert!(
+        fs::read_to_string(&bb)
+            .unwrap()
+            .contains("<Value>none</Value>")
+    );
+    // The program saves and closes: the save compiles and the value is written.
+    let text = fs::read_to_string(&bb)
+        .unwrap()
+        .replacen("?>", "?><!-- saved -->", 1);
+    drop(held);
+    fs::write(&bb, text).unwrap();
+    w.wait_for(
+        "the write-back after the save",
+        Duration::from_secs(20),
+        |e| e["event"] == "write-back" && e["written"] == true,
+    );
+    let after = fs::read_to_string(&bb).unwrap();
+    assert!(after.contains("<!-- saved -->") && after.contains("<Value>Blackboard.src</Value>"));
+}
