@@ -3,6 +3,7 @@
 //! ```text
 //! cargo run --release --example generate -- --steps 100000 --out /tmp/p100k
 //! cargo run --release --example generate -- --steps 100000 --branch-every 50 --branch-width 3 --out /tmp/p100k-b
+//! cargo run --release --example generate -- --steps 100000 --select-every 50 --looped --out /tmp/p100k-flow
 //! ./target/release/skillpost /tmp/p100k/Blackboard.aml out
 //! ```
 //!
@@ -30,6 +31,12 @@ struct Args {
     /// Branches per simultaneous divergence
     #[arg(long, value_name = "W", default_value_t = 3, value_parser = clap::value_parser!(u32).range(2..))]
     branch_width: u32,
+    /// Every K main-line steps a two-way selection (`Part_OK` / `TRUE`); 0 = none
+    #[arg(long, value_name = "K", default_value_t = 0)]
+    select_every: usize,
+    /// Make the main line a loop closed by a jump back (left when `Magazine_Empty`)
+    #[arg(long)]
+    looped: bool,
     /// Output folder (created if needed; existing files are overwritten)
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
@@ -41,6 +48,8 @@ fn main() -> ExitCode {
         steps: args.steps,
         branch_every: args.branch_every,
         branch_width: args.branch_width as usize,
+        select_every: args.select_every,
+        looped: args.looped,
     };
     let t = std::time::Instant::now();
     match generator::write_project(&args.out, &spec) {

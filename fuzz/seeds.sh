@@ -1,13 +1,13 @@
 #!/usr/bin/env bash
 # Rebuilds the committed seed corpus (fuzz/corpus/<target>/seed-*) from fixtures/.
-# Regression seeds (seed-regress-*) are kept. Run from anywhere.
+# Regression seeds (seed-regression-*) are kept. Run from anywhere.
 set -euo pipefail
 cd "$(dirname "$0")"
 F=../fixtures
 C=corpus
-for t in blackboard sfc irl template value splice compile; do
+for t in blackboard sfc irl template value splice compile cond; do
   mkdir -p "$C/$t"
-  find "$C/$t" -name 'seed-*' ! -name 'seed-regress-*' -delete
+  find "$C/$t" -name 'seed-*' ! -name 'seed-regression-*' -delete
 done
 
 # Project files of the ok fixtures: case name, blackboard, SFC, IRL.
@@ -22,6 +22,13 @@ ok=(
   "umlauts|Zelle_Übergabe.aml|Ablauf.xml|greifer.irl"
   "writeback-insert-value|Drilling.aml|drill.xml|kr60.irl"
 )
+# The flow fixtures: the shared base's blackboard and IRL file, each case's SFC.
+for d in "$F"/ok/flow-*/; do
+  case=$(basename "$d")
+  cp "$d/sfc.xml" "$C/sfc/seed-ok-$case"
+  { cat "$F/base/flow/Blackboard.aml"; printf '\0'; cat "$d/sfc.xml"; printf '\0'; cat "$F/base/flow/kr15-2.irl"; } \
+    >"$C/compile/seed-ok-$case"
+done
 for line in "${ok[@]}"; do
   IFS='|' read -r case bb sfc irl <<<"$line"
   d="$F/ok/$case"
@@ -39,7 +46,8 @@ for e in e101_blackboard_not_utf8 e102_blackboard e102_blackboard_dtd e201_two_u
   cp "$F/err/$e/Blackboard.aml" "$C/blackboard/seed-err-$e"
 done
 for e in e101_sfc_not_utf8 e102_sfc e302_duplicate_local_id e306_n_to_m e309_cycle \
-         e310_divergence_not_converged e313_selection_branches e315_unclosed_list e503_quote; do
+         e310_divergence_not_converged e310_selection_branch_without_transition e315_unclosed_list \
+         e503_quote e316_condition_syntax e317_jump_target_names_several_steps; do
   cp "$F/err/$e/sfc.xml" "$C/sfc/seed-err-$e"
 done
 for e in e102_irl e401_empty_definition e402_unknown_command e602_irl_call \
@@ -95,7 +103,29 @@ spl '\x03ä\r\n\0<Attribute Name="refURI"><Value>\r\n</Value><Constraint Name="c
 printf '\x00output.src\0' | cat - "$F/ok/reference-sample/Blackboard.aml" >"$C/splice/seed-ok-reference-sample"
 printf '\x2eoutput.src\0' | cat - "$F/ok/writeback-insert-value/Drilling.aml" >"$C/splice/seed-ok-writeback-insert-value"
 
+# Conditions: the flow fixtures' conditions, and hand-written ones (operators, precedence,
+# comments, errors).
+n=0
+cnd() { n=$((n + 1)); printf '%b' "$1" >"$C/cond/seed-$n"; }
+cnd 'TRUE'
+cnd 'Part_OK'
+cnd 'NOT Magazine_Empty AND (Release OR Door_Closed)'
+cnd 'Gripper_Closed = TRUE'
+cnd 'Variant = 2 OR Variant >= 12'
+cnd 'a XOR b & NOT (c <> d) OR -n < -3'
+cnd 'x >= 1.5 (* a comment *) AND y <= 2'
+cnd 'n = 3 AND m < 2 = FALSE'
+cnd '((((a))))'
+cnd 'a AND'
+cnd 'Robot.Ready'
+cnd '%IX0.1'
+cnd 'a := 1'
+cnd '(* open'
+cnd 'Gr\xc3\xb6\xc3\x9fe'
+cnd '3a OR 16#FF'
+
 du -sh "$C"
-for t in blackboard sfc irl template value splice compile; do
+for t in blackboard sfc irl template value splice compile cond; do
   echo "$t: $(find "$C/$t" -name 'seed-*' | wc -l) seeds"
 done
+

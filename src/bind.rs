@@ -31,7 +31,7 @@ pub struct StepOrder {
     pub steps: Vec<usize>,
     /// The start and end steps, which may name no skill; `None` when unknown (then any step may
     /// name no skill without an error, since the flow errors are reported already).
-    pub start_end: Option<(usize, usize)>,
+    pub start_end: Option<(usize, Option<usize>)>,
 }
 
 impl StepOrder {
@@ -75,7 +75,7 @@ pub fn resolve(
         let Some(skill_name) = &st.skill else {
             if order
                 .start_end
-                .is_some_and(|(start, end)| i != start && i != end)
+                .is_some_and(|(start, end)| i != start && Some(i) != end)
             {
                 diags.push(
                     Diagnostic::error(
@@ -259,6 +259,10 @@ pub struct Bound {
     pub steps: Vec<Option<BoundStep>>,
     /// `(irl, definition)` indexes into the IRL list, in order of first use.
     pub definitions: Vec<(usize, usize)>,
+    /// The program's resource, whose signals the conditions read.
+    pub resource: Option<usize>,
+    /// The signals the conditions use (indexes into the resource's), in first-use order.
+    pub signals: Vec<usize>,
 }
 
 #[derive(Debug)]
@@ -301,6 +305,8 @@ pub fn bind(
     let mut bound = Bound {
         steps: (0..sfc.elements.len()).map(|_| None).collect(),
         definitions: Vec::new(),
+        resource: r.resource,
+        signals: Vec::new(),
     };
     let mut def_keys: Vec<&str> = Vec::new();
     let mut values: Vec<Cow<str>> = Vec::new();
@@ -711,6 +717,103 @@ pub fn is_safe_token(s: &str) -> bool {
             && !inner.chars().any(|c| c.is_ascii_control());
     }
     false
+}
+
+/// Resolves the names in every transition condition against the signals of the program's
+/// resource and checks the types (SPEC.md 3.1). Returns the signals used, in first-use order.
+pub fn conditions(
+    bb: &Blackboard,
+    sfc: &Sfc,
+    resource: Option<usize>,
+    diags: &mut Diagnostics,
+) -> Vec<usize> {
+    use crate::cond::Ty;
+    let mut used = Vec::new();
+    let res = resource.map(|r| &bb.resources[r]);
+    for e in &sfc.elements {
+        let ElementKind::Transition(Some(c)) = &e.kind else {
+            continue;
+        };
+        let lookup = |n: &str| {
+            let r = res?;
+            let key = crate::names::key(n);
+            let s = &r.signals[r.signal(&key)?];
+            Some(if s.is_integer() { Ty::Number } else { Ty::Bool })
+        };
+        for err in crate::cond::check(&c.expr, &lookup) {
+            let at = Span::new(sfc.file, err.at.clone());
+            let label = format!("localId {}", e.local_id);
+            if !err.unknown {
+                diags.push(
+                    Diagnostic::error(
+                        Code::BadCondition,
+                        format!("condition `{}`: {}", c.text, err.message),
+                    )
+                    .at(at)
+                    .element(label),
+                );
+                continue;
+            }
+            let name = &err.message;
+            let d = match res {
+                // Present but malformed: reported by the reader.
+                Some(r)
+                    if r.broken_signals
+                        .contains(&Arc::from(crate::names::key(name))) =>
+                {
+                    continue;
+                }
+                Some(r) => Diagnostic::error(
+                    Code::UnknownSignal,
+                    format!(
+                        "condition names `{name}`, which is not a signal of resource `{}` (it has {}); declare it there: an ExternalInterface named `{name}` with RefBaseClassPath ending in `SignalInterface`, directly under the resource or under its `Signals` element, with `Number` (or `Address`)",
+                        r.name.text,
+                        known(r.signals.iter().map(|s| s.name.text.as_ref()))
+                    ),
+                ),
+                None => Diagnostic::error(
+                    Code::UnknownSignal,
+                    format!(
+                        "condition names `{name}`, but no step names the program's resource, whose signals conditions read"
+                    ),
+                ),
+            };
+            diags.push(d.at(at).element(label));
+        }
+        if let Some(r) = res {
+            for (n, _) in c.expr.names() {
+                if let Some(si) = r.signal(&crate::names::key(n))
+                    && !used.contains(&si)
+                {
+                    used.push(si);
+                }
+            }
+        }
+    }
+    used
+}
+
+/// Checks the conditions' types as far as they do not depend on names (`--sfc`: no
+/// blackboard, no signals): `3 AND TRUE` is an error, `a AND 3` too, `a AND b` is not.
+pub fn check_conditions_unresolved(sfc: &Sfc, diags: &mut Diagnostics) {
+    for e in &sfc.elements {
+        let ElementKind::Transition(Some(c)) = &e.kind else {
+            continue;
+        };
+        for err in crate::cond::check(&c.expr, &|_| None) {
+            if err.unknown {
+                continue;
+            }
+            diags.push(
+                Diagnostic::error(
+                    Code::BadCondition,
+                    format!("condition `{}`: {}", c.text, err.message),
+                )
+                .at(Span::new(sfc.file, err.at.clone()))
+                .element(format!("localId {}", e.local_id)),
+            );
+        }
+    }
 }
 
 /// Prepares a skill's calls: functions, IRL commands, overloads and parameter fit. Reports

@@ -57,6 +57,10 @@ struct Args {
     /// Use this output template instead of the built-in one (see templates/krl.toml)
     #[arg(long, value_name = "FILE")]
     template: Option<PathBuf>,
+    /// The SFC POU to use (default: the SFC reference's #fragment, else the first program with
+    /// an SFC body)
+    #[arg(long, value_name = "NAME")]
+    pou: Option<String>,
     /// Refuse input files larger than MB MiB (default 256)
     #[arg(long, value_name = "MB", value_parser = clap::value_parser!(u64).range(1..=4096))]
     max_file_size: Option<u64>,
@@ -157,9 +161,10 @@ fn run(a: Args) -> u8 {
         let _ = write!(stdout, "{}", crate::print::info(model.as_ref()));
         let list = diags.into_vec();
         report(&list, &sources, a.format, warnings);
+        // `--info` reports what it can: only a blackboard it cannot read at all fails it.
         return if file.is_none() && sources.find(bb).is_none() {
             2
-        } else if list.iter().any(|d| d.severity == diag::Severity::Error) {
+        } else if model.is_none() {
             1
         } else {
             0
@@ -170,7 +175,7 @@ fn run(a: Args) -> u8 {
         let [path] = a.inputs.as_slice() else {
             return usage("--sfc takes one argument, the SFC file");
         };
-        let c = compile::check_sfc(&fs, path);
+        let c = compile::check_sfc_pou(&fs, path, a.pou.as_deref());
         print_listings(&c, &print, &mut stdout);
         report(&c.diagnostics, &c.sources, a.format, warnings);
         return status(&c, "SFC validation successful!", a.format);
@@ -184,6 +189,7 @@ fn run(a: Args) -> u8 {
         lf: a.lf,
         template: a.template.clone(),
         confine_to: None,
+        pou: a.pou.clone(),
     };
     let c = compile::compile(&fs, blackboard, &opts);
     if std::env::var_os("SKILLPOST_TIMINGS").is_some() {
@@ -255,6 +261,17 @@ fn print_listings(c: &Compilation, print: &dyn Fn(char) -> bool, out: &mut impl 
         }
         if print('O') {
             let _ = writeln!(out, "{}", crate::print::order(sfc, plan));
+        }
+    } else {
+        for (p, what) in [('F', "-pF"), ('O', "-pO")] {
+            if print(p) {
+                let why = if c.sfc.is_some() {
+                    "the SFC's flow has errors"
+                } else {
+                    "the SFC could not be read"
+                };
+                let _ = writeln!(out, "{what}: nothing to print: {why} (see the diagnostics)");
+            }
         }
     }
 }

@@ -12,7 +12,7 @@ use crate::emit::{EmitInput, OutputFile};
 use crate::load::FileSource;
 use crate::model::{Blackboard, Irl, Sfc};
 use crate::plan::{self, Plan};
-use crate::read::{self, blackboard::read_blackboard, irl::read_irl, sfc::read_sfc, xml};
+use crate::read::{self, blackboard::read_blackboard, irl::read_irl, sfc::read_sfc_pou, xml};
 
 /// What to compile and how.
 #[derive(Debug, Clone, Default)]
@@ -25,6 +25,9 @@ pub struct Options {
     pub template: Option<PathBuf>,
     /// Refuse references that leave this folder (the daemon's project folder).
     pub confine_to: Option<PathBuf>,
+    /// The SFC POU to use (`--pou`); else the SFC reference's `#fragment`, else the first
+    /// program with an SFC body.
+    pub pou: Option<String>,
 }
 
 /// The write-back to do after a successful compile.
@@ -36,8 +39,30 @@ pub struct WriteBack {
     pub bom: bool,
     /// The refURI `Attribute` element's range in the text after the BOM.
     pub attribute: Range<usize>,
+    /// Where the value goes in the text after the BOM, as the reader found it.
+    pub site: crate::write::SpliceSite,
     /// The value to write: the `.src` path relative to the blackboard, with `/`.
     pub value: String,
+}
+
+impl WriteBack {
+    /// The blackboard's bytes after this write-back (BOM included): what [`apply`] writes when
+    /// it writes. `None` when the value is already right or cannot be spliced.
+    pub fn new_bytes(&self) -> Option<Vec<u8>> {
+        let body = if self.bom {
+            self.expected.get(3..)?
+        } else {
+            &self.expected
+        };
+        let text = std::str::from_utf8(body).ok()?;
+        let new = crate::write::splice_at(text, &self.site, &self.value).ok()??;
+        let mut out = Vec::with_capacity(new.len() + 3);
+        if self.bom {
+            out.extend_from_slice(b"\xEF\xBB\xBF");
+        }
+        out.extend_from_slice(new.as_bytes());
+        Some(out)
+    }
 }
 
 /// Everything a compile produced.
@@ -98,6 +123,8 @@ struct Ctx<'a> {
     diags: Diagnostics,
     base: PathBuf,
     confine: Option<PathBuf>,
+    /// Every file a `refURI` named, with the reference (for [`check_outputs`]).
+    refs: Vec<(PathBuf, Span)>,
 }
 
 impl<'a> Ctx<'a> {
@@ -111,6 +138,7 @@ impl<'a> Ctx<'a> {
             diags: Diagnostics::default(),
             base,
             confine,
+            refs: Vec::new(),
         }
     }
 
@@ -169,6 +197,7 @@ impl<'a> Ctx<'a> {
             );
             return None;
         }
+        self.refs.push((path.clone(), at.clone()));
         let display = path.display().to_string();
         xml::load(
             &self.fs,
@@ -179,6 +208,65 @@ impl<'a> Ctx<'a> {
             &mut self.diags,
         )
     }
+}
+
+/// `E605` for every output that is also an input of this compile: a `refURI`'s file (located
+/// at the reference), the blackboard or the template. Paths are compared as written (after
+/// `.`/`..` are resolved) and, where the file system can tell, with symbolic links resolved, so
+/// `./X.src` and a link to `X.src` count. (The blackboard is the write-back's target, which is
+/// not an output; an *output* named like it is an error.)
+fn check_outputs(
+    cx: &mut Ctx,
+    outputs: &[(PathBuf, crate::emit::OutputFile)],
+    blackboard: &Path,
+    template: Option<&Path>,
+) {
+    if outputs.is_empty() {
+        return;
+    }
+    let mut inputs: Vec<(PathBuf, Option<Span>)> = vec![(blackboard.to_owned(), None::<Span>)];
+    inputs.extend(template.map(|t| (t.to_owned(), None)));
+    inputs.extend(cx.refs.iter().map(|(p, s)| (p.clone(), Some(s.clone()))));
+    let mut reported: Vec<(PathBuf, PathBuf)> = Vec::new();
+    for (out, _) in outputs {
+        let out_real = real_or_parent(&cx.fs, out);
+        for (input, at) in &inputs {
+            let same = read::normalize(&absolute(out)) == read::normalize(&absolute(input))
+                || (out_real.is_some() && out_real == real_or_parent(&cx.fs, input));
+            if !same || reported.iter().any(|(o, i)| o == out && i == input) {
+                continue;
+            }
+            reported.push((out.clone(), input.clone()));
+            let name = out.file_name().unwrap_or_default().to_string_lossy();
+            let d = Diagnostic::error(
+                Code::OutputIsInput,
+                format!(
+                    "the output `{name}` is also an input of this compile (`{}`); writing it would overwrite that input: rename the input or choose another program name",
+                    input.display()
+                ),
+            );
+            cx.diags.push(match at {
+                Some(span) => d.at(span.clone()),
+                None => match cx.sources.find(input) {
+                    Some(file) => d.at(Span::new(file, 0..0)),
+                    None => d.path(input),
+                },
+            });
+        }
+    }
+}
+
+/// The real path of a file, or of its folder joined with its name when the file does not exist
+/// (an output about to be created); `None` where the file system cannot tell.
+fn real_or_parent(fs: &dyn FileSource, p: &Path) -> Option<PathBuf> {
+    fs.real_path(p).or_else(|| {
+        let name = p.file_name()?;
+        let parent = match p.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        Some(fs.real_path(parent)?.join(name))
+    })
 }
 
 fn absolute(p: &Path) -> PathBuf {
@@ -242,11 +330,15 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
     };
 
     // The SFC and its plan.
+    let pou = opts
+        .pou
+        .clone()
+        .or_else(|| bb.sfc_ref.as_ref().and_then(|r| fragment(&r.value)));
     let sfc = bb
         .sfc_ref
         .clone()
         .and_then(|r| cx.load_ref(&r.value, &r.span))
-        .and_then(|f| read_sfc(&cx.sources, f, &mut cx.diags));
+        .and_then(|f| read_sfc_pou(&cx.sources, f, pou.as_deref(), &mut cx.diags));
     lap(&mut out, "read-sfc");
     let plan = sfc.as_ref().and_then(|s| plan::plan(s, &mut cx.diags));
     lap(&mut out, "plan");
@@ -279,7 +371,8 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 fn_irl.insert((r, f), i);
             }
         }
-        let bound = bind::bind(&bb, sfc, &order, &res, &irls, &fn_irl, &mut cx.diags);
+        let mut bound = bind::bind(&bb, sfc, &order, &res, &irls, &fn_irl, &mut cx.diags);
+        bound.signals = bind::conditions(&bb, sfc, res.resource, &mut cx.diags);
         out.skill_steps = bound.steps.iter().filter(|s| s.is_some()).count();
         lap(&mut out, "bind");
         if !cx.diags.has_errors()
@@ -306,6 +399,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             lap(&mut out, "emit");
         }
     }
+    check_outputs(&mut cx, &out.outputs, blackboard, opts.template.as_deref());
 
     if !cx.diags.has_errors()
         && let Some(wb) = &bb.write_back
@@ -321,6 +415,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             expected,
             bom: src.bom,
             attribute: wb.attribute.range.clone(),
+            site: wb.site.clone(),
             value: format!("{}.src", opts.program),
         });
     }
@@ -331,14 +426,32 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
     finish(cx, out)
 }
 
+/// The `#fragment` of a `refURI` (the SFC POU it names), percent-decoded.
+fn fragment(value: &str) -> Option<String> {
+    let v = value.trim().trim_matches('"');
+    let (_, f) = v.split_once('#')?;
+    let f = read::percent_decode(f).unwrap_or_else(|| f.to_owned());
+    let f = f.trim();
+    (!f.is_empty()).then(|| f.to_owned())
+}
+
 /// Checks an SFC file on its own (`--sfc`): read and plan, no blackboard.
 pub fn check_sfc(fs: &dyn FileSource, path: &Path) -> Compilation {
+    check_sfc_pou(fs, path, None)
+}
+
+/// [`check_sfc`] of the POU named `pou`.
+pub fn check_sfc_pou(fs: &dyn FileSource, path: &Path, pou: Option<&str>) -> Compilation {
     let mut cx = Ctx::new(fs, PathBuf::new(), None);
     let mut out = Compilation::default();
     let Some(file) = cx.load_top(path, &mut out) else {
         return finish(cx, out);
     };
-    out.sfc = read_sfc(&cx.sources, file, &mut cx.diags);
+    out.sfc = read_sfc_pou(&cx.sources, file, pou, &mut cx.diags);
+    if let Some(sfc) = &out.sfc {
+        // Without a blackboard the names stay unresolved: only what the literals tell.
+        bind::check_conditions_unresolved(sfc, &mut cx.diags);
+    }
     out.plan = out.sfc.as_ref().and_then(|s| plan::plan(s, &mut cx.diags));
     finish(cx, out)
 }
@@ -364,6 +477,28 @@ pub struct Applied {
     pub write_back: Option<crate::write::WriteBackOutcome>,
 }
 
+/// How often, and how long apart at first (doubling), the write-back is tried again while
+/// another program has the blackboard open: about 1.3 s in all.
+const IN_USE_TRIES: u32 = 6;
+const IN_USE_FIRST_WAIT: std::time::Duration = std::time::Duration::from_millis(40);
+
+/// The write-back, tried again a few times while another program has the blackboard open (an
+/// editor saving it holds it open for milliseconds); after that it is reported as skipped.
+fn write_back_retrying(wb: &WriteBack) -> std::io::Result<crate::write::WriteBackOutcome> {
+    let mut wait = IN_USE_FIRST_WAIT;
+    let mut tries = 1;
+    loop {
+        let outcome =
+            crate::write::write_back(&wb.blackboard, &wb.expected, wb.bom, &wb.site, &wb.value)?;
+        if outcome != crate::write::WriteBackOutcome::SkippedInUse || tries >= IN_USE_TRIES {
+            return Ok(outcome);
+        }
+        std::thread::sleep(wait);
+        wait *= 2;
+        tries += 1;
+    }
+}
+
 /// Writes the outputs (atomically, only when their bytes change), then the write-back.
 pub fn apply(c: &Compilation) -> std::io::Result<Applied> {
     // The `.src` and `.dat` only work as a pair: both are replaced or neither is.
@@ -378,18 +513,9 @@ pub fn apply(c: &Compilation) -> std::io::Result<Applied> {
         .map(|(o, (p, _))| (p.clone(), o == crate::write::WriteOutcome::Written))
         .collect();
     let write_back = match &c.write_back {
-        Some(wb) => Some(
-            crate::write::write_back(
-                &wb.blackboard,
-                &wb.expected,
-                wb.bom,
-                wb.attribute.clone(),
-                &wb.value,
-            )
-            .map_err(|e| {
-                std::io::Error::new(e.kind(), format!("{}: {e}", wb.blackboard.display()))
-            })?,
-        ),
+        Some(wb) => Some(write_back_retrying(wb).map_err(|e| {
+            std::io::Error::new(e.kind(), format!("{}: {e}", wb.blackboard.display()))
+        })?),
         None => None,
     };
     Ok(Applied {

@@ -298,10 +298,12 @@ codes! {
     /// A function mapping without a usable `Name`, a bad `Order`, or a mapping path that is not a
     /// skill parameter.
     BadFunctionMapping = "E207",
-    /// Two resources, skills or functions with the same name.
+    /// Two resources, skills, functions or signals with the same name.
     DuplicateName = "E208",
+    /// A signal whose `IoType`, `Type`, `Number`, `Length` or `Address` cannot be used.
+    BadSignal = "E209",
 
-    /// No program `pou` with an `SFC` body.
+    /// No `pou` with an `SFC` body (or none of the name asked for).
     NoSfcBody = "E301",
     /// A `localId` is used twice or is not a number.
     BadLocalId = "E302",
@@ -325,13 +327,21 @@ codes! {
     UnknownResource = "E311",
     /// A step names a skill its resource does not offer (or none).
     UnknownSkill = "E312",
-    /// A construct that is not supported yet (selection branches, jump and macro steps, several
-    /// resources in one program, nesting deeper than the limit).
+    /// A construct that is not supported yet (macro steps, wired conditions, several resources
+    /// in one program, nesting deeper than the limit).
     Unsupported = "E313",
     /// A step lacks a variable its skill needs.
     MissingVariable = "E314",
     /// A variable's value is not a well-formed value or list.
     BadVariableSyntax = "E315",
+    /// A transition condition is not in the condition language (SPEC.md 3.1), or names a
+    /// signal of the wrong type.
+    BadCondition = "E316",
+    /// A jump without a usable target, or one that cannot be structured (not back to a step on
+    /// every path to it, not from the selection that decides the loop).
+    BadJump = "E317",
+    /// A condition names a signal the program's resource does not declare.
+    UnknownSignal = "E318",
 
     /// An IRL file without `<src>`, or not an `<irl>` document.
     BadIrl = "E401",
@@ -355,9 +365,13 @@ codes! {
     NonAscii = "E602",
     /// The output template cannot be used.
     BadTemplate = "E603",
-    /// An output or the blackboard cannot be written (disk full, permissions); the daemon
-    /// reports it in `compile-failed`, the command line exits with status 2.
+    /// An output or the blackboard cannot be written (disk full, permissions, an output that
+    /// is a symbolic link or read-only); the daemon reports it in `compile-failed`, the command
+    /// line exits with status 2.
     CannotWrite = "E604",
+    /// An output (`<program>.src`/`.dat`) is also a file this compile reads (an IRL file, the
+    /// SFC, the template, the blackboard): writing it would overwrite an input.
+    OutputIsInput = "E605",
 
     /// The hierarchy is not named `Blackboard` (the only one was used).
     HierarchyNotNamed = "W201",
@@ -373,8 +387,12 @@ codes! {
     ResourceInferred = "W302",
     /// A step has variables its skill does not use.
     ExtraVariable = "W303",
-    /// An ignored SFC element (action block, non-`TRUE` condition, unknown element).
+    /// Ignored SFC elements (action blocks, unknown elements), one warning per kind and chart.
     Ignored = "W304",
+    /// Several POUs have an SFC body and none was named: the one used and the others.
+    SeveralPous = "W305",
+    /// A selection branch right of an unconditional one: it is never taken.
+    BranchNeverTaken = "W306",
 }
 
 impl std::fmt::Display for Code {

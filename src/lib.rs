@@ -7,6 +7,7 @@
 //! - [`load`]: the only file-system reads of the compiler core, behind the [`load::FileSource`]
 //!   trait; records every file a compile read.
 //! - [`read`]: blackboard, SFC and IRL files → [`model`], every item with its byte span.
+//! - [`cond`]: transition conditions (an ST subset): parse, check, render as KRL.
 //! - [`plan`]: SFC graph checks → an ordered program tree ([`plan::Block`]).
 //! - [`bind`]: skill steps → function calls with checked, typed values ([`bind::BoundStep`]).
 //! - [`template`]: IRL template parsing and parameter substitution.
@@ -22,6 +23,7 @@
 pub mod bind;
 pub mod cli;
 pub mod compile;
+pub mod cond;
 pub mod daemon;
 pub mod diag;
 pub mod emit;

@@ -76,6 +76,9 @@ pub struct RefValue {
 pub struct WriteBackTarget {
     pub attribute: Span,
     pub current: Option<String>,
+    /// Where the value goes: the byte range the splice replaces, found by the reader's parse
+    /// (`write::SpliceSite::of`).
+    pub site: crate::write::SpliceSite,
 }
 
 #[derive(Debug)]
@@ -88,6 +91,10 @@ pub struct Resource {
     pub functions: Vec<Function>,
     /// Keys of functions that are present but malformed (reported): not "unknown".
     pub broken_functions: Vec<Arc<str>>,
+    /// The I/O signals transition conditions may name (SPEC.md 3.1), in document order.
+    pub signals: Vec<Signal>,
+    /// Keys of signals that are present but malformed (reported): not "unknown".
+    pub broken_signals: Vec<Arc<str>>,
 }
 
 impl Resource {
@@ -96,6 +103,41 @@ impl Resource {
     }
     pub fn function(&self, key: &str) -> Option<usize> {
         self.functions.iter().position(|f| &*f.name.key == key)
+    }
+    pub fn signal(&self, key: &str) -> Option<usize> {
+        self.signals.iter().position(|s| &*s.name.key == key)
+    }
+}
+
+/// An I/O signal of a resource: an `ExternalInterface` whose `RefBaseClassPath` ends in
+/// `SignalInterface` or `Channel` (SPEC.md 3.1).
+#[derive(Debug, Clone)]
+pub struct Signal {
+    pub name: Name,
+    /// The CAEX element, described for diagnostics.
+    pub element: String,
+    /// `IoType` `Output` (else an input).
+    pub output: bool,
+    pub kind: SignalKind,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SignalKind {
+    /// One bit: the I/O index `Number` (1-based, as KRL counts).
+    Bit(u32),
+    /// An integer of `length` bits from index `number` on, least significant first.
+    Group { number: u32, length: u32 },
+    /// A robot-language expression used as it stands (one safe token); `integer` per `Type`.
+    Address { text: String, integer: bool },
+}
+
+impl Signal {
+    /// Whether conditions see an integer (else a boolean).
+    pub fn is_integer(&self) -> bool {
+        matches!(
+            self.kind,
+            SignalKind::Group { .. } | SignalKind::Address { integer: true, .. }
+        )
     }
 }
 
@@ -254,12 +296,14 @@ pub struct Element {
 #[derive(Debug)]
 pub enum ElementKind {
     Step(Box<Step>),
-    Transition,
+    /// A transition and its condition; `None` when it always fires (absent or `TRUE`).
+    Transition(Option<Box<Condition>>),
     SimultaneousDivergence,
     SimultaneousConvergence,
     SelectionDivergence,
     SelectionConvergence,
-    JumpStep,
+    /// A jump to the step named `targetName` (`None` when the attribute is missing or empty).
+    JumpStep(Option<Box<Name>>),
     MacroStep,
 }
 
@@ -267,12 +311,12 @@ impl ElementKind {
     pub fn tag(&self) -> &'static str {
         match self {
             ElementKind::Step(_) => "step",
-            ElementKind::Transition => "transition",
+            ElementKind::Transition(_) => "transition",
             ElementKind::SimultaneousDivergence => "simultaneousDivergence",
             ElementKind::SimultaneousConvergence => "simultaneousConvergence",
             ElementKind::SelectionDivergence => "selectionDivergence",
             ElementKind::SelectionConvergence => "selectionConvergence",
-            ElementKind::JumpStep => "jumpStep",
+            ElementKind::JumpStep(_) => "jumpStep",
             ElementKind::MacroStep => "macroStep",
         }
     }
@@ -280,6 +324,18 @@ impl ElementKind {
     pub fn is_step(&self) -> bool {
         matches!(self, ElementKind::Step(_))
     }
+}
+
+/// A transition's condition (SPEC.md 3.1), parsed.
+#[derive(Debug)]
+pub struct Condition {
+    /// The inline ST text as written (trimmed), or the reference's name.
+    pub text: String,
+    pub expr: crate::cond::Expr,
+    /// The `condition` element's start tag.
+    pub span: Span,
+    /// Whether it was `condition/reference@name`.
+    pub reference: bool,
 }
 
 #[derive(Debug)]

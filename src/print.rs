@@ -6,8 +6,8 @@
 
 use std::fmt::Write as _;
 
-use crate::model::{Blackboard, ElementKind, Sfc, Value};
-use crate::plan::{Block, Plan};
+use crate::model::{Blackboard, ElementKind, Sfc, Signal, SignalKind, Value};
+use crate::plan::{Block, BranchEnd, Plan};
 
 /// `-pB`: resources, their skills with the calls they map, and functions with their IRL files.
 pub fn blackboard(bb: &Blackboard) -> String {
@@ -49,8 +49,28 @@ pub fn blackboard(bb: &Blackboard) -> String {
                 f.irl.value, f.command.text
             );
         }
+        for s in &r.signals {
+            let _ = writeln!(o, "        (Signal) {:<40} {}", s.name.text, signal_text(s));
+        }
     }
     o
+}
+
+/// A signal in one line: direction, type and where it is (`input bit $IN[3]`).
+pub fn signal_text(s: &Signal) -> String {
+    let dir = if s.output { "output" } else { "input" };
+    let io = if s.output { "$OUT" } else { "$IN" };
+    match &s.kind {
+        SignalKind::Bit(n) => format!("{dir} bit {io}[{n}]"),
+        SignalKind::Group { number, length } => format!(
+            "{dir} integer {io}[{number}] TO {io}[{}] ({length} bits)",
+            number + length - 1
+        ),
+        SignalKind::Address { text, integer } => format!(
+            "{dir} {} at {text}",
+            if *integer { "integer" } else { "bit" }
+        ),
+    }
 }
 
 fn value_text(v: &Value) -> String {
@@ -77,6 +97,7 @@ pub fn sfc(sfc: &Sfc) -> String {
     .map(|v| v.as_deref().unwrap_or("?"))
     .collect();
     let _ = writeln!(o, "{}", parts.join(", "));
+    let _ = writeln!(o, "POU: {}", sfc.pou_name.as_deref().unwrap_or("?"));
     let mut succs: std::collections::HashMap<u64, Vec<u64>> = Default::default();
     for e in &sfc.elements {
         for (r, _) in &e.inputs {
@@ -132,6 +153,23 @@ pub fn sfc(sfc: &Sfc) -> String {
             k => {
                 let _ = writeln!(o, "Transition  ({})", k.tag());
                 let _ = writeln!(o, "            {conn}");
+                match k {
+                    ElementKind::Transition(Some(c)) => {
+                        let _ = writeln!(
+                            o,
+                            "            Condition:  {}{}",
+                            one_line(&c.text),
+                            if c.reference { "   (reference)" } else { "" }
+                        );
+                    }
+                    ElementKind::Transition(None) => {
+                        let _ = writeln!(o, "            Condition:  TRUE");
+                    }
+                    ElementKind::JumpStep(Some(t)) => {
+                        let _ = writeln!(o, "            Target:     {}", t.text);
+                    }
+                    _ => {}
+                }
             }
         }
     }
@@ -152,11 +190,40 @@ fn duration(sfc: &Sfc, i: usize) -> f64 {
     }
 }
 
+/// The condition of a transition as written, on one line (`TRUE` when it has none).
+fn condition(sfc: &Sfc, t: usize) -> String {
+    match &sfc.elements[t].kind {
+        ElementKind::Transition(Some(c)) => one_line(&c.text),
+        _ => "TRUE".to_owned(),
+    }
+}
+
+fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+/// What the flow's total time means.
+#[derive(Default)]
+struct Totals {
+    loops: bool,
+    endless: bool,
+    choices: bool,
+}
+
 /// `-pF`: the flow as a pseudo-graphic: one line per step with its start time and duration;
-/// simultaneous branches drawn as `{ | … + | … }`. A block of branches ends when its longest
-/// branch ends (they run in parallel in the plan, even though one robot runs them in turn).
+/// simultaneous branches drawn as `{ | … + | … }`, selection branches as `< | ? cond … + … >`,
+/// a loop as `[ loop … ]` with one round of its body. A block of branches ends when its longest
+/// branch ends (simultaneous branches run in parallel in the plan, even though one robot runs
+/// them in turn; of alternatives the longest is counted). A loop counts one round.
 pub fn flow(sfc: &Sfc, plan: &Plan) -> String {
-    fn walk(sfc: &Sfc, blocks: &[Block], t: f64, indent: &str, o: &mut String) -> f64 {
+    fn walk(
+        sfc: &Sfc,
+        blocks: &[Block],
+        t: f64,
+        indent: &str,
+        o: &mut String,
+        tot: &mut Totals,
+    ) -> f64 {
         let mut t = t;
         for b in blocks {
             match b {
@@ -172,6 +239,14 @@ pub fn flow(sfc: &Sfc, plan: &Plan) -> String {
                     );
                     t += d;
                 }
+                Block::Wait(tr) => {
+                    let _ = writeln!(
+                        o,
+                        "{indent}wait for {} (transition id={})",
+                        condition(sfc, *tr),
+                        sfc.elements[*tr].local_id
+                    );
+                }
                 Block::Parallel { branches, .. } => {
                     let _ = writeln!(o, "{indent}{{");
                     let inner = format!("{indent} | ");
@@ -180,18 +255,90 @@ pub fn flow(sfc: &Sfc, plan: &Plan) -> String {
                         if k > 0 {
                             let _ = writeln!(o, "{indent} +");
                         }
-                        end = end.max(walk(sfc, br, t, &inner, o));
+                        end = end.max(walk(sfc, br, t, &inner, o, tot));
                     }
                     let _ = writeln!(o, "{indent}}}");
                     t = end;
+                }
+                Block::Choice {
+                    divergence,
+                    branches,
+                    ..
+                } => {
+                    tot.choices = true;
+                    let _ = writeln!(
+                        o,
+                        "{indent}< selection id={}, the longest branch counts",
+                        sfc.elements[*divergence].local_id
+                    );
+                    let inner = format!("{indent} | ");
+                    let mut end = t;
+                    for (k, br) in branches.iter().enumerate() {
+                        if k > 0 {
+                            let _ = writeln!(o, "{indent} +");
+                        }
+                        let _ = writeln!(
+                            o,
+                            "{inner}? {} (transition id={})",
+                            condition(sfc, br.transition),
+                            sfc.elements[br.transition].local_id
+                        );
+                        end = end.max(walk(sfc, &br.body, t, &inner, o, tot));
+                        match br.end {
+                            BranchEnd::Join => {}
+                            BranchEnd::Repeat(j) => {
+                                let _ = writeln!(
+                                    o,
+                                    "{inner}-> round again (jump id={})",
+                                    sfc.elements[j].local_id
+                                );
+                            }
+                            BranchEnd::Leave => {
+                                let _ = writeln!(o, "{inner}-> leave the loop");
+                            }
+                        }
+                    }
+                    let _ = writeln!(o, "{indent}>");
+                    t = end;
+                }
+                Block::Loop {
+                    head,
+                    body,
+                    endless,
+                    ..
+                } => {
+                    tot.loops = true;
+                    tot.endless |= *endless;
+                    let _ = writeln!(
+                        o,
+                        "{indent}[ loop back to id={}{}, one round:",
+                        sfc.elements[*head].local_id,
+                        if *endless { ", endless" } else { "" }
+                    );
+                    let inner = format!("{indent} : ");
+                    t = walk(sfc, body, t, &inner, o, tot);
+                    let _ = writeln!(o, "{indent}]");
                 }
             }
         }
         t
     }
     let mut o = String::new();
-    let total = walk(sfc, &plan.body, 0.0, "", &mut o);
-    let _ = writeln!(o, "total: {} seconds", fmt_num(total));
+    let mut tot = Totals::default();
+    let total = walk(sfc, &plan.body, 0.0, "", &mut o, &mut tot);
+    let what = if tot.endless {
+        " per round (the program repeats without end)"
+    } else if tot.loops {
+        " at least (loops counted once)"
+    } else {
+        ""
+    };
+    let longest = if tot.choices {
+        ", the longest alternative counted"
+    } else {
+        ""
+    };
+    let _ = writeln!(o, "total: {} seconds{what}{longest}", fmt_num(total));
     o
 }
 
@@ -205,18 +352,79 @@ fn fmt_num(x: f64) -> String {
     }
 }
 
-/// `-pO`: the execution order, one step per line with its number and localId.
+/// `-pO`: the execution order, one step per line with its number and localId; selections,
+/// their branches' conditions and loops are shown around the steps they hold.
 pub fn order(sfc: &Sfc, plan: &Plan) -> String {
-    let mut o = String::new();
-    for (n, i) in plan.steps().into_iter().enumerate() {
-        let _ = writeln!(
-            o,
-            " #{} \t(id={}) \t{}",
-            n + 1,
-            sfc.elements[i].local_id,
-            step_name(sfc, i)
-        );
+    fn walk(sfc: &Sfc, blocks: &[Block], indent: &str, n: &mut usize, o: &mut String) {
+        for b in blocks {
+            match b {
+                Block::Step(i) => {
+                    *n += 1;
+                    let _ = writeln!(
+                        o,
+                        "{indent} #{} \t(id={}) \t{}",
+                        n,
+                        sfc.elements[*i].local_id,
+                        step_name(sfc, *i)
+                    );
+                }
+                Block::Wait(t) => {
+                    let _ = writeln!(o, "{indent} wait for {}", condition(sfc, *t));
+                }
+                Block::Parallel { branches, .. } => {
+                    for br in branches {
+                        walk(sfc, br, indent, n, o);
+                    }
+                }
+                Block::Choice {
+                    divergence,
+                    branches,
+                    ..
+                } => {
+                    let _ = writeln!(
+                        o,
+                        "{indent} selection (id={}): the first branch whose condition holds",
+                        sfc.elements[*divergence].local_id
+                    );
+                    let inner = format!("{indent}    ");
+                    for (k, br) in branches.iter().enumerate() {
+                        let _ = writeln!(
+                            o,
+                            "{indent}  {}. if {}",
+                            k + 1,
+                            condition(sfc, br.transition)
+                        );
+                        walk(sfc, &br.body, &inner, n, o);
+                        match br.end {
+                            BranchEnd::Join => {}
+                            BranchEnd::Repeat(_) => {
+                                let _ = writeln!(o, "{inner} round again");
+                            }
+                            BranchEnd::Leave => {
+                                let _ = writeln!(o, "{inner} leave the loop");
+                            }
+                        }
+                    }
+                }
+                Block::Loop {
+                    head,
+                    body,
+                    endless,
+                    ..
+                } => {
+                    let _ = writeln!(
+                        o,
+                        "{indent} loop{} (back to id={}):",
+                        if *endless { ", endless" } else { "" },
+                        sfc.elements[*head].local_id
+                    );
+                    walk(sfc, body, &format!("{indent}  "), n, o);
+                }
+            }
+        }
     }
+    let mut o = String::new();
+    walk(sfc, &plan.body, "", &mut 0, &mut o);
     o
 }
 
@@ -241,6 +449,9 @@ pub fn info(bb: Option<&Blackboard>) -> String {
             let _ = writeln!(o, "{}", r.name.text);
             if r.skills.is_empty() {
                 let _ = writeln!(o, "  (no skills)");
+            }
+            for s in &r.signals {
+                let _ = writeln!(o, "  signal {:<21} {}", s.name.text, signal_text(s));
             }
             for s in &r.skills {
                 let vars = s.variables();

@@ -401,3 +401,272 @@ fn input_larger_than_the_limit_is_refused() {
     assert!(e.contains("Blackboard.aml:"), "located at the refURI: {e}");
     assert!(!p.path().join("out.src").exists());
 }
+
+#[test]
+fn flow_listings_say_why_they_are_empty() {
+    let p = project();
+    // Two start steps: the flow cannot be planned.
+    let sfc = std::fs::read_to_string(p.path().join("sfc.xml")).unwrap();
+    let broken = sfc.replacen(
+        "<connectionPointIn><connection refLocalId=\"2\"/></connectionPointIn>",
+        "",
+        1,
+    );
+    std::fs::write(p.path().join("sfc.xml"), broken).unwrap();
+    let o = run(&["--sfc", "-pF", "-pO", "sfc.xml"], p.path());
+    assert_eq!(o.status.code(), Some(1));
+    let out = stdout(&o);
+    assert!(
+        out.contains("-pF: nothing to print: the SFC's flow has errors"),
+        "{out}"
+    );
+    assert!(out.contains("-pO: nothing to print"), "{out}");
+}
+
+#[test]
+fn info_reports_what_it_can() {
+    let p = project();
+    // No Process Sequence: an error for a compile, but `--info` does not need it.
+    let bb = std::fs::read_to_string(p.path().join("Blackboard.aml")).unwrap();
+    let cut = bb.replace("Name=\"Process Sequenz\"", "Name=\"Somewhere else\"");
+    std::fs::write(p.path().join("Blackboard.aml"), cut).unwrap();
+    let o = run(&["--info", "Blackboard.aml"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stdout(&o).contains("Move PTP"), "{}", stdout(&o));
+    assert!(stderr(&o).contains("E203"), "{}", stderr(&o));
+}
+
+#[test]
+fn action_blocks_are_one_warning_per_chart() {
+    let p = project();
+    let sfc = std::fs::read_to_string(p.path().join("sfc.xml")).unwrap();
+    let blocks = "<actionBlock localId=\"90\"><position x=\"0\" y=\"0\"/></actionBlock>\
+                  <actionBlock><position x=\"0\" y=\"0\"/></actionBlock>\
+                  <actionBlock localId=\"92\"><position x=\"0\" y=\"0\"/></actionBlock>";
+    std::fs::write(
+        p.path().join("sfc.xml"),
+        sfc.replacen("</SFC>", &format!("{blocks}</SFC>"), 1),
+    )
+    .unwrap();
+    let o = run(&["--sfc", "--format", "short", "sfc.xml"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert_eq!(e.matches("W304").count(), 1, "{e}");
+    assert!(
+        e.contains(
+            "3 action blocks ignored (localId 90, actionBlock no. 2 of the SFC body, localId 92)"
+        ),
+        "{e}"
+    );
+}
+
+/// An SFC file with three POUs with SFC bodies (a function block first) and one without.
+fn three_pous(dir: &Path) {
+    let body = |start: &str| {
+        format!(
+            "<body><SFC><step localId=\"1\" name=\"{start}\" initialStep=\"true\"><position x=\"0\" y=\"0\"/></step>\
+             <transition localId=\"2\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"1\"/></connectionPointIn></transition>\
+             <step localId=\"3\" name=\"End\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"2\"/></connectionPointIn></step></SFC></body>"
+        )
+    };
+    let text = format!(
+        "<project><types><pous>\
+         <pou name=\"Helper\" pouType=\"functionBlock\">{}</pou>\
+         <pou name=\"NoChart\" pouType=\"program\"><body><ST/></body></pou>\
+         <pou name=\"Main\" pouType=\"program\">{}</pou>\
+         <pou name=\"Other\" pouType=\"program\">{}</pou>\
+         </pous></types></project>",
+        body("HelperStart"),
+        body("MainStart"),
+        body("OtherStart")
+    );
+    std::fs::write(dir.join("pous.xml"), text).unwrap();
+}
+
+#[test]
+fn pou_choice() {
+    let p = project();
+    three_pous(p.path());
+    let o = run(&["--sfc", "-pS", "--format", "short", "pous.xml"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stdout(&o).contains("POU: Main"), "{}", stdout(&o));
+    let e = stderr(&o);
+    assert!(
+        e.contains("W305")
+            && e.contains(
+                "3 POUs have an SFC body; `Main` is used (the first program), not `Helper`, `Other`"
+            ),
+        "{e}"
+    );
+    let o = run(
+        &[
+            "--sfc", "-pS", "--pou", "other", "--format", "short", "pous.xml",
+        ],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stdout(&o).contains("POU: Other"), "{}", stdout(&o));
+    assert!(!stderr(&o).contains("W305"), "{}", stderr(&o));
+    let o = run(
+        &["--sfc", "--pou", "Nope", "--format", "short", "pous.xml"],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains(
+            "no POU named `Nope` with an SFC body; the POUs with one: `Helper`, `Main`, `Other`"
+        ),
+        "{}",
+        stderr(&o)
+    );
+    // The blackboard's reference names the POU with a #fragment.
+    let bb = std::fs::read_to_string(p.path().join("Blackboard.aml")).unwrap();
+    std::fs::write(
+        p.path().join("Blackboard.aml"),
+        bb.replace("<Value>sfc.xml</Value>", "<Value>pous.xml#Helper</Value>"),
+    )
+    .unwrap();
+    let o = run(&["--validate", "-pS", "Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stdout(&o).contains("POU: Helper"), "{}", stdout(&o));
+}
+
+#[test]
+fn no_sfc_body_names_the_pous_considered() {
+    let p = project();
+    std::fs::write(
+        p.path().join("none.xml"),
+        "<project><types><pous><pou name=\"A\" pouType=\"program\"><body><ST/></body></pou>\
+         <pou name=\"B\" pouType=\"functionBlock\"><body><FBD/></body></pou></pous></types></project>",
+    )
+    .unwrap();
+    let o = run(&["--sfc", "--format", "short", "none.xml"], p.path());
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("none of the 2 POUs (`A`, `B`) has an SFC body"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn resources_below_grouping_elements_are_found() {
+    let p = project();
+    let bb = std::fs::read_to_string(p.path().join("Blackboard.aml")).unwrap();
+    // Ressourcen/Building/Line/KUKA KR15-2, and an empty grouping element beside it.
+    let open = "<InternalElement Name=\"KUKA KR15-2\"";
+    let at = bb.find(open).unwrap();
+    let close_at = bb[at..]
+        .find("\n    </InternalElement>\n    <InternalElement Name=\"Process")
+        .unwrap()
+        + at;
+    let nested = format!(
+        "{}<InternalElement Name=\"Building\"><InternalElement Name=\"Line 1\">{}</InternalElement></InternalElement>{}",
+        &bb[..at],
+        &bb[at..close_at],
+        &bb[close_at..]
+    );
+    std::fs::write(p.path().join("Blackboard.aml"), nested).unwrap();
+    let o = run(&["--validate", "Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let o = run(&["--info", "Blackboard.aml"], p.path());
+    assert!(stdout(&o).contains("KUKA KR15-2\n"), "{}", stdout(&o));
+    assert!(!stdout(&o).contains("Building"), "{}", stdout(&o));
+}
+
+#[test]
+fn branches_right_of_an_unconditional_one_are_never_taken() {
+    let p = project();
+    let sfc = "<project><types><pous><pou name=\"P\" pouType=\"program\"><body><SFC>\
+        <step localId=\"1\" name=\"Start\" initialStep=\"true\"><position x=\"0\" y=\"0\"/></step>\
+        <selectionDivergence localId=\"2\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"1\"/></connectionPointIn></selectionDivergence>\
+        <transition localId=\"3\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"2\"/></connectionPointIn><condition><inline name=\"\"><ST>a</ST></inline></condition></transition>\
+        <transition localId=\"4\"><position x=\"10\" y=\"0\"/><connectionPointIn><connection refLocalId=\"2\"/></connectionPointIn></transition>\
+        <transition localId=\"5\"><position x=\"20\" y=\"0\"/><connectionPointIn><connection refLocalId=\"2\"/></connectionPointIn><condition><inline name=\"\"><ST>b</ST></inline></condition></transition>\
+        <selectionConvergence localId=\"6\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"3\"/><connection refLocalId=\"4\"/><connection refLocalId=\"5\"/></connectionPointIn></selectionConvergence>\
+        <step localId=\"7\" name=\"End\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"6\"/></connectionPointIn></step>\
+        </SFC></body></pou></pous></types></project>";
+    std::fs::write(p.path().join("sel.xml"), sfc).unwrap();
+    let o = run(&["--sfc", "--format", "short", "sel.xml"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert_eq!(e.matches("W306").count(), 1, "{e}");
+    assert!(
+        e.contains("[localId 5]") && e.contains("transition localId 4"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_template_without_declarations_cannot_take_them() {
+    // The two-way selection needs the SKP_BRANCH variable in the .dat.
+    let dir = tempfile::tempdir().unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
+    for from in [
+        root.join("base/flow"),
+        root.join("ok/flow-selection-two-way"),
+    ] {
+        for e in std::fs::read_dir(from).unwrap() {
+            let e = e.unwrap();
+            std::fs::copy(e.path(), dir.path().join(e.file_name())).unwrap();
+        }
+    }
+    let template = std::fs::read_to_string(root.join("../templates/krl.toml"))
+        .unwrap()
+        .replace("{{declarations}}\n", "");
+    std::fs::write(dir.path().join("t.toml"), template).unwrap();
+    let o = run(
+        &[
+            "--format",
+            "short",
+            "--template",
+            "t.toml",
+            "Blackboard.aml",
+            "out",
+        ],
+        dir.path(),
+    );
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains("E603")
+            && e.contains("DECL INT SKP_BRANCH=0")
+            && e.contains("`{{declarations}}`"),
+        "{e}"
+    );
+    assert!(!dir.path().join("out.src").exists());
+}
+
+#[test]
+fn sfc_check_reports_what_the_literals_tell() {
+    let p = project();
+    let sfc = std::fs::read_to_string(p.path().join("sfc.xml")).unwrap();
+    std::fs::write(
+        p.path().join("sfc.xml"),
+        sfc.replacen(
+            "<xhtml:p>TRUE</xhtml:p>",
+            "<xhtml:p>Part_OK AND 3</xhtml:p>",
+            1,
+        ),
+    )
+    .unwrap();
+    let o = run(&["--sfc", "--format", "short", "sfc.xml"], p.path());
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    assert!(
+        e.contains("E316") && e.contains("`AND` needs a boolean"),
+        "{e}"
+    );
+    // Names alone are not resolved without a blackboard.
+    std::fs::write(
+        p.path().join("sfc.xml"),
+        sfc.replacen(
+            "<xhtml:p>TRUE</xhtml:p>",
+            "<xhtml:p>Part_OK AND NOT Unknown</xhtml:p>",
+            1,
+        ),
+    )
+    .unwrap();
+    let o = run(&["--sfc", "sfc.xml"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+}

@@ -6,6 +6,7 @@
 //!
 //! ```toml
 //! # What the case breaks (one line, for the reader).
+//! base = "flow"                 # optional: fixtures/base/<base>/ first, the case's files over it
 //! program = "output"             # the PROGRAM argument (default "output")
 //! blackboard = "Blackboard.aml"  # default: the only *.aml in the folder
 //! template = "bad.toml"          # passed as `--template` (optional)
@@ -41,6 +42,7 @@ const UNCOVERED: &[(&str, &str)] = &[(
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Expect {
+    base: Option<String>,
     #[serde(default = "default_program")]
     program: String,
     blackboard: Option<String>,
@@ -207,7 +209,15 @@ fn run_case(case: &Path) -> Vec<String> {
         }
     }
 
-    let files = snapshot(case);
+    let mut files = match &expect.base {
+        Some(b) => snapshot(
+            &Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("fixtures/base")
+                .join(b),
+        ),
+        None => Default::default(),
+    };
+    files.extend(snapshot(case));
     let blackboard = match &expect.blackboard {
         Some(b) => b.clone(),
         None => {

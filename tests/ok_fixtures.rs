@@ -4,6 +4,8 @@
 //! Each case folder holds the project's files and a `case.toml`:
 //!
 //! ```toml
+//! base = "flow"                # optional: fixtures/base/<base>/ is copied first, the case's
+//!                              # files over it (a case keeps only what it changes)
 //! program = "Name"             # the <PROGRAM> argument
 //! blackboard = "Cell.aml"      # optional; default: the single *.aml in the folder
 //! args = ["--lf"]              # optional extra arguments
@@ -36,6 +38,7 @@ use serde::Deserialize;
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct CaseToml {
+    base: Option<String>,
     program: String,
     blackboard: Option<String>,
     #[serde(default)]
@@ -61,6 +64,17 @@ macro_rules! cases {
 
 cases! {
     caex3_english => "caex3-english",
+    flow_cyclic => "flow-cyclic",
+    flow_guarded_sequence => "flow-guarded-sequence",
+    flow_loop_early_exit => "flow-loop-early-exit",
+    flow_loop_exit => "flow-loop-exit",
+    flow_loop_joined_exits => "flow-loop-joined-exits",
+    flow_nested_loops => "flow-nested-loops",
+    flow_parallel_in_selection => "flow-parallel-in-selection",
+    flow_reference_condition => "flow-reference-condition",
+    flow_selection_in_parallel => "flow-selection-in-parallel",
+    flow_selection_three_way => "flow-selection-three-way",
+    flow_selection_two_way => "flow-selection-two-way",
     lf_output => "lf-output",
     mappings_overloads => "mappings-overloads",
     no_writeback_target => "no-writeback-target",
@@ -110,6 +124,9 @@ fn run_case(name: &str) {
 
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
+    if let Some(base) = &case.base {
+        copy_dir(&repo().join("fixtures/base").join(base), dir);
+    }
     copy_dir(&case_dir, dir);
 
     let bb_name = match &case.blackboard {
@@ -254,7 +271,7 @@ fn copy_dir(from: &Path, to: &Path) {
         let e = e.unwrap();
         let target = to.join(e.file_name());
         if e.file_type().unwrap().is_dir() {
-            fs::create_dir(&target).unwrap();
+            fs::create_dir_all(&target).unwrap();
             copy_dir(&e.path(), &target);
         } else {
             fs::copy(e.path(), &target).unwrap();
@@ -561,278 +578,9 @@ fn xmllint(xsd: &Path, file: &Path) -> Result<(), String> {
 // KRL structure check
 // ---------------------------------------------------------------------------------------------
 
-/// A KRL name: a letter or `_`, then letters, digits or `_`, at most 24 characters.
-fn is_krl_name(s: &str) -> bool {
-    let b = s.as_bytes();
-    !b.is_empty()
-        && b.len() <= 24
-        && (b[0].is_ascii_alphabetic() || b[0] == b'_')
-        && b.iter().all(|c| c.is_ascii_alphanumeric() || *c == b'_')
-}
-
-/// Splits `text` into lines, checking that it is ASCII without control characters (tabs
-/// allowed) and that every line, the last included, ends in CRLF (or LF when `lf`).
-fn split_lines<'t>(text: &'t str, lf: bool, what: &str) -> Result<Vec<&'t str>, String> {
-    if text.is_empty() {
-        return Err(format!("{what} is empty"));
-    }
-    let mut lines = Vec::new();
-    let mut rest = text;
-    let mut n = 0;
-    while !rest.is_empty() {
-        n += 1;
-        let Some(i) = rest.find('\n') else {
-            return Err(format!(
-                "{what} line {n}: no line break at the end of the file"
-            ));
-        };
-        let (line, ending) = match rest[..i].strip_suffix('\r') {
-            Some(l) => (l, "CRLF"),
-            None => (&rest[..i], "LF"),
-        };
-        let wanted = if lf { "LF" } else { "CRLF" };
-        if ending != wanted {
-            return Err(format!(
-                "{what} line {n} ends in {ending}, expected {wanted} (mixed line endings)"
-            ));
-        }
-        if let Some(c) = line.chars().find(|c| !c.is_ascii()) {
-            return Err(format!("{what} line {n}: non-ASCII character `{c}`"));
-        }
-        if let Some(c) = line.chars().find(|c| c.is_ascii_control() && *c != '\t') {
-            return Err(format!("{what} line {n}: control character {:?}", c));
-        }
-        lines.push(line);
-        rest = &rest[i + 1..];
-    }
-    Ok(lines)
-}
-
-/// The code part of a KRL line: without a `;` comment (outside string literals); string
-/// contents blanked so keywords inside them do not count.
-fn code_of(line: &str) -> Result<String, String> {
-    let mut out = String::with_capacity(line.len());
-    let mut in_str = false;
-    for c in line.chars() {
-        match c {
-            '"' => {
-                in_str = !in_str;
-                out.push('"');
-            }
-            ';' if !in_str => break,
-            _ if in_str => out.push(' '),
-            _ => out.push(c),
-        }
-    }
-    if in_str {
-        return Err("unterminated string literal".to_owned());
-    }
-    Ok(out.trim().to_owned())
-}
-
-/// The words of a code line (runs of letters, digits, `_`, `$`, `#`), upper-cased.
-fn words_of(code: &str) -> Vec<String> {
-    code.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_' || c == '$' || c == '#'))
-        .filter(|w| !w.is_empty())
-        .map(str::to_ascii_uppercase)
-        .collect()
-}
-
-/// The name declared by `DEF name(...)` (`rest` is the text after `DEF`).
-fn def_name(rest: &str) -> Result<&str, String> {
-    let rest = rest.trim_start();
-    let Some(paren) = rest.find('(') else {
-        return Err(format!("`DEF {rest}` has no parameter list"));
-    };
-    if !rest.trim_end().ends_with(')') {
-        return Err(format!("`DEF {rest}`: parameter list not closed"));
-    }
-    let name = rest[..paren].trim();
-    if !is_krl_name(name) {
-        return Err(format!("DEF name `{name}` is not a valid KRL name"));
-    }
-    Ok(name)
-}
-
-/// Checks the structure of a generated `.src`/`.dat` pair for `program`: ASCII; CRLF (or LF)
-/// line endings on every line; header lines (`&...`) only before the first `DEF`; `DEF name( )`
-/// / `END` balanced and not nested, every statement inside one, the first `DEF` named like the
-/// program; `IF`/`ENDIF` (with `THEN`, `ELSE` only inside), `FOR`/`ENDFOR`, `WHILE`/`ENDWHILE`,
-/// `LOOP`/`ENDLOOP`, `SWITCH`/`ENDSWITCH`, `REPEAT`/`UNTIL` balanced inside each `DEF` (comments
-/// and string contents ignored); `;FOLD`/`;ENDFOLD` balanced and closed before `DEF`/`END`; every
-/// name a valid KRL name; the `.dat` one `DEFDAT <program>` ... `ENDDAT`.
-fn check_krl(src: &str, dat: &str, program: &str, lf: bool) -> Result<(), String> {
-    if !is_krl_name(program) {
-        return Err(format!("program name `{program}` is not a valid KRL name"));
-    }
-
-    // .src
-    let lines = split_lines(src, lf, ".src")?;
-    let mut open_def: Option<(String, usize)> = None;
-    let mut defs: Vec<String> = Vec::new();
-    let mut blocks: Vec<(&str, usize)> = Vec::new();
-    let mut folds: Vec<usize> = Vec::new();
-    for (i, raw) in lines.iter().enumerate() {
-        let n = i + 1;
-        let err = |m: String| format!(".src line {n}: {m}: `{raw}`");
-        let t = raw.trim();
-        let upper = t.to_ascii_uppercase();
-        if upper.starts_with(";FOLD") {
-            folds.push(n);
-            continue;
-        }
-        if upper.starts_with(";ENDFOLD") {
-            if folds.pop().is_none() {
-                return Err(err("`;ENDFOLD` without `;FOLD`".into()));
-            }
-            continue;
-        }
-        let code = code_of(t).map_err(&err)?;
-        if code.is_empty() {
-            continue;
-        }
-        if code.starts_with('&') {
-            if !defs.is_empty() {
-                return Err(err("header line after the first DEF".into()));
-            }
-            continue;
-        }
-        let words = words_of(&code);
-        let mut first = words.first().map(String::as_str).unwrap_or("");
-        let mut body = code.as_str();
-        if first == "GLOBAL" && matches!(words.get(1).map(String::as_str), Some("DEF")) {
-            first = "DEF";
-            body = body.trim_start()[6..].trim_start();
-        }
-        match first {
-            "DEF" => {
-                if let Some((name, at)) = &open_def {
-                    return Err(err(format!("DEF inside DEF `{name}` (line {at})")));
-                }
-                if let Some(f) = folds.last() {
-                    return Err(err(format!("DEF inside the ;FOLD of line {f}")));
-                }
-                let name = def_name(&body[3..]).map_err(&err)?;
-                if defs.is_empty() && name != program {
-                    return Err(err(format!(
-                        "the first DEF is `{name}`, not the program `{program}`"
-                    )));
-                }
-                if defs.iter().any(|d| d.eq_ignore_ascii_case(name)) {
-                    return Err(err(format!("DEF `{name}` defined twice")));
-                }
-                defs.push(name.to_owned());
-                open_def = Some((name.to_owned(), n));
-            }
-            "END" => {
-                if open_def.is_none() {
-                    return Err(err("END without DEF".into()));
-                }
-                if let Some((kw, at)) = blocks.last() {
-                    return Err(err(format!("END while {kw} of line {at} is open")));
-                }
-                if let Some(f) = folds.last() {
-                    return Err(err(format!("END inside the ;FOLD of line {f}")));
-                }
-                if words.len() != 1 {
-                    return Err(err("END followed by more".into()));
-                }
-                open_def = None;
-            }
-            _ => {
-                if open_def.is_none() {
-                    return Err(err("statement outside a DEF".into()));
-                }
-                let close = |blocks: &mut Vec<(&str, usize)>, opener: &str| match blocks.pop() {
-                    Some((kw, _)) if kw == opener => Ok(()),
-                    Some((kw, at)) => Err(err(format!(
-                        "{first} closes {kw} of line {at}, expected {opener}"
-                    ))),
-                    None => Err(err(format!("{first} without {opener}"))),
-                };
-                match first {
-                    "IF" => {
-                        if words.last().map(String::as_str) != Some("THEN") {
-                            return Err(err("IF without THEN".into()));
-                        }
-                        blocks.push(("IF", n));
-                    }
-                    "ELSE" if !matches!(blocks.last(), Some(("IF", _))) => {
-                        return Err(err("ELSE outside IF".into()));
-                    }
-                    "FOR" | "WHILE" | "LOOP" | "SWITCH" | "REPEAT" => {
-                        let kw = ["FOR", "WHILE", "LOOP", "SWITCH", "REPEAT"]
-                            .into_iter()
-                            .find(|k| *k == first)
-                            .unwrap();
-                        blocks.push((kw, n));
-                    }
-                    "CASE" | "DEFAULT" if !matches!(blocks.last(), Some(("SWITCH", _))) => {
-                        return Err(err(format!("{first} outside SWITCH")));
-                    }
-                    "ENDIF" => close(&mut blocks, "IF")?,
-                    "ENDFOR" => close(&mut blocks, "FOR")?,
-                    "ENDWHILE" => close(&mut blocks, "WHILE")?,
-                    "ENDLOOP" => close(&mut blocks, "LOOP")?,
-                    "ENDSWITCH" => close(&mut blocks, "SWITCH")?,
-                    "UNTIL" => close(&mut blocks, "REPEAT")?,
-                    _ => {}
-                }
-            }
-        }
-    }
-    if let Some((name, at)) = open_def {
-        return Err(format!(".src: DEF `{name}` of line {at} has no END"));
-    }
-    if let Some(at) = folds.last() {
-        return Err(format!(".src: ;FOLD of line {at} has no ;ENDFOLD"));
-    }
-    if defs.is_empty() {
-        return Err(".src has no DEF".to_owned());
-    }
-
-    // .dat
-    let lines = split_lines(dat, lf, ".dat")?;
-    let mut state = 0; // 0 before DEFDAT, 1 inside, 2 after ENDDAT
-    for (i, raw) in lines.iter().enumerate() {
-        let n = i + 1;
-        let code = code_of(raw.trim()).map_err(|m| format!(".dat line {n}: {m}"))?;
-        if code.is_empty() {
-            continue;
-        }
-        let words = words_of(&code);
-        let first = words.first().map(String::as_str).unwrap_or("");
-        match (state, first) {
-            (0, _) if code.starts_with('&') => {}
-            (0, "DEFDAT") => {
-                let name = code.split_whitespace().nth(1).unwrap_or("");
-                if !is_krl_name(name) {
-                    return Err(format!(".dat line {n}: `{name}` is not a valid KRL name"));
-                }
-                if name != program {
-                    return Err(format!(
-                        ".dat line {n}: DEFDAT `{name}`, but the program is `{program}`"
-                    ));
-                }
-                let rest: Vec<&String> = words.iter().skip(2).collect();
-                if !(rest.is_empty() || rest == ["PUBLIC"]) {
-                    return Err(format!(".dat line {n}: unexpected text after DEFDAT"));
-                }
-                state = 1;
-            }
-            (1, "ENDDAT") if words.len() == 1 => state = 2,
-            (1, "DEFDAT") => return Err(format!(".dat line {n}: DEFDAT inside DEFDAT")),
-            (1, _) => {}
-            (0, _) => return Err(format!(".dat line {n}: `{raw}` before DEFDAT")),
-            _ => return Err(format!(".dat line {n}: `{raw}` after ENDDAT")),
-        }
-    }
-    match state {
-        0 => Err(".dat has no DEFDAT".to_owned()),
-        1 => Err(".dat: DEFDAT without ENDDAT".to_owned()),
-        _ => Ok(()),
-    }
-}
+#[path = "common/krl_check.rs"]
+mod krl_syntax;
+use krl_syntax::check_krl;
 
 #[cfg(test)]
 mod write_back_check {

@@ -38,7 +38,9 @@ fn unit_has_the_key_lines() {
         ("PrivateDevices", "yes"),
         ("RestrictAddressFamilies", "AF_UNIX"),
         ("SystemCallFilter", "@system-service"),
-        ("CapabilityBoundingSet", ""),
+        // The write-back's lease on planners' blackboards; nothing else.
+        ("CapabilityBoundingSet", "CAP_LEASE"),
+        ("AmbientCapabilities", "CAP_LEASE"),
         ("ExecReload", "/bin/kill -HUP $MAINPID"),
         ("Restart", "on-failure"),
         ("User", "skillpost"),

@@ -3,7 +3,10 @@
 //! to `SetToolPathVelocity` + `PTP`) and `Move LIN` (mapped to `LIN`), and an SFC of alternating
 //! `P2P`/`LIN` steps with `Frame`, `Velocity` and `JointConfig` as direct `<Variable>` children.
 //! Optionally every `branch_every` main-line steps a `branch_width`-way simultaneous branch, whose
-//! first branch holds a nested branch (one level).
+//! first branch holds a nested branch (one level). Optionally every `select_every` main-line
+//! steps a two-way selection (`Part_OK` / `TRUE`, one step each), and with `looped` the whole
+//! line is a loop: a step `Loop` after `Start`, and at the end a selection that jumps back to it
+//! while `NOT Magazine_Empty` and goes to `End` otherwise (the resource has the two signals).
 //!
 //! Shared by `examples/generate.rs`, `benches/compile.rs` and any test:
 //! `#[path = "../benches/common/generator.rs"] mod generator;`. Output is deterministic: the same
@@ -27,6 +30,10 @@ pub struct Spec {
     pub branch_every: usize,
     /// Branches per simultaneous divergence (at least 2 when branching).
     pub branch_width: usize,
+    /// Every this many main-line steps a two-way selection; 0 = none.
+    pub select_every: usize,
+    /// The main line is a loop closed by a jump back.
+    pub looped: bool,
 }
 
 impl Spec {
@@ -35,6 +42,8 @@ impl Spec {
             steps,
             branch_every: 0,
             branch_width: 0,
+            select_every: 0,
+            looped: false,
         }
     }
 
@@ -43,6 +52,8 @@ impl Spec {
             steps,
             branch_every: every,
             branch_width: width,
+            select_every: 0,
+            looped: false,
         }
     }
 }
@@ -112,11 +123,18 @@ pub fn write_sfc(w: &mut impl Write, spec: &Spec) -> io::Result<Stats> {
         stats: Stats::default(),
         bytes: 0,
         err: None,
+        name: None,
     };
     g.raw(SFC_HEAD);
     let start = g.special_step("Start", None);
     let mut last = start;
+    if spec.looped {
+        let t = g.transition(last);
+        last = g.loop_head(t);
+    }
     let mut since_branch = 0usize;
+    let mut since_select = 0usize;
+    let mut last_is_step = true;
     let block = if spec.branch_every > 0 && spec.branch_width >= 2 {
         block_size(spec.branch_width, 0)
     } else {
@@ -124,17 +142,32 @@ pub fn write_sfc(w: &mut impl Write, spec: &Spec) -> io::Result<Stats> {
     };
     while g.stats.skill_steps < spec.steps {
         let left = spec.steps - g.stats.skill_steps;
+        if spec.select_every > 0 && since_select >= spec.select_every && left >= 3 && last_is_step {
+            // A selection after a step; a step after its convergence.
+            let conv = g.selection(last);
+            last = g.skill_step(Pred::Plain(conv), 0);
+            since_select = 0;
+            continue;
+        }
         let t = g.transition(last);
         if since_branch == spec.branch_every && block <= left {
             last = g.branch(t, spec.branch_width, 0);
             since_branch = 0;
+            last_is_step = false;
         } else {
             last = g.skill_step(Pred::Plain(t), 0);
             since_branch += 1;
+            last_is_step = true;
         }
+        since_select += 1;
     }
-    let t = g.transition(last);
-    g.special_step("End", Some(t));
+    if spec.looped && last_is_step {
+        let end = g.loop_end(last);
+        g.special_step("End", Some(end));
+    } else {
+        let t = g.transition(last);
+        g.special_step("End", Some(t));
+    }
     g.raw(SFC_TAIL);
     g.flush();
     if let Some(e) = g.err {
@@ -185,6 +218,8 @@ struct Gen<'w, W: Write> {
     bytes: u64,
     /// The first write error; later writes are skipped.
     err: Option<io::Error>,
+    /// The next skill step's name instead of its step type.
+    name: Option<&'static str>,
 }
 
 impl<W: Write> Gen<'_, W> {
@@ -264,6 +299,7 @@ impl<W: Write> Gen<'_, W> {
         } else {
             ("P2P", "Move PTP")
         };
+        let kind = self.name.unwrap_or(kind);
         let x = column * 200;
         let r = &mut self.rng;
         // Millimetres with one decimal, whole degrees: a reachable-looking KR15 workspace.
@@ -308,6 +344,93 @@ impl<W: Write> Gen<'_, W> {
         );
         self.maybe_flush();
         id
+    }
+
+    /// A transition with a condition (inline ST, escaped by the caller).
+    fn guarded(&mut self, pred: Pred, cond: &str) -> u64 {
+        let id = self.id();
+        let y = self.y();
+        let _ = write!(
+            self.buf,
+            "<transition localId=\"{id}\">\n <position x=\"0\" y=\"{y}\"/>\n "
+        );
+        self.conn_in(pred);
+        let _ = write!(
+            self.buf,
+            "<connectionPointOut/>\n \
+             <condition><inline name=\"\"><ST><xhtml:p>{cond}</xhtml:p></ST></inline></condition>\n\
+             </transition>\n"
+        );
+        self.maybe_flush();
+        id
+    }
+
+    /// A selection divergence after step `pred` with `n` outputs.
+    fn selection_divergence(&mut self, pred: u64, n: usize) -> u64 {
+        let div = self.id();
+        let y = self.y();
+        let _ = write!(
+            self.buf,
+            "<selectionDivergence localId=\"{div}\">\n <position x=\"0\" y=\"{y}\"/>\n "
+        );
+        self.conn_in(Pred::Plain(pred));
+        for k in 0..n {
+            let _ = write!(
+                self.buf,
+                "\n <connectionPointOut formalParameter=\"branch{k}\"/>"
+            );
+        }
+        self.raw("\n</selectionDivergence>\n");
+        div
+    }
+
+    /// A two-way selection after step `pred` (`Part_OK`, then `TRUE`), one step per branch;
+    /// returns the convergence.
+    fn selection(&mut self, pred: u64) -> u64 {
+        let div = self.selection_divergence(pred, 2);
+        let mut lasts = Vec::with_capacity(2);
+        for (k, cond) in ["Part_OK", "TRUE"].into_iter().enumerate() {
+            let t = self.guarded(Pred::Branch(div, k), cond);
+            let s = self.skill_step(Pred::Plain(t), k);
+            lasts.push(self.transition(s));
+        }
+        let conv = self.id();
+        let y = self.y();
+        let _ = write!(
+            self.buf,
+            "<selectionConvergence localId=\"{conv}\">\n <position x=\"0\" y=\"{y}\"/>"
+        );
+        for l in lasts {
+            self.raw("\n ");
+            self.conn_in(Pred::Plain(l));
+        }
+        self.raw("\n <connectionPointOut/>\n</selectionConvergence>\n");
+        self.maybe_flush();
+        conv
+    }
+
+    /// The loop's head: a skill step named `Loop` after transition `pred`.
+    fn loop_head(&mut self, pred: u64) -> u64 {
+        self.name = Some("Loop");
+        let id = self.skill_step(Pred::Plain(pred), 0);
+        self.name = None;
+        id
+    }
+
+    /// The loop's end after step `pred`: a selection that jumps back to `Loop` while
+    /// `NOT Magazine_Empty`; returns the transition to the end step.
+    fn loop_end(&mut self, pred: u64) -> u64 {
+        let div = self.selection_divergence(pred, 2);
+        let back = self.guarded(Pred::Branch(div, 0), "NOT Magazine_Empty");
+        let id = self.id();
+        let y = self.y();
+        let _ = write!(
+            self.buf,
+            "<jumpStep localId=\"{id}\" targetName=\"Loop\">\n <position x=\"0\" y=\"{y}\"/>\n "
+        );
+        self.conn_in(Pred::Plain(back));
+        self.raw("\n</jumpStep>\n");
+        self.guarded(Pred::Branch(div, 1), "Magazine_Empty")
     }
 
     /// A `width`-way simultaneous branch after transition `pred`; returns the convergence.
@@ -460,6 +583,12 @@ const BLACKBOARD: &str = r#"<?xml version="1.0" encoding="utf-8"?>
   <InstanceHierarchy Name="Blackboard">
     <InternalElement Name="Ressourcen" ID="{00000000-0000-0000-0000-000000000001}">
       <InternalElement Name="KUKA KR15-2" ID="{00000000-0000-0000-0000-000000000002}">
+        <ExternalInterface Name="Part_OK" ID="{00000000-0000-0000-0000-000000000101}" RefBaseClassPath="AutomationMLInterfaceClassLib/AutomationMLBaseInterface/Communication/SignalInterface">
+          <Attribute Name="Number" AttributeDataType="xs:integer"><Value>1</Value></Attribute>
+        </ExternalInterface>
+        <ExternalInterface Name="Magazine_Empty" ID="{00000000-0000-0000-0000-000000000102}" RefBaseClassPath="AutomationMLInterfaceClassLib/AutomationMLBaseInterface/Communication/SignalInterface">
+          <Attribute Name="Number" AttributeDataType="xs:integer"><Value>2</Value></Attribute>
+        </ExternalInterface>
         <InternalElement Name="Skills" ID="{00000000-0000-0000-0000-000000000003}">
           <InternalElement Name="Move PTP" ID="{00000000-0000-0000-0000-000000000004}">
             <Attribute Name="Velocity" AttributeDataType="xs:double" Unit="m/s">

@@ -54,6 +54,7 @@ fuzz_target!(|data: &[u8]| {
         lf: data.len() % 2 == 0,
         template: None,
         confine_to: None,
+        pou: None,
     };
     let c = compile(&fs, Path::new(BLACKBOARD), &opts);
     assert_eq!(c.files_read.first(), Some(&PathBuf::from(BLACKBOARD)));

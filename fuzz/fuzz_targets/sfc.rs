@@ -1,6 +1,7 @@
 //! The SFC reader: bytes → `read::xml::load` → `read_sfc` (the streaming reader) → `plan::plan`
-//! → the listings; every variable the reader accepted parses and looks up; the diagnostics in
-//! every format.
+//! → the listings; every variable the reader accepted parses and looks up; the program tree's
+//! invariants (each step once, waits and branches on transitions, loops start at their head);
+//! the diagnostics in every format.
 #![no_main]
 
 mod common;
@@ -41,6 +42,31 @@ fuzz_target!(|data: &[u8]| {
                     "plan step {i} is not a step"
                 );
             }
+            // Each step once; waits and branch conditions are transitions; loops start at
+            // their head step.
+            let mut seen = vec![false; sfc.elements.len()];
+            for &i in &steps {
+                assert!(!seen[i], "plan step {i} twice");
+                seen[i] = true;
+            }
+            plan::visit(&p.body, &mut |b| match b {
+                plan::Block::Wait(t) => assert!(matches!(
+                    sfc.elements[*t].kind,
+                    ElementKind::Transition(Some(_))
+                )),
+                plan::Block::Choice { branches, .. } => {
+                    for br in branches {
+                        assert!(matches!(
+                            sfc.elements[br.transition].kind,
+                            ElementKind::Transition(_)
+                        ));
+                    }
+                }
+                plan::Block::Loop { head, body, .. } => {
+                    assert_eq!(body.first(), Some(&plan::Block::Step(*head)));
+                }
+                _ => {}
+            });
             let _ = print::flow(sfc, &p);
             let _ = print::order(sfc, &p);
         }

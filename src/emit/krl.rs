@@ -9,9 +9,9 @@ use serde::Deserialize;
 
 use super::{EmitInput, OutputFile};
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
-use crate::model::ElementKind;
+use crate::model::{ElementKind, Signal, SignalKind};
 use crate::names::transliterate;
-use crate::plan::Block;
+use crate::plan::{Block, Branch, BranchEnd};
 
 /// The built-in template's text.
 pub const DEFAULT_TEMPLATE: &str = include_str!("../../templates/krl.toml");
@@ -169,11 +169,16 @@ pub fn emit(
         .map(|b| b.code.len() + 80)
         .sum::<usize>();
     let mut src = String::with_capacity(template.src.len() + steps_estimate + 1024);
+    let mut writer = Writer {
+        input,
+        template,
+        number: 0,
+        uses_branch_var: false,
+    };
     for line in template.src.lines() {
         match block(line) {
             Some("steps") => {
-                let mut number = 0usize;
-                emit_blocks(input, template, &input.plan.body, &mut number, &mut src);
+                writer.blocks(&input.plan.body, 0, &mut src);
             }
             Some("definitions") => {
                 for &(irl, d) in &input.bound.definitions {
@@ -193,11 +198,36 @@ pub fn emit(
         }
     }
     let mut dat = String::with_capacity(template.dat.len() + 256);
+    let decls = declarations(input, writer.uses_branch_var);
+    if !decls.is_empty()
+        && !template
+            .dat
+            .lines()
+            .any(|l| block(l) == Some("declarations"))
+    {
+        // The program would use names nothing declares.
+        diags.push(Diagnostic::error(
+            Code::BadTemplate,
+            format!(
+                "output template: the program needs declarations in its .dat ({}), but `dat` has no `{{{{declarations}}}}` line",
+                decls.join("; ")
+            ),
+        ));
+        return None;
+    }
     for line in template.dat.lines() {
-        // No declarations yet: the block is empty.
-        if block(line).is_none() {
-            dat.push_str(&inline(line));
-            dat.push_str(nl);
+        match block(line) {
+            Some("declarations") => {
+                for d in &decls {
+                    dat.push_str(d);
+                    dat.push_str(nl);
+                }
+            }
+            Some(_) => {}
+            None => {
+                dat.push_str(&inline(line));
+                dat.push_str(nl);
+            }
         }
     }
 
@@ -233,34 +263,100 @@ fn block_name(line: &str) -> Option<&str> {
         .filter(|n| matches!(*n, "steps" | "definitions" | "declarations"))
 }
 
-fn emit_blocks(
-    input: &EmitInput,
-    template: &OutputTemplate,
-    blocks: &[Block],
-    number: &mut usize,
-    out: &mut String,
-) {
-    let nl = input.newline;
-    for b in blocks {
+/// The `.dat` variable that holds the branch a selection without an unconditional branch chose.
+pub const BRANCH_VAR: &str = "SKP_BRANCH";
+
+/// Writes the program tree.
+struct Writer<'a> {
+    input: &'a EmitInput<'a>,
+    template: &'a OutputTemplate,
+    number: usize,
+    /// Whether a selection needed [`BRANCH_VAR`].
+    uses_branch_var: bool,
+}
+
+impl Writer<'_> {
+    fn line(&self, out: &mut String, level: usize, text: &str) {
+        for _ in 0..level {
+            out.push_str("  ");
+        }
+        out.push_str(text);
+        out.push_str(self.input.newline);
+    }
+
+    /// A comment line; its text transliterated to ASCII on one line.
+    fn comment(&self, out: &mut String, level: usize, text: &str) {
+        self.line(out, level, &format!(";{}", transliterate(text)));
+    }
+
+    /// The KRL condition of a transition; `None` when it always fires.
+    fn condition(&self, t: usize) -> Option<String> {
+        let ElementKind::Transition(Some(c)) = &self.input.sfc.elements[t].kind else {
+            return None;
+        };
+        let res = self
+            .input
+            .bound
+            .resource
+            .map(|r| &self.input.blackboard.resources[r]);
+        let signal = |n: &str| -> String {
+            let Some(r) = res else {
+                return n.to_owned();
+            };
+            let Some(si) = r.signal(&crate::names::key(n)) else {
+                return n.to_owned();
+            };
+            krl_signal(&r.signals[si])
+        };
+        Some(crate::cond::render_krl(&c.expr, &signal))
+    }
+
+    /// The condition as written, for comments: on one line, without `;` (which would start a
+    /// comment inside the comment, and could look like a fold marker).
+    fn condition_text(&self, t: usize) -> String {
+        match &self.input.sfc.elements[t].kind {
+            ElementKind::Transition(Some(c)) => c
+                .text
+                .replace(';', ",")
+                .split_whitespace()
+                .collect::<Vec<_>>()
+                .join(" "),
+            _ => "TRUE".to_owned(),
+        }
+    }
+
+    fn blocks(&mut self, blocks: &[Block], level: usize, out: &mut String) {
+        for b in blocks {
+            self.block(b, level, out);
+        }
+    }
+
+    fn block(&mut self, b: &Block, level: usize, out: &mut String) {
+        let input = self.input;
+        let nl = input.newline;
+        let el = &input.sfc.elements;
         match b {
             Block::Step(i) => {
                 let Some(bs) = &input.bound.steps[*i] else {
-                    continue;
+                    return;
                 };
-                let e = &input.sfc.elements[*i];
+                let e = &el[*i];
                 let ElementKind::Step(st) = &e.kind else {
-                    continue;
+                    return;
                 };
-                *number += 1;
+                self.number += 1;
                 let res = &input.blackboard.resources[bs.resource];
                 let skill = &res.skills[bs.skill];
                 let ascii =
                     st.name.is_ascii() && skill.name.text.is_ascii() && res.name.text.is_ascii();
+                for _ in 0..level {
+                    out.push_str("  ");
+                }
                 let title_at = out.len();
                 let _ = write!(
                     out,
                     ";FOLD {} {}: {} @ {} (localId {})",
-                    number, st.name, skill.name.text, res.name.text, e.local_id
+                    self.number, st.name, skill.name.text, res.name.text, e.local_id
                 );
                 if !ascii || out[title_at..].contains(['\r', '\n']) {
                     let title = transliterate(&out[title_at..]);
@@ -270,21 +366,187 @@ fn emit_blocks(
                 out.push_str(nl);
                 for line in bs.code.split('\n') {
                     if !line.is_empty() {
-                        out.push_str(&template.step_indent);
+                        for _ in 0..level {
+                            out.push_str("  ");
+                        }
+                        out.push_str(&self.template.step_indent);
                         out.push_str(line);
                     }
                     out.push_str(nl);
                 }
-                out.push_str(";ENDFOLD");
-                out.push_str(nl);
+                self.line(out, level, ";ENDFOLD");
+            }
+            Block::Wait(t) => {
+                if let Some(c) = self.condition(*t) {
+                    self.comment(
+                        out,
+                        level,
+                        &format!(
+                            "transition localId {}: {}",
+                            el[*t].local_id,
+                            self.condition_text(*t)
+                        ),
+                    );
+                    self.line(out, level, &format!("WAIT FOR {c}"));
+                }
             }
             Block::Parallel { branches, .. } => {
                 for br in branches {
-                    emit_blocks(input, template, br, number, out);
+                    self.blocks(br, level, out);
                 }
+            }
+            Block::Choice {
+                divergence,
+                branches,
+                ..
+            } => self.choice(*divergence, branches, level, out),
+            Block::Loop {
+                head,
+                jumps,
+                body,
+                endless,
+            } => {
+                let ids: Vec<String> = jumps.iter().map(|j| el[*j].local_id.to_string()).collect();
+                self.comment(
+                    out,
+                    level,
+                    &format!(
+                        "loop back to step localId {} (jump localId {}){}",
+                        el[*head].local_id,
+                        ids.join(", "),
+                        if *endless { ", endless" } else { "" }
+                    ),
+                );
+                self.line(out, level, "LOOP");
+                self.blocks(body, level + 1, out);
+                self.line(out, level, "ENDLOOP");
             }
         }
     }
+
+    /// A branch's body and how it ends.
+    fn branch(&mut self, n: usize, br: &Branch, level: usize, out: &mut String) {
+        let el = &self.input.sfc.elements;
+        self.comment(
+            out,
+            level,
+            &format!(
+                "branch {n} (transition localId {}): {}",
+                el[br.transition].local_id,
+                self.condition_text(br.transition)
+            ),
+        );
+        self.blocks(&br.body, level, out);
+        match br.end {
+            BranchEnd::Join => {}
+            BranchEnd::Repeat(j) => self.comment(
+                out,
+                level,
+                &format!("round again (jump localId {})", el[j].local_id),
+            ),
+            BranchEnd::Leave => self.line(out, level, "EXIT"),
+        }
+    }
+
+    /// Selection branches in priority order. With an unconditional branch: an `IF` chain whose
+    /// last `ELSE` is that branch. Without: the program waits for any condition, records the
+    /// first that holds in [`BRANCH_VAR`] (testing again if none holds any more) and then runs
+    /// that branch, so it never passes the selection without taking a branch.
+    fn choice(&mut self, div: usize, branches: &[Branch], level: usize, out: &mut String) {
+        let el = &self.input.sfc.elements;
+        let conds: Vec<Option<String>> = branches
+            .iter()
+            .map(|b| self.condition(b.transition))
+            .collect();
+        self.comment(
+            out,
+            level,
+            &format!(
+                "selection localId {}: {} branches, the first whose condition holds",
+                el[div].local_id,
+                branches.len()
+            ),
+        );
+        if let Some(k) = conds.iter().position(Option::is_none) {
+            // Branches after an unconditional one are never taken.
+            for (n, br) in branches.iter().enumerate().take(k) {
+                let c = conds[n].as_deref().expect("conditional");
+                self.line(out, level + n, &format!("IF {c} THEN"));
+                self.branch(n + 1, br, level + n + 1, out);
+                self.line(out, level + n, "ELSE");
+            }
+            self.branch(k + 1, &branches[k], level + k, out);
+            for n in (0..k).rev() {
+                self.line(out, level + n, "ENDIF");
+            }
+            return;
+        }
+        self.uses_branch_var = true;
+        let any: Vec<String> = conds
+            .iter()
+            .map(|c| format!("({})", c.as_deref().unwrap_or("TRUE")))
+            .collect();
+        self.line(out, level, &format!("{BRANCH_VAR} = 0"));
+        self.line(out, level, "REPEAT");
+        self.line(out, level + 1, &format!("WAIT FOR {}", any.join(" OR ")));
+        for (n, c) in conds.iter().enumerate() {
+            let c = c.as_deref().unwrap_or("TRUE");
+            self.line(out, level + 1 + n, &format!("IF {c} THEN"));
+            self.line(out, level + 2 + n, &format!("{BRANCH_VAR} = {}", n + 1));
+            if n + 1 < conds.len() {
+                self.line(out, level + 1 + n, "ELSE");
+            }
+        }
+        for n in (0..conds.len()).rev() {
+            self.line(out, level + 1 + n, "ENDIF");
+        }
+        self.line(out, level, &format!("UNTIL {BRANCH_VAR} <> 0"));
+        self.line(out, level, &format!("SWITCH {BRANCH_VAR}"));
+        for (n, br) in branches.iter().enumerate() {
+            if n + 1 < branches.len() {
+                self.line(out, level, &format!("CASE {}", n + 1));
+            } else {
+                self.line(out, level, "DEFAULT");
+            }
+            self.branch(n + 1, br, level + 1, out);
+        }
+        self.line(out, level, "ENDSWITCH");
+    }
+}
+
+/// A signal in KRL: `$IN[n]`/`$OUT[n]` for a bit, the `SIGNAL` name for an integer group, the
+/// `Address` as it stands.
+pub fn krl_signal(s: &Signal) -> String {
+    let io = if s.output { "$OUT" } else { "$IN" };
+    match &s.kind {
+        SignalKind::Bit(n) => format!("{io}[{n}]"),
+        SignalKind::Group { .. } => s.name.text.to_string(),
+        SignalKind::Address { text, .. } => text.clone(),
+    }
+}
+
+/// The `.dat` declarations: `SIGNAL`s for the integer groups the conditions use, and the
+/// selection variable when a selection needs it.
+fn declarations(input: &EmitInput, uses_branch_var: bool) -> Vec<String> {
+    let mut out = Vec::new();
+    if let Some(r) = input.bound.resource {
+        let res = &input.blackboard.resources[r];
+        for &si in &input.bound.signals {
+            let s = &res.signals[si];
+            if let SignalKind::Group { number, length } = s.kind {
+                let io = if s.output { "$OUT" } else { "$IN" };
+                out.push(format!(
+                    "SIGNAL {} {io}[{number}] TO {io}[{}]",
+                    s.name.text,
+                    number + length - 1
+                ));
+            }
+        }
+    }
+    if uses_branch_var {
+        out.push(format!("DECL INT {BRANCH_VAR}=0"));
+    }
+    out
 }
 
 #[cfg(test)]

@@ -6,8 +6,8 @@ use roxmltree::Node;
 use super::xml::{caex_attr, caex_element, caex_name, caex_value, children, tag_span};
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
 use crate::model::{
-    Blackboard, Function, FunctionMapping, MappedArg, Name, Param, RefValue, Resource, Skill,
-    ValueType, WriteBackTarget,
+    Blackboard, Function, FunctionMapping, MappedArg, Name, Param, RefValue, Resource, Signal,
+    SignalKind, Skill, ValueType, WriteBackTarget,
 };
 use crate::names;
 
@@ -90,6 +90,80 @@ pub fn read_blackboard(
     Some(r.hierarchy(hierarchy))
 }
 
+/// The highest I/O index a signal may use (KRL's `$IN`/`$OUT` have 4096 on a KR C4; 8192 on
+/// later controllers).
+pub const MAX_IO: u32 = 8192;
+
+/// An `Address` is one safe token: a name or a `$`system variable, optionally with one or two
+/// integer indexes (`PART_OK`, `$IN[5]`, `$CYCFLAG[3]`, `$X[1,2]`).
+pub fn is_safe_address(s: &str) -> bool {
+    let (base, index) = match s.find('[') {
+        Some(i) => (&s[..i], Some(&s[i..])),
+        None => (s, None),
+    };
+    let name = base.strip_prefix('$').unwrap_or(base);
+    let ident = !name.is_empty()
+        && name.len() <= 24
+        && (name.as_bytes()[0].is_ascii_alphabetic() || name.as_bytes()[0] == b'_')
+        && name.bytes().all(|c| c.is_ascii_alphanumeric() || c == b'_');
+    let index_ok = match index {
+        None => true,
+        Some(ix) => ix
+            .strip_prefix('[')
+            .and_then(|r| r.strip_suffix(']'))
+            .is_some_and(|inner| {
+                let parts: Vec<&str> = inner.split(',').collect();
+                parts.len() <= 2
+                    && parts.iter().all(|p| {
+                        !p.is_empty() && p.len() <= 9 && p.bytes().all(|b| b.is_ascii_digit())
+                    })
+            }),
+    };
+    ident && index_ok && !names::is_krl_keyword(name)
+}
+
+/// The resources under `Ressourcen`/`Resources` (SPEC.md 2): its children that have a child
+/// named `Skills` or `FunctionDescription(s)`, and at any depth below grouping elements (plant,
+/// line, cell) those that do; a child with no resource below it is a resource itself. Document
+/// order.
+fn resource_nodes<'a, 'i>(res: Node<'a, 'i>) -> Vec<Node<'a, 'i>> {
+    let is_resource = |n: Node| {
+        internal_element(
+            n,
+            &["Skills", "FunctionDescription", "FunctionDescriptions"],
+        )
+        .is_some()
+    };
+    let mut out = Vec::new();
+    for c in children(res, "InternalElement") {
+        if is_resource(c) {
+            out.push(c);
+            continue;
+        }
+        let mut found = Vec::new();
+        let mut stack: Vec<(Node, usize)> =
+            children(c, "InternalElement").map(|k| (k, 1)).collect();
+        stack.reverse();
+        while let Some((n, depth)) = stack.pop() {
+            if is_resource(n) {
+                found.push(n);
+            } else if depth < super::xml::MAX_DEPTH {
+                let mut kids: Vec<(Node, usize)> = children(n, "InternalElement")
+                    .map(|k| (k, depth + 1))
+                    .collect();
+                kids.reverse();
+                stack.extend(kids);
+            }
+        }
+        if found.is_empty() {
+            out.push(c);
+        } else {
+            out.extend(found);
+        }
+    }
+    out
+}
+
 struct Reader<'d> {
     file: FileId,
     diags: &'d mut Diagnostics,
@@ -129,7 +203,7 @@ impl Reader<'_> {
         let mut resources = Vec::new();
         match internal_element(h, &["Ressourcen", "Resources"]) {
             Some(res) => {
-                for r in children(res, "InternalElement") {
+                for r in resource_nodes(res) {
                     resources.push(self.resource(r));
                 }
                 self.check_unique(
@@ -206,6 +280,7 @@ impl Reader<'_> {
             functions.iter().map(|f| (&f.name, f.element.as_str())),
             "function",
         );
+        let (signals, broken_signals) = self.signals(r);
         Resource {
             name,
             element: caex_element(r),
@@ -213,7 +288,182 @@ impl Reader<'_> {
             skills,
             functions,
             broken_functions,
+            signals,
+            broken_signals,
         }
+    }
+
+    /// The resource's signals: `ExternalInterface`s directly under it or under its child named
+    /// `Signals`/`Signale` whose `RefBaseClassPath` ends in `SignalInterface` or `Channel`.
+    fn signals(&mut self, r: Node) -> (Vec<Signal>, Vec<std::sync::Arc<str>>) {
+        let mut ifaces: Vec<Node> = children(r, "ExternalInterface").collect();
+        if let Some(group) = internal_element(r, &["Signals", "Signale"]) {
+            ifaces.extend(children(group, "ExternalInterface"));
+        }
+        let mut signals = Vec::new();
+        let mut broken = Vec::new();
+        for ei in ifaces {
+            if !(ref_base_ends_with(ei, "SignalInterface") || ref_base_ends_with(ei, "Channel")) {
+                continue;
+            }
+            match self.signal(ei) {
+                Some(s) => signals.push(s),
+                None => broken.push(self.name_of(ei).key),
+            }
+        }
+        self.check_unique(
+            signals.iter().map(|s| (&s.name, s.element.as_str())),
+            "signal",
+        );
+        (signals, broken)
+    }
+
+    fn signal(&mut self, ei: Node) -> Option<Signal> {
+        let name = self.name_of(ei);
+        let element = caex_element(ei);
+        let mut ok = true;
+        let value = |attr: &str| {
+            caex_attr(ei, attr)
+                .and_then(|a| caex_value(self.file, a))
+                .filter(|(v, _)| !v.is_empty())
+        };
+        let mut bad = |diags: &mut Diagnostics, span: Span, msg: String| {
+            diags.push(
+                Diagnostic::error(Code::BadSignal, format!("signal `{}`: {msg}", name.text))
+                    .at(span)
+                    .element(element.clone()),
+            );
+            ok = false;
+        };
+        let output = match value("IoType") {
+            None => false,
+            Some((v, span)) => match v.to_ascii_lowercase().as_str() {
+                "input" | "in" => false,
+                "output" | "out" => true,
+                _ => {
+                    bad(
+                        self.diags,
+                        span,
+                        format!("IoType `{v}` is neither `Input` nor `Output`"),
+                    );
+                    false
+                }
+            },
+        };
+        let integer = match value("Type") {
+            None => false,
+            Some((v, span)) => match ValueType::parse(&v) {
+                Some(ValueType::Boolean) => false,
+                Some(ValueType::Integer) => true,
+                _ => {
+                    bad(
+                        self.diags,
+                        span,
+                        format!(
+                            "Type `{v}` is neither `xs:boolean` (one bit) nor `xs:integer` (a group of `Length` bits)"
+                        ),
+                    );
+                    false
+                }
+            },
+        };
+        let kind = if let Some((text, span)) = value("Address") {
+            if !is_safe_address(&text) {
+                bad(
+                    self.diags,
+                    span,
+                    format!(
+                        "Address `{text}` is not one safe token: write a name or a system variable with an index (`PART_OK`, `$IN[5]`, `$CYCFLAG[3]`)"
+                    ),
+                );
+            }
+            SignalKind::Address { text, integer }
+        } else {
+            let number = match value("Number") {
+                None => {
+                    bad(
+                        self.diags,
+                        self.span(ei),
+                        "no `Number` (the first I/O index, from 1) and no `Address`".to_owned(),
+                    );
+                    1
+                }
+                Some((v, span)) => match v.parse::<u32>() {
+                    Ok(n) if (1..=MAX_IO).contains(&n) => n,
+                    Ok(0) => {
+                        bad(
+                            self.diags,
+                            span,
+                            "Number 0 is not an I/O index: KRL counts inputs and outputs from 1 ($IN[1])".to_owned(),
+                        );
+                        1
+                    }
+                    _ => {
+                        bad(
+                            self.diags,
+                            span,
+                            format!("Number `{v}` is not an I/O index from 1 to {MAX_IO}"),
+                        );
+                        1
+                    }
+                },
+            };
+            if integer {
+                let length = match value("Length") {
+                    None => {
+                        bad(
+                            self.diags,
+                            self.span(ei),
+                            "an xs:integer signal needs a `Length` (its number of bits, 2 to 32)"
+                                .to_owned(),
+                        );
+                        2
+                    }
+                    Some((v, span)) => match v.parse::<u32>() {
+                        Ok(l) if (2..=32).contains(&l) => {
+                            if number.saturating_add(l - 1) > MAX_IO {
+                                bad(
+                                    self.diags,
+                                    span,
+                                    format!(
+                                        "Length {l} from Number {number} passes the last I/O index {MAX_IO}"
+                                    ),
+                                );
+                            }
+                            l
+                        }
+                        _ => {
+                            bad(
+                                self.diags,
+                                span,
+                                format!("Length `{v}` is not a number of bits from 2 to 32"),
+                            );
+                            2
+                        }
+                    },
+                };
+                if !names::is_krl_name(&name.text)
+                    || names::is_krl_keyword(&name.text)
+                    || names::eq(&name.text, crate::emit::krl::BRANCH_VAR)
+                {
+                    let span = name.span.clone();
+                    bad(
+                        self.diags,
+                        span,
+                        "an integer signal is declared as a KRL SIGNAL of this name: it must be a KRL name (a letter or `_`, then letters, digits or `_`, at most 24 characters, not a keyword nor `SKP_BRANCH`)".to_owned(),
+                    );
+                }
+                SignalKind::Group { number, length }
+            } else {
+                SignalKind::Bit(number)
+            }
+        };
+        ok.then_some(Signal {
+            name,
+            element,
+            output,
+            kind,
+        })
     }
 
     fn skill(&mut self, sk: Node) -> Skill {
@@ -628,10 +878,11 @@ impl Reader<'_> {
                 })
         });
         let attr = iface.and_then(|i| caex_attr(i, "refURI"));
-        match attr {
-            Some(a) => Some(WriteBackTarget {
+        match attr.and_then(|a| Some((a, crate::write::SpliceSite::of(a)?))) {
+            Some((a, site)) => Some(WriteBackTarget {
                 attribute: Span::new(self.file, a.range()),
                 current: caex_value(self.file, a).map(|(v, _)| v),
+                site,
             }),
             None => {
                 let at = iface.or(code).unwrap_or(h);
@@ -644,6 +895,34 @@ impl Reader<'_> {
                 );
                 None
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod signal_tests {
+    use super::is_safe_address;
+
+    #[test]
+    fn addresses_are_one_safe_token() {
+        for ok in ["PART_OK", "$IN[5]", "$CYCFLAG[3]", "$X[1,2]", "_a1"] {
+            assert!(is_safe_address(ok), "{ok}");
+        }
+        for bad in [
+            "$IN[5]; $OUT[1]=TRUE",
+            "$IN[ 5]",
+            "$IN[]",
+            "$IN[5",
+            "a b",
+            "1X",
+            "$",
+            "END",
+            "$IN[1][2]",
+            "$IN[-1]",
+            "",
+            "Grüße",
+        ] {
+            assert!(!is_safe_address(bad), "{bad}");
         }
     }
 }

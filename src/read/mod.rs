@@ -72,7 +72,7 @@ pub fn normalize(p: &Path) -> PathBuf {
     out
 }
 
-fn percent_decode(s: &str) -> Option<String> {
+pub fn percent_decode(s: &str) -> Option<String> {
     if !s.contains('%') {
         return Some(s.to_owned());
     }

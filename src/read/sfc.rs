@@ -11,19 +11,37 @@ use std::ops::Range;
 use quick_xml::events::{BytesStart, Event};
 
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
-use crate::model::{Element, ElementKind, FileHeader, Interner, Name, Sfc, Step, Value, Variable};
+use crate::model::{
+    Condition, Element, ElementKind, FileHeader, Interner, Name, Sfc, Step, Value, Variable,
+};
 
 /// Lists nest at most this deep in a variable's value.
 pub const MAX_LIST_DEPTH: usize = 32;
 
 /// Reads the SFC file. `None` when the file is not well-formed or has no usable program body.
 pub fn read_sfc(sources: &Sources, file: FileId, diags: &mut Diagnostics) -> Option<Sfc> {
+    read_sfc_pou(sources, file, None, diags)
+}
+
+/// Reads the SFC file's POU named `pou` (`--pou`, or the reference's `#fragment`); without a
+/// name, the first program with an SFC body, else the first POU with one (SPEC.md 3). When
+/// several POUs have an SFC body and none was named, a warning names the one used and the
+/// others.
+pub fn read_sfc_pou(
+    sources: &Sources,
+    file: FileId,
+    pou: Option<&str>,
+    diags: &mut Diagnostics,
+) -> Option<Sfc> {
     let text = sources.get(file).text.as_str();
     let mut r = Stream {
+        wanted: pou.map(|p| p.trim().to_owned()).filter(|p| !p.is_empty()),
+        pous: Vec::new(),
         text,
         file,
         names: Interner::default(),
         found: Vec::new(),
+        ignored: Vec::new(),
     };
     let before = diags.error_count();
     let mut local = Diagnostics::default();
@@ -52,27 +70,68 @@ pub fn read_sfc(sources: &Sources, file: FileId, diags: &mut Diagnostics) -> Opt
             for d in local.into_vec() {
                 diags.push(d);
             }
+            report_ignored(&r.ignored, diags);
             let _ = before;
             let chosen = r
                 .found
                 .iter()
                 .position(|p| p.program)
                 .or(if r.found.is_empty() { None } else { Some(0) });
+            let with_sfc: Vec<&str> = r
+                .pous
+                .iter()
+                .filter(|p| p.1)
+                .map(|p| p.0.as_str())
+                .collect();
+            let list = |names: &[&str]| {
+                let v: Vec<String> = names.iter().take(12).map(|n| format!("`{n}`")).collect();
+                let more = if names.len() > 12 { ", ..." } else { "" };
+                format!("{}{more}", v.join(", "))
+            };
             let Some(i) = chosen else {
+                let all: Vec<&str> = r.pous.iter().map(|p| p.0.as_str()).collect();
+                let message = match (&r.wanted, &first_pou) {
+                    (Some(w), _) if !with_sfc.is_empty() => format!(
+                        "no POU named `{w}` with an SFC body; the POUs with one: {}",
+                        list(&with_sfc)
+                    ),
+                    (Some(w), Some(_)) => format!(
+                        "no POU named `{w}` with an SFC body; none of the {} POUs ({}) has one",
+                        all.len(),
+                        list(&all)
+                    ),
+                    (_, None) => "the SFC file has no `pou` (types/pous/pou)".to_owned(),
+                    (None, Some((_, name))) if all.len() == 1 => {
+                        format!("pou `{name}` has no SFC body (body/SFC)")
+                    }
+                    (None, Some(_)) => format!(
+                        "none of the {} POUs ({}) has an SFC body (body/SFC)",
+                        all.len(),
+                        list(&all)
+                    ),
+                };
                 diags.push(
-                    Diagnostic::error(
-                        Code::NoSfcBody,
-                        match &first_pou {
-                            None => "the SFC file has no `pou` (types/pous/pou)".to_owned(),
-                            Some((_, name)) => {
-                                format!("pou `{name}` has no SFC body (body/SFC)")
-                            }
-                        },
-                    )
-                    .at(first_pou.map(|(s, _)| s).unwrap_or(root)),
+                    Diagnostic::error(Code::NoSfcBody, message)
+                        .at(first_pou.map(|(s, _)| s).unwrap_or(root)),
                 );
                 return None;
             };
+            if r.wanted.is_none() && with_sfc.len() > 1 {
+                let used = r.found[i].name.clone().unwrap_or_default();
+                let others: Vec<&str> = with_sfc.iter().copied().filter(|n| *n != used).collect();
+                diags.push(
+                    Diagnostic::warning(
+                        Code::SeveralPous,
+                        format!(
+                            "{} POUs have an SFC body; `{used}` is used ({}), not {}: name the one meant with `--pou NAME` or `#NAME` after the SFC file's name in the blackboard",
+                            with_sfc.len(),
+                            if r.found[i].program { "the first program" } else { "the first with one" },
+                            list(&others)
+                        ),
+                    )
+                    .at(r.found[i].sfc_span.clone()),
+                );
+            }
             let pou = r.found.swap_remove(i);
             Some(Sfc {
                 file,
@@ -109,6 +168,12 @@ struct Stream<'t> {
     file: FileId,
     names: Interner,
     found: Vec<Pou>,
+    /// Elements of the SFC body that are ignored: tag, place, label.
+    ignored: Vec<(String, Span, String)>,
+    /// The POU asked for by name.
+    wanted: Option<String>,
+    /// Every POU: name, whether it has an SFC body.
+    pous: Vec<(String, bool)>,
 }
 
 /// An attribute: its local name, value (entities resolved) and the raw value's byte range.
@@ -123,8 +188,8 @@ struct Building<'t> {
     tag: &'t str,
     span: Span,
     depth: usize,
-    /// `localId`, `name`, `initialStep`.
-    attrs: [Option<Attr<'t>>; 3],
+    /// `localId`, `name`, `initialStep`, `targetName`.
+    attrs: [Option<Attr<'t>>; 4],
     x: Option<f64>,
     inputs: Vec<(u64, Range<usize>)>,
     bad_inputs: Vec<Diagnostic>,
@@ -141,6 +206,13 @@ struct Building<'t> {
     condition: Option<Span>,
     condition_done: bool,
     inline: Option<String>,
+    /// Where each piece of `inline` came from: (offset in `inline`, offset in the file, whether
+    /// the piece's bytes are the file's bytes one to one).
+    inline_map: Vec<(usize, usize, bool)>,
+    /// `condition/reference@name`: the name and its range.
+    reference: Option<(String, Range<usize>)>,
+    /// `condition/connectionPointIn`: a condition wired from FBD/LD elements.
+    wired: bool,
 }
 
 #[derive(PartialEq, Eq, Clone, Copy)]
@@ -312,13 +384,16 @@ impl<'t> Stream<'t> {
                     continue;
                 }
                 Event::Text(t) => {
-                    inline_text(&mut building, &stack, || {
+                    let end = reader.buffer_position() as usize;
+                    inline_text(&mut building, &stack, at..end, || {
                         t.xml_content(quick_xml::XmlVersion::Implicit1_0)
                     });
                     continue;
                 }
                 Event::CData(t) => {
-                    inline_text(&mut building, &stack, || {
+                    // `<![CDATA[` … `]]>`
+                    let end = (reader.buffer_position() as usize).saturating_sub(3);
+                    inline_text(&mut building, &stack, (at + 9).min(end)..end, || {
                         t.xml_content(quick_xml::XmlVersion::Implicit1_0)
                     });
                     continue;
@@ -345,7 +420,9 @@ impl<'t> Stream<'t> {
                         && b.inline.is_some()
                         && in_inline(b, &stack)
                     {
-                        b.inline.as_mut().expect("checked").push(c);
+                        let inline = b.inline.as_mut().expect("checked");
+                        b.inline_map.push((inline.len(), at, false));
+                        inline.push(c);
                     }
                     continue;
                 }
@@ -392,6 +469,11 @@ impl<'t> Stream<'t> {
             let depth = stack.len() + 1;
             // The element's place, relative to the document.
             let path = PathKind::of(&stack, name);
+            if matches!(path, PathKind::Sfc)
+                && let Some(p) = self.pous.last_mut()
+            {
+                p.1 = true;
+            }
             if let Some(b) = &mut building {
                 self.inside(b, &stack, name, tag, &start, at)?;
                 if empty {
@@ -427,8 +509,15 @@ impl<'t> Stream<'t> {
                     if first_pou.is_none() {
                         first_pou = Some((tag.clone(), pname.clone().unwrap_or_default()));
                     }
+                    self.pous.push((pname.clone().unwrap_or_default(), false));
                     let have_program = self.found.iter().any(|p| p.program);
-                    want_pou = !have_program && (program || self.found.is_empty());
+                    want_pou = match &self.wanted {
+                        Some(w) => {
+                            self.found.is_empty()
+                                && pname.as_deref().is_some_and(|n| crate::names::eq(n, w))
+                        }
+                        None => !have_program && (program || self.found.is_empty()),
+                    };
                     if want_pou && !empty {
                         pou = Some((pname, program, depth));
                         body_seen = false;
@@ -460,7 +549,11 @@ impl<'t> Stream<'t> {
                     if let Some((_, d, els)) = &mut sfc
                         && depth == *d + 1
                     {
-                        let attrs = self.pick(&start, at, ["localId", "name", "initialStep"])?;
+                        let attrs = self.pick(
+                            &start,
+                            at,
+                            ["localId", "name", "initialStep", "targetName"],
+                        )?;
                         let b = Building {
                             tag: name,
                             span: tag,
@@ -480,6 +573,9 @@ impl<'t> Stream<'t> {
                             condition: None,
                             condition_done: false,
                             inline: None,
+                            inline_map: Vec::new(),
+                            reference: None,
+                            wired: false,
                         };
                         if empty {
                             if let Some(el) = self.finish(b, diags) {
@@ -572,9 +668,21 @@ impl<'t> Stream<'t> {
             ([], "condition") if b.condition.is_none() && !b.condition_done => {
                 b.condition = Some(tag);
             }
-            (["condition"], "inline") if b.condition.is_some() && b.inline.is_none() => {
+            (["condition"], "inline")
+                if b.condition.is_some() && b.inline.is_none() && b.reference.is_none() =>
+            {
                 b.inline = Some(String::new());
             }
+            (["condition"], "reference")
+                if b.condition.is_some() && b.inline.is_none() && b.reference.is_none() =>
+            {
+                let [n] = self.pick(start, at, ["name"])?;
+                b.reference = Some(match n {
+                    Some(a) => (a.value.into_owned(), a.range),
+                    None => (String::new(), tag.range.clone()),
+                });
+            }
+            (["condition"], "connectionPointIn") if b.condition.is_some() => b.wired = true,
             _ => {}
         }
         Ok(())
@@ -592,46 +700,36 @@ impl<'t> Stream<'t> {
         };
         let kind = match b.tag {
             "step" => ElementKind::Step(Box::new(self.step(&b, diags))),
-            "transition" => {
-                if let Some(c) = &b.condition {
-                    let is_true = b
-                        .inline
-                        .as_deref()
-                        .is_some_and(|s| s.trim().eq_ignore_ascii_case("TRUE"));
-                    if !is_true {
-                        let what = match &b.inline {
-                            Some(s) => format!("condition `{}`", s.trim()),
-                            None => "a condition that is not an inline `TRUE`".to_owned(),
-                        };
-                        diags.push(
-                            Diagnostic::warning(
-                                Code::Ignored,
-                                format!("transition with {what} ignored: transitions always fire"),
-                            )
-                            .at(c.clone())
-                            .element(id_label()),
-                        );
-                    }
-                }
-                ElementKind::Transition
-            }
+            "transition" => ElementKind::Transition(self.condition(&b, diags)),
             "simultaneousDivergence" => ElementKind::SimultaneousDivergence,
             "simultaneousConvergence" => ElementKind::SimultaneousConvergence,
             "selectionDivergence" => ElementKind::SelectionDivergence,
             "selectionConvergence" => ElementKind::SelectionConvergence,
-            "jumpStep" => ElementKind::JumpStep,
-            "macroStep" => ElementKind::MacroStep,
-            tag => {
-                let what = if tag == "actionBlock" {
-                    "action block".to_owned()
-                } else {
-                    format!("`{tag}` element")
-                };
-                diags.push(
-                    Diagnostic::warning(Code::Ignored, format!("{what} ignored"))
+            "jumpStep" => {
+                let target = attr("targetName")
+                    .filter(|a| !a.value.trim().is_empty())
+                    .map(|a| Box::new(self.names.name(&a.value, Span::new(file, a.range.clone()))));
+                if target.is_none() {
+                    diags.push(
+                        Diagnostic::error(
+                            Code::BadJump,
+                            "jumpStep without `targetName`: name the step to jump to",
+                        )
                         .at(b.span.clone())
                         .element(id_label()),
-                );
+                    );
+                }
+                ElementKind::JumpStep(target)
+            }
+            "macroStep" => ElementKind::MacroStep,
+            tag => {
+                // Reported once per kind and chart (see `report_ignored`).
+                let n = self.ignored.iter().filter(|i| i.0 == tag).count() + 1;
+                let label = match attr("localId") {
+                    Some(a) => format!("localId {}", a.value.trim()),
+                    None => format!("{tag} no. {n} of the SFC body"),
+                };
+                self.ignored.push((tag.to_owned(), b.span.clone(), label));
                 return None;
             }
         };
@@ -670,6 +768,115 @@ impl<'t> Stream<'t> {
             x: b.x.unwrap_or(0.0),
             inputs: b.inputs,
         })
+    }
+
+    /// A transition's condition: parsed, syntax errors located in the file. `None` when the
+    /// transition always fires (no condition, or `TRUE`).
+    fn condition(&self, b: &Building<'t>, diags: &mut Diagnostics) -> Option<Box<Condition>> {
+        let c = b.condition.as_ref()?;
+        let label = || {
+            format!(
+                "localId {}",
+                b.attrs
+                    .iter()
+                    .flatten()
+                    .find(|a| a.name == "localId")
+                    .map(|a| &*a.value)
+                    .unwrap_or("?")
+            )
+        };
+        let file = self.file;
+        let (text, parsed, reference) = if let Some(inline) = &b.inline {
+            let map = |o: usize| map_offset(&b.inline_map, o);
+            (inline.trim(), crate::cond::parse(inline, &map), false)
+        } else if let Some((name, range)) = &b.reference {
+            // The name is the condition: one name, nothing else.
+            let lead = name.len() - name.trim_start().len();
+            let map = |o: usize| (range.start + o).min(range.end);
+            let parsed = if range.len() == name.len() {
+                crate::cond::parse(name, &map)
+            } else {
+                crate::cond::parse(name, &|_| range.start)
+            };
+            let parsed = match parsed {
+                Ok(e) if matches!(e.kind, crate::cond::ExprKind::Name(_)) => Ok(e),
+                _ if name.trim().is_empty() => Err(crate::cond::SyntaxError {
+                    at: 0..name.len(),
+                    message: "condition reference without a `name`".to_owned(),
+                }),
+                _ => Err(crate::cond::SyntaxError {
+                    at: lead..name.trim_end().len(),
+                    message: format!(
+                        "condition reference `{}` is not one name (the name is the condition: a signal)",
+                        name.trim()
+                    ),
+                }),
+            };
+            (name.trim(), parsed, true)
+        } else if b.wired {
+            diags.push(
+                Diagnostic::error(
+                    Code::Unsupported,
+                    "a condition wired from FBD/LD elements (condition/connectionPointIn) is not supported: write it as inline ST",
+                )
+                .at(c.clone())
+                .element(label()),
+            );
+            return None;
+        } else {
+            diags.push(
+                Diagnostic::error(
+                    Code::BadCondition,
+                    "`condition` holds neither `inline` ST nor a `reference`",
+                )
+                .at(c.clone())
+                .element(label()),
+            );
+            return None;
+        };
+        // As written, on one line (for messages, listings and comments).
+        let text = text.split_whitespace().collect::<Vec<_>>().join(" ");
+        match parsed {
+            Ok(e) if e.is_true() => None,
+            Ok(expr) => Some(Box::new(Condition {
+                text,
+                expr,
+                span: c.clone(),
+                reference,
+            })),
+            Err(err) => {
+                let at = if reference {
+                    let r = &b.reference.as_ref().expect("reference").1;
+                    if r.len() == text.len() || err.at.end <= r.len() {
+                        (r.start + err.at.start).min(r.end)..(r.start + err.at.end).min(r.end)
+                    } else {
+                        r.clone()
+                    }
+                } else {
+                    let s = map_offset(&b.inline_map, err.at.start);
+                    let e = map_offset(&b.inline_map, err.at.end.saturating_sub(1)) + 1;
+                    s..e.max(s + 1)
+                };
+                // On character boundaries of the file, whatever the pieces' mapping gave.
+                let (mut s, mut e) = (at.start.min(self.text.len()), at.end.min(self.text.len()));
+                while !self.text.is_char_boundary(s) {
+                    s -= 1;
+                }
+                while !self.text.is_char_boundary(e) {
+                    e += 1;
+                }
+                let at = s..e.max(s);
+                diags.push(
+                    Diagnostic::error(
+                        Code::BadCondition,
+                        format!("condition `{}`: {}", text, err.message),
+                    )
+                    .at(Span::new(file, at))
+                    .element(label()),
+                );
+                None
+            }
+        }
     }
 
     fn step(&mut self, b: &Building<'t>, diags: &mut Diagnostics) -> Step {
@@ -755,6 +962,40 @@ impl<'t> Stream<'t> {
     }
 }
 
+/// One warning per kind of ignored element (action blocks, unknown elements), naming them.
+fn report_ignored(ignored: &[(String, Span, String)], diags: &mut Diagnostics) {
+    let mut kinds: Vec<&str> = Vec::new();
+    for (tag, _, _) in ignored {
+        if !kinds.contains(&tag.as_str()) {
+            kinds.push(tag);
+        }
+    }
+    for kind in kinds {
+        let all: Vec<&(String, Span, String)> = ignored.iter().filter(|i| i.0 == kind).collect();
+        let what = if kind == "actionBlock" {
+            "action block".to_owned()
+        } else {
+            format!("`{kind}` element")
+        };
+        let labels: Vec<&str> = all.iter().take(8).map(|i| i.2.as_str()).collect();
+        let more = if all.len() > 8 { ", ..." } else { "" };
+        let msg = if all.len() == 1 {
+            format!("{what} ignored")
+        } else {
+            format!(
+                "{} {what}s ignored ({}{more})",
+                all.len(),
+                labels.join(", ")
+            )
+        };
+        diags.push(
+            Diagnostic::warning(Code::Ignored, msg)
+                .at(all[0].1.clone())
+                .element(all[0].2.clone()),
+        );
+    }
+}
+
 /// Where an element stands in the document, for the parts read outside SFC elements.
 enum PathKind {
     FileHeader,
@@ -788,10 +1029,12 @@ fn end_inside(b: &mut Building, stack: &[&str]) {
     }
 }
 
-/// Adds text to the element's inline condition when the stack is inside it.
+/// Adds text (read from `raw`, a range of the file) to the element's inline condition when the
+/// stack is inside it.
 fn inline_text<'s>(
     building: &mut Option<Building>,
     stack: &[&str],
+    raw: Range<usize>,
     text: impl FnOnce() -> std::borrow::Cow<'s, str>,
 ) {
     if let Some(b) = building
@@ -799,7 +1042,20 @@ fn inline_text<'s>(
         && in_inline(b, stack)
     {
         let t = text();
-        b.inline.get_or_insert_default().push_str(&t);
+        let inline = b.inline.get_or_insert_default();
+        b.inline_map
+            .push((inline.len(), raw.start, t.len() == raw.len()));
+        inline.push_str(&t);
+    }
+}
+
+/// The file offset of byte `o` of an inline condition assembled from the pieces of `map`.
+fn map_offset(map: &[(usize, usize, bool)], o: usize) -> usize {
+    let i = map.partition_point(|&(c, _, _)| c <= o);
+    match i.checked_sub(1).map(|i| map[i]) {
+        Some((c, f, true)) => f + (o - c),
+        Some((_, f, false)) => f,
+        None => map.first().map_or(0, |m| m.1),
     }
 }
 
@@ -1063,20 +1319,49 @@ mod tests {
         ));
         assert_eq!(sfc.unwrap().elements.len(), 1);
         assert!(d.is_empty(), "{d:?}");
-        let (_, d) = read(&doc("<inline><ST>a &lt; b<![CDATA[ && c]]></ST></inline>"));
-        assert_eq!(d.len(), 1);
-        assert_eq!(d[0].code, Code::Ignored);
+        // Entities and CDATA: the error is located in the file.
+        let text = doc("<inline><ST>a &lt; b<![CDATA[ && c]]></ST></inline>");
+        let (sfc, d) = read(&text);
+        assert_eq!(d.len(), 1, "{d:?}");
+        assert_eq!(d[0].code, Code::BadCondition);
         assert!(
             d[0].message.contains("condition `a < b && c`"),
             "{}",
             d[0].message
         );
-        let (_, d) = read(&doc("<reference name=\"Cond1\"/>"));
-        assert!(
-            d[0].message.contains("not an inline `TRUE`"),
-            "{}",
-            d[0].message
+        // The second `&` of `&&` (the first is a complete AND, the second lacks an operand).
+        let at = d[0].span.as_ref().unwrap().range.start;
+        assert_eq!(&text[at..at + 1], "&");
+        assert_eq!(&text[at - 1..at + 3], "&& c");
+        assert!(sfc.unwrap().elements.len() == 1);
+        // A parsed condition keeps file spans.
+        let text = doc(
+            "<inline><ST><xhtml:p xmlns:xhtml=\"x\">Part_OK AND NOT Stop</xhtml:p></ST></inline>",
         );
+        let (sfc, d) = read(&text);
+        assert!(d.is_empty(), "{d:?}");
+        let sfc = sfc.unwrap();
+        let ElementKind::Transition(Some(c)) = &sfc.elements[0].kind else {
+            panic!("no condition")
+        };
+        let names = c.expr.names();
+        assert_eq!(&text[names[1].1.clone()], "Stop");
+        // A reference is one name.
+        let text = doc("<reference name=\"Cond1\"/>");
+        let (sfc, d) = read(&text);
+        assert!(d.is_empty(), "{d:?}");
+        let ElementKind::Transition(Some(c)) = &sfc.unwrap().elements[0].kind else {
+            panic!("no condition")
+        };
+        assert!(c.reference);
+        assert_eq!(&text[c.expr.span.clone()], "Cond1");
+        let (_, d) = read(&doc("<reference name=\"a b\"/>"));
+        assert!(d[0].message.contains("is not one name"), "{}", d[0].message);
+        let (_, d) = read(&doc(
+            "<connectionPointIn><connection refLocalId=\"9\"/></connectionPointIn>",
+        ));
+        assert_eq!(d[0].code, Code::Unsupported);
+        assert!(d[0].message.contains("wired"), "{}", d[0].message);
     }
 
     #[test]

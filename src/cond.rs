@@ -1,0 +1,745 @@
+//! Transition conditions (SPEC.md 3.1): the ST subset `TRUE`, `FALSE`, integer and decimal
+//! literals, names, `NOT`, `AND` (`&`), `OR`, `XOR`, `=`, `<>`, `<`, `>`, `<=`, `>=`, unary `-`
+//! and parentheses, with ST's precedence (loosest first: `OR`, `XOR`, `AND`, `=`/`<>`,
+//! `<`/`>`/`<=`/`>=`, unary `-`/`NOT`). `(* comments *)` are skipped.
+//!
+//! [`parse`] turns a condition's text into an [`Expr`] whose spans are byte ranges of the file
+//! the text came from (the caller maps text offsets to file offsets, since the text may have
+//! been assembled from several XML text pieces). [`check`] resolves names and types;
+//! [`render_krl`] writes KRL with the parentheses KRL's different precedence needs (KRL binds
+//! comparisons weaker than `AND`/`OR`).
+
+use std::ops::Range;
+
+/// Parentheses and `NOT`s nest at most this deep.
+pub const MAX_DEPTH: usize = 64;
+
+/// A condition has at most this many tokens (so a chain of operators cannot build a tree deep
+/// enough to exhaust the stack of the recursive passes over it).
+pub const MAX_TOKENS: usize = 1024;
+
+/// A condition expression. `span` is a byte range in the file the condition was read from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Expr {
+    pub kind: ExprKind,
+    pub span: Range<usize>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum ExprKind {
+    Bool(bool),
+    /// An integer literal, as written (digits only).
+    Int(Box<str>),
+    /// A decimal literal, as written (`1.5`).
+    Real(Box<str>),
+    /// A name (a signal), as written.
+    Name(Box<str>),
+    Not(Box<Expr>),
+    Neg(Box<Expr>),
+    Bin(BinOp, Box<Expr>, Box<Expr>),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BinOp {
+    Or,
+    Xor,
+    And,
+    Eq,
+    Ne,
+    Lt,
+    Gt,
+    Le,
+    Ge,
+}
+
+impl BinOp {
+    /// ST binding strength: higher binds tighter.
+    fn strength(self) -> u8 {
+        match self {
+            BinOp::Or => 1,
+            BinOp::Xor => 2,
+            BinOp::And => 3,
+            BinOp::Eq | BinOp::Ne => 4,
+            BinOp::Lt | BinOp::Gt | BinOp::Le | BinOp::Ge => 5,
+        }
+    }
+
+    /// The operator as ST writes it.
+    pub fn st(self) -> &'static str {
+        match self {
+            BinOp::Or => "OR",
+            BinOp::Xor => "XOR",
+            BinOp::And => "AND",
+            BinOp::Eq => "=",
+            BinOp::Ne => "<>",
+            BinOp::Lt => "<",
+            BinOp::Gt => ">",
+            BinOp::Le => "<=",
+            BinOp::Ge => ">=",
+        }
+    }
+
+    /// The operator as KRL writes it.
+    pub fn krl(self) -> &'static str {
+        match self {
+            BinOp::Or => "OR",
+            BinOp::Xor => "EXOR",
+            BinOp::And => "AND",
+            BinOp::Eq => "==",
+            BinOp::Ne => "<>",
+            BinOp::Lt => "<",
+            BinOp::Gt => ">",
+            BinOp::Le => "<=",
+            BinOp::Ge => ">=",
+        }
+    }
+
+    fn logical(self) -> bool {
+        matches!(self, BinOp::Or | BinOp::Xor | BinOp::And)
+    }
+}
+
+impl Expr {
+    /// Whether the expression is the literal `TRUE`.
+    pub fn is_true(&self) -> bool {
+        matches!(self.kind, ExprKind::Bool(true))
+    }
+
+    /// Every name in the expression, left to right, with its span.
+    pub fn names(&self) -> Vec<(&str, Range<usize>)> {
+        let mut out = Vec::new();
+        let mut stack = vec![self];
+        while let Some(e) = stack.pop() {
+            match &e.kind {
+                ExprKind::Name(n) => out.push((&**n, e.span.clone())),
+                ExprKind::Not(a) | ExprKind::Neg(a) => stack.push(a),
+                ExprKind::Bin(_, a, b) => {
+                    stack.push(b);
+                    stack.push(a);
+                }
+                _ => {}
+            }
+        }
+        out
+    }
+
+    /// The expression in ST, fully parenthesised where operators nest (for listings).
+    pub fn to_st(&self) -> String {
+        let mut s = String::new();
+        write(self, &mut s, &|n| n.to_owned(), |op| op.st(), "NOT ");
+        s
+    }
+}
+
+/// A syntax error: where (a byte range of the condition's text) and what.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SyntaxError {
+    pub at: Range<usize>,
+    pub message: String,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Tok {
+    True,
+    False,
+    Int,
+    Real,
+    Name,
+    Not,
+    And,
+    Or,
+    Xor,
+    Op(BinOp),
+    Minus,
+    Open,
+    Close,
+}
+
+struct Lexer {
+    toks: Vec<(Tok, Range<usize>)>,
+}
+
+fn describe(text: &str, r: &Range<usize>) -> String {
+    format!("`{}`", &text[r.clone()])
+}
+
+impl Lexer {
+    fn run(text: &str) -> Result<Vec<(Tok, Range<usize>)>, SyntaxError> {
+        let mut l = Lexer { toks: Vec::new() };
+        let b = text.as_bytes();
+        let mut i = 0;
+        while i < b.len() {
+            let c = b[i];
+            let start = i;
+            if c.is_ascii_whitespace() {
+                i += 1;
+                continue;
+            }
+            if text[i..].starts_with("(*") {
+                match text[i + 2..].find("*)") {
+                    Some(j) => {
+                        i += 2 + j + 2;
+                        continue;
+                    }
+                    None => {
+                        return Err(SyntaxError {
+                            at: i..i + 2,
+                            message: "comment `(*` without its `*)`".to_owned(),
+                        });
+                    }
+                }
+            }
+            let tok = match c {
+                b'(' => {
+                    i += 1;
+                    Tok::Open
+                }
+                b')' => {
+                    i += 1;
+                    Tok::Close
+                }
+                b'&' => {
+                    i += 1;
+                    Tok::And
+                }
+                b'-' => {
+                    i += 1;
+                    Tok::Minus
+                }
+                b'=' => {
+                    i += 1;
+                    Tok::Op(BinOp::Eq)
+                }
+                b'<' => match b.get(i + 1) {
+                    Some(b'>') => {
+                        i += 2;
+                        Tok::Op(BinOp::Ne)
+                    }
+                    Some(b'=') => {
+                        i += 2;
+                        Tok::Op(BinOp::Le)
+                    }
+                    _ => {
+                        i += 1;
+                        Tok::Op(BinOp::Lt)
+                    }
+                },
+                b'>' => match b.get(i + 1) {
+                    Some(b'=') => {
+                        i += 2;
+                        Tok::Op(BinOp::Ge)
+                    }
+                    _ => {
+                        i += 1;
+                        Tok::Op(BinOp::Gt)
+                    }
+                },
+                b'0'..=b'9' => {
+                    while i < b.len() && b[i].is_ascii_digit() {
+                        i += 1;
+                    }
+                    if i + 1 < b.len() && b[i] == b'.' && b[i + 1].is_ascii_digit() {
+                        i += 1;
+                        while i < b.len() && b[i].is_ascii_digit() {
+                            i += 1;
+                        }
+                        Tok::Real
+                    } else {
+                        Tok::Int
+                    }
+                }
+                c if c.is_ascii_alphabetic() || c == b'_' => {
+                    while i < b.len() && (b[i].is_ascii_alphanumeric() || b[i] == b'_') {
+                        i += 1;
+                    }
+                    let w = &text[start..i];
+                    if w.eq_ignore_ascii_case("TRUE") {
+                        Tok::True
+                    } else if w.eq_ignore_ascii_case("FALSE") {
+                        Tok::False
+                    } else if w.eq_ignore_ascii_case("NOT") {
+                        Tok::Not
+                    } else if w.eq_ignore_ascii_case("AND") {
+                        Tok::And
+                    } else if w.eq_ignore_ascii_case("OR") {
+                        Tok::Or
+                    } else if w.eq_ignore_ascii_case("XOR") {
+                        Tok::Xor
+                    } else {
+                        Tok::Name
+                    }
+                }
+                _ => {
+                    let ch = text[i..].chars().next().unwrap_or(' ');
+                    let end = i + ch.len_utf8();
+                    let hint = match ch {
+                        '.' => {
+                            ": structured names and direct addresses (`%IX0.1`) are not supported; declare a signal and use its name"
+                        }
+                        '%' => {
+                            ": direct addresses are not supported; declare a signal (an ExternalInterface of the resource) and use its name"
+                        }
+                        ':' if text[i..].starts_with(":=") => ": `:=` assigns; compare with `=`",
+                        '+' | '*' | '/' => ": arithmetic is not part of the condition language",
+                        '#' => ": typed literals are not supported",
+                        '\'' | '"' => ": strings are not part of the condition language",
+                        ';' => ": a condition is one expression",
+                        _ => "",
+                    };
+                    return Err(SyntaxError {
+                        at: i..end,
+                        message: format!("unexpected character `{ch}`{hint}"),
+                    });
+                }
+            };
+            // A letter right after a number (`3a`) is not a token boundary.
+            if matches!(tok, Tok::Int | Tok::Real)
+                && i < b.len()
+                && (b[i].is_ascii_alphabetic() || b[i] == b'_' || b[i] == b'#')
+            {
+                let mut j = i;
+                while j < b.len() && (b[j].is_ascii_alphanumeric() || b[j] == b'_' || b[j] == b'#')
+                {
+                    j += 1;
+                }
+                return Err(SyntaxError {
+                    at: start..j,
+                    message: format!(
+                        "{} is not a number or a name (based and typed literals are not supported)",
+                        describe(text, &(start..j))
+                    ),
+                });
+            }
+            if tok == Tok::Int && text[start..i].parse::<i32>().is_err() {
+                return Err(SyntaxError {
+                    at: start..i,
+                    message: format!(
+                        "{} is larger than a KRL integer (at most {})",
+                        describe(text, &(start..i)),
+                        i32::MAX
+                    ),
+                });
+            }
+            l.toks.push((tok, start..i));
+        }
+        Ok(l.toks)
+    }
+}
+
+struct Parser<'t> {
+    text: &'t str,
+    toks: Vec<(Tok, Range<usize>)>,
+    pos: usize,
+    /// Maps a byte offset of the text to the file.
+    map: &'t dyn Fn(usize) -> usize,
+}
+
+/// Parses a condition. `map` turns a byte offset of `text` into a byte offset of the file (the
+/// expression's spans are file ranges); errors are ranges of `text`.
+pub fn parse(text: &str, map: &dyn Fn(usize) -> usize) -> Result<Expr, SyntaxError> {
+    let toks = Lexer::run(text)?;
+    if let Some((_, r)) = toks.get(MAX_TOKENS) {
+        return Err(SyntaxError {
+            at: r.clone(),
+            message: format!("the condition is longer than {MAX_TOKENS} tokens"),
+        });
+    }
+    if toks.is_empty() {
+        let t = text.len();
+        return Err(SyntaxError {
+            at: 0..t,
+            message: "empty condition (write `TRUE` for a transition that always fires)".to_owned(),
+        });
+    }
+    let mut p = Parser {
+        text,
+        toks,
+        pos: 0,
+        map,
+    };
+    let e = p.expr(0, 0)?;
+    if let Some((_, r)) = p.toks.get(p.pos) {
+        let r = r.clone();
+        return Err(SyntaxError {
+            message: format!(
+                "{} after a complete condition: an operator is missing",
+                describe(text, &r)
+            ),
+            at: r,
+        });
+    }
+    Ok(e)
+}
+
+impl Parser<'_> {
+    fn span(&self, r: Range<usize>) -> Range<usize> {
+        let s = (self.map)(r.start);
+        let e = (self.map)(r.end.saturating_sub(1)) + 1;
+        s..e.max(s)
+    }
+
+    fn end_error(&self, what: &str) -> SyntaxError {
+        let t = self.text.trim_end().len();
+        SyntaxError {
+            at: t.saturating_sub(1)..t,
+            message: format!("the condition ends where {what} is expected"),
+        }
+    }
+
+    fn binop(&self) -> Option<BinOp> {
+        match self.toks.get(self.pos).map(|t| &t.0) {
+            Some(Tok::Or) => Some(BinOp::Or),
+            Some(Tok::Xor) => Some(BinOp::Xor),
+            Some(Tok::And) => Some(BinOp::And),
+            Some(Tok::Op(op)) => Some(*op),
+            _ => None,
+        }
+    }
+
+    /// Precedence climbing: operators binding tighter than `min`.
+    fn expr(&mut self, min: u8, depth: usize) -> Result<Expr, SyntaxError> {
+        let mut lhs = self.unary(depth)?;
+        while let Some(op) = self.binop() {
+            if op.strength() <= min {
+                break;
+            }
+            self.pos += 1;
+            let rhs = self.expr(op.strength(), depth + 1)?;
+            let span = lhs.span.start..rhs.span.end;
+            lhs = Expr {
+                kind: ExprKind::Bin(op, Box::new(lhs), Box::new(rhs)),
+                span,
+            };
+        }
+        Ok(lhs)
+    }
+
+    fn unary(&mut self, depth: usize) -> Result<Expr, SyntaxError> {
+        let Some((tok, r)) = self.toks.get(self.pos).cloned() else {
+            return Err(self.end_error("an operand"));
+        };
+        if depth >= MAX_DEPTH {
+            return Err(SyntaxError {
+                at: r,
+                message: format!("the condition nests deeper than {MAX_DEPTH} levels"),
+            });
+        }
+        self.pos += 1;
+        let leaf = |k: ExprKind, p: &Self| Expr {
+            kind: k,
+            span: p.span(r.clone()),
+        };
+        let text = &self.text[r.clone()];
+        Ok(match tok {
+            Tok::True => leaf(ExprKind::Bool(true), self),
+            Tok::False => leaf(ExprKind::Bool(false), self),
+            Tok::Int => leaf(ExprKind::Int(text.into()), self),
+            Tok::Real => leaf(ExprKind::Real(text.into()), self),
+            Tok::Name => leaf(ExprKind::Name(text.into()), self),
+            Tok::Not | Tok::Minus => {
+                let inner = self.unary(depth + 1)?;
+                let span = self.span(r.clone()).start..inner.span.end;
+                let kind = if tok == Tok::Not {
+                    ExprKind::Not(Box::new(inner))
+                } else {
+                    ExprKind::Neg(Box::new(inner))
+                };
+                Expr { kind, span }
+            }
+            Tok::Open => {
+                let inner = self.expr(0, depth + 1)?;
+                match self.toks.get(self.pos) {
+                    Some((Tok::Close, _)) => {
+                        self.pos += 1;
+                        inner
+                    }
+                    Some((_, r2)) => {
+                        return Err(SyntaxError {
+                            message: format!(
+                                "{} where `)` is expected (to close the `(` at offset {})",
+                                describe(self.text, r2),
+                                r.start
+                            ),
+                            at: r2.clone(),
+                        });
+                    }
+                    None => {
+                        return Err(SyntaxError {
+                            at: r,
+                            message: "`(` without its `)`".to_owned(),
+                        });
+                    }
+                }
+            }
+            _ => {
+                return Err(SyntaxError {
+                    message: format!("{} where an operand is expected", describe(self.text, &r)),
+                    at: r,
+                });
+            }
+        })
+    }
+}
+
+/// The type of a (sub)expression.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Ty {
+    Bool,
+    Number,
+}
+
+impl Ty {
+    fn name(self) -> &'static str {
+        match self {
+            Ty::Bool => "boolean",
+            Ty::Number => "number",
+        }
+    }
+}
+
+/// A name or type error: where (a file range) and what; `unknown` marks an unknown name.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CheckError {
+    pub at: Range<usize>,
+    pub message: String,
+    pub unknown: bool,
+}
+
+/// Resolves the names with `lookup` (`None`: unknown) and checks the types; the whole condition
+/// must be boolean. Every error is returned.
+pub fn check(e: &Expr, lookup: &dyn Fn(&str) -> Option<Ty>) -> Vec<CheckError> {
+    let mut errs = Vec::new();
+    if let Some(t) = ty(e, lookup, &mut errs)
+        && t != Ty::Bool
+    {
+        errs.push(CheckError {
+            at: e.span.clone(),
+            message: "the condition is a number, not a boolean: compare it (`= 3`)".to_owned(),
+            unknown: false,
+        });
+    }
+    errs
+}
+
+fn ty(e: &Expr, lookup: &dyn Fn(&str) -> Option<Ty>, errs: &mut Vec<CheckError>) -> Option<Ty> {
+    let want = |e: &Expr, t: Option<Ty>, wanted: Ty, what: &str, errs: &mut Vec<_>| {
+        if let Some(t) = t
+            && t != wanted
+        {
+            errs.push(CheckError {
+                at: e.span.clone(),
+                message: format!("{what} needs a {}, this is a {}", wanted.name(), t.name()),
+                unknown: false,
+            });
+        }
+    };
+    match &e.kind {
+        ExprKind::Bool(_) => Some(Ty::Bool),
+        ExprKind::Int(_) | ExprKind::Real(_) => Some(Ty::Number),
+        ExprKind::Name(n) => {
+            let t = lookup(n);
+            if t.is_none() {
+                errs.push(CheckError {
+                    at: e.span.clone(),
+                    message: n.to_string(),
+                    unknown: true,
+                });
+            }
+            t
+        }
+        ExprKind::Not(a) => {
+            let t = ty(a, lookup, errs);
+            want(a, t, Ty::Bool, "`NOT`", errs);
+            Some(Ty::Bool)
+        }
+        ExprKind::Neg(a) => {
+            let t = ty(a, lookup, errs);
+            want(a, t, Ty::Number, "unary `-`", errs);
+            Some(Ty::Number)
+        }
+        ExprKind::Bin(op, a, b) => {
+            let (ta, tb) = (ty(a, lookup, errs), ty(b, lookup, errs));
+            let what = format!("`{}`", op.st());
+            if op.logical() {
+                want(a, ta, Ty::Bool, &what, errs);
+                want(b, tb, Ty::Bool, &what, errs);
+            } else if matches!(op, BinOp::Eq | BinOp::Ne) {
+                if let (Some(x), Some(y)) = (ta, tb)
+                    && x != y
+                {
+                    errs.push(CheckError {
+                        at: e.span.clone(),
+                        message: format!("{what} compares a {} with a {}", x.name(), y.name()),
+                        unknown: false,
+                    });
+                }
+            } else {
+                want(a, ta, Ty::Number, &what, errs);
+                want(b, tb, Ty::Number, &what, errs);
+            }
+            Some(Ty::Bool)
+        }
+    }
+}
+
+/// The expression in KRL: `signal` renders a (resolved) name. Every operator nested inside
+/// another is parenthesised, so KRL's precedence (comparisons bind weaker than `AND`/`OR`,
+/// `EXOR` between them) cannot change the meaning.
+pub fn render_krl(e: &Expr, signal: &dyn Fn(&str) -> String) -> String {
+    let mut s = String::new();
+    write(e, &mut s, signal, |op| op.krl(), "NOT ");
+    s
+}
+
+fn write(
+    e: &Expr,
+    out: &mut String,
+    name: &dyn Fn(&str) -> String,
+    op: fn(BinOp) -> &'static str,
+    not: &str,
+) {
+    let sub = |x: &Expr, out: &mut String| {
+        let paren = matches!(
+            x.kind,
+            ExprKind::Bin(..) | ExprKind::Neg(_) | ExprKind::Not(_)
+        );
+        if paren {
+            out.push('(');
+        }
+        write(x, out, name, op, not);
+        if paren {
+            out.push(')');
+        }
+    };
+    match &e.kind {
+        ExprKind::Bool(true) => out.push_str("TRUE"),
+        ExprKind::Bool(false) => out.push_str("FALSE"),
+        ExprKind::Int(s) | ExprKind::Real(s) => out.push_str(s),
+        ExprKind::Name(n) => out.push_str(&name(n)),
+        ExprKind::Not(a) => {
+            out.push_str(not);
+            sub(a, out);
+        }
+        ExprKind::Neg(a) => {
+            out.push('-');
+            sub(a, out);
+        }
+        ExprKind::Bin(o, a, b) => {
+            sub(a, out);
+            out.push(' ');
+            out.push_str(op(*o));
+            out.push(' ');
+            sub(b, out);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p(s: &str) -> Result<Expr, SyntaxError> {
+        parse(s, &|o| o)
+    }
+
+    fn st(s: &str) -> String {
+        p(s).unwrap().to_st()
+    }
+
+    #[test]
+    fn precedence_is_st() {
+        assert_eq!(st("a OR b AND c"), "a OR (b AND c)");
+        assert_eq!(st("a AND b OR c"), "(a AND b) OR c");
+        assert_eq!(st("a XOR b OR c AND d"), "(a XOR b) OR (c AND d)");
+        assert_eq!(st("n = 3 AND m < 2"), "(n = 3) AND (m < 2)");
+        assert_eq!(st("a = b < c"), "a = (b < c)");
+        assert_eq!(st("NOT a AND b"), "(NOT a) AND b");
+        assert_eq!(st("NOT (a AND b)"), "NOT (a AND b)");
+        assert_eq!(st("a & b & c"), "(a AND b) AND c");
+        assert_eq!(st("- n < -3"), "(-n) < (-3)");
+        assert_eq!(st(" ((TRUE)) "), "TRUE");
+        assert_eq!(st("x >= 1.5 (* a comment *)"), "x >= 1.5");
+        assert!(p("true").unwrap().is_true());
+        assert!(p("not FALSE").is_ok());
+    }
+
+    #[test]
+    fn krl_keeps_the_meaning() {
+        let sig = |n: &str| match n {
+            "a" => "$IN[1]".to_owned(),
+            "b" => "$IN[2]".to_owned(),
+            other => other.to_ascii_uppercase(),
+        };
+        let k = |s: &str| render_krl(&p(s).unwrap(), &sig);
+        // ST: `n = 3 AND a` is `(n = 3) AND a`; KRL would read `N == (3 AND $IN[1])`.
+        assert_eq!(k("n = 3 AND a"), "(N == 3) AND $IN[1]");
+        assert_eq!(k("a XOR b"), "$IN[1] EXOR $IN[2]");
+        assert_eq!(k("n <> 2"), "N <> 2");
+        assert_eq!(k("NOT a OR b"), "(NOT $IN[1]) OR $IN[2]");
+        assert_eq!(k("a = b"), "$IN[1] == $IN[2]");
+    }
+
+    #[test]
+    fn syntax_errors_are_located() {
+        let e = |s: &str| p(s).unwrap_err();
+        assert_eq!(e("a AND").at, 4..5);
+        assert!(e("a AND").message.contains("ends where an operand"));
+        assert_eq!(e("a b").at, 2..3);
+        assert!(e("a b").message.contains("operator is missing"));
+        assert_eq!(e("(a OR b").at, 0..1);
+        assert_eq!(e("Robot.Ready").at, 5..6);
+        assert!(e("%IX0.1").message.contains("direct addresses"));
+        assert_eq!(e("a := 1").at, 2..3);
+        assert_eq!(e("  ").at, 0..2);
+        assert_eq!(e("3a").at, 0..2);
+        assert_eq!(e("a AND )").at, 6..7);
+        assert!(e("(* open").message.contains("`*)`"));
+        assert!(
+            e("n = 2147483648")
+                .message
+                .contains("larger than a KRL integer")
+        );
+        assert!(p("n = 2147483647").is_ok());
+        assert!(e("Grüße").message.contains("`ü`"));
+        let deep = format!("{}a{}", "(".repeat(100), ")".repeat(100));
+        assert!(e(&deep).message.contains("deeper"));
+        let nots = format!("{}a", "NOT ".repeat(100));
+        assert!(e(&nots).message.contains("deeper"));
+        let long = vec!["a"; 600].join(" AND ");
+        assert!(e(&long).message.contains("longer than 1024 tokens"));
+        let fine = vec!["a"; 500].join(" OR ");
+        assert!(p(&fine).is_ok());
+    }
+
+    #[test]
+    fn spans_follow_the_map() {
+        let e = parse("a OR b", &|o| o + 100).unwrap();
+        assert_eq!(e.span, 100..106);
+        assert_eq!(e.names(), vec![("a", 100..101), ("b", 105..106)]);
+    }
+
+    #[test]
+    fn types() {
+        let look = |n: &str| match n {
+            "a" | "b" => Some(Ty::Bool),
+            "n" => Some(Ty::Number),
+            _ => None,
+        };
+        let c = |s: &str| check(&p(s).unwrap(), &look);
+        assert!(c("a AND NOT b OR n = 3").is_empty());
+        assert!(c("n <> -2 XOR a").is_empty());
+        let e = c("n AND a");
+        assert_eq!(e.len(), 1);
+        assert!(e[0].message.contains("needs a boolean"), "{e:?}");
+        assert!(
+            c("a = 3")[0]
+                .message
+                .contains("compares a boolean with a number")
+        );
+        assert!(c("n")[0].message.contains("not a boolean"));
+        assert!(c("a < b")[0].message.contains("needs a number"));
+        let u = c("x OR y");
+        assert_eq!(u.len(), 2);
+        assert!(u[0].unknown && u[0].message == "x");
+    }
+}

@@ -1,0 +1,369 @@
+//! The graph rules, each element on its own (`check_nodes`), jump targets, start and end, and
+//! cycles of connections.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use super::{Graph, label, list_ids};
+use crate::diag::{Code, Diagnostic, Diagnostics};
+use crate::model::{ElementKind, Sfc};
+
+/// Checks each element's inputs and outputs. Returns the diagnostics that are often a
+/// consequence of another fault, to be reported only when there is no other error.
+pub fn check_nodes(sfc: &Sfc, g: &Graph, diags: &mut Diagnostics) -> Vec<Diagnostic> {
+    let el = &sfc.elements;
+    let id = |i: usize| label(sfc, i);
+    let mut secondary = Vec::new();
+    for (i, e) in el.iter().enumerate() {
+        let (np, ns) = (g.preds(i).len(), g.succs(i).len());
+        let err = |code: Code, msg: String| {
+            Diagnostic::error(code, msg)
+                .at(e.span.clone())
+                .element(id(i))
+        };
+        match &e.kind {
+            ElementKind::MacroStep => {
+                diags.push(err(
+                    Code::Unsupported,
+                    "macroStep is not supported yet".to_owned(),
+                ));
+            }
+            ElementKind::JumpStep(_) => {
+                if np != 1 {
+                    diags.push(err(
+                        Code::BadJump,
+                        format!("jumpStep has {np} inputs; it follows exactly one transition"),
+                    ));
+                }
+                if ns > 0 {
+                    diags.push(err(
+                        Code::BadJump,
+                        format!(
+                            "jumpStep is followed by {} ({}); a jump ends its branch",
+                            ns,
+                            list_ids(sfc, g.succs(i))
+                        ),
+                    ));
+                }
+            }
+            ElementKind::Step(_) => {
+                if np > 1 || ns > 1 {
+                    let (what, n) = if np > 1 {
+                        ("predecessors", np)
+                    } else {
+                        ("successors", ns)
+                    };
+                    diags.push(err(
+                        Code::StepFanInOut,
+                        format!(
+                            "step has {n} {what}; a step has at most one (branches need a divergence or convergence)"
+                        ),
+                    ));
+                }
+                for &p in g.preds(i) {
+                    if el[p].kind.is_step() {
+                        diags.push(err(
+                            Code::StepToStep,
+                            format!(
+                                "step follows step localId {} without a transition between them",
+                                el[p].local_id
+                            ),
+                        ));
+                    }
+                }
+            }
+            kind => {
+                let unbalanced = |msg: String| err(Code::UnbalancedBranch, msg);
+                let tag = kind.tag();
+                if np > 1 && ns > 1 {
+                    diags.push(err(
+                        Code::NToM,
+                        format!(
+                            "{tag} joins {np} inputs and splits into {ns} outputs at once; use a convergence and a divergence"
+                        ),
+                    ));
+                } else {
+                    let (sim, div) = match kind {
+                        ElementKind::SimultaneousDivergence => (true, true),
+                        ElementKind::SimultaneousConvergence => (true, false),
+                        ElementKind::SelectionDivergence => (false, true),
+                        ElementKind::SelectionConvergence => (false, false),
+                        _ => (false, false),
+                    };
+                    let branches = if sim { "simultaneous" } else { "selection" };
+                    let opens = if sim {
+                        "a simultaneousDivergence"
+                    } else {
+                        "a selectionDivergence"
+                    };
+                    let closes = if sim {
+                        "a simultaneousConvergence"
+                    } else {
+                        "a selectionConvergence"
+                    };
+                    match kind {
+                        // Often a consequence of another fault (a cycle, a second start):
+                        // reported only when the flow has no other error.
+                        ElementKind::Transition(_) if ns > 1 => secondary.push(unbalanced(format!(
+                            "transition splits into {ns} outputs ({}); branches start with a simultaneousDivergence or a selectionDivergence",
+                            list_ids(sfc, g.succs(i))
+                        ))),
+                        ElementKind::Transition(_) if np > 1 => secondary.push(unbalanced(format!(
+                            "transition joins {np} inputs ({}); branches end with a simultaneousConvergence or a selectionConvergence",
+                            list_ids(sfc, g.preds(i))
+                        ))),
+                        ElementKind::Transition(_) => {}
+                        _ if div && np > 1 => {
+                            diags.push(unbalanced(format!("{tag} has {np} inputs; it must have one")))
+                        }
+                        _ if div && ns == 1 => diags.push(unbalanced(format!(
+                            "{tag} opens only one branch"
+                        ))),
+                        _ if !div && ns > 1 => diags.push(unbalanced(format!(
+                            "{tag} has {ns} outputs; it must have one"
+                        ))),
+                        _ if !div && np == 1 => diags.push(unbalanced(format!(
+                            "{tag} joins only one branch: {opens} opens {branches} branches and {closes} joins them"
+                        ))),
+                        _ => {}
+                    }
+                    if matches!(kind, ElementKind::SelectionDivergence) {
+                        for &h in g.succs(i) {
+                            if !matches!(el[h].kind, ElementKind::Transition(_)) {
+                                diags.push(unbalanced(format!(
+                                    "selection branch starts with {} localId {}; each selection branch starts with a transition (its condition)",
+                                    el[h].kind.tag(),
+                                    el[h].local_id
+                                )));
+                            }
+                        }
+                    }
+                }
+                if np == 0 {
+                    diags.push(err(
+                        Code::StartStep,
+                        format!("{tag} has no input: the flow must start at a step"),
+                    ));
+                }
+                if ns == 0 {
+                    diags.push(err(
+                        Code::EndStep,
+                        format!("{tag} has no output: the flow must end at a step or a jump"),
+                    ));
+                }
+            }
+        }
+    }
+    secondary
+}
+
+/// Each jumpStep's target step (by element index), `None` for other elements and for jumps
+/// whose target names no step or several (reported).
+pub fn resolve_jumps(sfc: &Sfc, diags: &mut Diagnostics) -> Vec<Option<usize>> {
+    let el = &sfc.elements;
+    let mut out = vec![None; el.len()];
+    if !el
+        .iter()
+        .any(|e| matches!(e.kind, ElementKind::JumpStep(_)))
+    {
+        return out;
+    }
+    // Only the steps whose name some jump names are indexed (a quick length test first: the
+    // names of 100,000 steps are not all turned into keys).
+    let mut by_name: HashMap<Arc<str>, Vec<usize>> = HashMap::new();
+    let mut lengths: Vec<usize> = Vec::new();
+    for e in el {
+        if let ElementKind::JumpStep(Some(t)) = &e.kind {
+            by_name.entry(t.key.clone()).or_default();
+            if !lengths.contains(&t.key.len()) {
+                lengths.push(t.key.len());
+            }
+        }
+    }
+    for (i, e) in el.iter().enumerate() {
+        if let ElementKind::Step(st) = &e.kind {
+            let name = st.name.trim();
+            if name.is_ascii() && !lengths.contains(&name.len()) {
+                continue;
+            }
+            if let Some(v) = by_name.get_mut(crate::names::key(name).as_str()) {
+                v.push(i);
+            }
+        }
+    }
+    for (i, e) in el.iter().enumerate() {
+        let ElementKind::JumpStep(Some(target)) = &e.kind else {
+            continue;
+        };
+        match by_name.get(&*target.key).map(Vec::as_slice) {
+            Some([t]) => out[i] = Some(*t),
+            None | Some([]) => diags.push(
+                Diagnostic::error(
+                    Code::BadJump,
+                    format!("jump target `{}` names no step", target.text),
+                )
+                .at(target.span.clone())
+                .element(label(sfc, i)),
+            ),
+            Some(several) => {
+                let mut d = Diagnostic::error(
+                    Code::BadJump,
+                    format!(
+                        "jump target `{}` names {} steps ({}); give the target step a name of its own",
+                        target.text,
+                        several.len(),
+                        list_ids(sfc, several)
+                    ),
+                )
+                .at(target.span.clone())
+                .element(label(sfc, i));
+                for &t in several.iter().take(4) {
+                    d = d.related(el[t].span.clone(), "a step of that name");
+                }
+                diags.push(d)
+            }
+        }
+    }
+    out
+}
+
+/// The start and the end step, found after the jumps are resolved: a step that only jumps lead
+/// to is not a second start (unless there is no other), and a chart that ends in jumps only has
+/// no end step (`None`). Reports a missing or repeated start or end.
+pub fn start_end(
+    sfc: &Sfc,
+    g: &Graph,
+    jumps: &[Option<usize>],
+    diags: &mut Diagnostics,
+) -> Option<(usize, Option<usize>)> {
+    let el = &sfc.elements;
+    let mut targeted = vec![false; el.len()];
+    for t in jumps.iter().flatten() {
+        targeted[*t] = true;
+    }
+    let has_jumps = el
+        .iter()
+        .any(|e| matches!(e.kind, ElementKind::JumpStep(_)));
+    let no_pred: Vec<usize> = (0..el.len())
+        .filter(|&i| el[i].kind.is_step() && g.preds(i).is_empty())
+        .collect();
+    let untargeted: Vec<usize> = no_pred.iter().copied().filter(|&i| !targeted[i]).collect();
+    let starts = if untargeted.is_empty() {
+        no_pred
+    } else {
+        untargeted
+    };
+    let ends: Vec<usize> = (0..el.len())
+        .filter(|&i| el[i].kind.is_step() && g.succs(i).is_empty())
+        .collect();
+    let mut ok = true;
+    let start = match starts.as_slice() {
+        [] => {
+            diags.push(
+                Diagnostic::error(
+                    Code::StartStep,
+                    "no start step: every step has a predecessor",
+                )
+                .at_opt(sfc.span.clone()),
+            );
+            ok = false;
+            0
+        }
+        [s] => {
+            if let ElementKind::Step(st) = &el[*s].kind
+                && !st.initial
+            {
+                diags.push(
+                    Diagnostic::warning(
+                        Code::StartNotInitial,
+                        "the start step is not marked initialStep=\"true\"",
+                    )
+                    .at(el[*s].span.clone())
+                    .element(label(sfc, *s)),
+                );
+            }
+            *s
+        }
+        [first, rest @ ..] => {
+            let mut d = Diagnostic::error(
+                Code::StartStep,
+                format!(
+                    "{} start steps (steps without a predecessor): {}",
+                    starts.len(),
+                    list_ids(sfc, &starts)
+                ),
+            )
+            .at(el[*first].span.clone())
+            .element(label(sfc, *first));
+            for r in rest.iter().take(8) {
+                d = d.related(el[*r].span.clone(), "another start step");
+            }
+            diags.push(d);
+            ok = false;
+            0
+        }
+    };
+    let end = match ends.as_slice() {
+        [] if has_jumps => None,
+        [] => {
+            diags.push(
+                Diagnostic::error(Code::EndStep, "no end step: every step has a successor")
+                    .at_opt(sfc.span.clone()),
+            );
+            ok = false;
+            None
+        }
+        [e] => Some(*e),
+        [first, rest @ ..] => {
+            let mut d = Diagnostic::error(
+                Code::EndStep,
+                format!(
+                    "{} end steps (steps without a successor): {}",
+                    ends.len(),
+                    list_ids(sfc, &ends)
+                ),
+            )
+            .at(el[*first].span.clone())
+            .element(label(sfc, *first));
+            for r in rest.iter().take(8) {
+                d = d.related(el[*r].span.clone(), "another end step");
+            }
+            diags.push(d);
+            ok = false;
+            None
+        }
+    };
+    ok.then_some((start, end))
+}
+
+/// Kahn's algorithm; returns an element on a cycle of connections, if any (jumps are not
+/// connections).
+pub fn find_cycle(g: &Graph) -> Option<usize> {
+    let n = g.len();
+    let mut indeg: Vec<usize> = (0..n).map(|i| g.preds(i).len()).collect();
+    let mut queue: Vec<usize> = (0..n).filter(|&i| indeg[i] == 0).collect();
+    let mut seen = 0;
+    while let Some(i) = queue.pop() {
+        seen += 1;
+        for &s in g.succs(i) {
+            indeg[s] -= 1;
+            if indeg[s] == 0 {
+                queue.push(s);
+            }
+        }
+    }
+    if seen == n {
+        return None;
+    }
+    // Every remaining node either is on a cycle or follows one; walk predecessors among the
+    // remaining nodes until one repeats: that one is on a cycle.
+    let mut cur = (0..n).find(|&i| indeg[i] > 0)?;
+    let mut visited = vec![false; n];
+    loop {
+        if visited[cur] {
+            return Some(cur);
+        }
+        visited[cur] = true;
+        cur = *g.preds(cur).iter().find(|&&p| indeg[p] > 0)?;
+    }
+}

@@ -1,0 +1,150 @@
+//! The flow graph: ids, connections, predecessors and successors.
+
+use std::collections::HashMap;
+
+use crate::diag::{Code, Diagnostic, Diagnostics, Span};
+use crate::model::Sfc;
+
+/// The flow graph: predecessors and successors by element index, in compact (CSR) form: one
+/// array of edges per direction and an offset per element.
+#[derive(Debug, Default)]
+pub struct Graph {
+    pred_at: Vec<usize>,
+    pred: Vec<usize>,
+    succ_at: Vec<usize>,
+    succ: Vec<usize>,
+}
+
+impl Graph {
+    /// The elements connected into element `i`.
+    pub fn preds(&self, i: usize) -> &[usize] {
+        &self.pred[self.pred_at[i]..self.pred_at[i + 1]]
+    }
+
+    /// The elements element `i` connects to.
+    pub fn succs(&self, i: usize) -> &[usize] {
+        &self.succ[self.succ_at[i]..self.succ_at[i + 1]]
+    }
+
+    /// The number of elements.
+    pub fn len(&self) -> usize {
+        self.pred_at.len().saturating_sub(1)
+    }
+
+    /// Whether there are no elements.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// Finds elements by localId: a direct table when the ids are dense (as planning tools write
+/// them), a hash map otherwise.
+enum Ids {
+    Dense(Vec<u32>),
+    Sparse(HashMap<u64, usize>),
+}
+
+impl Ids {
+    const NONE: u32 = u32::MAX;
+
+    fn new(sfc: &Sfc) -> Self {
+        let n = sfc.elements.len();
+        let max = sfc.elements.iter().map(|e| e.local_id).max().unwrap_or(0);
+        if n < Self::NONE as usize && max < (4 * n as u64 + 1024) {
+            Ids::Dense(vec![Self::NONE; max as usize + 1])
+        } else {
+            Ids::Sparse(HashMap::with_capacity(n))
+        }
+    }
+
+    fn get(&self, id: u64) -> Option<usize> {
+        match self {
+            Ids::Dense(t) => t
+                .get(id as usize)
+                .copied()
+                .filter(|&v| v != Self::NONE)
+                .map(|v| v as usize),
+            Ids::Sparse(m) => m.get(&id).copied(),
+        }
+    }
+
+    fn insert(&mut self, id: u64, i: usize) {
+        match self {
+            Ids::Dense(t) => t[id as usize] = i as u32,
+            Ids::Sparse(m) => {
+                m.insert(id, i);
+            }
+        }
+    }
+}
+
+/// Builds the graph and reports duplicate and dangling ids. Connections that name nothing are
+/// dropped from the graph, and so are repeated ones.
+pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
+    let n = sfc.elements.len();
+    let mut ids = Ids::new(sfc);
+    for (i, e) in sfc.elements.iter().enumerate() {
+        if let Some(first) = ids.get(e.local_id) {
+            diags.push(
+                Diagnostic::error(
+                    Code::BadLocalId,
+                    format!("localId {} is used twice", e.local_id),
+                )
+                .at(e.span.clone())
+                .element(format!("localId {}", e.local_id))
+                .related(sfc.elements[first].span.clone(), "first used here"),
+            );
+        } else {
+            ids.insert(e.local_id, i);
+        }
+    }
+    // Edges (producer, consumer), predecessors in document order of the connections.
+    let mut pred_at = Vec::with_capacity(n + 1);
+    let mut pred = Vec::with_capacity(n);
+    let mut succ_count = vec![0usize; n];
+    for e in sfc.elements.iter() {
+        pred_at.push(pred.len());
+        let first = pred.len();
+        for (r, range) in &e.inputs {
+            match ids.get(*r) {
+                Some(p) => {
+                    if !pred[first..].contains(&p) {
+                        pred.push(p);
+                        succ_count[p] += 1;
+                    }
+                }
+                None => diags.push(
+                    Diagnostic::error(
+                        Code::DanglingReference,
+                        format!("refLocalId {r} names no element"),
+                    )
+                    .at(Span::new(sfc.file, range.clone()))
+                    .element(format!("localId {}", e.local_id)),
+                ),
+            }
+        }
+    }
+    pred_at.push(pred.len());
+    // Successors: counting sort by producer; consumers in element order.
+    let mut succ_at = Vec::with_capacity(n + 1);
+    let mut total = 0;
+    for c in &succ_count {
+        succ_at.push(total);
+        total += c;
+    }
+    succ_at.push(total);
+    let mut fill = succ_at.clone();
+    let mut succ = vec![0usize; total];
+    for i in 0..n {
+        for &p in &pred[pred_at[i]..pred_at[i + 1]] {
+            succ[fill[p]] = i;
+            fill[p] += 1;
+        }
+    }
+    Graph {
+        pred_at,
+        pred,
+        succ_at,
+        succ,
+    }
+}

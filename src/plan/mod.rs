@@ -1,0 +1,649 @@
+//! SFC graph checks and the ordered program tree (SPEC.md sections 3 and 3.1).
+//!
+//! [`plan`] runs in parts, each with its own tests: [`graph`] (ids and connections),
+//! [`check_nodes`] (each element's inputs and outputs), [`resolve_jumps`] (jump targets),
+//! [`start_end`] (found after the jumps are resolved), [`find_cycle`] (a cycle of connections,
+//! not of jumps) and the walk, which recognises the structure: sequences, guarded transitions
+//! ([`Block::Wait`]), simultaneous branches ([`Block::Parallel`]), selection branches
+//! ([`Block::Choice`]) and loops closed by a jump back ([`Block::Loop`]). Branches are in
+//! emission order: left to right by the x of each branch head, ties in document order; for
+//! selections that order is their priority.
+
+mod checks;
+mod graph;
+mod walk;
+
+pub use checks::{check_nodes, find_cycle, resolve_jumps, start_end};
+pub use graph::{Graph, graph};
+pub use walk::walk;
+
+use crate::diag::{Code, Diagnostic, Diagnostics};
+use crate::model::Sfc;
+
+/// Branches and loops nest at most this deep.
+pub const MAX_NESTING: usize = 128;
+
+/// One entry of the program tree. Indexes are into [`Sfc::elements`].
+#[derive(Debug, Clone, PartialEq)]
+pub enum Block {
+    /// A step.
+    Step(usize),
+    /// A transition with a condition in a sequence: the program waits until it holds.
+    Wait(usize),
+    /// Simultaneous branches, in emission order. On one robot they run one after another.
+    Parallel {
+        divergence: usize,
+        convergence: usize,
+        branches: Vec<Vec<Block>>,
+    },
+    /// Selection branches in priority order: the first whose first transition's condition
+    /// holds is taken. `convergence` is `None` for the selection that decides a loop when its
+    /// branches do not join again.
+    Choice {
+        divergence: usize,
+        convergence: Option<usize>,
+        branches: Vec<Branch>,
+    },
+    /// A loop back to the step `head` (the body's first block). It repeats until a branch of
+    /// its last block (a [`Block::Choice`]) ends in [`BranchEnd::Leave`]; `endless` when none
+    /// does (a cyclic chart).
+    Loop {
+        head: usize,
+        /// The jumpSteps that close the loop.
+        jumps: Vec<usize>,
+        body: Vec<Block>,
+        endless: bool,
+    },
+}
+
+/// One selection branch.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Branch {
+    /// The branch's first transition: its condition selects the branch.
+    pub transition: usize,
+    /// What runs after the transition fired.
+    pub body: Vec<Block>,
+    pub end: BranchEnd,
+}
+
+/// How a selection branch ends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BranchEnd {
+    /// At the selection's convergence: the program goes on after it.
+    Join,
+    /// In a jump (the element) back to the enclosing loop's head: the loop goes round again.
+    Repeat(usize),
+    /// The loop is left: the program goes on after it.
+    Leave,
+}
+
+/// The planned program.
+#[derive(Debug)]
+pub struct Plan {
+    /// The whole flow, start and end steps included.
+    pub body: Vec<Block>,
+    /// The start step.
+    pub start: usize,
+    /// The end step; `None` for a cyclic chart (it ends in jumps only).
+    pub end: Option<usize>,
+}
+
+impl Plan {
+    /// Steps in program order (each once; loop bodies once).
+    pub fn steps(&self) -> Vec<usize> {
+        let mut out = Vec::new();
+        visit(&self.body, &mut |b| {
+            if let Block::Step(i) = b {
+                out.push(*i);
+            }
+        });
+        out
+    }
+}
+
+/// Calls `f` for every block, depth first in program order.
+pub fn visit(blocks: &[Block], f: &mut dyn FnMut(&Block)) {
+    for b in blocks {
+        f(b);
+        match b {
+            Block::Step(_) | Block::Wait(_) => {}
+            Block::Parallel { branches, .. } => {
+                for br in branches {
+                    visit(br, f);
+                }
+            }
+            Block::Choice { branches, .. } => {
+                for br in branches {
+                    visit(&br.body, f);
+                }
+            }
+            Block::Loop { body, .. } => visit(body, f),
+        }
+    }
+}
+
+/// Checks the graph rules and builds the program tree. `None` when the flow has errors (all of
+/// them reported).
+pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
+    let errors_before = diags.error_count();
+    let el = &sfc.elements;
+    if !el.iter().any(|e| e.kind.is_step()) {
+        // The root cause, once: no start, no end and no steps are one fault.
+        diags.push(
+            Diagnostic::error(Code::StartStep, "the SFC body has no steps")
+                .at_opt(sfc.span.clone()),
+        );
+        return None;
+    }
+    let g = graph(sfc, diags);
+    let secondary = check_nodes(sfc, &g, diags);
+    let jumps = resolve_jumps(sfc, diags);
+    let ends = start_end(sfc, &g, &jumps, diags);
+    if let Some(c) = find_cycle(&g) {
+        diags.push(
+            Diagnostic::error(
+                Code::Cycle,
+                "the flow has a cycle of connections through this element; close loops with a jumpStep back to the step",
+            )
+            .at(el[c].span.clone())
+            .element(label(sfc, c)),
+        );
+    }
+    if diags.error_count() == errors_before {
+        for d in secondary {
+            diags.push(d);
+        }
+    }
+    if diags.error_count() > errors_before {
+        return None;
+    }
+    let (start, end) = ends?;
+    walk(sfc, &g, &jumps, start, diags).map(|body| Plan { body, start, end })
+}
+
+pub(crate) fn label(sfc: &Sfc, i: usize) -> String {
+    format!("localId {}", sfc.elements[i].local_id)
+}
+
+pub(crate) fn list_ids(sfc: &Sfc, idx: &[usize]) -> String {
+    let mut s: Vec<String> = idx
+        .iter()
+        .take(10)
+        .map(|&i| format!("localId {}", sfc.elements[i].local_id))
+        .collect();
+    if idx.len() > 10 {
+        s.push(format!("and {} more", idx.len() - 10));
+    }
+    s.join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diag::Sources;
+
+    fn conn(inputs: &[u64]) -> String {
+        let c: String = inputs
+            .iter()
+            .map(|i| format!("<connection refLocalId=\"{i}\"/>"))
+            .collect();
+        if inputs.is_empty() {
+            String::new()
+        } else {
+            format!("<connectionPointIn>{c}</connectionPointIn>")
+        }
+    }
+    fn st(id: u64, name: &str, inp: &[u64]) -> String {
+        format!(
+            "<step localId=\"{id}\" name=\"{name}\"{}><position x=\"0\" y=\"0\"/>{}</step>",
+            if inp.is_empty() {
+                " initialStep=\"true\""
+            } else {
+                ""
+            },
+            conn(inp)
+        )
+    }
+    fn tr(id: u64, inp: &[u64], cond: &str) -> String {
+        format!(
+            "<transition localId=\"{id}\"><position x=\"0\" y=\"0\"/>{}<condition><inline name=\"\"><ST>{cond}</ST></inline></condition></transition>",
+            conn(inp)
+        )
+    }
+    fn el(tag: &str, id: u64, inp: &[u64]) -> String {
+        format!(
+            "<{tag} localId=\"{id}\"><position x=\"0\" y=\"0\"/>{}</{tag}>",
+            conn(inp)
+        )
+    }
+    fn jmp(id: u64, inp: &[u64], target: &str) -> String {
+        format!(
+            "<jumpStep localId=\"{id}\" targetName=\"{target}\"><position x=\"0\" y=\"0\"/>{}</jumpStep>",
+            conn(inp)
+        )
+    }
+
+    /// Reads an SFC body and plans it: the plan (if any) and the diagnostics' codes and messages.
+    fn run(parts: &[String]) -> (Option<Plan>, Sfc, Vec<(Code, String)>) {
+        let text = format!(
+            "<project><types><pous><pou name=\"P\" pouType=\"program\"><body><SFC>{}</SFC></body></pou></pous></types></project>",
+            parts.concat()
+        );
+        let mut sources = Sources::default();
+        let f = sources.add("s.xml".into(), "s.xml".into(), text, false);
+        let mut d = Diagnostics::default();
+        let sfc = crate::read::sfc::read_sfc(&sources, f, &mut d).expect("readable");
+        let p = plan(&sfc, &mut d);
+        let msgs = d
+            .into_vec()
+            .into_iter()
+            .filter(|d| d.severity == crate::diag::Severity::Error)
+            .map(|d| (d.code, d.message))
+            .collect();
+        (p, sfc, msgs)
+    }
+
+    /// The tree with localIds: `S3` step, `W4` wait, `P(..|..)`, `C(..|..)` with `^` for a
+    /// repeat and `!` for a leave, `L3[..]` (`L3*[..]` endless).
+    fn shape(sfc: &Sfc, blocks: &[Block]) -> String {
+        let id = |i: usize| sfc.elements[i].local_id;
+        let mut out = Vec::new();
+        for b in blocks {
+            out.push(match b {
+                Block::Step(i) => format!("S{}", id(*i)),
+                Block::Wait(i) => format!("W{}", id(*i)),
+                Block::Parallel { branches, .. } => {
+                    let v: Vec<String> = branches.iter().map(|b| shape(sfc, b)).collect();
+                    format!("P({})", v.join("|"))
+                }
+                Block::Choice { branches, .. } => {
+                    let v: Vec<String> = branches
+                        .iter()
+                        .map(|b| {
+                            let end = match b.end {
+                                BranchEnd::Join => "",
+                                BranchEnd::Repeat(_) => "^",
+                                BranchEnd::Leave => "!",
+                            };
+                            format!("{}:{}{end}", id(b.transition), shape(sfc, &b.body))
+                        })
+                        .collect();
+                    format!("C({})", v.join("|"))
+                }
+                Block::Loop {
+                    head,
+                    body,
+                    endless,
+                    ..
+                } => format!(
+                    "L{}{}[{}]",
+                    id(*head),
+                    if *endless { "*" } else { "" },
+                    shape(sfc, body)
+                ),
+            });
+        }
+        out.join(" ")
+    }
+
+    fn planned(parts: &[String]) -> String {
+        let (p, sfc, msgs) = run(parts);
+        assert!(msgs.is_empty(), "{msgs:?}");
+        shape(&sfc, &p.expect("a plan").body)
+    }
+
+    #[test]
+    fn empty_body_is_one_error() {
+        let (p, _, msgs) = run(&[]);
+        assert!(p.is_none());
+        assert_eq!(msgs.len(), 1, "{msgs:?}");
+        assert!(msgs[0].1.contains("no steps"));
+    }
+
+    #[test]
+    fn node_checks() {
+        // A selection branch starting with a step; a jump followed by a step.
+        let (_, _, msgs) = run(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "A", &[2]),
+            el("selectionDivergence", 4, &[3]),
+            st(5, "B", &[4]),
+            tr(6, &[4], "x"),
+            jmp(7, &[6], "A"),
+            st(8, "C", &[7]),
+        ]);
+        assert!(
+            msgs.iter()
+                .any(|(c, m)| *c == Code::UnbalancedBranch
+                    && m.contains("starts with step localId 5")),
+            "{msgs:?}"
+        );
+        assert!(
+            msgs.iter()
+                .any(|(c, m)| *c == Code::BadJump && m.contains("a jump ends its branch")),
+            "{msgs:?}"
+        );
+    }
+
+    #[test]
+    fn jump_targets() {
+        let (_, _, msgs) = run(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "Twin", &[2]),
+            tr(4, &[3], "TRUE"),
+            st(5, "twin", &[4]),
+            tr(6, &[5], "a"),
+            el("selectionDivergence", 7, &[6]),
+            tr(8, &[7], "b"),
+            jmp(9, &[8], "TWIN"),
+            tr(10, &[7], "c"),
+            jmp(11, &[10], "Nobody"),
+        ]);
+        let jumps: Vec<&String> = msgs
+            .iter()
+            .filter(|(c, _)| *c == Code::BadJump)
+            .map(|(_, m)| m)
+            .collect();
+        assert!(jumps[0].contains("names 2 steps"), "{msgs:?}");
+        assert!(jumps[1].contains("`Nobody` names no step"), "{msgs:?}");
+    }
+
+    #[test]
+    fn start_and_end_after_jumps() {
+        // The start step is also the jump target and has no connection in: one start; the
+        // chart ends in a jump only: no end step, and no error.
+        let p = planned(&[
+            st(1, "Init", &[]),
+            tr(2, &[1], "go"),
+            st(3, "Work", &[2]),
+            tr(4, &[3], "TRUE"),
+            jmp(5, &[4], "Init"),
+        ]);
+        assert_eq!(p, "L1*[S1 W2 S3]");
+        // A step that only a jump leads to is not a second start: here the jump is forward,
+        // which the walk reports (not E307).
+        let (_, _, msgs) = run(&[
+            st(1, "Init", &[]),
+            tr(2, &[1], "TRUE"),
+            jmp(3, &[2], "Later"),
+            st(4, "Later", &[]),
+            tr(5, &[4], "TRUE"),
+            st(6, "End", &[5]),
+        ]);
+        assert!(msgs.iter().all(|(c, _)| *c != Code::StartStep), "{msgs:?}");
+        assert!(msgs.iter().any(|(c, _)| *c == Code::BadJump), "{msgs:?}");
+        // Without jumps a missing end is still an error.
+        let (_, _, msgs) = run(&[
+            st(1, "A", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "B", &[2, 4]),
+            tr(4, &[3], "TRUE"),
+        ]);
+        assert!(msgs.iter().any(|(c, _)| *c == Code::EndStep), "{msgs:?}");
+    }
+
+    #[test]
+    fn cycles_of_connections_are_not_loops() {
+        let (_, _, msgs) = run(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            el("selectionConvergence", 3, &[2, 8]),
+            st(4, "A", &[3]),
+            el("selectionDivergence", 5, &[4]),
+            tr(6, &[5], "done"),
+            st(7, "End", &[6]),
+            tr(8, &[5], "NOT done"),
+        ]);
+        assert!(
+            msgs.iter()
+                .any(|(c, m)| *c == Code::Cycle && m.contains("jumpStep")),
+            "{msgs:?}"
+        );
+    }
+
+    #[test]
+    fn walk_sequence_selection_parallel() {
+        let p = planned(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "A", &[2]),
+            tr(4, &[3], "ready"),
+            st(5, "B", &[4]),
+            el("selectionDivergence", 6, &[5]),
+            tr(7, &[6], "x"),
+            el("simultaneousDivergence", 8, &[7]),
+            st(9, "C", &[8]),
+            st(10, "D", &[8]),
+            el("simultaneousConvergence", 11, &[9, 10]),
+            tr(12, &[11], "TRUE"),
+            tr(13, &[6], "TRUE"),
+            el("selectionConvergence", 14, &[12, 13]),
+            st(15, "End", &[14]),
+        ]);
+        assert_eq!(p, "S1 S3 W4 S5 C(7:P(S9|S10)|13:) S15");
+    }
+
+    #[test]
+    fn walk_loop_with_exit() {
+        let p = planned(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "Pick", &[2]),
+            el("selectionDivergence", 4, &[3]),
+            tr(5, &[4], "more"),
+            st(6, "Count", &[5]),
+            tr(7, &[6], "TRUE"),
+            jmp(8, &[7], "Pick"),
+            tr(9, &[4], "NOT more"),
+            st(10, "Home", &[9]),
+            tr(11, &[10], "TRUE"),
+            st(12, "End", &[11]),
+        ]);
+        assert_eq!(p, "S1 L3[S3 C(5:S6^|9:!)] S10 S12");
+    }
+
+    #[test]
+    fn walk_nested_loops() {
+        // Rows of a pallet: the inner loop over Place, the outer over Row.
+        let p = planned(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "Row", &[2]),
+            tr(4, &[3], "TRUE"),
+            st(5, "Place", &[4]),
+            el("selectionDivergence", 6, &[5]),
+            tr(7, &[6], "NOT row_full"),
+            jmp(8, &[7], "Place"),
+            tr(9, &[6], "row_full"),
+            st(10, "Next", &[9]),
+            el("selectionDivergence", 11, &[10]),
+            tr(12, &[11], "NOT pallet_full"),
+            jmp(13, &[12], "Row"),
+            tr(14, &[11], "pallet_full"),
+            st(15, "End", &[14]),
+        ]);
+        assert_eq!(p, "S1 L3[S3 L5[S5 C(7:^|9:!)] S10 C(12:^|14:!)] S15");
+    }
+
+    #[test]
+    fn walk_exits_that_join() {
+        let p = planned(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "Pick", &[2]),
+            el("selectionDivergence", 4, &[3]),
+            tr(5, &[4], "a"),
+            jmp(6, &[5], "Pick"),
+            tr(7, &[4], "b"),
+            st(8, "B", &[7]),
+            tr(9, &[8], "TRUE"),
+            tr(10, &[4], "c"),
+            el("selectionConvergence", 11, &[9, 10]),
+            st(12, "End", &[11]),
+        ]);
+        assert_eq!(p, "S1 L3[S3 C(5:^|7:S8!|10:!)] S12");
+    }
+
+    #[test]
+    fn walk_rejects_a_loop_continued_past_its_decision() {
+        // Branch 9 goes on in the loop body while branch 5 jumps back, and jumps back again
+        // from a selection inside it: no KRL structure (EXIT leaves one loop, there is no
+        // CONTINUE).
+        let (p, _, msgs) = run(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "Pick", &[2]),
+            el("selectionDivergence", 4, &[3]),
+            tr(5, &[4], "a"),
+            jmp(6, &[5], "Pick"),
+            tr(9, &[4], "b"),
+            st(10, "B", &[9]),
+            el("selectionDivergence", 11, &[10]),
+            tr(12, &[11], "c"),
+            jmp(13, &[12], "Pick"),
+            tr(14, &[11], "NOT c"),
+            st(15, "End", &[14]),
+        ]);
+        assert!(p.is_none());
+        assert!(
+            msgs.iter()
+                .any(|(c, m)| *c == Code::BadJump && m.contains("inside another branch")),
+            "{msgs:?}"
+        );
+    }
+
+    #[test]
+    fn a_chain_of_loops_does_not_nest_the_walk() {
+        // 20,000 loops one after another: each loop's exit is the next loop's way in. The walk
+        // goes on after each loop in the same sequence, so the stack does not grow with them.
+        let n = 20_000u64;
+        let mut parts = vec![st(1, "Start", &[]), tr(2, &[1], "TRUE")];
+        let mut prev = 2;
+        for k in 0..n {
+            let b = 10 + k * 10;
+            parts.push(st(b, &format!("L{k}"), &[prev]));
+            parts.push(el("selectionDivergence", b + 1, &[b]));
+            parts.push(tr(b + 2, &[b + 1], "again"));
+            parts.push(jmp(b + 3, &[b + 2], &format!("L{k}")));
+            parts.push(tr(b + 4, &[b + 1], "NOT again"));
+            prev = b + 4;
+        }
+        parts.push(st(5, "End", &[prev]));
+        let (p, _, msgs) = std::thread::Builder::new()
+            .stack_size(256 * 1024)
+            .spawn(move || {
+                let (p, sfc, msgs) = run(&parts);
+                (p.map(|p| p.body.len()), sfc.elements.len(), msgs)
+            })
+            .unwrap()
+            .join()
+            .unwrap();
+        assert!(msgs.is_empty(), "{:?}", &msgs[..msgs.len().min(3)]);
+        // Start, the loops, End.
+        assert_eq!(p, Some(n as usize + 2));
+    }
+
+    #[test]
+    fn nested_loops_deeper_than_the_limit_are_an_error() {
+        // Loop k's body holds loop k + 1; each is left to its parent's decision.
+        let n = MAX_NESTING as u64 + 10;
+        let mut parts = vec![st(1, "Start", &[]), tr(2, &[1], "TRUE")];
+        let mut prev = 2;
+        for k in 0..n {
+            let b = 10 + k * 10;
+            parts.push(st(b, &format!("L{k}"), &[prev]));
+            parts.push(tr(b + 1, &[b], "TRUE"));
+            prev = b + 1;
+        }
+        // Innermost first: each loop's deciding selection after the inner loop's exit.
+        let mut last = prev;
+        let mut last_is_step = false;
+        for k in (0..n).rev() {
+            let b = 10_000 + k * 10;
+            let s = if last_is_step {
+                last
+            } else {
+                parts.push(st(b, &format!("X{k}"), &[last]));
+                b
+            };
+            parts.push(el("selectionDivergence", b + 1, &[s]));
+            parts.push(tr(b + 2, &[b + 1], "again"));
+            parts.push(jmp(b + 3, &[b + 2], &format!("L{k}")));
+            parts.push(tr(b + 4, &[b + 1], "NOT again"));
+            last = b + 4;
+            last_is_step = false;
+        }
+        parts.push(st(5, "End", &[last]));
+        let (p, _, msgs) = run(&parts);
+        assert!(p.is_none());
+        assert!(
+            msgs.iter()
+                .any(|(c, m)| *c == Code::Unsupported && m.contains("nested deeper")),
+            "{msgs:?}"
+        );
+    }
+
+    #[test]
+    fn an_inner_exit_straight_back_to_the_outer_head() {
+        let p = planned(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "Row", &[2]),
+            tr(4, &[3], "TRUE"),
+            st(5, "Place", &[4]),
+            el("selectionDivergence", 6, &[5]),
+            tr(7, &[6], "more"),
+            jmp(8, &[7], "Place"),
+            tr(9, &[6], "NOT more"),
+            jmp(10, &[9], "Row"),
+        ]);
+        assert_eq!(p, "S1 L3*[S3 L5[S5 C(7:^|9:!)]]");
+    }
+
+    #[test]
+    fn walk_early_exit() {
+        // Selection 4 leaves the loop early (branch 9); selection 7 decides it; both exits join
+        // in 12.
+        let p = planned(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "Pick", &[2]),
+            el("selectionDivergence", 4, &[3]),
+            tr(5, &[4], "good"),
+            st(6, "Good", &[5]),
+            el("selectionDivergence", 7, &[6]),
+            tr(8, &[7], "more"),
+            jmp(13, &[8], "Pick"),
+            tr(10, &[7], "NOT more"),
+            tr(9, &[4], "NOT good"),
+            st(11, "Bad", &[9]),
+            tr(14, &[11], "TRUE"),
+            el("selectionConvergence", 12, &[10, 14]),
+            st(15, "End", &[12]),
+        ]);
+        assert_eq!(p, "S1 L3[S3 C(5:S6 C(8:^|10:!)|9:S11!)] S15");
+        // Steps on both exits before they join: they run before each EXIT.
+        let p = planned(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "Pick", &[2]),
+            el("selectionDivergence", 4, &[3]),
+            tr(5, &[4], "good"),
+            st(6, "Good", &[5]),
+            el("selectionDivergence", 7, &[6]),
+            tr(8, &[7], "more"),
+            jmp(13, &[8], "Pick"),
+            tr(10, &[7], "NOT more"),
+            st(16, "Done", &[10]),
+            tr(17, &[16], "TRUE"),
+            tr(9, &[4], "NOT good"),
+            st(11, "Bad", &[9]),
+            tr(14, &[11], "TRUE"),
+            el("selectionConvergence", 12, &[17, 14]),
+            st(15, "End", &[12]),
+        ]);
+        assert_eq!(p, "S1 L3[S3 C(5:S6 C(8:^|10:S16!)|9:S11!)] S15");
+    }
+}
