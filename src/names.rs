@@ -33,7 +33,8 @@ pub fn is_krl_name(name: &str) -> bool {
 
 /// Makes a KRL name of any text (a folder or file name): transliterated like a comment
 /// (`Ü` → `Ue`), every other character that is not a letter, digit or `_` replaced by `_`, `_`
-/// put before a leading digit, cut to 24 characters. A KRL name comes back unchanged.
+/// put before a leading digit, cut to 24 characters, `_` after a KRL keyword (`End` → `End_`,
+/// which `DEF` accepts). A KRL name that is not a keyword comes back unchanged.
 pub fn to_krl_name(text: &str) -> String {
     let mut name: String = transliterate(text)
         .chars()
@@ -49,6 +50,9 @@ pub fn to_krl_name(text: &str) -> String {
         name.insert(0, '_');
     }
     name.truncate(24);
+    if is_krl_keyword(&name) {
+        name.push('_');
+    }
     name
 }
 
@@ -215,6 +219,8 @@ mod tests {
             ("Palletizing Cell", "Palletizing_Cell"),
             ("Zelle_Übergabe", "Zelle_Uebergabe"),
             ("2024-Linie.v2", "_2024_Linie_v2"),
+            ("Loop", "Loop_"),
+            ("end", "end_"),
             ("", "_"),
             ("日本", "__"),
             (

@@ -174,8 +174,17 @@ pub fn check_program(value: &str) -> Result<(), String> {
              name) and {{blackboard}} (the blackboard's file name without .aml)"
         ));
     }
-    if value.contains('{') || crate::names::is_krl_name(value) {
+    if value.contains('{')
+        || (crate::names::is_krl_name(value) && !crate::names::is_krl_keyword(value))
+    {
         return Ok(());
+    }
+    if crate::names::is_krl_name(value) {
+        return Err(format!(
+            "`program` {value:?} is a KRL keyword, which cannot name a program: write e.g. \
+             {:?}",
+            crate::names::to_krl_name(value)
+        ));
     }
     Err(format!(
         "`program` {value:?} is not a KRL name (a letter or `_`, then letters, digits or `_`, at \
@@ -1255,6 +1264,11 @@ template = "t/r2.toml"
         assert!(e.message.contains("\"Zelle_A\""), "says how to fix it: {e}");
         let e = err("[[root]]\npath = \"r\"\nprogram = \"{ordner}\"\n");
         assert!(e.message.contains("{folder}"), "{e}");
+        let e = err("[[root]]\npath = \"r\"\nprogram = \"Loop\"\n");
+        assert!(
+            e.message.contains("keyword") && e.message.contains("\"Loop_\""),
+            "{e}"
+        );
 
         let bb = Path::new("/r/Palletizing Cell/Palletizing Cell.aml");
         let folder = Path::new("/r/Palletizing Cell");
