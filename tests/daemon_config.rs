@@ -418,3 +418,44 @@ fn started_names_the_configuration_by_its_absolute_path() {
     );
     assert!(src_of(&a).is_file());
 }
+
+#[test]
+fn pou_is_passed_like_the_command_lines() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let b = w.project("B");
+    let cfg = w.config("pou = \"Nope\"\n[[project]]\npath = \"ws/A\"\n[[project]]\npath = \"ws/B\"\npou = \"Demo\"\n");
+    let d = InProc::with_config(&cfg);
+    let evs = d.wait_for("A fails: no such POU", WAIT, |e| {
+        is_for(e, "compile-failed", &a)
+    });
+    let failed = evs
+        .iter()
+        .find(|e| is_for(e, "compile-failed", &a))
+        .unwrap();
+    assert!(
+        failed.to_string().contains("no POU named `Nope`"),
+        "{failed}"
+    );
+    d.wait_for("B compiles with its own POU", WAIT, |e| {
+        is_for(e, "write-back", &b)
+    });
+    // A reload naming the right POU compiles A (trigger `reload`).
+    let mark = d.mark();
+    fs::write(&cfg, "pou = \"Demo\"\n[[project]]\npath = \"ws/A\"\n[[project]]\npath = \"ws/B\"\npou = \"Demo\"\n").unwrap();
+    d.reload();
+    let evs = d.wait_for("A compiles after the reload", WAIT, |e| {
+        is_after(e, "compile-succeeded", &a, mark)
+    });
+    assert_eq!(started_after(&evs, &a, mark)[0]["trigger"], "reload");
+    d.stop(WAIT);
+    let copy = w.project("A_cli");
+    let out = Command::new(bin())
+        .args(["--pou", "Demo"])
+        .arg(copy.join("Blackboard.aml"))
+        .arg("Blackboard")
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    assert_same_outputs(&a, &copy, "Blackboard");
+}

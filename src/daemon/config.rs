@@ -75,6 +75,8 @@ pub struct Config {
     /// LF line endings for every project that does not say otherwise (`line_endings = "lf"`;
     /// default CRLF).
     pub lf: bool,
+    /// The SFC POU of every project that does not name its own (`pou`, like `--pou`).
+    pub pou: Option<String>,
     /// Explicit projects, with the global `template`/`line_endings` already applied.
     pub projects: Vec<ProjectSpec>,
     /// Folders whose direct subfolders holding a blackboard are projects.
@@ -95,6 +97,8 @@ pub struct ProjectSpec {
     pub template: Option<PathBuf>,
     /// LF line endings instead of CRLF, like `--lf`.
     pub lf: bool,
+    /// The SFC POU to use, like `--pou`.
+    pub pou: Option<String>,
 }
 
 /// A `[[root]]` entry: its folder and what its projects get.
@@ -107,6 +111,8 @@ pub struct RootSpec {
     pub template: Option<PathBuf>,
     /// LF line endings for its projects (the root's setting, else the global one).
     pub lf: bool,
+    /// The SFC POU of its projects (the root's, else the global one).
+    pub pou: Option<String>,
 }
 
 impl RootSpec {
@@ -118,6 +124,7 @@ impl RootSpec {
             program: self.program.clone(),
             template: self.template.clone(),
             lf: self.lf,
+            pou: self.pou.clone(),
         }
     }
 }
@@ -311,6 +318,7 @@ pub fn parse(text: &str, file: &Path) -> Result<Config, ConfigError> {
         None => false,
     };
     // A project's or root's own settings, else the global ones.
+    let pou = raw.pou.clone();
     let settings = |t: &Option<Spanned<String>>,
                     le: &Option<Spanned<String>>,
                     program: &Option<Spanned<String>>|
@@ -408,6 +416,7 @@ pub fn parse(text: &str, file: &Path) -> Result<Config, ConfigError> {
             program,
             template,
             lf,
+            pou: p.pou.clone().or_else(|| pou.clone()),
         });
     }
 
@@ -425,6 +434,7 @@ pub fn parse(text: &str, file: &Path) -> Result<Config, ConfigError> {
             program,
             template,
             lf,
+            pou: r.pou.clone().or_else(|| pou.clone()),
         });
     }
 
@@ -437,6 +447,7 @@ pub fn parse(text: &str, file: &Path) -> Result<Config, ConfigError> {
         forget_after_s,
         template,
         lf,
+        pou,
         projects,
         roots,
     })
@@ -528,6 +539,7 @@ pub fn merge(
                 path: dir,
                 template: config.template.clone(),
                 lf: config.lf,
+                pou: config.pou.clone(),
                 ..ProjectSpec::default()
             });
         }
@@ -588,6 +600,7 @@ pub fn add_blackboard(config: &mut Config, blackboard: &Path) {
         blackboard: Some(PathBuf::from(name)),
         template: config.template.clone(),
         lf: config.lf,
+        pou: config.pou.clone(),
         ..ProjectSpec::default()
     });
 }
@@ -739,6 +752,7 @@ struct RawConfig {
     events: Option<Spanned<String>>,
     template: Option<Spanned<String>>,
     line_endings: Option<Spanned<String>>,
+    pou: Option<String>,
     settle_ms: Option<Spanned<i64>>,
     #[serde(default)]
     allow_outside: bool,
@@ -758,6 +772,7 @@ struct RawProject {
     program: Option<Spanned<String>>,
     template: Option<Spanned<String>>,
     line_endings: Option<Spanned<String>>,
+    pou: Option<String>,
 }
 
 #[derive(Deserialize)]
@@ -767,6 +782,7 @@ struct RawRoot {
     program: Option<Spanned<String>>,
     template: Option<Spanned<String>>,
     line_endings: Option<Spanned<String>>,
+    pou: Option<String>,
 }
 
 #[cfg(test)]
@@ -832,6 +848,7 @@ path = "/srv/planning/projects"
                 forget_after_s: Some(120),
                 template: None,
                 lf: false,
+                pou: None,
                 projects: vec![
                     ProjectSpec {
                         path: "/srv/cells/Zelle_A".into(),
@@ -865,6 +882,7 @@ path = "/srv/planning/projects"
             "forget_after_s",
             "template",
             "line_endings",
+            "pou",
             "[[project]]",
             "[[root]]",
         ] {
@@ -1217,10 +1235,23 @@ template = "t/r2.toml"
         assert_eq!(cli.template, Some("/etc/skillpost/krl-team.toml".into()));
         assert!(cli.lf);
 
-        // Defaults: built-in template, CRLF.
+        // Defaults: built-in template, CRLF, the POU the SFC says.
         let c = parse("[[project]]\npath = \"A\"\n", &file()).unwrap();
         assert_eq!(c.projects[0].template, None);
         assert!(!c.projects[0].lf);
+        assert_eq!(c.projects[0].pou, None);
+
+        // `pou` likewise.
+        let c = parse(
+            "pou = \"Main\"\n[[project]]\npath = \"A\"\n[[project]]\npath = \"B\"\npou = \"Other\"\n\
+             [[root]]\npath = \"r\"\n[[root]]\npath = \"s\"\npou = \"S\"\n",
+            &file(),
+        )
+        .unwrap();
+        assert_eq!(c.projects[0].pou.as_deref(), Some("Main"));
+        assert_eq!(c.projects[1].pou.as_deref(), Some("Other"));
+        assert_eq!(c.roots[0].project("x".into()).pou.as_deref(), Some("Main"));
+        assert_eq!(c.roots[1].project("x".into()).pou.as_deref(), Some("S"));
     }
 
     #[test]
@@ -1360,6 +1391,7 @@ template = "t/r2.toml"
             forget_after_s: None,
             template: None,
             lf: false,
+            pou: None,
             projects: vec![ProjectSpec {
                 path: "/srv/A".into(),
                 blackboard: Some("A.aml".into()),

@@ -252,13 +252,13 @@ impl Job {
                 "file": blackboard.display().to_string(),
             })
         });
-        // Exactly what `skillpost [--template F] [--lf] BLACKBOARD PROGRAM` writes.
+        // Exactly what `skillpost [--template F] [--lf] [--pou P] BLACKBOARD PROGRAM` writes.
         let opts = Options {
             program: program.name,
             lf: self.spec.lf,
             template: self.spec.template.clone(),
             confine_to: self.confine.then(|| self.key.clone()),
-            ..Options::default()
+            pou: self.spec.pou.clone(),
         };
         let c = compile::compile(&fs, &blackboard, &opts);
         let mut inputs = fs.seen.into_inner().unwrap_or_else(|p| p.into_inner());
