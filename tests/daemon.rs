@@ -1133,13 +1133,15 @@ fn systemd_readiness_status_watchdog_and_stopping() {
         ],
     );
     let got = notifications_until(&sock, "READY=1");
-    // Ready only after the startup compile.
-    let evs = d.events();
+    // Ready only after the startup compile: its outputs are there when READY arrives (the
+    // events are written by a thread of their own, so the event may follow a moment later).
     assert!(
-        evs.iter().any(|e| is_for(e, "compile-succeeded", &a)),
-        "{}",
-        dump(&evs)
+        src_of(&a).is_file() && dat_of(&a).is_file(),
+        "READY before the startup compile wrote its outputs"
     );
+    d.wait_for("the startup compile-succeeded", WAIT, |e| {
+        is_for(e, "compile-succeeded", &a)
+    });
     assert!(
         got.iter()
             .any(|m| m.starts_with("STATUS=watching 1 project")),
