@@ -7,7 +7,7 @@ use tokio::time::Instant;
 
 use super::config;
 use super::events::Event;
-use super::project::{Origin, holds_blackboard};
+use super::project::{Origin, Project, holds_blackboard};
 use super::watch::{self, Backend, WatchMsg};
 use super::{Daemon, settle_of};
 
@@ -192,8 +192,7 @@ impl Daemon {
                 Err(_) => p.missing = true,
             }
             if was_missing && !p.missing {
-                self.sink
-                    .emit(Some(&Self::key_str(key)), folder_back(p.backend));
+                self.sink.emit(Some(&Self::key_str(key)), folder_back(&p));
             }
             p.trigger.get_or_insert("folder-created");
             p.force = true;
@@ -245,8 +244,7 @@ impl Daemon {
             p.watched.remove(&k);
             self.set_watches(&mut p, dirs);
             if !p.missing {
-                self.sink
-                    .emit(Some(&Self::key_str(&k)), folder_back(p.backend));
+                self.sink.emit(Some(&Self::key_str(&k)), folder_back(&p));
                 p.trigger = Some("folder-created");
                 p.force = true;
                 p.sched.change(now);
@@ -257,12 +255,13 @@ impl Daemon {
 }
 
 /// The `watching` event of a project folder that came back.
-pub(super) fn folder_back(backend: Backend) -> Event {
+pub(super) fn folder_back(p: &Project) -> Event {
+    let resolved = config::resolve(&p.spec).ok();
     Event::Watching {
         root: None,
-        blackboard: None,
-        backend: backend.as_str(),
+        blackboard: resolved.as_ref().map(|(b, _)| b.display().to_string()),
+        backend: p.backend.as_str(),
         reason: Some("the project folder is back".into()),
-        program: None,
+        program: resolved.map(|(_, program)| program),
     }
 }
