@@ -62,6 +62,8 @@ fn check_invariants(evs: &[Value]) -> Seen {
     let mut seen = Seen::default();
     let mut projects: BTreeMap<String, ProjectState> = BTreeMap::new();
     let mut degraded: BTreeSet<String> = BTreeSet::new();
+    // Projects whose last run was `compile-retrying`: the next run has trigger `retry`.
+    let mut retrying: BTreeSet<String> = BTreeSet::new();
     for (i, e) in evs.iter().enumerate() {
         if seq(e) != i as u64 + 1 {
             fail(i, format!("seq {} at position {}", seq(e), i + 1));
@@ -134,6 +136,12 @@ fn check_invariants(evs: &[Value]) -> Seen {
                     fail(i, format!("run_id {run} after {}", st.last_run));
                 }
                 let trigger = e["trigger"].as_str().unwrap();
+                if retrying.remove(project.as_ref().unwrap()) && trigger != "retry" {
+                    fail(
+                        i,
+                        format!("the run after compile-retrying has trigger {trigger}"),
+                    );
+                }
                 if st.reload_pending && trigger != "reload" {
                     fail(
                         i,
@@ -157,7 +165,10 @@ fn check_invariants(evs: &[Value]) -> Seen {
                 st.last_succeeded = (name == "compile-succeeded").then_some(run);
                 match name {
                     "compile-succeeded" => seen.succeeded += 1,
-                    "compile-retrying" => seen.retrying += 1,
+                    "compile-retrying" => {
+                        seen.retrying += 1;
+                        retrying.insert(project.clone().unwrap());
+                    }
                     _ => {
                         seen.failed += 1;
                         let text = e.to_string();

@@ -379,7 +379,7 @@ impl Daemon {
             Outcome::Retry => {
                 p.retries += 1;
                 p.force = true;
-                p.trigger.get_or_insert("retry");
+                p.trigger = Some("retry");
                 p.sched.finished(now);
                 p.sched.postpone(now);
             }
