@@ -123,7 +123,8 @@ impl Daemon {
                     if p.spec != spec {
                         p.spec = spec;
                         p.force = true;
-                        p.trigger = Some("reload");
+                        // The first reason of a burst counts: a pending retry stays a retry.
+                        p.trigger.get_or_insert("reload");
                         p.sched.immediately(now);
                     }
                     p.sched.set_timing(settle, max_wait_of(settle));
