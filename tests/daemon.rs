@@ -1140,7 +1140,7 @@ fn systemd_readiness_status_watchdog_and_stopping() {
     );
     assert!(
         got.iter()
-            .any(|m| m.starts_with("STATUS=watching 1 project")),
+            .any(|m| m.starts_with("STATUS=1 project, all compiled;")),
         "{got:?}"
     );
     let pings = notifications_until(&sock, "WATCHDOG=1");

@@ -1,0 +1,533 @@
+//! The daemon's state file and `skillpost status`.
+//!
+//! The event loop keeps each project's last result (taken from the events as they are emitted,
+//! see [`Tracker::observe`]) and writes a small JSON file with it whenever a compile ends, the
+//! configuration is reloaded, and when the daemon stops. The file is replaced atomically (a
+//! temporary file in the same folder, then a rename), so a reader never sees half of it.
+//!
+//! Where: `watch --state FILE`, else `$RUNTIME_DIRECTORY/status.json` (`/run/skillpost` under the
+//! shipped unit), else `status.json` in the folder of the lock files ([`super::lock::runtime_dir`]:
+//! `$XDG_RUNTIME_DIR/skillpost`, else `/tmp/skillpost-<uid>`). `skillpost status` looks in the
+//! same places, and also in `/run/skillpost` (the service's, for an administrator's shell).
+//!
+//! The same numbers make systemd's `STATUS=` line ([`sentence`]).
+
+use std::collections::BTreeMap;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::SystemTime;
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use super::events::Event;
+
+/// The schema of the state file; fields are only ever added.
+pub const SCHEMA: &str = "skillpost.status/1";
+
+/// The file name in a runtime directory.
+pub const FILE_NAME: &str = "status.json";
+
+/// Where the service's state file is under the shipped unit (`RuntimeDirectory=skillpost`).
+pub const SERVICE_STATE: &str = "/run/skillpost/status.json";
+
+/// The whole state file.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct Snapshot {
+    pub schema: String,
+    pub version: String,
+    pub pid: u32,
+    /// When the daemon started (RFC 3339, UTC).
+    pub started: String,
+    /// When this file was written.
+    pub updated: String,
+    /// `running`, or `stopped` once the daemon has ended.
+    pub daemon: String,
+    /// Compiles running when the file was written.
+    pub compiling: usize,
+    /// The systemd status line of the same moment.
+    pub summary: String,
+    pub projects: Vec<ProjectState>,
+}
+
+/// One project's last result.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct ProjectState {
+    pub project: String,
+    /// `ok`, `failed`, or `pending` (not compiled yet).
+    pub result: String,
+    /// When the last compile ended (RFC 3339, UTC).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub run_id: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub duration_ms: Option<u64>,
+    /// The files of the last successful compile.
+    #[serde(default)]
+    pub outputs: Vec<String>,
+    /// Diagnostics of the last compile.
+    pub errors: usize,
+    pub warnings: usize,
+    /// The first error of a failed compile, `code file:line:col: message`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub first_error: Option<String>,
+}
+
+/// systemd's `STATUS=` line: "4 projects, 1 failing", "1 project, all compiled", with the
+/// running compiles and the watched directories after it.
+pub fn sentence(projects: usize, failing: usize, compiling: usize, directories: usize) -> String {
+    let mut s = format!("{projects} project{}", plural(projects));
+    if projects > 0 {
+        if failing > 0 {
+            s.push_str(&format!(", {failing} failing"));
+        }
+        if compiling > 0 {
+            s.push_str(&format!(", {compiling} compiling"));
+        }
+        if failing == 0 && compiling == 0 {
+            s.push_str(", all compiled");
+        }
+    }
+    s.push_str(&format!(
+        "; watching {directories} director{}",
+        if directories == 1 { "y" } else { "ies" }
+    ));
+    s
+}
+
+fn plural(n: usize) -> &'static str {
+    if n == 1 { "" } else { "s" }
+}
+
+fn now() -> String {
+    humantime::format_rfc3339_seconds(SystemTime::now()).to_string()
+}
+
+/// `code file:line:col: message` of a diagnostic as the events carry it.
+pub fn describe(d: &Value) -> String {
+    let s = |k: &str| d.get(k).and_then(Value::as_str).unwrap_or("");
+    let mut at = s("file").to_owned();
+    for k in ["line", "column"] {
+        if let Some(n) = d.get(k).and_then(Value::as_u64) {
+            at.push_str(&format!(":{n}"));
+        }
+    }
+    let code = s("code");
+    match (at.is_empty(), code.is_empty()) {
+        (true, true) => s("message").to_owned(),
+        (true, false) => format!("{code}: {}", s("message")),
+        (false, _) => format!("{code} {at}: {}", s("message"))
+            .trim_start()
+            .to_owned(),
+    }
+}
+
+fn count(diags: &[Value], severity: &str) -> usize {
+    diags
+        .iter()
+        .filter(|d| d.get("severity").and_then(Value::as_str) == Some(severity))
+        .count()
+}
+
+struct Inner {
+    results: BTreeMap<String, ProjectState>,
+    /// The projects and counts of the last [`Tracker::sync`].
+    last: Option<Snapshot>,
+    warned: bool,
+}
+
+/// The projects' last results, and the state file they are written to.
+pub struct Tracker {
+    path: Option<PathBuf>,
+    started: String,
+    inner: Mutex<Inner>,
+}
+
+impl Tracker {
+    /// Results kept in memory only (tests, or no file wanted).
+    pub fn new(path: Option<PathBuf>) -> Self {
+        Tracker {
+            path,
+            started: now(),
+            inner: Mutex::new(Inner {
+                results: BTreeMap::new(),
+                last: None,
+                warned: false,
+            }),
+        }
+    }
+
+    pub fn path(&self) -> Option<&Path> {
+        self.path.as_deref()
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
+        self.inner.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Takes what concerns the state from an event as it is emitted (any thread): the
+    /// compile results; and `stopped`, which writes the file one last time.
+    pub fn observe(&self, project: Option<&str>, event: &Event) {
+        let mut st = self.lock();
+        match (project, event) {
+            (
+                Some(p),
+                Event::CompileSucceeded {
+                    run_id,
+                    duration_ms,
+                    outputs,
+                    counts,
+                    ..
+                },
+            ) => {
+                st.results.insert(
+                    p.to_owned(),
+                    ProjectState {
+                        project: p.to_owned(),
+                        result: "ok".into(),
+                        time: Some(now()),
+                        run_id: Some(*run_id),
+                        duration_ms: Some(*duration_ms),
+                        outputs: outputs.iter().map(|o| o.path.clone()).collect(),
+                        errors: 0,
+                        warnings: counts.warnings,
+                        first_error: None,
+                    },
+                );
+            }
+            (
+                Some(p),
+                Event::CompileFailed {
+                    run_id,
+                    duration_ms,
+                    diagnostics,
+                },
+            ) => {
+                st.results.insert(
+                    p.to_owned(),
+                    ProjectState {
+                        project: p.to_owned(),
+                        result: "failed".into(),
+                        time: Some(now()),
+                        run_id: Some(*run_id),
+                        duration_ms: Some(*duration_ms),
+                        outputs: Vec::new(),
+                        errors: count(diagnostics, "error").max(1),
+                        warnings: count(diagnostics, "warning"),
+                        first_error: diagnostics
+                            .iter()
+                            .find(|d| d.get("severity").and_then(Value::as_str) == Some("error"))
+                            .or(diagnostics.first())
+                            .map(describe),
+                    },
+                );
+            }
+            (_, Event::Stopped { .. }) => {
+                if let Some(mut snap) = st.last.clone() {
+                    snap.daemon = "stopped".into();
+                    snap.compiling = 0;
+                    snap.updated = now();
+                    self.write(&mut st, &snap);
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// The state of `projects` now (the daemon's table: removed and forgotten projects are
+    /// left out), written to the state file; returns the [`sentence`] for systemd.
+    pub fn sync<'a>(
+        &self,
+        projects: impl Iterator<Item = &'a Path>,
+        compiling: usize,
+        directories: usize,
+    ) -> String {
+        let mut st = self.lock();
+        let projects: Vec<ProjectState> = projects
+            .map(|p| {
+                let key = p.display().to_string();
+                st.results.get(&key).cloned().unwrap_or(ProjectState {
+                    project: key,
+                    result: "pending".into(),
+                    ..ProjectState::default()
+                })
+            })
+            .collect();
+        st.results
+            .retain(|k, _| projects.iter().any(|p| &p.project == k));
+        let failing = projects.iter().filter(|p| p.result == "failed").count();
+        let summary = sentence(projects.len(), failing, compiling, directories);
+        let snap = Snapshot {
+            schema: SCHEMA.into(),
+            version: crate::VERSION.into(),
+            pid: std::process::id(),
+            started: self.started.clone(),
+            updated: now(),
+            daemon: "running".into(),
+            compiling,
+            summary: summary.clone(),
+            projects,
+        };
+        if st.last.as_ref().is_some_and(|l| same_content(l, &snap)) {
+            return summary;
+        }
+        self.write(&mut st, &snap);
+        st.last = Some(snap);
+        summary
+    }
+
+    fn write(&self, st: &mut Inner, snap: &Snapshot) {
+        let Some(path) = &self.path else {
+            return;
+        };
+        if let Err(e) = write_atomically(path, snap) {
+            if !st.warned {
+                st.warned = true;
+                tracing::warn!(
+                    "cannot write the state file {} (`skillpost status` will not see this daemon): {e}",
+                    path.display()
+                );
+            }
+        } else {
+            st.warned = false;
+        }
+    }
+}
+
+/// Whether two snapshots differ only in their time of writing.
+fn same_content(a: &Snapshot, b: &Snapshot) -> bool {
+    a.projects == b.projects && a.compiling == b.compiling && a.summary == b.summary
+}
+
+/// Writes the snapshot to a temporary file beside `path` (mode 0644: `skillpost status` is for
+/// anyone who may read the folder), then renames it over `path`.
+pub fn write_atomically(path: &Path, snap: &Snapshot) -> std::io::Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
+        _ => PathBuf::from("."),
+    };
+    if !dir.exists() {
+        use std::os::unix::fs::DirBuilderExt as _;
+        std::fs::DirBuilder::new()
+            .recursive(true)
+            .mode(0o700)
+            .create(&dir)?;
+    }
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".status-")
+        .suffix(".tmp")
+        .tempfile_in(&dir)?;
+    let mut text = serde_json::to_vec_pretty(snap).map_err(std::io::Error::other)?;
+    text.push(b'\n');
+    tmp.as_file_mut().write_all(&text)?;
+    {
+        use std::os::unix::fs::PermissionsExt as _;
+        tmp.as_file()
+            .set_permissions(std::fs::Permissions::from_mode(0o644))?;
+    }
+    tmp.persist(path).map_err(|e| e.error)?;
+    Ok(())
+}
+
+/// The state file the daemon writes by default: `$RUNTIME_DIRECTORY/status.json`, else beside
+/// the lock files.
+pub fn default_path() -> PathBuf {
+    super::lock::runtime_dir().join(FILE_NAME)
+}
+
+/// Where `skillpost status` looks without `--state`, in order: the daemon's default for this
+/// environment, then the service's (`/run/skillpost/status.json`).
+pub fn candidates() -> Vec<PathBuf> {
+    let mut v = vec![default_path()];
+    if !v.contains(&PathBuf::from(SERVICE_STATE)) {
+        v.push(PathBuf::from(SERVICE_STATE));
+    }
+    v
+}
+
+/// Reads a state file.
+pub fn read(path: &Path) -> Result<Snapshot, String> {
+    let text = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    serde_json::from_slice(&text)
+        .map_err(|e| format!("{} is not a skillpost state file: {e}", path.display()))
+}
+
+/// The state as an aligned table (spaces, no tabs), with a heading line.
+pub fn table(s: &Snapshot) -> String {
+    let mut out = if s.daemon == "stopped" {
+        format!(
+            "skillpost {} (pid {}) stopped; last state written {}\n",
+            s.version, s.pid, s.updated
+        )
+    } else {
+        format!(
+            "skillpost {} (pid {}) running since {}: {}\n",
+            s.version, s.pid, s.started, s.summary
+        )
+    };
+    if s.projects.is_empty() {
+        return out;
+    }
+    out.push('\n');
+    let header = [
+        "PROJECT", "RESULT", "LAST RUN", "ERRORS", "WARNINGS", "OUTPUTS",
+    ];
+    let rows: Vec<[String; 6]> = s
+        .projects
+        .iter()
+        .map(|p| {
+            let outputs = if p.result == "failed" {
+                p.first_error.clone().unwrap_or_default()
+            } else {
+                p.outputs
+                    .iter()
+                    .map(|o| {
+                        Path::new(o)
+                            .file_name()
+                            .map_or_else(|| o.clone(), |n| n.to_string_lossy().into_owned())
+                    })
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            [
+                p.project.clone(),
+                p.result.clone(),
+                p.time.clone().unwrap_or_else(|| "-".into()),
+                p.errors.to_string(),
+                p.warnings.to_string(),
+                outputs,
+            ]
+        })
+        .collect();
+    let mut width = header.map(|h| h.chars().count());
+    for r in &rows {
+        for (w, c) in width.iter_mut().zip(r) {
+            *w = (*w).max(c.chars().count());
+        }
+    }
+    let line = |cells: &[&str]| {
+        let mut l = String::new();
+        for (i, c) in cells.iter().enumerate() {
+            let c = c.replace(['\t', '\n', '\r'], " ");
+            if i + 1 == cells.len() {
+                l.push_str(&c);
+            } else {
+                l.push_str(&c);
+                l.push_str(&" ".repeat(width[i] - c.chars().count() + 2));
+            }
+        }
+        l.truncate(l.trim_end().len());
+        l.push('\n');
+        l
+    };
+    out.push_str(&line(&header));
+    for r in &rows {
+        out.push_str(&line(&r.each_ref().map(String::as_str)));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::daemon::events::{Counts, OutputInfo};
+
+    #[test]
+    fn the_status_line_reads_like_a_sentence() {
+        assert_eq!(
+            sentence(4, 1, 0, 9),
+            "4 projects, 1 failing; watching 9 directories"
+        );
+        assert_eq!(
+            sentence(1, 0, 0, 1),
+            "1 project, all compiled; watching 1 directory"
+        );
+        assert_eq!(
+            sentence(3, 2, 1, 6),
+            "3 projects, 2 failing, 1 compiling; watching 6 directories"
+        );
+        assert_eq!(
+            sentence(2, 0, 2, 4),
+            "2 projects, 2 compiling; watching 4 directories"
+        );
+        assert_eq!(sentence(0, 0, 0, 0), "0 projects; watching 0 directories");
+    }
+
+    #[test]
+    fn describes_a_diagnostic_on_one_line() {
+        let d = serde_json::json!({"severity": "error", "code": "E604", "message": "cannot write",
+            "file": "a/P.src", "line": 3, "column": 7});
+        assert_eq!(describe(&d), "E604 a/P.src:3:7: cannot write");
+        let d = serde_json::json!({"severity": "error", "code": "E000", "message": "boom"});
+        assert_eq!(describe(&d), "E000: boom");
+    }
+
+    #[test]
+    fn results_are_written_atomically_and_printed_aligned() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("status.json");
+        let t = Tracker::new(Some(path.clone()));
+        t.observe(
+            Some("/p/Zelle_A"),
+            &Event::CompileSucceeded {
+                run_id: 1,
+                duration_ms: 5,
+                outputs: vec![OutputInfo {
+                    path: "/p/Zelle_A/Zelle_A.src".into(),
+                    written: true,
+                }],
+                counts: Counts {
+                    steps: 3,
+                    warnings: 1,
+                },
+                warnings: vec![],
+            },
+        );
+        t.observe(
+            Some("/p/B"),
+            &Event::failed_with(2, 1, "E604", "cannot write".into()),
+        );
+        let projects = [
+            Path::new("/p/B"),
+            Path::new("/p/C"),
+            Path::new("/p/Zelle_A"),
+        ];
+        let s = t.sync(projects.iter().copied(), 0, 6);
+        assert_eq!(s, "3 projects, 1 failing; watching 6 directories");
+        let names: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        assert_eq!(names, ["status.json"], "no temporary file left");
+        let snap = read(&path).unwrap();
+        assert_eq!(snap.projects.len(), 3);
+        assert_eq!(snap.projects[0].result, "failed");
+        assert_eq!(snap.projects[1].result, "pending");
+        assert_eq!(snap.projects[2].outputs, ["/p/Zelle_A/Zelle_A.src"]);
+        let text = table(&snap);
+        assert!(!text.contains('\t'), "{text}");
+        let lines: Vec<&str> = text.lines().skip(2).collect();
+        let col = lines[0].find("RESULT").unwrap();
+        for l in &lines[1..] {
+            assert_eq!(&l[col - 2..col], "  ", "aligned: {text}");
+            assert!(!l[col..].starts_with(' '), "aligned: {text}");
+        }
+        assert!(text.contains("E604: cannot write"), "{text}");
+        // A removed project leaves the file at the next sync.
+        t.sync([Path::new("/p/Zelle_A")].into_iter(), 0, 2);
+        assert_eq!(read(&path).unwrap().projects.len(), 1);
+        t.observe(
+            None,
+            &Event::Stopped {
+                reason: "SIGTERM".into(),
+                requested: None,
+                compiling: None,
+            },
+        );
+        let snap = read(&path).unwrap();
+        assert_eq!(snap.daemon, "stopped");
+        assert!(table(&snap).contains("stopped"));
+    }
+}
