@@ -49,12 +49,14 @@ pub enum WriteBackOutcome {
 /// the target is untouched.
 ///
 /// - **Permissions:** an existing target keeps its permission bits (Unix: the whole mode
-///   including setuid/setgid/sticky; elsewhere: the read-only flag). A new file gets exactly
-///   `0o644` on Unix — the process umask is *not* applied (the temporary file is created `0o600`
-///   and then set to `0o644` explicitly).
+///   including setuid/setgid/sticky; elsewhere: the read-only flag). A new file gets `0o666`
+///   less the process umask on Unix, like any program's new file (`0o664` under the service's
+///   `UMask=0002`, so planners in the group can write it; the temporary file is created `0o600`
+///   and then set to that mode explicitly).
 /// - **Ownership (Unix):** an existing target's owner and group are copied to the new file where
 ///   the process may do so (as root, or a group the user belongs to); failures are ignored, the
-///   file then belongs to the writing user.
+///   file then belongs to the writing user. Without the right to give the file away (no
+///   `CAP_CHOWN`, the service) the group is still kept.
 /// - **Symbolic links:** when `path` is a symbolic link, the file it finally points to is
 ///   replaced and the link stays a link. A dangling link is an error.
 /// - A `path` that exists but is not a regular file (a folder, a device) is an error.
@@ -423,7 +425,7 @@ fn resolve_link(path: &Path) -> io::Result<PathBuf> {
 }
 
 /// Gives the temporary file the permissions (and on Unix, best effort, the owner) of the file it
-/// replaces, or `0o644` for a new file.
+/// replaces, or `0o666` less the umask for a new file.
 #[cfg(unix)]
 fn set_metadata(file: &fs::File, existing: Option<&fs::Metadata>) -> io::Result<()> {
     use std::os::unix::fs::{MetadataExt as _, PermissionsExt as _};
@@ -431,12 +433,15 @@ fn set_metadata(file: &fs::File, existing: Option<&fs::Metadata>) -> io::Result<
         Some(m) => {
             let own = file.metadata()?;
             if own.uid() != m.uid() || own.gid() != m.gid() {
-                // Before the chmod: a chown clears setuid/setgid bits.
-                let _ = std::os::unix::fs::fchown(file, Some(m.uid()), Some(m.gid()));
+                // Before the chmod: a chown clears setuid/setgid bits. Not allowed to give the
+                // file away (no CAP_CHOWN): keep at least the group (a group we are in).
+                if std::os::unix::fs::fchown(file, Some(m.uid()), Some(m.gid())).is_err() {
+                    let _ = std::os::unix::fs::fchown(file, None, Some(m.gid()));
+                }
             }
             m.permissions().mode() & 0o7777
         }
-        None => 0o644,
+        None => crate::umask::new_file_mode(),
     };
     file.set_permissions(fs::Permissions::from_mode(mode))
 }
@@ -1444,7 +1449,7 @@ mod tests {
         );
         assert_eq!(fs::read(&p).unwrap(), b"DEF x()\n");
         #[cfg(unix)]
-        assert_eq!(mode(&p), 0o644);
+        assert_eq!(mode(&p), 0o666 & !crate::umask::get());
         assert!(temp_leftovers(d.path()).is_empty());
     }
 
