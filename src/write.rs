@@ -56,7 +56,8 @@ pub enum WriteBackOutcome {
 /// - **Ownership (Unix):** an existing target's owner and group are copied to the new file where
 ///   the process may do so (as root, or a group the user belongs to); failures are ignored, the
 ///   file then belongs to the writing user. Without the right to give the file away (no
-///   `CAP_CHOWN`, the service) the group is still kept.
+///   `CAP_CHOWN`) the group is still kept. The mode is set before the owner, so a process with
+///   `CAP_CHOWN` but without `CAP_FOWNER` (the service) keeps both.
 /// - **Symbolic links:** when `path` is a symbolic link, the file it finally points to is
 ///   replaced and the link stays a link. A dangling link is an error.
 /// - A `path` that exists but is not a regular file (a folder, a device) is an error.
@@ -429,21 +430,26 @@ fn resolve_link(path: &Path) -> io::Result<PathBuf> {
 #[cfg(unix)]
 fn set_metadata(file: &fs::File, existing: Option<&fs::Metadata>) -> io::Result<()> {
     use std::os::unix::fs::{MetadataExt as _, PermissionsExt as _};
-    let mode = match existing {
-        Some(m) => {
-            let own = file.metadata()?;
-            if own.uid() != m.uid() || own.gid() != m.gid() {
-                // Before the chmod: a chown clears setuid/setgid bits. Not allowed to give the
-                // file away (no CAP_CHOWN): keep at least the group (a group we are in).
-                if std::os::unix::fs::fchown(file, Some(m.uid()), Some(m.gid())).is_err() {
-                    let _ = std::os::unix::fs::fchown(file, None, Some(m.gid()));
-                }
-            }
-            m.permissions().mode() & 0o7777
-        }
-        None => crate::umask::new_file_mode(),
+    let Some(m) = existing else {
+        return file.set_permissions(fs::Permissions::from_mode(crate::umask::new_file_mode()));
     };
-    file.set_permissions(fs::Permissions::from_mode(mode))
+    let mode = m.permissions().mode() & 0o7777;
+    // The mode first, while the file is still ours: once it belongs to another user (a
+    // service with CAP_CHOWN keeping a planner's blackboard theirs) we may not chmod it.
+    file.set_permissions(fs::Permissions::from_mode(mode))?;
+    let own = file.metadata()?;
+    if own.uid() != m.uid() || own.gid() != m.gid() {
+        // Not allowed to give the file away (no CAP_CHOWN): keep at least the group (a group
+        // we are in).
+        if std::os::unix::fs::fchown(file, Some(m.uid()), Some(m.gid())).is_err() {
+            let _ = std::os::unix::fs::fchown(file, None, Some(m.gid()));
+        }
+        if mode & 0o6000 != 0 {
+            // A chown clears setuid/setgid bits: put them back where we still may.
+            let _ = file.set_permissions(fs::Permissions::from_mode(mode));
+        }
+    }
+    Ok(())
 }
 
 #[cfg(not(unix))]
