@@ -75,9 +75,27 @@ pub struct ProjectState {
     pub first_error: Option<String>,
 }
 
+/// The counts [`sentence`] reads.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Tally {
+    pub projects: usize,
+    pub failing: usize,
+    pub compiling: usize,
+    /// Not compiled yet (at startup, or a project folder that does not exist yet).
+    pub pending: usize,
+    pub directories: usize,
+}
+
 /// systemd's `STATUS=` line: "4 projects, 1 failing", "1 project, all compiled", with the
-/// running compiles and the watched directories after it.
-pub fn sentence(projects: usize, failing: usize, compiling: usize, directories: usize) -> String {
+/// running compiles, the projects not compiled yet and the watched directories.
+pub fn sentence(c: Tally) -> String {
+    let Tally {
+        projects,
+        failing,
+        compiling,
+        pending,
+        directories,
+    } = c;
     let mut s = format!("{projects} project{}", plural(projects));
     if projects > 0 {
         if failing > 0 {
@@ -86,7 +104,10 @@ pub fn sentence(projects: usize, failing: usize, compiling: usize, directories: 
         if compiling > 0 {
             s.push_str(&format!(", {compiling} compiling"));
         }
-        if failing == 0 && compiling == 0 {
+        if pending > 0 {
+            s.push_str(&format!(", {pending} not compiled yet"));
+        }
+        if failing == 0 && compiling == 0 && pending == 0 {
             s.push_str(", all compiled");
         }
     }
@@ -257,8 +278,13 @@ impl Tracker {
             .collect();
         st.results
             .retain(|k, _| projects.iter().any(|p| &p.project == k));
-        let failing = projects.iter().filter(|p| p.result == "failed").count();
-        let summary = sentence(projects.len(), failing, compiling, directories);
+        let summary = sentence(Tally {
+            projects: projects.len(),
+            failing: projects.iter().filter(|p| p.result == "failed").count(),
+            compiling,
+            pending: projects.iter().filter(|p| p.result == "pending").count(),
+            directories,
+        });
         let snap = Snapshot {
             schema: SCHEMA.into(),
             version: crate::VERSION.into(),
@@ -436,23 +462,36 @@ mod tests {
 
     #[test]
     fn the_status_line_reads_like_a_sentence() {
+        let s = |projects, failing, compiling, pending, directories| {
+            sentence(Tally {
+                projects,
+                failing,
+                compiling,
+                pending,
+                directories,
+            })
+        };
         assert_eq!(
-            sentence(4, 1, 0, 9),
+            s(4, 1, 0, 0, 9),
             "4 projects, 1 failing; watching 9 directories"
         );
         assert_eq!(
-            sentence(1, 0, 0, 1),
+            s(1, 0, 0, 0, 1),
             "1 project, all compiled; watching 1 directory"
         );
         assert_eq!(
-            sentence(3, 2, 1, 6),
+            s(3, 2, 1, 0, 6),
             "3 projects, 2 failing, 1 compiling; watching 6 directories"
         );
         assert_eq!(
-            sentence(2, 0, 2, 4),
+            s(2, 0, 2, 0, 4),
             "2 projects, 2 compiling; watching 4 directories"
         );
-        assert_eq!(sentence(0, 0, 0, 0), "0 projects; watching 0 directories");
+        assert_eq!(
+            s(2, 0, 0, 1, 3),
+            "2 projects, 1 not compiled yet; watching 3 directories"
+        );
+        assert_eq!(s(0, 0, 0, 0, 0), "0 projects; watching 0 directories");
     }
 
     #[test]
@@ -495,7 +534,10 @@ mod tests {
             Path::new("/p/Zelle_A"),
         ];
         let s = t.sync(projects.iter().copied(), 0, 6);
-        assert_eq!(s, "3 projects, 1 failing; watching 6 directories");
+        assert_eq!(
+            s,
+            "3 projects, 1 failing, 1 not compiled yet; watching 6 directories"
+        );
         let names: Vec<_> = std::fs::read_dir(dir.path())
             .unwrap()
             .map(|e| e.unwrap().file_name().into_string().unwrap())
