@@ -211,3 +211,47 @@ fn status_and_journal_after_a_success_a_failure_and_a_failed_reload() {
     });
     assert!(status(&state, "table").1.contains("stopped"));
 }
+
+/// A fresh host: the service configuration names a project folder that does not exist yet.
+/// The daemon must still say READY=1 (systemd waits for it), and the state file says `running`
+/// with the project `pending`.
+#[test]
+fn ready_with_only_a_missing_project() {
+    use std::os::unix::net::UnixDatagram;
+    let tmp = tempfile::tempdir().unwrap();
+    let root: PathBuf = tmp.path().canonicalize().unwrap();
+    let sock_path = root.join("notify.sock");
+    let sock = UnixDatagram::bind(&sock_path).unwrap();
+    sock.set_read_timeout(Some(Duration::from_millis(100)))
+        .unwrap();
+    let state = root.join("status.json");
+    let _daemon = Kill(
+        Command::new(BIN)
+            .arg("watch")
+            .arg("--state")
+            .arg(&state)
+            .arg("--events")
+            .arg(root.join("ev.jsonl"))
+            .arg(root.join("not-yet"))
+            .env("RUNTIME_DIRECTORY", root.join("locks"))
+            .env("NOTIFY_SOCKET", &sock_path)
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let end = Instant::now() + Duration::from_secs(10);
+    let mut got = Vec::new();
+    let mut buf = [0u8; 4096];
+    while Instant::now() < end && !got.iter().any(|m: &String| m.contains("READY=1")) {
+        if let Ok(n) = sock.recv(&mut buf) {
+            got.push(String::from_utf8_lossy(&buf[..n]).into_owned());
+        }
+    }
+    assert!(got.iter().any(|m| m.contains("READY=1")), "{got:?}");
+    wait_for("the running state", || {
+        status(&state, "json").1.contains("\"running\"")
+    });
+    let (_, json, _) = status(&state, "json");
+    assert!(json.contains("\"pending\""), "{json}");
+    assert!(json.contains("1 project, 1 not compiled yet"), "{json}");
+}

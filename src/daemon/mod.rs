@@ -199,7 +199,11 @@ pub async fn run(
             _ = watchdog_tick.tick(), if watchdog.is_some() => {
                 let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
             }
-            _ = missing_tick.tick() => d.look_for_missing(Instant::now()),
+            _ = missing_tick.tick() => {
+                d.look_for_missing(Instant::now());
+                // The state file catches up with changes its rate limit held back.
+                d.notify_status();
+            }
         }
     }
     d.stop(stop_reason, drx, control).await
@@ -288,6 +292,20 @@ impl Daemon {
         while self.running < self.parallel && !self.queue.is_empty() {
             let k = self.queue.remove(0);
             self.spawn_compile(&k);
+        }
+        // Only projects whose folder does not exist yet: nothing to compile, so no compile's
+        // end would say READY=1 (systemd would wait for it until its start timeout).
+        if !self.ready
+            && self.running == 0
+            && self.queue.is_empty()
+            && self
+                .projects
+                .values()
+                .all(|p| p.missing || p.sched.deadline().is_none())
+        {
+            self.ready = true;
+            let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
+            self.notify_status();
         }
     }
 
@@ -406,6 +424,7 @@ impl Daemon {
             self.projects.keys().map(PathBuf::as_path),
             self.running,
             self.watchers.len(),
+            self.ready,
         );
         let _ = sd_notify::notify(&[sd_notify::NotifyState::Status(&status)]);
     }

@@ -42,7 +42,8 @@ pub struct Snapshot {
     pub started: String,
     /// When this file was written.
     pub updated: String,
-    /// `running`, or `stopped` once the daemon has ended.
+    /// `starting` (the startup compiles are not done), `running`, or `stopped` once the daemon
+    /// has ended.
     pub daemon: String,
     /// Compiles running when the file was written.
     pub compiling: usize,
@@ -156,8 +157,16 @@ struct Inner {
     results: BTreeMap<String, ProjectState>,
     /// The projects and counts of the last [`Tracker::sync`].
     last: Option<Snapshot>,
+    /// When the file was last written, and whether `last` is newer than the file.
+    written: Option<std::time::Instant>,
+    dirty: bool,
     warned: bool,
 }
+
+/// The file is written at most this often (a startup of 1,000 projects would otherwise write
+/// it 1,000 times); a change within it is written by a later [`Tracker::sync`] (the event loop
+/// calls it at least every 2 s) or at stop.
+pub const MIN_WRITE_INTERVAL: std::time::Duration = std::time::Duration::from_millis(250);
 
 /// The projects' last results, and the state file they are written to.
 pub struct Tracker {
@@ -175,6 +184,8 @@ impl Tracker {
             inner: Mutex::new(Inner {
                 results: BTreeMap::new(),
                 last: None,
+                written: None,
+                dirty: false,
                 warned: false,
             }),
         }
@@ -258,12 +269,14 @@ impl Tracker {
     }
 
     /// The state of `projects` now (the daemon's table: removed and forgotten projects are
-    /// left out), written to the state file; returns the [`sentence`] for systemd.
+    /// left out), written to the state file; returns the [`sentence`] for systemd. `ready`:
+    /// the startup compiles are done (systemd's `READY=1`); before, `daemon` is `starting`.
     pub fn sync<'a>(
         &self,
         projects: impl Iterator<Item = &'a Path>,
         compiling: usize,
         directories: usize,
+        ready: bool,
     ) -> String {
         let mut st = self.lock();
         let projects: Vec<ProjectState> = projects
@@ -291,16 +304,24 @@ impl Tracker {
             pid: std::process::id(),
             started: self.started.clone(),
             updated: now(),
-            daemon: "running".into(),
+            daemon: if ready { "running" } else { "starting" }.into(),
             compiling,
             summary: summary.clone(),
             projects,
         };
-        if st.last.as_ref().is_some_and(|l| same_content(l, &snap)) {
-            return summary;
+        let changed = !st.last.as_ref().is_some_and(|l| same_content(l, &snap));
+        if changed {
+            st.last = Some(snap);
+            st.dirty = true;
         }
-        self.write(&mut st, &snap);
-        st.last = Some(snap);
+        let due = st.written.is_none_or(|t| t.elapsed() >= MIN_WRITE_INTERVAL);
+        if st.dirty && due {
+            if let Some(snap) = st.last.clone() {
+                self.write(&mut st, &snap);
+            }
+            st.dirty = false;
+            st.written = Some(std::time::Instant::now());
+        }
         summary
     }
 
@@ -324,7 +345,10 @@ impl Tracker {
 
 /// Whether two snapshots differ only in their time of writing.
 fn same_content(a: &Snapshot, b: &Snapshot) -> bool {
-    a.projects == b.projects && a.compiling == b.compiling && a.summary == b.summary
+    a.projects == b.projects
+        && a.compiling == b.compiling
+        && a.summary == b.summary
+        && a.daemon == b.daemon
 }
 
 /// Writes the snapshot to a temporary file beside `path` (mode 0644: `skillpost status` is for
@@ -389,8 +413,8 @@ pub fn table(s: &Snapshot) -> String {
         )
     } else {
         format!(
-            "skillpost {} (pid {}) running since {}: {}\n",
-            s.version, s.pid, s.started, s.summary
+            "skillpost {} (pid {}) {} since {}: {}\n",
+            s.version, s.pid, s.daemon, s.started, s.summary
         )
     };
     if s.projects.is_empty() {
@@ -533,7 +557,7 @@ mod tests {
             Path::new("/p/C"),
             Path::new("/p/Zelle_A"),
         ];
-        let s = t.sync(projects.iter().copied(), 0, 6);
+        let s = t.sync(projects.iter().copied(), 0, 6, true);
         assert_eq!(
             s,
             "3 projects, 1 failing, 1 not compiled yet; watching 6 directories"
@@ -557,8 +581,11 @@ mod tests {
             assert!(!l[col..].starts_with(' '), "aligned: {text}");
         }
         assert!(text.contains("E604: cannot write"), "{text}");
-        // A removed project leaves the file at the next sync.
-        t.sync([Path::new("/p/Zelle_A")].into_iter(), 0, 2);
+        // A removed project leaves the file at the next sync, once the rate limit allows.
+        t.sync([Path::new("/p/Zelle_A")].into_iter(), 0, 2, true);
+        assert_eq!(read(&path).unwrap().projects.len(), 3, "held back");
+        std::thread::sleep(MIN_WRITE_INTERVAL);
+        t.sync([Path::new("/p/Zelle_A")].into_iter(), 0, 2, true);
         assert_eq!(read(&path).unwrap().projects.len(), 1);
         t.observe(
             None,

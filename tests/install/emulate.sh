@@ -82,8 +82,8 @@ unit_last() { unit_values "$1" | tail -n 1; }
 # exist (else 226/NAMESPACE), LogsDirectory= and RuntimeDirectory= are made for the user, the
 # process runs as User=/Group= with SupplementaryGroups=, AmbientCapabilities= and UMask=,
 # Environment= set,
-# RUNTIME_DIRECTORY given; stdout and stderr go to the "journal". Ready when the state file
-# says no compile is running. (Not played: the sandbox, the watchdog, Type=notify.)
+# RUNTIME_DIRECTORY given; stdout and stderr go to the "journal". Ready (Type=notify's READY=1)
+# when the state file says `running` instead of `starting`. (Not played: the sandbox, the watchdog, Type=notify.)
 service_start() {
     local user group umask exec supp p env
     user=$(unit_last User)
@@ -125,7 +125,7 @@ service_start() {
     echo "service $!" >>"$RECORD"
     local i
     for i in $(seq 1 200); do
-        if grep -q '"compiling": 0' "$p/status.json" 2>/dev/null; then
+        if grep -q '"daemon": "running"' "$p/status.json" 2>/dev/null; then
             return 0
         fi
         if ! kill -0 "$(cat "$PIDFILE")" 2>/dev/null; then
