@@ -157,9 +157,13 @@ struct Inner {
     results: BTreeMap<String, ProjectState>,
     /// The projects and counts of the last [`Tracker::sync`].
     last: Option<Snapshot>,
-    /// When the file was last written, and whether `last` is newer than the file.
+    /// When the file was last written, and whether anything changed since.
     written: Option<std::time::Instant>,
     dirty: bool,
+    /// The projects, compiles, directories and readiness of the last [`Tracker::sync`].
+    shape: Option<(usize, usize, usize, bool)>,
+    /// How many of `results` failed.
+    failing: usize,
     warned: bool,
 }
 
@@ -186,6 +190,8 @@ impl Tracker {
                 last: None,
                 written: None,
                 dirty: false,
+                shape: None,
+                failing: 0,
                 warned: false,
             }),
         }
@@ -202,8 +208,7 @@ impl Tracker {
     /// Takes what concerns the state from an event as it is emitted (any thread): the
     /// compile results; and `stopped`, which writes the file one last time.
     pub fn observe(&self, project: Option<&str>, event: &Event) {
-        let mut st = self.lock();
-        match (project, event) {
+        let result = match (project, event) {
             (
                 Some(p),
                 Event::CompileSucceeded {
@@ -213,22 +218,17 @@ impl Tracker {
                     counts,
                     ..
                 },
-            ) => {
-                st.results.insert(
-                    p.to_owned(),
-                    ProjectState {
-                        project: p.to_owned(),
-                        result: "ok".into(),
-                        time: Some(now()),
-                        run_id: Some(*run_id),
-                        duration_ms: Some(*duration_ms),
-                        outputs: outputs.iter().map(|o| o.path.clone()).collect(),
-                        errors: 0,
-                        warnings: counts.warnings,
-                        first_error: None,
-                    },
-                );
-            }
+            ) => ProjectState {
+                project: p.to_owned(),
+                result: "ok".into(),
+                time: Some(now()),
+                run_id: Some(*run_id),
+                duration_ms: Some(*duration_ms),
+                outputs: outputs.iter().map(|o| o.path.clone()).collect(),
+                errors: 0,
+                warnings: counts.warnings,
+                first_error: None,
+            },
             (
                 Some(p),
                 Event::CompileFailed {
@@ -236,66 +236,108 @@ impl Tracker {
                     duration_ms,
                     diagnostics,
                 },
-            ) => {
-                st.results.insert(
-                    p.to_owned(),
-                    ProjectState {
-                        project: p.to_owned(),
-                        result: "failed".into(),
-                        time: Some(now()),
-                        run_id: Some(*run_id),
-                        duration_ms: Some(*duration_ms),
-                        outputs: Vec::new(),
-                        errors: count(diagnostics, "error").max(1),
-                        warnings: count(diagnostics, "warning"),
-                        first_error: diagnostics
-                            .iter()
-                            .find(|d| d.get("severity").and_then(Value::as_str) == Some("error"))
-                            .or(diagnostics.first())
-                            .map(describe),
-                    },
-                );
-            }
+            ) => ProjectState {
+                project: p.to_owned(),
+                result: "failed".into(),
+                time: Some(now()),
+                run_id: Some(*run_id),
+                duration_ms: Some(*duration_ms),
+                outputs: Vec::new(),
+                errors: count(diagnostics, "error").max(1),
+                warnings: count(diagnostics, "warning"),
+                first_error: diagnostics
+                    .iter()
+                    .find(|d| d.get("severity").and_then(Value::as_str) == Some("error"))
+                    .or(diagnostics.first())
+                    .map(describe),
+            },
             (_, Event::Stopped { .. }) => {
+                let mut st = self.lock();
                 if let Some(mut snap) = st.last.clone() {
+                    // The results held back by the rate limit, too.
+                    for p in &mut snap.projects {
+                        if let Some(r) = st.results.get(&p.project) {
+                            *p = r.clone();
+                        }
+                    }
                     snap.daemon = "stopped".into();
                     snap.compiling = 0;
                     snap.updated = now();
                     self.write(&mut st, &snap);
                 }
+                return;
             }
+            _ => return,
+        };
+        let mut st = self.lock();
+        let failed = result.result == "failed";
+        let before = st.results.insert(result.project.clone(), result);
+        let was = before.is_some_and(|b| b.result == "failed");
+        match (was, failed) {
+            (false, true) => st.failing += 1,
+            (true, false) => st.failing = st.failing.saturating_sub(1),
             _ => {}
         }
+        st.dirty = true;
     }
 
     /// The state of `projects` now (the daemon's table: removed and forgotten projects are
-    /// left out), written to the state file; returns the [`sentence`] for systemd. `ready`:
-    /// the startup compiles are done (systemd's `READY=1`); before, `daemon` is `starting`.
+    /// left out), written to the state file (at most every [`MIN_WRITE_INTERVAL`]); returns the
+    /// [`sentence`] for systemd. `ready`: the startup compiles are done (systemd's `READY=1`);
+    /// before, `daemon` is `starting`.
+    ///
+    /// Called after every compile: constant time unless the file is written (then one pass over
+    /// the projects), so a startup of many projects does not slow down the event loop.
     pub fn sync<'a>(
         &self,
-        projects: impl Iterator<Item = &'a Path>,
+        projects: impl ExactSizeIterator<Item = &'a Path>,
         compiling: usize,
         directories: usize,
         ready: bool,
     ) -> String {
         let mut st = self.lock();
-        let projects: Vec<ProjectState> = projects
+        let n = projects.len();
+        // Between writes the results may still hold a project removed since the last one.
+        let mut summary = sentence(Tally {
+            projects: n,
+            failing: st.failing.min(n),
+            compiling,
+            pending: n.saturating_sub(st.results.len()),
+            directories,
+        });
+        let shape = (n, compiling, directories, ready);
+        if st.shape != Some(shape) {
+            st.shape = Some(shape);
+            st.dirty = true;
+        }
+        let due = st.written.is_none_or(|t| t.elapsed() >= MIN_WRITE_INTERVAL);
+        if !(st.dirty && due) {
+            return summary;
+        }
+        let mut kept = BTreeMap::new();
+        let list: Vec<ProjectState> = projects
             .map(|p| {
                 let key = p.display().to_string();
-                st.results.get(&key).cloned().unwrap_or(ProjectState {
-                    project: key,
-                    result: "pending".into(),
-                    ..ProjectState::default()
-                })
+                match st.results.remove(&key) {
+                    Some(r) => {
+                        kept.insert(key, r.clone());
+                        r
+                    }
+                    None => ProjectState {
+                        project: key,
+                        result: "pending".into(),
+                        ..ProjectState::default()
+                    },
+                }
             })
             .collect();
-        st.results
-            .retain(|k, _| projects.iter().any(|p| &p.project == k));
-        let summary = sentence(Tally {
-            projects: projects.len(),
-            failing: projects.iter().filter(|p| p.result == "failed").count(),
+        st.results = kept;
+        st.failing = st.results.values().filter(|r| r.result == "failed").count();
+        summary = sentence(Tally {
+            projects: n,
+            failing: st.failing,
             compiling,
-            pending: projects.iter().filter(|p| p.result == "pending").count(),
+            pending: n - st.results.len(),
             directories,
         });
         let snap = Snapshot {
@@ -307,21 +349,12 @@ impl Tracker {
             daemon: if ready { "running" } else { "starting" }.into(),
             compiling,
             summary: summary.clone(),
-            projects,
+            projects: list,
         };
-        let changed = !st.last.as_ref().is_some_and(|l| same_content(l, &snap));
-        if changed {
-            st.last = Some(snap);
-            st.dirty = true;
-        }
-        let due = st.written.is_none_or(|t| t.elapsed() >= MIN_WRITE_INTERVAL);
-        if st.dirty && due {
-            if let Some(snap) = st.last.clone() {
-                self.write(&mut st, &snap);
-            }
-            st.dirty = false;
-            st.written = Some(std::time::Instant::now());
-        }
+        self.write(&mut st, &snap);
+        st.last = Some(snap);
+        st.dirty = false;
+        st.written = Some(std::time::Instant::now());
         summary
     }
 
@@ -341,14 +374,6 @@ impl Tracker {
             st.warned = false;
         }
     }
-}
-
-/// Whether two snapshots differ only in their time of writing.
-fn same_content(a: &Snapshot, b: &Snapshot) -> bool {
-    a.projects == b.projects
-        && a.compiling == b.compiling
-        && a.summary == b.summary
-        && a.daemon == b.daemon
 }
 
 /// Writes the snapshot to a temporary file beside `path` (mode 0644: `skillpost status` is for
