@@ -76,9 +76,9 @@ enum Command {
 
 #[derive(Debug, clap::Args)]
 struct StatusArgs {
-    /// The daemon's state file (default: $RUNTIME_DIRECTORY/status.json, then
-    /// /run/skillpost/status.json, then $XDG_RUNTIME_DIR/skillpost/status.json or
-    /// /tmp/skillpost-<uid>/status.json)
+    /// The daemon's state file (default: the first that exists of
+    /// $RUNTIME_DIRECTORY/status.json, /run/skillpost/status.json, and
+    /// $XDG_RUNTIME_DIR/skillpost/status.json or /tmp/skillpost-<uid>/status.json)
     #[arg(long, value_name = "FILE")]
     state: Option<PathBuf>,
     /// Output: an aligned table, or the state file's JSON

@@ -412,14 +412,33 @@ pub fn default_path() -> PathBuf {
     super::lock::runtime_dir().join(FILE_NAME)
 }
 
-/// Where `skillpost status` looks without `--state`, in order: the daemon's default for this
-/// environment, then the service's (`/run/skillpost/status.json`).
+/// Where `skillpost status` looks without `--state`, in order: `$RUNTIME_DIRECTORY/status.json`
+/// (when set), the service's `/run/skillpost/status.json`, then the default of a daemon started
+/// by hand (`$XDG_RUNTIME_DIR/skillpost/status.json`, else `/tmp/skillpost-<uid>/status.json`).
 pub fn candidates() -> Vec<PathBuf> {
-    let mut v = vec![default_path()];
-    if !v.contains(&PathBuf::from(SERVICE_STATE)) {
-        v.push(PathBuf::from(SERVICE_STATE));
+    let mut v = Vec::new();
+    if std::env::var_os("RUNTIME_DIRECTORY").is_some_and(|d| !d.is_empty()) {
+        v.push(default_path());
+    }
+    v.push(PathBuf::from(SERVICE_STATE));
+    let by_hand = match std::env::var_os("XDG_RUNTIME_DIR").filter(|d| !d.is_empty()) {
+        Some(d) => PathBuf::from(d).join("skillpost"),
+        None => {
+            std::env::temp_dir().join(format!("skillpost-{}", rustix::process::getuid().as_raw()))
+        }
+    }
+    .join(FILE_NAME);
+    if !v.contains(&by_hand) {
+        v.push(by_hand);
     }
     v
+}
+
+/// Whether the process that wrote the state still runs (`/proc/<pid>`; true where that cannot
+/// be told).
+pub fn writer_alive(s: &Snapshot) -> bool {
+    let proc = Path::new("/proc");
+    !proc.join("self").exists() || proc.join(s.pid.to_string()).exists()
 }
 
 /// Reads a state file.
@@ -442,6 +461,12 @@ pub fn table(s: &Snapshot) -> String {
             s.version, s.pid, s.daemon, s.started, s.summary
         )
     };
+    if s.daemon != "stopped" && !writer_alive(s) {
+        out.push_str(&format!(
+            "warning: pid {} is not running: the daemon ended without updating this state\n",
+            s.pid
+        ));
+    }
     if s.projects.is_empty() {
         return out;
     }
@@ -541,6 +566,27 @@ mod tests {
             "2 projects, 1 not compiled yet; watching 3 directories"
         );
         assert_eq!(s(0, 0, 0, 0, 0), "0 projects; watching 0 directories");
+    }
+
+    #[test]
+    fn a_state_whose_daemon_is_gone_says_so() {
+        let mut snap = Snapshot {
+            schema: SCHEMA.into(),
+            version: "0".into(),
+            pid: std::process::id(),
+            started: now(),
+            updated: now(),
+            daemon: "running".into(),
+            compiling: 0,
+            summary: "0 projects; watching 0 directories".into(),
+            projects: vec![],
+        };
+        assert!(!table(&snap).contains("warning"), "{}", table(&snap));
+        // Above the kernel's largest pid (4194304).
+        snap.pid = 4_194_400;
+        assert!(table(&snap).contains("warning: pid 4194400 is not running"));
+        snap.daemon = "stopped".into();
+        assert!(!table(&snap).contains("warning"));
     }
 
     #[test]
