@@ -415,6 +415,37 @@ fn the_install_guide_works_as_written_and_planners_keep_working() {
     let cell_key = cell.display().to_string();
     wait_for("Zelle_A to compile", || succeeded(&cell_key) > 0);
 
+    // Why step 3 has the default ACL: the same folder without it (what a planner with umask
+    // 022 makes where there is none) is drwxr-sr-x, and its compile fails with E604, which the
+    // journal shows as one warn line.
+    let bare = root.join("srv/planning/projects/NoAcl");
+    let o = as_planner("umask 022 && mkdir \"$1\"", &[&bare]);
+    assert!(o.status.success(), "{o:?}");
+    let o = Command::new("setfacl")
+        .arg("-b")
+        .arg(&bare)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{o:?}");
+    fs::set_permissions(&bare, fs::Permissions::from_mode(0o2755)).unwrap();
+    let o = as_planner("umask 022 && cp \"$1\"/* \"$2\"/", &[&sample, &bare]);
+    assert!(o.status.success(), "{o:?}");
+    let bare_key = bare.display().to_string();
+    wait_for("E604 in the folder without the ACL", || {
+        events(&events_file).iter().any(|e| {
+            e["event"] == "compile-failed"
+                && e["project"] == bare_key.as_str()
+                && e["diagnostics"][0]["code"] == "E604"
+        })
+    });
+    wait_for("the journal's warn line", || {
+        fs::read_to_string(root.join("journal.log"))
+            .unwrap_or_default()
+            .lines()
+            .any(|l| l.contains("WARN") && l.contains("compile failed") && l.contains("E604"))
+    });
+    fs::remove_dir_all(&bare).unwrap();
+
     let status = Command::new(root.join("usr/local/bin/skillpost"))
         .args(["status"])
         .env("RUNTIME_DIRECTORY", root.join("run/skillpost"))
@@ -424,7 +455,10 @@ fn the_install_guide_works_as_written_and_planners_keep_working() {
     println!("{table}");
     assert!(table.contains("2 projects, all compiled"), "{table}");
     let journal = fs::read_to_string(root.join("journal.log")).unwrap_or_default();
-    assert!(!journal.contains("E604"), "{journal}");
+    assert!(
+        !journal.contains("NewCell: E604") && !journal.contains("Zelle_A: E604"),
+        "{journal}"
+    );
 }
 
 #[test]
