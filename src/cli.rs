@@ -71,13 +71,35 @@ struct Args {
 
 #[derive(Debug, clap::Subcommand)]
 enum Command {
-    /// The daemon: keep project folders compiled, emit JSON events (see docs/DAEMON.md)
+    /// The daemon: keep project folders compiled, emit JSON events (see DAEMON.md, installed in
+    /// /usr/local/share/doc/skillpost)
     Watch(WatchArgs),
+    /// Each project's last result, as the running daemon's state file tells it
+    Status(StatusArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct StatusArgs {
+    /// The daemon's state file (default: the first that exists of
+    /// $RUNTIME_DIRECTORY/status.json, /run/skillpost/status.json, and
+    /// $XDG_RUNTIME_DIR/skillpost/status.json or /tmp/skillpost-<uid>/status.json)
+    #[arg(long, value_name = "FILE")]
+    state: Option<PathBuf>,
+    /// Output: an aligned table, or the state file's JSON
+    #[arg(long, value_enum, default_value_t = StatusFormat::Table)]
+    format: StatusFormat,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum StatusFormat {
+    Table,
+    Json,
 }
 
 #[derive(Debug, clap::Args)]
 struct WatchArgs {
-    /// Configuration file (TOML; see config/skillpost.toml); SIGHUP reads it again
+    /// Configuration file (TOML; every key is described in skillpost.toml, installed in
+    /// /usr/local/share/doc/skillpost); SIGHUP reads it again
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
     /// Append the event stream to FILE instead of writing it to stdout
@@ -89,6 +111,10 @@ struct WatchArgs {
     /// Format of the logs on stderr
     #[arg(long, value_enum, default_value_t = LogFormat::Human)]
     log_format: LogFormat,
+    /// Keep each project's last result in FILE for `skillpost status` (default:
+    /// $RUNTIME_DIRECTORY/status.json, else beside the lock files)
+    #[arg(long, value_name = "FILE")]
+    state: Option<PathBuf>,
     /// Project folders (each holding one blackboard), or blackboards (their folder, with that
     /// blackboard); each must exist
     #[arg(value_name = "DIR|BLACKBOARD")]
@@ -121,8 +147,10 @@ fn usage(msg: &str) -> u8 {
 }
 
 fn run(a: Args) -> u8 {
-    if let Some(Command::Watch(w)) = a.command {
-        return watch(w);
+    match a.command {
+        Some(Command::Watch(w)) => return watch(w),
+        Some(Command::Status(s)) => return status_command(s),
+        None => {}
     }
     let fs = FsSource {
         max_file_size: a
@@ -361,6 +389,7 @@ fn watch(w: WatchArgs) -> u8 {
         },
         None => EventSink::stdout(),
     };
+    let sink = sink.with_state_file(w.state.clone().unwrap_or_else(daemon::state::default_path));
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
@@ -414,4 +443,57 @@ fn watch(w: WatchArgs) -> u8 {
             2
         }
     }
+}
+
+/// `skillpost status`: prints the daemon's state file. 0 printed, 1 no daemon state found, 2 a
+/// state file that cannot be read.
+fn status_command(s: StatusArgs) -> u8 {
+    use crate::daemon::state;
+    let path = match s.state {
+        Some(p) => p,
+        None => {
+            let candidates = state::candidates();
+            match candidates.iter().find(|p| p.exists()) {
+                Some(p) => p.clone(),
+                None => {
+                    let list: Vec<String> =
+                        candidates.iter().map(|p| p.display().to_string()).collect();
+                    eprintln!(
+                        "no daemon state: neither {} exists. Is `skillpost watch` running? Under \
+                         systemd: `systemctl status skillpost`; a daemon started with --state FILE: \
+                         `skillpost status --state FILE`.",
+                        list.join(" nor ")
+                    );
+                    return 1;
+                }
+            }
+        }
+    };
+    if !path.exists() {
+        eprintln!(
+            "no daemon state: {} does not exist. Is `skillpost watch --state {}` running?",
+            path.display(),
+            path.display()
+        );
+        return 1;
+    }
+    let snap = match state::read(&path) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return 2;
+        }
+    };
+    let text = match s.format {
+        StatusFormat::Table => state::table(&snap),
+        StatusFormat::Json => match serde_json::to_string_pretty(&snap) {
+            Ok(t) => t + "\n",
+            Err(e) => {
+                eprintln!("error: {e}");
+                return 2;
+            }
+        },
+    };
+    let _ = std::io::stdout().lock().write_all(text.as_bytes());
+    0
 }

@@ -18,6 +18,7 @@
 //! - [`print`]: the `-pB`/`-pS`/`-pF`/`-pO` and `--info` listings.
 //! - [`diag`]: diagnostics, their codes and their rendering.
 //! - [`names`]: case-insensitive name keys, KRL names, transliteration.
+//! - [`umask`]: the process's umask (the mode of new output files).
 #![forbid(unsafe_code)]
 
 pub mod bind;
@@ -34,6 +35,7 @@ pub mod plan;
 pub mod print;
 pub mod read;
 pub mod template;
+pub mod umask;
 pub mod write;
 
 /// The version printed by `--info`.

@@ -1160,8 +1160,7 @@ fn systemd_readiness_status_watchdog_and_stopping() {
         is_for(e, "compile-succeeded", &a)
     });
     assert!(
-        got.iter()
-            .any(|m| m.starts_with("STATUS=watching 1 project")),
+        got.iter().any(|m| m.starts_with("STATUS=1 project, ")),
         "{got:?}"
     );
     let pings = notifications_until(&sock, "WATCHDOG=1");

@@ -40,9 +40,9 @@ fn unit_has_the_key_lines() {
         ("PrivateDevices", "yes"),
         ("RestrictAddressFamilies", "AF_UNIX"),
         ("SystemCallFilter", "@system-service"),
-        // The write-back's lease on planners' blackboards; nothing else.
-        ("CapabilityBoundingSet", "CAP_LEASE"),
-        ("AmbientCapabilities", "CAP_LEASE"),
+        // The write-back on planners' blackboards: the lease, the owner kept; nothing else.
+        ("CapabilityBoundingSet", "CAP_LEASE CAP_CHOWN"),
+        ("AmbientCapabilities", "CAP_LEASE CAP_CHOWN"),
         ("ExecReload", "/bin/kill -HUP $MAINPID"),
         ("Restart", "on-failure"),
         ("User", "skillpost"),
@@ -124,7 +124,7 @@ fn systemd_analyze_verify_accepts_the_unit() {
     let dir = tempfile::tempdir().unwrap();
     let unit = unit_copy(dir.path(), Path::new(env!("CARGO_BIN_EXE_skillpost")), "");
     let Some((ok, ours, all)) = verify(&unit) else {
-        common::skip(
+        skip(
             "`systemd-analyze` is not installed, so systemd/skillpost.service was not \
              verified (install systemd, e.g. `apt-get install systemd`, to run this check)",
         );
@@ -149,7 +149,7 @@ fn systemd_analyze_verify_catches_mistakes() {
         "ProtectSytem=strict\nRestrictRealtime=maybe",
     );
     let Some((_, ours, all)) = verify(&unit) else {
-        common::skip("`systemd-analyze` is not installed");
+        skip("`systemd-analyze` is not installed");
         return;
     };
     assert!(
@@ -161,3 +161,98 @@ fn systemd_analyze_verify_catches_mistakes() {
         "the invalid value is reported:\n{all}"
     );
 }
+
+/// The service configuration the install guide installs names only folders the unit makes
+/// writable, and the unit's other promises to the guide hold (UMask, state file readable,
+/// documentation installed where `Documentation=` points).
+#[test]
+fn service_config_folders_are_writable_and_documentation_is_installed() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/skillpost.service.toml");
+    let c = skillpost::daemon::config::load(&path).expect("config/skillpost.service.toml is valid");
+    let rw: Vec<&str> = value(UNIT, "ReadWritePaths")
+        .iter()
+        .flat_map(|v| v.split_whitespace())
+        .map(|p| p.trim_start_matches('-'))
+        .collect();
+    let covered = |p: &Path| rw.iter().any(|w| p.starts_with(w));
+    let mut folders: Vec<PathBuf> = c.roots.iter().map(|r| r.path.clone()).collect();
+    folders.extend(c.projects.iter().map(|p| p.path.clone()));
+    folders.extend(
+        c.events
+            .iter()
+            .filter_map(|e| e.parent().map(Path::to_owned)),
+    );
+    assert!(folders.len() >= 3, "{folders:?}");
+    for f in &folders {
+        assert!(
+            covered(f),
+            "{} is not in ReadWritePaths={rw:?}",
+            f.display()
+        );
+    }
+    assert_eq!(value(UNIT, "UMask"), ["0002"], "new outputs group-writable");
+    assert_eq!(
+        value(UNIT, "RuntimeDirectoryMode"),
+        ["0755"],
+        "status readable"
+    );
+    let guide = include_str!("../docs/DAEMON-INSTALL.md");
+    for doc in value(UNIT, "Documentation")
+        .iter()
+        .flat_map(|v| v.split_whitespace())
+    {
+        let file = doc.strip_prefix("file://").expect("a file: URL");
+        let (dir, name) = file.rsplit_once('/').unwrap();
+        assert!(
+            guide.contains(&format!("install -d -m 0755 {dir}\n")),
+            "{dir} made"
+        );
+        assert!(guide.contains(name), "{name} installed");
+        assert!(
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("docs")
+                .join(name)
+                .exists()
+        );
+    }
+}
+
+/// `systemd-analyze security --offline=true`: the exposure score of the unit as shipped
+/// (0.9 "SAFE" with systemd 252: 0.6 without CAP_CHOWN) stays "SAFE" (below 2.0).
+#[test]
+fn systemd_analyze_security_offline_scores_safe() {
+    let dir = tempfile::tempdir().unwrap();
+    let unit = unit_copy(dir.path(), Path::new(env!("CARGO_BIN_EXE_skillpost")), "");
+    let output = match Command::new("systemd-analyze")
+        .args(["security", "--offline=true", "--no-pager"])
+        .arg(&unit)
+        .env("SYSTEMD_LOG_COLOR", "0")
+        .output()
+    {
+        Ok(o) => o,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            skip("`systemd-analyze` is not installed");
+            return;
+        }
+        Err(e) => panic!("cannot run systemd-analyze: {e}"),
+    };
+    let text = String::from_utf8_lossy(&output.stdout);
+    let Some(line) = text.lines().find(|l| l.contains("Overall exposure level")) else {
+        let err = String::from_utf8_lossy(&output.stderr);
+        if err.contains("offline") {
+            skip("this systemd-analyze has no --offline (systemd < 250)");
+            return;
+        }
+        panic!("no score:\n{text}\n{err}");
+    };
+    let score: f64 = line
+        .split(':')
+        .nth(1)
+        .and_then(|s| s.split_whitespace().next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("cannot read the score: {line}"));
+    println!("systemd-analyze security --offline=true: {}", line.trim());
+    assert!(score < 2.0 && line.contains(" SAFE"), "{line}");
+}
+
+use common::skip;

@@ -323,6 +323,9 @@ impl Shared {
 /// Where events go. Shared by the daemon's tasks; see the module documentation.
 pub struct EventSink {
     shared: Arc<Shared>,
+    /// Sees every event as it is emitted: the projects' results (`skillpost status`, systemd's
+    /// status line); failures also go to the log ([`super::journal`]).
+    state: Arc<super::state::Tracker>,
 }
 
 impl EventSink {
@@ -379,12 +382,28 @@ impl EventSink {
             // Without a writer events only pile up to the queue's bound and are counted.
             tracing::error!("cannot start the event writer thread: {e}");
         }
-        EventSink { shared }
+        EventSink {
+            shared,
+            state: Arc::new(super::state::Tracker::new(None)),
+        }
+    }
+
+    /// The same sink, writing the projects' results to a state file (`skillpost status`).
+    pub fn with_state_file(mut self, path: PathBuf) -> Self {
+        self.state = Arc::new(super::state::Tracker::new(Some(path)));
+        self
+    }
+
+    /// The projects' results as the events told them.
+    pub fn state(&self) -> &super::state::Tracker {
+        &self.state
     }
 
     /// Emits one event: numbers it and queues its line for the writer; never waits for the
     /// output. When the queue is full the event is dropped and counted (see `events-dropped`).
     pub fn emit(&self, project: Option<&str>, event: Event) {
+        super::journal::log(project, &event);
+        self.state.observe(project, &event);
         let (head, tail) = render(SystemTime::now(), project, &event);
         let mut st = self.shared.lock();
         st.seq += 1;

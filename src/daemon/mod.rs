@@ -10,6 +10,8 @@
 //! - `project`: the project table (projects, their watched folders, the directory index).
 //! - `route`: file events → the projects they concern; roots; folders that come and go.
 //! - `job`: one compile on a blocking thread (hash check, compile, write, its events).
+//! - [`state`]: each project's last result → the state file (`skillpost status`) and systemd's
+//!   `STATUS=` line; `journal`: failures also logged through `tracing` (the journal).
 //! - `stop`: the end: running compiles and the last events waited for, both bounded.
 //! - this module: the event loop. [`run`] takes its control channel as a parameter (stop and
 //!   reload), so tests drive it without signals; the command line connects the signals.
@@ -28,11 +30,13 @@
 pub mod config;
 pub mod events;
 mod job;
+mod journal;
 pub mod lock;
 mod poll;
 mod project;
 mod route;
 pub mod settle;
+pub mod state;
 mod stop;
 mod watch;
 
@@ -202,7 +206,11 @@ pub async fn run(
             _ = watchdog_tick.tick(), if watchdog.is_some() => {
                 let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
             }
-            _ = missing_tick.tick() => d.look_for_missing(Instant::now()),
+            _ = missing_tick.tick() => {
+                d.look_for_missing(Instant::now());
+                // The state file catches up with changes its rate limit held back.
+                d.notify_status();
+            }
         }
     }
     d.stop(stop_reason, drx, control).await
@@ -301,6 +309,20 @@ impl Daemon {
             let k = self.queue.remove(0);
             self.spawn_compile(&k);
         }
+        // Only projects whose folder does not exist yet: nothing to compile, so no compile's
+        // end would say READY=1 (systemd would wait for it until its start timeout).
+        if !self.ready
+            && self.running == 0
+            && self.queue.is_empty()
+            && self
+                .projects
+                .values()
+                .all(|p| p.missing || p.sched.deadline().is_none())
+        {
+            self.ready = true;
+            let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
+            self.notify_status();
+        }
     }
 
     fn spawn_compile(&mut self, key: &Path) {
@@ -336,6 +358,9 @@ impl Daemon {
         self.running += 1;
         let done = self.done.clone();
         tokio::task::spawn_blocking(move || {
+            // The compile's log lines (and the journal's failure line) carry project and run_id.
+            let span = tracing::warn_span!("compile", project = %job.key.display(), run_id);
+            let _span = span.enter();
             stop::test_hook_hang();
             let key = job.key.clone();
             let sink = job.sink.clone();
@@ -412,13 +437,13 @@ impl Daemon {
         self.projects.insert(r.key, p);
     }
 
+    /// systemd's status line ("4 projects, 1 failing; ..."), and the state file with it.
     fn notify_status(&self) {
-        let status = format!(
-            "watching {} project(s), {} director{} ; {} compile(s) running",
-            self.projects.len(),
+        let status = self.sink.state().sync(
+            self.projects.keys().map(PathBuf::as_path),
+            self.running,
             self.watchers.len(),
-            if self.watchers.len() == 1 { "y" } else { "ies" },
-            self.running
+            self.ready,
         );
         let _ = sd_notify::notify(&[sd_notify::NotifyState::Status(&status)]);
     }

@@ -30,9 +30,10 @@ pub enum WriteOutcome {
 /// the target is untouched.
 ///
 /// - **Permissions:** an existing target keeps its permission bits (Unix: the whole mode
-///   including setuid/setgid/sticky; elsewhere: the read-only flag). A new file gets exactly
-///   `0o644` on Unix — the process umask is *not* applied (the temporary file is created `0o600`
-///   and then set to `0o644` explicitly).
+///   including setuid/setgid/sticky; elsewhere: the read-only flag). A new file gets `0o666`
+///   less the process umask on Unix, like any program's new file (`0o664` under the service's
+///   `UMask=0002`, so planners in the group can write it; the temporary file is created `0o600`
+///   and then set to that mode explicitly).
 /// - **Ownership (Unix):** an existing target's owner and group are copied to the new file where
 ///   the process may do so (as root, or a group the user belongs to); failures are ignored, the
 ///   file then belongs to the writing user.
@@ -324,22 +325,30 @@ fn second_name_with(
 }
 
 /// Gives the temporary file the permissions (and on Unix, best effort, the owner) of the file it
-/// replaces, or `0o644` for a new file.
+/// replaces, or `0o666` less the umask for a new file.
 #[cfg(unix)]
 fn set_metadata(file: &fs::File, existing: Option<&fs::Metadata>) -> io::Result<()> {
     use std::os::unix::fs::{MetadataExt as _, PermissionsExt as _};
-    let mode = match existing {
-        Some(m) => {
-            let own = file.metadata()?;
-            if own.uid() != m.uid() || own.gid() != m.gid() {
-                // Before the chmod: a chown clears setuid/setgid bits.
-                let _ = std::os::unix::fs::fchown(file, Some(m.uid()), Some(m.gid()));
-            }
-            m.permissions().mode() & 0o7777
-        }
-        None => 0o644,
+    let Some(m) = existing else {
+        return file.set_permissions(fs::Permissions::from_mode(crate::umask::new_file_mode()));
     };
-    file.set_permissions(fs::Permissions::from_mode(mode))
+    let mode = m.permissions().mode() & 0o7777;
+    // The mode first, while the file is still ours: once it belongs to another user (a
+    // service with CAP_CHOWN keeping a planner's blackboard theirs) we may not chmod it.
+    file.set_permissions(fs::Permissions::from_mode(mode))?;
+    let own = file.metadata()?;
+    if own.uid() != m.uid() || own.gid() != m.gid() {
+        // Not allowed to give the file away (no CAP_CHOWN): keep at least the group (a group
+        // we are in).
+        if std::os::unix::fs::fchown(file, Some(m.uid()), Some(m.gid())).is_err() {
+            let _ = std::os::unix::fs::fchown(file, None, Some(m.gid()));
+        }
+        if mode & 0o6000 != 0 {
+            // A chown clears setuid/setgid bits: put them back where we still may.
+            let _ = file.set_permissions(fs::Permissions::from_mode(mode));
+        }
+    }
+    Ok(())
 }
 
 #[cfg(not(unix))]
@@ -400,7 +409,7 @@ mod tests {
         );
         assert_eq!(fs::read(&p).unwrap(), b"DEF x()\n");
         #[cfg(unix)]
-        assert_eq!(mode(&p), 0o644);
+        assert_eq!(mode(&p), 0o666 & !crate::umask::get());
         assert!(temp_leftovers(d.path()).is_empty());
     }
 

@@ -1,0 +1,673 @@
+//! The daemon's state file and `skillpost status`.
+//!
+//! The event loop keeps each project's last result (taken from the events as they are emitted,
+//! see [`Tracker::observe`]) and writes a small JSON file with it whenever a compile ends, the
+//! configuration is reloaded, and when the daemon stops. The file is replaced atomically (a
+//! temporary file in the same folder, then a rename), so a reader never sees half of it.
+//!
+//! Where: `watch --state FILE`, else `$RUNTIME_DIRECTORY/status.json` (`/run/skillpost` under the
+//! shipped unit), else `status.json` in the folder of the lock files ([`super::lock::runtime_dir`]:
+//! `$XDG_RUNTIME_DIR/skillpost`, else `/tmp/skillpost-<uid>`). `skillpost status` looks in the
+//! same places, and also in `/run/skillpost` (the service's, for an administrator's shell).
+//!
+//! The same numbers make systemd's `STATUS=` line ([`sentence`]).
+
+use std::collections::BTreeMap;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::SystemTime;
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use super::events::Event;
+
+/// The schema of the state file; fields are only ever added.
+pub const SCHEMA: &str = "skillpost.status/1";
+
+/// The file name in a runtime directory.
+pub const FILE_NAME: &str = "status.json";
+
+/// Where the service's state file is under the shipped unit (`RuntimeDirectory=skillpost`).
+pub const SERVICE_STATE: &str = "/run/skillpost/status.json";
+
+/// The whole state file.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct Snapshot {
+    pub schema: String,
+    pub version: String,
+    pub pid: u32,
+    /// When the daemon started (RFC 3339, UTC).
+    pub started: String,
+    /// When this file was written.
+    pub updated: String,
+    /// `starting` (the startup compiles are not done), `running`, or `stopped` once the daemon
+    /// has ended.
+    pub daemon: String,
+    /// Compiles running when the file was written.
+    pub compiling: usize,
+    /// The systemd status line of the same moment.
+    pub summary: String,
+    pub projects: Vec<ProjectState>,
+}
+
+/// One project's last result.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct ProjectState {
+    pub project: String,
+    /// `ok`, `failed`, or `pending` (not compiled yet).
+    pub result: String,
+    /// When the last compile ended (RFC 3339, UTC).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub run_id: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub duration_ms: Option<u64>,
+    /// The files of the last successful compile.
+    #[serde(default)]
+    pub outputs: Vec<String>,
+    /// Diagnostics of the last compile.
+    pub errors: usize,
+    pub warnings: usize,
+    /// The first error of a failed compile, `code file:line:col: message`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub first_error: Option<String>,
+}
+
+/// The counts [`sentence`] reads.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Tally {
+    pub projects: usize,
+    pub failing: usize,
+    pub compiling: usize,
+    /// Not compiled yet (at startup, or a project folder that does not exist yet).
+    pub pending: usize,
+    pub directories: usize,
+}
+
+/// systemd's `STATUS=` line: "4 projects, 1 failing", "1 project, all compiled", with the
+/// running compiles, the projects not compiled yet and the watched directories.
+pub fn sentence(c: Tally) -> String {
+    let Tally {
+        projects,
+        failing,
+        compiling,
+        pending,
+        directories,
+    } = c;
+    let mut s = format!("{projects} project{}", plural(projects));
+    if projects > 0 {
+        if failing > 0 {
+            s.push_str(&format!(", {failing} failing"));
+        }
+        if compiling > 0 {
+            s.push_str(&format!(", {compiling} compiling"));
+        }
+        if pending > 0 {
+            s.push_str(&format!(", {pending} not compiled yet"));
+        }
+        if failing == 0 && compiling == 0 && pending == 0 {
+            s.push_str(", all compiled");
+        }
+    }
+    s.push_str(&format!(
+        "; watching {directories} director{}",
+        if directories == 1 { "y" } else { "ies" }
+    ));
+    s
+}
+
+fn plural(n: usize) -> &'static str {
+    if n == 1 { "" } else { "s" }
+}
+
+fn now() -> String {
+    humantime::format_rfc3339_seconds(SystemTime::now()).to_string()
+}
+
+/// `code file:line:col: message` of a diagnostic as the events carry it.
+pub fn describe(d: &Value) -> String {
+    let s = |k: &str| d.get(k).and_then(Value::as_str).unwrap_or("");
+    let mut at = s("file").to_owned();
+    for k in ["line", "column"] {
+        if let Some(n) = d.get(k).and_then(Value::as_u64) {
+            at.push_str(&format!(":{n}"));
+        }
+    }
+    let code = s("code");
+    match (at.is_empty(), code.is_empty()) {
+        (true, true) => s("message").to_owned(),
+        (true, false) => format!("{code}: {}", s("message")),
+        (false, _) => format!("{code} {at}: {}", s("message"))
+            .trim_start()
+            .to_owned(),
+    }
+}
+
+fn count(diags: &[Value], severity: &str) -> usize {
+    diags
+        .iter()
+        .filter(|d| d.get("severity").and_then(Value::as_str) == Some(severity))
+        .count()
+}
+
+struct Inner {
+    results: BTreeMap<String, ProjectState>,
+    /// The projects and counts of the last [`Tracker::sync`].
+    last: Option<Snapshot>,
+    /// When the file was last written, and whether anything changed since.
+    written: Option<std::time::Instant>,
+    dirty: bool,
+    /// The projects, compiles, directories and readiness of the last [`Tracker::sync`].
+    shape: Option<(usize, usize, usize, bool)>,
+    /// How many of `results` failed.
+    failing: usize,
+    warned: bool,
+}
+
+/// The file is written at most this often (a startup of 1,000 projects would otherwise write
+/// it 1,000 times); a change within it is written by a later [`Tracker::sync`] (the event loop
+/// calls it at least every 2 s) or at stop.
+pub const MIN_WRITE_INTERVAL: std::time::Duration = std::time::Duration::from_millis(250);
+
+/// The projects' last results, and the state file they are written to.
+pub struct Tracker {
+    path: Option<PathBuf>,
+    started: String,
+    inner: Mutex<Inner>,
+}
+
+impl Tracker {
+    /// Results kept in memory only (tests, or no file wanted).
+    pub fn new(path: Option<PathBuf>) -> Self {
+        Tracker {
+            path,
+            started: now(),
+            inner: Mutex::new(Inner {
+                results: BTreeMap::new(),
+                last: None,
+                written: None,
+                dirty: false,
+                shape: None,
+                failing: 0,
+                warned: false,
+            }),
+        }
+    }
+
+    pub fn path(&self) -> Option<&Path> {
+        self.path.as_deref()
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
+        self.inner.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Takes what concerns the state from an event as it is emitted (any thread): the
+    /// compile results; and `stopped`, which writes the file one last time.
+    pub fn observe(&self, project: Option<&str>, event: &Event) {
+        let result = match (project, event) {
+            (
+                Some(p),
+                Event::CompileSucceeded {
+                    run_id,
+                    duration_ms,
+                    outputs,
+                    counts,
+                    ..
+                },
+            ) => ProjectState {
+                project: p.to_owned(),
+                result: "ok".into(),
+                time: Some(now()),
+                run_id: Some(*run_id),
+                duration_ms: Some(*duration_ms),
+                outputs: outputs.iter().map(|o| o.path.clone()).collect(),
+                errors: 0,
+                warnings: counts.warnings,
+                first_error: None,
+            },
+            (
+                Some(p),
+                Event::CompileFailed {
+                    run_id,
+                    duration_ms,
+                    diagnostics,
+                },
+            ) => ProjectState {
+                project: p.to_owned(),
+                result: "failed".into(),
+                time: Some(now()),
+                run_id: Some(*run_id),
+                duration_ms: Some(*duration_ms),
+                outputs: Vec::new(),
+                errors: count(diagnostics, "error").max(1),
+                warnings: count(diagnostics, "warning"),
+                first_error: diagnostics
+                    .iter()
+                    .find(|d| d.get("severity").and_then(Value::as_str) == Some("error"))
+                    .or(diagnostics.first())
+                    .map(describe),
+            },
+            (_, Event::Stopped { .. }) => {
+                let mut st = self.lock();
+                if let Some(mut snap) = st.last.clone() {
+                    // The results held back by the rate limit, too.
+                    for p in &mut snap.projects {
+                        if let Some(r) = st.results.get(&p.project) {
+                            *p = r.clone();
+                        }
+                    }
+                    snap.daemon = "stopped".into();
+                    snap.compiling = 0;
+                    snap.updated = now();
+                    self.write(&mut st, &snap);
+                }
+                return;
+            }
+            _ => return,
+        };
+        let mut st = self.lock();
+        let failed = result.result == "failed";
+        let before = st.results.insert(result.project.clone(), result);
+        let was = before.is_some_and(|b| b.result == "failed");
+        match (was, failed) {
+            (false, true) => st.failing += 1,
+            (true, false) => st.failing = st.failing.saturating_sub(1),
+            _ => {}
+        }
+        st.dirty = true;
+    }
+
+    /// The state of `projects` now (the daemon's table: removed and forgotten projects are
+    /// left out), written to the state file (at most every [`MIN_WRITE_INTERVAL`]); returns the
+    /// [`sentence`] for systemd. `ready`: the startup compiles are done (systemd's `READY=1`);
+    /// before, `daemon` is `starting`.
+    ///
+    /// Called after every compile: constant time unless the file is written (then one pass over
+    /// the projects), so a startup of many projects does not slow down the event loop.
+    pub fn sync<'a>(
+        &self,
+        projects: impl ExactSizeIterator<Item = &'a Path>,
+        compiling: usize,
+        directories: usize,
+        ready: bool,
+    ) -> String {
+        let mut st = self.lock();
+        let n = projects.len();
+        // Between writes the results may still hold a project removed since the last one.
+        let mut summary = sentence(Tally {
+            projects: n,
+            failing: st.failing.min(n),
+            compiling,
+            pending: n.saturating_sub(st.results.len()),
+            directories,
+        });
+        let shape = (n, compiling, directories, ready);
+        if st.shape != Some(shape) {
+            st.shape = Some(shape);
+            st.dirty = true;
+        }
+        let due = st.written.is_none_or(|t| t.elapsed() >= MIN_WRITE_INTERVAL);
+        if !(st.dirty && due) {
+            return summary;
+        }
+        let mut kept = BTreeMap::new();
+        let list: Vec<ProjectState> = projects
+            .map(|p| {
+                let key = p.display().to_string();
+                match st.results.remove(&key) {
+                    Some(r) => {
+                        kept.insert(key, r.clone());
+                        r
+                    }
+                    None => ProjectState {
+                        project: key,
+                        result: "pending".into(),
+                        ..ProjectState::default()
+                    },
+                }
+            })
+            .collect();
+        st.results = kept;
+        st.failing = st.results.values().filter(|r| r.result == "failed").count();
+        summary = sentence(Tally {
+            projects: n,
+            failing: st.failing,
+            compiling,
+            pending: n - st.results.len(),
+            directories,
+        });
+        let snap = Snapshot {
+            schema: SCHEMA.into(),
+            version: crate::VERSION.into(),
+            pid: std::process::id(),
+            started: self.started.clone(),
+            updated: now(),
+            daemon: if ready { "running" } else { "starting" }.into(),
+            compiling,
+            summary: summary.clone(),
+            projects: list,
+        };
+        self.write(&mut st, &snap);
+        st.last = Some(snap);
+        st.dirty = false;
+        st.written = Some(std::time::Instant::now());
+        summary
+    }
+
+    fn write(&self, st: &mut Inner, snap: &Snapshot) {
+        let Some(path) = &self.path else {
+            return;
+        };
+        if let Err(e) = write_atomically(path, snap) {
+            if !st.warned {
+                st.warned = true;
+                tracing::warn!(
+                    "cannot write the state file {} (`skillpost status` will not see this daemon): {e}",
+                    path.display()
+                );
+            }
+        } else {
+            st.warned = false;
+        }
+    }
+}
+
+/// Writes the snapshot to a temporary file beside `path` (mode 0644: `skillpost status` is for
+/// anyone who may read the folder), then renames it over `path`.
+pub fn write_atomically(path: &Path, snap: &Snapshot) -> std::io::Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
+        _ => PathBuf::from("."),
+    };
+    if !dir.exists() {
+        use std::os::unix::fs::DirBuilderExt as _;
+        std::fs::DirBuilder::new()
+            .recursive(true)
+            .mode(0o700)
+            .create(&dir)?;
+    }
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".status-")
+        .suffix(".tmp")
+        .tempfile_in(&dir)?;
+    let mut text = serde_json::to_vec_pretty(snap).map_err(std::io::Error::other)?;
+    text.push(b'\n');
+    tmp.as_file_mut().write_all(&text)?;
+    {
+        use std::os::unix::fs::PermissionsExt as _;
+        tmp.as_file()
+            .set_permissions(std::fs::Permissions::from_mode(0o644))?;
+    }
+    tmp.persist(path).map_err(|e| e.error)?;
+    Ok(())
+}
+
+/// The state file the daemon writes by default: `$RUNTIME_DIRECTORY/status.json`, else beside
+/// the lock files.
+pub fn default_path() -> PathBuf {
+    super::lock::runtime_dir().join(FILE_NAME)
+}
+
+/// Where `skillpost status` looks without `--state`, in order: `$RUNTIME_DIRECTORY/status.json`
+/// (when set), the service's `/run/skillpost/status.json`, then the default of a daemon started
+/// by hand (`$XDG_RUNTIME_DIR/skillpost/status.json`, else `/tmp/skillpost-<uid>/status.json`).
+pub fn candidates() -> Vec<PathBuf> {
+    let mut v = Vec::new();
+    if std::env::var_os("RUNTIME_DIRECTORY").is_some_and(|d| !d.is_empty()) {
+        v.push(default_path());
+    }
+    v.push(PathBuf::from(SERVICE_STATE));
+    let by_hand = match std::env::var_os("XDG_RUNTIME_DIR").filter(|d| !d.is_empty()) {
+        Some(d) => PathBuf::from(d).join("skillpost"),
+        None => {
+            std::env::temp_dir().join(format!("skillpost-{}", rustix::process::getuid().as_raw()))
+        }
+    }
+    .join(FILE_NAME);
+    if !v.contains(&by_hand) {
+        v.push(by_hand);
+    }
+    v
+}
+
+/// Whether the process that wrote the state still runs (`/proc/<pid>`; true where that cannot
+/// be told).
+pub fn writer_alive(s: &Snapshot) -> bool {
+    let proc = Path::new("/proc");
+    !proc.join("self").exists() || proc.join(s.pid.to_string()).exists()
+}
+
+/// Reads a state file.
+pub fn read(path: &Path) -> Result<Snapshot, String> {
+    let text = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    serde_json::from_slice(&text)
+        .map_err(|e| format!("{} is not a skillpost state file: {e}", path.display()))
+}
+
+/// The state as an aligned table (spaces, no tabs), with a heading line.
+pub fn table(s: &Snapshot) -> String {
+    let mut out = if s.daemon == "stopped" {
+        format!(
+            "skillpost {} (pid {}) stopped; last state written {}\n",
+            s.version, s.pid, s.updated
+        )
+    } else {
+        format!(
+            "skillpost {} (pid {}) {} since {}: {}\n",
+            s.version, s.pid, s.daemon, s.started, s.summary
+        )
+    };
+    if s.daemon != "stopped" && !writer_alive(s) {
+        out.push_str(&format!(
+            "warning: pid {} is not running: the daemon ended without updating this state\n",
+            s.pid
+        ));
+    }
+    if s.projects.is_empty() {
+        return out;
+    }
+    out.push('\n');
+    let header = [
+        "PROJECT", "RESULT", "LAST RUN", "ERRORS", "WARNINGS", "OUTPUTS",
+    ];
+    let rows: Vec<[String; 6]> = s
+        .projects
+        .iter()
+        .map(|p| {
+            let outputs = if p.result == "failed" {
+                p.first_error.clone().unwrap_or_default()
+            } else {
+                p.outputs
+                    .iter()
+                    .map(|o| {
+                        Path::new(o)
+                            .file_name()
+                            .map_or_else(|| o.clone(), |n| n.to_string_lossy().into_owned())
+                    })
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            [
+                p.project.clone(),
+                p.result.clone(),
+                p.time.clone().unwrap_or_else(|| "-".into()),
+                p.errors.to_string(),
+                p.warnings.to_string(),
+                outputs,
+            ]
+        })
+        .collect();
+    let mut width = header.map(|h| h.chars().count());
+    for r in &rows {
+        for (w, c) in width.iter_mut().zip(r) {
+            *w = (*w).max(c.chars().count());
+        }
+    }
+    let line = |cells: &[&str]| {
+        let mut l = String::new();
+        for (i, c) in cells.iter().enumerate() {
+            let c = c.replace(['\t', '\n', '\r'], " ");
+            if i + 1 == cells.len() {
+                l.push_str(&c);
+            } else {
+                l.push_str(&c);
+                l.push_str(&" ".repeat(width[i] - c.chars().count() + 2));
+            }
+        }
+        l.truncate(l.trim_end().len());
+        l.push('\n');
+        l
+    };
+    out.push_str(&line(&header));
+    for r in &rows {
+        out.push_str(&line(&r.each_ref().map(String::as_str)));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::daemon::events::{Counts, OutputInfo};
+
+    #[test]
+    fn the_status_line_reads_like_a_sentence() {
+        let s = |projects, failing, compiling, pending, directories| {
+            sentence(Tally {
+                projects,
+                failing,
+                compiling,
+                pending,
+                directories,
+            })
+        };
+        assert_eq!(
+            s(4, 1, 0, 0, 9),
+            "4 projects, 1 failing; watching 9 directories"
+        );
+        assert_eq!(
+            s(1, 0, 0, 0, 1),
+            "1 project, all compiled; watching 1 directory"
+        );
+        assert_eq!(
+            s(3, 2, 1, 0, 6),
+            "3 projects, 2 failing, 1 compiling; watching 6 directories"
+        );
+        assert_eq!(
+            s(2, 0, 2, 0, 4),
+            "2 projects, 2 compiling; watching 4 directories"
+        );
+        assert_eq!(
+            s(2, 0, 0, 1, 3),
+            "2 projects, 1 not compiled yet; watching 3 directories"
+        );
+        assert_eq!(s(0, 0, 0, 0, 0), "0 projects; watching 0 directories");
+    }
+
+    #[test]
+    fn a_state_whose_daemon_is_gone_says_so() {
+        let mut snap = Snapshot {
+            schema: SCHEMA.into(),
+            version: "0".into(),
+            pid: std::process::id(),
+            started: now(),
+            updated: now(),
+            daemon: "running".into(),
+            compiling: 0,
+            summary: "0 projects; watching 0 directories".into(),
+            projects: vec![],
+        };
+        assert!(!table(&snap).contains("warning"), "{}", table(&snap));
+        // Above the kernel's largest pid (4194304).
+        snap.pid = 4_194_400;
+        assert!(table(&snap).contains("warning: pid 4194400 is not running"));
+        snap.daemon = "stopped".into();
+        assert!(!table(&snap).contains("warning"));
+    }
+
+    #[test]
+    fn describes_a_diagnostic_on_one_line() {
+        let d = serde_json::json!({"severity": "error", "code": "E604", "message": "cannot write",
+            "file": "a/P.src", "line": 3, "column": 7});
+        assert_eq!(describe(&d), "E604 a/P.src:3:7: cannot write");
+        let d = serde_json::json!({"severity": "error", "code": "E000", "message": "boom"});
+        assert_eq!(describe(&d), "E000: boom");
+    }
+
+    #[test]
+    fn results_are_written_atomically_and_printed_aligned() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("status.json");
+        let t = Tracker::new(Some(path.clone()));
+        t.observe(
+            Some("/p/Zelle_A"),
+            &Event::CompileSucceeded {
+                run_id: 1,
+                duration_ms: 5,
+                outputs: vec![OutputInfo {
+                    path: "/p/Zelle_A/Zelle_A.src".into(),
+                    written: true,
+                }],
+                counts: Counts {
+                    steps: 3,
+                    warnings: 1,
+                },
+                warnings: vec![],
+            },
+        );
+        t.observe(
+            Some("/p/B"),
+            &Event::failed_with(2, 1, "E604", "cannot write".into()),
+        );
+        let projects = [
+            Path::new("/p/B"),
+            Path::new("/p/C"),
+            Path::new("/p/Zelle_A"),
+        ];
+        let s = t.sync(projects.iter().copied(), 0, 6, true);
+        assert_eq!(
+            s,
+            "3 projects, 1 failing, 1 not compiled yet; watching 6 directories"
+        );
+        let names: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        assert_eq!(names, ["status.json"], "no temporary file left");
+        let snap = read(&path).unwrap();
+        assert_eq!(snap.projects.len(), 3);
+        assert_eq!(snap.projects[0].result, "failed");
+        assert_eq!(snap.projects[1].result, "pending");
+        assert_eq!(snap.projects[2].outputs, ["/p/Zelle_A/Zelle_A.src"]);
+        let text = table(&snap);
+        assert!(!text.contains('\t'), "{text}");
+        let lines: Vec<&str> = text.lines().skip(2).collect();
+        let col = lines[0].find("RESULT").unwrap();
+        for l in &lines[1..] {
+            assert_eq!(&l[col - 2..col], "  ", "aligned: {text}");
+            assert!(!l[col..].starts_with(' '), "aligned: {text}");
+        }
+        assert!(text.contains("E604: cannot write"), "{text}");
+        // A removed project leaves the file at the next sync, once the rate limit allows.
+        t.sync([Path::new("/p/Zelle_A")].into_iter(), 0, 2, true);
+        assert_eq!(read(&path).unwrap().projects.len(), 3, "held back");
+        std::thread::sleep(MIN_WRITE_INTERVAL);
+        t.sync([Path::new("/p/Zelle_A")].into_iter(), 0, 2, true);
+        assert_eq!(read(&path).unwrap().projects.len(), 1);
+        t.observe(
+            None,
+            &Event::Stopped {
+                reason: "SIGTERM".into(),
+                requested: None,
+                compiling: None,
+            },
+        );
+        let snap = read(&path).unwrap();
+        assert_eq!(snap.daemon, "stopped");
+        assert!(table(&snap).contains("stopped"));
+    }
+}

@@ -1,0 +1,257 @@
+//! `skillpost status` and the journal lines, through the binary: a daemon on a good and a
+//! broken project (`--log-format json`, `--state FILE`), then a reload with an invalid
+//! configuration.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+const BIN: &str = env!("CARGO_BIN_EXE_skillpost");
+
+fn copy_sample(dir: &Path) {
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/ok/reference-sample");
+    fs::create_dir_all(dir).unwrap();
+    for f in ["Blackboard.aml", "sfc.xml", "kr15-2.irl"] {
+        fs::copy(sample.join(f), dir.join(f)).unwrap();
+    }
+}
+
+fn lines(p: &Path) -> Vec<Value> {
+    fs::read_to_string(p)
+        .unwrap_or_default()
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .collect()
+}
+
+fn wait_for(what: &str, mut cond: impl FnMut() -> bool) {
+    let end = Instant::now() + Duration::from_secs(10);
+    while Instant::now() < end {
+        if cond() {
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    panic!("timed out waiting for {what}");
+}
+
+struct Kill(Child);
+impl Drop for Kill {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn status(state: &Path, format: &str) -> (i32, String, String) {
+    let o = Command::new(BIN)
+        .args(["status", "--state"])
+        .arg(state)
+        .args(["--format", format])
+        .output()
+        .unwrap();
+    (
+        o.status.code().unwrap_or(-1),
+        String::from_utf8(o.stdout).unwrap(),
+        String::from_utf8(o.stderr).unwrap(),
+    )
+}
+
+#[test]
+fn status_and_journal_after_a_success_a_failure_and_a_failed_reload() {
+    let tmp = tempfile::tempdir().unwrap();
+    let root: PathBuf = tmp.path().canonicalize().unwrap();
+    let (good, bad) = (root.join("good"), root.join("bad"));
+    copy_sample(&good);
+    copy_sample(&bad);
+    // Not well-formed, and stable (older than the half-written check's second).
+    fs::write(bad.join("sfc.xml"), "<pou").unwrap();
+    let old = std::time::SystemTime::now() - Duration::from_secs(10);
+    fs::File::options()
+        .write(true)
+        .open(bad.join("sfc.xml"))
+        .unwrap()
+        .set_modified(old)
+        .unwrap();
+    let config = root.join("skillpost.toml");
+    fs::write(
+        &config,
+        "[[project]]\npath = \"good\"\n[[project]]\npath = \"bad\"\n",
+    )
+    .unwrap();
+    let state = root.join("run/status.json");
+    let (events, log) = (root.join("ev.jsonl"), root.join("log.jsonl"));
+
+    let (code, _, err) = status(&state, "table");
+    assert_eq!(code, 1, "no daemon state yet: {err}");
+    assert!(err.contains("no daemon state"), "{err}");
+
+    let daemon = Kill(
+        Command::new(BIN)
+            .args(["watch", "--log-format", "json", "--config"])
+            .arg(&config)
+            .arg("--events")
+            .arg(&events)
+            .arg("--state")
+            .arg(&state)
+            .env("RUNTIME_DIRECTORY", root.join("locks"))
+            .env("RUST_LOG", "info")
+            .stdout(Stdio::null())
+            .stderr(fs::File::create(&log).unwrap())
+            .spawn()
+            .unwrap(),
+    );
+    let ended = |name: &str| {
+        lines(&events)
+            .iter()
+            .filter(|e| e["event"] == "compile-succeeded" || e["event"] == "compile-failed")
+            .any(|e| e["project"].as_str().is_some_and(|p| p.ends_with(name)))
+    };
+    wait_for("both compiles", || ended("/good") && ended("/bad"));
+    wait_for("the state file", || {
+        status(&state, "json").1.contains("\"failed\"")
+            && status(&state, "json").1.contains("\"ok\"")
+    });
+
+    // JSON: the state file's content.
+    let (code, json, _) = status(&state, "json");
+    assert_eq!(code, 0);
+    let snap: Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(snap["schema"], "skillpost.status/1");
+    assert_eq!(
+        snap["summary"].as_str().unwrap().split(';').next(),
+        Some("2 projects, 1 failing")
+    );
+    let by = |p: &Path| {
+        snap["projects"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|x| x["project"] == p.display().to_string())
+            .cloned()
+            .unwrap()
+    };
+    assert_eq!(by(&good)["result"], "ok");
+    assert_eq!(by(&good)["outputs"].as_array().unwrap().len(), 2);
+    assert_eq!(by(&good)["errors"], 0);
+    assert_eq!(by(&bad)["result"], "failed");
+    assert!(by(&bad)["errors"].as_u64().unwrap() >= 1);
+    assert!(by(&bad)["time"].is_string());
+
+    // Table: aligned with spaces.
+    let (code, table, _) = status(&state, "table");
+    assert_eq!(code, 0);
+    assert!(!table.contains('\t'), "{table}");
+    assert!(table.contains("2 projects, 1 failing"), "{table}");
+    let rows: Vec<&str> = table
+        .lines()
+        .skip_while(|l| !l.starts_with("PROJECT"))
+        .collect();
+    assert_eq!(rows.len(), 3, "{table}");
+    let col = rows[0].find("RESULT").unwrap();
+    for r in &rows[1..] {
+        assert!(
+            r[col..].starts_with("ok") || r[col..].starts_with("failed"),
+            "{table}"
+        );
+    }
+    // Replaced atomically: no temporary file beside it.
+    let left: Vec<_> = fs::read_dir(state.parent().unwrap())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(left, [std::ffi::OsString::from("status.json")]);
+
+    // The failed compile in the log: one warn line with project, run_id and the location.
+    let logs = lines(&log);
+    let failed: Vec<&Value> = logs
+        .iter()
+        .filter(|l| {
+            l["fields"]["message"]
+                .as_str()
+                .is_some_and(|m| m.starts_with("compile failed"))
+        })
+        .collect();
+    assert_eq!(failed.len(), 1, "{logs:#?}");
+    let f = failed[0];
+    assert_eq!(f["level"], "WARN");
+    assert_eq!(f["span"]["project"], bad.display().to_string());
+    assert!(f["span"]["run_id"].is_u64(), "{f}");
+    let msg = f["fields"]["message"].as_str().unwrap();
+    assert!(msg.contains("E102") && msg.contains("sfc.xml:1:"), "{msg}");
+
+    // A failed reload: one error line with file:line:col.
+    fs::write(&config, "settle_ms = \"soon\"\n").unwrap();
+    Command::new("kill")
+        .args(["-HUP", &daemon.0.id().to_string()])
+        .status()
+        .unwrap();
+    wait_for("reload-failed", || {
+        lines(&events).iter().any(|e| e["event"] == "reload-failed")
+    });
+    wait_for("the reload's log line", || {
+        lines(&log).iter().any(|l| {
+            l["level"] == "ERROR"
+                && l["fields"]["message"]
+                    .as_str()
+                    .is_some_and(|m| m.contains("reload failed") && m.contains("skillpost.toml:1:"))
+        })
+    });
+
+    // Stopped: the file says so.
+    Command::new("kill")
+        .args(["-TERM", &daemon.0.id().to_string()])
+        .status()
+        .unwrap();
+    wait_for("the stopped state", || {
+        status(&state, "json").1.contains("\"stopped\"")
+    });
+    assert!(status(&state, "table").1.contains("stopped"));
+}
+
+/// A fresh host: the service configuration names a project folder that does not exist yet.
+/// The daemon must still say READY=1 (systemd waits for it), and the state file says `running`
+/// with the project `pending`.
+#[test]
+fn ready_with_only_a_missing_project() {
+    use std::os::unix::net::UnixDatagram;
+    let tmp = tempfile::tempdir().unwrap();
+    let root: PathBuf = tmp.path().canonicalize().unwrap();
+    let sock_path = root.join("notify.sock");
+    let sock = UnixDatagram::bind(&sock_path).unwrap();
+    sock.set_read_timeout(Some(Duration::from_millis(100)))
+        .unwrap();
+    let state = root.join("status.json");
+    let _daemon = Kill(
+        Command::new(BIN)
+            .arg("watch")
+            .arg("--state")
+            .arg(&state)
+            .arg("--events")
+            .arg(root.join("ev.jsonl"))
+            .arg(root.join("not-yet"))
+            .env("RUNTIME_DIRECTORY", root.join("locks"))
+            .env("NOTIFY_SOCKET", &sock_path)
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let end = Instant::now() + Duration::from_secs(10);
+    let mut got = Vec::new();
+    let mut buf = [0u8; 4096];
+    while Instant::now() < end && !got.iter().any(|m: &String| m.contains("READY=1")) {
+        if let Ok(n) = sock.recv(&mut buf) {
+            got.push(String::from_utf8_lossy(&buf[..n]).into_owned());
+        }
+    }
+    assert!(got.iter().any(|m| m.contains("READY=1")), "{got:?}");
+    wait_for("the running state", || {
+        status(&state, "json").1.contains("\"running\"")
+    });
+    let (_, json, _) = status(&state, "json");
+    assert!(json.contains("\"pending\""), "{json}");
+    assert!(json.contains("1 project, 1 not compiled yet"), "{json}");
+}
