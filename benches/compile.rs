@@ -350,7 +350,7 @@ fn stream_floor(text: &str) -> Duration {
 
 fn options() -> Options {
     Options {
-        program: "p".into(),
+        program: Some("p".into()),
         ..Default::default()
     }
 }

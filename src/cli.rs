@@ -180,11 +180,17 @@ fn run(a: Args) -> u8 {
         return status(&c, "SFC validation successful!", a.format);
     }
 
-    let [blackboard, program] = a.inputs.as_slice() else {
-        return usage("expected a blackboard and a program name");
+    // `--validate` needs no program name: nothing is written.
+    let (blackboard, program) = match a.inputs.as_slice() {
+        [blackboard, program] => (blackboard, Some(program.to_string_lossy().into_owned())),
+        [blackboard] if a.validate => (blackboard, None),
+        _ if a.validate => {
+            return usage("--validate takes a blackboard and, optionally, a program name");
+        }
+        _ => return usage("expected a blackboard and a program name"),
     };
     let opts = Options {
-        program: program.to_string_lossy().into_owned(),
+        program,
         lf: a.lf,
         template: a.template.clone(),
         confine_to: None,
@@ -214,24 +220,44 @@ fn run(a: Args) -> u8 {
     std::mem::forget(c.sfc);
     match result {
         Ok(applied) => {
+            let json = a.format == Format::Json;
             for (path, written) in &applied.outputs {
-                eprintln!(
-                    "{} {}",
-                    if *written { "wrote" } else { "unchanged" },
-                    path.display()
+                say(
+                    json,
+                    &format!(
+                        "{} {}",
+                        if *written { "wrote" } else { "unchanged" },
+                        path.display()
+                    ),
                 );
             }
             use crate::write::WriteBackOutcome as W;
             match (&applied.write_back, &c.write_back) {
-                (Some(W::Written), Some(wb)) => {
-                    eprintln!("wrote back `{}` into {}", wb.value, wb.blackboard.display())
-                }
+                (Some(W::Written), Some(wb)) => say(
+                    json,
+                    &format!("wrote back `{}` into {}", wb.value, wb.blackboard.display()),
+                ),
                 (Some(W::AlreadyRight), _) => {}
                 (Some(W::SkippedChangedOnDisk), Some(wb)) => eprintln!(
                     "warning: {} changed on disk while compiling; the write-back of `{}` was skipped (run again)",
                     wb.blackboard.display(),
                     wb.value
                 ),
+                (None, _) if json => {
+                    let line = serde_json::json!({
+                        "outcome": "blackboard-not-updated",
+                        "blackboard": blackboard.display().to_string(),
+                        "reason": "no write-back target",
+                    });
+                    let _ = writeln!(stdout, "{line}");
+                }
+                (None, _) => {
+                    let _ = writeln!(
+                        stdout,
+                        "blackboard not updated: {} has no write-back target (Code -> KRL code -> refURI; W204 with --warn shows where)",
+                        blackboard.display()
+                    );
+                }
                 _ => {}
             }
             0
@@ -240,6 +266,16 @@ fn run(a: Args) -> u8 {
             eprintln!("error: cannot write: {e}");
             2
         }
+    }
+}
+
+/// A line of the run's outcome (what was written): on stdout, except with `--format json`,
+/// whose stdout holds JSON objects only; there it goes to stderr.
+fn say(json: bool, line: &str) {
+    if json {
+        eprintln!("{line}");
+    } else {
+        println!("{line}");
     }
 }
 
@@ -307,7 +343,7 @@ fn status(c: &Compilation, ok_message: &str, format: Format) -> u8 {
         1
     } else {
         if !ok_message.is_empty() {
-            eprintln!("{ok_message}");
+            say(format == Format::Json, ok_message);
         }
         0
     }

@@ -17,8 +17,10 @@ use crate::read::{self, blackboard::read_blackboard, irl::read_irl, sfc::read_sf
 /// What to compile and how.
 #[derive(Debug, Clone, Default)]
 pub struct Options {
-    /// The program name (`<PROGRAM>`): the output files' stem and the `DEF` name.
-    pub program: String,
+    /// The program name (`<PROGRAM>`): the output files' stem and the `DEF` name. `None`
+    /// checks everything without one (`--validate BLACKBOARD`): the code is still generated, under
+    /// a placeholder name, so its checks run, but no outputs and no write-back are produced.
+    pub program: Option<String>,
     /// LF line endings instead of CRLF.
     pub lf: bool,
     /// A user output template instead of the built-in one.
@@ -51,7 +53,8 @@ pub struct Compilation {
     pub diagnostics: Vec<Diagnostic>,
     /// Every file the compile asked for, read or not (the daemon watches these).
     pub files_read: Vec<PathBuf>,
-    /// Set when the blackboard itself could not be read (an I/O failure, exit status 2).
+    /// Set when the blackboard itself (or the SFC with `--sfc`, or the `--template`) could not be
+    /// read (an I/O failure, exit status 2).
     pub io_failure: bool,
     /// The outputs to write, with their paths; empty when there are errors.
     pub outputs: Vec<(PathBuf, OutputFile)>,
@@ -117,7 +120,7 @@ impl<'a> Ctx<'a> {
         }
     }
 
-    /// Loads the file the command names (the blackboard, or the SFC with `--sfc`). When it
+    /// Loads a file the command names (the blackboard, the SFC with `--sfc`, the template). When it
     /// cannot be read at all, that is an I/O failure (exit status 2), not an input error.
     fn load_top(&mut self, path: &Path, out: &mut Compilation) -> Option<crate::diag::FileId> {
         let file = xml::load(
@@ -194,6 +197,10 @@ fn absolute(p: &Path) -> PathBuf {
     }
 }
 
+/// The `DEF` name the code is generated under when no program name is given (a valid KRL name;
+/// the code is checked, then discarded).
+const PLACEHOLDER_PROGRAM: &str = "VALIDATE";
+
 /// Compiles one project. Never writes; see [`apply`].
 pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compilation {
     let base = blackboard.parent().map(Path::to_owned).unwrap_or_default();
@@ -212,12 +219,13 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         clock = now;
     };
 
-    if !crate::names::is_krl_name(&opts.program) {
+    if let Some(program) = &opts.program
+        && !crate::names::is_krl_name(program)
+    {
         cx.diags.push(Diagnostic::error(
             Code::BadProgramName,
             format!(
-                "program name `{}` is not a KRL name: a letter or `_`, then letters, digits or `_`, at most 24 characters",
-                opts.program
+                "program name `{program}` is not a KRL name: a letter or `_`, then letters, digits or `_`, at most 24 characters"
             ),
         ));
     }
@@ -230,18 +238,13 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
     };
     lap(&mut out, "read-blackboard");
 
-    // The output template.
+    // The output template: like the blackboard, one the command names, so a template that
+    // cannot be read at all is an I/O failure.
     let template = match &opts.template {
         None => Some(OutputTemplate::builtin()),
-        Some(p) => xml::load(
-            &cx.fs,
-            p,
-            p.display().to_string(),
-            None,
-            &mut cx.sources,
-            &mut cx.diags,
-        )
-        .and_then(|f| OutputTemplate::parse(&cx.sources, f, &mut cx.diags)),
+        Some(p) => cx
+            .load_top(p, &mut out)
+            .and_then(|f| OutputTemplate::parse(&cx.sources, f, &mut cx.diags)),
     };
 
     // The SFC and its plan.
@@ -294,7 +297,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             && let (Some(template), Some(plan)) = (&template, &plan)
         {
             let input = EmitInput {
-                program: &opts.program,
+                program: opts.program.as_deref().unwrap_or(PLACEHOLDER_PROGRAM),
                 blackboard: &bb,
                 sfc,
                 plan,
@@ -302,11 +305,13 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 irls: &irls,
                 newline: if opts.lf { "\n" } else { "\r\n" },
             };
-            if let Some(files) = crate::emit::krl::emit(&input, template, &mut cx.diags) {
+            if let Some(files) = crate::emit::krl::emit(&input, template, &mut cx.diags)
+                && let Some(program) = &opts.program
+            {
                 out.outputs = files
                     .into_iter()
                     .map(|f| {
-                        let name = format!("{}.{}", opts.program, f.extension);
+                        let name = format!("{program}.{}", f.extension);
                         (cx.base.join(name), f)
                     })
                     .collect();
@@ -317,6 +322,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
 
     if !cx.diags.has_errors()
         && let Some(wb) = &bb.write_back
+        && let Some(program) = &opts.program
     {
         let src = cx.sources.get(bb_file);
         let mut expected = Vec::with_capacity(src.text.len() + 3);
@@ -329,7 +335,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             expected,
             bom: src.bom,
             attribute: wb.attribute.range.clone(),
-            value: format!("{}.src", opts.program),
+            value: format!("{program}.src"),
         });
     }
     out.blackboard = Some(bb);

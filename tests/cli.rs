@@ -44,7 +44,8 @@ fn compile_writes_outputs_and_reports_them() {
     assert!(src.contains("DEF Demo_1( )\r\n"));
     assert!(src.contains("SetVelCP (0.5)\r\n"));
     assert!(p.path().join("Demo_1.dat").exists());
-    assert!(stderr(&o).contains("wrote"), "{}", stderr(&o));
+    // The outcome is the run's result: on stdout.
+    assert!(stdout(&o).contains("wrote"), "{}", stdout(&o));
     let bb = std::fs::read_to_string(p.path().join("Blackboard.aml")).unwrap();
     assert!(bb.contains("<Value>Demo_1.src</Value>"));
 }
@@ -74,7 +75,7 @@ fn validate_writes_nothing_and_shows_warnings() {
     // The sample's steps carry a JointConfig variable no skill uses: a warning.
     let e = stderr(&o);
     assert!(e.contains("warning[W303]"), "{e}");
-    assert!(e.contains("Input validation successful!"), "{e}");
+    assert!(stdout(&o).contains("Input validation successful!"), "{e}");
     // One warning per skill and unused variable, not one per step.
     assert_eq!(e.matches("warning[W303]").count(), 3, "{e}");
     assert!(
@@ -160,7 +161,7 @@ fn sfc_mode_checks_the_sfc_alone() {
     let o = run(&["--sfc", "-pO", "sfc.xml"], p.path());
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     assert!(stdout(&o).contains("(id=12)"));
-    assert!(stderr(&o).contains("SFC validation successful!"));
+    assert!(stdout(&o).contains("SFC validation successful!"));
     // A broken flow: exit 1, located.
     let sfc = std::fs::read_to_string(p.path().join("sfc.xml")).unwrap();
     std::fs::write(
@@ -669,4 +670,122 @@ fn sfc_check_reports_what_the_literals_tell() {
     .unwrap();
     let o = run(&["--sfc", "sfc.xml"], p.path());
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+}
+
+#[test]
+fn validate_needs_no_program_name() {
+    let p = project();
+    let before = std::fs::read(p.path().join("Blackboard.aml")).unwrap();
+    let o = run(&["--validate", "-pO", "Blackboard.aml"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let (out, err) = (stdout(&o), stderr(&o));
+    assert!(out.contains("Input validation successful!"), "{out}");
+    assert!(out.contains("(id=12)"), "listings work: {out}");
+    assert!(err.contains("warning[W303]"), "{err}");
+    assert!(!err.contains("E601"), "{err}");
+    // Nothing written: the folder holds what it held, the blackboard is unchanged.
+    let names: Vec<_> = std::fs::read_dir(p.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert!(
+        !names.iter().any(|n| n.to_string_lossy().ends_with(".src")),
+        "{names:?}"
+    );
+    assert_eq!(
+        std::fs::read(p.path().join("Blackboard.aml")).unwrap(),
+        before
+    );
+    // The template is still read (the code is generated to be checked): a missing one is exit 2.
+    let o = run(
+        &["--validate", "--template", "nope.toml", "Blackboard.aml"],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    // Without --validate the name is needed; --validate takes at most two arguments.
+    assert_eq!(run(&["Blackboard.aml"], p.path()).status.code(), Some(2));
+    let o = run(&["--validate", "Blackboard.aml", "a", "b"], p.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("--validate takes a blackboard"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn missing_or_unreadable_template_is_exit_two() {
+    let p = project();
+    let o = run(
+        &["--template", "missing.toml", "Blackboard.aml", "out"],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("missing.toml"), "{}", stderr(&o));
+    assert!(!p.path().join("out.src").exists());
+    // A folder named as the template: unreadable too.
+    std::fs::create_dir(p.path().join("tpl")).unwrap();
+    let o = run(&["--template", "tpl", "Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let o = run(
+        &["--validate", "--template", "missing.toml", "Blackboard.aml"],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    // A readable template with errors stays an input error (1).
+    std::fs::write(p.path().join("bad.toml"), "this is = = not toml").unwrap();
+    let o = run(
+        &["--template", "bad.toml", "Blackboard.aml", "out"],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+}
+
+/// A copy of the reference sample without its write-back target (the `Code` element renamed).
+fn project_without_write_back() -> tempfile::TempDir {
+    let p = project();
+    let bb = std::fs::read_to_string(p.path().join("Blackboard.aml")).unwrap();
+    let bb = bb.replace(
+        "<InternalElement Name=\"Code\"",
+        "<InternalElement Name=\"Notes\"",
+    );
+    std::fs::write(p.path().join("Blackboard.aml"), bb).unwrap();
+    p
+}
+
+#[test]
+fn no_write_back_target_is_said_on_stdout() {
+    let p = project_without_write_back();
+    let before = std::fs::read(p.path().join("Blackboard.aml")).unwrap();
+    let o = run(&["Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let out = stdout(&o);
+    assert!(
+        out.contains("blackboard not updated: Blackboard.aml has no write-back target"),
+        "{out}"
+    );
+    assert!(!stderr(&o).contains("W204"), "a warning only with --warn");
+    assert_eq!(
+        std::fs::read(p.path().join("Blackboard.aml")).unwrap(),
+        before
+    );
+    // JSON: stdout stays JSON Lines; the notice is an object.
+    let o = run(&["--format", "json", "Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let lines: Vec<serde_json::Value> = stdout(&o)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}")))
+        .collect();
+    assert_eq!(
+        lines,
+        [serde_json::json!({
+            "outcome": "blackboard-not-updated",
+            "blackboard": "Blackboard.aml",
+            "reason": "no write-back target"
+        })]
+    );
+    // With a target, no such line.
+    let p = project();
+    let o = run(&["Blackboard.aml", "out"], p.path());
+    assert!(!stdout(&o).contains("not updated"), "{}", stdout(&o));
 }

@@ -165,7 +165,7 @@ impl Job {
             seen: Default::default(),
         };
         let opts = Options {
-            program,
+            program: Some(program),
             confine_to: self.confine.then(|| self.key.clone()),
             ..Options::default()
         };
