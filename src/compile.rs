@@ -11,8 +11,9 @@ use crate::emit::krl::OutputTemplate;
 use crate::emit::{EmitInput, OutputFile};
 use crate::load::FileSource;
 use crate::model::{Blackboard, Irl, Sfc};
+use crate::paths;
 use crate::plan::{self, Plan};
-use crate::read::{self, blackboard::read_blackboard, irl::read_irl, sfc::read_sfc_pou, xml};
+use crate::read::{blackboard::read_blackboard, irl::read_irl, sfc::read_sfc_pou, xml};
 
 /// What to compile and how.
 #[derive(Debug, Clone, Default)]
@@ -140,7 +141,7 @@ impl<'a> Ctx<'a> {
     /// Whether `path` stays inside `root`: by its text, and, where the file system can tell,
     /// with symbolic links resolved (a link inside the folder pointing out of it leaves it).
     fn inside(&self, path: &Path, root: &Path) -> bool {
-        if !read::normalize(&absolute(path)).starts_with(root) {
+        if !paths::absolute(path).starts_with(root) {
             return false;
         }
         match (self.fs.real_path(path), self.fs.real_path(root)) {
@@ -151,7 +152,7 @@ impl<'a> Ctx<'a> {
 
     /// Resolves a `refURI` and loads the file; errors are located at the reference.
     fn load_ref(&mut self, value: &str, at: &Span) -> Option<crate::diag::FileId> {
-        let path = match read::resolve_ref(&self.base, value) {
+        let path = match paths::resolve_ref(&self.base, value) {
             Ok(p) => p,
             Err(why) => {
                 self.diags.push(
@@ -187,16 +188,6 @@ impl<'a> Ctx<'a> {
     }
 }
 
-fn absolute(p: &Path) -> PathBuf {
-    if p.is_absolute() {
-        p.to_owned()
-    } else {
-        std::env::current_dir()
-            .map(|d| d.join(p))
-            .unwrap_or_else(|_| p.to_owned())
-    }
-}
-
 /// The `DEF` name the code is generated under when no program name is given (a valid KRL name;
 /// the code is checked, then discarded).
 const PLACEHOLDER_PROGRAM: &str = "VALIDATE";
@@ -207,9 +198,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
     let mut cx = Ctx::new(
         fs,
         base,
-        opts.confine_to
-            .as_ref()
-            .map(|p| read::normalize(&absolute(p))),
+        opts.confine_to.as_ref().map(|p| paths::absolute(p)),
     );
     let mut out = Compilation::default();
     let mut clock = std::time::Instant::now();
@@ -349,7 +338,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
 fn fragment(value: &str) -> Option<String> {
     let v = value.trim().trim_matches('"');
     let (_, f) = v.split_once('#')?;
-    let f = read::percent_decode(f).unwrap_or_else(|| f.to_owned());
+    let f = paths::percent_decode(f).unwrap_or_else(|| f.to_owned());
     let f = f.trim();
     (!f.is_empty()).then(|| f.to_owned())
 }

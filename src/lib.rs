@@ -18,6 +18,7 @@
 //! - [`print`]: the `-pB`/`-pS`/`-pF`/`-pO` and `--info` listings.
 //! - [`diag`]: diagnostics, their codes and their rendering.
 //! - [`names`]: case-insensitive name keys, KRL names, transliteration.
+//! - [`paths`]: `refURI` values → paths, lexical normalisation, absolute paths.
 #![forbid(unsafe_code)]
 
 pub mod bind;
@@ -30,6 +31,7 @@ pub mod emit;
 pub mod load;
 pub mod model;
 pub mod names;
+pub mod paths;
 pub mod plan;
 pub mod print;
 pub mod read;

@@ -789,3 +789,45 @@ fn no_write_back_target_is_said_on_stdout() {
     let o = run(&["Blackboard.aml", "out"], p.path());
     assert!(!stdout(&o).contains("not updated"), "{}", stdout(&o));
 }
+
+#[test]
+fn blackboard_given_with_leading_parents_from_a_subfolder() {
+    // tmp/p holds the project; the user runs from tmp/x/y.
+    let tmp = tempfile::tempdir().unwrap();
+    let p = project();
+    std::fs::create_dir(tmp.path().join("p")).unwrap();
+    for e in std::fs::read_dir(p.path()).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), tmp.path().join("p").join(e.file_name())).unwrap();
+    }
+    let cwd = tmp.path().join("x/y");
+    std::fs::create_dir_all(&cwd).unwrap();
+    let o = run(&["--validate", "../../p/Blackboard.aml"], &cwd);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let o = run(&["../../p/Blackboard.aml", "Up"], &cwd);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(tmp.path().join("p/Up.src").exists());
+    assert!(
+        stdout(&o).contains("wrote ../../p/Up.src"),
+        "{}",
+        stdout(&o)
+    );
+    // An IRL file named with leading `..` from the blackboard's folder.
+    std::fs::create_dir(tmp.path().join("lib")).unwrap();
+    std::fs::rename(
+        tmp.path().join("p/kr15-2.irl"),
+        tmp.path().join("lib/kr15-2.irl"),
+    )
+    .unwrap();
+    let bb = std::fs::read_to_string(tmp.path().join("p/Blackboard.aml")).unwrap();
+    std::fs::write(
+        tmp.path().join("p/Blackboard.aml"),
+        bb.replace(
+            "<Value>kr15-2.irl</Value>",
+            "<Value>../lib/kr15-2.irl</Value>",
+        ),
+    )
+    .unwrap();
+    let o = run(&["--validate", "../../p/Blackboard.aml"], &cwd);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+}
