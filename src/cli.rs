@@ -175,7 +175,7 @@ fn run(a: Args) -> u8 {
             return usage("--sfc takes one argument, the SFC file");
         };
         let c = compile::check_sfc_pou(&fs, path, a.pou.as_deref());
-        print_listings(&c, &print, &mut stdout);
+        print_listings(&c, &print, a.format, &mut stdout);
         report(&c.diagnostics, &c.sources, a.format, warnings);
         return status(&c, "SFC validation successful!", a.format);
     }
@@ -202,7 +202,7 @@ fn run(a: Args) -> u8 {
             eprintln!("timing: {stage:<16} {:>8.1} ms", d.as_secs_f64() * 1000.0);
         }
     }
-    print_listings(&c, &print, &mut stdout);
+    print_listings(&c, &print, a.format, &mut stdout);
     report(&c.diagnostics, &c.sources, a.format, warnings);
     if c.io_failure {
         return 2;
@@ -279,33 +279,54 @@ fn say(json: bool, line: &str) {
     }
 }
 
-fn print_listings(c: &Compilation, print: &dyn Fn(char) -> bool, out: &mut impl Write) {
+/// The `-p` listings on stdout: as text, or with `--format json` one JSON object per listing
+/// (docs/JSON.md), so stdout stays JSON Lines.
+fn print_listings(
+    c: &Compilation,
+    print: &dyn Fn(char) -> bool,
+    format: Format,
+    out: &mut impl Write,
+) {
+    use crate::print::json;
+    let json = format == Format::Json;
+    let mut emit = |text: &dyn Fn() -> String, object: &dyn Fn() -> serde_json::Value| {
+        let _ = if json {
+            writeln!(out, "{}", object())
+        } else {
+            writeln!(out, "{}", text())
+        };
+    };
     if print('B')
         && let Some(bb) = &c.blackboard
     {
-        let _ = writeln!(out, "{}", crate::print::blackboard(bb));
+        emit(&|| crate::print::blackboard(bb), &|| json::blackboard(bb));
     }
     if print('S')
         && let Some(sfc) = &c.sfc
     {
-        let _ = writeln!(out, "{}", crate::print::sfc(sfc));
+        emit(&|| crate::print::sfc(sfc), &|| json::sfc(sfc));
     }
     if let (Some(sfc), Some(plan)) = (&c.sfc, &c.plan) {
         if print('F') {
-            let _ = writeln!(out, "{}", crate::print::flow(sfc, plan));
+            emit(&|| crate::print::flow(sfc, plan), &|| json::flow(sfc, plan));
         }
         if print('O') {
-            let _ = writeln!(out, "{}", crate::print::order(sfc, plan));
+            emit(&|| crate::print::order(sfc, plan), &|| {
+                json::order(sfc, plan)
+            });
         }
     } else {
-        for (p, what) in [('F', "-pF"), ('O', "-pO")] {
+        for (p, what, listing) in [('F', "-pF", "flow"), ('O', "-pO", "order")] {
             if print(p) {
                 let why = if c.sfc.is_some() {
                     "the SFC's flow has errors"
                 } else {
                     "the SFC could not be read"
                 };
-                let _ = writeln!(out, "{what}: nothing to print: {why} (see the diagnostics)");
+                emit(
+                    &|| format!("{what}: nothing to print: {why} (see the diagnostics)"),
+                    &|| json::unavailable(listing, why),
+                );
             }
         }
     }

@@ -831,3 +831,200 @@ fn blackboard_given_with_leading_parents_from_a_subfolder() {
     let o = run(&["--validate", "../../p/Blackboard.aml"], &cwd);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
 }
+
+/// Every stdout line of a `--format json` run, parsed (each must be one JSON object).
+fn json_lines(o: &Output) -> Vec<serde_json::Value> {
+    stdout(o)
+        .lines()
+        .map(|l| {
+            let v: serde_json::Value =
+                serde_json::from_str(l).unwrap_or_else(|e| panic!("not JSON ({e}): {l}"));
+            assert!(v.is_object(), "{l}");
+            v
+        })
+        .collect()
+}
+
+fn listing<'a>(lines: &'a [serde_json::Value], name: &str) -> &'a serde_json::Value {
+    lines
+        .iter()
+        .find(|l| l["listing"] == name)
+        .unwrap_or_else(|| panic!("no {name} listing in {lines:?}"))
+}
+
+#[test]
+fn json_format_prints_listings_as_objects() {
+    let p = project();
+    let o = run(
+        &[
+            "--validate",
+            "--format",
+            "json",
+            "-pB",
+            "-pS",
+            "-pF",
+            "-pO",
+            "Blackboard.aml",
+        ],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let lines = json_lines(&o);
+    // Listings and diagnostics mixed, each saying what it is.
+    assert!(
+        lines
+            .iter()
+            .all(|l| l.get("listing").is_some() || l.get("severity").is_some())
+    );
+    assert!(lines.iter().any(|l| l["code"] == "W303"), "{lines:?}");
+    assert_eq!(
+        lines.iter().filter(|l| l.get("listing").is_some()).count(),
+        4
+    );
+
+    let bb = listing(&lines, "blackboard");
+    let r = &bb["resources"][0];
+    assert_eq!(r["name"], "KUKA KR15-2");
+    let ptp = r["skills"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["name"] == "Move PTP")
+        .unwrap();
+    assert_eq!(
+        ptp["calls"][0],
+        serde_json::json!({"function": "SetToolPathVelocity", "arguments": ["Velocity"], "order": 0})
+    );
+    let f = r["functions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|f| f["name"] == "SetToolPathVelocity")
+        .unwrap();
+    assert_eq!(f["irl"], "kr15-2.irl");
+    assert!(r["signals"].is_array());
+
+    let sfc = listing(&lines, "sfc");
+    assert_eq!(sfc["header"]["company_name"], "iwb");
+    assert!(sfc["pou"].is_string());
+    let objects = sfc["objects"].as_array().unwrap();
+    let five = objects.iter().find(|o| o["local_id"] == 5).unwrap();
+    assert_eq!(five["inputs"], serde_json::json!([4]));
+    assert_eq!(five["outputs"], serde_json::json!([8, 6]));
+    let step = objects
+        .iter()
+        .find(|o| o["kind"] == "step" && o["variables"].as_array().is_some_and(|v| !v.is_empty()))
+        .unwrap();
+    assert!(step["variables"][0]["value"].is_array() || step["variables"][0]["value"].is_string());
+    assert!(
+        objects
+            .iter()
+            .any(|o| o["kind"] == "transition" && o["condition"].is_string())
+    );
+
+    // The flow: both simultaneous branches start at 1.5 s, the block ends with the longer (3.5).
+    let flow = listing(&lines, "flow");
+    assert_eq!(flow["total"]["seconds"], 3.5);
+    let par = flow["blocks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|b| b["kind"] == "parallel")
+        .unwrap();
+    assert_eq!(par["start"], 1.5);
+    assert_eq!(par["end"], 3.5);
+    assert_eq!(par["branches"][0]["blocks"][0]["local_id"], 8);
+    assert_eq!(par["branches"][0]["blocks"][0]["duration"], 2.0);
+    assert_eq!(par["branches"][1]["blocks"][0]["start"], 1.5);
+
+    let order = listing(&lines, "order");
+    assert_eq!(order["steps"], 5);
+    let ids: Vec<_> = order["blocks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|b| b["kind"] == "step")
+        .map(|b| {
+            (
+                b["number"].as_u64().unwrap(),
+                b["local_id"].as_u64().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(ids, [(1, 1), (2, 3), (3, 8), (4, 6), (5, 12)]);
+
+    // Human mode is unchanged: text, not JSON.
+    let o = run(&["--validate", "-pO", "Blackboard.aml"], p.path());
+    assert!(stdout(&o).contains(" #1"), "{}", stdout(&o));
+}
+
+#[test]
+fn json_listings_of_a_loop_and_of_a_broken_flow() {
+    let base = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
+    let d = tempfile::tempdir().unwrap();
+    for e in std::fs::read_dir(base.join("base/flow")).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), d.path().join(e.file_name())).unwrap();
+    }
+    std::fs::copy(
+        base.join("ok/flow-loop-exit/sfc.xml"),
+        d.path().join("sfc.xml"),
+    )
+    .unwrap();
+    let o = run(
+        &[
+            "--validate",
+            "--format",
+            "json",
+            "-pF",
+            "-pO",
+            "Blackboard.aml",
+        ],
+        d.path(),
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let lines = json_lines(&o);
+    let flow = listing(&lines, "flow");
+    let lp = flow["blocks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|b| b["kind"] == "loop")
+        .unwrap();
+    assert_eq!(lp["endless"], false);
+    let sel = lp["blocks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|b| b["kind"] == "selection")
+        .unwrap();
+    assert_eq!(sel["branches"][0]["then"], "repeat");
+    assert_eq!(sel["branches"][1]["then"], "leave");
+    assert_eq!(sel["branches"][1]["condition"], "Magazine_Empty");
+    assert_eq!(flow["total"]["at_least"], true);
+    assert_eq!(flow["total"]["longest_alternative"], true);
+    assert!(listing(&lines, "order")["blocks"].is_array());
+
+    // --sfc with a flow that cannot be planned: the listings say so, as objects.
+    let p = project();
+    let sfc = std::fs::read_to_string(p.path().join("sfc.xml")).unwrap();
+    let broken = sfc.replacen(
+        "<connectionPointIn><connection refLocalId=\"2\"/></connectionPointIn>",
+        "",
+        1,
+    );
+    std::fs::write(p.path().join("sfc.xml"), broken).unwrap();
+    let o = run(
+        &["--sfc", "--format", "json", "-pS", "-pF", "-pO", "sfc.xml"],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(1));
+    let lines = json_lines(&o);
+    assert_eq!(listing(&lines, "flow")["available"], false);
+    assert_eq!(
+        listing(&lines, "order")["reason"],
+        "the SFC's flow has errors"
+    );
+    assert!(listing(&lines, "sfc")["objects"].is_array());
+    assert!(lines.iter().any(|l| l["severity"] == "error"));
+}
