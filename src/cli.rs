@@ -26,9 +26,16 @@ use crate::load::FsSource;
 struct Args {
     #[command(subcommand)]
     command: Option<Command>,
-    /// BLACKBOARD and PROGRAM (compile); SFC (with --sfc); optional BLACKBOARD (with --info)
-    #[arg(value_name = "FILES")]
-    inputs: Vec<PathBuf>,
+    /// The blackboard (.aml); with --sfc, the SFC file instead; optional with --info
+    #[arg(value_name = "BLACKBOARD")]
+    blackboard: Option<PathBuf>,
+    /// The program name, a KRL name: writes <PROGRAM>.src and <PROGRAM>.dat beside the blackboard
+    /// (not needed with --validate)
+    #[arg(value_name = "PROGRAM")]
+    program: Option<PathBuf>,
+    /// More arguments than a mode takes: a usage error that names the mode's arguments.
+    #[arg(hide = true)]
+    extra: Vec<PathBuf>,
     /// Print the version and build; with a blackboard, the skills of each resource and the SFC
     /// variables each needs
     #[arg(long)]
@@ -135,12 +142,18 @@ fn run(a: Args) -> u8 {
     };
     let warnings = a.warn || a.validate || a.sfc;
     let mut stdout = std::io::stdout().lock();
+    let inputs: Vec<&PathBuf> = a
+        .blackboard
+        .iter()
+        .chain(&a.program)
+        .chain(&a.extra)
+        .collect();
 
     if a.info {
-        if a.inputs.len() > 1 {
+        if inputs.len() > 1 {
             return usage("--info takes at most one argument, the blackboard");
         }
-        let Some(bb) = a.inputs.first() else {
+        let Some(bb) = inputs.first() else {
             let _ = write!(stdout, "{}", crate::print::info(None));
             return 0;
         };
@@ -171,7 +184,7 @@ fn run(a: Args) -> u8 {
     }
 
     if a.sfc {
-        let [path] = a.inputs.as_slice() else {
+        let [path] = inputs.as_slice() else {
             return usage("--sfc takes one argument, the SFC file");
         };
         let c = compile::check_sfc_pou(&fs, path, a.pou.as_deref());
@@ -181,7 +194,7 @@ fn run(a: Args) -> u8 {
     }
 
     // `--validate` needs no program name: nothing is written.
-    let (blackboard, program) = match a.inputs.as_slice() {
+    let (blackboard, program) = match inputs.as_slice() {
         [blackboard, program] => (blackboard, Some(program.to_string_lossy().into_owned())),
         [blackboard] if a.validate => (blackboard, None),
         _ if a.validate => {

@@ -46,7 +46,7 @@ pub fn blackboard(bb: &Blackboard) -> String {
             );
             let _ = writeln!(
                 o,
-                "                -> IRL-File:  \t{}   (command {})",
+                "                -> IRL-File:  {}   (command {})",
                 f.irl.value, f.command.text
             );
         }
@@ -128,8 +128,8 @@ pub fn sfc(sfc: &Sfc) -> String {
                 let _ = writeln!(o, "            {conn}");
                 let _ = writeln!(
                     o,
-                    "            Duration:   {} seconds",
-                    st.duration.unwrap_or(0.0)
+                    "            Duration:   {}",
+                    seconds(st.duration.unwrap_or(0.0))
                 );
                 if let Some(r) = &st.resource {
                     let _ = writeln!(o, "            Resource:   {}", r.text);
@@ -339,8 +339,18 @@ pub fn flow(sfc: &Sfc, plan: &Plan) -> String {
     } else {
         ""
     };
-    let _ = writeln!(o, "total: {} seconds{what}{longest}", fmt_num(total));
+    let _ = writeln!(o, "total: {}{what}{longest}", seconds(total));
     o
+}
+
+/// `1 second`, `0 seconds`, `1.5 seconds`.
+fn seconds(x: f64) -> String {
+    let n = fmt_num(x);
+    if n == "1" {
+        "1 second".to_owned()
+    } else {
+        format!("{n} seconds")
+    }
 }
 
 fn fmt_num(x: f64) -> String {
@@ -361,11 +371,12 @@ pub fn order(sfc: &Sfc, plan: &Plan) -> String {
             match b {
                 Block::Step(i) => {
                     *n += 1;
+                    // Aligned with spaces (no tabs): numbers to 999, localIds to 99999.
                     let _ = writeln!(
                         o,
-                        "{indent} #{} \t(id={}) \t{}",
-                        n,
-                        sfc.elements[*i].local_id,
+                        "{indent} {:<4} {:<10} {}",
+                        format!("#{n}"),
+                        format!("(id={})", sfc.elements[*i].local_id),
                         step_name(sfc, *i)
                     );
                 }

@@ -122,6 +122,10 @@ fn print_order_and_flow() {
     );
     assert!(out.contains("id=  12, [@3.5    +      0], End"), "{out}");
     assert!(out.contains("total: 3.5 seconds"), "{out}");
+    // Aligned with spaces, no tabs.
+    assert!(!out.contains('\t'), "{out}");
+    assert!(out.contains(" #3   (id=8)     LIN\n"), "{out}");
+    assert!(out.contains(" #5   (id=12)    End\n"), "{out}");
     // -p0 is accepted for -pO.
     let o = run(&["--validate", "-p0", "Blackboard.aml", "out"], p.path());
     assert_eq!(
@@ -146,7 +150,15 @@ fn print_blackboard_and_sfc() {
         "{out}"
     );
     assert!(out.contains("(Func)  SetToolPathVelocity"));
-    assert!(out.contains("IRL-File:  \tkr15-2.irl"));
+    assert!(
+        out.contains("-> IRL-File:  kr15-2.irl   (command PTP)"),
+        "{out}"
+    );
+    // Aligned with spaces: no tabs in any listing.
+    assert!(!out.contains('\t'), "{out}");
+    // One second, singular.
+    assert!(out.contains("Duration:   1 second\n"), "{out}");
+    assert!(out.contains("Duration:   1.5 seconds\n"), "{out}");
     assert!(out.contains("iwb, DemoProduct, 1, 2015-05-26T12:00:00"));
     assert!(out.contains("4 -> [ 5 ] -> 8, 6"), "{out}");
     assert!(
@@ -1027,4 +1039,55 @@ fn json_listings_of_a_loop_and_of_a_broken_flow() {
     );
     assert!(listing(&lines, "sfc")["objects"].is_array());
     assert!(lines.iter().any(|l| l["severity"] == "error"));
+}
+
+#[test]
+fn help_names_the_arguments() {
+    let d = tempfile::tempdir().unwrap();
+    let o = run(&["--help"], d.path());
+    assert_eq!(o.status.code(), Some(0));
+    let h = stdout(&o);
+    assert!(
+        h.contains("Usage: skillpost [OPTIONS] <BLACKBOARD> <PROGRAM>"),
+        "{h}"
+    );
+    assert!(h.contains("[BLACKBOARD]") && h.contains("[PROGRAM]"), "{h}");
+    assert!(!h.contains("FILES"), "{h}");
+    // More arguments than the mode takes: our usage error, exit 2.
+    let o = run(&["a.aml", "P", "extra"], d.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("expected a blackboard and a program name"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn one_second_is_singular_in_the_flow_total() {
+    let d = project();
+    // Every step 0 s except one of 1 s.
+    let sfc = std::fs::read_to_string(d.path().join("sfc.xml")).unwrap();
+    let mut n = 0;
+    let sfc = regex_free_replace_durations(&sfc, &mut n);
+    std::fs::write(d.path().join("sfc.xml"), sfc).unwrap();
+    let o = run(&["--sfc", "-pF", "sfc.xml"], d.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stdout(&o).contains("total: 1 second\n"), "{}", stdout(&o));
+}
+
+/// Sets the first `duration="…"` to 1 and every other to 0.
+fn regex_free_replace_durations(s: &str, n: &mut usize) -> String {
+    let mut out = String::new();
+    let mut rest = s;
+    while let Some(i) = rest.find("duration=\"") {
+        out.push_str(&rest[..i + 10]);
+        rest = &rest[i + 10..];
+        let j = rest.find('"').unwrap();
+        out.push_str(if *n == 0 { "1" } else { "0" });
+        *n += 1;
+        rest = &rest[j..];
+    }
+    out.push_str(rest);
+    out
 }
