@@ -19,7 +19,7 @@ use crate::load::FsSource;
     name = "skillpost",
     version,
     disable_version_flag = true,
-    override_usage = "skillpost [OPTIONS] <BLACKBOARD> <PROGRAM>\n       skillpost --sfc [OPTIONS] <SFC>\n       skillpost --info [<BLACKBOARD>]",
+    override_usage = "skillpost [OPTIONS] <BLACKBOARD> <PROGRAM>\n       skillpost --validate [OPTIONS] <BLACKBOARD> [<PROGRAM>]\n       skillpost --sfc [OPTIONS] <SFC>\n       skillpost --info [<BLACKBOARD>]",
     after_help = "Exit status: 0 success (warnings allowed), 1 the inputs have errors, 2 usage or I/O failure."
 )]
 #[command(args_conflicts_with_subcommands = true)]
@@ -121,7 +121,7 @@ pub fn main(args: impl IntoIterator<Item = OsString>) -> ExitCode {
 
 fn usage(msg: &str) -> u8 {
     eprintln!(
-        "error: {msg}\n\nUsage: skillpost [OPTIONS] <BLACKBOARD> <PROGRAM>\n       skillpost --sfc [OPTIONS] <SFC>\n       skillpost --info [<BLACKBOARD>]\n\nFor more information, try '--help'."
+        "error: {msg}\n\nUsage: skillpost [OPTIONS] <BLACKBOARD> <PROGRAM>\n       skillpost --validate [OPTIONS] <BLACKBOARD> [<PROGRAM>]\n       skillpost --sfc [OPTIONS] <SFC>\n       skillpost --info [<BLACKBOARD>]\n\nFor more information, try '--help'."
     );
     2
 }

@@ -1051,6 +1051,10 @@ fn help_names_the_arguments() {
         h.contains("Usage: skillpost [OPTIONS] <BLACKBOARD> <PROGRAM>"),
         "{h}"
     );
+    assert!(
+        h.contains("skillpost --validate [OPTIONS] <BLACKBOARD> [<PROGRAM>]"),
+        "{h}"
+    );
     assert!(h.contains("[BLACKBOARD]") && h.contains("[PROGRAM]"), "{h}");
     assert!(!h.contains("FILES"), "{h}");
     // More arguments than the mode takes: our usage error, exit 2.
