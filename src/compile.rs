@@ -42,8 +42,30 @@ pub struct WriteBack {
     pub bom: bool,
     /// The refURI `Attribute` element's range in the text after the BOM.
     pub attribute: Range<usize>,
+    /// Where the value goes in the text after the BOM, as the reader found it.
+    pub site: crate::write::SpliceSite,
     /// The value to write: the `.src` path relative to the blackboard, with `/`.
     pub value: String,
+}
+
+impl WriteBack {
+    /// The blackboard's bytes after this write-back (BOM included): what [`apply`] writes when
+    /// it writes. `None` when the value is already right or cannot be spliced.
+    pub fn new_bytes(&self) -> Option<Vec<u8>> {
+        let body = if self.bom {
+            self.expected.get(3..)?
+        } else {
+            &self.expected
+        };
+        let text = std::str::from_utf8(body).ok()?;
+        let new = crate::write::splice_at(text, &self.site, &self.value).ok()??;
+        let mut out = Vec::with_capacity(new.len() + 3);
+        if self.bom {
+            out.extend_from_slice(b"\xEF\xBB\xBF");
+        }
+        out.extend_from_slice(new.as_bytes());
+        Some(out)
+    }
 }
 
 /// Everything a compile produced.
@@ -105,6 +127,8 @@ struct Ctx<'a> {
     diags: Diagnostics,
     base: PathBuf,
     confine: Option<PathBuf>,
+    /// Every file a `refURI` named, with the reference (for [`check_outputs`]).
+    refs: Vec<(PathBuf, Span)>,
 }
 
 impl<'a> Ctx<'a> {
@@ -118,6 +142,7 @@ impl<'a> Ctx<'a> {
             diags: Diagnostics::default(),
             base,
             confine,
+            refs: Vec::new(),
         }
     }
 
@@ -176,6 +201,7 @@ impl<'a> Ctx<'a> {
             );
             return None;
         }
+        self.refs.push((path.clone(), at.clone()));
         let display = path.display().to_string();
         xml::load(
             &self.fs,
@@ -186,6 +212,65 @@ impl<'a> Ctx<'a> {
             &mut self.diags,
         )
     }
+}
+
+/// `E605` for every output that is also an input of this compile: a `refURI`'s file (located
+/// at the reference), the blackboard or the template. Paths are compared as written (after
+/// `.`/`..` are resolved) and, where the file system can tell, with symbolic links resolved, so
+/// `./X.src` and a link to `X.src` count. (The blackboard is the write-back's target, which is
+/// not an output; an *output* named like it is an error.)
+fn check_outputs(
+    cx: &mut Ctx,
+    outputs: &[(PathBuf, crate::emit::OutputFile)],
+    blackboard: &Path,
+    template: Option<&Path>,
+) {
+    if outputs.is_empty() {
+        return;
+    }
+    let mut inputs: Vec<(PathBuf, Option<Span>)> = vec![(blackboard.to_owned(), None::<Span>)];
+    inputs.extend(template.map(|t| (t.to_owned(), None)));
+    inputs.extend(cx.refs.iter().map(|(p, s)| (p.clone(), Some(s.clone()))));
+    let mut reported: Vec<(PathBuf, PathBuf)> = Vec::new();
+    for (out, _) in outputs {
+        let out_real = real_or_parent(&cx.fs, out);
+        for (input, at) in &inputs {
+            let same = paths::absolute(out) == paths::absolute(input)
+                || (out_real.is_some() && out_real == real_or_parent(&cx.fs, input));
+            if !same || reported.iter().any(|(o, i)| o == out && i == input) {
+                continue;
+            }
+            reported.push((out.clone(), input.clone()));
+            let name = out.file_name().unwrap_or_default().to_string_lossy();
+            let d = Diagnostic::error(
+                Code::OutputIsInput,
+                format!(
+                    "the output `{name}` is also an input of this compile (`{}`); writing it would overwrite that input: rename the input or choose another program name",
+                    input.display()
+                ),
+            );
+            cx.diags.push(match at {
+                Some(span) => d.at(span.clone()),
+                None => match cx.sources.find(input) {
+                    Some(file) => d.at(Span::new(file, 0..0)),
+                    None => d.path(input),
+                },
+            });
+        }
+    }
+}
+
+/// The real path of a file, or of its folder joined with its name when the file does not exist
+/// (an output about to be created); `None` where the file system cannot tell.
+fn real_or_parent(fs: &dyn FileSource, p: &Path) -> Option<PathBuf> {
+    fs.real_path(p).or_else(|| {
+        let name = p.file_name()?;
+        let parent = match p.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        Some(fs.real_path(parent)?.join(name))
+    })
 }
 
 /// The `DEF` name the code is generated under when no program name is given (a valid KRL name;
@@ -308,6 +393,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             lap(&mut out, "emit");
         }
     }
+    check_outputs(&mut cx, &out.outputs, blackboard, opts.template.as_deref());
 
     if !cx.diags.has_errors()
         && let Some(wb) = &bb.write_back
@@ -324,6 +410,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             expected,
             bom: src.bom,
             attribute: wb.attribute.range.clone(),
+            site: wb.site.clone(),
             value: format!("{program}.src"),
         });
     }
@@ -385,6 +472,28 @@ pub struct Applied {
     pub write_back: Option<crate::write::WriteBackOutcome>,
 }
 
+/// How often, and how long apart at first (doubling), the write-back is tried again while
+/// another program has the blackboard open: about 1.3 s in all.
+const IN_USE_TRIES: u32 = 6;
+const IN_USE_FIRST_WAIT: std::time::Duration = std::time::Duration::from_millis(40);
+
+/// The write-back, tried again a few times while another program has the blackboard open (an
+/// editor saving it holds it open for milliseconds); after that it is reported as skipped.
+fn write_back_retrying(wb: &WriteBack) -> std::io::Result<crate::write::WriteBackOutcome> {
+    let mut wait = IN_USE_FIRST_WAIT;
+    let mut tries = 1;
+    loop {
+        let outcome =
+            crate::write::write_back(&wb.blackboard, &wb.expected, wb.bom, &wb.site, &wb.value)?;
+        if outcome != crate::write::WriteBackOutcome::SkippedInUse || tries >= IN_USE_TRIES {
+            return Ok(outcome);
+        }
+        std::thread::sleep(wait);
+        wait *= 2;
+        tries += 1;
+    }
+}
+
 /// Writes the outputs (atomically, only when their bytes change), then the write-back.
 pub fn apply(c: &Compilation) -> std::io::Result<Applied> {
     // The `.src` and `.dat` only work as a pair: both are replaced or neither is.
@@ -399,18 +508,9 @@ pub fn apply(c: &Compilation) -> std::io::Result<Applied> {
         .map(|(o, (p, _))| (p.clone(), o == crate::write::WriteOutcome::Written))
         .collect();
     let write_back = match &c.write_back {
-        Some(wb) => Some(
-            crate::write::write_back(
-                &wb.blackboard,
-                &wb.expected,
-                wb.bom,
-                wb.attribute.clone(),
-                &wb.value,
-            )
-            .map_err(|e| {
-                std::io::Error::new(e.kind(), format!("{}: {e}", wb.blackboard.display()))
-            })?,
-        ),
+        Some(wb) => Some(write_back_retrying(wb).map_err(|e| {
+            std::io::Error::new(e.kind(), format!("{}: {e}", wb.blackboard.display()))
+        })?),
         None => None,
     };
     Ok(Applied {

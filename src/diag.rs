@@ -365,9 +365,13 @@ codes! {
     NonAscii = "E602",
     /// The output template cannot be used.
     BadTemplate = "E603",
-    /// An output or the blackboard cannot be written (disk full, permissions); the daemon
-    /// reports it in `compile-failed`, the command line exits with status 2.
+    /// An output or the blackboard cannot be written (disk full, permissions, an output that
+    /// is a symbolic link or read-only); the daemon reports it in `compile-failed`, the command
+    /// line exits with status 2.
     CannotWrite = "E604",
+    /// An output (`<program>.src`/`.dat`) is also a file this compile reads (an IRL file, the
+    /// SFC, the template, the blackboard): writing it would overwrite an input.
+    OutputIsInput = "E605",
 
     /// The hierarchy is not named `Blackboard` (the only one was used).
     HierarchyNotNamed = "W201",

@@ -76,6 +76,9 @@ pub struct RefValue {
 pub struct WriteBackTarget {
     pub attribute: Span,
     pub current: Option<String>,
+    /// Where the value goes: the byte range the splice replaces, found by the reader's parse
+    /// (`write::SpliceSite::of`).
+    pub site: crate::write::SpliceSite,
 }
 
 #[derive(Debug)]

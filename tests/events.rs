@@ -6,6 +6,8 @@
 //!
 //! The helpers are copied from tests/daemon.rs (kept small; that file is not shared).
 
+mod common;
+
 use std::fs;
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -25,14 +27,7 @@ const FILES: [&str; 3] = ["Blackboard.aml", "sfc.xml", "kr15-2.irl"];
 // Helpers
 // ---------------------------------------------------------------------------------------------
 
-/// Prints why a test cannot run here; with `SKILLPOST_STRICT_TESTS=1` that is a failure.
-/// (A minimal local copy of `tests/common`'s `skip`.)
-fn skip(reason: &str) {
-    if std::env::var_os("SKILLPOST_STRICT_TESTS").is_some_and(|v| v == "1") {
-        panic!("skipped: {reason} (SKILLPOST_STRICT_TESTS=1)");
-    }
-    eprintln!("skipped: {reason}");
-}
+use common::skip;
 
 fn sample() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/ok/reference-sample")

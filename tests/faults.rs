@@ -2,6 +2,8 @@
 //! which holds even for root). Each test says it is skipped, and why, where the machine does not
 //! allow the fault (mounting needs root).
 
+mod common;
+
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -155,7 +157,7 @@ fn full_disk_is_a_clear_failure_and_other_projects_go_on() {
     let ok = dir.path().join("ok");
     copy_project(&ok);
     let Some(_fs) = Tmpfs::mount(&dir.path().join("small"), 256) else {
-        eprintln!("skipped: cannot mount a tmpfs here (needs root)");
+        common::skip("cannot mount a tmpfs here (needs root)");
         return;
     };
     let full = dir.path().join("small/full");
@@ -219,7 +221,7 @@ fn unwritable_folder_is_a_clear_failure_and_nothing_partial_is_left() {
     copy_project(&locked);
     let bb_before = fs::read(locked.join("Blackboard.aml")).unwrap();
     let Some(_imm) = Immutable::set(&locked) else {
-        eprintln!("skipped: chattr +i is not available here");
+        common::skip("chattr +i is not available here");
         return;
     };
     let d = Daemon::start(&dir.path().join("events.jsonl"), &[&ok, &locked]);
@@ -244,7 +246,7 @@ fn unwritable_folder_is_a_clear_failure_and_nothing_partial_is_left() {
 fn command_line_on_a_full_disk_exits_2_and_leaves_no_partial_file() {
     let dir = tempfile::tempdir().unwrap();
     let Some(_fs) = Tmpfs::mount(&dir.path().join("small"), 256) else {
-        eprintln!("skipped: cannot mount a tmpfs here (needs root)");
+        common::skip("cannot mount a tmpfs here (needs root)");
         return;
     };
     let p = dir.path().join("small/p");
@@ -280,7 +282,7 @@ fn an_output_that_cannot_be_replaced_keeps_the_pair_unwritten() {
         let bb_before = fs::read(p.join("Blackboard.aml")).unwrap();
         fs::write(p.join(locked), "stale\r\n").unwrap();
         let Some(_imm) = Immutable::set(&p.join(locked)) else {
-            eprintln!("skipped: chattr +i is not available here");
+            common::skip("chattr +i is not available here");
             return;
         };
         let o = Command::new(env!("CARGO_BIN_EXE_skillpost"))

@@ -26,6 +26,8 @@
 //! - a second run over unchanged inputs exits 0 and rewrites nothing (modification times kept);
 //! - the `.src`/`.dat` pass a KRL structure check ([`check_krl`]).
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::fs;
 use std::ops::Range;
@@ -531,20 +533,20 @@ fn line_ends(bytes: &[u8]) -> &'static str {
 fn schema_dir() -> Option<PathBuf> {
     let dir = repo().join("../shared/schemas");
     if !dir.is_dir() {
-        println!("schema check skipped: {} does not exist", dir.display());
+        common::skip(&format!("schema check: {} does not exist", dir.display()));
         return None;
     }
     match Command::new("xmllint").arg("--version").output() {
         Ok(o) if o.status.success() => Some(dir),
         Ok(o) => {
-            println!(
-                "schema check skipped: `xmllint --version` failed with {}",
+            common::skip(&format!(
+                "schema check: `xmllint --version` failed with {}",
                 o.status
-            );
+            ));
             None
         }
         Err(e) => {
-            println!("schema check skipped: xmllint is not installed ({e})");
+            common::skip(&format!("schema check: xmllint is not installed ({e})"));
             None
         }
     }

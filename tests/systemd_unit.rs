@@ -1,6 +1,8 @@
 //! The systemd unit in `systemd/skillpost.service`: hardened, and accepted by
 //! `systemd-analyze verify` (when systemd's analyzer is installed).
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -38,7 +40,9 @@ fn unit_has_the_key_lines() {
         ("PrivateDevices", "yes"),
         ("RestrictAddressFamilies", "AF_UNIX"),
         ("SystemCallFilter", "@system-service"),
-        ("CapabilityBoundingSet", ""),
+        // The write-back's lease on planners' blackboards; nothing else.
+        ("CapabilityBoundingSet", "CAP_LEASE"),
+        ("AmbientCapabilities", "CAP_LEASE"),
         ("ExecReload", "/bin/kill -HUP $MAINPID"),
         ("Restart", "on-failure"),
         ("User", "skillpost"),
@@ -120,9 +124,9 @@ fn systemd_analyze_verify_accepts_the_unit() {
     let dir = tempfile::tempdir().unwrap();
     let unit = unit_copy(dir.path(), Path::new(env!("CARGO_BIN_EXE_skillpost")), "");
     let Some((ok, ours, all)) = verify(&unit) else {
-        println!(
-            "skipped: `systemd-analyze` is not installed, so systemd/skillpost.service was not \
-             verified (install systemd, e.g. `apt-get install systemd`, to run this check)"
+        common::skip(
+            "`systemd-analyze` is not installed, so systemd/skillpost.service was not \
+             verified (install systemd, e.g. `apt-get install systemd`, to run this check)",
         );
         return;
     };
@@ -145,7 +149,7 @@ fn systemd_analyze_verify_catches_mistakes() {
         "ProtectSytem=strict\nRestrictRealtime=maybe",
     );
     let Some((_, ours, all)) = verify(&unit) else {
-        println!("skipped: `systemd-analyze` is not installed");
+        common::skip("`systemd-analyze` is not installed");
         return;
     };
     assert!(

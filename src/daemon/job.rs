@@ -235,22 +235,28 @@ impl Job {
                 warnings,
             },
         );
+        // (The outputs are our other writes: never inputs (E605), and their events are ignored,
+        // so they need no known state.)
         let mut again = false;
         if let (Some(wb), Some(outcome)) = (&c.write_back, &applied.write_back) {
             use crate::write::WriteBackOutcome as W;
-            let (written, reason) = match outcome {
-                W::Written => (true, None),
-                W::AlreadyRight => (false, Some("already right")),
-                W::SkippedChangedOnDisk => (
-                    false,
-                    Some("the blackboard changed on disk since it was read; compiling again"),
-                ),
-            };
-            if *outcome == W::Written {
-                // Our own write: its bytes are the new known state, so its event starts nothing.
-                inputs.insert(wb.blackboard.clone(), hash_file(&wb.blackboard));
+            let (written, reason) = (*outcome == W::Written, outcome.reason());
+            if written {
+                // Our own write: the bytes *we* wrote are the known state, so the event of our
+                // write starts nothing. Not the bytes on disk now: a planner's save may already
+                // have replaced ours, and hashing it would take that save for our write.
+                let ours = wb.new_bytes().map(|b| hash_bytes(&b));
+                inputs.insert(wb.blackboard.clone(), ours);
+                // A linked blackboard: the file it points to is an input too (add_link_targets).
+                if let Ok(real) = std::fs::canonicalize(&wb.blackboard)
+                    && let Some(h) = inputs.get_mut(&real)
+                {
+                    *h = ours;
+                }
+                // A save that raced our write: compile again.
+                again = hash_file(&wb.blackboard) != ours;
             }
-            again = *outcome == W::SkippedChangedOnDisk;
+            again |= *outcome == W::SkippedChangedOnDisk;
             self.sink.emit(
                 Some(&project),
                 Event::WriteBack {
@@ -259,7 +265,7 @@ impl Job {
                     value: wb.value.clone(),
                     written,
                     reason: reason.map(str::to_owned),
-                    skipped: again,
+                    skipped: !matches!(outcome, W::Written | W::AlreadyRight),
                 },
             );
         }

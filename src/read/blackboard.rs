@@ -878,10 +878,11 @@ impl Reader<'_> {
                 })
         });
         let attr = iface.and_then(|i| caex_attr(i, "refURI"));
-        match attr {
-            Some(a) => Some(WriteBackTarget {
+        match attr.and_then(|a| Some((a, crate::write::SpliceSite::of(a)?))) {
+            Some((a, site)) => Some(WriteBackTarget {
                 attribute: Span::new(self.file, a.range()),
                 current: caex_value(self.file, a).map(|(v, _)| v),
+                site,
             }),
             None => {
                 let at = iface.or(code).unwrap_or(h);

@@ -38,15 +38,6 @@ pub const WAIT: Duration = Duration::from_secs(5);
 /// The project files copied from the reference sample.
 pub const FILES: [&str; 3] = ["Blackboard.aml", "sfc.xml", "kr15-2.irl"];
 
-/// Reports a test that cannot run here: prints `skipped: <why>`, or fails when
-/// `SKILLPOST_STRICT_TESTS=1` (CI machines that must run everything).
-pub fn skip(reason: &str) {
-    if std::env::var_os("SKILLPOST_STRICT_TESTS").is_some_and(|v| v == "1") {
-        panic!("cannot run (SKILLPOST_STRICT_TESTS=1): {reason}");
-    }
-    eprintln!("skipped: {reason}");
-}
-
 // ---------------------------------------------------------------------------------------------
 // Files
 // ---------------------------------------------------------------------------------------------

@@ -1,0 +1,149 @@
+//! Helpers shared by the integration tests (`mod common;` in a test file).
+
+#![allow(dead_code)]
+
+/// Skips a test that cannot run on this machine: prints `skipped: <reason>` and returns, so the
+/// caller `return`s next. Under `SKILLPOST_STRICT_TESTS=1` (CI sets it) it fails instead, so a
+/// machine that silently cannot run a test does not pass for one that ran it.
+pub fn skip(reason: &str) {
+    if strict() {
+        panic!("cannot run here: {reason} (SKILLPOST_STRICT_TESTS=1 makes this a failure)");
+    }
+    eprintln!("skipped: {reason}");
+}
+
+/// Whether `SKILLPOST_STRICT_TESTS=1` is set.
+pub fn strict() -> bool {
+    std::env::var("SKILLPOST_STRICT_TESTS").as_deref() == Ok("1")
+}
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+/// The reference sample project.
+pub fn sample() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/ok/reference-sample")
+}
+
+/// Copies the regular files of the reference sample into `dir`.
+pub fn copy_sample(dir: &Path) {
+    for e in fs::read_dir(sample()).unwrap() {
+        let e = e.unwrap();
+        if e.file_type().unwrap().is_file() {
+            fs::copy(e.path(), dir.join(e.file_name())).unwrap();
+        }
+    }
+}
+
+/// A running `skillpost watch --events FILE --settle MS <args>`, killed when dropped.
+pub struct Watch {
+    child: Child,
+    pub events: PathBuf,
+    stderr: PathBuf,
+}
+
+impl Watch {
+    /// Starts the daemon in `cwd` (events and log go there) and waits for `started`.
+    pub fn start(cwd: &Path, settle_ms: u64, args: &[&str]) -> Watch {
+        Self::start_bin(
+            Path::new(env!("CARGO_BIN_EXE_skillpost")),
+            cwd,
+            settle_ms,
+            args,
+        )
+    }
+
+    /// [`Watch::start`] with another binary (an older build, to show a test catches its bug).
+    pub fn start_bin(bin: &Path, cwd: &Path, settle_ms: u64, args: &[&str]) -> Watch {
+        let events = cwd.join("events.jsonl");
+        let stderr = cwd.join("stderr.log");
+        let child = Command::new(bin)
+            .arg("watch")
+            .arg("--events")
+            .arg(&events)
+            .arg("--settle")
+            .arg(settle_ms.to_string())
+            .args(args)
+            .current_dir(cwd)
+            .env("RUST_LOG", "info")
+            // The daemon's folder locks stay in the test's workspace.
+            .env_remove("RUNTIME_DIRECTORY")
+            .env("XDG_RUNTIME_DIR", cwd)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(fs::File::create(&stderr).unwrap())
+            .spawn()
+            .unwrap();
+        let mut w = Watch {
+            child,
+            events,
+            stderr,
+        };
+        w.wait_for("started", Duration::from_secs(20), |e| {
+            e["event"] == "started"
+        });
+        w
+    }
+
+    /// Every complete event line so far.
+    pub fn events(&self) -> Vec<Value> {
+        let text = fs::read_to_string(&self.events).unwrap_or_default();
+        text.lines()
+            .filter(|l| !l.is_empty())
+            .filter_map(|l| serde_json::from_str(l).ok())
+            .collect()
+    }
+
+    /// Waits until an event matching `pred` appears; returns all events by then. Fails (with
+    /// the events and the log) on a timeout or when the daemon exits.
+    pub fn wait_for(
+        &mut self,
+        what: &str,
+        timeout: Duration,
+        pred: impl Fn(&Value) -> bool,
+    ) -> Vec<Value> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let evs = self.events();
+            if evs.iter().any(&pred) {
+                return evs;
+            }
+            if let Some(st) = self.child.try_wait().unwrap() {
+                self.fail(&format!(
+                    "the daemon exited ({st}) while waiting for {what}"
+                ));
+            }
+            if Instant::now() >= deadline {
+                self.fail(&format!("timed out after {timeout:?} waiting for {what}"));
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    /// Whether the daemon is still running.
+    pub fn alive(&mut self) -> bool {
+        self.child.try_wait().unwrap().is_none()
+    }
+
+    /// Panics with the event stream and the daemon's log.
+    pub fn fail(&self, msg: &str) -> ! {
+        let ev = fs::read_to_string(&self.events).unwrap_or_default();
+        let tail: Vec<&str> = ev.lines().rev().take(60).collect();
+        panic!(
+            "{msg}\n--- last events ---\n{}\n--- stderr ---\n{}",
+            tail.into_iter().rev().collect::<Vec<_>>().join("\n"),
+            fs::read_to_string(&self.stderr).unwrap_or_default()
+        );
+    }
+}
+
+impl Drop for Watch {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
