@@ -245,33 +245,59 @@ fn run(a: Args) -> u8 {
                 );
             }
             use crate::write::WriteBackOutcome as W;
-            match (&applied.write_back, &c.write_back) {
-                (Some(W::Written), Some(wb)) => say(
-                    json,
-                    &format!("wrote back `{}` into {}", wb.value, wb.blackboard.display()),
-                ),
-                (Some(W::AlreadyRight), _) => {}
-                (Some(W::SkippedChangedOnDisk), Some(wb)) => eprintln!(
-                    "warning: {} changed on disk while compiling; the write-back of `{}` was skipped (run again)",
-                    wb.blackboard.display(),
-                    wb.value
-                ),
-                (None, _) if json => {
-                    let line = serde_json::json!({
+            // Whenever the blackboard does not get the value, say so on stdout (a JSON object
+            // with --format json): (cause, reason).
+            let not_updated = match &applied.write_back {
+                Some(W::Written) => {
+                    if let Some(wb) = &c.write_back {
+                        say(
+                            json,
+                            &format!("wrote back `{}` into {}", wb.value, wb.blackboard.display()),
+                        );
+                    }
+                    None
+                }
+                Some(W::AlreadyRight) => None,
+                Some(W::SkippedChangedOnDisk) => Some((
+                    "changed-on-disk",
+                    "it changed on disk while compiling; run again",
+                )),
+                Some(W::SkippedInUse) => Some((
+                    "in-use",
+                    "another program has it open; run again when it is closed",
+                )),
+                Some(W::SkippedHardLinked) => Some((
+                    "hard-linked",
+                    "it has several names (hard links); writing it would split them",
+                )),
+                None => Some((
+                    "no-target",
+                    "no write-back target (Code -> KRL code -> refURI; W204 with --warn shows where)",
+                )),
+            };
+            if let Some((cause, reason)) = not_updated {
+                let value = c.write_back.as_ref().map(|wb| wb.value.as_str());
+                let _ = if json {
+                    let mut line = serde_json::json!({
                         "outcome": "blackboard-not-updated",
                         "blackboard": blackboard.display().to_string(),
-                        "reason": "no write-back target",
+                        "cause": cause,
+                        "reason": reason,
                     });
-                    let _ = writeln!(stdout, "{line}");
-                }
-                (None, _) => {
-                    let _ = writeln!(
+                    if let Some(v) = value {
+                        line["value"] = v.into();
+                    }
+                    writeln!(stdout, "{line}")
+                } else {
+                    let value = value
+                        .map(|v| format!(" (`{v}` not written)"))
+                        .unwrap_or_default();
+                    writeln!(
                         stdout,
-                        "blackboard not updated: {} has no write-back target (Code -> KRL code -> refURI; W204 with --warn shows where)",
+                        "blackboard not updated: {}: {reason}{value}",
                         blackboard.display()
-                    );
-                }
-                _ => {}
+                    )
+                };
             }
             0
         }

@@ -773,7 +773,7 @@ fn no_write_back_target_is_said_on_stdout() {
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     let out = stdout(&o);
     assert!(
-        out.contains("blackboard not updated: Blackboard.aml has no write-back target"),
+        out.contains("blackboard not updated: Blackboard.aml: no write-back target"),
         "{out}"
     );
     assert!(!stderr(&o).contains("W204"), "a warning only with --warn");
@@ -793,13 +793,32 @@ fn no_write_back_target_is_said_on_stdout() {
         [serde_json::json!({
             "outcome": "blackboard-not-updated",
             "blackboard": "Blackboard.aml",
-            "reason": "no write-back target"
+            "cause": "no-target",
+            "reason": "no write-back target (Code -> KRL code -> refURI; W204 with --warn shows where)"
         })]
     );
     // With a target, no such line.
     let p = project();
     let o = run(&["Blackboard.aml", "out"], p.path());
     assert!(!stdout(&o).contains("not updated"), "{}", stdout(&o));
+    // A write-back that is skipped says so too: a hard-linked blackboard is not split.
+    std::fs::hard_link(p.path().join("Blackboard.aml"), p.path().join("Other.aml")).unwrap();
+    let o = run(&["Blackboard.aml", "again"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let out = stdout(&o);
+    assert!(
+        out.contains("blackboard not updated: Blackboard.aml: it has several names (hard links)"),
+        "{out}"
+    );
+    assert!(out.contains("(`again.src` not written)"), "{out}");
+    let o = run(&["--format", "json", "Blackboard.aml", "again"], p.path());
+    let lines: Vec<serde_json::Value> = stdout(&o)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 1, "{lines:?}");
+    assert_eq!(lines[0]["cause"], "hard-linked");
+    assert_eq!(lines[0]["value"], "again.src");
 }
 
 #[test]
