@@ -35,7 +35,7 @@ use skillpost::emit::{EmitInput, OutputFile};
 use skillpost::load::FsSource;
 use skillpost::model::Irl;
 use skillpost::plan;
-use skillpost::read::{self, blackboard::read_blackboard, irl::read_irl, sfc::read_sfc, xml};
+use skillpost::read::{blackboard::read_blackboard, irl::read_irl, sfc::read_sfc, xml};
 
 #[path = "common/generator.rs"]
 mod generator;
@@ -350,7 +350,7 @@ fn stream_floor(text: &str) -> Duration {
 
 fn options() -> Options {
     Options {
-        program: "p".into(),
+        program: Some("p".into()),
         ..Default::default()
     }
 }
@@ -407,7 +407,7 @@ fn stages(bb_path: &Path) -> (Vec<Duration>, Vec<(&'static str, String)>) {
     lap(&mut times);
 
     let sfc_ref = bb.sfc_ref.clone().expect("an SFC reference");
-    let sfc_path = read::resolve_ref(base, &sfc_ref.value).expect("resolve the SFC");
+    let sfc_path = skillpost::paths::resolve_ref(base, &sfc_ref.value).expect("resolve the SFC");
     let sfc_file = xml::load(
         &fs,
         &sfc_path,
@@ -433,7 +433,8 @@ fn stages(bb_path: &Path) -> (Vec<Duration>, Vec<(&'static str, String)>) {
     let mut by_file = HashMap::new();
     for (r, f) in needed {
         let func = &bb.resources[r].functions[f];
-        let path = read::resolve_ref(base, &func.irl.value).expect("resolve an IRL file");
+        let path =
+            skillpost::paths::resolve_ref(base, &func.irl.value).expect("resolve an IRL file");
         let file = xml::load(
             &fs,
             &path,

@@ -19,16 +19,23 @@ use crate::load::FsSource;
     name = "skillpost",
     version,
     disable_version_flag = true,
-    override_usage = "skillpost [OPTIONS] <BLACKBOARD> <PROGRAM>\n       skillpost --sfc [OPTIONS] <SFC>\n       skillpost --info [<BLACKBOARD>]",
+    override_usage = "skillpost [OPTIONS] <BLACKBOARD> <PROGRAM>\n       skillpost --validate [OPTIONS] <BLACKBOARD> [<PROGRAM>]\n       skillpost --sfc [OPTIONS] <SFC>\n       skillpost --info [<BLACKBOARD>]",
     after_help = "Exit status: 0 success (warnings allowed), 1 the inputs have errors, 2 usage or I/O failure."
 )]
 #[command(args_conflicts_with_subcommands = true)]
 struct Args {
     #[command(subcommand)]
     command: Option<Command>,
-    /// BLACKBOARD and PROGRAM (compile); SFC (with --sfc); optional BLACKBOARD (with --info)
-    #[arg(value_name = "FILES")]
-    inputs: Vec<PathBuf>,
+    /// The blackboard (.aml); with --sfc, the SFC file instead; optional with --info
+    #[arg(value_name = "BLACKBOARD")]
+    blackboard: Option<PathBuf>,
+    /// The program name, a KRL name: writes <PROGRAM>.src and <PROGRAM>.dat beside the blackboard
+    /// (not needed with --validate)
+    #[arg(value_name = "PROGRAM")]
+    program: Option<PathBuf>,
+    /// More arguments than a mode takes: a usage error that names the mode's arguments.
+    #[arg(hide = true)]
+    extra: Vec<PathBuf>,
     /// Print the version and build; with a blackboard, the skills of each resource and the SFC
     /// variables each needs
     #[arg(long)]
@@ -141,7 +148,7 @@ pub fn main(args: impl IntoIterator<Item = OsString>) -> ExitCode {
 
 fn usage(msg: &str) -> u8 {
     eprintln!(
-        "error: {msg}\n\nUsage: skillpost [OPTIONS] <BLACKBOARD> <PROGRAM>\n       skillpost --sfc [OPTIONS] <SFC>\n       skillpost --info [<BLACKBOARD>]\n\nFor more information, try '--help'."
+        "error: {msg}\n\nUsage: skillpost [OPTIONS] <BLACKBOARD> <PROGRAM>\n       skillpost --validate [OPTIONS] <BLACKBOARD> [<PROGRAM>]\n       skillpost --sfc [OPTIONS] <SFC>\n       skillpost --info [<BLACKBOARD>]\n\nFor more information, try '--help'."
     );
     2
 }
@@ -164,12 +171,18 @@ fn run(a: Args) -> u8 {
     };
     let warnings = a.warn || a.validate || a.sfc;
     let mut stdout = std::io::stdout().lock();
+    let inputs: Vec<&PathBuf> = a
+        .blackboard
+        .iter()
+        .chain(&a.program)
+        .chain(&a.extra)
+        .collect();
 
     if a.info {
-        if a.inputs.len() > 1 {
+        if inputs.len() > 1 {
             return usage("--info takes at most one argument, the blackboard");
         }
-        let Some(bb) = a.inputs.first() else {
+        let Some(bb) = inputs.first() else {
             let _ = write!(stdout, "{}", crate::print::info(None));
             return 0;
         };
@@ -200,20 +213,26 @@ fn run(a: Args) -> u8 {
     }
 
     if a.sfc {
-        let [path] = a.inputs.as_slice() else {
+        let [path] = inputs.as_slice() else {
             return usage("--sfc takes one argument, the SFC file");
         };
         let c = compile::check_sfc_pou(&fs, path, a.pou.as_deref());
-        print_listings(&c, &print, &mut stdout);
+        print_listings(&c, &print, a.format, &mut stdout);
         report(&c.diagnostics, &c.sources, a.format, warnings);
         return status(&c, "SFC validation successful!", a.format);
     }
 
-    let [blackboard, program] = a.inputs.as_slice() else {
-        return usage("expected a blackboard and a program name");
+    // `--validate` needs no program name: nothing is written.
+    let (blackboard, program) = match inputs.as_slice() {
+        [blackboard, program] => (blackboard, Some(program.to_string_lossy().into_owned())),
+        [blackboard] if a.validate => (blackboard, None),
+        _ if a.validate => {
+            return usage("--validate takes a blackboard and, optionally, a program name");
+        }
+        _ => return usage("expected a blackboard and a program name"),
     };
     let opts = Options {
-        program: program.to_string_lossy().into_owned(),
+        program,
         lf: a.lf,
         template: a.template.clone(),
         confine_to: None,
@@ -225,7 +244,7 @@ fn run(a: Args) -> u8 {
             eprintln!("timing: {stage:<16} {:>8.1} ms", d.as_secs_f64() * 1000.0);
         }
     }
-    print_listings(&c, &print, &mut stdout);
+    print_listings(&c, &print, a.format, &mut stdout);
     report(&c.diagnostics, &c.sources, a.format, warnings);
     if c.io_failure {
         return 2;
@@ -243,25 +262,71 @@ fn run(a: Args) -> u8 {
     std::mem::forget(c.sfc);
     match result {
         Ok(applied) => {
+            let json = a.format == Format::Json;
             for (path, written) in &applied.outputs {
-                eprintln!(
-                    "{} {}",
-                    if *written { "wrote" } else { "unchanged" },
-                    path.display()
+                say(
+                    json,
+                    &format!(
+                        "{} {}",
+                        if *written { "wrote" } else { "unchanged" },
+                        path.display()
+                    ),
                 );
             }
             use crate::write::WriteBackOutcome as W;
-            match (&applied.write_back, &c.write_back) {
-                (Some(W::Written), Some(wb)) => {
-                    eprintln!("wrote back `{}` into {}", wb.value, wb.blackboard.display())
+            // Whenever the blackboard does not get the value, say so on stdout (a JSON object
+            // with --format json): (cause, reason).
+            let not_updated = match &applied.write_back {
+                Some(W::Written) => {
+                    if let Some(wb) = &c.write_back {
+                        say(
+                            json,
+                            &format!("wrote back `{}` into {}", wb.value, wb.blackboard.display()),
+                        );
+                    }
+                    None
                 }
-                (Some(W::AlreadyRight), _) => {}
-                (Some(W::SkippedChangedOnDisk), Some(wb)) => eprintln!(
-                    "warning: {} changed on disk while compiling; the write-back of `{}` was skipped (run again)",
-                    wb.blackboard.display(),
-                    wb.value
-                ),
-                _ => {}
+                Some(W::AlreadyRight) => None,
+                Some(W::SkippedChangedOnDisk) => Some((
+                    "changed-on-disk",
+                    "it changed on disk while compiling; run again",
+                )),
+                Some(W::SkippedInUse) => Some((
+                    "in-use",
+                    "another program has it open; run again when it is closed",
+                )),
+                Some(W::SkippedHardLinked) => Some((
+                    "hard-linked",
+                    "it has several names (hard links); writing it would split them",
+                )),
+                None => Some((
+                    "no-target",
+                    "no write-back target (Code -> KRL code -> refURI; W204 with --warn shows where)",
+                )),
+            };
+            if let Some((cause, reason)) = not_updated {
+                let value = c.write_back.as_ref().map(|wb| wb.value.as_str());
+                let _ = if json {
+                    let mut line = serde_json::json!({
+                        "outcome": "blackboard-not-updated",
+                        "blackboard": blackboard.display().to_string(),
+                        "cause": cause,
+                        "reason": reason,
+                    });
+                    if let Some(v) = value {
+                        line["value"] = v.into();
+                    }
+                    writeln!(stdout, "{line}")
+                } else {
+                    let value = value
+                        .map(|v| format!(" (`{v}` not written)"))
+                        .unwrap_or_default();
+                    writeln!(
+                        stdout,
+                        "blackboard not updated: {}: {reason}{value}",
+                        blackboard.display()
+                    )
+                };
             }
             0
         }
@@ -272,33 +337,64 @@ fn run(a: Args) -> u8 {
     }
 }
 
-fn print_listings(c: &Compilation, print: &dyn Fn(char) -> bool, out: &mut impl Write) {
+/// A line of the run's outcome (what was written): on stdout, except with `--format json`,
+/// whose stdout holds JSON objects only; there it goes to stderr.
+fn say(json: bool, line: &str) {
+    if json {
+        eprintln!("{line}");
+    } else {
+        println!("{line}");
+    }
+}
+
+/// The `-p` listings on stdout: as text, or with `--format json` one JSON object per listing
+/// (docs/JSON.md), so stdout stays JSON Lines.
+fn print_listings(
+    c: &Compilation,
+    print: &dyn Fn(char) -> bool,
+    format: Format,
+    out: &mut impl Write,
+) {
+    use crate::print::json;
+    let json = format == Format::Json;
+    let mut emit = |text: &dyn Fn() -> String, object: &dyn Fn() -> serde_json::Value| {
+        let _ = if json {
+            writeln!(out, "{}", object())
+        } else {
+            writeln!(out, "{}", text())
+        };
+    };
     if print('B')
         && let Some(bb) = &c.blackboard
     {
-        let _ = writeln!(out, "{}", crate::print::blackboard(bb));
+        emit(&|| crate::print::blackboard(bb), &|| json::blackboard(bb));
     }
     if print('S')
         && let Some(sfc) = &c.sfc
     {
-        let _ = writeln!(out, "{}", crate::print::sfc(sfc));
+        emit(&|| crate::print::sfc(sfc), &|| json::sfc(sfc));
     }
     if let (Some(sfc), Some(plan)) = (&c.sfc, &c.plan) {
         if print('F') {
-            let _ = writeln!(out, "{}", crate::print::flow(sfc, plan));
+            emit(&|| crate::print::flow(sfc, plan), &|| json::flow(sfc, plan));
         }
         if print('O') {
-            let _ = writeln!(out, "{}", crate::print::order(sfc, plan));
+            emit(&|| crate::print::order(sfc, plan), &|| {
+                json::order(sfc, plan)
+            });
         }
     } else {
-        for (p, what) in [('F', "-pF"), ('O', "-pO")] {
+        for (p, what, listing) in [('F', "-pF", "flow"), ('O', "-pO", "order")] {
             if print(p) {
                 let why = if c.sfc.is_some() {
                     "the SFC's flow has errors"
                 } else {
                     "the SFC could not be read"
                 };
-                let _ = writeln!(out, "{what}: nothing to print: {why} (see the diagnostics)");
+                emit(
+                    &|| format!("{what}: nothing to print: {why} (see the diagnostics)"),
+                    &|| json::unavailable(listing, why),
+                );
             }
         }
     }
@@ -336,7 +432,7 @@ fn status(c: &Compilation, ok_message: &str, format: Format) -> u8 {
         1
     } else {
         if !ok_message.is_empty() {
-            eprintln!("{ok_message}");
+            say(format == Format::Json, ok_message);
         }
         0
     }

@@ -11,14 +11,17 @@ use crate::emit::krl::OutputTemplate;
 use crate::emit::{EmitInput, OutputFile};
 use crate::load::FileSource;
 use crate::model::{Blackboard, Irl, Sfc};
+use crate::paths;
 use crate::plan::{self, Plan};
-use crate::read::{self, blackboard::read_blackboard, irl::read_irl, sfc::read_sfc_pou, xml};
+use crate::read::{blackboard::read_blackboard, irl::read_irl, sfc::read_sfc_pou, xml};
 
 /// What to compile and how.
 #[derive(Debug, Clone, Default)]
 pub struct Options {
-    /// The program name (`<PROGRAM>`): the output files' stem and the `DEF` name.
-    pub program: String,
+    /// The program name (`<PROGRAM>`): the output files' stem and the `DEF` name. `None`
+    /// checks everything without one (`--validate BLACKBOARD`): the code is still generated, under
+    /// a placeholder name, so its checks run, but no outputs and no write-back are produced.
+    pub program: Option<String>,
     /// LF line endings instead of CRLF.
     pub lf: bool,
     /// A user output template instead of the built-in one.
@@ -73,7 +76,8 @@ pub struct Compilation {
     pub diagnostics: Vec<Diagnostic>,
     /// Every file the compile asked for, read or not (the daemon watches these).
     pub files_read: Vec<PathBuf>,
-    /// Set when the blackboard itself could not be read (an I/O failure, exit status 2).
+    /// Set when the blackboard itself (or the SFC with `--sfc`, or the `--template`) could not be
+    /// read (an I/O failure, exit status 2).
     pub io_failure: bool,
     /// The outputs to write, with their paths; empty when there are errors.
     pub outputs: Vec<(PathBuf, OutputFile)>,
@@ -142,7 +146,7 @@ impl<'a> Ctx<'a> {
         }
     }
 
-    /// Loads the file the command names (the blackboard, or the SFC with `--sfc`). When it
+    /// Loads a file the command names (the blackboard, the SFC with `--sfc`, the template). When it
     /// cannot be read at all, that is an I/O failure (exit status 2), not an input error.
     fn load_top(&mut self, path: &Path, out: &mut Compilation) -> Option<crate::diag::FileId> {
         let file = xml::load(
@@ -162,7 +166,7 @@ impl<'a> Ctx<'a> {
     /// Whether `path` stays inside `root`: by its text, and, where the file system can tell,
     /// with symbolic links resolved (a link inside the folder pointing out of it leaves it).
     fn inside(&self, path: &Path, root: &Path) -> bool {
-        if !read::normalize(&absolute(path)).starts_with(root) {
+        if !paths::absolute(path).starts_with(root) {
             return false;
         }
         match (self.fs.real_path(path), self.fs.real_path(root)) {
@@ -173,7 +177,7 @@ impl<'a> Ctx<'a> {
 
     /// Resolves a `refURI` and loads the file; errors are located at the reference.
     fn load_ref(&mut self, value: &str, at: &Span) -> Option<crate::diag::FileId> {
-        let path = match read::resolve_ref(&self.base, value) {
+        let path = match paths::resolve_ref(&self.base, value) {
             Ok(p) => p,
             Err(why) => {
                 self.diags.push(
@@ -231,7 +235,7 @@ fn check_outputs(
     for (out, _) in outputs {
         let out_real = real_or_parent(&cx.fs, out);
         for (input, at) in &inputs {
-            let same = read::normalize(&absolute(out)) == read::normalize(&absolute(input))
+            let same = paths::absolute(out) == paths::absolute(input)
                 || (out_real.is_some() && out_real == real_or_parent(&cx.fs, input));
             if !same || reported.iter().any(|(o, i)| o == out && i == input) {
                 continue;
@@ -269,15 +273,9 @@ fn real_or_parent(fs: &dyn FileSource, p: &Path) -> Option<PathBuf> {
     })
 }
 
-fn absolute(p: &Path) -> PathBuf {
-    if p.is_absolute() {
-        p.to_owned()
-    } else {
-        std::env::current_dir()
-            .map(|d| d.join(p))
-            .unwrap_or_else(|_| p.to_owned())
-    }
-}
+/// The `DEF` name the code is generated under when no program name is given (a valid KRL name;
+/// the code is checked, then discarded).
+const PLACEHOLDER_PROGRAM: &str = "VALIDATE";
 
 /// Compiles one project. Never writes; see [`apply`].
 pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compilation {
@@ -285,9 +283,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
     let mut cx = Ctx::new(
         fs,
         base,
-        opts.confine_to
-            .as_ref()
-            .map(|p| read::normalize(&absolute(p))),
+        opts.confine_to.as_ref().map(|p| paths::absolute(p)),
     );
     let mut out = Compilation::default();
     let mut clock = std::time::Instant::now();
@@ -297,12 +293,13 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         clock = now;
     };
 
-    if !crate::names::is_krl_name(&opts.program) {
+    if let Some(program) = &opts.program
+        && !crate::names::is_krl_name(program)
+    {
         cx.diags.push(Diagnostic::error(
             Code::BadProgramName,
             format!(
-                "program name `{}` is not a KRL name: a letter or `_`, then letters, digits or `_`, at most 24 characters",
-                opts.program
+                "program name `{program}` is not a KRL name: a letter or `_`, then letters, digits or `_`, at most 24 characters"
             ),
         ));
     }
@@ -315,18 +312,13 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
     };
     lap(&mut out, "read-blackboard");
 
-    // The output template.
+    // The output template: like the blackboard, one the command names, so a template that
+    // cannot be read at all is an I/O failure.
     let template = match &opts.template {
         None => Some(OutputTemplate::builtin()),
-        Some(p) => xml::load(
-            &cx.fs,
-            p,
-            p.display().to_string(),
-            None,
-            &mut cx.sources,
-            &mut cx.diags,
-        )
-        .and_then(|f| OutputTemplate::parse(&cx.sources, f, &mut cx.diags)),
+        Some(p) => cx
+            .load_top(p, &mut out)
+            .and_then(|f| OutputTemplate::parse(&cx.sources, f, &mut cx.diags)),
     };
 
     // The SFC and its plan.
@@ -379,7 +371,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             && let (Some(template), Some(plan)) = (&template, &plan)
         {
             let input = EmitInput {
-                program: &opts.program,
+                program: opts.program.as_deref().unwrap_or(PLACEHOLDER_PROGRAM),
                 blackboard: &bb,
                 sfc,
                 plan,
@@ -387,11 +379,13 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 irls: &irls,
                 newline: if opts.lf { "\n" } else { "\r\n" },
             };
-            if let Some(files) = crate::emit::krl::emit(&input, template, &mut cx.diags) {
+            if let Some(files) = crate::emit::krl::emit(&input, template, &mut cx.diags)
+                && let Some(program) = &opts.program
+            {
                 out.outputs = files
                     .into_iter()
                     .map(|f| {
-                        let name = format!("{}.{}", opts.program, f.extension);
+                        let name = format!("{program}.{}", f.extension);
                         (cx.base.join(name), f)
                     })
                     .collect();
@@ -403,6 +397,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
 
     if !cx.diags.has_errors()
         && let Some(wb) = &bb.write_back
+        && let Some(program) = &opts.program
     {
         let src = cx.sources.get(bb_file);
         let mut expected = Vec::with_capacity(src.text.len() + 3);
@@ -416,7 +411,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             bom: src.bom,
             attribute: wb.attribute.range.clone(),
             site: wb.site.clone(),
-            value: format!("{}.src", opts.program),
+            value: format!("{program}.src"),
         });
     }
     out.blackboard = Some(bb);
@@ -430,7 +425,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
 fn fragment(value: &str) -> Option<String> {
     let v = value.trim().trim_matches('"');
     let (_, f) = v.split_once('#')?;
-    let f = read::percent_decode(f).unwrap_or_else(|| f.to_owned());
+    let f = paths::percent_decode(f).unwrap_or_else(|| f.to_owned());
     let f = f.trim();
     (!f.is_empty()).then(|| f.to_owned())
 }

@@ -19,6 +19,7 @@
 //! - [`diag`]: diagnostics, their codes and their rendering.
 //! - [`names`]: case-insensitive name keys, KRL names, transliteration.
 //! - [`umask`]: the process's umask (the mode of new output files).
+//! - [`paths`]: `refURI` values → paths, lexical normalisation, absolute paths.
 #![forbid(unsafe_code)]
 
 pub mod bind;
@@ -31,6 +32,7 @@ pub mod emit;
 pub mod load;
 pub mod model;
 pub mod names;
+pub mod paths;
 pub mod plan;
 pub mod print;
 pub mod read;

@@ -2,7 +2,8 @@
 //! (flow with parallel branches and times), `-pO` (execution order), and `--info`.
 //!
 //! Each returns a `String`; the command line prints it. The layout follows the original's
-//! console output (see `docs/CLI.md`), with localIds everywhere.
+//! console output (`../shared/spec/reference/original-sample/`), with localIds everywhere; [`json`]
+//! gives the same listings as JSON objects for `--format json` (docs/JSON.md).
 
 use std::fmt::Write as _;
 
@@ -45,7 +46,7 @@ pub fn blackboard(bb: &Blackboard) -> String {
             );
             let _ = writeln!(
                 o,
-                "                -> IRL-File:  \t{}   (command {})",
+                "                -> IRL-File:  {}   (command {})",
                 f.irl.value, f.command.text
             );
         }
@@ -127,8 +128,8 @@ pub fn sfc(sfc: &Sfc) -> String {
                 let _ = writeln!(o, "            {conn}");
                 let _ = writeln!(
                     o,
-                    "            Duration:   {} seconds",
-                    st.duration.unwrap_or(0.0)
+                    "            Duration:   {}",
+                    seconds(st.duration.unwrap_or(0.0))
                 );
                 if let Some(r) = &st.resource {
                     let _ = writeln!(o, "            Resource:   {}", r.text);
@@ -338,8 +339,18 @@ pub fn flow(sfc: &Sfc, plan: &Plan) -> String {
     } else {
         ""
     };
-    let _ = writeln!(o, "total: {} seconds{what}{longest}", fmt_num(total));
+    let _ = writeln!(o, "total: {}{what}{longest}", seconds(total));
     o
+}
+
+/// `1 second`, `0 seconds`, `1.5 seconds`.
+fn seconds(x: f64) -> String {
+    let n = fmt_num(x);
+    if n == "1" {
+        "1 second".to_owned()
+    } else {
+        format!("{n} seconds")
+    }
 }
 
 fn fmt_num(x: f64) -> String {
@@ -360,11 +371,12 @@ pub fn order(sfc: &Sfc, plan: &Plan) -> String {
             match b {
                 Block::Step(i) => {
                     *n += 1;
+                    // Aligned with spaces (no tabs): numbers to 999, localIds to 99999.
                     let _ = writeln!(
                         o,
-                        "{indent} #{} \t(id={}) \t{}",
-                        n,
-                        sfc.elements[*i].local_id,
+                        "{indent} {:<4} {:<10} {}",
+                        format!("#{n}"),
+                        format!("(id={})", sfc.elements[*i].local_id),
                         step_name(sfc, *i)
                     );
                 }
@@ -469,4 +481,360 @@ pub fn info(bb: Option<&Blackboard>) -> String {
         }
     }
     o
+}
+
+/// The listings as JSON objects, for `--format json` (one object per listing, printed on one
+/// line; docs/JSON.md). Each has `"listing"`: `blackboard`, `sfc`, `flow` or `order`.
+pub mod json {
+    use serde_json::{Value as Json, json};
+
+    use super::{Totals, condition, duration, one_line, signal_text, step_name};
+    use crate::model::{Blackboard, ElementKind, Sfc, SignalKind, Value};
+    use crate::plan::{Block, BranchEnd, Plan};
+
+    /// `-pB`: resources with their skills (and the calls each maps), functions and signals.
+    pub fn blackboard(bb: &Blackboard) -> Json {
+        let resources: Vec<Json> = bb
+            .resources
+            .iter()
+            .map(|r| {
+                let mut skills: Vec<_> = r.skills.iter().collect();
+                skills.sort_by(|a, b| a.name.key.cmp(&b.name.key));
+                let skills: Vec<Json> = skills
+                    .iter()
+                    .map(|s| {
+                        let calls: Vec<Json> = s
+                            .mappings
+                            .iter()
+                            .map(|m| {
+                                json!({
+                                    "function": &*m.function.text,
+                                    "arguments": m.args.iter().map(|a| &*a.skill_param.text).collect::<Vec<_>>(),
+                                    "order": m.order,
+                                })
+                            })
+                            .collect();
+                        json!({"name": &*s.name.text, "id": s.id, "calls": calls})
+                    })
+                    .collect();
+                let mut funcs: Vec<_> = r.functions.iter().collect();
+                funcs.sort_by(|a, b| a.name.key.cmp(&b.name.key));
+                let functions: Vec<Json> = funcs
+                    .iter()
+                    .map(|f| {
+                        json!({
+                            "name": &*f.name.text,
+                            "id": f.id,
+                            "irl": f.irl.value,
+                            "command": &*f.command.text,
+                        })
+                    })
+                    .collect();
+                let signals: Vec<Json> = r
+                    .signals
+                    .iter()
+                    .map(|s| {
+                        let mut o = json!({
+                            "name": &*s.name.text,
+                            "direction": if s.output { "output" } else { "input" },
+                            "type": if s.is_integer() { "integer" } else { "bit" },
+                        });
+                        match &s.kind {
+                            SignalKind::Bit(n) => o["number"] = json!(n),
+                            SignalKind::Group { number, length } => {
+                                o["number"] = json!(number);
+                                o["length"] = json!(length);
+                            }
+                            SignalKind::Address { text, .. } => o["address"] = json!(text),
+                        }
+                        o["text"] = json!(signal_text(s));
+                        o
+                    })
+                    .collect();
+                json!({
+                    "name": &*r.name.text,
+                    "id": r.id,
+                    "skills": skills,
+                    "functions": functions,
+                    "signals": signals,
+                })
+            })
+            .collect();
+        json!({"listing": "blackboard", "resources": resources})
+    }
+
+    fn value(v: &Value) -> Json {
+        match v {
+            Value::Scalar(s) => json!(s),
+            Value::List(items) => Json::Array(items.iter().map(value).collect()),
+        }
+    }
+
+    /// `-pS`: the file header, the POU, and every SFC object with its connections.
+    pub fn sfc(sfc: &Sfc) -> Json {
+        let h = &sfc.header;
+        let mut succs: std::collections::HashMap<u64, Vec<u64>> = Default::default();
+        for e in &sfc.elements {
+            for (r, _) in &e.inputs {
+                succs.entry(*r).or_default().push(e.local_id);
+            }
+        }
+        let objects: Vec<Json> = sfc
+            .elements
+            .iter()
+            .map(|e| {
+                let mut o = json!({
+                    "kind": e.kind.tag(),
+                    "local_id": e.local_id,
+                    "inputs": e.inputs.iter().map(|(r, _)| *r).collect::<Vec<_>>(),
+                    "outputs": succs.get(&e.local_id).cloned().unwrap_or_default(),
+                });
+                match &e.kind {
+                    ElementKind::Step(st) => {
+                        o["name"] = json!(&*st.name);
+                        o["initial"] = json!(st.initial);
+                        o["duration"] = json!(st.duration.unwrap_or(0.0));
+                        o["resource"] = json!(st.resource.as_ref().map(|r| &*r.text));
+                        o["skill"] = json!(st.skill.as_ref().map(|s| &*s.text));
+                        o["variables"] = Json::Array(
+                            st.variables
+                                .iter()
+                                .map(|v| json!({"name": &*v.name.text, "value": value(&v.value())}))
+                                .collect(),
+                        );
+                    }
+                    ElementKind::Transition(c) => {
+                        o["condition"] = json!(
+                            c.as_ref()
+                                .map_or_else(|| "TRUE".to_owned(), |c| one_line(&c.text))
+                        );
+                        o["reference"] = json!(c.as_ref().is_some_and(|c| c.reference));
+                    }
+                    ElementKind::JumpStep(t) => {
+                        o["target"] = json!(t.as_ref().map(|t| &*t.text));
+                    }
+                    _ => {}
+                }
+                o
+            })
+            .collect();
+        json!({
+            "listing": "sfc",
+            "header": {
+                "company_name": h.company_name,
+                "product_name": h.product_name,
+                "product_version": h.product_version,
+                "creation_date_time": h.creation_date_time,
+            },
+            "pou": sfc.pou_name,
+            "objects": objects,
+        })
+    }
+
+    fn local_id(sfc: &Sfc, i: usize) -> u64 {
+        sfc.elements[i].local_id
+    }
+
+    /// `-pF`: the flow as a tree of blocks with start times and durations (seconds), and the
+    /// total. Times are counted as in the text listing.
+    pub fn flow(sfc: &Sfc, plan: &Plan) -> Json {
+        fn walk(sfc: &Sfc, blocks: &[Block], t: f64, tot: &mut Totals) -> (Vec<Json>, f64) {
+            let mut t = t;
+            let mut out = Vec::new();
+            for b in blocks {
+                match b {
+                    Block::Step(i) => {
+                        let d = duration(sfc, *i);
+                        out.push(json!({
+                            "kind": "step",
+                            "local_id": local_id(sfc, *i),
+                            "name": step_name(sfc, *i),
+                            "start": t,
+                            "duration": d,
+                        }));
+                        t += d;
+                    }
+                    Block::Wait(tr) => out.push(json!({
+                        "kind": "wait",
+                        "condition": condition(sfc, *tr),
+                        "transition": local_id(sfc, *tr),
+                    })),
+                    Block::Parallel {
+                        divergence,
+                        branches,
+                        ..
+                    } => {
+                        let start = t;
+                        let mut end = t;
+                        let mut bs = Vec::new();
+                        for br in branches {
+                            let (blocks, e) = walk(sfc, br, start, tot);
+                            end = end.max(e);
+                            bs.push(json!({"blocks": blocks}));
+                        }
+                        out.push(json!({
+                            "kind": "parallel",
+                            "divergence": local_id(sfc, *divergence),
+                            "start": start,
+                            "end": end,
+                            "branches": bs,
+                        }));
+                        t = end;
+                    }
+                    Block::Choice {
+                        divergence,
+                        branches,
+                        ..
+                    } => {
+                        tot.choices = true;
+                        let start = t;
+                        let mut end = t;
+                        let mut bs = Vec::new();
+                        for br in branches {
+                            let (blocks, e) = walk(sfc, &br.body, start, tot);
+                            end = end.max(e);
+                            let mut o = json!({
+                                "condition": condition(sfc, br.transition),
+                                "transition": local_id(sfc, br.transition),
+                                "blocks": blocks,
+                            });
+                            match br.end {
+                                BranchEnd::Join => o["then"] = json!("join"),
+                                BranchEnd::Repeat(j) => {
+                                    o["then"] = json!("repeat");
+                                    o["jump"] = json!(local_id(sfc, j));
+                                }
+                                BranchEnd::Leave => o["then"] = json!("leave"),
+                            }
+                            bs.push(o);
+                        }
+                        out.push(json!({
+                            "kind": "selection",
+                            "divergence": local_id(sfc, *divergence),
+                            "start": start,
+                            "end": end,
+                            "branches": bs,
+                        }));
+                        t = end;
+                    }
+                    Block::Loop {
+                        head,
+                        body,
+                        endless,
+                        ..
+                    } => {
+                        tot.loops = true;
+                        tot.endless |= *endless;
+                        let start = t;
+                        let (blocks, e) = walk(sfc, body, t, tot);
+                        out.push(json!({
+                            "kind": "loop",
+                            "head": local_id(sfc, *head),
+                            "endless": endless,
+                            "start": start,
+                            "end": e,
+                            "blocks": blocks,
+                        }));
+                        t = e;
+                    }
+                }
+            }
+            (out, t)
+        }
+        let mut tot = Totals::default();
+        let (blocks, total) = walk(sfc, &plan.body, 0.0, &mut tot);
+        json!({
+            "listing": "flow",
+            "blocks": blocks,
+            "total": {
+                "seconds": total,
+                "at_least": tot.loops && !tot.endless,
+                "per_round": tot.endless,
+                "longest_alternative": tot.choices,
+            },
+        })
+    }
+
+    /// `-pO`: the execution order as a tree: steps numbered in order, inside the selections
+    /// (each branch's condition) and loops that hold them; simultaneous branches one after
+    /// another, as emitted.
+    pub fn order(sfc: &Sfc, plan: &Plan) -> Json {
+        fn walk(sfc: &Sfc, blocks: &[Block], n: &mut usize, out: &mut Vec<Json>) {
+            for b in blocks {
+                match b {
+                    Block::Step(i) => {
+                        *n += 1;
+                        out.push(json!({
+                            "kind": "step",
+                            "number": *n,
+                            "local_id": local_id(sfc, *i),
+                            "name": step_name(sfc, *i),
+                        }));
+                    }
+                    Block::Wait(t) => out.push(json!({
+                        "kind": "wait",
+                        "condition": condition(sfc, *t),
+                        "transition": local_id(sfc, *t),
+                    })),
+                    Block::Parallel { branches, .. } => {
+                        for br in branches {
+                            walk(sfc, br, n, out);
+                        }
+                    }
+                    Block::Choice {
+                        divergence,
+                        branches,
+                        ..
+                    } => {
+                        let bs: Vec<Json> = branches
+                            .iter()
+                            .map(|br| {
+                                let mut blocks = Vec::new();
+                                walk(sfc, &br.body, n, &mut blocks);
+                                json!({
+                                    "condition": condition(sfc, br.transition),
+                                    "transition": local_id(sfc, br.transition),
+                                    "blocks": blocks,
+                                    "then": match br.end {
+                                        BranchEnd::Join => "join",
+                                        BranchEnd::Repeat(_) => "repeat",
+                                        BranchEnd::Leave => "leave",
+                                    },
+                                })
+                            })
+                            .collect();
+                        out.push(json!({
+                            "kind": "selection",
+                            "divergence": local_id(sfc, *divergence),
+                            "branches": bs,
+                        }));
+                    }
+                    Block::Loop {
+                        head,
+                        body,
+                        endless,
+                        ..
+                    } => {
+                        let mut blocks = Vec::new();
+                        walk(sfc, body, n, &mut blocks);
+                        out.push(json!({
+                            "kind": "loop",
+                            "head": local_id(sfc, *head),
+                            "endless": endless,
+                            "blocks": blocks,
+                        }));
+                    }
+                }
+            }
+        }
+        let mut blocks = Vec::new();
+        let mut n = 0;
+        walk(sfc, &plan.body, &mut n, &mut blocks);
+        json!({"listing": "order", "steps": n, "blocks": blocks})
+    }
+
+    /// A listing that cannot be printed (`-pF`/`-pO` when the flow has errors).
+    pub fn unavailable(listing: &str, reason: &str) -> Json {
+        json!({"listing": listing, "available": false, "reason": reason})
+    }
 }

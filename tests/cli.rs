@@ -44,7 +44,8 @@ fn compile_writes_outputs_and_reports_them() {
     assert!(src.contains("DEF Demo_1( )\r\n"));
     assert!(src.contains("SetVelCP (0.5)\r\n"));
     assert!(p.path().join("Demo_1.dat").exists());
-    assert!(stderr(&o).contains("wrote"), "{}", stderr(&o));
+    // The outcome is the run's result: on stdout.
+    assert!(stdout(&o).contains("wrote"), "{}", stdout(&o));
     let bb = std::fs::read_to_string(p.path().join("Blackboard.aml")).unwrap();
     assert!(bb.contains("<Value>Demo_1.src</Value>"));
 }
@@ -74,7 +75,7 @@ fn validate_writes_nothing_and_shows_warnings() {
     // The sample's steps carry a JointConfig variable no skill uses: a warning.
     let e = stderr(&o);
     assert!(e.contains("warning[W303]"), "{e}");
-    assert!(e.contains("Input validation successful!"), "{e}");
+    assert!(stdout(&o).contains("Input validation successful!"), "{e}");
     // One warning per skill and unused variable, not one per step.
     assert_eq!(e.matches("warning[W303]").count(), 3, "{e}");
     assert!(
@@ -121,6 +122,10 @@ fn print_order_and_flow() {
     );
     assert!(out.contains("id=  12, [@3.5    +      0], End"), "{out}");
     assert!(out.contains("total: 3.5 seconds"), "{out}");
+    // Aligned with spaces, no tabs.
+    assert!(!out.contains('\t'), "{out}");
+    assert!(out.contains(" #3   (id=8)     LIN\n"), "{out}");
+    assert!(out.contains(" #5   (id=12)    End\n"), "{out}");
     // -p0 is accepted for -pO.
     let o = run(&["--validate", "-p0", "Blackboard.aml", "out"], p.path());
     assert_eq!(
@@ -145,7 +150,15 @@ fn print_blackboard_and_sfc() {
         "{out}"
     );
     assert!(out.contains("(Func)  SetToolPathVelocity"));
-    assert!(out.contains("IRL-File:  \tkr15-2.irl"));
+    assert!(
+        out.contains("-> IRL-File:  kr15-2.irl   (command PTP)"),
+        "{out}"
+    );
+    // Aligned with spaces: no tabs in any listing.
+    assert!(!out.contains('\t'), "{out}");
+    // One second, singular.
+    assert!(out.contains("Duration:   1 second\n"), "{out}");
+    assert!(out.contains("Duration:   1.5 seconds\n"), "{out}");
     assert!(out.contains("iwb, DemoProduct, 1, 2015-05-26T12:00:00"));
     assert!(out.contains("4 -> [ 5 ] -> 8, 6"), "{out}");
     assert!(
@@ -160,7 +173,7 @@ fn sfc_mode_checks_the_sfc_alone() {
     let o = run(&["--sfc", "-pO", "sfc.xml"], p.path());
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     assert!(stdout(&o).contains("(id=12)"));
-    assert!(stderr(&o).contains("SFC validation successful!"));
+    assert!(stdout(&o).contains("SFC validation successful!"));
     // A broken flow: exit 1, located.
     let sfc = std::fs::read_to_string(p.path().join("sfc.xml")).unwrap();
     std::fs::write(
@@ -669,4 +682,435 @@ fn sfc_check_reports_what_the_literals_tell() {
     .unwrap();
     let o = run(&["--sfc", "sfc.xml"], p.path());
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+}
+
+#[test]
+fn validate_needs_no_program_name() {
+    let p = project();
+    let before = std::fs::read(p.path().join("Blackboard.aml")).unwrap();
+    let o = run(&["--validate", "-pO", "Blackboard.aml"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let (out, err) = (stdout(&o), stderr(&o));
+    assert!(out.contains("Input validation successful!"), "{out}");
+    assert!(out.contains("(id=12)"), "listings work: {out}");
+    assert!(err.contains("warning[W303]"), "{err}");
+    assert!(!err.contains("E601"), "{err}");
+    // Nothing written: the folder holds what it held, the blackboard is unchanged.
+    let names: Vec<_> = std::fs::read_dir(p.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert!(
+        !names.iter().any(|n| n.to_string_lossy().ends_with(".src")),
+        "{names:?}"
+    );
+    assert_eq!(
+        std::fs::read(p.path().join("Blackboard.aml")).unwrap(),
+        before
+    );
+    // The template is still read (the code is generated to be checked): a missing one is exit 2.
+    let o = run(
+        &["--validate", "--template", "nope.toml", "Blackboard.aml"],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    // Without --validate the name is needed; --validate takes at most two arguments.
+    assert_eq!(run(&["Blackboard.aml"], p.path()).status.code(), Some(2));
+    let o = run(&["--validate", "Blackboard.aml", "a", "b"], p.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("--validate takes a blackboard"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn missing_or_unreadable_template_is_exit_two() {
+    let p = project();
+    let o = run(
+        &["--template", "missing.toml", "Blackboard.aml", "out"],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("missing.toml"), "{}", stderr(&o));
+    assert!(!p.path().join("out.src").exists());
+    // A folder named as the template: unreadable too.
+    std::fs::create_dir(p.path().join("tpl")).unwrap();
+    let o = run(&["--template", "tpl", "Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let o = run(
+        &["--validate", "--template", "missing.toml", "Blackboard.aml"],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    // A readable template with errors stays an input error (1).
+    std::fs::write(p.path().join("bad.toml"), "this is = = not toml").unwrap();
+    let o = run(
+        &["--template", "bad.toml", "Blackboard.aml", "out"],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+}
+
+/// A copy of the reference sample without its write-back target (the `Code` element renamed).
+fn project_without_write_back() -> tempfile::TempDir {
+    let p = project();
+    let bb = std::fs::read_to_string(p.path().join("Blackboard.aml")).unwrap();
+    let bb = bb.replace(
+        "<InternalElement Name=\"Code\"",
+        "<InternalElement Name=\"Notes\"",
+    );
+    std::fs::write(p.path().join("Blackboard.aml"), bb).unwrap();
+    p
+}
+
+#[test]
+fn no_write_back_target_is_said_on_stdout() {
+    let p = project_without_write_back();
+    let before = std::fs::read(p.path().join("Blackboard.aml")).unwrap();
+    let o = run(&["Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let out = stdout(&o);
+    assert!(
+        out.contains("blackboard not updated: Blackboard.aml: no write-back target"),
+        "{out}"
+    );
+    assert!(!stderr(&o).contains("W204"), "a warning only with --warn");
+    assert_eq!(
+        std::fs::read(p.path().join("Blackboard.aml")).unwrap(),
+        before
+    );
+    // JSON: stdout stays JSON Lines; the notice is an object.
+    let o = run(&["--format", "json", "Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let lines: Vec<serde_json::Value> = stdout(&o)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}")))
+        .collect();
+    assert_eq!(
+        lines,
+        [serde_json::json!({
+            "outcome": "blackboard-not-updated",
+            "blackboard": "Blackboard.aml",
+            "cause": "no-target",
+            "reason": "no write-back target (Code -> KRL code -> refURI; W204 with --warn shows where)"
+        })]
+    );
+    // With a target, no such line.
+    let p = project();
+    let o = run(&["Blackboard.aml", "out"], p.path());
+    assert!(!stdout(&o).contains("not updated"), "{}", stdout(&o));
+    // A write-back that is skipped says so too: a hard-linked blackboard is not split.
+    std::fs::hard_link(p.path().join("Blackboard.aml"), p.path().join("Other.aml")).unwrap();
+    let o = run(&["Blackboard.aml", "again"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let out = stdout(&o);
+    assert!(
+        out.contains("blackboard not updated: Blackboard.aml: it has several names (hard links)"),
+        "{out}"
+    );
+    assert!(out.contains("(`again.src` not written)"), "{out}");
+    let o = run(&["--format", "json", "Blackboard.aml", "again"], p.path());
+    let lines: Vec<serde_json::Value> = stdout(&o)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 1, "{lines:?}");
+    assert_eq!(lines[0]["cause"], "hard-linked");
+    assert_eq!(lines[0]["value"], "again.src");
+}
+
+#[test]
+fn blackboard_given_with_leading_parents_from_a_subfolder() {
+    // tmp/p holds the project; the user runs from tmp/x/y.
+    let tmp = tempfile::tempdir().unwrap();
+    let p = project();
+    std::fs::create_dir(tmp.path().join("p")).unwrap();
+    for e in std::fs::read_dir(p.path()).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), tmp.path().join("p").join(e.file_name())).unwrap();
+    }
+    let cwd = tmp.path().join("x/y");
+    std::fs::create_dir_all(&cwd).unwrap();
+    let o = run(&["--validate", "../../p/Blackboard.aml"], &cwd);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let o = run(&["../../p/Blackboard.aml", "Up"], &cwd);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(tmp.path().join("p/Up.src").exists());
+    assert!(
+        stdout(&o).contains("wrote ../../p/Up.src"),
+        "{}",
+        stdout(&o)
+    );
+    // An IRL file named with leading `..` from the blackboard's folder.
+    std::fs::create_dir(tmp.path().join("lib")).unwrap();
+    std::fs::rename(
+        tmp.path().join("p/kr15-2.irl"),
+        tmp.path().join("lib/kr15-2.irl"),
+    )
+    .unwrap();
+    let bb = std::fs::read_to_string(tmp.path().join("p/Blackboard.aml")).unwrap();
+    std::fs::write(
+        tmp.path().join("p/Blackboard.aml"),
+        bb.replace(
+            "<Value>kr15-2.irl</Value>",
+            "<Value>../lib/kr15-2.irl</Value>",
+        ),
+    )
+    .unwrap();
+    let o = run(&["--validate", "../../p/Blackboard.aml"], &cwd);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+}
+
+/// Every stdout line of a `--format json` run, parsed (each must be one JSON object).
+fn json_lines(o: &Output) -> Vec<serde_json::Value> {
+    stdout(o)
+        .lines()
+        .map(|l| {
+            let v: serde_json::Value =
+                serde_json::from_str(l).unwrap_or_else(|e| panic!("not JSON ({e}): {l}"));
+            assert!(v.is_object(), "{l}");
+            v
+        })
+        .collect()
+}
+
+fn listing<'a>(lines: &'a [serde_json::Value], name: &str) -> &'a serde_json::Value {
+    lines
+        .iter()
+        .find(|l| l["listing"] == name)
+        .unwrap_or_else(|| panic!("no {name} listing in {lines:?}"))
+}
+
+#[test]
+fn json_format_prints_listings_as_objects() {
+    let p = project();
+    let o = run(
+        &[
+            "--validate",
+            "--format",
+            "json",
+            "-pB",
+            "-pS",
+            "-pF",
+            "-pO",
+            "Blackboard.aml",
+        ],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let lines = json_lines(&o);
+    // Listings and diagnostics mixed, each saying what it is.
+    assert!(
+        lines
+            .iter()
+            .all(|l| l.get("listing").is_some() || l.get("severity").is_some())
+    );
+    assert!(lines.iter().any(|l| l["code"] == "W303"), "{lines:?}");
+    assert_eq!(
+        lines.iter().filter(|l| l.get("listing").is_some()).count(),
+        4
+    );
+
+    let bb = listing(&lines, "blackboard");
+    let r = &bb["resources"][0];
+    assert_eq!(r["name"], "KUKA KR15-2");
+    let ptp = r["skills"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["name"] == "Move PTP")
+        .unwrap();
+    assert_eq!(
+        ptp["calls"][0],
+        serde_json::json!({"function": "SetToolPathVelocity", "arguments": ["Velocity"], "order": 0})
+    );
+    let f = r["functions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|f| f["name"] == "SetToolPathVelocity")
+        .unwrap();
+    assert_eq!(f["irl"], "kr15-2.irl");
+    assert!(r["signals"].is_array());
+
+    let sfc = listing(&lines, "sfc");
+    assert_eq!(sfc["header"]["company_name"], "iwb");
+    assert!(sfc["pou"].is_string());
+    let objects = sfc["objects"].as_array().unwrap();
+    let five = objects.iter().find(|o| o["local_id"] == 5).unwrap();
+    assert_eq!(five["inputs"], serde_json::json!([4]));
+    assert_eq!(five["outputs"], serde_json::json!([8, 6]));
+    let step = objects
+        .iter()
+        .find(|o| o["kind"] == "step" && o["variables"].as_array().is_some_and(|v| !v.is_empty()))
+        .unwrap();
+    assert!(step["variables"][0]["value"].is_array() || step["variables"][0]["value"].is_string());
+    assert!(
+        objects
+            .iter()
+            .any(|o| o["kind"] == "transition" && o["condition"].is_string())
+    );
+
+    // The flow: both simultaneous branches start at 1.5 s, the block ends with the longer (3.5).
+    let flow = listing(&lines, "flow");
+    assert_eq!(flow["total"]["seconds"], 3.5);
+    let par = flow["blocks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|b| b["kind"] == "parallel")
+        .unwrap();
+    assert_eq!(par["start"], 1.5);
+    assert_eq!(par["end"], 3.5);
+    assert_eq!(par["branches"][0]["blocks"][0]["local_id"], 8);
+    assert_eq!(par["branches"][0]["blocks"][0]["duration"], 2.0);
+    assert_eq!(par["branches"][1]["blocks"][0]["start"], 1.5);
+
+    let order = listing(&lines, "order");
+    assert_eq!(order["steps"], 5);
+    let ids: Vec<_> = order["blocks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|b| b["kind"] == "step")
+        .map(|b| {
+            (
+                b["number"].as_u64().unwrap(),
+                b["local_id"].as_u64().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(ids, [(1, 1), (2, 3), (3, 8), (4, 6), (5, 12)]);
+
+    // Human mode is unchanged: text, not JSON.
+    let o = run(&["--validate", "-pO", "Blackboard.aml"], p.path());
+    assert!(stdout(&o).contains(" #1"), "{}", stdout(&o));
+}
+
+#[test]
+fn json_listings_of_a_loop_and_of_a_broken_flow() {
+    let base = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
+    let d = tempfile::tempdir().unwrap();
+    for e in std::fs::read_dir(base.join("base/flow")).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), d.path().join(e.file_name())).unwrap();
+    }
+    std::fs::copy(
+        base.join("ok/flow-loop-exit/sfc.xml"),
+        d.path().join("sfc.xml"),
+    )
+    .unwrap();
+    let o = run(
+        &[
+            "--validate",
+            "--format",
+            "json",
+            "-pF",
+            "-pO",
+            "Blackboard.aml",
+        ],
+        d.path(),
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let lines = json_lines(&o);
+    let flow = listing(&lines, "flow");
+    let lp = flow["blocks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|b| b["kind"] == "loop")
+        .unwrap();
+    assert_eq!(lp["endless"], false);
+    let sel = lp["blocks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|b| b["kind"] == "selection")
+        .unwrap();
+    assert_eq!(sel["branches"][0]["then"], "repeat");
+    assert_eq!(sel["branches"][1]["then"], "leave");
+    assert_eq!(sel["branches"][1]["condition"], "Magazine_Empty");
+    assert_eq!(flow["total"]["at_least"], true);
+    assert_eq!(flow["total"]["longest_alternative"], true);
+    assert!(listing(&lines, "order")["blocks"].is_array());
+
+    // --sfc with a flow that cannot be planned: the listings say so, as objects.
+    let p = project();
+    let sfc = std::fs::read_to_string(p.path().join("sfc.xml")).unwrap();
+    let broken = sfc.replacen(
+        "<connectionPointIn><connection refLocalId=\"2\"/></connectionPointIn>",
+        "",
+        1,
+    );
+    std::fs::write(p.path().join("sfc.xml"), broken).unwrap();
+    let o = run(
+        &["--sfc", "--format", "json", "-pS", "-pF", "-pO", "sfc.xml"],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(1));
+    let lines = json_lines(&o);
+    assert_eq!(listing(&lines, "flow")["available"], false);
+    assert_eq!(
+        listing(&lines, "order")["reason"],
+        "the SFC's flow has errors"
+    );
+    assert!(listing(&lines, "sfc")["objects"].is_array());
+    assert!(lines.iter().any(|l| l["severity"] == "error"));
+}
+
+#[test]
+fn help_names_the_arguments() {
+    let d = tempfile::tempdir().unwrap();
+    let o = run(&["--help"], d.path());
+    assert_eq!(o.status.code(), Some(0));
+    let h = stdout(&o);
+    assert!(
+        h.contains("Usage: skillpost [OPTIONS] <BLACKBOARD> <PROGRAM>"),
+        "{h}"
+    );
+    assert!(
+        h.contains("skillpost --validate [OPTIONS] <BLACKBOARD> [<PROGRAM>]"),
+        "{h}"
+    );
+    assert!(h.contains("[BLACKBOARD]") && h.contains("[PROGRAM]"), "{h}");
+    assert!(!h.contains("FILES"), "{h}");
+    // More arguments than the mode takes: our usage error, exit 2.
+    let o = run(&["a.aml", "P", "extra"], d.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("expected a blackboard and a program name"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn one_second_is_singular_in_the_flow_total() {
+    let d = project();
+    // Every step 0 s except one of 1 s.
+    let sfc = std::fs::read_to_string(d.path().join("sfc.xml")).unwrap();
+    let mut n = 0;
+    let sfc = regex_free_replace_durations(&sfc, &mut n);
+    std::fs::write(d.path().join("sfc.xml"), sfc).unwrap();
+    let o = run(&["--sfc", "-pF", "sfc.xml"], d.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stdout(&o).contains("total: 1 second\n"), "{}", stdout(&o));
+}
+
+/// Sets the first `duration="…"` to 1 and every other to 0.
+fn regex_free_replace_durations(s: &str, n: &mut usize) -> String {
+    let mut out = String::new();
+    let mut rest = s;
+    while let Some(i) = rest.find("duration=\"") {
+        out.push_str(&rest[..i + 10]);
+        rest = &rest[i + 10..];
+        let j = rest.find('"').unwrap();
+        out.push_str(if *n == 0 { "1" } else { "0" });
+        *n += 1;
+        rest = &rest[j..];
+    }
+    out.push_str(rest);
+    out
 }

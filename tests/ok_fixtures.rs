@@ -11,6 +11,7 @@
 //! args = ["--lf"]              # optional extra arguments
 //! tc6_valid = ["sfc.xml"]      # optional; SFC files that must validate against tc6_xml_v201.xsd
 //! stderr_contains = ["W204"]   # optional; text the compiler's stderr must contain
+//! stdout_contains = ["wrote"]  # optional; text the compiler's stdout must contain
 //! ```
 //!
 //! For every case the test checks, through the binary only:
@@ -49,6 +50,8 @@ struct CaseToml {
     tc6_valid: Vec<String>,
     #[serde(default)]
     stderr_contains: Vec<String>,
+    #[serde(default)]
+    stdout_contains: Vec<String>,
 }
 
 macro_rules! cases {
@@ -162,6 +165,10 @@ fn run_case(name: &str) {
     );
     for s in &case.stderr_contains {
         assert!(stderr.contains(s), "{name}: stderr lacks `{s}`:\n{stderr}");
+    }
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    for s in &case.stdout_contains {
+        assert!(stdout.contains(s), "{name}: stdout lacks `{s}`:\n{stdout}");
     }
     let after = listing(dir);
     let added: Vec<&String> = after.keys().filter(|k| !before.contains_key(*k)).collect();

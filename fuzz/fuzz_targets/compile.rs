@@ -50,7 +50,7 @@ fuzz_target!(|data: &[u8]| {
         irl,
     };
     let opts = Options {
-        program: "output".to_owned(),
+        program: Some("output".to_owned()),
         lf: data.len() % 2 == 0,
         template: None,
         confine_to: None,

@@ -35,6 +35,8 @@ use std::time::Duration;
 use serde::Deserialize;
 use toml::Spanned;
 
+use crate::paths::{absolute, normalize};
+
 /// The quiet period when neither the file nor the command line sets one.
 pub const DEFAULT_SETTLE_MS: u64 = 100;
 
@@ -676,38 +678,6 @@ where
             first.get_ref()
         ),
     )
-}
-
-/// `path` made absolute against the current directory, then normalised.
-fn absolute(path: &Path) -> PathBuf {
-    if path.is_absolute() {
-        normalize(path)
-    } else {
-        match std::env::current_dir() {
-            Ok(cwd) => normalize(&cwd.join(path)),
-            Err(_) => normalize(path),
-        }
-    }
-}
-
-/// Removes `.` and resolves `..` lexically (symlinks are not followed; `..` above the root stays
-/// at the root).
-fn normalize(path: &Path) -> PathBuf {
-    let mut out = PathBuf::new();
-    for c in path.components() {
-        match c {
-            Component::CurDir => {}
-            Component::ParentDir => {
-                if matches!(out.components().next_back(), Some(Component::Normal(_))) {
-                    out.pop();
-                } else if !out.has_root() {
-                    out.push("..");
-                }
-            }
-            other => out.push(other.as_os_str()),
-        }
-    }
-    out
 }
 
 /// The parser's message, with serde's type names put in the file's terms.

@@ -254,7 +254,7 @@ impl Job {
         });
         // Exactly what `skillpost [--template F] [--lf] [--pou P] BLACKBOARD PROGRAM` writes.
         let opts = Options {
-            program: program.name,
+            program: Some(program.name),
             lf: self.spec.lf,
             template: self.spec.template.clone(),
             confine_to: self.confine.then(|| self.key.clone()),

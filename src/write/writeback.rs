@@ -609,6 +609,25 @@ mod tests {
 
     /// Whether this process can take leases on files in `dir`; prints why a test is skipped
     /// when not, and fails under `SKILLPOST_STRICT_TESTS=1`.
+    /// Waits until `/proc/locks` lists a lease on inode `ino` that is being broken (a process
+    /// blocked in `open` by it).
+    fn lease_breaking(ino: u64, timeout: Duration) -> bool {
+        let end = std::time::Instant::now() + timeout;
+        let suffix = format!(":{ino}");
+        while std::time::Instant::now() < end {
+            let locks = fs::read_to_string("/proc/locks").unwrap_or_default();
+            if locks.lines().any(|l| {
+                l.contains("LEASE")
+                    && l.contains("BREAK")
+                    && l.split_whitespace().any(|w| w.ends_with(&suffix))
+            }) {
+                return true;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        false
+    }
+
     fn leases_work(dir: &Path) -> bool {
         let p = dir.join("lease-probe");
         fs::write(&p, "x").unwrap();
@@ -772,20 +791,30 @@ mod tests {
             let mut writer = None;
             let out = run(&p, opts, &mut |pt| {
                 if let Point::AfterExchange(old) = pt {
+                    let ino = fs::metadata(old).unwrap().ino();
                     let old = old.to_owned();
                     // Another thread: with a lease, its `open` blocks until the lease goes.
-                    writer = Some(std::thread::spawn(move || {
+                    let w = std::thread::spawn(move || {
                         let mut f = fs::File::options()
                             .write(true)
                             .truncate(true)
                             .open(&old)
                             .unwrap();
                         f.write_all(b"in place").unwrap();
-                    }));
-                    std::thread::sleep(Duration::from_millis(30));
+                    });
+                    if opts.lease {
+                        // Go on once the writer is blocked in `open` (not after a guessed sleep).
+                        assert!(lease_breaking(ino, Duration::from_secs(10)), "{opts:?}");
+                        writer = Some(w);
+                    } else {
+                        // Nothing blocks it: its write has happened before the checks go on.
+                        w.join().unwrap();
+                    }
                 }
             });
-            writer.unwrap().join().unwrap();
+            if let Some(w) = writer {
+                w.join().unwrap();
+            }
             assert_eq!(out, WriteBackOutcome::SkippedChangedOnDisk, "{opts:?}");
             assert_eq!(fs::read_to_string(&p).unwrap(), "in place", "{opts:?}");
             assert!(temp_leftovers(d.path()).is_empty());
@@ -820,6 +849,7 @@ mod tests {
         let mut writer = None;
         let out = run(&p, Opts::default(), &mut |pt| {
             if pt == Point::Read {
+                let ino = fs::metadata(&p).unwrap().ino();
                 let p = p.clone();
                 writer = Some(std::thread::spawn(move || {
                     let mut f = fs::File::options()
@@ -829,7 +859,12 @@ mod tests {
                         .unwrap();
                     f.write_all(b"in place").unwrap();
                 }));
-                std::thread::sleep(Duration::from_millis(30));
+                // Go on only once the writer is blocked in `open` by our lease (a sleep is not
+                // enough on a loaded machine): the kernel lists the lease as breaking.
+                assert!(
+                    lease_breaking(ino, Duration::from_secs(10)),
+                    "the writer's open did not break the lease"
+                );
             }
         });
         writer.unwrap().join().unwrap();
