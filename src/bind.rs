@@ -6,7 +6,7 @@
 //! those skills call; [`bind`] renders every call with the IRL templates.
 
 use std::borrow::Cow;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
 use crate::diag::{Code, Diagnostic, Diagnostics, Span};
@@ -277,6 +277,8 @@ pub struct BoundStep {
 /// skill parameter that fills it.
 struct Prepared {
     calls: Vec<PreparedCall>,
+    /// Keys of the SFC variables the skill's parameters read.
+    variables: HashSet<Arc<str>>,
 }
 
 struct PreparedCall {
@@ -323,13 +325,14 @@ pub fn bind(
             continue;
         };
         let skill = &bb.resources[res].skills[sk];
-        let mut ok = check_variables(st, skill, e, &mut extras, diags);
+        let vars = StepVars::new(&st.variables);
+        let mut ok = check_variables(st, &vars, skill, &p.variables, e, &mut extras, diags);
         let mut code = String::new();
         for pc in &p.calls {
             let call = &irls[pc.irl].calls[pc.call];
             values.clear();
             for &pi in &pc.args {
-                match value_of(st, skill, pi, e.local_id) {
+                match value_of(&vars, skill, pi, e.local_id) {
                     Ok(v) => values.push(v),
                     Err(Some(d)) => {
                         diags.push(*d);
@@ -370,10 +373,44 @@ fn label(e: &crate::model::Element) -> String {
     format!("localId {}", e.local_id)
 }
 
+/// A step's variables by key: a scan for the few of a usual step, a hash map for many (a step
+/// may carry any number of variables; one lookup per parameter must not cost their number).
+enum StepVars<'a> {
+    Few(&'a [crate::model::Variable]),
+    Many(HashMap<&'a str, &'a crate::model::Variable>),
+}
+
+impl<'a> StepVars<'a> {
+    /// Up to this many variables are scanned.
+    const SCAN: usize = 16;
+
+    fn new(vars: &'a [crate::model::Variable]) -> Self {
+        if vars.len() <= Self::SCAN {
+            return StepVars::Few(vars);
+        }
+        let mut map = HashMap::with_capacity(vars.len());
+        for v in vars {
+            // The first of equal names wins, as a scan finds it.
+            map.entry(&*v.name.key).or_insert(v);
+        }
+        StepVars::Many(map)
+    }
+
+    fn get(&self, key: &str) -> Option<&'a crate::model::Variable> {
+        match self {
+            StepVars::Few(vars) => vars.iter().find(|v| &*v.name.key == key),
+            StepVars::Many(map) => map.get(key).copied(),
+        }
+    }
+}
+
 /// Reports missing variables (`E314`) and extra ones (`W303`). False when one is missing.
+/// `used` holds the keys of the variables the skill's parameters read.
 fn check_variables(
     st: &Step,
+    vars: &StepVars,
     skill: &crate::model::Skill,
+    used: &HashSet<Arc<str>>,
     e: &crate::model::Element,
     extras: &mut Extras,
     diags: &mut Diagnostics,
@@ -381,7 +418,7 @@ fn check_variables(
     let mut ok = true;
     for p in skill.params.iter().filter(|p| p.indices.is_empty()) {
         let Some(var) = &p.variable else { continue };
-        if !st.variables.iter().any(|v| v.name.key == var.key) {
+        if vars.get(&var.key).is_none() {
             ok = false;
             if st.invalid_variables.contains(&var.key) {
                 continue; // present but malformed: reported by the reader
@@ -400,11 +437,7 @@ fn check_variables(
         }
     }
     for v in &st.variables {
-        let used = skill
-            .params
-            .iter()
-            .any(|p| p.variable.as_ref().is_some_and(|n| n.key == v.name.key));
-        if !used {
+        if !used.contains(&v.name.key) {
             extras.add(skill, v, e);
         }
     }
@@ -416,12 +449,12 @@ fn check_variables(
 #[derive(Default)]
 struct Extras {
     list: Vec<Extra>,
+    /// `(skill key, variable key)` → index into `list`.
+    index: HashMap<(Arc<str>, Arc<str>), usize>,
 }
 
 /// One unused variable of one skill: the warning for its first place, and every step's id.
 struct Extra {
-    skill: Arc<str>,
-    variable: Arc<str>,
     first: Diagnostic,
     steps: Vec<u64>,
 }
@@ -433,14 +466,12 @@ impl Extras {
         v: &crate::model::Variable,
         e: &crate::model::Element,
     ) {
-        if let Some(entry) = self
-            .list
-            .iter_mut()
-            .find(|x| x.skill == skill.name.key && x.variable == v.name.key)
-        {
-            entry.steps.push(e.local_id);
+        let key = (skill.name.key.clone(), v.name.key.clone());
+        if let Some(&at) = self.index.get(&key) {
+            self.list[at].steps.push(e.local_id);
             return;
         }
+        self.index.insert(key, self.list.len());
         let d = Diagnostic::warning(
             Code::ExtraVariable,
             format!(
@@ -451,8 +482,6 @@ impl Extras {
         .at(v.name.span.clone())
         .element(label(e));
         self.list.push(Extra {
-            skill: skill.name.key.clone(),
-            variable: v.name.key.clone(),
             first: d,
             steps: vec![e.local_id],
         });
@@ -483,7 +512,7 @@ impl Extras {
 /// missing (reported elsewhere). Allocates only for an error or a value that changes (a boolean
 /// or string literal, a number spelled differently).
 fn value_of<'a>(
-    st: &'a Step,
+    vars: &StepVars<'a>,
     skill: &crate::model::Skill,
     pi: usize,
     local_id: u64,
@@ -493,7 +522,7 @@ fn value_of<'a>(
     let Some(var_name) = &p.variable else {
         return Err(None);
     };
-    let Some(var) = st.variables.iter().find(|v| v.name.key == var_name.key) else {
+    let Some(var) = vars.get(&var_name.key) else {
         return Err(None);
     };
     let err = |code: Code, msg: String| {
@@ -989,7 +1018,12 @@ fn prepare(
             args,
         });
     }
-    ok.then_some(Prepared { calls })
+    let variables = skill
+        .params
+        .iter()
+        .filter_map(|p| p.variable.as_ref().map(|n| n.key.clone()))
+        .collect();
+    ok.then_some(Prepared { calls, variables })
 }
 
 #[cfg(test)]
