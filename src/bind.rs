@@ -66,6 +66,12 @@ pub fn resolve(
         ..Resolution::default()
     };
     let mut several_reported = false;
+    let mut used: HashSet<(usize, usize)> = HashSet::new();
+    // Resource key → index of its first resource.
+    let mut by_key: HashMap<&str, usize> = HashMap::new();
+    for (ri, res) in bb.resources.iter().enumerate() {
+        by_key.entry(&res.name.key).or_insert(ri);
+    }
     for &i in &order.steps {
         let e = &sfc.elements[i];
         let ElementKind::Step(st) = &e.kind else {
@@ -92,7 +98,7 @@ pub fn resolve(
             continue;
         };
         let res = match &st.resource {
-            Some(rn) => match bb.resources.iter().position(|r| r.name.key == rn.key) {
+            Some(rn) => match by_key.get(&*rn.key).copied() {
                 Some(ri) => ri,
                 None => {
                     diags.push(
@@ -189,7 +195,7 @@ pub fn resolve(
             }
             _ => {}
         }
-        if !r.used.contains(&(res, sk)) {
+        if used.insert((res, sk)) {
             r.used.push((res, sk));
             let skill = &resource.skills[sk];
             for d in &skill.defects {
@@ -221,12 +227,13 @@ pub fn needed_functions(
     diags: &mut Diagnostics,
 ) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
+    let mut seen = HashSet::new();
     for &(res, sk) in &r.used {
         let resource = &bb.resources[res];
         for m in &resource.skills[sk].mappings {
             match resource.function(&m.function.key) {
                 Some(f) => {
-                    if !out.contains(&(res, f)) {
+                    if seen.insert((res, f)) {
                         out.push((res, f));
                     }
                 }
@@ -288,6 +295,32 @@ struct PreparedCall {
     args: Vec<usize>,
 }
 
+/// Each IRL file's function-calls (all overloads, in order) and definitions (the first) by key.
+struct CallIndex<'a> {
+    calls: Vec<HashMap<&'a str, Vec<usize>>>,
+    definitions: Vec<HashMap<&'a str, usize>>,
+}
+
+impl<'a> CallIndex<'a> {
+    fn new(irls: &'a [Irl]) -> Self {
+        let mut calls = Vec::with_capacity(irls.len());
+        let mut definitions = Vec::with_capacity(irls.len());
+        for irl in irls {
+            let mut c: HashMap<&str, Vec<usize>> = HashMap::new();
+            for (i, call) in irl.calls.iter().enumerate() {
+                c.entry(&call.name.key).or_default().push(i);
+            }
+            let mut d: HashMap<&str, usize> = HashMap::new();
+            for (i, def) in irl.definitions.iter().enumerate() {
+                d.entry(&def.name.key).or_insert(i);
+            }
+            calls.push(c);
+            definitions.push(d);
+        }
+        CallIndex { calls, definitions }
+    }
+}
+
 /// Renders every step. `fn_irl` maps `(resource, function)` to the loaded IRL file (absent when
 /// it could not be loaded; that was reported).
 pub fn bind(
@@ -300,8 +333,9 @@ pub fn bind(
     diags: &mut Diagnostics,
 ) -> Bound {
     let mut prepared: HashMap<(usize, usize), Option<Prepared>> = HashMap::new();
+    let calls = CallIndex::new(irls);
     for &(res, sk) in &r.used {
-        let p = prepare(bb, res, sk, irls, fn_irl, diags);
+        let p = prepare(bb, res, sk, irls, &calls, fn_irl, diags);
         prepared.insert((res, sk), p);
     }
     let mut bound = Bound {
@@ -310,7 +344,7 @@ pub fn bind(
         resource: r.resource,
         signals: Vec::new(),
     };
-    let mut def_keys: Vec<&str> = Vec::new();
+    let mut def_keys: HashSet<&str> = HashSet::new();
     let mut values: Vec<Cow<str>> = Vec::new();
     let mut extras = Extras::default();
     for &i in &order.steps {
@@ -346,13 +380,10 @@ pub fn bind(
                     code.push('\n');
                 }
                 call.template.render(&values, &mut code);
-                if !def_keys.contains(&&*call.name.key)
-                    && let Some(d) = irls[pc.irl]
-                        .definitions
-                        .iter()
-                        .position(|d| d.name.key == call.name.key)
+                if !def_keys.contains(&*call.name.key)
+                    && let Some(&d) = calls.definitions[pc.irl].get(&*call.name.key)
                 {
-                    def_keys.push(&call.name.key);
+                    def_keys.insert(&call.name.key);
                     bound.definitions.push((pc.irl, d));
                 }
             }
@@ -758,6 +789,7 @@ pub fn conditions(
 ) -> Vec<usize> {
     use crate::cond::Ty;
     let mut used = Vec::new();
+    let mut seen = HashSet::new();
     let res = resource.map(|r| &bb.resources[r]);
     for e in &sfc.elements {
         let ElementKind::Transition(Some(c)) = &e.kind else {
@@ -812,7 +844,7 @@ pub fn conditions(
         if let Some(r) = res {
             for (n, _) in c.expr.names() {
                 if let Some(si) = r.signal(&crate::names::key(n))
-                    && !used.contains(&si)
+                    && seen.insert(si)
                 {
                     used.push(si);
                 }
@@ -852,6 +884,7 @@ fn prepare(
     res: usize,
     sk: usize,
     irls: &[Irl],
+    index: &CallIndex,
     fn_irl: &HashMap<(usize, usize), usize>,
     diags: &mut Diagnostics,
 ) -> Option<Prepared> {
@@ -874,9 +907,10 @@ fn prepare(
         };
         let irl = &irls[irl_i];
         let irl_span = Span::new(irl.file, 0..0);
-        let candidates: Vec<usize> = (0..irl.calls.len())
-            .filter(|&c| irl.calls[c].name.key == f.command.key)
-            .collect();
+        let candidates: Vec<usize> = index.calls[irl_i]
+            .get(&*f.command.key)
+            .cloned()
+            .unwrap_or_default();
         if candidates.is_empty() {
             diags.push(
                 Diagnostic::error(

@@ -755,9 +755,12 @@ pub const DIMENSIONS: &[(&str, &str)] = &[
     ),
     (
         "signals",
-        "signals of the resource, all read by one condition (16 steps)",
+        "signals of the resource; the first condition reads up to 300, the others the last ones (16 steps)",
     ),
-    ("cond", "terms of one transition condition (16 steps)"),
+    (
+        "cond",
+        "terms of one transition condition (16 steps; a condition has at most 1024 tokens: n <= 370)",
+    ),
     ("width", "branches of one simultaneous divergence"),
     (
         "depth",
@@ -773,6 +776,8 @@ pub fn write_shape(dir: &Path, dim: &str, n: usize) -> Option<io::Result<Project
     let mut irl = IRL.to_owned();
     let mut spec = Spec::flat(16);
     let mut cond = None::<String>;
+    // Conditions of the transitions after the first (each names one signal).
+    let mut later = None::<usize>;
     let mut skills = 0;
     let mut extra = String::new();
     let anchor_skills =
@@ -879,13 +884,16 @@ pub fn write_shape(dir: &Path, dim: &str, n: usize) -> Option<io::Result<Project
                     id(0x51, k),
                     k + 3
                 );
-                if k > 0 {
-                    c.push_str(" OR ");
+                if k < 300 {
+                    if k > 0 {
+                        c.push_str(" OR ");
+                    }
+                    let _ = write!(c, "S{k}");
                 }
-                let _ = write!(c, "S{k}");
             }
             insert(&mut bb, anchor_signals, true, &t);
             cond = Some(c);
+            later = Some(n);
         }
         "cond" => {
             let mut c = String::new();
@@ -948,8 +956,14 @@ pub fn write_shape(dir: &Path, dim: &str, n: usize) -> Option<io::Result<Project
                     let start = g.special_step("Start", None);
                     let t = g.guarded(Pred::Plain(start), &c);
                     let mut last = g.skill_step(Pred::Plain(t), 0);
-                    for _ in 1..spec.steps {
-                        let t = g.transition(last);
+                    for k in 1..spec.steps {
+                        let t = match later {
+                            Some(n) if n > 0 => {
+                                let s = format!("S{}", n - 1 - k % n);
+                                g.guarded(Pred::Plain(last), &s)
+                            }
+                            _ => g.transition(last),
+                        };
                         last = g.skill_step(Pred::Plain(t), 0);
                     }
                     let t = g.transition(last);
