@@ -1,6 +1,6 @@
 //! Hostile sizes (issue 13): for every input dimension, a project 16 times larger in that
 //! dimension must not take much more than 16 times as long to compile. A quadratic path makes the
-//! 16× run cost 256× (the bound below allows 30× plus a constant), so it cannot come back
+//! 16× run cost 256× (the bound below allows 30× plus half a second, since the machine may be loaded), so it cannot come back
 //! unnoticed. The figures themselves are the benches' business (`bench/scaling.sh`,
 //! docs/PERFORMANCE.md); this only catches growth.
 //!
@@ -8,8 +8,10 @@
 //! lock, so they do not time each other; a bound that is missed is measured once more before the
 //! test fails (a loaded machine may stall one run).
 //!
-//! `SKILLPOST_SCALING_BIN=/path/to/skillpost` times another build (e.g. an older release build,
-//! to see these tests fail on a quadratic path).
+//! `SKILLPOST_SCALING_BIN=/path/to/skillpost` times another build. A debug build of the code
+//! before issue 13 fails `vars`, `resources` and `signals` here (and `irl` in some runs); its
+//! quadratic paths in skills and functions have a small coefficient and stay within the bound at
+//! these sizes (CI's time budget): `bench/scaling.sh` (instruction counts) is the precise check.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -92,27 +94,27 @@ fn variables_in_one_step() {
 
 #[test]
 fn skills_per_resource() {
-    check("skills", 150, 2400);
+    check("skills", 300, 4800);
 }
 
 #[test]
 fn resources() {
-    check("resources", 500, 8000);
+    check("resources", 2000, 32000);
 }
 
 #[test]
 fn functions_per_skill() {
-    check("functions", 150, 2400);
+    check("functions", 400, 6400);
 }
 
 #[test]
 fn irl_calls_and_definitions() {
-    check("irl", 150, 2400);
+    check("irl", 250, 4000);
 }
 
 #[test]
 fn signals() {
-    check("signals", 500, 8000);
+    check("signals", 2000, 32000);
 }
 
 #[test]

@@ -882,7 +882,8 @@ pub fn write_shape(dir: &Path, dim: &str, n: usize) -> Option<io::Result<Project
                     t,
                     "        <ExternalInterface Name=\"S{k}\" ID=\"{}\" RefBaseClassPath=\"AutomationMLInterfaceClassLib/AutomationMLBaseInterface/Communication/SignalInterface\"><Attribute Name=\"Number\" AttributeDataType=\"xs:integer\"><Value>{}</Value></Attribute></ExternalInterface>",
                     id(0x51, k),
-                    k + 3
+                    // I/O indexes go up to 8192 (read::blackboard::MAX_IO); they may repeat.
+                    k % 8000 + 3
                 );
                 if k < 300 {
                     if k > 0 {
