@@ -359,7 +359,7 @@ pub fn bind(
             continue;
         };
         let skill = &bb.resources[res].skills[sk];
-        let vars = StepVars::new(&st.variables);
+        let vars = StepVars::new(&st.variables, &p.variables);
         let mut ok = check_variables(st, &vars, skill, &p.variables, e, &mut extras, diags);
         let mut code = String::new();
         for pc in &p.calls {
@@ -408,29 +408,40 @@ fn label(e: &crate::model::Element) -> String {
 /// may carry any number of variables; one lookup per parameter must not cost their number).
 enum StepVars<'a> {
     Few(&'a [crate::model::Variable]),
-    Many(HashMap<&'a str, &'a crate::model::Variable>),
+    /// The variables the skill reads, by key, and the others in document order.
+    Many {
+        used: HashMap<&'a str, &'a crate::model::Variable>,
+        unused: Vec<&'a crate::model::Variable>,
+    },
 }
 
 impl<'a> StepVars<'a> {
     /// Up to this many variables are scanned.
     const SCAN: usize = 16;
 
-    fn new(vars: &'a [crate::model::Variable]) -> Self {
+    /// `read`: the keys of the variables the skill reads.
+    fn new(vars: &'a [crate::model::Variable], read: &HashSet<Arc<str>>) -> Self {
         if vars.len() <= Self::SCAN {
             return StepVars::Few(vars);
         }
-        let mut map = HashMap::with_capacity(vars.len());
+        let mut used = HashMap::new();
+        let mut unused = Vec::new();
         for v in vars {
-            // The first of equal names wins, as a scan finds it.
-            map.entry(&*v.name.key).or_insert(v);
+            if read.contains(&v.name.key) {
+                // The first of equal names wins, as a scan finds it.
+                used.entry(&*v.name.key).or_insert(v);
+            } else {
+                unused.push(v);
+            }
         }
-        StepVars::Many(map)
+        StepVars::Many { used, unused }
     }
 
+    /// The variable of this key, if the skill reads that key (or the step has few variables).
     fn get(&self, key: &str) -> Option<&'a crate::model::Variable> {
         match self {
             StepVars::Few(vars) => vars.iter().find(|v| &*v.name.key == key),
-            StepVars::Many(map) => map.get(key).copied(),
+            StepVars::Many { used, .. } => used.get(key).copied(),
         }
     }
 }
@@ -467,9 +478,18 @@ fn check_variables(
             );
         }
     }
-    for v in &st.variables {
-        if !used.contains(&v.name.key) {
-            extras.add(skill, v, e);
+    match vars {
+        StepVars::Few(list) => {
+            for v in *list {
+                if !used.contains(&v.name.key) {
+                    extras.add(skill, v, e);
+                }
+            }
+        }
+        StepVars::Many { unused, .. } => {
+            for v in unused {
+                extras.add(skill, v, e);
+            }
         }
     }
     ok
