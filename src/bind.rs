@@ -481,7 +481,16 @@ fn check_variables(
     match vars {
         StepVars::Few(list) => {
             for v in *list {
-                if !used.contains(&v.name.key) {
+                // A usual skill has a handful of parameters: a scan beats hashing.
+                let read = if skill.params.len() <= StepVars::SCAN {
+                    skill
+                        .params
+                        .iter()
+                        .any(|p| p.variable.as_ref().is_some_and(|n| n.key == v.name.key))
+                } else {
+                    used.contains(&v.name.key)
+                };
+                if !read {
                     extras.add(skill, v, e);
                 }
             }
@@ -506,23 +515,47 @@ struct Extras {
 
 /// One unused variable of one skill: the warning for its first place, and every step's id.
 struct Extra {
+    skill: Arc<str>,
+    variable: Arc<str>,
     first: Diagnostic,
     steps: Vec<u64>,
 }
 
 impl Extras {
+    /// Up to this many groups are scanned; then `index` holds them all.
+    const SCAN: usize = 8;
+
+    fn find(&mut self, skill: &Arc<str>, variable: &Arc<str>) -> Option<usize> {
+        if self.list.len() <= Self::SCAN {
+            return self
+                .list
+                .iter()
+                .position(|x| x.skill == *skill && x.variable == *variable);
+        }
+        if self.index.is_empty() {
+            for (i, x) in self.list.iter().enumerate() {
+                self.index
+                    .entry((x.skill.clone(), x.variable.clone()))
+                    .or_insert(i);
+            }
+        }
+        self.index.get(&(skill.clone(), variable.clone())).copied()
+    }
+
     fn add(
         &mut self,
         skill: &crate::model::Skill,
         v: &crate::model::Variable,
         e: &crate::model::Element,
     ) {
-        let key = (skill.name.key.clone(), v.name.key.clone());
-        if let Some(&at) = self.index.get(&key) {
+        if let Some(at) = self.find(&skill.name.key, &v.name.key) {
             self.list[at].steps.push(e.local_id);
             return;
         }
-        self.index.insert(key, self.list.len());
+        if !self.index.is_empty() {
+            let key = (skill.name.key.clone(), v.name.key.clone());
+            self.index.insert(key, self.list.len());
+        }
         let d = Diagnostic::warning(
             Code::ExtraVariable,
             format!(
@@ -533,6 +566,8 @@ impl Extras {
         .at(v.name.span.clone())
         .element(label(e));
         self.list.push(Extra {
+            skill: skill.name.key.clone(),
+            variable: v.name.key.clone(),
             first: d,
             steps: vec![e.local_id],
         });
