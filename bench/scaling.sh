@@ -9,9 +9,10 @@
 #   DIMS="vars skills" bench/scaling.sh   # some
 #   SCALE=4 bench/scaling.sh              # every base size times 4
 #   BIN=/path/to/skillpost bench/scaling.sh
+#   BUILD=0 bench/scaling.sh              # use the release binaries as they are
 set -euo pipefail
 cd "$(dirname "$0")/.."
-cargo build --release --quiet --bin skillpost --example generate
+[ "${BUILD:-1}" = 0 ] || cargo build --release --quiet --bin skillpost --example generate
 BIN=${BIN:-$PWD/target/release/skillpost}
 GEN=$PWD/target/release/examples/generate
 SCALE=${SCALE:-1}
