@@ -46,6 +46,9 @@ struct Case {
     label: &'static str,
     spec: Spec,
     iters: usize,
+    /// A shape of `generator::write_shape` instead (issue 13), `spec.steps` its size; only
+    /// shapes that leave the blackboard as it is (the write pass regenerates it).
+    shape: Option<&'static str>,
 }
 
 const CASES: &[Case] = &[
@@ -59,6 +62,7 @@ const CASES: &[Case] = &[
             looped: false,
         },
         iters: 30,
+        shape: None,
     },
     Case {
         label: "10k",
@@ -70,6 +74,7 @@ const CASES: &[Case] = &[
             looped: false,
         },
         iters: 15,
+        shape: None,
     },
     Case {
         label: "100k",
@@ -81,6 +86,7 @@ const CASES: &[Case] = &[
             looped: false,
         },
         iters: 5,
+        shape: None,
     },
     Case {
         label: "100k-branched",
@@ -92,6 +98,20 @@ const CASES: &[Case] = &[
             looped: false,
         },
         iters: 5,
+        shape: None,
+    },
+    // Issue 13: 100,000 extra variables in one step (of 16): goal under 0.3 s.
+    Case {
+        label: "100k-vars-one-step",
+        spec: Spec {
+            steps: 100_000,
+            branch_every: 0,
+            branch_width: 0,
+            select_every: 0,
+            looped: false,
+        },
+        iters: 5,
+        shape: Some("vars"),
     },
     // Issue 4's shape: every 4 main-line steps a 4-way branch (with a nested one).
     Case {
@@ -104,6 +124,7 @@ const CASES: &[Case] = &[
             looped: false,
         },
         iters: 5,
+        shape: None,
     },
 ];
 
@@ -184,7 +205,12 @@ fn main() {
 fn run_case(case: &Case, tmp: &Path) -> Row {
     let dir = tmp.join(case.label);
     let t = Instant::now();
-    let project = generator::write_project(&dir, &case.spec).expect("generate the project");
+    let project = match case.shape {
+        Some(dim) => generator::write_shape(&dir, dim, case.spec.steps)
+            .expect("a known shape")
+            .expect("generate the project"),
+        None => generator::write_project(&dir, &case.spec).expect("generate the project"),
+    };
     eprintln!(
         "{}: generated {} steps, {:.1} MB in {:.2} s; {} iterations",
         case.label,

@@ -4,6 +4,7 @@
 //! cargo run --release --example generate -- --steps 100000 --out /tmp/p100k
 //! cargo run --release --example generate -- --steps 100000 --branch-every 50 --branch-width 3 --out /tmp/p100k-b
 //! cargo run --release --example generate -- --steps 100000 --select-every 50 --looped --out /tmp/p100k-flow
+//! cargo run --release --example generate -- --shape vars --steps 100000 --out /tmp/v100k
 //! ./target/release/skillpost /tmp/p100k/Blackboard.aml out
 //! ```
 //!
@@ -37,6 +38,10 @@ struct Args {
     /// Make the main line a loop closed by a jump back (left when `Magazine_Empty`)
     #[arg(long)]
     looped: bool,
+    /// Grow one dimension instead (issue 13): `--steps` is then its size N; one of steps, vars,
+    /// skills, resources, functions, irl, signals, cond, width, depth, loops
+    #[arg(long, value_name = "DIM")]
+    shape: Option<String>,
     /// Output folder (created if needed; existing files are overwritten)
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
@@ -52,7 +57,21 @@ fn main() -> ExitCode {
         looped: args.looped,
     };
     let t = std::time::Instant::now();
-    match generator::write_project(&args.out, &spec) {
+    let written = match &args.shape {
+        Some(dim) => match generator::write_shape(&args.out, dim, args.steps) {
+            Some(r) => r,
+            None => {
+                let dims: Vec<&str> = generator::DIMENSIONS.iter().map(|d| d.0).collect();
+                eprintln!(
+                    "generate: unknown shape `{dim}`; one of {}",
+                    dims.join(", ")
+                );
+                return ExitCode::from(2);
+            }
+        },
+        None => generator::write_project(&args.out, &spec),
+    };
+    match written {
         Ok(p) => {
             let s = p.stats;
             println!(

@@ -6,7 +6,7 @@
 //! those skills call; [`bind`] renders every call with the IRL templates.
 
 use std::borrow::Cow;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
 use crate::diag::{Code, Diagnostic, Diagnostics, Span};
@@ -66,6 +66,12 @@ pub fn resolve(
         ..Resolution::default()
     };
     let mut several_reported = false;
+    let mut used: HashSet<(usize, usize)> = HashSet::new();
+    // Resource key → index of its first resource.
+    let mut by_key: HashMap<&str, usize> = HashMap::new();
+    for (ri, res) in bb.resources.iter().enumerate() {
+        by_key.entry(&res.name.key).or_insert(ri);
+    }
     for &i in &order.steps {
         let e = &sfc.elements[i];
         let ElementKind::Step(st) = &e.kind else {
@@ -92,7 +98,7 @@ pub fn resolve(
             continue;
         };
         let res = match &st.resource {
-            Some(rn) => match bb.resources.iter().position(|r| r.name.key == rn.key) {
+            Some(rn) => match by_key.get(&*rn.key).copied() {
                 Some(ri) => ri,
                 None => {
                     diags.push(
@@ -189,7 +195,7 @@ pub fn resolve(
             }
             _ => {}
         }
-        if !r.used.contains(&(res, sk)) {
+        if used.insert((res, sk)) {
             r.used.push((res, sk));
             let skill = &resource.skills[sk];
             for d in &skill.defects {
@@ -221,12 +227,13 @@ pub fn needed_functions(
     diags: &mut Diagnostics,
 ) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
+    let mut seen = HashSet::new();
     for &(res, sk) in &r.used {
         let resource = &bb.resources[res];
         for m in &resource.skills[sk].mappings {
             match resource.function(&m.function.key) {
                 Some(f) => {
-                    if !out.contains(&(res, f)) {
+                    if seen.insert((res, f)) {
                         out.push((res, f));
                     }
                 }
@@ -277,6 +284,8 @@ pub struct BoundStep {
 /// skill parameter that fills it.
 struct Prepared {
     calls: Vec<PreparedCall>,
+    /// Keys of the SFC variables the skill's parameters read.
+    variables: HashSet<Arc<str>>,
 }
 
 struct PreparedCall {
@@ -284,6 +293,32 @@ struct PreparedCall {
     call: usize,
     /// Skill parameter index per template parameter.
     args: Vec<usize>,
+}
+
+/// Each IRL file's function-calls (all overloads, in order) and definitions (the first) by key.
+struct CallIndex<'a> {
+    calls: Vec<HashMap<&'a str, Vec<usize>>>,
+    definitions: Vec<HashMap<&'a str, usize>>,
+}
+
+impl<'a> CallIndex<'a> {
+    fn new(irls: &'a [Irl]) -> Self {
+        let mut calls = Vec::with_capacity(irls.len());
+        let mut definitions = Vec::with_capacity(irls.len());
+        for irl in irls {
+            let mut c: HashMap<&str, Vec<usize>> = HashMap::new();
+            for (i, call) in irl.calls.iter().enumerate() {
+                c.entry(&call.name.key).or_default().push(i);
+            }
+            let mut d: HashMap<&str, usize> = HashMap::new();
+            for (i, def) in irl.definitions.iter().enumerate() {
+                d.entry(&def.name.key).or_insert(i);
+            }
+            calls.push(c);
+            definitions.push(d);
+        }
+        CallIndex { calls, definitions }
+    }
 }
 
 /// Renders every step. `fn_irl` maps `(resource, function)` to the loaded IRL file (absent when
@@ -298,8 +333,9 @@ pub fn bind(
     diags: &mut Diagnostics,
 ) -> Bound {
     let mut prepared: HashMap<(usize, usize), Option<Prepared>> = HashMap::new();
+    let calls = CallIndex::new(irls);
     for &(res, sk) in &r.used {
-        let p = prepare(bb, res, sk, irls, fn_irl, diags);
+        let p = prepare(bb, res, sk, irls, &calls, fn_irl, diags);
         prepared.insert((res, sk), p);
     }
     let mut bound = Bound {
@@ -308,7 +344,7 @@ pub fn bind(
         resource: r.resource,
         signals: Vec::new(),
     };
-    let mut def_keys: Vec<&str> = Vec::new();
+    let mut def_keys: HashSet<&str> = HashSet::new();
     let mut values: Vec<Cow<str>> = Vec::new();
     let mut extras = Extras::default();
     for &i in &order.steps {
@@ -323,13 +359,14 @@ pub fn bind(
             continue;
         };
         let skill = &bb.resources[res].skills[sk];
-        let mut ok = check_variables(st, skill, e, &mut extras, diags);
+        let vars = StepVars::new(&st.variables, &p.variables);
+        let mut ok = check_variables(st, &vars, skill, &p.variables, e, &mut extras, diags);
         let mut code = String::new();
         for pc in &p.calls {
             let call = &irls[pc.irl].calls[pc.call];
             values.clear();
             for &pi in &pc.args {
-                match value_of(st, skill, pi, e.local_id) {
+                match value_of(&vars, skill, pi, e.local_id) {
                     Ok(v) => values.push(v),
                     Err(Some(d)) => {
                         diags.push(*d);
@@ -343,13 +380,10 @@ pub fn bind(
                     code.push('\n');
                 }
                 call.template.render(&values, &mut code);
-                if !def_keys.contains(&&*call.name.key)
-                    && let Some(d) = irls[pc.irl]
-                        .definitions
-                        .iter()
-                        .position(|d| d.name.key == call.name.key)
+                if !def_keys.contains(&*call.name.key)
+                    && let Some(&d) = calls.definitions[pc.irl].get(&*call.name.key)
                 {
-                    def_keys.push(&call.name.key);
+                    def_keys.insert(&call.name.key);
                     bound.definitions.push((pc.irl, d));
                 }
             }
@@ -370,10 +404,55 @@ fn label(e: &crate::model::Element) -> String {
     format!("localId {}", e.local_id)
 }
 
+/// A step's variables by key: a scan for the few of a usual step, a hash map for many (a step
+/// may carry any number of variables; one lookup per parameter must not cost their number).
+enum StepVars<'a> {
+    Few(&'a [crate::model::Variable]),
+    /// The variables the skill reads, by key, and the others in document order.
+    Many {
+        used: HashMap<&'a str, &'a crate::model::Variable>,
+        unused: Vec<&'a crate::model::Variable>,
+    },
+}
+
+impl<'a> StepVars<'a> {
+    /// Up to this many variables are scanned.
+    const SCAN: usize = 16;
+
+    /// `read`: the keys of the variables the skill reads.
+    fn new(vars: &'a [crate::model::Variable], read: &HashSet<Arc<str>>) -> Self {
+        if vars.len() <= Self::SCAN {
+            return StepVars::Few(vars);
+        }
+        let mut used = HashMap::new();
+        let mut unused = Vec::new();
+        for v in vars {
+            if read.contains(&v.name.key) {
+                // The first of equal names wins, as a scan finds it.
+                used.entry(&*v.name.key).or_insert(v);
+            } else {
+                unused.push(v);
+            }
+        }
+        StepVars::Many { used, unused }
+    }
+
+    /// The variable of this key, if the skill reads that key (or the step has few variables).
+    fn get(&self, key: &str) -> Option<&'a crate::model::Variable> {
+        match self {
+            StepVars::Few(vars) => vars.iter().find(|v| &*v.name.key == key),
+            StepVars::Many { used, .. } => used.get(key).copied(),
+        }
+    }
+}
+
 /// Reports missing variables (`E314`) and extra ones (`W303`). False when one is missing.
+/// `used` holds the keys of the variables the skill's parameters read.
 fn check_variables(
     st: &Step,
+    vars: &StepVars,
     skill: &crate::model::Skill,
+    used: &HashSet<Arc<str>>,
     e: &crate::model::Element,
     extras: &mut Extras,
     diags: &mut Diagnostics,
@@ -381,7 +460,7 @@ fn check_variables(
     let mut ok = true;
     for p in skill.params.iter().filter(|p| p.indices.is_empty()) {
         let Some(var) = &p.variable else { continue };
-        if !st.variables.iter().any(|v| v.name.key == var.key) {
+        if vars.get(&var.key).is_none() {
             ok = false;
             if st.invalid_variables.contains(&var.key) {
                 continue; // present but malformed: reported by the reader
@@ -399,13 +478,27 @@ fn check_variables(
             );
         }
     }
-    for v in &st.variables {
-        let used = skill
-            .params
-            .iter()
-            .any(|p| p.variable.as_ref().is_some_and(|n| n.key == v.name.key));
-        if !used {
-            extras.add(skill, v, e);
+    match vars {
+        StepVars::Few(list) => {
+            for v in *list {
+                // A usual skill has a handful of parameters: a scan beats hashing.
+                let read = if skill.params.len() <= StepVars::SCAN {
+                    skill
+                        .params
+                        .iter()
+                        .any(|p| p.variable.as_ref().is_some_and(|n| n.key == v.name.key))
+                } else {
+                    used.contains(&v.name.key)
+                };
+                if !read {
+                    extras.add(skill, v, e);
+                }
+            }
+        }
+        StepVars::Many { unused, .. } => {
+            for v in unused {
+                extras.add(skill, v, e);
+            }
         }
     }
     ok
@@ -416,6 +509,8 @@ fn check_variables(
 #[derive(Default)]
 struct Extras {
     list: Vec<Extra>,
+    /// `(skill key, variable key)` → index into `list`.
+    index: HashMap<(Arc<str>, Arc<str>), usize>,
 }
 
 /// One unused variable of one skill: the warning for its first place, and every step's id.
@@ -427,19 +522,39 @@ struct Extra {
 }
 
 impl Extras {
+    /// Up to this many groups are scanned; then `index` holds them all.
+    const SCAN: usize = 8;
+
+    fn find(&mut self, skill: &Arc<str>, variable: &Arc<str>) -> Option<usize> {
+        if self.list.len() <= Self::SCAN {
+            return self
+                .list
+                .iter()
+                .position(|x| x.skill == *skill && x.variable == *variable);
+        }
+        if self.index.is_empty() {
+            for (i, x) in self.list.iter().enumerate() {
+                self.index
+                    .entry((x.skill.clone(), x.variable.clone()))
+                    .or_insert(i);
+            }
+        }
+        self.index.get(&(skill.clone(), variable.clone())).copied()
+    }
+
     fn add(
         &mut self,
         skill: &crate::model::Skill,
         v: &crate::model::Variable,
         e: &crate::model::Element,
     ) {
-        if let Some(entry) = self
-            .list
-            .iter_mut()
-            .find(|x| x.skill == skill.name.key && x.variable == v.name.key)
-        {
-            entry.steps.push(e.local_id);
+        if let Some(at) = self.find(&skill.name.key, &v.name.key) {
+            self.list[at].steps.push(e.local_id);
             return;
+        }
+        if !self.index.is_empty() {
+            let key = (skill.name.key.clone(), v.name.key.clone());
+            self.index.insert(key, self.list.len());
         }
         let d = Diagnostic::warning(
             Code::ExtraVariable,
@@ -483,7 +598,7 @@ impl Extras {
 /// missing (reported elsewhere). Allocates only for an error or a value that changes (a boolean
 /// or string literal, a number spelled differently).
 fn value_of<'a>(
-    st: &'a Step,
+    vars: &StepVars<'a>,
     skill: &crate::model::Skill,
     pi: usize,
     local_id: u64,
@@ -493,7 +608,7 @@ fn value_of<'a>(
     let Some(var_name) = &p.variable else {
         return Err(None);
     };
-    let Some(var) = st.variables.iter().find(|v| v.name.key == var_name.key) else {
+    let Some(var) = vars.get(&var_name.key) else {
         return Err(None);
     };
     let err = |code: Code, msg: String| {
@@ -729,6 +844,7 @@ pub fn conditions(
 ) -> Vec<usize> {
     use crate::cond::Ty;
     let mut used = Vec::new();
+    let mut seen = HashSet::new();
     let res = resource.map(|r| &bb.resources[r]);
     for e in &sfc.elements {
         let ElementKind::Transition(Some(c)) = &e.kind else {
@@ -783,7 +899,7 @@ pub fn conditions(
         if let Some(r) = res {
             for (n, _) in c.expr.names() {
                 if let Some(si) = r.signal(&crate::names::key(n))
-                    && !used.contains(&si)
+                    && seen.insert(si)
                 {
                     used.push(si);
                 }
@@ -823,6 +939,7 @@ fn prepare(
     res: usize,
     sk: usize,
     irls: &[Irl],
+    index: &CallIndex,
     fn_irl: &HashMap<(usize, usize), usize>,
     diags: &mut Diagnostics,
 ) -> Option<Prepared> {
@@ -845,9 +962,10 @@ fn prepare(
         };
         let irl = &irls[irl_i];
         let irl_span = Span::new(irl.file, 0..0);
-        let candidates: Vec<usize> = (0..irl.calls.len())
-            .filter(|&c| irl.calls[c].name.key == f.command.key)
-            .collect();
+        let candidates: Vec<usize> = index.calls[irl_i]
+            .get(&*f.command.key)
+            .cloned()
+            .unwrap_or_default();
         if candidates.is_empty() {
             diags.push(
                 Diagnostic::error(
@@ -989,7 +1107,12 @@ fn prepare(
             args,
         });
     }
-    ok.then_some(Prepared { calls })
+    let variables = skill
+        .params
+        .iter()
+        .filter_map(|p| p.variable.as_ref().map(|n| n.key.clone()))
+        .collect();
+    ok.then_some(Prepared { calls, variables })
 }
 
 #[cfg(test)]

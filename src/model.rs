@@ -95,17 +95,59 @@ pub struct Resource {
     pub signals: Vec<Signal>,
     /// Keys of signals that are present but malformed (reported): not "unknown".
     pub broken_signals: Vec<Arc<str>>,
+    /// Skills, functions and signals by key, built at the first lookup (after reading): a lookup
+    /// per step must not cost the number of skills.
+    pub index: std::sync::OnceLock<ResourceIndex>,
+}
+
+/// Key → index of the first skill, function and signal of that key.
+#[derive(Debug, Default)]
+pub struct ResourceIndex {
+    skills: std::collections::HashMap<Arc<str>, usize>,
+    functions: std::collections::HashMap<Arc<str>, usize>,
+    signals: std::collections::HashMap<Arc<str>, usize>,
 }
 
 impl Resource {
+    /// Up to this many entries a scan is cheaper than building the index.
+    const SCAN: usize = 8;
+
+    fn index(&self) -> &ResourceIndex {
+        self.index.get_or_init(|| {
+            fn by_key<'a>(
+                keys: impl Iterator<Item = &'a Arc<str>>,
+            ) -> std::collections::HashMap<Arc<str>, usize> {
+                let mut m = std::collections::HashMap::new();
+                for (i, k) in keys.enumerate() {
+                    m.entry(k.clone()).or_insert(i);
+                }
+                m
+            }
+            ResourceIndex {
+                skills: by_key(self.skills.iter().map(|s| &s.name.key)),
+                functions: by_key(self.functions.iter().map(|f| &f.name.key)),
+                signals: by_key(self.signals.iter().map(|s| &s.name.key)),
+            }
+        })
+    }
+
     pub fn skill(&self, key: &str) -> Option<usize> {
-        self.skills.iter().position(|s| &*s.name.key == key)
+        if self.skills.len() <= Self::SCAN {
+            return self.skills.iter().position(|s| &*s.name.key == key);
+        }
+        self.index().skills.get(key).copied()
     }
     pub fn function(&self, key: &str) -> Option<usize> {
-        self.functions.iter().position(|f| &*f.name.key == key)
+        if self.functions.len() <= Self::SCAN {
+            return self.functions.iter().position(|f| &*f.name.key == key);
+        }
+        self.index().functions.get(key).copied()
     }
     pub fn signal(&self, key: &str) -> Option<usize> {
-        self.signals.iter().position(|s| &*s.name.key == key)
+        if self.signals.len() <= Self::SCAN {
+            return self.signals.iter().position(|s| &*s.name.key == key);
+        }
+        self.index().signals.get(key).copied()
     }
 }
 

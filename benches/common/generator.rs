@@ -114,18 +114,43 @@ pub fn sfc_text(spec: &Spec) -> String {
 
 /// Writes the SFC.
 pub fn write_sfc(w: &mut impl Write, spec: &Spec) -> io::Result<Stats> {
-    let mut g = Gen {
-        w,
-        buf: String::with_capacity(4096),
-        next_id: 1,
-        row: 0,
-        rng: Rng(0x5EED_0F1B_2015),
-        stats: Stats::default(),
-        bytes: 0,
-        err: None,
-        name: None,
-    };
+    let mut g = Gen::new(w);
     g.raw(SFC_HEAD);
+    write_body(&mut g, spec);
+    g.raw(SFC_TAIL);
+    g.finish()
+}
+
+impl<'w, W: Write> Gen<'w, W> {
+    fn new(w: &'w mut W) -> Self {
+        Gen {
+            w,
+            buf: String::with_capacity(4096),
+            next_id: 1,
+            row: 0,
+            rng: Rng(0x5EED_0F1B_2015),
+            stats: Stats::default(),
+            bytes: 0,
+            err: None,
+            name: None,
+            skills: 0,
+            extra: String::new(),
+            max_depth: MAX_DEPTH,
+        }
+    }
+
+    fn finish(mut self) -> io::Result<Stats> {
+        self.flush();
+        if let Some(e) = self.err {
+            return Err(e);
+        }
+        self.stats.sfc_bytes = self.bytes;
+        Ok(self.stats)
+    }
+}
+
+/// The steps of [`Spec`] between the SFC's head and tail.
+fn write_body<W: Write>(g: &mut Gen<'_, W>, spec: &Spec) {
     let start = g.special_step("Start", None);
     let mut last = start;
     if spec.looped {
@@ -168,13 +193,6 @@ pub fn write_sfc(w: &mut impl Write, spec: &Spec) -> io::Result<Stats> {
         let t = g.transition(last);
         g.special_step("End", Some(t));
     }
-    g.raw(SFC_TAIL);
-    g.flush();
-    if let Some(e) = g.err {
-        return Err(e);
-    }
-    g.stats.sfc_bytes = g.bytes;
-    Ok(g.stats)
 }
 
 /// Nested branches go this deep (0 = the main line's branch).
@@ -219,7 +237,13 @@ struct Gen<'w, W: Write> {
     /// The first write error; later writes are skipped.
     err: Option<io::Error>,
     /// The next skill step's name instead of its step type.
-    name: Option<&'static str>,
+    name: Option<String>,
+    /// Skill steps name skill `Skill {k % skills}` instead of `Move PTP`/`Move LIN` (0: off).
+    skills: usize,
+    /// Written into the next skill step after its variables (then cleared).
+    extra: String,
+    /// Nested simultaneous branches go this deep (0 = the main line's branch).
+    max_depth: usize,
 }
 
 impl<W: Write> Gen<'_, W> {
@@ -299,7 +323,15 @@ impl<W: Write> Gen<'_, W> {
         } else {
             ("P2P", "Move PTP")
         };
-        let kind = self.name.unwrap_or(kind);
+        let name = self.name.clone();
+        let kind = name.as_deref().unwrap_or(kind);
+        let own_skill;
+        let skill = if self.skills > 0 {
+            own_skill = format!("Skill {}", (self.stats.skill_steps - 1) % self.skills);
+            own_skill.as_str()
+        } else {
+            skill
+        };
         let x = column * 200;
         let r = &mut self.rng;
         // Millimetres with one decimal, whole degrees: a reachable-looking KR15 workspace.
@@ -323,8 +355,13 @@ impl<W: Write> Gen<'_, W> {
              <skill name=\"{skill}\"/></iwb></data></addData>\n \
              <Variable name=\"Frame\" Value=\"({fx}, {fy}, {fz}, {a}, {b}, {c})\"/>\n \
              <Variable name=\"Velocity\" Value=\"{vel}\"/>\n \
-             <Variable name=\"JointConfig\" Value=\"({j1}, {j2})\"/>\n</step>\n"
+             <Variable name=\"JointConfig\" Value=\"({j1}, {j2})\"/>\n"
         );
+        if !self.extra.is_empty() {
+            let extra = std::mem::take(&mut self.extra);
+            self.raw(&extra);
+        }
+        self.raw("</step>\n");
         self.maybe_flush();
         id
     }
@@ -411,7 +448,11 @@ impl<W: Write> Gen<'_, W> {
 
     /// The loop's head: a skill step named `Loop` after transition `pred`.
     fn loop_head(&mut self, pred: u64) -> u64 {
-        self.name = Some("Loop");
+        self.loop_head_named(pred, "Loop")
+    }
+
+    fn loop_head_named(&mut self, pred: u64, name: &str) -> u64 {
+        self.name = Some(name.to_owned());
         let id = self.skill_step(Pred::Plain(pred), 0);
         self.name = None;
         id
@@ -420,13 +461,17 @@ impl<W: Write> Gen<'_, W> {
     /// The loop's end after step `pred`: a selection that jumps back to `Loop` while
     /// `NOT Magazine_Empty`; returns the transition to the end step.
     fn loop_end(&mut self, pred: u64) -> u64 {
+        self.loop_end_named(pred, "Loop")
+    }
+
+    fn loop_end_named(&mut self, pred: u64, target: &str) -> u64 {
         let div = self.selection_divergence(pred, 2);
         let back = self.guarded(Pred::Branch(div, 0), "NOT Magazine_Empty");
         let id = self.id();
         let y = self.y();
         let _ = write!(
             self.buf,
-            "<jumpStep localId=\"{id}\" targetName=\"Loop\">\n <position x=\"0\" y=\"{y}\"/>\n "
+            "<jumpStep localId=\"{id}\" targetName=\"{target}\">\n <position x=\"0\" y=\"{y}\"/>\n "
         );
         self.conn_in(Pred::Plain(back));
         self.raw("\n</jumpStep>\n");
@@ -454,7 +499,7 @@ impl<W: Write> Gen<'_, W> {
         for j in 0..width {
             let column = depth * width + j;
             let mut last = self.skill_step(Pred::Branch(div, j), column);
-            if j == 0 && depth < MAX_DEPTH {
+            if j == 0 && depth < self.max_depth {
                 let t = self.transition(last);
                 let conv = self.branch(t, width, depth + 1);
                 let t = self.transition(conv);
@@ -690,3 +735,253 @@ const BLACKBOARD: &str = r#"<?xml version="1.0" encoding="utf-8"?>
   </InstanceHierarchy>
 </CAEXFile>
 "#;
+
+/// The input dimensions a shape can grow in (issue 13), each with what `n` counts.
+pub const DIMENSIONS: &[(&str, &str)] = &[
+    ("steps", "skill steps in a flat line"),
+    ("vars", "extra <Variable>s in one step (16 steps)"),
+    (
+        "skills",
+        "skills of the resource, step k using skill k (n steps)",
+    ),
+    ("resources", "resources before the one the 16 steps use"),
+    (
+        "functions",
+        "functions (mappings) of one skill, all calling SetVelCP (16 steps)",
+    ),
+    (
+        "irl",
+        "IRL function-calls and definitions, each called by its own function of one skill (16 steps)",
+    ),
+    (
+        "signals",
+        "signals of the resource; the first condition reads up to 300, the others the last ones (16 steps)",
+    ),
+    (
+        "cond",
+        "terms of one transition condition (16 steps; a condition has at most 1024 tokens: n <= 370)",
+    ),
+    ("width", "branches of one simultaneous divergence"),
+    (
+        "depth",
+        "nesting depth of 2-way simultaneous branches (at most 127)",
+    ),
+    ("loops", "loops one after another, each closed by a jump"),
+];
+
+/// Writes a project that grows in one dimension of [`DIMENSIONS`] with `n`; the rest stays
+/// small. `None` for an unknown dimension.
+pub fn write_shape(dir: &Path, dim: &str, n: usize) -> Option<io::Result<Project>> {
+    let mut bb = blackboard_text(SFC_FILE, IRL_FILE);
+    let mut irl = IRL.to_owned();
+    let mut spec = Spec::flat(16);
+    let mut cond = None::<String>;
+    // Conditions of the transitions after the first (each names one signal).
+    let mut later = None::<usize>;
+    let mut skills = 0;
+    let mut extra = String::new();
+    let anchor_skills =
+        "        </InternalElement>\n        <InternalElement Name=\"FunctionDescription\"";
+    let anchor_functions = "{00000000-0000-0000-0000-000000000009}\">\n";
+    let anchor_signals = "        <InternalElement Name=\"Skills\"";
+    let anchor_resources = "      <InternalElement Name=\"KUKA KR15-2\"";
+    let id = |kind: u32, i: usize| format!("{{{kind:08X}-0000-0000-0000-{i:012X}}}");
+    let insert = |bb: &mut String, anchor: &str, before: bool, text: &str| {
+        let at = bb.find(anchor).expect("anchor in the blackboard");
+        let at = if before { at } else { at + anchor.len() };
+        bb.insert_str(at, text);
+    };
+    // A skill calling each of `functions` with its velocity.
+    let many = |functions: &[String]| {
+        let mut t = format!(
+            "          <InternalElement Name=\"Skill 0\" ID=\"{}\">\n            <Attribute Name=\"Velocity\" AttributeDataType=\"xs:double\"><Value>Velocity</Value></Attribute>\n",
+            id(0x5C, 0)
+        );
+        for (k, f) in functions.iter().enumerate() {
+            let _ = writeln!(
+                t,
+                "            <ExternalInterface Name=\"FunctionMapping\" ID=\"{}\" RefBaseClassPath=\"IWB StateModelInterfaceLib/SkillMapping\"><Attribute Name=\"Name\"><Value>{f}</Value></Attribute><Attribute Name=\"Order\"><Value>{k}</Value></Attribute><Attribute Name=\"Mapping\"><Attribute Name=\"Velocity\"><Value>value</Value></Attribute></Attribute></ExternalInterface>",
+                id(0x3A, k)
+            );
+        }
+        t.push_str("          </InternalElement>\n");
+        t
+    };
+    let function = |name: &str, command: &str, k: usize| {
+        format!(
+            "          <InternalElement Name=\"{name}\" ID=\"{}\"><ExternalInterface Name=\"FunctionDataInterface\" ID=\"{}\" RefBaseClassPath=\"IWB StateModelInterfaceLib/FunctionLogic\"><Attribute Name=\"Name\"><Value>{command}</Value></Attribute><Attribute Name=\"refURI\"><Value>{IRL_FILE}</Value></Attribute></ExternalInterface></InternalElement>\n",
+            id(0xF0, k),
+            id(0xF1, k)
+        )
+    };
+    match dim {
+        "steps" => spec = Spec::flat(n),
+        "vars" => {
+            for i in 0..n {
+                let _ = writeln!(extra, " <Variable name=\"Extra{i}\" Value=\"{i}\"/>");
+            }
+        }
+        "skills" => {
+            let mut t = String::new();
+            for k in 0..n {
+                let _ = writeln!(
+                    t,
+                    "          <InternalElement Name=\"Skill {k}\" ID=\"{}\"><Attribute Name=\"End Position\" AttributeDataType=\"xs:string\"><Value>Frame</Value><Attribute Name=\"x\" AttributeDataType=\"xs:double\"><Value>0</Value></Attribute><Attribute Name=\"y\" AttributeDataType=\"xs:double\"><Value>1</Value></Attribute><Attribute Name=\"z\" AttributeDataType=\"xs:double\"><Value>2</Value></Attribute><Attribute Name=\"a\" AttributeDataType=\"xs:double\"><Value>3</Value></Attribute><Attribute Name=\"b\" AttributeDataType=\"xs:double\"><Value>4</Value></Attribute><Attribute Name=\"c\" AttributeDataType=\"xs:double\"><Value>5</Value></Attribute></Attribute><ExternalInterface Name=\"FunctionMapping\" ID=\"{}\" RefBaseClassPath=\"IWB StateModelInterfaceLib/SkillMapping\"><Attribute Name=\"Name\"><Value>LIN</Value></Attribute><Attribute Name=\"Order\"><Value>0</Value></Attribute><Attribute Name=\"Mapping\"><Attribute Name=\"End Position\"><Attribute Name=\"x\"><Value>X</Value></Attribute><Attribute Name=\"y\"><Value>Y</Value></Attribute><Attribute Name=\"z\"><Value>Z</Value></Attribute><Attribute Name=\"a\"><Value>A</Value></Attribute><Attribute Name=\"b\"><Value>B</Value></Attribute><Attribute Name=\"c\"><Value>C</Value></Attribute></Attribute></Attribute></ExternalInterface></InternalElement>",
+                    id(0x5C, k),
+                    id(0x3A, k)
+                );
+            }
+            insert(&mut bb, anchor_skills, true, &t);
+            spec = Spec::flat(n);
+            skills = n;
+        }
+        "resources" => {
+            let mut t = String::new();
+            for k in 0..n {
+                let _ = writeln!(
+                    t,
+                    "      <InternalElement Name=\"Robot {k}\" ID=\"{}\"><InternalElement Name=\"Skills\" ID=\"{}\"/></InternalElement>",
+                    id(0xAE, k),
+                    id(0xAF, k)
+                );
+            }
+            insert(&mut bb, anchor_resources, true, &t);
+        }
+        "functions" | "irl" => {
+            let names: Vec<String> = (0..n).map(|k| format!("Function {k}")).collect();
+            let mut t = String::new();
+            let (mut calls, mut defs) = (String::new(), String::new());
+            for (k, f) in names.iter().enumerate() {
+                let command = if dim == "irl" {
+                    let c = format!("Call{k}");
+                    let _ = write!(
+                        calls,
+                        "\t\t<function-call name=\"{c}\">\n\t\t\t<parameter name=\"VALUE\"/>\n\t\t\t{c} (VALUE)\n\t\t</function-call>\n"
+                    );
+                    let _ = write!(
+                        defs,
+                        "\t\t<definition name=\"{c}\">\n\t\t\t<parameter name=\"VALUE\"/>\n\t\t\tDEF {c}(VALUE:IN)\n\t\t\t\tDECL REAL VALUE\n\t\t\t\t$VEL.CP = VALUE\n\t\t\tEND\n\t\t</definition>\n"
+                    );
+                    c
+                } else {
+                    "SetVelCP".to_owned()
+                };
+                t.push_str(&function(f, &command, k));
+            }
+            insert(&mut bb, anchor_functions, false, &t);
+            insert(&mut bb, anchor_skills, true, &many(&names));
+            irl = irl.replace("\t</src>", &format!("{calls}\t</src>"));
+            irl = irl.replace("\t</def>", &format!("{defs}\t</def>"));
+            skills = 1;
+        }
+        "signals" => {
+            let mut t = String::new();
+            let mut c = String::new();
+            for k in 0..n {
+                let _ = writeln!(
+                    t,
+                    "        <ExternalInterface Name=\"S{k}\" ID=\"{}\" RefBaseClassPath=\"AutomationMLInterfaceClassLib/AutomationMLBaseInterface/Communication/SignalInterface\"><Attribute Name=\"Number\" AttributeDataType=\"xs:integer\"><Value>{}</Value></Attribute></ExternalInterface>",
+                    id(0x51, k),
+                    // I/O indexes go up to 8192 (read::blackboard::MAX_IO); they may repeat.
+                    k % 8000 + 3
+                );
+                if k < 300 {
+                    if k > 0 {
+                        c.push_str(" OR ");
+                    }
+                    let _ = write!(c, "S{k}");
+                }
+            }
+            insert(&mut bb, anchor_signals, true, &t);
+            cond = Some(c);
+            later = Some(n);
+        }
+        "cond" => {
+            let mut c = String::new();
+            for k in 0..n {
+                if k > 0 {
+                    c.push_str(if k % 2 == 1 { " AND " } else { " OR " });
+                }
+                c.push_str(if k % 3 == 0 {
+                    "Part_OK"
+                } else {
+                    "NOT Magazine_Empty"
+                });
+            }
+            cond = Some(c);
+        }
+        "width" | "depth" | "loops" => {}
+        _ => return None,
+    }
+    Some((|| {
+        fs::create_dir_all(dir)?;
+        let blackboard = dir.join(BLACKBOARD_FILE);
+        let sfc = dir.join(SFC_FILE);
+        let irl_path = dir.join(IRL_FILE);
+        fs::write(&blackboard, bb)?;
+        fs::write(&irl_path, irl)?;
+        let mut w = BufWriter::with_capacity(1 << 20, fs::File::create(&sfc)?);
+        let mut g = Gen::new(&mut w);
+        g.skills = skills;
+        g.extra = extra;
+        g.raw(SFC_HEAD);
+        match dim {
+            "width" | "depth" => {
+                let start = g.special_step("Start", None);
+                let t = g.transition(start);
+                let conv = if dim == "width" {
+                    g.max_depth = 0;
+                    g.branch(t, n, 0)
+                } else {
+                    g.max_depth = n.saturating_sub(1);
+                    g.branch(t, 2, 0)
+                };
+                let t = g.transition(conv);
+                g.special_step("End", Some(t));
+            }
+            "loops" => {
+                let start = g.special_step("Start", None);
+                let mut t = g.transition(start);
+                for k in 0..n {
+                    let name = format!("Loop{k}");
+                    let head = g.loop_head_named(t, &name);
+                    let t2 = g.transition(head);
+                    let body = g.skill_step(Pred::Plain(t2), 0);
+                    t = g.loop_end_named(body, &name);
+                }
+                g.special_step("End", Some(t));
+            }
+            _ => match cond {
+                Some(c) => {
+                    // The first transition carries the condition.
+                    let start = g.special_step("Start", None);
+                    let t = g.guarded(Pred::Plain(start), &c);
+                    let mut last = g.skill_step(Pred::Plain(t), 0);
+                    for k in 1..spec.steps {
+                        let t = match later {
+                            Some(n) if n > 0 => {
+                                let s = format!("S{}", n - 1 - k % n);
+                                g.guarded(Pred::Plain(last), &s)
+                            }
+                            _ => g.transition(last),
+                        };
+                        last = g.skill_step(Pred::Plain(t), 0);
+                    }
+                    let t = g.transition(last);
+                    g.special_step("End", Some(t));
+                }
+                None => write_body(&mut g, &spec),
+            },
+        }
+        g.raw(SFC_TAIL);
+        let stats = g.finish()?;
+        w.into_inner().map_err(|e| e.into_error())?.sync_all()?;
+        Ok(Project {
+            dir: dir.to_owned(),
+            blackboard,
+            sfc,
+            irl: irl_path,
+            stats,
+        })
+    })())
+}

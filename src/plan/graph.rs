@@ -102,13 +102,26 @@ pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
     let mut pred_at = Vec::with_capacity(n + 1);
     let mut pred = Vec::with_capacity(n);
     let mut succ_count = vec![0usize; n];
+    let mut seen: std::collections::HashSet<usize> = std::collections::HashSet::new();
     for e in sfc.elements.iter() {
         pred_at.push(pred.len());
         let first = pred.len();
+        seen.clear();
         for (r, range) in &e.inputs {
             match ids.get(*r) {
                 Some(p) => {
-                    if !pred[first..].contains(&p) {
+                    // A scan for the usual one or two inputs; a convergence of many is
+                    // deduplicated through `seen` (its width must not cost its square).
+                    let dup = if pred.len() - first < 8 {
+                        pred[first..].contains(&p)
+                    } else {
+                        if seen.len() < pred.len() - first {
+                            seen.clear();
+                            seen.extend(pred[first..].iter().copied());
+                        }
+                        !seen.insert(p)
+                    };
+                    if !dup {
                         pred.push(p);
                         succ_count[p] += 1;
                     }

@@ -232,9 +232,9 @@ impl Reader<'_> {
     }
 
     fn check_unique<'n>(&mut self, names: impl Iterator<Item = (&'n Name, &'n str)>, what: &str) {
-        let mut seen: Vec<&Name> = Vec::new();
+        let mut seen: std::collections::HashMap<&str, &Name> = std::collections::HashMap::new();
         for (n, element) in names {
-            if let Some(first) = seen.iter().find(|s| s.key == n.key) {
+            if let Some(first) = seen.get(&*n.key) {
                 self.diags.push(
                     Diagnostic::error(
                         Code::DuplicateName,
@@ -245,7 +245,7 @@ impl Reader<'_> {
                     .related(first.span.clone(), "the first one"),
                 );
             } else {
-                seen.push(n);
+                seen.insert(&n.key, n);
             }
         }
     }
@@ -290,6 +290,7 @@ impl Reader<'_> {
             broken_functions,
             signals,
             broken_signals,
+            index: Default::default(),
         }
     }
 

@@ -1,0 +1,140 @@
+//! Hostile sizes (issue 13): for every input dimension, a project 16 times larger in that
+//! dimension must not take much more than 16 times as long to compile. A quadratic path makes the
+//! 16× run cost 256× (the bound below allows 30× plus half a second, since the machine may be loaded), so it cannot come back
+//! unnoticed. The figures themselves are the benches' business (`bench/scaling.sh`,
+//! docs/PERFORMANCE.md); this only catches growth.
+//!
+//! Each case runs the command line on a project from `generator::write_shape`. The cases take a
+//! lock, so they do not time each other; a bound that is missed is measured once more before the
+//! test fails (a loaded machine may stall one run).
+//!
+//! `SKILLPOST_SCALING_BIN=/path/to/skillpost` times another build. A debug build of the code
+//! before issue 13 fails `vars`, `resources` and `signals` here (and `irl` in some runs); its
+//! quadratic paths in skills and functions have a small coefficient and stay within the bound at
+//! these sizes (CI's time budget): `bench/scaling.sh` (instruction counts) is the precise check.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+#[path = "../benches/common/generator.rs"]
+mod generator;
+
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+
+/// The 16× run may take this many times the 1× run …
+const FACTOR: f64 = 30.0;
+/// … plus this much (process start, page faults, a loaded machine).
+const SLACK: Duration = Duration::from_millis(500);
+
+fn bin() -> PathBuf {
+    std::env::var_os("SKILLPOST_SCALING_BIN")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_skillpost")))
+}
+
+/// Wall time of one compile of `dir`'s project (outputs written into `dir`).
+fn compile(dir: &Path) -> Duration {
+    let t = Instant::now();
+    let out = Command::new(bin())
+        .current_dir(dir)
+        .args(["Blackboard.aml", "out"])
+        .output()
+        .expect("run skillpost");
+    let took = t.elapsed();
+    assert!(
+        out.status.success(),
+        "{}: {}\n{}",
+        dir.display(),
+        out.status,
+        String::from_utf8_lossy(&out.stderr[..out.stderr.len().min(2000)])
+    );
+    took
+}
+
+/// The fastest of `runs` compiles.
+fn best(dir: &Path, runs: usize) -> Duration {
+    (0..runs).map(|_| compile(dir)).min().unwrap()
+}
+
+fn check(dim: &str, n: usize, n16: usize) {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let tmp = tempfile::tempdir().unwrap();
+    let small = tmp.path().join("small");
+    let large = tmp.path().join("large");
+    generator::write_shape(&small, dim, n)
+        .expect("a known dimension")
+        .unwrap();
+    generator::write_shape(&large, dim, n16)
+        .expect("a known dimension")
+        .unwrap();
+    let t1 = best(&small, 3);
+    let bound = t1.mul_f64(FACTOR * n16 as f64 / (16 * n) as f64) + SLACK;
+    let mut t16 = compile(&large);
+    if t16 > bound {
+        t16 = t16.min(compile(&large));
+    }
+    eprintln!("{dim}: n = {n}: {t1:.2?}; n = {n16}: {t16:.2?} (bound {bound:.2?})");
+    assert!(
+        t16 <= bound,
+        "{dim}: n = {n} took {t1:.2?}, n = {n16} took {t16:.2?}, more than {FACTOR}× plus {SLACK:?} ({bound:.2?}): a super-linear path?"
+    );
+}
+
+#[test]
+fn steps() {
+    check("steps", 200, 3200);
+}
+
+#[test]
+fn variables_in_one_step() {
+    check("vars", 1000, 16000);
+}
+
+#[test]
+fn skills_per_resource() {
+    check("skills", 300, 4800);
+}
+
+#[test]
+fn resources() {
+    check("resources", 2000, 32000);
+}
+
+#[test]
+fn functions_per_skill() {
+    check("functions", 400, 6400);
+}
+
+#[test]
+fn irl_calls_and_definitions() {
+    check("irl", 250, 4000);
+}
+
+#[test]
+fn signals() {
+    check("signals", 2000, 32000);
+}
+
+#[test]
+fn condition_size() {
+    // A condition has at most 1024 tokens (cond::MAX_TOKENS): 16× = 320 terms (~860 tokens).
+    check("cond", 20, 320);
+}
+
+#[test]
+fn branch_width() {
+    check("width", 150, 2400);
+}
+
+#[test]
+fn nesting_depth() {
+    // Nesting is bounded (plan::MAX_NESTING = 128): 1× = 7, 16× = 112.
+    check("depth", 7, 112);
+}
+
+#[test]
+fn loops() {
+    check("loops", 150, 2400);
+}
