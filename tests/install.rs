@@ -318,13 +318,6 @@ fn the_install_guide_works_as_written_and_planners_keep_working() {
     assert!(ok.success());
     let sample = base.join("sample");
     fs::create_dir(&sample).unwrap();
-    // The example's template is the checkout's templates/krl.toml.
-    fs::create_dir_all(base.join("templates")).unwrap();
-    fs::copy(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("templates/krl.toml"),
-        base.join("templates/krl.toml"),
-    )
-    .unwrap();
     for f in ["Blackboard.aml", "sfc.xml", "kr15-2.irl"] {
         fs::copy(
             repo.join("fixtures/ok/reference-sample").join(f),
@@ -498,6 +491,13 @@ fn the_checkout_example_runs_from_a_checkout() {
     fs::copy(
         Path::new(env!("CARGO_MANIFEST_DIR")).join("config/skillpost.toml"),
         &config,
+    )
+    .unwrap();
+    // The example's template is the checkout's templates/krl.toml.
+    fs::create_dir_all(base.join("templates")).unwrap();
+    fs::copy(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("templates/krl.toml"),
+        base.join("templates/krl.toml"),
     )
     .unwrap();
     for f in ["Blackboard.aml", "sfc.xml", "kr15-2.irl"] {
