@@ -47,18 +47,46 @@ fn ptp_with_x(x: u32) -> String {
     format!("PTP {{X {x}, Y 200, Z 300")
 }
 
+/// Tests that measure the daemon's memory run alone: beside the other tests of this file (whose
+/// daemons load the machine) queues and buffers reach higher marks with the load, not with what
+/// the daemon keeps. Every workspace holds a shared turn; [`Workspace::alone`] an exclusive one.
+static TURNS: std::sync::RwLock<()> = std::sync::RwLock::new(());
+
+#[allow(dead_code)] // held for its drop only
+enum Turn {
+    Shared(std::sync::RwLockReadGuard<'static, ()>),
+    Alone(std::sync::RwLockWriteGuard<'static, ()>),
+}
+
 /// A temporary folder (canonical path) with `ws/` for the projects and `ev.jsonl` for events.
 struct Workspace {
     _tmp: tempfile::TempDir,
     root: PathBuf,
+    // Last: released after the folder is gone (and after the test's daemon, declared later).
+    _turn: Turn,
 }
 
 impl Workspace {
     fn new() -> Self {
+        let turn = Turn::Shared(TURNS.read().unwrap_or_else(|e| e.into_inner()));
+        Self::with_turn(turn)
+    }
+
+    /// A workspace for a test that must run with no other test of this file beside it.
+    fn alone() -> Self {
+        let turn = Turn::Alone(TURNS.write().unwrap_or_else(|e| e.into_inner()));
+        Self::with_turn(turn)
+    }
+
+    fn with_turn(turn: Turn) -> Self {
         let tmp = tempfile::tempdir().unwrap();
         let root = tmp.path().canonicalize().unwrap();
         fs::create_dir(root.join("ws")).unwrap();
-        Workspace { _tmp: tmp, root }
+        Workspace {
+            _tmp: tmp,
+            root,
+            _turn: turn,
+        }
     }
 
     fn ws(&self) -> PathBuf {
@@ -1750,7 +1778,7 @@ fn churn_of_root_projects_keeps_memory_flat() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(2000);
     let batch = 500.min(cycles).max(1);
-    let w = Workspace::new();
+    let w = Workspace::alone();
     let root = w.ws().join("root");
     fs::create_dir(&root).unwrap();
     let cfg = w.config(
