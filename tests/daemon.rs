@@ -738,6 +738,22 @@ fn broken_file_fails_keeps_outputs_then_recovers() {
     assert!(read_string(&src_of(&a)).contains(&ptp_with_x(708)));
 }
 
+/// Every run of `project` after `since` has its outcome (`compile-succeeded`, `compile-failed`,
+/// `compile-retrying`) in `evs`, and the last of them is not `compile-retrying`.
+fn every_run_ended(evs: &[Value], project: &Path, since: u64) -> bool {
+    let outcomes = ["compile-succeeded", "compile-failed", "compile-retrying"];
+    let started = count_after(evs, "compile-started", project, since);
+    let ended: usize = outcomes
+        .iter()
+        .map(|o| count_after(evs, o, project, since))
+        .sum();
+    let last = evs
+        .iter()
+        .rev()
+        .find(|e| outcomes.iter().any(|o| is_after(e, o, project, since)));
+    started > 0 && started == ended && last.is_some_and(|e| !is(e, "compile-retrying"))
+}
+
 #[test]
 fn burst_of_saves_gives_few_compiles_and_the_last_content() {
     let w = Workspace::new();
@@ -756,8 +772,16 @@ fn burst_of_saves_gives_few_compiles_and_the_last_content() {
     if !wait_until(WAIT, || read_string(&src_of(&a)).contains(&last)) {
         d.fail("the last value never reached the .src");
     }
-    sleep(Duration::from_millis(SETTLE_MS * 10));
-    let evs = d.events();
+    // The events are written by a thread of their own, after the outputs: wait until every run
+    // since the mark has its final outcome in the file (a fixed sleep could read the file
+    // before those lines were in it).
+    let mut evs = d.events();
+    if !wait_until(WAIT, || {
+        evs = d.events();
+        every_run_ended(&evs, &a, m)
+    }) {
+        d.fail("the runs of the burst did not all end");
+    }
     let n = count_after(&evs, "compile-started", &a, m);
     assert!(
         (1..=10).contains(&n),
@@ -883,13 +907,10 @@ fn blackboard_writer_racing_the_daemon_loses_nothing() {
             t.contains(right)
         ));
     }
-    let evs = d.events();
-    assert!(
-        evs.iter()
-            .any(|e| is_after(e, "write-back", &a, m) && e["written"] == true),
-        "{}",
-        dump(&evs)
-    );
+    // The event follows the write on disk (the events have a writer thread of their own).
+    d.wait_for("a write-back that wrote", WAIT, |e| {
+        is_after(e, "write-back", &a, m) && e["written"] == true
+    });
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -96,6 +96,7 @@ fn check_invariants(evs: &[Value]) -> Seen {
                         fail(i, "forgotten during a run".into());
                     }
                     *st = ProjectState::default();
+                    retrying.remove(project.as_ref().unwrap());
                     // Found again later, it is a new project (its first `watching`).
                     degraded.remove(&folder.clone().unwrap());
                     seen.forgotten += 1;
@@ -124,6 +125,8 @@ fn check_invariants(evs: &[Value]) -> Seen {
                     if let Some(st) = projects.get_mut(r.as_str().unwrap()) {
                         st.reload_pending = false;
                     }
+                    // Its pending retry went with it: added again, its first run is `reload`.
+                    retrying.remove(r.as_str().unwrap());
                 }
             }
             "compile-started" => {

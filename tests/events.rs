@@ -702,8 +702,14 @@ fn a_full_disk_never_leaves_half_a_line() {
             "no compile on a full disk\n{}",
             d.log()
         );
-        sleep(Duration::from_millis(200));
     }
+    // The writer thread has met the full disk (it writes after the outputs, on its own thread:
+    // a fixed sleep could free the space before it tried).
+    assert!(
+        wait_until(WAIT, || d.log().contains("cannot write the event stream")),
+        "no write error logged on a full disk\n{}",
+        d.log()
+    );
     d.assert_running();
     // Free the space: the next events are whole lines, the lost ones reported.
     fs::remove_file(&filler).unwrap();

@@ -225,6 +225,16 @@ fn ready_with_only_a_missing_project() {
     sock.set_read_timeout(Some(Duration::from_millis(100)))
         .unwrap();
     let state = root.join("status.json");
+    // In the configuration, as on such a host: the command line takes existing folders only.
+    let config = root.join("skillpost.toml");
+    fs::write(
+        &config,
+        format!(
+            "[[project]]\npath = \"{}\"\n",
+            root.join("not-yet").display()
+        ),
+    )
+    .unwrap();
     let _daemon = Kill(
         Command::new(BIN)
             .arg("watch")
@@ -232,7 +242,8 @@ fn ready_with_only_a_missing_project() {
             .arg(&state)
             .arg("--events")
             .arg(root.join("ev.jsonl"))
-            .arg(root.join("not-yet"))
+            .arg("--config")
+            .arg(&config)
             .env("RUNTIME_DIRECTORY", root.join("locks"))
             .env("NOTIFY_SOCKET", &sock_path)
             .stderr(Stdio::null())

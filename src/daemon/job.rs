@@ -31,8 +31,9 @@ pub(super) struct Report {
 pub(super) enum Outcome {
     /// No input changed: nothing compiled.
     Unchanged,
-    /// A file was caught half-written: try again after a quiet period.
-    Retry,
+    /// A file was caught half-written: try again after a quiet period. `counted`: whether
+    /// the attempt counts towards the limit (not when the file's bytes were still changing).
+    Retry { counted: bool },
     Compiled {
         inputs: HashMap<PathBuf, Option<u64>>,
         outputs: Vec<PathBuf>,
@@ -265,8 +266,12 @@ impl Job {
         add_link_targets(&mut inputs);
         let ms = || started.elapsed().as_millis() as u64;
         if c.has_errors() {
-            if self.may_retry
-                && let Some(file) = half_written(&c, &inputs)
+            // A file whose bytes differ now from those read is being written right now: the
+            // writer is still at it, and such an attempt never counts towards the limit (on a
+            // loaded machine a burst of saves caught it half-written four times in a row and
+            // ended in `compile-failed` while the saves went on).
+            if let Some((file, moving)) = half_written(&c, &inputs)
+                && (self.may_retry || moving)
             {
                 tracing::info!("{project}: a file is still being written; trying again");
                 self.outcome(Event::CompileRetrying {
@@ -275,7 +280,7 @@ impl Job {
                     file: Some(file.display().to_string()),
                     attempt: self.attempt,
                 });
-                return Outcome::Retry;
+                return Outcome::Retry { counted: !moving };
             }
             let diags = renamed
                 .into_iter()
@@ -396,11 +401,11 @@ pub(super) fn add_link_targets(inputs: &mut HashMap<PathBuf, Option<u64>>) {
 
 /// Whether the compile failed on a file caught while it was being written: a syntax error (or
 /// unreadable text) in a file whose bytes differ now from those read, or that was modified
-/// within the last second. Returns that file.
+/// within the last second. Returns that file, and whether its bytes differ now from those read.
 pub(super) fn half_written(
     c: &Compilation,
     read: &HashMap<PathBuf, Option<u64>>,
-) -> Option<PathBuf> {
+) -> Option<(PathBuf, bool)> {
     c.diagnostics.iter().find_map(|d| {
         if !matches!(
             d.code,
@@ -420,7 +425,7 @@ pub(super) fn half_written(
             .ok()
             .and_then(|t| t.elapsed().ok())
             .is_some_and(|age| age < Duration::from_secs(1));
-        (changed || recent).then_some(file)
+        (changed || recent).then_some((file, changed))
     })
 }
 

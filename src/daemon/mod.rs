@@ -401,11 +401,17 @@ impl Daemon {
                 p.retries = 0;
                 p.sched.finished(now);
             }
-            Outcome::Retry => {
-                p.retries += 1;
+            Outcome::Retry { counted } => {
                 p.force = true;
                 p.trigger = Some("retry");
-                p.sched.finished(now);
+                // The writer is still at it (the file's bytes changed after the read, or changes
+                // arrived during the attempt): the next attempt comes after them. Only attempts
+                // that nothing followed count towards `MAX_RETRIES` (a file left half-written);
+                // counting every attempt made a long burst of saves on a loaded machine end in
+                // `compile-failed`.
+                if !p.sched.finished(now) && counted {
+                    p.retries += 1;
+                }
                 p.sched.postpone(now);
             }
             Outcome::Compiled {

@@ -116,6 +116,16 @@ impl Daemon {
                 self.watch_root(&r.path);
             }
         }
+        // Once more now that the roots and their subfolders are watched: a blackboard written
+        // into a subfolder after the first look but before its watch existed gives no event
+        // (seen at startup with folders created while the daemon started: never compiled).
+        for root in &config.roots {
+            for dir in config::discover(&root.path) {
+                wanted
+                    .entry(dir.clone())
+                    .or_insert((root.project(dir), Origin::Root(root.path.clone())));
+            }
+        }
         let mut added = Vec::new();
         for (k, (spec, origin)) in wanted {
             match self.projects.get_mut(&k) {

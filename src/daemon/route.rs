@@ -99,10 +99,18 @@ impl Daemon {
                     continue;
                 }
                 let is_input = p.inputs.contains_key(path);
-                let new_blackboard = !noise
-                    && path.parent() == Some(k.as_path())
-                    && path.file_name().is_some_and(config::is_blackboard_name);
+                let in_folder = !noise && path.parent() == Some(k.as_path());
+                let new_blackboard =
+                    in_folder && path.file_name().is_some_and(config::is_blackboard_name);
                 if !(is_input || new_blackboard) {
+                    // While a compile runs, its inputs are not known yet (a new project's first
+                    // compile knows none): a file of the folder that it may be reading right
+                    // now gets a follow-up, whose hash check costs nothing if that file was not
+                    // one (nothing else is recorded: no trigger, no changed path, no open write).
+                    // Dropping the event lost a file written during the compile for good.
+                    if in_folder && p.sched.is_running() {
+                        p.sched.change(now);
+                    }
                     continue;
                 }
                 // Polling reports no closes: only native watches track open writes.
