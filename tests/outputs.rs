@@ -270,3 +270,41 @@ fn daemon_waits_for_a_program_holding_the_blackboard_open() {
     let after = fs::read_to_string(&bb).unwrap();
     assert!(after.contains("<!-- saved -->") && after.contains("<Value>Blackboard.src</Value>"));
 }
+
+#[test]
+fn daemon_writes_back_once_a_program_lets_go_of_the_blackboard_without_saving() {
+    let t = tempfile::tempdir().unwrap();
+    let proj = t.path().join("proj");
+    fs::create_dir(&proj).unwrap();
+    common::copy_sample(&proj);
+    let bb = proj.join("Blackboard.aml");
+    // A program (an indexer, a viewer) has the blackboard open, then closes it without a save:
+    // no edit follows, so the daemon itself must try again.
+    let held = fs::File::options().append(true).open(&bb).unwrap();
+    let mut w = common::Watch::start(t.path(), 50, &[proj.to_str().unwrap()]);
+    let evs = w.wait_for("write-back", Duration::from_secs(20), |e| {
+        e["event"] == "write-back"
+    });
+    let wb = evs.iter().find(|e| e["event"] == "write-back").unwrap();
+    if wb["written"] == true {
+        common::skip("no file lease on this file system: the write-back cannot see open files");
+        return;
+    }
+    drop(held);
+    let evs = w.wait_for(
+        "the write-back once the blackboard is closed",
+        Duration::from_secs(20),
+        |e| e["event"] == "write-back" && e["written"] == true,
+    );
+    let again = evs
+        .iter()
+        .filter(|e| e["event"] == "compile-started")
+        .skip(1)
+        .all(|e| e["trigger"] == "write-back-skipped");
+    assert!(again, "{evs:?}");
+    assert!(
+        fs::read_to_string(&bb)
+            .unwrap()
+            .contains("<Value>Blackboard.src</Value>")
+    );
+}

@@ -39,6 +39,9 @@ pub(super) enum Outcome {
         outputs: Vec<PathBuf>,
         /// The write-back was skipped because the blackboard changed: compile again.
         again: bool,
+        /// The write-back was skipped because another program had the blackboard open: the
+        /// event loop compiles again a few times ([`super::MAX_IN_USE_ROUNDS`]).
+        in_use: bool,
     },
     /// The project could not be set up (no blackboard): reported.
     Failed,
@@ -295,6 +298,7 @@ impl Job {
                 inputs,
                 outputs: Vec::new(),
                 again: false,
+                in_use: false,
             };
         }
         let applied = match compile::apply(&c) {
@@ -310,6 +314,7 @@ impl Job {
                     inputs,
                     outputs: c.outputs.iter().map(|(p, _)| p.clone()).collect(),
                     again: false,
+                    in_use: false,
                 };
             }
         };
@@ -342,6 +347,7 @@ impl Job {
         // (The outputs are our other writes: never inputs (E605), and their events are ignored,
         // so they need no known state.)
         let mut again = false;
+        let mut in_use = false;
         if let (Some(wb), Some(outcome)) = (&c.write_back, &applied.write_back) {
             use crate::write::WriteBackOutcome as W;
             let (written, reason) = (*outcome == W::Written, outcome.reason());
@@ -361,6 +367,7 @@ impl Job {
                 again = hash_file(&wb.blackboard) != ours;
             }
             again |= *outcome == W::SkippedChangedOnDisk;
+            in_use = *outcome == W::SkippedInUse;
             self.sink.emit(
                 Some(&project),
                 Event::WriteBack {
@@ -377,6 +384,7 @@ impl Job {
             inputs,
             outputs: c.outputs.iter().map(|(p, _)| p.clone()).collect(),
             again,
+            in_use,
         }
     }
 }

@@ -97,6 +97,8 @@ impl Sources {
 pub const DEFAULT_SETTLE_MS: u64 = 100;
 /// Retries of a compile that failed on a file caught half-written.
 const MAX_RETRIES: u32 = 3;
+/// Compiles again after a write-back skipped because the blackboard was open elsewhere.
+const MAX_IN_USE_ROUNDS: u32 = 5;
 /// How often missing project folders are looked for again.
 const MISSING_RETRY: Duration = Duration::from_secs(2);
 
@@ -418,8 +420,13 @@ impl Daemon {
                 inputs,
                 outputs,
                 again,
+                in_use,
             } => {
                 p.retries = 0;
+                // Another program had the blackboard open (each write-back already waits about
+                // 1.3 s for it): a few more rounds, then the next edit tries again.
+                p.in_use_rounds = if in_use { p.in_use_rounds + 1 } else { 0 };
+                let again = again || (in_use && p.in_use_rounds <= MAX_IN_USE_ROUNDS);
                 let mut dirs: BTreeSet<PathBuf> = inputs
                     .keys()
                     .filter_map(|f| f.parent().map(Path::to_owned))
@@ -433,10 +440,16 @@ impl Daemon {
                 self.set_watches(&mut p, dirs);
                 self.reindex(&mut p);
                 let follow_up = p.sched.finished(now);
-                if again && !follow_up {
+                if again {
+                    // Forced even when a follow-up is already due (our own write-back's events
+                    // during the compile schedule one): without the force, that follow-up finds
+                    // the inputs' hashes unchanged and compiles nothing, and the write-back is
+                    // never tried again.
                     p.trigger.get_or_insert("write-back-skipped");
                     p.force = true;
-                    p.sched.change(now);
+                    if !follow_up {
+                        p.sched.change(now);
+                    }
                 }
             }
         }

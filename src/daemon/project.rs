@@ -58,6 +58,8 @@ pub(super) struct Project {
     /// Why the next compile runs: the first reason of the burst counts.
     pub(super) trigger: Option<&'static str>,
     pub(super) retries: u32,
+    /// Consecutive compiles whose write-back found the blackboard open elsewhere.
+    pub(super) in_use_rounds: u32,
     pub(super) missing: bool,
     /// Since when the folder is known to be missing (set by the periodic check).
     pub(super) missing_since: Option<Instant>,
@@ -506,6 +508,7 @@ impl Daemon {
             writing: HashMap::new(),
             trigger: Some("startup"),
             retries: 0,
+            in_use_rounds: 0,
             missing: false,
             missing_since: None,
             claim: None,
