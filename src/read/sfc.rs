@@ -215,6 +215,21 @@ struct Building<'t> {
     wired: bool,
 }
 
+impl<'t> Building<'t> {
+    /// The element's attribute `name`, if it has it.
+    fn attr(&self, name: &str) -> Option<&Attr<'t>> {
+        self.attrs.iter().flatten().find(|a| a.name == name)
+    }
+
+    /// How diagnostics name the element: `localId N` (`?` without one).
+    fn id_label(&self) -> String {
+        format!(
+            "localId {}",
+            self.attr("localId").map(|a| &*a.value).unwrap_or("?")
+        )
+    }
+}
+
 #[derive(PartialEq, Eq, Clone, Copy)]
 enum IwbState {
     Before,
@@ -691,13 +706,7 @@ impl<'t> Stream<'t> {
     /// The element is complete: check it and turn it into the model.
     fn finish(&mut self, b: Building<'t>, diags: &mut Diagnostics) -> Option<Element> {
         let file = self.file;
-        let attr = |n: &str| b.attrs.iter().flatten().find(|a| a.name == n);
-        let id_label = || {
-            format!(
-                "localId {}",
-                attr("localId").map(|a| &*a.value).unwrap_or("?")
-            )
-        };
+        let attr = |n: &str| b.attr(n);
         let kind = match b.tag {
             "step" => ElementKind::Step(Box::new(self.step(&b, diags))),
             "transition" => ElementKind::Transition(self.condition(&b, diags)),
@@ -716,7 +725,7 @@ impl<'t> Stream<'t> {
                             "jumpStep without `targetName`: name the step to jump to",
                         )
                         .at(b.span.clone())
-                        .element(id_label()),
+                        .element(b.id_label()),
                     );
                 }
                 ElementKind::JumpStep(target)
@@ -774,17 +783,7 @@ impl<'t> Stream<'t> {
     /// transition always fires (no condition, or `TRUE`).
     fn condition(&self, b: &Building<'t>, diags: &mut Diagnostics) -> Option<Box<Condition>> {
         let c = b.condition.as_ref()?;
-        let label = || {
-            format!(
-                "localId {}",
-                b.attrs
-                    .iter()
-                    .flatten()
-                    .find(|a| a.name == "localId")
-                    .map(|a| &*a.value)
-                    .unwrap_or("?")
-            )
-        };
+        let label = || b.id_label();
         let file = self.file;
         let (text, parsed, reference) = if let Some(inline) = &b.inline {
             let map = |o: usize| map_offset(&b.inline_map, o);
@@ -881,17 +880,7 @@ impl<'t> Stream<'t> {
 
     fn step(&mut self, b: &Building<'t>, diags: &mut Diagnostics) -> Step {
         let file = self.file;
-        let label = || {
-            format!(
-                "localId {}",
-                b.attrs
-                    .iter()
-                    .flatten()
-                    .find(|a| a.name == "localId")
-                    .map(|a| &*a.value)
-                    .unwrap_or("?")
-            )
-        };
+        let label = || b.id_label();
         let mut variables = Vec::new();
         let mut invalid_variables = Vec::new();
         for (tag, attrs) in b.direct_vars.iter().chain(b.iwb_vars.iter()) {
@@ -945,7 +934,7 @@ impl<'t> Stream<'t> {
                 }
             }
         }
-        let attr = |n: &str| b.attrs.iter().flatten().find(|a| a.name == n);
+        let attr = |n: &str| b.attr(n);
         Step {
             name: self
                 .names
