@@ -678,10 +678,7 @@ pub(super) fn remove_stale_temporaries(folder: &Path) {
     for e in std::fs::read_dir(folder).into_iter().flatten().flatten() {
         let name = e.file_name();
         let Some(name) = name.to_str() else { continue };
-        if name.starts_with(".skillpost-")
-            && name.ends_with(".tmp")
-            && e.file_type().is_ok_and(|t| t.is_file())
-        {
+        if crate::write::is_temporary(name) && e.file_type().is_ok_and(|t| t.is_file()) {
             match std::fs::remove_file(e.path()) {
                 Ok(()) => tracing::info!("removed a stale temporary file {}", e.path().display()),
                 Err(err) => tracing::warn!("cannot remove {}: {err}", e.path().display()),

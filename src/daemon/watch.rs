@@ -338,7 +338,7 @@ pub fn is_noise(path: &Path) -> bool {
     let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
         return false;
     };
-    (name.starts_with(".skillpost-") && name.ends_with(".tmp"))
+    crate::write::is_temporary(name)
         || name.ends_with('~')
         || name.starts_with(".#")
         || (name.starts_with('#') && name.ends_with('#'))

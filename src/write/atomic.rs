@@ -180,12 +180,20 @@ impl Staged {
     }
 }
 
+const TEMP_PREFIX: &str = ".skillpost-";
+const TEMP_SUFFIX: &str = ".tmp";
+
 /// Names our temporary files `.skillpost-<random>.tmp`: the daemon removes stale ones by that
-/// pattern, and its watchers ignore them.
+/// pattern ([`is_temporary`]), and its watchers ignore them.
 pub(super) fn temp_builder() -> tempfile::Builder<'static, 'static> {
     let mut b = tempfile::Builder::new();
-    b.prefix(".skillpost-").suffix(".tmp");
+    b.prefix(TEMP_PREFIX).suffix(TEMP_SUFFIX);
     b
+}
+
+/// Whether a file name is one of our temporary files (see [`temp_builder`]).
+pub fn is_temporary(name: &str) -> bool {
+    name.starts_with(TEMP_PREFIX) && name.ends_with(TEMP_SUFFIX)
 }
 
 /// Best effort, see the doc comment of [`write_if_changed`].

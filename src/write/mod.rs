@@ -19,6 +19,6 @@ pub mod atomic;
 pub mod splice;
 pub mod writeback;
 
-pub use atomic::{WriteOutcome, write_all_if_changed, write_if_changed};
+pub use atomic::{WriteOutcome, is_temporary, write_all_if_changed, write_if_changed};
 pub use splice::{SpliceSite, splice_at, splice_value};
 pub use writeback::{WriteBackOutcome, write_back};
