@@ -85,6 +85,46 @@ pub fn read_limited(path: &Path, max: u64) -> std::io::Result<Vec<u8>> {
     Ok(buf)
 }
 
+/// The content hash the daemon compares files by: of bytes in memory ([`hash_bytes`]) or of a
+/// file read in pieces ([`hash_file`]), alike for the same bytes.
+pub fn hash_bytes(b: &[u8]) -> u64 {
+    use std::hash::Hasher as _;
+    let mut h = std::hash::DefaultHasher::new();
+    h.write(b);
+    h.finish()
+}
+
+/// [`hash_bytes`] of a regular file's contents, read in pieces (nothing is held in memory), opened
+/// like [`read_limited`] (a FIFO or device is an error at once); a file of more than `max` bytes
+/// is an error.
+pub fn hash_file(path: &Path, max: u64) -> std::io::Result<u64> {
+    use std::hash::Hasher as _;
+    use std::io::{Error, ErrorKind};
+    let (file, _) = open_regular(path)?;
+    let mut file = file.take(max + 1);
+    let mut h = std::hash::DefaultHasher::new();
+    let mut buf = vec![0u8; 64 * 1024];
+    let mut total = 0u64;
+    loop {
+        match file.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => {
+                total += n as u64;
+                h.write(&buf[..n]);
+            }
+            Err(e) if e.kind() == ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    if total > max {
+        return Err(Error::new(
+            ErrorKind::InvalidData,
+            format!("is larger than the limit of {max} bytes"),
+        ));
+    }
+    Ok(h.finish())
+}
+
 impl FileSource for FsSource {
     fn real_path(&self, path: &Path) -> Option<PathBuf> {
         std::fs::canonicalize(path).ok()
@@ -119,6 +159,19 @@ impl FileSource for MemSource {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_file_hashes_like_its_bytes() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("f");
+        // More than one piece, and a piece boundary inside.
+        let bytes: Vec<u8> = (0..200_000u32).map(|i| (i % 251) as u8).collect();
+        std::fs::write(&p, &bytes).unwrap();
+        assert_eq!(hash_file(&p, 1 << 20).unwrap(), hash_bytes(&bytes));
+        assert!(hash_file(&p, 1000).is_err());
+        assert!(hash_file(Path::new("/dev/zero"), 1 << 20).is_err());
+        assert_ne!(hash_bytes(b"a"), hash_bytes(b"b"));
+    }
 
     #[test]
     fn refuses_what_is_not_a_regular_file() {

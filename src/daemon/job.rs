@@ -3,7 +3,6 @@
 //! event loop.
 
 use std::collections::HashMap;
-use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU8, Ordering};
@@ -47,21 +46,15 @@ pub(super) enum Outcome {
     Failed,
 }
 
-pub(super) fn hash_bytes(b: &[u8]) -> u64 {
-    let mut h = std::hash::DefaultHasher::new();
-    b.hash(&mut h);
-    h.finish()
-}
+use crate::load::hash_bytes;
 
-/// The hash of a file's bytes; `None` for anything but a readable regular file. Read through
-/// [`crate::load::read_limited`]: a FIFO or device among the inputs is refused at once (a
-/// blocking read hung the project's compile for good), and nothing past the largest file size a
-/// configuration can allow is read.
+/// The hash of a file's bytes; `None` for anything but a readable regular file. Through
+/// [`crate::load::hash_file`]: a FIFO or device among the inputs is refused at once (a blocking
+/// read hung the project's compile for good), the file is read in pieces, and nothing past the
+/// largest file size a configuration can allow is read.
 pub(super) fn hash_file(p: &Path) -> Option<u64> {
     let max = config::MAX_FILE_SIZE_MB_RANGE.end() * 1024 * 1024;
-    crate::load::read_limited(p, max)
-        .ok()
-        .map(|b| hash_bytes(&b))
+    crate::load::hash_file(p, max).ok()
 }
 
 /// Reads files like [`FsSource`] and keeps the hash of every file's bytes.

@@ -21,8 +21,6 @@
 
 use std::collections::HashMap;
 use std::ffi::OsString;
-use std::hash::{BuildHasher, Hasher};
-use std::io::Read;
 use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{self, RecvTimeoutError};
@@ -85,7 +83,6 @@ type Handler = dyn Fn(notify::Result<Event>) + Send + Sync;
 struct Shared {
     dirs: Mutex<HashMap<PathBuf, (u64, DirState)>>,
     handler: Box<Handler>,
-    hasher: std::hash::RandomState,
 }
 
 /// Polls directories with `stat` on a thread of its own; stops when dropped.
@@ -104,7 +101,6 @@ impl StatPoller {
         let shared = Arc::new(Shared {
             dirs: Mutex::new(HashMap::new()),
             handler: Box::new(handler),
-            hasher: std::hash::RandomState::new(),
         });
         let (stop, stopped) = mpsc::channel::<()>();
         let s = Arc::clone(&shared);
@@ -180,20 +176,13 @@ impl Shared {
         if !stamp.file {
             return None;
         }
-        // Non-blocking, regular files only, and never past the largest input a configuration
-        // can allow (a file growing without end is not hashed for ever).
-        let (f, _) = crate::load::open_regular(path).ok()?;
-        let mut f = f.take(super::config::MAX_FILE_SIZE_MB_RANGE.end() * 1024 * 1024);
-        let mut h = self.hasher.build_hasher();
-        let mut buf = vec![0u8; 64 * 1024];
-        loop {
-            match f.read(&mut buf) {
-                Ok(0) => return Some(h.finish()),
-                Ok(n) => h.write(&buf[..n]),
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(_) => return None,
-            }
-        }
+        // Non-blocking, regular files only, read in pieces, and never past the largest input a
+        // configuration can allow (a file growing without end is not hashed for ever).
+        crate::load::hash_file(
+            path,
+            super::config::MAX_FILE_SIZE_MB_RANGE.end() * 1024 * 1024,
+        )
+        .ok()
     }
 
     /// The entry of a file seen new or changed at `now`: hashed, and hashed again at every scan
