@@ -30,8 +30,7 @@ use std::time::{Duration, Instant};
 use skillpost::bind;
 use skillpost::compile::{self, Options};
 use skillpost::diag::{Diagnostics, Sources};
-use skillpost::emit::krl::OutputTemplate;
-use skillpost::emit::{EmitInput, OutputFile};
+use skillpost::emit::{EmitInput, Language, OutputFile, OutputTemplate};
 use skillpost::load::FsSource;
 use skillpost::model::Irl;
 use skillpost::plan;
@@ -429,7 +428,7 @@ fn stages(bb_path: &Path) -> (Vec<Duration>, Vec<(&'static str, String)>) {
     )
     .expect("load the blackboard");
     let bb = read_blackboard(&sources, bb_file, &mut diags).expect("read the blackboard");
-    let template = OutputTemplate::builtin();
+    let template = OutputTemplate::builtin(Language::Krl);
     lap(&mut times);
 
     let sfc_ref = bb.sfc_ref.clone().expect("an SFC reference");
@@ -480,7 +479,19 @@ fn stages(bb_path: &Path) -> (Vec<Duration>, Vec<(&'static str, String)>) {
             fn_irl.insert((r, f), i);
         }
     }
-    let bound = bind::bind(&bb, &sfc, &order, &res, &irls, &fn_irl, &mut diags);
+    let profile = Language::Krl.profile();
+    let bound = bind::bind(
+        &bb,
+        &sfc,
+        &order,
+        &res,
+        &bind::Calls {
+            irls: &irls,
+            fn_irl: &fn_irl,
+        },
+        profile,
+        &mut diags,
+    );
     lap(&mut times);
 
     let input = EmitInput {
@@ -491,9 +502,11 @@ fn stages(bb_path: &Path) -> (Vec<Duration>, Vec<(&'static str, String)>) {
         bound: &bound,
         irls: &irls,
         newline: "\r\n",
+        step_indent: &template.step_indent,
+        profile,
     };
     let files: Vec<OutputFile> =
-        skillpost::emit::krl::emit(&input, &template, &mut diags).expect("emit");
+        skillpost::emit::emit_files(&input, &template, &mut diags).expect("emit");
     lap(&mut times);
 
     diags.sort();

@@ -10,7 +10,8 @@ use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
 use crate::diag::{Code, Diagnostic, Diagnostics, Span};
-use crate::model::{Blackboard, ElementKind, Irl, Sfc, Step, ValueType};
+use crate::emit::Profile;
+use crate::model::{Blackboard, ElementKind, Irl, Sfc, Step};
 
 /// Which resource and skill each step uses.
 #[derive(Debug, Default)]
@@ -321,6 +322,16 @@ impl<'a> CallIndex<'a> {
     }
 }
 
+/// The loaded IRL files and which one each `(resource, function)` uses (absent when it could
+/// not be loaded; that was reported).
+pub struct Calls<'a> {
+    pub irls: &'a [Irl],
+    pub fn_irl: &'a HashMap<(usize, usize), usize>,
+}
+
+/// A value as the language writes it, and as a number (for conversions) when it is one.
+type Valued<'a> = (Cow<'a, str>, Option<f64>);
+
 /// Renders every step. `fn_irl` maps `(resource, function)` to the loaded IRL file (absent when
 /// it could not be loaded; that was reported).
 pub fn bind(
@@ -328,10 +339,11 @@ pub fn bind(
     sfc: &Sfc,
     order: &StepOrder,
     r: &Resolution,
-    irls: &[Irl],
-    fn_irl: &HashMap<(usize, usize), usize>,
+    calls_in: &Calls,
+    profile: &dyn Profile,
     diags: &mut Diagnostics,
 ) -> Bound {
+    let (irls, fn_irl) = (calls_in.irls, calls_in.fn_irl);
     let mut prepared: HashMap<(usize, usize), Option<Prepared>> = HashMap::new();
     let calls = CallIndex::new(irls);
     for &(res, sk) in &r.used {
@@ -346,6 +358,7 @@ pub fn bind(
     };
     let mut def_keys: HashSet<&str> = HashSet::new();
     let mut values: Vec<Cow<str>> = Vec::new();
+    let mut numbers: Vec<Option<f64>> = Vec::new();
     let mut extras = Extras::default();
     for &i in &order.steps {
         let Some((res, sk)) = r.step_skill[i] else {
@@ -365,9 +378,13 @@ pub fn bind(
         for pc in &p.calls {
             let call = &irls[pc.irl].calls[pc.call];
             values.clear();
+            numbers.clear();
             for &pi in &pc.args {
-                match value_of(&vars, skill, pi, e.local_id) {
-                    Ok(v) => values.push(v),
+                match value_of(&vars, skill, pi, e.local_id, profile) {
+                    Ok((v, n)) => {
+                        values.push(v);
+                        numbers.push(n);
+                    }
                     Err(Some(d)) => {
                         diags.push(*d);
                         ok = false;
@@ -379,7 +396,17 @@ pub fn bind(
                 if !code.is_empty() {
                     code.push('\n');
                 }
-                call.template.render(&values, &mut code);
+                let at = code.len();
+                if let Err(why) = call.template.render_with(
+                    &values,
+                    &|k| numbers.get(k).copied().flatten(),
+                    &mut code,
+                ) {
+                    code.truncate(at);
+                    ok = false;
+                    diags.push(conversion_error(&why, call, pc, skill, e, &vars));
+                    continue;
+                }
                 if !def_keys.contains(&*call.name.key)
                     && let Some(&d) = calls.definitions[pc.irl].get(&*call.name.key)
                 {
@@ -398,6 +425,59 @@ pub fn bind(
     }
     extras.report(diags);
     bound
+}
+
+/// `E505`: a conversion in a template got a value that is not a number (or a result too large
+/// to write): names the step, the variable and the template.
+fn conversion_error(
+    why: &crate::template::ConvError,
+    call: &crate::model::IrlCall,
+    pc: &PreparedCall,
+    skill: &crate::model::Skill,
+    e: &crate::model::Element,
+    vars: &StepVars,
+) -> Diagnostic {
+    use crate::template::ConvError;
+    match *why {
+        ConvError::NotANumber { conversion, param } => {
+            let p = &skill.params[pc.args[param]];
+            let var = p.variable.as_ref().and_then(|v| vars.get(&v.key));
+            let (name, value, at) = match var {
+                Some(v) => (
+                    v.name.text.to_string(),
+                    match crate::value::lookup(&v.raw, &p.indices) {
+                        crate::value::Lookup::Scalar(s) => s.to_owned(),
+                        _ => v.raw.clone(),
+                    },
+                    v.value_span.clone(),
+                ),
+                None => (p.path.text.to_string(), String::new(), e.span.clone()),
+            };
+            Diagnostic::error(
+                Code::BadConversion,
+                format!(
+                    "`{}({})` in the template of function-call `{}` needs a number, but variable `{name}` is `{value}`",
+                    conversion.name(),
+                    call.params.get(param).map_or("?", |n| &n.text),
+                    call.name.text,
+                ),
+            )
+            .at(at)
+            .element(label(e))
+            .related(call.span.clone(), "the template")
+        }
+        ConvError::OutOfRange { conversion } => Diagnostic::error(
+            Code::BadConversion,
+            format!(
+                "`{}` in the template of function-call `{}` gives a number too large to write (1e15 or more)",
+                conversion.name(),
+                call.name.text
+            ),
+        )
+        .at(e.span.clone())
+        .element(label(e))
+        .related(call.span.clone(), "the template"),
+    }
 }
 
 fn label(e: &crate::model::Element) -> String {
@@ -602,8 +682,9 @@ fn value_of<'a>(
     skill: &crate::model::Skill,
     pi: usize,
     local_id: u64,
-) -> Result<Cow<'a, str>, Option<Box<Diagnostic>>> {
-    use crate::read::sfc::{Lookup, lookup};
+    profile: &dyn Profile,
+) -> Result<Valued<'a>, Option<Box<Diagnostic>>> {
+    use crate::value::{Lookup, lookup};
     let p = &skill.params[pi];
     let Some(var_name) = &p.variable else {
         return Err(None);
@@ -665,10 +746,15 @@ fn value_of<'a>(
             ));
         }
     };
-    match typed_token(s, p.ty) {
-        Ok(t) => Ok(t),
+    let typed = crate::value::literal(s, p.ty);
+    let number = typed.as_ref().ok().and_then(|l| l.as_f64());
+    let neutral = typed.is_ok();
+    match typed.and_then(|l| profile.literal(&l)) {
+        Ok(t) => Ok((t, number)),
         Err(why) => {
-            let code = if why.starts_with("non-ASCII") {
+            let code = if neutral {
+                Code::UnsafeValue
+            } else if why.starts_with("non-ASCII") {
                 Code::NonAscii
             } else if p.ty.is_some() {
                 Code::TypeMismatch
@@ -687,159 +773,13 @@ fn value_of<'a>(
     }
 }
 
-/// Checks a value against its type (or, untyped, the safe-token rule) and returns the KRL token.
-/// Numbers are written in a conservative KRL spelling: no `+` sign, a digit on both sides of the
-/// decimal point, `E` for the exponent (`+.5e3` → `0.5E3`).
-pub fn typed_token(s: &str, ty: Option<ValueType>) -> Result<Cow<'_, str>, String> {
-    match ty {
-        Some(ValueType::Double) if is_number(s, true) => Ok(krl_number(s)),
-        Some(ValueType::Decimal) if is_number(s, false) => Ok(krl_number(s)),
-        Some(ValueType::Integer) if is_integer(s) => Ok(krl_number(s)),
-        Some(ValueType::Boolean) => match s.to_ascii_lowercase().as_str() {
-            "true" | "1" => Ok(Cow::Borrowed("TRUE")),
-            "false" | "0" => Ok(Cow::Borrowed("FALSE")),
-            _ => Err("not an xs:boolean (true, false, 1 or 0)".to_owned()),
-        },
-        Some(ValueType::String) => {
-            if s.contains('"') {
-                Err("a string value must not contain `\"`".to_owned())
-            } else if s.contains(['\n', '\r']) {
-                Err("a string value must not contain a line break".to_owned())
-            } else if !s.is_ascii() {
-                Err("non-ASCII character in a string value (KRL code is ASCII)".to_owned())
-            } else if s.chars().any(|c| c.is_ascii_control()) {
-                Err("a string value must not contain control characters".to_owned())
-            } else {
-                Ok(Cow::Owned(format!("\"{s}\"")))
-            }
-        }
-        Some(t) => Err(format!("not an {}", t.xs_name())),
-        None => {
-            if is_number(s, true) {
-                Ok(krl_number(s))
-            } else if is_safe_token(s) {
-                Ok(Cow::Borrowed(s))
-            } else if !s.is_ascii() {
-                Err("non-ASCII character in a value (KRL code is ASCII)".to_owned())
-            } else {
-                Err("an untyped value must be one KRL token (a number, a name, TRUE/FALSE, #ENUM or a \"string\"); give the parameter an AttributeDataType".to_owned())
-            }
-        }
-    }
-}
-
-/// A number (already checked by [`is_number`]) in KRL spelling; borrowed when unchanged.
-fn krl_number(s: &str) -> Cow<'_, str> {
-    let b = s.as_bytes();
-    let needs = s.starts_with('+')
-        || s.contains("E+")
-        || s.contains('e')
-        || b.windows(2).any(|w| {
-            (w[1] == b'.' && !w[0].is_ascii_digit()) || (w[0] == b'.' && !w[1].is_ascii_digit())
-        })
-        || s.starts_with('.')
-        || s.ends_with('.');
-    if !needs {
-        return Cow::Borrowed(s);
-    }
-    let body = s.strip_prefix('+').unwrap_or(s);
-    let (sign, body) = match body.strip_prefix('-') {
-        Some(rest) => ("-", rest),
-        None => ("", body),
-    };
-    let (mant, exp) = match body.find(['e', 'E']) {
-        Some(i) => (&body[..i], Some(&body[i + 1..])),
-        None => (body, None),
-    };
-    let mut out = String::with_capacity(s.len() + 2);
-    out.push_str(sign);
-    if mant.starts_with('.') {
-        out.push('0');
-    }
-    out.push_str(mant);
-    if mant.ends_with('.') {
-        out.push('0');
-    }
-    if let Some(e) = exp {
-        out.push('E');
-        out.push_str(e.strip_prefix('+').unwrap_or(e));
-    }
-    Cow::Owned(out)
-}
-
-fn is_integer(s: &str) -> bool {
-    let d = s.strip_prefix(['+', '-']).unwrap_or(s);
-    !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit())
-}
-
-/// A decimal number, with an optional exponent when `exp` is set.
-fn is_number(s: &str, exp: bool) -> bool {
-    let b = s.strip_prefix(['+', '-']).unwrap_or(s).as_bytes();
-    let mut i = 0;
-    let int_start = i;
-    while i < b.len() && b[i].is_ascii_digit() {
-        i += 1;
-    }
-    let int_digits = i - int_start;
-    let mut frac_digits = 0;
-    if i < b.len() && b[i] == b'.' {
-        i += 1;
-        let f = i;
-        while i < b.len() && b[i].is_ascii_digit() {
-            i += 1;
-        }
-        frac_digits = i - f;
-    }
-    if int_digits + frac_digits == 0 {
-        return false;
-    }
-    if exp && i < b.len() && (b[i] == b'e' || b[i] == b'E') {
-        i += 1;
-        if i < b.len() && (b[i] == b'+' || b[i] == b'-') {
-            i += 1;
-        }
-        let e = i;
-        while i < b.len() && b[i].is_ascii_digit() {
-            i += 1;
-        }
-        if i == e {
-            return false;
-        }
-    }
-    i == b.len()
-}
-
-fn is_ident(s: &str) -> bool {
-    let b = s.as_bytes();
-    !b.is_empty()
-        && (b[0].is_ascii_alphabetic() || b[0] == b'_')
-        && b.iter().all(|c| c.is_ascii_alphanumeric() || *c == b'_')
-}
-
-/// One safe KRL token: a number, a name (a system variable `$NAME` too), `TRUE`/`FALSE`, an enum
-/// `#NAME`, or a string literal without quotes or line breaks inside.
-pub fn is_safe_token(s: &str) -> bool {
-    if is_number(s, true) || is_ident(s) {
-        return true;
-    }
-    if let Some(rest) = s.strip_prefix('$').or_else(|| s.strip_prefix('#')) {
-        return is_ident(rest);
-    }
-    if s.len() >= 2 && s.starts_with('"') && s.ends_with('"') {
-        let inner = &s[1..s.len() - 1];
-        return inner.is_ascii()
-            && !inner.contains('"')
-            && !inner.chars().any(|c| c.is_ascii_control());
-    }
-    false
-}
-
 /// Resolves the names in every transition condition against the signals of the program's
 /// resource and checks the types (SPEC.md 3.1). Returns the signals used, in first-use order.
 pub fn conditions(
     bb: &Blackboard,
     sfc: &Sfc,
     resource: Option<usize>,
+    profile: &dyn Profile,
     diags: &mut Diagnostics,
 ) -> Vec<usize> {
     use crate::cond::Ty;
@@ -903,6 +843,26 @@ pub fn conditions(
                 {
                     used.push(si);
                 }
+            }
+        }
+    }
+    // Whether the program's language can read each signal the conditions use.
+    if let Some(r) = res {
+        for &si in &used {
+            let sig = &r.signals[si];
+            if let Err(why) = profile.signal(sig) {
+                diags.push(
+                    Diagnostic::error(
+                        Code::BadSignal,
+                        format!(
+                            "signal `{}`, read by a condition of this {} program: {why}",
+                            sig.name.text,
+                            profile.language()
+                        ),
+                    )
+                    .at(sig.name.span.clone())
+                    .element(sig.element.clone()),
+                );
             }
         }
     }
@@ -1119,29 +1079,41 @@ fn prepare(
 mod tests {
     use super::*;
 
+    use crate::emit::Language;
+    use crate::model::ValueType;
+
+    /// A value for a parameter of type `ty`, as KRL writes it.
+    fn typed(s: &str, ty: Option<ValueType>) -> Result<Cow<'_, str>, String> {
+        typed_in(Language::Krl, s, ty)
+    }
+
+    fn typed_in(l: Language, s: &str, ty: Option<ValueType>) -> Result<Cow<'_, str>, String> {
+        crate::value::literal(s, ty).and_then(|v| l.profile().literal(&v))
+    }
+
     #[test]
     fn typed_values() {
         use ValueType::*;
-        assert_eq!(typed_token("1.5e3", Some(Double)).unwrap(), "1.5E3");
-        assert_eq!(typed_token("-.5", Some(Double)).unwrap(), "-0.5");
-        assert_eq!(typed_token("+5.", Some(Double)).unwrap(), "5.0");
-        assert_eq!(typed_token("2E+3", Some(Double)).unwrap(), "2E3");
-        assert_eq!(typed_token("-12.50", Some(Decimal)).unwrap(), "-12.50");
+        assert_eq!(typed("1.5e3", Some(Double)).unwrap(), "1.5E3");
+        assert_eq!(typed("-.5", Some(Double)).unwrap(), "-0.5");
+        assert_eq!(typed("+5.", Some(Double)).unwrap(), "5.0");
+        assert_eq!(typed("2E+3", Some(Double)).unwrap(), "2E3");
+        assert_eq!(typed("-12.50", Some(Decimal)).unwrap(), "-12.50");
         assert!(matches!(
-            typed_token("12.5", Some(Double)).unwrap(),
+            typed("12.5", Some(Double)).unwrap(),
             Cow::Borrowed(_)
         ));
-        assert_eq!(typed_token("+.5", None).unwrap(), "0.5");
-        assert!(typed_token("1.5e", Some(Double)).is_err());
-        assert!(typed_token("1e3", Some(Decimal)).is_err());
-        assert_eq!(typed_token("+12", Some(Integer)).unwrap(), "12");
-        assert!(typed_token("1.0", Some(Integer)).is_err());
-        assert_eq!(typed_token("True", Some(Boolean)).unwrap(), "TRUE");
-        assert_eq!(typed_token("0", Some(Boolean)).unwrap(), "FALSE");
-        assert!(typed_token("yes", Some(Boolean)).is_err());
-        assert_eq!(typed_token("abc def", Some(String)).unwrap(), "\"abc def\"");
-        assert!(typed_token("a\"b", Some(String)).is_err());
-        assert!(typed_token("a\nb", Some(String)).is_err());
+        assert_eq!(typed("+.5", None).unwrap(), "0.5");
+        assert!(typed("1.5e", Some(Double)).is_err());
+        assert!(typed("1e3", Some(Decimal)).is_err());
+        assert_eq!(typed("+12", Some(Integer)).unwrap(), "12");
+        assert!(typed("1.0", Some(Integer)).is_err());
+        assert_eq!(typed("True", Some(Boolean)).unwrap(), "TRUE");
+        assert_eq!(typed("0", Some(Boolean)).unwrap(), "FALSE");
+        assert!(typed("yes", Some(Boolean)).is_err());
+        assert_eq!(typed("abc def", Some(String)).unwrap(), "\"abc def\"");
+        assert!(typed("a\"b", Some(String)).is_err());
+        assert!(typed("a\nb", Some(String)).is_err());
     }
 
     #[test]
@@ -1155,7 +1127,7 @@ mod tests {
             "$POS_ACT",
             "\"text ok\"",
         ] {
-            assert!(is_safe_token(ok), "{ok}");
+            assert!(typed(ok, None).is_ok(), "{ok}");
         }
         for bad in [
             "1; PTP HOME",
@@ -1167,8 +1139,45 @@ mod tests {
             "1)",
             "\"unterminated",
             "Grüße",
+            "EXIT",
+            "ENDLOOP",
         ] {
-            assert!(!is_safe_token(bad), "{bad}");
+            assert!(typed(bad, None).is_err(), "{bad}");
         }
+    }
+
+    #[test]
+    fn each_language_refuses_what_would_become_its_code() {
+        use Language::*;
+        // Words that are statements or block ends of the language.
+        for (l, bad) in [
+            (Rapid, "ENDPROC"),
+            (Rapid, "RETURN"),
+            (Rapid, "$POS_ACT"),
+            (Rapid, "#BASE"),
+            (Rapid, "_x"),
+            (UrScript, "end"),
+            (UrScript, "halt"),
+            (UrScript, "$x"),
+        ] {
+            assert!(typed_in(l, bad, None).is_err(), "{l} {bad}");
+        }
+        assert!(typed_in(Rapid, "a\\b", Some(ValueType::String)).is_err());
+        assert!(typed_in(UrScript, "a\\b", Some(ValueType::String)).is_err());
+        assert!(typed_in(Rapid, &"x".repeat(81), Some(ValueType::String)).is_err());
+        assert_eq!(typed_in(UrScript, "true", None).unwrap(), "True");
+        assert_eq!(
+            typed_in(UrScript, "0", Some(ValueType::Boolean)).unwrap(),
+            "False"
+        );
+        assert_eq!(
+            typed_in(Rapid, "1", Some(ValueType::Boolean)).unwrap(),
+            "TRUE"
+        );
+        assert_eq!(typed_in(UrScript, "\"x y\"", None).unwrap(), "\"x y\"");
+        assert_eq!(typed_in(UrScript, "1e3", None).unwrap(), "1000");
+        assert_eq!(typed_in(Rapid, "tool0", None).unwrap(), "tool0");
+        // KRL words RAPID and URScript take as names.
+        assert_eq!(typed_in(UrScript, "LOOP", None).unwrap(), "LOOP");
     }
 }

@@ -7,13 +7,12 @@ use std::path::{Path, PathBuf};
 
 use crate::bind;
 use crate::diag::{Code, Diagnostic, Diagnostics, Sources, Span};
-use crate::emit::krl::OutputTemplate;
-use crate::emit::{EmitInput, OutputFile};
+use crate::emit::{EmitInput, Language, OutputFile, OutputTemplate};
 use crate::load::FileSource;
 use crate::model::{Blackboard, Irl, Sfc};
 use crate::paths;
 use crate::plan::{self, Plan};
-use crate::read::{blackboard::read_blackboard, irl::read_irl, sfc::read_sfc_pou, xml};
+use crate::read::{blackboard::read_blackboard, irl, sfc::read_sfc_pou, xml};
 
 /// What to compile and how.
 #[derive(Debug, Clone, Default)]
@@ -293,17 +292,6 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         clock = now;
     };
 
-    if let Some(program) = &opts.program
-        && !crate::names::is_krl_name(program)
-    {
-        cx.diags.push(Diagnostic::error(
-            Code::BadProgramName,
-            format!(
-                "program name `{program}` is not a KRL name: a letter or `_`, then letters, digits or `_`, at most 24 characters"
-            ),
-        ));
-    }
-
     let Some(bb_file) = cx.load_top(blackboard, &mut out) else {
         return finish(cx, out);
     };
@@ -311,15 +299,6 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         return finish(cx, out);
     };
     lap(&mut out, "read-blackboard");
-
-    // The output template: like the blackboard, one the command names, so a template that
-    // cannot be read at all is an I/O failure.
-    let template = match &opts.template {
-        None => Some(OutputTemplate::builtin()),
-        Some(p) => cx
-            .load_top(p, &mut out)
-            .and_then(|f| OutputTemplate::parse(&cx.sources, f, &mut cx.diags)),
-    };
 
     // The SFC and its plan.
     let pou = opts
@@ -337,6 +316,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
 
     // Bind, loading the IRL files the used skills need.
     let mut irls: Vec<Irl> = Vec::new();
+    let mut language = None;
     if let Some(sfc) = &sfc {
         // Bind even when the flow has errors (in document order), so one run reports every
         // problem; emit only a planned flow.
@@ -346,15 +326,21 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         };
         let res = bind::resolve(&bb, sfc, &order, &mut cx.diags);
         let needed = bind::needed_functions(&bb, &res, &mut cx.diags);
-        let mut fn_irl: HashMap<(usize, usize), usize> = HashMap::new();
-        let mut by_file: HashMap<crate::diag::FileId, Option<usize>> = HashMap::new();
+        let mut files: Vec<((usize, usize), crate::diag::FileId)> = Vec::new();
         for (r, f) in needed {
             let func = &bb.resources[r].functions[f];
-            let Some(file) = cx.load_ref(&func.irl.value, &func.irl.span) else {
-                continue;
-            };
-            let idx = *by_file.entry(file).or_insert_with(|| {
-                read_irl(&cx.sources, file, &mut cx.diags).map(|irl| {
+            if let Some(file) = cx.load_ref(&func.irl.value, &func.irl.span) {
+                files.push(((r, f), file));
+            }
+        }
+        let langs = languages(&mut cx, &bb, &res, &files);
+        language = Some(langs.program);
+        let mut fn_irl: HashMap<(usize, usize), usize> = HashMap::new();
+        let mut by_file: HashMap<(crate::diag::FileId, Language), Option<usize>> = HashMap::new();
+        for ((r, f), file) in files {
+            let lang = langs.of(r);
+            let idx = *by_file.entry((file, lang)).or_insert_with(|| {
+                irl::read_irl_in(&cx.sources, file, lang, &mut cx.diags).map(|irl| {
                     irls.push(irl);
                     irls.len() - 1
                 })
@@ -363,10 +349,31 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 fn_irl.insert((r, f), i);
             }
         }
-        let mut bound = bind::bind(&bb, sfc, &order, &res, &irls, &fn_irl, &mut cx.diags);
-        bound.signals = bind::conditions(&bb, sfc, res.resource, &mut cx.diags);
+        let profile = langs.program.profile();
+        check_program_name(&mut cx, opts, Some(langs.program));
+        let mut bound = bind::bind(
+            &bb,
+            sfc,
+            &order,
+            &res,
+            &bind::Calls {
+                irls: &irls,
+                fn_irl: &fn_irl,
+            },
+            profile,
+            &mut cx.diags,
+        );
+        bound.signals = bind::conditions(&bb, sfc, res.resource, profile, &mut cx.diags);
         out.skill_steps = bound.steps.iter().filter(|s| s.is_some()).count();
         lap(&mut out, "bind");
+        // The output template: like the blackboard, one the command names, so a template
+        // that cannot be read at all is an I/O failure.
+        let template = match &opts.template {
+            None => Some(OutputTemplate::builtin(langs.program)),
+            Some(p) => cx
+                .load_top(p, &mut out)
+                .and_then(|f| OutputTemplate::parse(&cx.sources, f, langs.program, &mut cx.diags)),
+        };
         if !cx.diags.has_errors()
             && let (Some(template), Some(plan)) = (&template, &plan)
         {
@@ -378,8 +385,10 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 bound: &bound,
                 irls: &irls,
                 newline: if opts.lf { "\n" } else { "\r\n" },
+                step_indent: &template.step_indent,
+                profile,
             };
-            if let Some(files) = crate::emit::krl::emit(&input, template, &mut cx.diags)
+            if let Some(files) = crate::emit::emit_files(&input, template, &mut cx.diags)
                 && let Some(program) = &opts.program
             {
                 out.outputs = files
@@ -391,6 +400,12 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                     .collect();
             }
             lap(&mut out, "emit");
+        }
+    } else {
+        check_program_name(&mut cx, opts, None);
+        if let Some(p) = &opts.template {
+            // Read (an unreadable template is an I/O failure); its language is not known.
+            cx.load_top(p, &mut out);
         }
     }
     check_outputs(&mut cx, &out.outputs, blackboard, opts.template.as_deref());
@@ -411,7 +426,10 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             bom: src.bom,
             attribute: wb.attribute.range.clone(),
             site: wb.site.clone(),
-            value: format!("{program}.src"),
+            value: format!(
+                "{program}.{}",
+                language.unwrap_or(Language::Krl).profile().files()[0]
+            ),
         });
     }
     out.blackboard = Some(bb);
@@ -419,6 +437,125 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
     out.plan = plan;
     out.irls = irls;
     finish(cx, out)
+}
+
+/// `E601` when the program name is not a name of `language` (when the language is not known:
+/// of no language).
+fn check_program_name(cx: &mut Ctx, opts: &Options, language: Option<Language>) {
+    let Some(program) = &opts.program else {
+        return;
+    };
+    let why = match language {
+        Some(l) => l.profile().check_program_name(program).err(),
+        None => Language::ALL
+            .iter()
+            .all(|l| l.profile().check_program_name(program).is_err())
+            .then(|| "a name in no robot language".to_owned()),
+    };
+    if let Some(why) = why {
+        cx.diags.push(Diagnostic::error(
+            Code::BadProgramName,
+            format!("program name `{program}` is {why}"),
+        ));
+    }
+}
+
+/// The language of each resource the program uses, and the program's.
+struct Languages {
+    program: Language,
+    resources: HashMap<usize, Language>,
+}
+
+impl Languages {
+    fn of(&self, resource: usize) -> Language {
+        self.resources
+            .get(&resource)
+            .copied()
+            .unwrap_or(Language::Krl)
+    }
+}
+
+/// Decides the languages (SPEC.md 8): a resource's `Language` attribute, else the language its
+/// IRL files declare, else KRL. An IRL file declaring another language than its resource's, and
+/// steps of resources of different languages, are `E319`.
+fn languages(
+    cx: &mut Ctx,
+    bb: &Blackboard,
+    res: &bind::Resolution,
+    files: &[((usize, usize), crate::diag::FileId)],
+) -> Languages {
+    let mut declared: HashMap<crate::diag::FileId, Option<(Language, Span)>> = HashMap::new();
+    for &(_, file) in files {
+        if let std::collections::hash_map::Entry::Vacant(v) = declared.entry(file) {
+            v.insert(irl::declared_language(&cx.sources, file, &mut cx.diags));
+        }
+    }
+    let mut resources: HashMap<usize, Language> = HashMap::new();
+    let mut reported: std::collections::HashSet<crate::diag::FileId> = Default::default();
+    let mut order: Vec<usize> = Vec::new();
+    for &(r, _) in &res.used {
+        if !order.contains(&r) {
+            order.push(r);
+        }
+    }
+    for &r in &order {
+        let resource = &bb.resources[r];
+        let from_irl = files
+            .iter()
+            .filter(|((fr, _), _)| *fr == r)
+            .find_map(|(_, file)| declared[file].clone());
+        let lang = resource
+            .language
+            .as_ref()
+            .map(|(l, _)| *l)
+            .or(from_irl.as_ref().map(|(l, _)| *l))
+            .unwrap_or(Language::Krl);
+        resources.insert(r, lang);
+        for ((fr, f), file) in files {
+            if *fr != r {
+                continue;
+            }
+            if let Some((l, span)) = &declared[file]
+                && *l != lang
+                && reported.insert(*file)
+            {
+                let why = match (&resource.language, &from_irl) {
+                    (Some((_, at)), _) => (at.clone(), "the resource's Language"),
+                    (None, Some((_, at))) => (at.clone(), "the first IRL file's language"),
+                    (None, None) => (span.clone(), "here"),
+                };
+                cx.diags.push(
+                    Diagnostic::error(
+                        Code::TwoLanguages,
+                        format!(
+                            "IRL file of function `{}` is {l}, but resource `{}` is {lang}: one program is in one language",
+                            resource.functions[*f].name.text, resource.name.text
+                        ),
+                    )
+                    .at(span.clone())
+                    .related(why.0, why.1),
+                );
+            }
+        }
+    }
+    let program = res
+        .resource
+        .and_then(|r| resources.get(&r).copied())
+        .unwrap_or(Language::Krl);
+    if let Some(&other) = order.iter().find(|r| resources[r] != program)
+        && let Some(first) = res.resource
+    {
+        cx.diags.push(Diagnostic::error(
+            Code::TwoLanguages,
+            format!(
+                "steps use resource `{}` ({program}) and resource `{}` ({}): one program is in one language",
+                bb.resources[first].name.text,
+                bb.resources[other].name.text,
+                resources[&other]
+            ),
+        ));
+    }
+    Languages { program, resources }
 }
 
 /// The `#fragment` of a `refURI` (the SFC POU it names), percent-decoded.

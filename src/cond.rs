@@ -126,7 +126,7 @@ impl Expr {
     /// The expression in ST, fully parenthesised where operators nest (for listings).
     pub fn to_st(&self) -> String {
         let mut s = String::new();
-        write(self, &mut s, &|n| n.to_owned(), |op| op.st(), "NOT ");
+        write(self, &mut s, &|n| n.to_owned(), &Ops::ST);
         s
     }
 }
@@ -586,38 +586,76 @@ fn ty(e: &Expr, lookup: &dyn Fn(&str) -> Option<Ty>, errs: &mut Vec<CheckError>)
 /// another is parenthesised, so KRL's precedence (comparisons bind weaker than `AND`/`OR`,
 /// `EXOR` between them) cannot change the meaning.
 pub fn render_krl(e: &Expr, signal: &dyn Fn(&str) -> String) -> String {
+    render(e, signal, &Ops::KRL)
+}
+
+/// How a robot language writes the condition language's operators and literals.
+#[derive(Debug)]
+pub struct Ops {
+    pub op: fn(BinOp) -> &'static str,
+    /// The negation with its space (`NOT `, `not `).
+    pub not: &'static str,
+    pub true_: &'static str,
+    pub false_: &'static str,
+}
+
+impl Ops {
+    pub const KRL: Ops = Ops {
+        op: BinOp::krl,
+        not: "NOT ",
+        true_: "TRUE",
+        false_: "FALSE",
+    };
+    const ST: Ops = Ops {
+        op: BinOp::st,
+        not: "NOT ",
+        true_: "TRUE",
+        false_: "FALSE",
+    };
+}
+
+/// Renders `e` with `ops`, every nested operation in parentheses (no language's precedence is
+/// relied on); `signal` gives a name's text, which is parenthesised as an operand when it holds
+/// a space (RAPID's `di_Part = 1`).
+pub fn render(e: &Expr, signal: &dyn Fn(&str) -> String, ops: &Ops) -> String {
     let mut s = String::new();
-    write(e, &mut s, signal, |op| op.krl(), "NOT ");
+    write(e, &mut s, signal, ops);
     s
 }
 
-fn write(
-    e: &Expr,
-    out: &mut String,
-    name: &dyn Fn(&str) -> String,
-    op: fn(BinOp) -> &'static str,
-    not: &str,
-) {
+fn write(e: &Expr, out: &mut String, name: &dyn Fn(&str) -> String, ops: &Ops) {
     let sub = |x: &Expr, out: &mut String| {
-        let paren = matches!(
-            x.kind,
-            ExprKind::Bin(..) | ExprKind::Neg(_) | ExprKind::Not(_)
-        );
+        let text;
+        let paren = match &x.kind {
+            ExprKind::Bin(..) | ExprKind::Neg(_) | ExprKind::Not(_) => true,
+            ExprKind::Name(n) => {
+                text = name(n);
+                if text.contains(' ') {
+                    out.push('(');
+                    out.push_str(&text);
+                    out.push(')');
+                } else {
+                    out.push_str(&text);
+                }
+                return;
+            }
+            _ => false,
+        };
         if paren {
             out.push('(');
         }
-        write(x, out, name, op, not);
+        write(x, out, name, ops);
         if paren {
             out.push(')');
         }
     };
     match &e.kind {
-        ExprKind::Bool(true) => out.push_str("TRUE"),
-        ExprKind::Bool(false) => out.push_str("FALSE"),
+        ExprKind::Bool(true) => out.push_str(ops.true_),
+        ExprKind::Bool(false) => out.push_str(ops.false_),
         ExprKind::Int(s) | ExprKind::Real(s) => out.push_str(s),
         ExprKind::Name(n) => out.push_str(&name(n)),
         ExprKind::Not(a) => {
-            out.push_str(not);
+            out.push_str(ops.not);
             sub(a, out);
         }
         ExprKind::Neg(a) => {
@@ -627,7 +665,7 @@ fn write(
         ExprKind::Bin(o, a, b) => {
             sub(a, out);
             out.push(' ');
-            out.push_str(op(*o));
+            out.push_str((ops.op)(*o));
             out.push(' ');
             sub(b, out);
         }

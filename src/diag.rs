@@ -302,6 +302,9 @@ codes! {
     DuplicateName = "E208",
     /// A signal whose `IoType`, `Type`, `Number`, `Length` or `Address` cannot be used.
     BadSignal = "E209",
+    /// A resource's `Language` or an IRL file's `info@language` names no language skillpost
+    /// writes (KRL, RAPID, URScript).
+    BadLanguage = "E210",
 
     /// No `pou` with an `SFC` body (or none of the name asked for).
     NoSfcBody = "E301",
@@ -342,6 +345,9 @@ codes! {
     BadJump = "E317",
     /// A condition names a signal the program's resource does not declare.
     UnknownSignal = "E318",
+    /// A program whose steps would need two robot languages (resources or IRL files of
+    /// different languages).
+    TwoLanguages = "E319",
 
     /// An IRL file without `<src>`, or not an `<irl>` document.
     BadIrl = "E401",
@@ -349,17 +355,24 @@ codes! {
     UnknownCommand = "E402",
     /// Template parameters and mapped function parameters do not fit.
     ParameterMismatch = "E403",
+    /// A conversion in an IRL template (`m`, `mm`, `rad`, `deg`, `quat`, `rotvec`) with
+    /// arguments that are not parameters or numbers, or the wrong number of them.
+    BadConversionCall = "E404",
 
     /// A mapping names a function the resource does not have.
     UnknownFunction = "E501",
     /// A value does not have its parameter's type.
     TypeMismatch = "E502",
-    /// A value is not a safe KRL token (it could inject code).
+    /// A value the program's language cannot take safely: not one token, a keyword, a name
+    /// the language does not allow (it could inject code).
     UnsafeValue = "E503",
     /// An index into a list variable is out of range, or a list where one value is needed.
     BadIndex = "E504",
+    /// A conversion in a template got a value that is not a number (or gave a result too
+    /// large to write).
+    BadConversion = "E505",
 
-    /// The program name is not a KRL name.
+    /// The program name is not a name of the program's language (or too long for it).
     BadProgramName = "E601",
     /// A non-ASCII character in generated code.
     NonAscii = "E602",

@@ -7,11 +7,14 @@
 //! - [`load`]: the only file-system reads of the compiler core, behind the [`load::FileSource`]
 //!   trait; records every file a compile read.
 //! - [`read`]: blackboard, SFC and IRL files → [`model`], every item with its byte span.
+//! - [`value`]: SFC variable values: list syntax, in-place lookup, typed neutral literals.
 //! - [`cond`]: transition conditions (an ST subset): parse, check, render as KRL.
 //! - [`plan`]: SFC graph checks → an ordered program tree ([`plan::Block`]).
 //! - [`bind`]: skill steps → function calls with checked, typed values ([`bind::BoundStep`]).
 //! - [`template`]: IRL template parsing and parameter substitution.
-//! - [`emit`]: a language profile turns the bound program into text (KRL first).
+//! - [`convert`]: the conversions templates may call (`m`, `mm`, `rad`, `deg`, `quat`, `rotvec`)
+//!   and how their results are written.
+//! - [`emit`]: language profiles (KRL, RAPID, URScript): value rules, names, control flow, files.
 //! - [`write`]: atomic output files and the byte-preserving blackboard write-back.
 //! - [`compile`]: the whole pipeline for one project: inputs in, outputs + diagnostics out.
 //! - [`daemon`]: `skillpost watch`, the long-running service over the same pipeline.
@@ -26,6 +29,7 @@ pub mod bind;
 pub mod cli;
 pub mod compile;
 pub mod cond;
+pub mod convert;
 pub mod daemon;
 pub mod diag;
 pub mod emit;
@@ -38,6 +42,7 @@ pub mod print;
 pub mod read;
 pub mod template;
 pub mod umask;
+pub mod value;
 pub mod write;
 
 /// The version printed by `--info`.

@@ -84,6 +84,8 @@ pub struct WriteBackTarget {
 #[derive(Debug)]
 pub struct Resource {
     pub name: Name,
+    /// The `Language` (`Sprache`) attribute: the language and the attribute's value span.
+    pub language: Option<(crate::emit::Language, Span)>,
     /// The CAEX element, described for diagnostics (`InternalElement "KUKA KR15-2" {ID}`).
     pub element: String,
     pub id: Option<String>,
@@ -398,7 +400,7 @@ pub struct Step {
 pub struct Variable {
     pub name: Name,
     /// The value as written, trimmed; its syntax was checked by the reader. Items are looked up
-    /// without building a tree ([`crate::read::sfc::lookup`]); [`Variable::value`] builds one.
+    /// without building a tree ([`crate::value::lookup`]); [`Variable::value`] builds one.
     pub raw: String,
     /// The `Value` attribute's value.
     pub value_span: Span,
@@ -407,7 +409,7 @@ pub struct Variable {
 impl Variable {
     /// The value as a tree (for listings).
     pub fn value(&self) -> Value {
-        crate::read::sfc::parse_value(&self.raw).unwrap_or(Value::Scalar(self.raw.clone()))
+        crate::value::parse_value(&self.raw).unwrap_or(Value::Scalar(self.raw.clone()))
     }
 }
 
@@ -423,6 +425,8 @@ pub enum Value {
 pub struct Irl {
     pub file: FileId,
     pub info: Option<String>,
+    /// The language its templates were read in.
+    pub language: crate::emit::Language,
     pub calls: Vec<IrlCall>,
     pub definitions: Vec<IrlDefinition>,
 }

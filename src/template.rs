@@ -26,10 +26,64 @@
 //!   aggregate (`{E6POS: X, Y}`) is skipped, and the first item starts after the `:`. Nested
 //!   aggregates (`{POS {X, Y}}`) follow the same rules at every level. KRL statements are one
 //!   line each, so an aggregate left open at the end of a line is closed there.
+//! - **Languages.** The comment character and the aggregate rule are the template language's
+//!   ([`Syntax`]): KRL comments start with `;` and `{...}` is an aggregate; RAPID comments start
+//!   with `!`, URScript's with `#`, and neither has the aggregate rule (`;` ends a RAPID
+//!   statement and is copied like any punctuation).
+//! - **Conversions** (SPEC.md 8): `m(P)`, `mm(P)`, `rad(P)`, `deg(P)`, `quat(A, B, C)`,
+//!   `rotvec(A, B, C)` — the exact lower-case name, then `(`, arguments that are parameters or
+//!   numbers, `)` — are evaluated when the program is bound: the whole call is replaced by the
+//!   result, numbers joined by `, ` ([`crate::convert`]). A conversion with other arguments is a
+//!   template error ([`Template::errors`]).
 //! - Everything else — whitespace, case, punctuation — is copied byte for byte. Values are
 //!   inserted as they are and never substituted again.
 
 use std::collections::HashMap;
+
+use crate::convert::Conversion;
+
+/// What a template's language changes in the substitution rules.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Syntax {
+    /// The byte that starts a comment to the end of the line.
+    pub comment: u8,
+    /// Whether `{...}` is a KRL aggregate (the `{X, Y}` → `{X 1, Y 2}` rule).
+    pub aggregates: bool,
+}
+
+impl Syntax {
+    /// KRL's: `;` comments, aggregates.
+    pub const KRL: Syntax = Syntax {
+        comment: b';',
+        aggregates: true,
+    };
+}
+
+/// One conversion in a template: what, and its arguments.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Conv {
+    pub conversion: Conversion,
+    pub args: Vec<ConvArg>,
+}
+
+/// A conversion's argument: a parameter (by index) or a number written in the template.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ConvArg {
+    Param(usize),
+    Number(f64),
+}
+
+/// Why a conversion could not be rendered.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ConvError {
+    /// The parameter (index) of the conversion is not a number.
+    NotANumber {
+        conversion: Conversion,
+        param: usize,
+    },
+    /// The result is too large to write (or not finite).
+    OutOfRange { conversion: Conversion },
+}
 
 /// A compiled template: literal text and parameter slots.
 #[derive(Debug, Clone)]
@@ -38,6 +92,9 @@ pub struct Template {
     lits: String,
     pieces: Vec<Piece>,
     used: Vec<bool>,
+    convs: Vec<Conv>,
+    /// Conversions that cannot be used: `(byte offset in the text, message)`.
+    errors: Vec<(usize, String)>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -46,6 +103,8 @@ enum Piece {
     Lit(usize, usize),
     /// The value of parameter `n`.
     Param(usize),
+    /// A conversion (index into `convs`).
+    Conv(usize),
 }
 
 /// Parse state of one open aggregate.
@@ -74,6 +133,9 @@ struct Compiler<'t> {
     pending: usize,
     /// Scratch buffer for lower-casing words.
     buf: String,
+    syntax: Syntax,
+    convs: Vec<Conv>,
+    errors: Vec<(usize, String)>,
 }
 
 impl<'t> Compiler<'t> {
@@ -128,11 +190,93 @@ impl<'t> Compiler<'t> {
         self.pending = end;
     }
 
+    /// At a word `start..end` that names a conversion: the conversion call up to its `)`,
+    /// compiled into a piece. Returns where scanning goes on; `None` leaves the word to the
+    /// other rules (not a call: no `(` follows, or the word follows `.`/`#`/`'`).
+    fn conversion(&mut self, start: usize, end: usize) -> Option<usize> {
+        let b = self.text.as_bytes();
+        let conversion = Conversion::from_name(&self.text[start..end])?;
+        if start > 0 && matches!(b[start - 1], b'.' | b'#' | b'\'') {
+            return None;
+        }
+        let mut open = end;
+        while open < b.len() && (b[open] == b' ' || b[open] == b'\t') {
+            open += 1;
+        }
+        if b.get(open) != Some(&b'(') {
+            return None;
+        }
+        let line_end = self.text[open..].find('\n').map_or(b.len(), |k| open + k);
+        let Some(close) = self.text[open + 1..line_end]
+            .find(')')
+            .map(|k| open + 1 + k)
+        else {
+            self.errors.push((
+                start,
+                format!(
+                    "conversion `{}(` without its `)` on the same line",
+                    conversion.name()
+                ),
+            ));
+            return Some(line_end);
+        };
+        let inner = &self.text[open + 1..close];
+        let mut args = Vec::new();
+        let mut bad = None;
+        for arg in inner.split(',') {
+            let a = arg.trim();
+            let arg_start = open + 1 + (arg.as_ptr() as usize - inner.as_ptr() as usize);
+            let a_start = arg_start + (arg.len() - arg.trim_start().len());
+            if crate::value::is_number(a, true) {
+                match a.parse::<f64>() {
+                    Ok(x) if x.is_finite() => args.push(ConvArg::Number(x)),
+                    _ => bad = Some(format!("argument `{a}` is out of range")),
+                }
+            } else if !a.is_empty()
+                && a.bytes().all(is_word_byte)
+                && let Some(p) = self.param_at(a_start, a_start + a.len())
+            {
+                args.push(ConvArg::Param(p));
+            } else {
+                bad = Some(format!(
+                    "argument `{a}` is neither a parameter of the function-call nor a number"
+                ));
+            }
+        }
+        if bad.is_none() && args.len() != conversion.arity() {
+            bad = Some(format!(
+                "takes {} argument{}, not {}",
+                conversion.arity(),
+                if conversion.arity() == 1 { "" } else { "s" },
+                args.len()
+            ));
+        }
+        if let Some(why) = bad {
+            self.errors.push((
+                start,
+                format!("conversion `{}`: {why}", &self.text[start..=close]),
+            ));
+            return Some(close + 1);
+        }
+        self.flush(start);
+        for a in &args {
+            if let ConvArg::Param(p) = *a {
+                self.used[p] = true;
+            }
+        }
+        self.pieces.push(Piece::Conv(self.convs.len()));
+        self.convs.push(Conv { conversion, args });
+        self.pending = close + 1;
+        Some(close + 1)
+    }
+
     fn run(mut self) -> Template {
         let b = self.text.as_bytes();
         let n = b.len();
         let mut stack: Vec<Frame> = Vec::new();
         let mut i = 0;
+        let comment = self.syntax.comment;
+        let aggregates = self.syntax.aggregates;
         while i < n {
             let c = b[i];
             match c {
@@ -141,7 +285,7 @@ impl<'t> Compiler<'t> {
                     i += 1;
                 }
                 b' ' | b'\t' | b'\r' => i += 1,
-                b';' => {
+                c if c == comment => {
                     while i < n && b[i] != b'\n' {
                         i += 1;
                     }
@@ -156,7 +300,7 @@ impl<'t> Compiler<'t> {
                         i += 1;
                     }
                 }
-                b'{' => {
+                b'{' if aggregates => {
                     in_item(&mut stack);
                     stack.push(Frame {
                         item_start: true,
@@ -165,7 +309,7 @@ impl<'t> Compiler<'t> {
                     });
                     i += 1;
                 }
-                b'}' => {
+                b'}' if aggregates => {
                     stack.pop();
                     i += 1;
                 }
@@ -197,6 +341,11 @@ impl<'t> Compiler<'t> {
                         i += 1;
                     }
                     let end = i;
+                    if let Some(next) = self.conversion(start, end) {
+                        in_item(&mut stack);
+                        i = next;
+                        continue;
+                    }
                     match stack.last_mut() {
                         Some(f) if f.item_start => {
                             let mut j = end;
@@ -242,6 +391,8 @@ impl<'t> Compiler<'t> {
             lits: self.lits,
             pieces: self.pieces,
             used: self.used,
+            convs: self.convs,
+            errors: self.errors,
         }
     }
 }
@@ -257,6 +408,11 @@ impl Template {
     /// Compiles `text` (already dedented, lines joined by '\n') for the parameters `params`
     /// (names as declared; matching is case-insensitive via [`crate::names`]).
     pub fn compile(text: &str, params: &[String]) -> Template {
+        Self::compile_for(text, params, Syntax::KRL)
+    }
+
+    /// [`Template::compile`] with a language's [`Syntax`].
+    pub fn compile_for(text: &str, params: &[String], syntax: Syntax) -> Template {
         let mut index = HashMap::with_capacity(params.len());
         for (i, p) in params.iter().enumerate() {
             index.entry(crate::names::key(p)).or_insert(i);
@@ -269,6 +425,9 @@ impl Template {
             index,
             pending: 0,
             buf: String::new(),
+            syntax,
+            convs: Vec::new(),
+            errors: Vec::new(),
         }
         .run()
     }
@@ -276,6 +435,20 @@ impl Template {
     /// Renders with `values[i]` for `params[i]` into `out` (lines joined by '\n', no trailing
     /// newline). Never panics; a missing value renders as nothing.
     pub fn render<S: AsRef<str>>(&self, values: &[S], out: &mut String) {
+        // Conversions read the values as numbers; a value that is none leaves its conversion
+        // out (the binder, which knows where the value came from, uses `render_with`).
+        let _ = self.render_with(values, &|p| values.get(p)?.as_ref().parse().ok(), out);
+    }
+
+    /// Renders with `values` (as the output writes them) and `number` (a parameter's value as a
+    /// number, for conversions; `None`: not a number). On a conversion error `out` holds the
+    /// text up to it.
+    pub fn render_with<S: AsRef<str>>(
+        &self,
+        values: &[S],
+        number: &dyn Fn(usize) -> Option<f64>,
+        out: &mut String,
+    ) -> Result<(), ConvError> {
         debug_assert_eq!(values.len(), self.used.len(), "one value per parameter");
         out.reserve(self.lits.len() + 8 * values.len());
         for piece in &self.pieces {
@@ -286,8 +459,34 @@ impl Template {
                         out.push_str(v.as_ref());
                     }
                 }
+                Piece::Conv(c) => {
+                    let conv = &self.convs[c];
+                    let mut args = [0.0; 3];
+                    for (k, a) in conv.args.iter().enumerate() {
+                        args[k] = match *a {
+                            ConvArg::Number(x) => x,
+                            ConvArg::Param(p) => number(p).ok_or(ConvError::NotANumber {
+                                conversion: conv.conversion,
+                                param: p,
+                            })?,
+                        };
+                    }
+                    let mut res = [0.0; 4];
+                    conv.conversion.apply(&args[..conv.args.len()], &mut res);
+                    let text = crate::convert::format_results(&res[..conv.conversion.results()])
+                        .ok_or(ConvError::OutOfRange {
+                            conversion: conv.conversion,
+                        })?;
+                    out.push_str(&text);
+                }
             }
         }
+        Ok(())
+    }
+
+    /// The conversions that cannot be used, `(byte offset in the text, message)`.
+    pub fn errors(&self) -> &[(usize, String)] {
+        &self.errors
     }
 
     /// Which parameter indexes occur in the text (so the binder can report a declared-but-unused

@@ -8,7 +8,8 @@ mod common;
 
 use libfuzzer_sys::fuzz_target;
 use skillpost::model::ElementKind;
-use skillpost::read::sfc::{Lookup, lookup, parse_value, read_sfc};
+use skillpost::read::sfc::read_sfc;
+use skillpost::value::{Lookup, lookup, parse_value};
 use skillpost::{plan, print};
 
 fuzz_target!(|data: &[u8]| {

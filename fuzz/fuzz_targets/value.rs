@@ -1,4 +1,4 @@
-//! The SFC value syntax (`read/sfc.rs`): `check_value`, `parse_value` and `lookup` agree.
+//! The SFC value syntax (`value.rs`): `check_value`, `parse_value` and `lookup` agree.
 //!
 //! - `check_value` accepts exactly what `parse_value` accepts, and both report the same error
 //!   offset (inside the text, on a character boundary);
@@ -8,7 +8,7 @@
 
 use libfuzzer_sys::fuzz_target;
 use skillpost::model::Value;
-use skillpost::read::sfc::{Lookup, check_value, lookup, parse_value};
+use skillpost::value::{Lookup, check_value, lookup, parse_value};
 
 fuzz_target!(|data: &[u8]| {
     // The first byte picks the index path checked besides the fixed ones.

@@ -1,12 +1,95 @@
-//! Language profiles: the bound program → output files. KRL is the first (and so far only)
-//! profile; another robot language adds a module beside [`krl`] with the same shape: it takes
-//! the [`EmitInput`] and returns its files or diagnostics.
+//! Language profiles: the bound program → output files (SPEC.md 5, 8).
+//!
+//! A [`Profile`] holds everything one robot language decides: its output files and their
+//! built-in template (`templates/<lang>.toml`), how IRL templates are read ([`Syntax`]), how a
+//! neutral [`Literal`] is written and which ones are refused (a value must never become code),
+//! names and their limits, how a signal is read in a condition, and how the program tree's control
+//! flow is written. The binder asks the program's profile about values; [`emit_files`] runs the
+//! profile's writer and fills its template.
+//!
+//! Adding a language: a module beside [`krl`], [`rapid`] and [`urscript`] implementing
+//! [`Profile`], a `templates/<lang>.toml`, and a [`Language`] variant.
 
+pub mod flow;
 pub mod krl;
+pub mod rapid;
+pub mod urscript;
+
+use std::borrow::Cow;
+
+use serde::Deserialize;
 
 use crate::bind::Bound;
-use crate::model::{Blackboard, Irl, Sfc};
+use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
+use crate::model::{Blackboard, Irl, Sfc, Signal};
 use crate::plan::Plan;
+use crate::template::Syntax;
+use crate::value::Literal;
+
+/// A robot language skillpost writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Language {
+    Krl,
+    Rapid,
+    UrScript,
+}
+
+impl Language {
+    pub const ALL: [Language; 3] = [Language::Krl, Language::Rapid, Language::UrScript];
+
+    /// `KRL`, `RAPID` or `URScript`, any case (surrounding whitespace ignored).
+    pub fn parse(s: &str) -> Option<Language> {
+        let s = s.trim();
+        Language::ALL
+            .into_iter()
+            .find(|l| l.name().eq_ignore_ascii_case(s))
+    }
+
+    /// The language's name as the blackboard and the listings write it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Language::Krl => "KRL",
+            Language::Rapid => "RAPID",
+            Language::UrScript => "URScript",
+        }
+    }
+
+    /// Its profile.
+    pub fn profile(self) -> &'static dyn Profile {
+        match self {
+            Language::Krl => &krl::Krl,
+            Language::Rapid => &rapid::Rapid,
+            Language::UrScript => &urscript::UrScript,
+        }
+    }
+}
+
+impl std::fmt::Display for Language {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// What one robot language decides. Implementations are stateless unit structs.
+pub trait Profile: Sync {
+    fn language(&self) -> Language;
+    /// The output files' extensions, the main one (the write-back's) first. Each is also the
+    /// key of that file's text in the output template.
+    fn files(&self) -> &'static [&'static str];
+    /// The built-in output template (`templates/<lang>.toml`).
+    fn builtin_template(&self) -> &'static str;
+    /// How IRL templates of this language are read.
+    fn syntax(&self) -> Syntax;
+    /// `Ok` when `name` can be the program's name; else why not (for `E601`).
+    fn check_program_name(&self, name: &str) -> Result<(), String>;
+    /// A value as this language writes it; `Err` says why the language cannot take it safely.
+    fn literal<'v>(&self, v: &Literal<'v>) -> Result<Cow<'v, str>, String>;
+    /// A signal as a condition reads it: a boolean or an integer expression. `Err` says why the
+    /// language cannot read this signal (for `E209`).
+    fn signal(&self, s: &Signal) -> Result<String, String>;
+    /// Writes the program tree and its declarations (see [`Generated`]).
+    fn generate(&self, input: &EmitInput, diags: &mut Diagnostics) -> Option<Generated>;
+}
 
 /// Everything a profile reads.
 pub struct EmitInput<'a> {
@@ -18,11 +101,380 @@ pub struct EmitInput<'a> {
     pub irls: &'a [Irl],
     /// `"\r\n"` or `"\n"`.
     pub newline: &'a str,
+    /// The template's indentation of a step's code lines.
+    pub step_indent: &'a str,
+    pub profile: &'static dyn Profile,
 }
 
-/// One generated file: its extension (`src`, `dat`) and its bytes.
+/// What a profile's writer made: the text of the template's blocks, lines separated by the
+/// newline, each line without the indentation of its placeholder line.
+#[derive(Debug, Default)]
+pub struct Generated {
+    /// `{{steps}}`: the program tree.
+    pub steps: String,
+    /// `{{declarations}}`: one line each.
+    pub declarations: Vec<String>,
+}
+
+/// One generated file: its extension (`src`, `dat`, `mod`, `script`) and its bytes.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct OutputFile {
     pub extension: &'static str,
     pub text: String,
+}
+
+/// An output template: the step indentation and one text per output file.
+#[derive(Debug, Clone)]
+pub struct OutputTemplate {
+    pub language: Language,
+    /// Indentation of the code lines inside each step.
+    pub step_indent: String,
+    /// `(extension, text)` in the profile's file order.
+    pub files: Vec<(&'static str, String)>,
+}
+
+/// Placeholders replaced inside a line.
+const INLINE: &[&str] = &["program", "comment"];
+/// Placeholders that stand on a line of their own.
+const BLOCKS: &[&str] = &["steps", "definitions", "declarations"];
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTemplate {
+    step_indent: String,
+    src: Option<String>,
+    dat: Option<String>,
+    #[serde(rename = "mod")]
+    module: Option<String>,
+    script: Option<String>,
+}
+
+impl OutputTemplate {
+    /// The built-in template of `language`.
+    pub fn builtin(language: Language) -> Self {
+        let mut sources = Sources::default();
+        let file = sources.add(
+            format!("templates/{}.toml", language.name().to_ascii_lowercase()).into(),
+            "<built-in template>".into(),
+            language.profile().builtin_template().to_owned(),
+            false,
+        );
+        let mut d = Diagnostics::default();
+        Self::parse(&sources, file, language, &mut d).expect("the built-in templates are valid")
+    }
+
+    /// The text of the file with this extension.
+    pub fn file(&self, ext: &str) -> &str {
+        self.files
+            .iter()
+            .find(|(e, _)| *e == ext)
+            .map_or("", |(_, t)| t)
+    }
+
+    /// Parses and checks a template file for `language`.
+    pub fn parse(
+        sources: &Sources,
+        file: FileId,
+        language: Language,
+        diags: &mut Diagnostics,
+    ) -> Option<Self> {
+        let text = &sources.get(file).text;
+        let raw: RawTemplate = match toml::from_str(text) {
+            Ok(t) => t,
+            Err(e) => {
+                let range = e.span().unwrap_or(0..0);
+                diags.push(
+                    Diagnostic::error(
+                        Code::BadTemplate,
+                        format!("output template: {}", e.message()),
+                    )
+                    .at(Span::new(file, range)),
+                );
+                return None;
+            }
+        };
+        let profile = language.profile();
+        let mut ok = true;
+        let mut bad = |msg: String, needle: &str| {
+            let at = text.find(needle).unwrap_or(0);
+            diags.push(
+                Diagnostic::error(Code::BadTemplate, format!("output template: {msg}"))
+                    .at(Span::new(file, at..at + needle.len().max(1))),
+            );
+            ok = false;
+        };
+        let given = [
+            ("src", raw.src),
+            ("dat", raw.dat),
+            ("mod", raw.module),
+            ("script", raw.script),
+        ];
+        let mut files = Vec::new();
+        for (key, body) in given {
+            let wanted = profile.files().iter().find(|e| **e == key);
+            match (wanted, body) {
+                (Some(ext), Some(body)) => files.push((*ext, body)),
+                (Some(_), None) => bad(
+                    format!(
+                        "a {language} template needs `{key}` (it has {})",
+                        list(profile.files())
+                    ),
+                    "step_indent",
+                ),
+                (None, Some(_)) => bad(
+                    format!(
+                        "`{key}` is not a file of a {language} program, which has {}: is this a template for another language?",
+                        list(profile.files())
+                    ),
+                    key,
+                ),
+                (None, None) => {}
+            }
+        }
+        files.sort_by_key(|(e, _)| profile.files().iter().position(|x| x == e));
+        let mut steps = 0;
+        for (key, body) in &files {
+            if let Some(pos) = body.find(|c: char| !c.is_ascii()) {
+                let c = body[pos..].chars().next().unwrap_or('?');
+                bad(
+                    format!("`{key}` contains the non-ASCII character `{c}`"),
+                    &c.to_string(),
+                );
+            }
+            for name in placeholders(body) {
+                if INLINE.contains(&name) {
+                    continue;
+                }
+                let marker = format!("{{{{{name}}}}}");
+                if BLOCKS.contains(&name) {
+                    if !body.lines().any(|l| l.trim() == marker) {
+                        bad(
+                            format!("`{marker}` must stand on a line of its own in `{key}`"),
+                            &marker,
+                        );
+                    }
+                } else {
+                    bad(
+                        format!("unknown placeholder `{marker}` in `{key}`"),
+                        &marker,
+                    );
+                }
+            }
+            steps += body.lines().filter(|l| l.trim() == "{{steps}}").count();
+        }
+        if steps != 1 {
+            let main = profile.files()[0];
+            bad(
+                format!("`{main}` must hold `{{{{steps}}}}` exactly once (found {steps})"),
+                main,
+            );
+        }
+        if !raw.step_indent.chars().all(|c| c == ' ' || c == '\t') {
+            bad(
+                "`step_indent` may only hold spaces and tabs".to_owned(),
+                "step_indent",
+            );
+        }
+        ok.then_some(OutputTemplate {
+            language,
+            step_indent: raw.step_indent,
+            files,
+        })
+    }
+}
+
+fn list(exts: &[&str]) -> String {
+    let v: Vec<String> = exts.iter().map(|e| format!("`{e}`")).collect();
+    v.join(" and ")
+}
+
+/// The `name`s of `{{name}}` in `text`.
+fn placeholders(text: &str) -> Vec<&str> {
+    let mut out = Vec::new();
+    let mut rest = text;
+    while let Some(i) = rest.find("{{") {
+        let after = &rest[i + 2..];
+        match after.find("}}") {
+            Some(j) => {
+                out.push(after[..j].trim());
+                rest = &after[j + 2..];
+            }
+            None => break,
+        }
+    }
+    out
+}
+
+/// The block placeholder a template line holds, if it is one.
+fn block_name(line: &str) -> Option<&str> {
+    let t = line.trim();
+    t.strip_prefix("{{")
+        .and_then(|r| r.strip_suffix("}}"))
+        .filter(|n| BLOCKS.contains(n))
+}
+
+/// The comment line from the SFC's file header (company, product, version, time), ASCII.
+pub fn header_comment(h: &crate::model::FileHeader) -> String {
+    let parts = [
+        ("Company name", &h.company_name),
+        ("Product name", &h.product_name),
+        ("Product version", &h.product_version),
+        ("Creation time", &h.creation_date_time),
+    ];
+    let s: Vec<String> = parts
+        .iter()
+        .filter_map(|(k, v)| v.as_ref().map(|v| format!("{k}: {}", v.trim())))
+        .collect();
+    crate::names::transliterate(&s.join(" "))
+}
+
+/// Runs the profile's writer and fills the template: the program's files, or `None` with the
+/// reasons in `diags`.
+pub fn emit_files(
+    input: &EmitInput,
+    template: &OutputTemplate,
+    diags: &mut Diagnostics,
+) -> Option<Vec<OutputFile>> {
+    let generated = input.profile.generate(input, diags)?;
+    let nl = input.newline;
+    let comment = header_comment(&input.sfc.header);
+    let inline = |line: &str| {
+        line.replace("{{program}}", input.program)
+            .replace("{{comment}}", &comment)
+    };
+    let has_declarations = template
+        .files
+        .iter()
+        .any(|(_, t)| t.lines().any(|l| block_name(l) == Some("declarations")));
+    if !generated.declarations.is_empty() && !has_declarations {
+        // The program would use names nothing declares.
+        diags.push(Diagnostic::error(
+            Code::BadTemplate,
+            format!(
+                "output template: the program needs declarations ({}), but the template has no `{{{{declarations}}}}` line",
+                generated.declarations.join("; ")
+            ),
+        ));
+        return None;
+    }
+    let mut out = Vec::new();
+    for (ext, body) in &template.files {
+        let mut text = String::with_capacity(body.len() + generated.steps.len() + 1024);
+        for line in body.lines() {
+            let indent = &line[..line.len() - line.trim_start().len()];
+            match block_name(line) {
+                Some("steps") => push_block(&mut text, indent, &generated.steps, nl),
+                Some("definitions") => {
+                    for &(irl, d) in &input.bound.definitions {
+                        let def = &input.irls[irl].definitions[d];
+                        text.push_str(nl);
+                        for l in &def.lines {
+                            if !l.is_empty() {
+                                text.push_str(indent);
+                            }
+                            text.push_str(l);
+                            text.push_str(nl);
+                        }
+                    }
+                }
+                Some(_) => {
+                    for d in &generated.declarations {
+                        text.push_str(indent);
+                        text.push_str(d);
+                        text.push_str(nl);
+                    }
+                }
+                None => {
+                    text.push_str(&inline(line));
+                    text.push_str(nl);
+                }
+            }
+        }
+        if let Some(pos) = text.find(|c: char| !c.is_ascii()) {
+            // Values and templates are checked before; this is the last line of defence.
+            diags.push(Diagnostic::error(
+                Code::NonAscii,
+                format!(
+                    "generated .{ext} would contain a non-ASCII character at byte {pos}; nothing was written"
+                ),
+            ));
+            return None;
+        }
+        out.push(OutputFile {
+            extension: ext,
+            text,
+        });
+    }
+    Some(out)
+}
+
+/// Appends `block` (lines ending in `nl`), each non-empty line after `indent`.
+fn push_block(out: &mut String, indent: &str, block: &str, nl: &str) {
+    if indent.is_empty() {
+        out.push_str(block);
+        return;
+    }
+    for line in block.split_inclusive(nl) {
+        if line != nl {
+            out.push_str(indent);
+        }
+        out.push_str(line);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(lang: Language, text: &str) -> (Option<OutputTemplate>, Vec<String>) {
+        let mut s = Sources::default();
+        let f = s.add("t.toml".into(), "t.toml".into(), text.to_owned(), false);
+        let mut d = Diagnostics::default();
+        let t = OutputTemplate::parse(&s, f, lang, &mut d);
+        (t, d.iter().map(|d| d.message.clone()).collect())
+    }
+
+    #[test]
+    fn builtin_templates_parse() {
+        for l in Language::ALL {
+            let t = OutputTemplate::builtin(l);
+            assert_eq!(t.files.len(), l.profile().files().len(), "{l}");
+            assert!(t.file(l.profile().files()[0]).contains("{{steps}}"), "{l}");
+        }
+    }
+
+    #[test]
+    fn template_errors() {
+        let k = Language::Krl;
+        let (t, m) = parse(k, "step_indent = \" \"\nsrc = \"DEF x\"\ndat = \"\"\n");
+        assert!(t.is_none());
+        assert!(m[0].contains("exactly once"), "{m:?}");
+        let (t, m) = parse(
+            k,
+            "step_indent = \" \"\nsrc = \"\"\"\n{{steps}}\n{{oops}}\n\"\"\"\ndat = \"\"\n",
+        );
+        assert!(t.is_none());
+        assert!(m[0].contains("unknown placeholder `{{oops}}`"), "{m:?}");
+        let (t, m) = parse(
+            k,
+            "step_indent = \" \"\nsrc = \"\"\"\n{{steps}}\n\"\"\"\ndat = \"\"\nextra = 1\n",
+        );
+        assert!(t.is_none());
+        assert!(m[0].contains("unknown field"), "{m:?}");
+        // A KRL template given to a RAPID program.
+        let (t, m) = parse(
+            Language::Rapid,
+            "step_indent = \" \"\nsrc = \"\"\"\n{{steps}}\n\"\"\"\ndat = \"\"\n",
+        );
+        assert!(t.is_none());
+        assert!(m.iter().any(|m| m.contains("another language")), "{m:?}");
+    }
+
+    #[test]
+    fn languages_parse_in_any_case() {
+        assert_eq!(Language::parse(" urscript "), Some(Language::UrScript));
+        assert_eq!(Language::parse("Rapid"), Some(Language::Rapid));
+        assert_eq!(Language::parse("krl"), Some(Language::Krl));
+        assert_eq!(Language::parse("C++"), None);
+    }
 }

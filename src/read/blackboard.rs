@@ -97,6 +97,16 @@ pub const MAX_IO: u32 = 8192;
 /// An `Address` is one safe token: a name or a `$`system variable, optionally with one or two
 /// integer indexes (`PART_OK`, `$IN[5]`, `$CYCFLAG[3]`, `$X[1,2]`).
 pub fn is_safe_address(s: &str) -> bool {
+    // A call with one integer argument (URScript: `read_input_integer_register(2)`).
+    if let Some(inner) = s.strip_suffix(')')
+        && let Some((f, arg)) = inner.split_once('(')
+    {
+        return crate::value::is_ident(f)
+            && f.len() <= 63
+            && !arg.is_empty()
+            && arg.len() <= 9
+            && arg.bytes().all(|b| b.is_ascii_digit());
+    }
     let (base, index) = match s.find('[') {
         Some(i) => (&s[..i], Some(&s[i..])),
         None => (s, None),
@@ -281,8 +291,10 @@ impl Reader<'_> {
             "function",
         );
         let (signals, broken_signals) = self.signals(r);
+        let language = self.language(r, &name);
         Resource {
             name,
+            language,
             element: caex_element(r),
             id: r.attribute("ID").map(str::to_owned),
             skills,
@@ -291,6 +303,31 @@ impl Reader<'_> {
             signals,
             broken_signals,
             index: Default::default(),
+        }
+    }
+
+    /// The resource's `Language` (alias `Sprache`) attribute, any case; `E210` for a value
+    /// that names no language skillpost writes.
+    fn language(&mut self, r: Node, name: &Name) -> Option<(crate::emit::Language, Span)> {
+        let attr = caex_attr(r, "Language").or_else(|| caex_attr(r, "Sprache"))?;
+        let (v, span) = caex_value(self.file, attr).filter(|(v, _)| !v.trim().is_empty())?;
+        match crate::emit::Language::parse(&v) {
+            Some(l) => Some((l, span)),
+            None => {
+                self.diags.push(
+                    Diagnostic::error(
+                        Code::BadLanguage,
+                        format!(
+                            "resource `{}`: Language `{}` is none skillpost writes: `KRL`, `RAPID` or `URScript`",
+                            name.text,
+                            v.trim()
+                        ),
+                    )
+                    .at(span)
+                    .element(caex_element(r)),
+                );
+                None
+            }
         }
     }
 
@@ -374,7 +411,7 @@ impl Reader<'_> {
                     self.diags,
                     span,
                     format!(
-                        "Address `{text}` is not one safe token: write a name or a system variable with an index (`PART_OK`, `$IN[5]`, `$CYCFLAG[3]`)"
+                        "Address `{text}` is not one safe token: write a name, a system variable with an index or a call with one number (`PART_OK`, `$IN[5]`, `di_Part`, `read_input_integer_register(2)`)"
                     ),
                 );
             }

@@ -8,6 +8,7 @@
 use roxmltree::Node;
 
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
+use crate::emit::Language;
 use crate::model::{Irl, IrlCall, IrlDefinition, Name};
 use crate::read::xml::{attr_span, children, parse, tag_span};
 use crate::template::{Template, dedent, params_from_brackets};
@@ -15,6 +16,48 @@ use crate::template::{Template, dedent, params_from_brackets};
 /// Reads an IRL file already in `sources`. `None` only when the file is not well-formed XML or
 /// not an `<irl>` document; every other problem is pushed into `diags`.
 pub fn read_irl(sources: &Sources, file: FileId, diags: &mut Diagnostics) -> Option<Irl> {
+    read_irl_in(sources, file, Language::Krl, diags)
+}
+
+/// The language an IRL file declares (`<info language="…"/>`), with the attribute's span.
+/// `E210` when it names no language skillpost writes; problems of the file itself are left to
+/// [`read_irl_in`].
+pub fn declared_language(
+    sources: &Sources,
+    file: FileId,
+    diags: &mut Diagnostics,
+) -> Option<(Language, Span)> {
+    let mut scratch = Diagnostics::default();
+    let doc = parse(sources, file, &mut scratch)?;
+    let root = doc.root_element();
+    let info = children(root, "info").find(|i| i.attribute("language").is_some())?;
+    let text = info.attribute("language")?;
+    let span = attr_span(file, info, "language");
+    match Language::parse(text) {
+        Some(l) => Some((l, span)),
+        None => {
+            diags.push(
+                Diagnostic::error(
+                    Code::BadLanguage,
+                    format!(
+                        "IRL language `{}` is none skillpost writes: `KRL`, `RAPID` or `URScript`",
+                        text.trim()
+                    ),
+                )
+                .at(span),
+            );
+            None
+        }
+    }
+}
+
+/// Reads an IRL file whose templates are in `language`.
+pub fn read_irl_in(
+    sources: &Sources,
+    file: FileId,
+    language: Language,
+    diags: &mut Diagnostics,
+) -> Option<Irl> {
     let doc = parse(sources, file, diags)?;
     let text = sources.get(file).text.as_ref();
     let root = doc.root_element();
@@ -38,6 +81,7 @@ pub fn read_irl(sources: &Sources, file: FileId, diags: &mut Diagnostics) -> Opt
     let mut irl = Irl {
         file,
         info,
+        language,
         calls: Vec::new(),
         definitions: Vec::new(),
     };
@@ -70,7 +114,7 @@ pub fn read_irl(sources: &Sources, file: FileId, diags: &mut Diagnostics) -> Opt
     for src in children(root, "src") {
         has_src = true;
         for node in children(src, "function-call") {
-            if let Some(call) = read_call(file, text, node, diags) {
+            if let Some(call) = read_call(file, text, node, language, diags) {
                 irl.calls.push(call);
             }
         }
@@ -85,7 +129,13 @@ pub fn read_irl(sources: &Sources, file: FileId, diags: &mut Diagnostics) -> Opt
 }
 
 /// One `function-call`: its name, parameters and compiled template.
-fn read_call(file: FileId, text: &str, node: Node, diags: &mut Diagnostics) -> Option<IrlCall> {
+fn read_call(
+    file: FileId,
+    text: &str,
+    node: Node,
+    language: Language,
+    diags: &mut Diagnostics,
+) -> Option<IrlCall> {
     let name = element_name(file, node, "function-call", diags)?;
     let span = tag_span(file, node);
 
@@ -142,7 +192,16 @@ fn read_call(file: FileId, text: &str, node: Node, diags: &mut Diagnostics) -> O
         }
     }
     let names: Vec<String> = params.iter().map(|p| p.text.to_string()).collect();
-    let template = Template::compile(&joined, &names);
+    let template = Template::compile_for(&joined, &names, language.profile().syntax());
+    for (_, why) in template.errors() {
+        diags.push(
+            Diagnostic::error(
+                Code::BadConversionCall,
+                format!("function-call `{}`: {why}", name.text),
+            )
+            .at(span.clone()),
+        );
+    }
     Some(IrlCall {
         name,
         params,

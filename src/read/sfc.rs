@@ -12,11 +12,10 @@ use quick_xml::events::{BytesStart, Event};
 
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
 use crate::model::{
-    Condition, Element, ElementKind, FileHeader, Interner, Name, Sfc, Step, Value, Variable,
+    Condition, Element, ElementKind, FileHeader, Interner, Name, Sfc, Step, Variable,
 };
 
-/// Lists nest at most this deep in a variable's value.
-pub const MAX_LIST_DEPTH: usize = 32;
+pub use crate::value::MAX_LIST_DEPTH;
 
 /// Reads the SFC file. `None` when the file is not well-formed or has no usable program body.
 pub fn read_sfc(sources: &Sources, file: FileId, diags: &mut Diagnostics) -> Option<Sfc> {
@@ -906,7 +905,7 @@ impl<'t> Stream<'t> {
                 continue;
             };
             let value_span = Span::new(file, value.range.clone());
-            match check_value(&value.value) {
+            match crate::value::check_value(&value.value) {
                 Ok(()) => variables.push(Variable {
                     name: self
                         .names
@@ -1054,237 +1053,9 @@ fn in_inline(b: &Building, stack: &[&str]) -> bool {
     rel.len() >= 2 && rel[0] == "condition" && rel[1] == "inline"
 }
 
-/// What a list lookup found.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Lookup<'a> {
-    /// One value.
-    Scalar(&'a str),
-    /// A list (where one value was looked for).
-    List,
-    /// The index at `depth` is past the end of a list of `len` items.
-    OutOfRange { depth: usize, len: usize },
-    /// The index at `depth` was applied to one value, not a list.
-    NotAList { depth: usize },
-}
-
-/// Looks up `indices` in a value whose syntax [`check_value`] accepted, without allocating.
-pub fn lookup<'a>(raw: &'a str, indices: &[usize]) -> Lookup<'a> {
-    let mut cur = raw.trim();
-    for (depth, &ix) in indices.iter().enumerate() {
-        if !cur.starts_with('(') {
-            return Lookup::NotAList { depth };
-        }
-        match items(cur).nth(ix) {
-            Some(item) => cur = item,
-            None => {
-                return Lookup::OutOfRange {
-                    depth,
-                    len: items(cur).count(),
-                };
-            }
-        }
-    }
-    if cur.starts_with('(') {
-        Lookup::List
-    } else {
-        Lookup::Scalar(cur)
-    }
-}
-
-/// The trimmed items of a well-formed list `( … )`.
-fn items(list: &str) -> impl Iterator<Item = &str> {
-    let inner = list
-        .strip_prefix('(')
-        .and_then(|l| l.strip_suffix(')'))
-        .unwrap_or("");
-    let empty = inner.trim().is_empty();
-    let b = inner.as_bytes();
-    let mut start = 0;
-    let mut i = 0;
-    let mut done = empty;
-    std::iter::from_fn(move || {
-        if done {
-            return None;
-        }
-        let (mut depth, mut in_str) = (0usize, false);
-        while i < b.len() {
-            match b[i] {
-                b'"' => in_str = !in_str,
-                b'(' if !in_str => depth += 1,
-                b')' if !in_str => depth = depth.saturating_sub(1),
-                b',' if !in_str && depth == 0 => break,
-                _ => {}
-            }
-            i += 1;
-        }
-        let item = inner[start..i].trim();
-        if i >= b.len() {
-            done = true;
-        } else {
-            i += 1;
-            start = i;
-        }
-        Some(item)
-    })
-}
-
-/// Checks a value's syntax (the rules of [`parse_value`]) without building it.
-pub fn check_value(text: &str) -> Result<(), (usize, String)> {
-    parse(text, false).map(|_| ())
-}
-
-/// Parses a variable's value: `(a, b, (c, d))` is a (nested) list of trimmed items, `()` is
-/// empty, anything else is one trimmed value. Commas inside `"..."` do not split. Errors carry
-/// the byte offset in `text`.
-pub fn parse_value(text: &str) -> Result<Value, (usize, String)> {
-    parse(text, true)
-}
-
-fn parse(text: &str, build: bool) -> Result<Value, (usize, String)> {
-    let lead = text.len() - text.trim_start().len();
-    let t = text.trim();
-    if !t.starts_with('(') {
-        return Ok(Value::Scalar(if build {
-            t.to_owned()
-        } else {
-            String::new()
-        }));
-    }
-    let mut p = ListParser {
-        s: t.as_bytes(),
-        text: t,
-        i: 0,
-        base: lead,
-        build,
-    };
-    let v = p.list(0)?;
-    p.skip_ws();
-    if p.i < p.s.len() {
-        return Err((lead + p.i, "text after the closing `)`".to_owned()));
-    }
-    Ok(v)
-}
-
-struct ListParser<'a> {
-    s: &'a [u8],
-    text: &'a str,
-    i: usize,
-    base: usize,
-    /// Build the value (else only check the syntax, allocating nothing).
-    build: bool,
-}
-
-impl ListParser<'_> {
-    fn skip_ws(&mut self) {
-        while self.i < self.s.len() && self.s[self.i].is_ascii_whitespace() {
-            self.i += 1;
-        }
-    }
-
-    fn err(&self, msg: &str) -> (usize, String) {
-        (self.base + self.i, msg.to_owned())
-    }
-
-    /// At `(`: parses to the matching `)`.
-    fn list(&mut self, depth: usize) -> Result<Value, (usize, String)> {
-        if depth >= MAX_LIST_DEPTH {
-            return Err(self.err(&format!("lists nested deeper than {MAX_LIST_DEPTH} levels")));
-        }
-        let open = self.i;
-        self.i += 1; // '('
-        let mut items = Vec::new();
-        self.skip_ws();
-        if self.s.get(self.i) == Some(&b')') {
-            self.i += 1;
-            return Ok(Value::List(items));
-        }
-        loop {
-            self.skip_ws();
-            match self.s.get(self.i) {
-                Some(b'(') => {
-                    let v = self.list(depth + 1)?;
-                    if self.build {
-                        items.push(v);
-                    }
-                    self.skip_ws();
-                }
-                Some(b',') | Some(b')') => return Err(self.err("empty list item")),
-                None => {
-                    self.i = open;
-                    return Err(self.err("`(` without its `)`"));
-                }
-                Some(_) => {
-                    let start = self.i;
-                    let mut in_str = false;
-                    while let Some(&c) = self.s.get(self.i) {
-                        match c {
-                            b'"' => in_str = !in_str,
-                            b',' | b')' if !in_str => break,
-                            b'(' if !in_str => {
-                                return Err(self.err("`(` inside a list item"));
-                            }
-                            _ => {}
-                        }
-                        self.i += 1;
-                    }
-                    let item = self.text[start..self.i].trim();
-                    if item.is_empty() {
-                        // Whitespace that `skip_ws` leaves (e.g. a vertical tab) is still
-                        // whitespace: `(a, \u{b})` has an empty item like `(a, )`.
-                        self.i = start;
-                        return Err(self.err("empty list item"));
-                    }
-                    if self.build {
-                        items.push(Value::Scalar(item.to_owned()));
-                    }
-                }
-            }
-            match self.s.get(self.i) {
-                Some(b',') => self.i += 1,
-                Some(b')') => {
-                    self.i += 1;
-                    return Ok(Value::List(items));
-                }
-                None => {
-                    self.i = open;
-                    return Err(self.err("`(` without its `)`"));
-                }
-                Some(_) => return Err(self.err("expected `,` or `)`")),
-            }
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn s(v: &str) -> Value {
-        Value::Scalar(v.to_owned())
-    }
-
-    #[test]
-    fn values() {
-        assert_eq!(parse_value(" 0.5 ").unwrap(), s("0.5"));
-        assert_eq!(
-            parse_value("(100, 200 , 300)").unwrap(),
-            Value::List(vec![s("100"), s("200"), s("300")])
-        );
-        assert_eq!(parse_value("()").unwrap(), Value::List(vec![]));
-        assert_eq!(
-            parse_value("(1, (2, 3), ())").unwrap(),
-            Value::List(vec![
-                s("1"),
-                Value::List(vec![s("2"), s("3")]),
-                Value::List(vec![])
-            ])
-        );
-        assert_eq!(
-            parse_value("(\"a,b\", c)").unwrap(),
-            Value::List(vec![s("\"a,b\""), s("c")])
-        );
-        assert_eq!(parse_value("abc def").unwrap(), s("abc def"));
-    }
 
     fn read(text: &str) -> (Option<Sfc>, Vec<Diagnostic>) {
         let mut sources = Sources::default();
@@ -1376,33 +1147,5 @@ mod tests {
             "{}",
             d[0].message
         );
-    }
-
-    #[test]
-    fn lookups() {
-        let v = "( 100, (1, \"a,b\"), (), 7 )";
-        assert!(check_value(v).is_ok());
-        assert_eq!(lookup(v, &[0]), Lookup::Scalar("100"));
-        assert_eq!(lookup(v, &[1, 1]), Lookup::Scalar("\"a,b\""));
-        assert_eq!(lookup(v, &[1]), Lookup::List);
-        assert_eq!(lookup(v, &[3]), Lookup::Scalar("7"));
-        assert_eq!(lookup(v, &[4]), Lookup::OutOfRange { depth: 0, len: 4 });
-        assert_eq!(lookup(v, &[2, 0]), Lookup::OutOfRange { depth: 1, len: 0 });
-        assert_eq!(lookup(v, &[0, 0]), Lookup::NotAList { depth: 1 });
-        assert_eq!(lookup("0.5", &[]), Lookup::Scalar("0.5"));
-        assert_eq!(lookup("0.5", &[0]), Lookup::NotAList { depth: 0 });
-        assert_eq!(lookup("()", &[]), Lookup::List);
-    }
-
-    #[test]
-    fn value_errors_have_offsets() {
-        assert_eq!(parse_value("(1, 2").unwrap_err().0, 0);
-        assert_eq!(parse_value("  (1, 2").unwrap_err().0, 2);
-        assert_eq!(parse_value("(1,,2)").unwrap_err().0, 3);
-        assert_eq!(parse_value("(1) x").unwrap_err().0, 4);
-        assert!(parse_value(&"(".repeat(100)).is_err());
-        // Found by fuzzing: an item of whitespace `skip_ws` does not skip is still empty.
-        assert_eq!(parse_value("( \"\"`,\u{b}\r )").unwrap_err().0, 6);
-        assert_eq!(check_value("( \"\"`,\u{b}\r )").unwrap_err().0, 6);
     }
 }

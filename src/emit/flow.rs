@@ -1,0 +1,110 @@
+//! What every language's writer shares: lines at a nesting level, the texts of step titles and
+//! of the comments that say which element of the chart a piece of code comes from, and
+//! conditions rendered with the language's operators and signals.
+
+use crate::bind::BoundStep;
+use crate::cond::Ops;
+use crate::model::ElementKind;
+use crate::names::transliterate;
+
+use super::EmitInput;
+
+/// Output text with a nesting level of two spaces per level.
+pub struct Lines<'a> {
+    pub out: String,
+    pub newline: &'a str,
+}
+
+impl Lines<'_> {
+    /// One line at `level`.
+    pub fn line(&mut self, level: usize, text: &str) {
+        self.indent(level);
+        self.out.push_str(text);
+        self.out.push_str(self.newline);
+    }
+
+    /// The indentation of `level`.
+    pub fn indent(&mut self, level: usize) {
+        for _ in 0..level {
+            self.out.push_str("  ");
+        }
+    }
+
+    /// A step's code: each non-empty line at `level` after `step_indent`.
+    pub fn code(&mut self, level: usize, step_indent: &str, code: &str) {
+        for line in code.split('\n') {
+            if !line.is_empty() {
+                self.indent(level);
+                self.out.push_str(step_indent);
+                self.out.push_str(line);
+            }
+            self.out.push_str(self.newline);
+        }
+    }
+}
+
+/// A step's title: `N name: skill @ resource (localId n)`, on one line of ASCII.
+pub fn step_title(input: &EmitInput, i: usize, bs: &BoundStep, number: usize) -> String {
+    let e = &input.sfc.elements[i];
+    let name = match &e.kind {
+        ElementKind::Step(st) => &*st.name,
+        _ => "",
+    };
+    let res = &input.blackboard.resources[bs.resource];
+    let skill = &res.skills[bs.skill];
+    let title = format!(
+        "{number} {name}: {} @ {} (localId {})",
+        skill.name.text, res.name.text, e.local_id
+    );
+    if title.is_ascii() && !title.contains(['\r', '\n']) {
+        title
+    } else {
+        transliterate(&title)
+    }
+}
+
+/// The condition of transition `t` in the language (`ops`, the profile's signals); `None` when
+/// it always fires.
+pub fn condition(input: &EmitInput, t: usize, ops: &Ops) -> Option<String> {
+    let ElementKind::Transition(Some(c)) = &input.sfc.elements[t].kind else {
+        return None;
+    };
+    let res = input.bound.resource.map(|r| &input.blackboard.resources[r]);
+    let signal = |n: &str| -> String {
+        res.and_then(|r| {
+            let si = r.signal(&crate::names::key(n))?;
+            input.profile.signal(&r.signals[si]).ok()
+        })
+        .unwrap_or_else(|| n.to_owned())
+    };
+    Some(crate::cond::render(&c.expr, &signal, ops))
+}
+
+/// The condition as written, for comments: on one line, without `;` (a comment inside a KRL
+/// comment, a statement end in RAPID), ASCII.
+pub fn condition_text(input: &EmitInput, t: usize) -> String {
+    match &input.sfc.elements[t].kind {
+        ElementKind::Transition(Some(c)) => transliterate(
+            &c.text
+                .replace(';', ",")
+                .split_whitespace()
+                .collect::<Vec<_>>()
+                .join(" "),
+        ),
+        _ => "TRUE".to_owned(),
+    }
+}
+
+/// A comment's text on one line of ASCII.
+pub fn comment_text(text: &str) -> String {
+    transliterate(text)
+}
+
+/// The `localId`s of elements, joined by `, `.
+pub fn local_ids(input: &EmitInput, elements: &[usize]) -> String {
+    let ids: Vec<String> = elements
+        .iter()
+        .map(|j| input.sfc.elements[*j].local_id.to_string())
+        .collect();
+    ids.join(", ")
+}

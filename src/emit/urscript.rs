@@ -1,0 +1,439 @@
+//! The Universal Robots URScript profile: `<program>.script` (SPEC.md 8).
+//!
+//! The program is `def <program>():` … `end` with the IRL definitions inside before the steps,
+//! then a call of it. Blocks close with `end`; a wait is `while not (c): sync() end`; a loop is
+//! `while True:` left by `break`.
+
+use std::borrow::Cow;
+
+use super::flow::{self, Lines};
+use super::{EmitInput, Generated, Language, Profile};
+use crate::cond::{BinOp, Ops};
+use crate::diag::Diagnostics;
+use crate::model::{Signal, SignalKind};
+use crate::plan::{Block, Branch, BranchEnd};
+use crate::template::Syntax;
+use crate::value::Literal;
+
+/// The built-in template's text.
+pub const DEFAULT_TEMPLATE: &str = include_str!("../../templates/urscript.toml");
+
+/// URScript's keywords and the names a value must not be (they would become code or change
+/// what a name means).
+const KEYWORDS: &[&str] = &[
+    "and",
+    "break",
+    "continue",
+    "def",
+    "elif",
+    "else",
+    "end",
+    "False",
+    "for",
+    "global",
+    "halt",
+    "if",
+    "in",
+    "join",
+    "kill",
+    "local",
+    "not",
+    "or",
+    "pass",
+    "return",
+    "run",
+    "sec",
+    "thread",
+    "True",
+    "while",
+    "xor",
+    "enter_critical",
+    "exit_critical",
+];
+
+/// The longest URScript program name.
+const MAX_NAME: usize = 63;
+
+/// The variable that holds the branch a selection without an unconditional branch chose.
+pub const BRANCH_VAR: &str = "skp_branch";
+
+/// The highest standard digital input or output.
+const MAX_STANDARD_IO: u32 = 7;
+
+fn is_keyword(w: &str) -> bool {
+    KEYWORDS.contains(&w)
+}
+
+fn is_ur_name(w: &str, max: usize) -> bool {
+    let b = w.as_bytes();
+    !b.is_empty()
+        && b.len() <= max
+        && (b[0].is_ascii_alphabetic() || b[0] == b'_')
+        && b.iter().all(|c| c.is_ascii_alphanumeric() || *c == b'_')
+}
+
+const OPS: Ops = Ops {
+    op: ur_op,
+    not: "not ",
+    true_: "True",
+    false_: "False",
+};
+
+fn ur_op(op: BinOp) -> &'static str {
+    match op {
+        BinOp::Or => "or",
+        BinOp::Xor => "xor",
+        BinOp::And => "and",
+        BinOp::Eq => "==",
+        BinOp::Ne => "!=",
+        BinOp::Lt => "<",
+        BinOp::Gt => ">",
+        BinOp::Le => "<=",
+        BinOp::Ge => ">=",
+    }
+}
+
+/// A number as URScript reads it: no leading zeros before the point (`007` is a syntax error
+/// in Python-like languages), no exponent (written out).
+fn ur_number(n: &str) -> Result<Cow<'_, str>, String> {
+    let (sign, body) = match n.strip_prefix('-') {
+        Some(b) => ("-", b),
+        None => ("", n),
+    };
+    let (mant, exp) = match body.split_once('E') {
+        Some((m, e)) => (m, e.parse::<i32>().map_err(|_| "exponent out of range")?),
+        None => (body, 0),
+    };
+    if !(-40..=40).contains(&exp) {
+        return Err(format!(
+            "`{n}` is out of the range URScript numbers are written in here"
+        ));
+    }
+    let leading_zero = mant.len() > 1 && mant.starts_with('0') && !mant.starts_with("0.");
+    if !body.contains('E') && !leading_zero {
+        return Ok(Cow::Borrowed(n));
+    }
+    // Digits and the position of the point, shifted by the exponent.
+    let (int, frac) = mant.split_once('.').unwrap_or((mant, ""));
+    let digits: String = format!("{int}{frac}");
+    let point = int.len() as i64 + exp as i64;
+    let mut s = String::new();
+    if point <= 0 {
+        s.push_str("0.");
+        s.extend(std::iter::repeat_n('0', (-point) as usize));
+        s.push_str(&digits);
+    } else if point as usize >= digits.len() {
+        s.push_str(&digits);
+        s.extend(std::iter::repeat_n('0', point as usize - digits.len()));
+    } else {
+        s.push_str(&digits[..point as usize]);
+        s.push('.');
+        s.push_str(&digits[point as usize..]);
+    }
+    // Leading zeros of the integer part; trailing zeros after a point.
+    let (i, f) = match s.split_once('.') {
+        Some((i, f)) => (i.to_owned(), Some(f.trim_end_matches('0').to_owned())),
+        None => (s.clone(), None),
+    };
+    let i = i.trim_start_matches('0');
+    let i = if i.is_empty() { "0" } else { i };
+    let mut out = format!("{sign}{i}");
+    if let Some(f) = f.filter(|f| !f.is_empty()) {
+        out.push('.');
+        out.push_str(&f);
+    } else if mant.contains('.') {
+        out.push_str(".0");
+    }
+    if out == "-0" || out == "-0.0" {
+        out.remove(0);
+    }
+    Ok(Cow::Owned(out))
+}
+
+/// The URScript profile.
+pub struct UrScript;
+
+impl Profile for UrScript {
+    fn language(&self) -> Language {
+        Language::UrScript
+    }
+
+    fn files(&self) -> &'static [&'static str] {
+        &["script"]
+    }
+
+    fn builtin_template(&self) -> &'static str {
+        DEFAULT_TEMPLATE
+    }
+
+    fn syntax(&self) -> Syntax {
+        Syntax {
+            comment: b'#',
+            aggregates: false,
+        }
+    }
+
+    fn check_program_name(&self, name: &str) -> Result<(), String> {
+        if !is_ur_name(name, MAX_NAME) || name.as_bytes()[0] == b'_' {
+            Err(format!(
+                "not a URScript program name: a letter, then letters, digits or `_`, at most {MAX_NAME} characters"
+            ))
+        } else if is_keyword(name) {
+            Err("a URScript keyword cannot name a program".to_owned())
+        } else {
+            Ok(())
+        }
+    }
+
+    fn literal<'v>(&self, v: &Literal<'v>) -> Result<Cow<'v, str>, String> {
+        Ok(match v {
+            Literal::Number(n) => match n {
+                Cow::Borrowed(b) => ur_number(b)?,
+                Cow::Owned(o) => Cow::Owned(ur_number(o)?.into_owned()),
+            },
+            Literal::Bool(true) => Cow::Borrowed("True"),
+            Literal::Bool(false) => Cow::Borrowed("False"),
+            Literal::Str(s) => {
+                if s.contains('\\') {
+                    return Err("a URScript string value must not contain `\\`".to_owned());
+                }
+                Cow::Owned(format!("\"{s}\""))
+            }
+            Literal::Word(w) => {
+                if !is_ur_name(w, usize::MAX) {
+                    return Err(format!(
+                        "`{w}` is not a URScript name (a letter or `_`, then letters, digits or `_`)"
+                    ));
+                }
+                if is_keyword(w) {
+                    return Err(format!(
+                        "`{w}` is a URScript keyword: as a value it would become code"
+                    ));
+                }
+                Cow::Borrowed(*w)
+            }
+        })
+    }
+
+    fn signal(&self, s: &Signal) -> Result<String, String> {
+        match &s.kind {
+            SignalKind::Bit(n) if *n <= MAX_STANDARD_IO => Ok(if s.output {
+                format!("get_standard_digital_out({n})")
+            } else {
+                format!("get_standard_digital_in({n})")
+            }),
+            SignalKind::Bit(n) => Err(format!(
+                "Number {n}: a UR robot has standard digital {} 0 to {MAX_STANDARD_IO}; for others give an `Address` (`get_tool_digital_in(0)`, `read_input_boolean_register(3)`)",
+                if s.output { "outputs" } else { "inputs" }
+            )),
+            SignalKind::Group { .. } => Err(
+                "URScript reads an integer signal through its `Address` (`read_input_integer_register(2)`), not `Number`/`Length`".to_owned(),
+            ),
+            SignalKind::Address { text, .. } if text.starts_with('$') || text.contains('[') => {
+                Err(format!(
+                    "URScript cannot read Address `{text}`: write a name or a call with one number (`read_input_integer_register(2)`)"
+                ))
+            }
+            SignalKind::Address { text, .. } => Ok(text.clone()),
+        }
+    }
+
+    fn generate(&self, input: &EmitInput, _diags: &mut Diagnostics) -> Option<Generated> {
+        let mut w = Writer {
+            input,
+            out: Lines {
+                out: String::new(),
+                newline: input.newline,
+            },
+            number: 0,
+        };
+        w.blocks(&input.plan.body, 0);
+        Some(Generated {
+            steps: w.out.out,
+            declarations: Vec::new(),
+        })
+    }
+}
+
+struct Writer<'a> {
+    input: &'a EmitInput<'a>,
+    out: Lines<'a>,
+    number: usize,
+}
+
+impl Writer<'_> {
+    fn comment(&mut self, level: usize, text: &str) {
+        self.out
+            .line(level, &format!("# {}", flow::comment_text(text)));
+    }
+
+    fn blocks(&mut self, blocks: &[Block], level: usize) {
+        for b in blocks {
+            self.block(b, level);
+        }
+    }
+
+    /// `while not (c): sync() end`: waits a control cycle at a time.
+    fn wait(&mut self, level: usize, c: &str) {
+        self.out.line(level, &format!("while not ({c}):"));
+        self.out.line(level + 1, "sync()");
+        self.out.line(level, "end");
+    }
+
+    fn block(&mut self, b: &Block, level: usize) {
+        let input = self.input;
+        let el = &input.sfc.elements;
+        match b {
+            Block::Step(i) => {
+                let Some(bs) = &input.bound.steps[*i] else {
+                    return;
+                };
+                self.number += 1;
+                let title = flow::step_title(input, *i, bs, self.number);
+                self.out.line(level, &format!("# step {title}"));
+                self.out.code(level, input.step_indent, &bs.code);
+            }
+            Block::Wait(t) => {
+                if let Some(c) = flow::condition(input, *t, &OPS) {
+                    let text = flow::condition_text(input, *t);
+                    self.comment(
+                        level,
+                        &format!("transition localId {}: {text}", el[*t].local_id),
+                    );
+                    self.wait(level, &c);
+                }
+            }
+            Block::Parallel { branches, .. } => {
+                for br in branches {
+                    self.blocks(br, level);
+                }
+            }
+            Block::Choice {
+                divergence,
+                branches,
+                ..
+            } => self.choice(*divergence, branches, level),
+            Block::Loop {
+                head,
+                jumps,
+                body,
+                endless,
+            } => {
+                self.comment(
+                    level,
+                    &format!(
+                        "loop back to step localId {} (jump localId {}){}",
+                        el[*head].local_id,
+                        flow::local_ids(input, jumps),
+                        if *endless { ", endless" } else { "" }
+                    ),
+                );
+                self.out.line(level, "while True:");
+                self.blocks(body, level + 1);
+                self.out.line(level, "end");
+            }
+        }
+    }
+
+    fn branch(&mut self, n: usize, br: &Branch, level: usize) {
+        let el = &self.input.sfc.elements;
+        let text = flow::condition_text(self.input, br.transition);
+        self.comment(
+            level,
+            &format!(
+                "branch {n} (transition localId {}): {text}",
+                el[br.transition].local_id
+            ),
+        );
+        self.blocks(&br.body, level);
+        match br.end {
+            BranchEnd::Join => {}
+            BranchEnd::Repeat(j) => self.comment(
+                level,
+                &format!("round again (jump localId {})", el[j].local_id),
+            ),
+            BranchEnd::Leave => self.out.line(level, "break"),
+        }
+    }
+
+    /// Selection branches in priority order: `if`/`elif` whose `else` is the first
+    /// unconditional branch; without one, the branch is chosen first (waiting for any
+    /// condition, testing again if none holds any more), then run.
+    fn choice(&mut self, div: usize, branches: &[Branch], level: usize) {
+        let input = self.input;
+        let conds: Vec<Option<String>> = branches
+            .iter()
+            .map(|b| flow::condition(input, b.transition, &OPS))
+            .collect();
+        self.comment(
+            level,
+            &format!(
+                "selection localId {}: {} branches, the first whose condition holds",
+                input.sfc.elements[div].local_id,
+                branches.len()
+            ),
+        );
+        if let Some(k) = conds.iter().position(Option::is_none) {
+            if k == 0 {
+                self.branch(1, &branches[0], level);
+                return;
+            }
+            for (n, br) in branches.iter().enumerate().take(k) {
+                let c = conds[n].as_deref().unwrap_or("True");
+                let kw = if n == 0 { "if" } else { "elif" };
+                self.out.line(level, &format!("{kw} {c}:"));
+                self.branch(n + 1, br, level + 1);
+            }
+            self.out.line(level, "else:");
+            self.branch(k + 1, &branches[k], level + 1);
+            self.out.line(level, "end");
+            return;
+        }
+        let any: Vec<String> = conds
+            .iter()
+            .map(|c| format!("({})", c.as_deref().unwrap_or("True")))
+            .collect();
+        self.out.line(level, &format!("{BRANCH_VAR} = 0"));
+        self.out.line(level, &format!("while {BRANCH_VAR} == 0:"));
+        self.wait(level + 1, &any.join(" or "));
+        for (n, c) in conds.iter().enumerate() {
+            let c = c.as_deref().unwrap_or("True");
+            let kw = if n == 0 { "if" } else { "elif" };
+            self.out.line(level + 1, &format!("{kw} {c}:"));
+            self.out
+                .line(level + 2, &format!("{BRANCH_VAR} = {}", n + 1));
+        }
+        self.out.line(level + 1, "end");
+        self.out.line(level, "end");
+        for (n, br) in branches.iter().enumerate() {
+            if n == 0 {
+                self.out.line(level, &format!("if {BRANCH_VAR} == 1:"));
+            } else if n + 1 < branches.len() {
+                self.out
+                    .line(level, &format!("elif {BRANCH_VAR} == {}:", n + 1));
+            } else {
+                self.out.line(level, "else:");
+            }
+            self.branch(n + 1, br, level + 1);
+        }
+        self.out.line(level, "end");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbers_are_written_as_urscript_reads_them() {
+        let n = |s: &str| ur_number(s).unwrap().into_owned();
+        assert_eq!(n("0.5"), "0.5");
+        assert_eq!(n("-12"), "-12");
+        assert_eq!(n("007"), "7");
+        assert_eq!(n("1.5E3"), "1500.0");
+        assert_eq!(n("1E3"), "1000");
+        assert_eq!(n("2.5E-3"), "0.0025");
+        assert_eq!(n("-0.0E0"), "0.0");
+        assert!(ur_number("1E99").is_err());
+    }
+}

@@ -1,0 +1,457 @@
+//! SFC variable values (SPEC.md 2.3): the list syntax `(a, (b, c))`, looking an item up in place,
+//! and the language-neutral typed [`Literal`] a value becomes for a parameter. Which text a
+//! literal is in a robot language is the language profile's business (`emit::Profile`).
+
+use std::borrow::Cow;
+
+use crate::model::{Value, ValueType};
+
+/// Lists nest at most this deep.
+pub const MAX_LIST_DEPTH: usize = 32;
+
+/// What a list lookup found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Lookup<'a> {
+    /// One value.
+    Scalar(&'a str),
+    /// A list (where one value was looked for).
+    List,
+    /// The index at `depth` is past the end of a list of `len` items.
+    OutOfRange { depth: usize, len: usize },
+    /// The index at `depth` was applied to one value, not a list.
+    NotAList { depth: usize },
+}
+
+/// Looks up `indices` in a value whose syntax [`check_value`] accepted, without allocating.
+pub fn lookup<'a>(raw: &'a str, indices: &[usize]) -> Lookup<'a> {
+    let mut cur = raw.trim();
+    for (depth, &ix) in indices.iter().enumerate() {
+        if !cur.starts_with('(') {
+            return Lookup::NotAList { depth };
+        }
+        match items(cur).nth(ix) {
+            Some(item) => cur = item,
+            None => {
+                return Lookup::OutOfRange {
+                    depth,
+                    len: items(cur).count(),
+                };
+            }
+        }
+    }
+    if cur.starts_with('(') {
+        Lookup::List
+    } else {
+        Lookup::Scalar(cur)
+    }
+}
+
+/// The trimmed items of a well-formed list `( … )`.
+fn items(list: &str) -> impl Iterator<Item = &str> {
+    let inner = list
+        .strip_prefix('(')
+        .and_then(|l| l.strip_suffix(')'))
+        .unwrap_or("");
+    let empty = inner.trim().is_empty();
+    let b = inner.as_bytes();
+    let mut start = 0;
+    let mut i = 0;
+    let mut done = empty;
+    std::iter::from_fn(move || {
+        if done {
+            return None;
+        }
+        let (mut depth, mut in_str) = (0usize, false);
+        while i < b.len() {
+            match b[i] {
+                b'"' => in_str = !in_str,
+                b'(' if !in_str => depth += 1,
+                b')' if !in_str => depth = depth.saturating_sub(1),
+                b',' if !in_str && depth == 0 => break,
+                _ => {}
+            }
+            i += 1;
+        }
+        let item = inner[start..i].trim();
+        if i >= b.len() {
+            done = true;
+        } else {
+            i += 1;
+            start = i;
+        }
+        Some(item)
+    })
+}
+
+/// Checks a value's syntax (the rules of [`parse_value`]) without building it.
+pub fn check_value(text: &str) -> Result<(), (usize, String)> {
+    parse(text, false).map(|_| ())
+}
+
+/// Parses a variable's value: `(a, b, (c, d))` is a (nested) list of trimmed items, `()` is
+/// empty, anything else is one trimmed value. Commas inside `"..."` do not split. Errors carry
+/// the byte offset in `text`.
+pub fn parse_value(text: &str) -> Result<Value, (usize, String)> {
+    parse(text, true)
+}
+
+fn parse(text: &str, build: bool) -> Result<Value, (usize, String)> {
+    let lead = text.len() - text.trim_start().len();
+    let t = text.trim();
+    if !t.starts_with('(') {
+        return Ok(Value::Scalar(if build {
+            t.to_owned()
+        } else {
+            String::new()
+        }));
+    }
+    let mut p = ListParser {
+        s: t.as_bytes(),
+        text: t,
+        i: 0,
+        base: lead,
+        build,
+    };
+    let v = p.list(0)?;
+    p.skip_ws();
+    if p.i < p.s.len() {
+        return Err((lead + p.i, "text after the closing `)`".to_owned()));
+    }
+    Ok(v)
+}
+
+struct ListParser<'a> {
+    s: &'a [u8],
+    text: &'a str,
+    i: usize,
+    base: usize,
+    /// Build the value (else only check the syntax, allocating nothing).
+    build: bool,
+}
+
+impl ListParser<'_> {
+    fn skip_ws(&mut self) {
+        while self.i < self.s.len() && self.s[self.i].is_ascii_whitespace() {
+            self.i += 1;
+        }
+    }
+
+    fn err(&self, msg: &str) -> (usize, String) {
+        (self.base + self.i, msg.to_owned())
+    }
+
+    /// At `(`: parses to the matching `)`.
+    fn list(&mut self, depth: usize) -> Result<Value, (usize, String)> {
+        if depth >= MAX_LIST_DEPTH {
+            return Err(self.err(&format!("lists nested deeper than {MAX_LIST_DEPTH} levels")));
+        }
+        let open = self.i;
+        self.i += 1; // '('
+        let mut items = Vec::new();
+        self.skip_ws();
+        if self.s.get(self.i) == Some(&b')') {
+            self.i += 1;
+            return Ok(Value::List(items));
+        }
+        loop {
+            self.skip_ws();
+            match self.s.get(self.i) {
+                Some(b'(') => {
+                    let v = self.list(depth + 1)?;
+                    if self.build {
+                        items.push(v);
+                    }
+                    self.skip_ws();
+                }
+                Some(b',') | Some(b')') => return Err(self.err("empty list item")),
+                None => {
+                    self.i = open;
+                    return Err(self.err("`(` without its `)`"));
+                }
+                Some(_) => {
+                    let start = self.i;
+                    let mut in_str = false;
+                    while let Some(&c) = self.s.get(self.i) {
+                        match c {
+                            b'"' => in_str = !in_str,
+                            b',' | b')' if !in_str => break,
+                            b'(' if !in_str => {
+                                return Err(self.err("`(` inside a list item"));
+                            }
+                            _ => {}
+                        }
+                        self.i += 1;
+                    }
+                    let item = self.text[start..self.i].trim();
+                    if item.is_empty() {
+                        // Whitespace that `skip_ws` leaves (e.g. a vertical tab) is still
+                        // whitespace: `(a, \u{b})` has an empty item like `(a, )`.
+                        self.i = start;
+                        return Err(self.err("empty list item"));
+                    }
+                    if self.build {
+                        items.push(Value::Scalar(item.to_owned()));
+                    }
+                }
+            }
+            match self.s.get(self.i) {
+                Some(b',') => self.i += 1,
+                Some(b')') => {
+                    self.i += 1;
+                    return Ok(Value::List(items));
+                }
+                None => {
+                    self.i = open;
+                    return Err(self.err("`(` without its `)`"));
+                }
+                Some(_) => return Err(self.err("expected `,` or `)`")),
+            }
+        }
+    }
+}
+
+/// A value made ready for one parameter, before any robot language: a typed literal. The
+/// language profile renders it (`TRUE` or `True`, `"text"`) and refuses what its language cannot
+/// take safely.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Literal<'a> {
+    /// A number in the common form: optional `-`, digits with a digit on both sides of a `.`,
+    /// an upper-case `E` exponent without `+` (`0.5`, `-1.0E3`).
+    Number(Cow<'a, str>),
+    Bool(bool),
+    /// A string's text, without quotes: printable ASCII without `"` (a profile may refuse more).
+    Str(&'a str),
+    /// One word: a name (`tool0`), or in KRL a system variable or enumeration value (`$POS_ACT`,
+    /// `#INITMOV`), kept as written.
+    Word(&'a str),
+}
+
+impl Literal<'_> {
+    /// The number's value, for conversions; `None` when the literal is not a number.
+    pub fn as_f64(&self) -> Option<f64> {
+        match self {
+            Literal::Number(s) => s.parse().ok(),
+            _ => None,
+        }
+    }
+}
+
+/// A value as the literal of its parameter's type (`None`: untyped, which takes one token: a
+/// number, `TRUE`/`FALSE`, a name, `$name`, `#name` or a `"string"`). `Err` says why not, for the
+/// diagnostic (a message starting with `non-ASCII` is one about the character set).
+pub fn literal(s: &str, ty: Option<ValueType>) -> Result<Literal<'_>, String> {
+    match ty {
+        Some(ValueType::Double) if is_number(s, true) => Ok(Literal::Number(normal_number(s))),
+        Some(ValueType::Decimal) if is_number(s, false) => Ok(Literal::Number(normal_number(s))),
+        Some(ValueType::Integer) if is_integer(s) => Ok(Literal::Number(normal_number(s))),
+        Some(ValueType::Boolean) => match s.to_ascii_lowercase().as_str() {
+            "true" | "1" => Ok(Literal::Bool(true)),
+            "false" | "0" => Ok(Literal::Bool(false)),
+            _ => Err("not an xs:boolean (true, false, 1 or 0)".to_owned()),
+        },
+        Some(ValueType::String) => string_text(s).map(Literal::Str),
+        Some(t) => Err(format!("not an {}", t.xs_name())),
+        None => {
+            if is_number(s, true) {
+                Ok(Literal::Number(normal_number(s)))
+            } else if s.eq_ignore_ascii_case("true") {
+                Ok(Literal::Bool(true))
+            } else if s.eq_ignore_ascii_case("false") {
+                Ok(Literal::Bool(false))
+            } else if is_ident(s) || s.strip_prefix(['$', '#']).is_some_and(is_ident) {
+                Ok(Literal::Word(s))
+            } else if s.len() >= 2 && s.starts_with('"') && s.ends_with('"') {
+                string_text(&s[1..s.len() - 1]).map(Literal::Str)
+            } else if !s.is_ascii() {
+                Err("non-ASCII character in a value (robot code is ASCII)".to_owned())
+            } else {
+                Err("an untyped value must be one token (a number, TRUE/FALSE, a name or a \"string\"); give the parameter an AttributeDataType".to_owned())
+            }
+        }
+    }
+}
+
+/// A string's text checked: one line of printable ASCII without `"`.
+fn string_text(s: &str) -> Result<&str, String> {
+    if s.contains('"') {
+        Err("a string value must not contain `\"`".to_owned())
+    } else if s.contains(['\n', '\r']) {
+        Err("a string value must not contain a line break".to_owned())
+    } else if !s.is_ascii() {
+        Err("non-ASCII character in a string value (robot code is ASCII)".to_owned())
+    } else if s.chars().any(|c| c.is_ascii_control()) {
+        Err("a string value must not contain control characters".to_owned())
+    } else {
+        Ok(s)
+    }
+}
+
+/// A checked number in the common form every profile's language reads: no `+`, a digit on both
+/// sides of the point, `E` for the exponent without `+`.
+fn normal_number(s: &str) -> Cow<'_, str> {
+    let b = s.as_bytes();
+    let needs = s.starts_with('+')
+        || s.contains("E+")
+        || s.contains('e')
+        || b.windows(2).any(|w| {
+            (w[1] == b'.' && !w[0].is_ascii_digit()) || (w[0] == b'.' && !w[1].is_ascii_digit())
+        })
+        || s.starts_with('.')
+        || s.ends_with('.');
+    if !needs {
+        return Cow::Borrowed(s);
+    }
+    let body = s.strip_prefix('+').unwrap_or(s);
+    let (sign, body) = match body.strip_prefix('-') {
+        Some(rest) => ("-", rest),
+        None => ("", body),
+    };
+    let (mant, exp) = match body.find(['e', 'E']) {
+        Some(i) => (&body[..i], Some(&body[i + 1..])),
+        None => (body, None),
+    };
+    let mut out = String::with_capacity(s.len() + 2);
+    out.push_str(sign);
+    if mant.starts_with('.') {
+        out.push('0');
+    }
+    out.push_str(mant);
+    if mant.ends_with('.') {
+        out.push('0');
+    }
+    if let Some(e) = exp {
+        out.push('E');
+        out.push_str(e.strip_prefix('+').unwrap_or(e));
+    }
+    Cow::Owned(out)
+}
+
+fn is_integer(s: &str) -> bool {
+    let d = s.strip_prefix(['+', '-']).unwrap_or(s);
+    !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit())
+}
+
+/// A decimal number (`exp`: with an optional exponent), optionally signed.
+pub fn is_number(s: &str, exp: bool) -> bool {
+    let b = s.strip_prefix(['+', '-']).unwrap_or(s).as_bytes();
+    let mut i = 0;
+    while i < b.len() && b[i].is_ascii_digit() {
+        i += 1;
+    }
+    let int_digits = i;
+    let mut frac_digits = 0;
+    if i < b.len() && b[i] == b'.' {
+        i += 1;
+        let f = i;
+        while i < b.len() && b[i].is_ascii_digit() {
+            i += 1;
+        }
+        frac_digits = i - f;
+    }
+    if int_digits + frac_digits == 0 {
+        return false;
+    }
+    if exp && i < b.len() && (b[i] == b'e' || b[i] == b'E') {
+        i += 1;
+        if i < b.len() && (b[i] == b'+' || b[i] == b'-') {
+            i += 1;
+        }
+        let e = i;
+        while i < b.len() && b[i].is_ascii_digit() {
+            i += 1;
+        }
+        if i == e {
+            return false;
+        }
+    }
+    i == b.len()
+}
+
+/// An ASCII identifier: a letter or `_`, then letters, digits or `_`.
+pub fn is_ident(s: &str) -> bool {
+    let b = s.as_bytes();
+    !b.is_empty()
+        && (b[0].is_ascii_alphabetic() || b[0] == b'_')
+        && b.iter().all(|c| c.is_ascii_alphanumeric() || *c == b'_')
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn s(v: &str) -> Value {
+        Value::Scalar(v.to_owned())
+    }
+
+    #[test]
+    fn values() {
+        assert_eq!(parse_value(" 0.5 ").unwrap(), s("0.5"));
+        assert_eq!(
+            parse_value("(100, 200 , 300)").unwrap(),
+            Value::List(vec![s("100"), s("200"), s("300")])
+        );
+        assert_eq!(parse_value("()").unwrap(), Value::List(vec![]));
+        assert_eq!(
+            parse_value("(1, (2, 3), ())").unwrap(),
+            Value::List(vec![
+                s("1"),
+                Value::List(vec![s("2"), s("3")]),
+                Value::List(vec![])
+            ])
+        );
+        assert_eq!(
+            parse_value("(\"a,b\", c)").unwrap(),
+            Value::List(vec![s("\"a,b\""), s("c")])
+        );
+        assert_eq!(parse_value("abc def").unwrap(), s("abc def"));
+    }
+
+    #[test]
+    fn lookups() {
+        let v = "( 100, (1, \"a,b\"), (), 7 )";
+        assert!(check_value(v).is_ok());
+        assert_eq!(lookup(v, &[0]), Lookup::Scalar("100"));
+        assert_eq!(lookup(v, &[1, 1]), Lookup::Scalar("\"a,b\""));
+        assert_eq!(lookup(v, &[1]), Lookup::List);
+        assert_eq!(lookup(v, &[3]), Lookup::Scalar("7"));
+        assert_eq!(lookup(v, &[4]), Lookup::OutOfRange { depth: 0, len: 4 });
+        assert_eq!(lookup(v, &[2, 0]), Lookup::OutOfRange { depth: 1, len: 0 });
+        assert_eq!(lookup(v, &[0, 0]), Lookup::NotAList { depth: 1 });
+        assert_eq!(lookup("0.5", &[]), Lookup::Scalar("0.5"));
+        assert_eq!(lookup("0.5", &[0]), Lookup::NotAList { depth: 0 });
+        assert_eq!(lookup("()", &[]), Lookup::List);
+    }
+
+    #[test]
+    fn value_errors_have_offsets() {
+        assert_eq!(parse_value("(1, 2").unwrap_err().0, 0);
+        assert_eq!(parse_value("  (1, 2").unwrap_err().0, 2);
+        assert_eq!(parse_value("(1,,2)").unwrap_err().0, 3);
+        assert_eq!(parse_value("(1) x").unwrap_err().0, 4);
+        assert!(parse_value(&"(".repeat(100)).is_err());
+        // Found by fuzzing: an item of whitespace `skip_ws` does not skip is still empty.
+        assert_eq!(parse_value("( \"\"`,\u{b}\r )").unwrap_err().0, 6);
+        assert_eq!(check_value("( \"\"`,\u{b}\r )").unwrap_err().0, 6);
+    }
+
+    #[test]
+    fn literals() {
+        use ValueType::*;
+        assert_eq!(
+            literal("+.5e+3", Some(Double)),
+            Ok(Literal::Number("0.5E3".into()))
+        );
+        assert_eq!(literal("7", Some(Integer)), Ok(Literal::Number("7".into())));
+        assert!(literal("7.5", Some(Integer)).is_err());
+        assert_eq!(literal("1", Some(Boolean)), Ok(Literal::Bool(true)));
+        assert_eq!(literal("true", None), Ok(Literal::Bool(true)));
+        assert_eq!(literal("a b", Some(String)), Ok(Literal::Str("a b")));
+        assert_eq!(literal("\"x\"", None), Ok(Literal::Str("x")));
+        assert_eq!(literal("#INITMOV", None), Ok(Literal::Word("#INITMOV")));
+        assert!(literal("a;b", None).is_err());
+        assert!(literal("\"a\"b\"", None).is_err());
+        assert!(literal("a\"b", Some(String)).is_err());
+        assert!(literal("Ä", None).unwrap_err().starts_with("non-ASCII"));
+        assert_eq!(Literal::Number("-1.5".into()).as_f64(), Some(-1.5));
+    }
+}
