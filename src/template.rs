@@ -10,8 +10,9 @@
 //!   `$`, and (so that a non-ASCII letter never splits a word) any non-ASCII character. Every
 //!   other character separates words; in particular `.` does.
 //! - **Parameters.** A word is replaced by a parameter's value when it equals the parameter's
-//!   name case-insensitively ([`crate::names`]), and it is not excluded by the next rule. A
-//!   parameter name that is not a single word (`End Position`) can therefore never occur.
+//!   name case-insensitively ([`crate::names`]; exactly in URScript, a case-sensitive language:
+//!   `a=1.2` there is a keyword argument, not parameter `A`), and it is not excluded by the next
+//!   rule. A parameter name that is not a single word (`End Position`) can therefore never occur.
 //! - **Never substituted:** a word starting with `$` (a KRL system variable: `$VEL`), a word
 //!   starting with a digit (a number: `1E3`), a word directly after `.` (a structure member:
 //!   `CP` in `$VEL.CP`, `X` in `P.X`; the word before the `.` is substituted normally), a word
@@ -49,6 +50,9 @@ pub struct Syntax {
     pub comment: u8,
     /// Whether `{...}` is a KRL aggregate (the `{X, Y}` → `{X 1, Y 2}` rule).
     pub aggregates: bool,
+    /// Whether a word must equal a parameter's name exactly (URScript: `a=1.2` is a keyword
+    /// argument, not parameter `A`); else case-insensitively.
+    pub case_sensitive: bool,
 }
 
 impl Syntax {
@@ -56,6 +60,7 @@ impl Syntax {
     pub const KRL: Syntax = Syntax {
         comment: b';',
         aggregates: true,
+        case_sensitive: false,
     };
 }
 
@@ -150,6 +155,9 @@ impl<'t> Compiler<'t> {
             return None;
         }
         let word = &self.text[start..end];
+        if self.syntax.case_sensitive {
+            return self.index.get(word).copied();
+        }
         self.buf.clear();
         if word.is_ascii() {
             self.buf
@@ -415,7 +423,12 @@ impl Template {
     pub fn compile_for(text: &str, params: &[String], syntax: Syntax) -> Template {
         let mut index = HashMap::with_capacity(params.len());
         for (i, p) in params.iter().enumerate() {
-            index.entry(crate::names::key(p)).or_insert(i);
+            let key = if syntax.case_sensitive {
+                p.clone()
+            } else {
+                crate::names::key(p)
+            };
+            index.entry(key).or_insert(i);
         }
         Compiler {
             text,

@@ -7,6 +7,8 @@
 //! base = "flow"                # optional: fixtures/base/<base>/ is copied first, the case's
 //!                              # files over it (a case keeps only what it changes)
 //! program = "Name"             # the <PROGRAM> argument
+//! language = "RAPID"           # optional: the program's language (KRL by default), which
+//!                              # decides the outputs: KRL .src + .dat, RAPID .mod, URScript .script
 //! blackboard = "Cell.aml"      # optional; default: the single *.aml in the folder
 //! args = ["--lf"]              # optional extra arguments
 //! tc6_valid = ["sfc.xml"]      # optional; SFC files that must validate against tc6_xml_v201.xsd
@@ -15,8 +17,9 @@
 //! ```
 //!
 //! For every case the test checks, through the binary only:
-//! - exit status 0, and exactly `<PROGRAM>.src` and `<PROGRAM>.dat` added to the folder;
-//! - snapshots (`tests/snapshots/`) of the `.src`, the `.dat` (line ends made visible: `⏎` marks a
+//! - exit status 0, and exactly the language's outputs (`<PROGRAM>.src` and `<PROGRAM>.dat`,
+//!   `<PROGRAM>.mod`, `<PROGRAM>.script`) added to the folder;
+//! - snapshots (`tests/snapshots/`) of each output (line ends made visible: `⏎` marks a
 //!   CRLF) and the region of the blackboard the write-back changed;
 //! - the blackboard differs from the input only inside the write-back target's `<Value>`, which
 //!   now holds `<PROGRAM>.src` (or only by the inserted `<Value>` element when the target had
@@ -24,7 +27,8 @@
 //! - the blackboard before and after, and the `tc6_valid` SFC files, validate against the XSDs in
 //!   `../shared/schemas/` with `xmllint` (skipped, with a note, when either is missing);
 //! - a second run over unchanged inputs exits 0 and rewrites nothing (modification times kept);
-//! - the `.src`/`.dat` pass a KRL structure check ([`check_krl`]).
+//! - the `.src`/`.dat` pass a KRL structure check ([`check_krl`]); a `.mod` passes `rapidchecker`;
+//!   a `.script` passes the URScript block-structure check.
 
 mod common;
 
@@ -43,6 +47,7 @@ use serde::Deserialize;
 struct CaseToml {
     base: Option<String>,
     program: String,
+    language: Option<String>,
     blackboard: Option<String>,
     #[serde(default)]
     args: Vec<String>,
@@ -141,8 +146,22 @@ fn run_case(name: &str) {
     let bb = dir.join(&bb_name);
     let original = fs::read(&bb).unwrap();
     let lf = case.args.iter().any(|a| a == "--lf");
-    let src_path = dir.join(format!("{}.src", case.program));
-    let dat_path = dir.join(format!("{}.dat", case.program));
+    // The outputs, the main one (the write-back's) first.
+    let exts: &[&str] = match case
+        .language
+        .as_deref()
+        .map(str::to_ascii_lowercase)
+        .as_deref()
+    {
+        None | Some("krl") => &["src", "dat"],
+        Some("rapid") => &["mod"],
+        Some("urscript") => &["script"],
+        Some(other) => panic!("{name}: case.toml: unknown language `{other}`"),
+    };
+    let out_paths: Vec<PathBuf> = exts
+        .iter()
+        .map(|e| dir.join(format!("{}.{e}", case.program)))
+        .collect();
 
     let schemas = schema_dir();
     if let Some(s) = &schemas {
@@ -172,31 +191,45 @@ fn run_case(name: &str) {
     }
     let after = listing(dir);
     let added: Vec<&String> = after.keys().filter(|k| !before.contains_key(*k)).collect();
-    // `.dat` sorts before `.src`, as in the BTreeMap.
-    let expected_added = [
-        format!("{}.dat", case.program),
-        format!("{}.src", case.program),
-    ];
+    // In the BTreeMap's order (`.dat` before `.src`).
+    let mut expected_added: Vec<String> = exts
+        .iter()
+        .map(|e| format!("{}.{e}", case.program))
+        .collect();
+    expected_added.sort();
     assert_eq!(
         added,
         expected_added.iter().collect::<Vec<_>>(),
-        "{name}: run 1 should add exactly the .src and .dat"
+        "{name}: run 1 should add exactly the program's outputs"
     );
 
     // The outputs.
-    let src = fs::read(&src_path).unwrap();
-    let dat = fs::read(&dat_path).unwrap();
-    let src_text = String::from_utf8(src.clone())
-        .unwrap_or_else(|_| panic!("{name}: the .src is not UTF-8 (let alone ASCII)"));
-    let dat_text = String::from_utf8(dat.clone())
-        .unwrap_or_else(|_| panic!("{name}: the .dat is not UTF-8 (let alone ASCII)"));
-    if let Err(e) = check_krl(&src_text, &dat_text, &case.program, lf) {
-        panic!("{name}: KRL structure check: {e}\n--- .src ---\n{src_text}");
+    let bytes: Vec<Vec<u8>> = out_paths.iter().map(|p| fs::read(p).unwrap()).collect();
+    let texts: Vec<String> = bytes
+        .iter()
+        .zip(exts)
+        .map(|(b, e)| {
+            String::from_utf8(b.clone())
+                .unwrap_or_else(|_| panic!("{name}: the .{e} is not UTF-8 (let alone ASCII)"))
+        })
+        .collect();
+    match exts[0] {
+        "src" => {
+            if let Err(e) = check_krl(&texts[0], &texts[1], &case.program, lf) {
+                panic!(
+                    "{name}: KRL structure check: {e}\n--- .src ---\n{}",
+                    texts[0]
+                );
+            }
+        }
+        "mod" => check_rapid(name, &out_paths[0], &texts[0]),
+        _ => check_script(name, &texts[0]),
     }
 
     // The write-back.
     let written = fs::read(&bb).unwrap();
-    let region = check_write_back(name, &bb_name, &original, &written, &case.program);
+    let main_output = format!("{}.{}", case.program, exts[0]);
+    let region = check_write_back(name, &bb_name, &original, &written, &main_output);
     if let Some(s) = &schemas {
         let xsd = caex_schema(s, &written);
         xmllint(&xsd, &bb).unwrap_or_else(|e| panic!("{name}: written-back blackboard: {e}"));
@@ -204,18 +237,14 @@ fn run_case(name: &str) {
 
     // Snapshots.
     let program = &case.program;
-    insta::with_settings!({
-        description => format!("fixtures/ok/{name}: {program}.src"),
-        omit_expression => true,
-    }, {
-        insta::assert_snapshot!(format!("{name}__src"), visible(&src_text));
-    });
-    insta::with_settings!({
-        description => format!("fixtures/ok/{name}: {program}.dat"),
-        omit_expression => true,
-    }, {
-        insta::assert_snapshot!(format!("{name}__dat"), visible(&dat_text));
-    });
+    for (ext, text) in exts.iter().zip(&texts) {
+        insta::with_settings!({
+            description => format!("fixtures/ok/{name}: {program}.{ext}"),
+            omit_expression => true,
+        }, {
+            insta::assert_snapshot!(format!("{name}__{ext}"), visible(text));
+        });
+    }
     insta::with_settings!({
         description => format!("fixtures/ok/{name}: the write-back into {bb_name}"),
         omit_expression => true,
@@ -225,8 +254,9 @@ fn run_case(name: &str) {
 
     // Run 2 over unchanged inputs: nothing is rewritten.
     let fixed = SystemTime::UNIX_EPOCH + Duration::new(1_000_000_000, 123_456_789);
-    let watched = [&src_path, &dat_path, &bb];
-    for p in watched {
+    let mut watched: Vec<&PathBuf> = out_paths.iter().collect();
+    watched.push(&bb);
+    for p in &watched {
         fs::File::options()
             .write(true)
             .open(p)
@@ -250,8 +280,9 @@ fn run_case(name: &str) {
             p.display()
         );
     }
-    assert_eq!(fs::read(&src_path).unwrap(), src, "{name}: .src changed");
-    assert_eq!(fs::read(&dat_path).unwrap(), dat, "{name}: .dat changed");
+    for (p, b) in out_paths.iter().zip(&bytes) {
+        assert_eq!(&fs::read(p).unwrap(), b, "{name}: {} changed", p.display());
+    }
     assert_eq!(
         fs::read(&bb).unwrap(),
         written,
@@ -403,16 +434,16 @@ fn line_number(bytes: &[u8], at: usize) -> usize {
     bytes[..at].iter().filter(|&&b| b == b'\n').count() + 1
 }
 
-/// Asserts the write-back changed only the target value (to `<program>.src`; or inserted the
+/// Asserts the write-back changed only the target value (to `new_value`, the main output's
+/// name, e.g. `<program>.src`; or inserted the
 /// missing `<Value>` element and nothing else), and describes the change for the snapshot.
 fn check_write_back(
     case: &str,
     bb_name: &str,
     original: &[u8],
     written: &[u8],
-    program: &str,
+    new_value: &str,
 ) -> String {
-    let new_value = format!("{program}.src");
     let mut report = format!(
         "{bb_name}: {} bytes, BOM: {}, line ends: {}\n",
         written.len(),
@@ -602,7 +633,7 @@ mod write_back_check {
         </InternalElement>\r\n  </InstanceHierarchy>\r\n</CAEXFile>\r\n";
 
     fn check(written: &str) -> String {
-        check_write_back("t", "bb.aml", BB.as_bytes(), written.as_bytes(), "prog")
+        check_write_back("t", "bb.aml", BB.as_bytes(), written.as_bytes(), "prog.src")
     }
 
     #[test]
@@ -650,7 +681,7 @@ mod write_back_check {
             "bb.aml",
             no_value.as_bytes(),
             written.as_bytes(),
-            "prog",
+            "prog.src",
         );
     }
 
@@ -664,7 +695,7 @@ mod write_back_check {
             "bb.aml",
             no_target.as_bytes(),
             written.as_bytes(),
-            "prog",
+            "prog.src",
         );
     }
 }
@@ -788,5 +819,27 @@ mod krl_check {
         rejects(&src("  MSG = \"open\r\n"), "unterminated string");
         let crlf_in_lf = check_krl(&src(""), DAT, "prog", true).unwrap_err();
         assert!(crlf_in_lf.contains("expected LF"), "{crlf_in_lf}");
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// RAPID and URScript outputs
+// ---------------------------------------------------------------------------------------------
+
+/// A `.mod` must pass `rapidchecker` (installed by `.ci/run`).
+fn check_rapid(name: &str, path: &Path, text: &str) {
+    if !common::rapid::rapidchecker_available() {
+        common::skip(&format!("{name}: rapidchecker is not installed"));
+        return;
+    }
+    if let Err(e) = common::rapid::rapidcheck(path) {
+        panic!("{name}: rapidchecker: {e}\n--- .mod ---\n{text}");
+    }
+}
+
+/// A `.script` must pass the URScript block-structure check.
+fn check_script(name: &str, text: &str) {
+    if let Err(e) = common::urscript::check_urscript(text) {
+        panic!("{name}: URScript structure check: {e}\n--- .script ---\n{text}");
     }
 }

@@ -87,6 +87,11 @@ pub trait Profile: Sync {
     /// A signal as a condition reads it: a boolean or an integer expression. `Err` says why the
     /// language cannot read this signal (for `E209`).
     fn signal(&self, s: &Signal) -> Result<String, String>;
+    /// Where an IRL definition goes among the others, by its first line: definitions are written
+    /// in this order (stable, then first use). RAPID puts data declarations before routines.
+    fn definition_rank(&self, _first_line: &str) -> u8 {
+        0
+    }
     /// Writes the program tree and its declarations (see [`Generated`]).
     fn generate(&self, input: &EmitInput, diags: &mut Diagnostics) -> Option<Generated>;
 }
@@ -365,7 +370,14 @@ pub fn emit_files(
             match block_name(line) {
                 Some("steps") => push_block(&mut text, indent, &generated.steps, nl),
                 Some("definitions") => {
-                    for &(irl, d) in &input.bound.definitions {
+                    let mut defs = input.bound.definitions.clone();
+                    defs.sort_by_key(|&(irl, d)| {
+                        let lines = &input.irls[irl].definitions[d].lines;
+                        input
+                            .profile
+                            .definition_rank(lines.first().map_or("", String::as_str))
+                    });
+                    for &(irl, d) in &defs {
                         let def = &input.irls[irl].definitions[d];
                         text.push_str(nl);
                         for l in &def.lines {

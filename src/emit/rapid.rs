@@ -143,6 +143,7 @@ impl Profile for Rapid {
         Syntax {
             comment: b'!',
             aggregates: false,
+            case_sensitive: false,
         }
     }
 
@@ -208,6 +209,21 @@ impl Profile for Rapid {
             SignalKind::Bit(_) | SignalKind::Group { .. } => Err(
                 "RAPID reads a signal by the name it is configured under: give the signal an `Address` with that name (`di_Part`, `gi_Type`)".to_owned(),
             ),
+        }
+    }
+
+    /// Data declarations (`PERS`, `VAR`, `CONST`, maybe after `LOCAL`/`TASK`) before routines:
+    /// RAPID wants a module's data before its routines.
+    fn definition_rank(&self, first_line: &str) -> u8 {
+        let mut words = first_line.split_whitespace().map(str::to_ascii_uppercase);
+        let mut w = words.next().unwrap_or_default();
+        if w == "LOCAL" || w == "TASK" {
+            w = words.next().unwrap_or_default();
+        }
+        if matches!(w.as_str(), "PERS" | "VAR" | "CONST") {
+            0
+        } else {
+            1
         }
     }
 

@@ -170,6 +170,7 @@ impl Profile for UrScript {
         Syntax {
             comment: b'#',
             aggregates: false,
+            case_sensitive: true,
         }
     }
 
