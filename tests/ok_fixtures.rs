@@ -73,6 +73,7 @@ macro_rules! cases {
 }
 
 cases! {
+    abb_irb1200 => "abb-irb1200",
     caex3_english => "caex3-english",
     flow_cyclic => "flow-cyclic",
     flow_guarded_sequence => "flow-guarded-sequence",
@@ -92,6 +93,7 @@ cases! {
     subfolders => "subfolders",
     typed_values => "typed-values",
     umlauts => "umlauts",
+    ur10e => "ur10e",
     writeback_insert_value => "writeback-insert-value",
 }
 
