@@ -444,7 +444,13 @@ fn conversion_error(
             let var = p.variable.as_ref().and_then(|v| vars.get(&v.key));
             let (name, value, at) = match var {
                 Some(v) => (
-                    v.name.text.to_string(),
+                    {
+                        let mut n = v.name.text.to_string();
+                        for ix in &p.indices {
+                            n.push_str(&format!("[{ix}]"));
+                        }
+                        n
+                    },
                     match crate::value::lookup(&v.raw, &p.indices) {
                         crate::value::Lookup::Scalar(s) => s.to_owned(),
                         _ => v.raw.clone(),
@@ -456,10 +462,10 @@ fn conversion_error(
             Diagnostic::error(
                 Code::BadConversion,
                 format!(
-                    "`{}({})` in the template of function-call `{}` needs a number, but variable `{name}` is `{value}`",
+                    "`{}` in the template of function-call `{}` needs a number for its argument `{}`, but `{name}` is `{value}`",
                     conversion.name(),
-                    call.params.get(param).map_or("?", |n| &n.text),
                     call.name.text,
+                    call.params.get(param).map_or("?", |n| &n.text),
                 ),
             )
             .at(at)
@@ -779,7 +785,7 @@ pub fn conditions(
     bb: &Blackboard,
     sfc: &Sfc,
     resource: Option<usize>,
-    profile: &dyn Profile,
+    profile: Option<&dyn Profile>,
     diags: &mut Diagnostics,
 ) -> Vec<usize> {
     use crate::cond::Ty;
@@ -846,8 +852,9 @@ pub fn conditions(
             }
         }
     }
-    // Whether the program's language can read each signal the conditions use.
-    if let Some(r) = res {
+    // Whether the program's language can read each signal the conditions use (not asked when
+    // the language is not known for sure).
+    if let (Some(r), Some(profile)) = (res, profile) {
         for &si in &used {
             let sig = &r.signals[si];
             if let Err(why) = profile.signal(sig) {

@@ -363,7 +363,16 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             profile,
             &mut cx.diags,
         );
-        bound.signals = bind::conditions(&bb, sfc, res.resource, profile, &mut cx.diags);
+        // A language named wrongly (E210) makes the language a guess: its signal rules are
+        // not applied then.
+        let sure = !cx.diags.iter().any(|d| d.code == Code::BadLanguage);
+        bound.signals = bind::conditions(
+            &bb,
+            sfc,
+            res.resource,
+            sure.then_some(profile),
+            &mut cx.diags,
+        );
         out.skill_steps = bound.steps.iter().filter(|s| s.is_some()).count();
         lap(&mut out, "bind");
         // The output template: like the blackboard, one the command names, so a template
