@@ -367,7 +367,9 @@ fn print_listings(
     if print('B')
         && let Some(bb) = &c.blackboard
     {
-        emit(&|| crate::print::blackboard(bb), &|| json::blackboard(bb));
+        emit(&|| crate::print::blackboard(bb, &c.languages), &|| {
+            json::blackboard(bb, &c.languages)
+        });
     }
     if print('S')
         && let Some(sfc) = &c.sfc

@@ -87,6 +87,10 @@ pub struct Compilation {
     pub irls: Vec<Irl>,
     /// Skill steps that produce code.
     pub skill_steps: usize,
+    /// The language of each resource the program uses (by resource index), as decided.
+    pub languages: HashMap<usize, Language>,
+    /// The program's language (`None` when no SFC could be read).
+    pub language: Option<Language>,
     /// Wall time per stage, in order (`read-blackboard`, `read-sfc`, `plan`, `bind`, `emit`).
     pub timings: Vec<(&'static str, std::time::Duration)>,
 }
@@ -335,6 +339,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         }
         let langs = languages(&mut cx, &bb, &res, &files);
         language = Some(langs.program);
+        out.languages = langs.resources.clone();
         let mut fn_irl: HashMap<(usize, usize), usize> = HashMap::new();
         let mut by_file: HashMap<(crate::diag::FileId, Language), Option<usize>> = HashMap::new();
         for ((r, f), file) in files {
@@ -441,6 +446,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             ),
         });
     }
+    out.language = language;
     out.blackboard = Some(bb);
     out.sfc = sfc;
     out.plan = plan;

@@ -10,11 +10,33 @@ use std::fmt::Write as _;
 use crate::model::{Blackboard, ElementKind, Sfc, Signal, SignalKind, Value};
 use crate::plan::{Block, BranchEnd, Plan};
 
-/// `-pB`: resources, their skills with the calls they map, and functions with their IRL files.
-pub fn blackboard(bb: &Blackboard) -> String {
+/// A resource's language and where it comes from: the compile's decision for a resource the
+/// program uses (`languages`), else its `Language` attribute, else the default.
+pub fn language_text(
+    bb: &Blackboard,
+    ri: usize,
+    languages: &std::collections::HashMap<usize, crate::emit::Language>,
+) -> String {
+    let r = &bb.resources[ri];
+    match (languages.get(&ri), &r.language) {
+        (Some(l), Some((a, _))) if l == a => format!("{l} (Language attribute)"),
+        (Some(l), None) => format!("{l} (IRL files, else the default)"),
+        (Some(l), Some(_)) => l.to_string(),
+        (None, Some((a, _))) => format!("{a} (Language attribute)"),
+        (None, None) => "KRL unless its IRL files say otherwise (no Language attribute)".to_owned(),
+    }
+}
+
+/// `-pB`: resources (with their language), their skills with the calls they map, and functions
+/// with their IRL files.
+pub fn blackboard(
+    bb: &Blackboard,
+    languages: &std::collections::HashMap<usize, crate::emit::Language>,
+) -> String {
     let mut o = String::new();
-    for r in &bb.resources {
+    for (ri, r) in bb.resources.iter().enumerate() {
         let _ = writeln!(o, "{:<23} {}", r.name.text, r.id.as_deref().unwrap_or(""));
+        let _ = writeln!(o, "        (Language) {}", language_text(bb, ri, languages));
         let mut skills: Vec<_> = r.skills.iter().collect();
         skills.sort_by(|a, b| a.name.key.cmp(&b.name.key));
         for s in skills {
@@ -451,14 +473,22 @@ pub fn info(bb: Option<&Blackboard>) -> String {
         std::env::consts::OS,
         std::env::consts::ARCH
     );
-    let _ = writeln!(o, "  Output profile: KUKA KRL (.src/.dat)");
+    let _ = writeln!(
+        o,
+        "  Output profiles: KUKA KRL (.src/.dat), ABB RAPID (.mod), Universal Robots URScript (.script)"
+    );
     let _ = writeln!(
         o,
         "  Step types: any; a step's variables come from its skill's SFC mapping"
     );
     if let Some(bb) = bb {
-        for r in &bb.resources {
+        for (ri, r) in bb.resources.iter().enumerate() {
             let _ = writeln!(o, "{}", r.name.text);
+            let _ = writeln!(
+                o,
+                "  language {}",
+                language_text(bb, ri, &Default::default())
+            );
             if r.skills.is_empty() {
                 let _ = writeln!(o, "  (no skills)");
             }
@@ -493,11 +523,15 @@ pub mod json {
     use crate::plan::{Block, BranchEnd, Plan};
 
     /// `-pB`: resources with their skills (and the calls each maps), functions and signals.
-    pub fn blackboard(bb: &Blackboard) -> Json {
+    pub fn blackboard(
+        bb: &Blackboard,
+        languages: &std::collections::HashMap<usize, crate::emit::Language>,
+    ) -> Json {
         let resources: Vec<Json> = bb
             .resources
             .iter()
-            .map(|r| {
+            .enumerate()
+            .map(|(ri, r)| {
                 let mut skills: Vec<_> = r.skills.iter().collect();
                 skills.sort_by(|a, b| a.name.key.cmp(&b.name.key));
                 let skills: Vec<Json> = skills
@@ -551,9 +585,19 @@ pub mod json {
                         o
                     })
                     .collect();
+                let language = languages
+                    .get(&ri)
+                    .copied()
+                    .or(r.language.as_ref().map(|(l, _)| *l));
                 json!({
                     "name": &*r.name.text,
                     "id": r.id,
+                    "language": language.map(|l| l.name()),
+                    "language_from": match (languages.get(&ri), &r.language) {
+                        (_, Some(_)) => "attribute",
+                        (Some(_), None) => "irl-or-default",
+                        (None, None) => "unknown",
+                    },
                     "skills": skills,
                     "functions": functions,
                     "signals": signals,
