@@ -1114,3 +1114,95 @@ fn regex_free_replace_durations(s: &str, n: &mut usize) -> String {
     out.push_str(rest);
     out
 }
+
+/// A fresh copy of a fixture base (`fixtures/base/<name>`: `abb`, `ur`).
+fn cell(name: &str) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let from = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures/base")
+        .join(name);
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), dir.path().join(e.file_name())).unwrap();
+    }
+    dir
+}
+
+#[test]
+fn listings_show_each_resources_language_and_where_it_comes_from() {
+    // The ABB cell says RAPID in its resource; the UR cell only in its IRL file.
+    let abb = cell("abb");
+    let o = run(&["--validate", "-pB", "Cell.aml", "P"], abb.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(
+        stdout(&o).contains("(Language) RAPID (Language attribute)"),
+        "{}",
+        stdout(&o)
+    );
+    let ur = cell("ur");
+    let o = run(&["--validate", "-pB", "Cell.aml", "P"], ur.path());
+    assert!(
+        stdout(&o).contains("(Language) URScript (IRL files, else the default)"),
+        "{}",
+        stdout(&o)
+    );
+    let o = run(
+        &["--format", "json", "--validate", "-pB", "Cell.aml", "P"],
+        ur.path(),
+    );
+    let listing: serde_json::Value = stdout(&o)
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .find(|v| v["listing"] == "blackboard")
+        .unwrap();
+    assert_eq!(listing["resources"][0]["language"], "URScript");
+    // --info reads only the blackboard: the attribute, or where the language will come from.
+    let o = run(&["--info", "Cell.aml"], abb.path());
+    assert!(
+        stdout(&o).contains("  language RAPID (Language attribute)"),
+        "{}",
+        stdout(&o)
+    );
+    let o = run(&["--info", "Cell.aml"], ur.path());
+    assert!(
+        stdout(&o).contains("  language KRL unless its IRL files say otherwise"),
+        "{}",
+        stdout(&o)
+    );
+    let o = run(&["--info"], ur.path());
+    assert!(stdout(&o).contains("ABB RAPID (.mod)"), "{}", stdout(&o));
+}
+
+#[test]
+fn a_rapid_program_writes_one_module_and_refuses_a_krl_template() {
+    let abb = cell("abb");
+    let o = run(&["Cell.aml", "Palletize"], abb.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stdout(&o).contains("wrote Palletize.mod"), "{}", stdout(&o));
+    assert!(!abb.path().join("Palletize.src").exists());
+    // CRLF by default, LF with --lf, as for KRL.
+    let m = std::fs::read_to_string(abb.path().join("Palletize.mod")).unwrap();
+    assert!(m.starts_with("MODULE Palletize\r\n"), "{m}");
+    let o = run(&["--lf", "Cell.aml", "Palletize"], abb.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let m = std::fs::read_to_string(abb.path().join("Palletize.mod")).unwrap();
+    assert!(
+        m.starts_with("MODULE Palletize\n") && !m.contains('\r'),
+        "{m}"
+    );
+    // A KRL template for a RAPID program is a located error, and nothing is written.
+    let krl = Path::new(env!("CARGO_MANIFEST_DIR")).join("templates/krl.toml");
+    std::fs::copy(krl, abb.path().join("krl.toml")).unwrap();
+    let before = std::fs::read(abb.path().join("Palletize.mod")).unwrap();
+    let o = run(
+        &["--template", "krl.toml", "Cell.aml", "Palletize"],
+        abb.path(),
+    );
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("E603"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("another language"), "{}", stderr(&o));
+    assert_eq!(
+        std::fs::read(abb.path().join("Palletize.mod")).unwrap(),
+        before
+    );
+}

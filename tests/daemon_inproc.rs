@@ -462,3 +462,79 @@ fn root_projects_gone_are_forgotten_after_the_default_period_explicit_ones_never
     }
     d.stop(WAIT);
 }
+
+// ---------------------------------------------------------------------------------------------
+// Robot languages
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn rapid_and_urscript_projects_are_compiled_watched_and_reported_like_krl_ones() {
+    let w = Workspace::new();
+    let base = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/base");
+    // (folder, fixture base, output extension, IRL file, an edit of it); the program is named
+    // after the blackboard, `Cell.aml`.
+    let cases = [
+        (
+            "Cell_UR",
+            "ur",
+            "script",
+            "ur10e.irl",
+            ("sleep(T)", "sleep(T)\n\t\t\tsync()"),
+        ),
+        (
+            "Cell_ABB",
+            "abb",
+            "mod",
+            "irb1200.irl",
+            ("WaitTime T;", "WaitTime T;\n\t\t\tWaitTime 0.1;"),
+        ),
+    ];
+    let mut dirs = Vec::new();
+    for (name, b, ..) in &cases {
+        let dir = w.ws().join(name);
+        fs::create_dir(&dir).unwrap();
+        for e in fs::read_dir(base.join(b)).unwrap() {
+            let e = e.unwrap();
+            fs::copy(e.path(), dir.join(e.file_name())).unwrap();
+        }
+        dirs.push(dir);
+    }
+    let refs: Vec<&Path> = dirs.iter().map(|p| p.as_path()).collect();
+    let d = InProc::with_dirs(&refs);
+    d.startup(&refs);
+    for ((name, _, ext, irl, (from, to)), dir) in cases.iter().zip(&dirs) {
+        let output = dir.join(format!("Cell.{ext}"));
+        let evs = d.events();
+        let ok = evs
+            .iter()
+            .find(|e| is_for(e, "compile-succeeded", dir))
+            .unwrap_or_else(|| panic!("no compile-succeeded for {name}:\n{}", dump(&evs)));
+        let paths: Vec<&str> = ok["outputs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|o| o["path"].as_str().unwrap())
+            .collect();
+        assert_eq!(paths, [output.to_str().unwrap()], "{name}: {ok}");
+        assert!(!dir.join("Cell.src").exists(), "{name}: a .src");
+        let bb = read_string(&dir.join("Cell.aml"));
+        assert!(
+            bb.contains(&format!("<Value>Cell.{ext}</Value>")),
+            "{name}: the write-back names the .{ext}"
+        );
+        // The IRL file is an input: editing it recompiles into the language's output.
+        let mark = d.mark();
+        let text = read_string(&dir.join(irl));
+        assert!(text.contains(from));
+        fs::write(dir.join(irl), text.replace(from, to)).unwrap();
+        d.wait_for(&format!("the recompile of {name}"), WAIT, |e| {
+            is_after(e, "compile-succeeded", dir, mark)
+        });
+        let new_line = to.lines().last().unwrap().trim();
+        assert!(
+            read_string(&output).contains(new_line),
+            "{name}: the .{ext} holds `{new_line}`"
+        );
+    }
+    d.stop(WAIT);
+}
