@@ -13,7 +13,8 @@ use crate::compile::{self, Compilation, Options};
 use crate::diag::{self, Format};
 use crate::load::FsSource;
 
-/// skillpost: AutomationML blackboard + PLCopen SFC + IRL snippets -> KUKA KRL (.src/.dat)
+/// skillpost: AutomationML blackboard + PLCopen SFC + IRL snippets -> a robot program: KUKA KRL
+/// (.src/.dat), ABB RAPID (.mod) or Universal Robots URScript (.script), by the resource's language
 #[derive(Debug, Parser)]
 #[command(
     name = "skillpost",
@@ -29,8 +30,9 @@ struct Args {
     /// The blackboard (.aml); with --sfc, the SFC file instead; optional with --info
     #[arg(value_name = "BLACKBOARD")]
     blackboard: Option<PathBuf>,
-    /// The program name, a KRL name: writes <PROGRAM>.src and <PROGRAM>.dat beside the blackboard
-    /// (not needed with --validate)
+    /// The program name, a name in the program's language: writes <PROGRAM>.src and .dat (KRL),
+    /// <PROGRAM>.mod (RAPID) or <PROGRAM>.script (URScript) beside the blackboard (not needed
+    /// with --validate)
     #[arg(value_name = "PROGRAM")]
     program: Option<PathBuf>,
     /// More arguments than a mode takes: a usage error that names the mode's arguments.
@@ -61,7 +63,8 @@ struct Args {
     /// Write LF line endings instead of CRLF
     #[arg(long)]
     lf: bool,
-    /// Use this output template instead of the built-in one (see templates/krl.toml)
+    /// Use this output template instead of the built-in one of the program's language (see
+    /// templates/krl.toml, rapid.toml, urscript.toml)
     #[arg(long, value_name = "FILE")]
     template: Option<PathBuf>,
     /// The SFC POU to use (default: the SFC reference's #fragment, else the first program with
