@@ -497,6 +497,11 @@ impl Template {
         Ok(())
     }
 
+    /// How many conversions the template holds.
+    pub fn conversions(&self) -> usize {
+        self.convs.len()
+    }
+
     /// The conversions that cannot be used, `(byte offset in the text, message)`.
     pub fn errors(&self) -> &[(usize, String)] {
         &self.errors

@@ -1,6 +1,11 @@
 //! Template substitution (`template.rs`). Input: `P1,P2,...\0TEXT`, or just `TEXT` (then the
 //! parameters come from `params_from_brackets`, as for an IRL call that declares none).
 //!
+//! Every text is also compiled and rendered with the RAPID and URScript syntaxes and with
+//! conversions (`quat(A, B, C)`) fed numbers and non-numbers: never a panic. The checks below
+//! are for the KRL syntax and texts without a conversion call (a conversion replaces its whole
+//! call by numbers).
+//!
 //! Checked, besides "never panics":
 //! - without parameters a template renders its text byte for byte;
 //! - `used()[i]` exactly when parameter `i`'s value appears in the output;
@@ -15,7 +20,7 @@ use std::collections::HashSet;
 
 use libfuzzer_sys::fuzz_target;
 use skillpost::names;
-use skillpost::template::{Template, dedent, params_from_brackets};
+use skillpost::template::{Syntax, Template, dedent, params_from_brackets};
 
 fuzz_target!(|data: &[u8]| {
     let Ok(s) = std::str::from_utf8(data) else {
@@ -26,6 +31,31 @@ fuzz_target!(|data: &[u8]| {
         None => (params_from_brackets(s), s),
     };
     let _ = dedent(text);
+
+    for syntax in [
+        Syntax::KRL,
+        Syntax {
+            comment: b'!',
+            aggregates: false,
+            case_sensitive: false,
+        },
+        Syntax {
+            comment: b'#',
+            aggregates: false,
+            case_sensitive: true,
+        },
+    ] {
+        let t = Template::compile_for(text, &params, syntax);
+        let mut out = String::new();
+        let _ = t.render_with(&params, &|i| Some(i as f64 * 37.5 - 90.0), &mut out);
+        let _ = t.render_with(&params, &|_| None, &mut out);
+        let _ = t.render_with(&params, &|_| Some(f64::MAX), &mut out);
+    }
+    if Template::compile(text, &params).conversions() > 0
+        || Template::compile(text, &[]).conversions() > 0
+    {
+        return;
+    }
 
     let bare = Template::compile(text, &[]);
     let mut out = String::new();
