@@ -242,8 +242,8 @@ impl Job {
                 "severity": "warning",
                 "code": PROGRAM_DERIVED,
                 "message": format!(
-                    "`{from}` is not a KRL name: the program is called `{}` (outputs {0}.src and \
-                     {0}.dat); set `program` in the configuration to choose the name",
+                    "`{from}` is not a program name every robot language takes: the program is \
+                     called `{}`; set `program` in the configuration to choose the name",
                     program.name
                 ),
                 "file": blackboard.display().to_string(),
