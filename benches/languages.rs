@@ -19,7 +19,6 @@ use skillpost::compile::{self, Options};
 use skillpost::load::FsSource;
 
 #[path = "common/generator.rs"]
-#[allow(dead_code)]
 mod generator;
 
 use generator::Spec;
