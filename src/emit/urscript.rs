@@ -346,6 +346,7 @@ impl Writer<'_> {
                 el[br.transition].local_id
             ),
         );
+        let start = self.out.out.len();
         self.blocks(&br.body, level);
         match br.end {
             BranchEnd::Join => {}
@@ -354,6 +355,15 @@ impl Writer<'_> {
                 &format!("round again (jump localId {})", el[j].local_id),
             ),
             BranchEnd::Leave => self.out.line(level, "break"),
+        }
+        // A block of comments only is no block to URScript's Python-like parser: a branch
+        // without steps waits one control cycle.
+        let body = &self.out.out[start..];
+        if body.lines().all(|l| {
+            let t = l.trim();
+            t.is_empty() || t.starts_with('#')
+        }) {
+            self.out.line(level, "sync()");
         }
     }
 
