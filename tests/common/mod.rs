@@ -2,6 +2,8 @@
 
 #![allow(dead_code)]
 
+pub mod rapid;
+
 /// Skips a test that cannot run on this machine: prints `skipped: <reason>` and returns, so the
 /// caller `return`s next. Under `SKILLPOST_STRICT_TESTS=1` (CI sets it) it fails instead, so a
 /// machine that silently cannot run a test does not pass for one that ran it.
