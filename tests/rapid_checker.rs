@@ -214,3 +214,48 @@ fn rejects_what_the_emitter_must_not_write() {
         }
     }
 }
+
+/// What the emitter writes passes the checker through the binary: the ABB cell, and the same
+/// cell with an SFC without a file header (the header comment line is then empty; RAPID lines
+/// keep no trailing space).
+#[test]
+fn the_emitters_modules_pass() {
+    if let Some(why) = rapidchecker_missing() {
+        common::skip(&why);
+        return;
+    }
+    let base = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/base/abb");
+    let dir = tempfile::tempdir().unwrap();
+    for e in std::fs::read_dir(&base).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), dir.path().join(e.file_name())).unwrap();
+    }
+    let sfc = dir.path().join("sfc.xml");
+    let text = std::fs::read_to_string(&sfc).unwrap();
+    let start = text.find("<fileHeader").unwrap();
+    let end = start + text[start..].find("/>").unwrap() + 2;
+    let headerless = format!("{}<fileHeader/>{}", &text[..start], &text[end..]);
+    for (what, sfc_text) in [("as is", text.clone()), ("without a header", headerless)] {
+        std::fs::write(&sfc, &sfc_text).unwrap();
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
+            .args(["--lf", "Cell.aml", "Palletize"])
+            .current_dir(dir.path())
+            .output()
+            .unwrap();
+        assert_eq!(
+            o.status.code(),
+            Some(0),
+            "{what}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let module = dir.path().join("Palletize.mod");
+        let m = std::fs::read_to_string(&module).unwrap();
+        assert!(
+            !m.lines().any(|l| l.ends_with(' ')),
+            "{what}: a trailing space:\n{m}"
+        );
+        if let Err(e) = rapidcheck(&module) {
+            panic!("{what}: rapidchecker: {e}\n{m}");
+        }
+    }
+}

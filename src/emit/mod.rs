@@ -92,6 +92,11 @@ pub trait Profile: Sync {
     fn definition_rank(&self, _first_line: &str) -> u8 {
         0
     }
+    /// Whether template lines lose trailing spaces after their placeholders are filled (RAPID:
+    /// `rapidchecker` refuses trailing whitespace, as in `! ` with an empty header comment).
+    fn trim_trailing_spaces(&self) -> bool {
+        false
+    }
     /// Writes the program tree and its declarations (see [`Generated`]).
     fn generate(&self, input: &EmitInput, diags: &mut Diagnostics) -> Option<Generated>;
 }
@@ -397,7 +402,12 @@ pub fn emit_files(
                     }
                 }
                 None => {
-                    text.push_str(&inline(line));
+                    let line = inline(line);
+                    if input.profile.trim_trailing_spaces() {
+                        text.push_str(line.trim_end_matches([' ', '\t']));
+                    } else {
+                        text.push_str(&line);
+                    }
                     text.push_str(nl);
                 }
             }

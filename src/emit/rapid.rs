@@ -212,6 +212,10 @@ impl Profile for Rapid {
         }
     }
 
+    fn trim_trailing_spaces(&self) -> bool {
+        true
+    }
+
     /// Data declarations (`PERS`, `VAR`, `CONST`, maybe after `LOCAL`/`TASK`) before routines:
     /// RAPID wants a module's data before its routines.
     fn definition_rank(&self, first_line: &str) -> u8 {
@@ -251,6 +255,17 @@ impl Profile for Rapid {
             steps: w.out.out,
             declarations,
         })
+    }
+}
+
+/// `WaitUntil c;`, the condition in parentheses when it starts with one: an instruction whose
+/// first argument starts with `(` reads as a function call (`WaitUntil (a) OR (b);` is refused
+/// by `rapidchecker`).
+fn wait_until(c: &str) -> String {
+    if c.starts_with('(') {
+        format!("WaitUntil ({c});")
+    } else {
+        format!("WaitUntil {c};")
     }
 }
 
@@ -324,7 +339,7 @@ impl Writer<'_> {
                         level,
                         &format!("transition localId {}: {text}", el[*t].local_id),
                     );
-                    self.out.line(level, &format!("WaitUntil {c};"));
+                    self.out.line(level, &wait_until(&c));
                 }
             }
             Block::Parallel { branches, .. } => {
@@ -450,8 +465,7 @@ impl Writer<'_> {
             .collect();
         self.out.line(level, &format!("{BRANCH_VAR} := 0;"));
         self.out.line(level, &format!("WHILE {BRANCH_VAR} = 0 DO"));
-        self.out
-            .line(level + 1, &format!("WaitUntil {};", any.join(" OR ")));
+        self.out.line(level + 1, &wait_until(&any.join(" OR ")));
         for (n, c) in conds.iter().enumerate() {
             let c = c.as_deref().unwrap_or("TRUE");
             let kw = if n == 0 { "IF" } else { "ELSEIF" };
