@@ -503,6 +503,7 @@ fn stages(bb_path: &Path) -> (Vec<Duration>, Vec<(&'static str, String)>) {
         irls: &irls,
         newline: "\r\n",
         step_indent: &template.step_indent,
+        steps_indent: template.steps_indent(),
         profile,
     };
     let files: Vec<OutputFile> =

@@ -400,6 +400,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 irls: &irls,
                 newline: if opts.lf { "\n" } else { "\r\n" },
                 step_indent: &template.step_indent,
+                steps_indent: template.steps_indent(),
                 profile,
             };
             if let Some(files) = crate::emit::emit_files(&input, template, &mut cx.diags)

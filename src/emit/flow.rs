@@ -9,13 +9,25 @@ use crate::names::transliterate;
 
 use super::EmitInput;
 
-/// Output text with a nesting level of two spaces per level.
+/// Output text with a nesting level of two spaces per level, after the indentation of the
+/// template's `{{steps}}` line.
 pub struct Lines<'a> {
     pub out: String,
     pub newline: &'a str,
+    /// The indentation of the `{{steps}}` line, before every non-empty line.
+    pub base: &'a str,
 }
 
-impl Lines<'_> {
+impl<'a> Lines<'a> {
+    /// Lines for `input`'s steps block, with room for `estimate` bytes.
+    pub fn new(input: &EmitInput<'a>, estimate: usize) -> Self {
+        Lines {
+            out: String::with_capacity(estimate),
+            newline: input.newline,
+            base: input.steps_indent,
+        }
+    }
+
     /// One line at `level`.
     pub fn line(&mut self, level: usize, text: &str) {
         self.indent(level);
@@ -25,6 +37,7 @@ impl Lines<'_> {
 
     /// The indentation of `level`.
     pub fn indent(&mut self, level: usize) {
+        self.out.push_str(self.base);
         for _ in 0..level {
             self.out.push_str("  ");
         }
@@ -107,4 +120,16 @@ pub fn local_ids(input: &EmitInput, elements: &[usize]) -> String {
         .map(|j| input.sfc.elements[*j].local_id.to_string())
         .collect();
     ids.join(", ")
+}
+
+/// About how long a program's steps block gets: its steps' code and a title line each.
+pub fn steps_estimate(input: &EmitInput) -> usize {
+    input
+        .bound
+        .steps
+        .iter()
+        .flatten()
+        .map(|b| b.code.len() + 80)
+        .sum::<usize>()
+        + 1024
 }

@@ -79,19 +79,9 @@ impl Profile for Krl {
     }
 
     fn generate(&self, input: &EmitInput, _diags: &mut Diagnostics) -> Option<Generated> {
-        let estimate = input
-            .bound
-            .steps
-            .iter()
-            .flatten()
-            .map(|b| b.code.len() + 80)
-            .sum::<usize>();
         let mut writer = Writer {
             input,
-            out: Lines {
-                out: String::with_capacity(estimate + 1024),
-                newline: input.newline,
-            },
+            out: Lines::new(input, flow::steps_estimate(input)),
             number: 0,
             uses_branch_var: false,
         };

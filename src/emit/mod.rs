@@ -113,6 +113,9 @@ pub struct EmitInput<'a> {
     pub newline: &'a str,
     /// The template's indentation of a step's code lines.
     pub step_indent: &'a str,
+    /// The indentation of the template's `{{steps}}` line ([`OutputTemplate::steps_indent`]),
+    /// which the writer puts before every line of the block.
+    pub steps_indent: &'a str,
     pub profile: &'static dyn Profile,
 }
 
@@ -171,6 +174,15 @@ impl OutputTemplate {
         );
         let mut d = Diagnostics::default();
         Self::parse(&sources, file, language, &mut d).expect("the built-in templates are valid")
+    }
+
+    /// The indentation of the `{{steps}}` line.
+    pub fn steps_indent(&self) -> &str {
+        self.files
+            .iter()
+            .flat_map(|(_, t)| t.lines())
+            .find(|l| block_name(l) == Some("steps"))
+            .map_or("", |l| &l[..l.len() - l.trim_start().len()])
     }
 
     /// The text of the file with this extension.
@@ -345,7 +357,7 @@ pub fn emit_files(
     template: &OutputTemplate,
     diags: &mut Diagnostics,
 ) -> Option<Vec<OutputFile>> {
-    let generated = input.profile.generate(input, diags)?;
+    let mut generated = input.profile.generate(input, diags)?;
     let nl = input.newline;
     let comment = header_comment(&input.sfc.header);
     let inline = |line: &str| {
@@ -369,11 +381,17 @@ pub fn emit_files(
     }
     let mut out = Vec::new();
     for (ext, body) in &template.files {
-        let mut text = String::with_capacity(body.len() + generated.steps.len() + 1024);
+        let mut text = String::with_capacity(body.len() + 1024);
         for line in body.lines() {
             let indent = &line[..line.len() - line.trim_start().len()];
             match block_name(line) {
-                Some("steps") => push_block(&mut text, indent, &generated.steps, nl),
+                Some("steps") => {
+                    // The block (indented by the writer) becomes the file's text, what came
+                    // before put in front: the largest text of a compile is not copied.
+                    let mut steps = std::mem::take(&mut generated.steps);
+                    steps.insert_str(0, &text);
+                    text = steps;
+                }
                 Some("definitions") => {
                     let mut defs = input.bound.definitions.clone();
                     defs.sort_by_key(|&(irl, d)| {
@@ -428,20 +446,6 @@ pub fn emit_files(
         });
     }
     Some(out)
-}
-
-/// Appends `block` (lines ending in `nl`), each non-empty line after `indent`.
-fn push_block(out: &mut String, indent: &str, block: &str, nl: &str) {
-    if indent.is_empty() {
-        out.push_str(block);
-        return;
-    }
-    for line in block.split_inclusive(nl) {
-        if line != nl {
-            out.push_str(indent);
-        }
-        out.push_str(line);
-    }
 }
 
 #[cfg(test)]

@@ -234,10 +234,7 @@ impl Profile for Rapid {
     fn generate(&self, input: &EmitInput, _diags: &mut Diagnostics) -> Option<Generated> {
         let mut w = Writer {
             input,
-            out: Lines {
-                out: String::new(),
-                newline: input.newline,
-            },
+            out: Lines::new(input, flow::steps_estimate(input)),
             number: 0,
             uses_branch_var: false,
             flags: 0,

@@ -242,10 +242,7 @@ impl Profile for UrScript {
     fn generate(&self, input: &EmitInput, _diags: &mut Diagnostics) -> Option<Generated> {
         let mut w = Writer {
             input,
-            out: Lines {
-                out: String::new(),
-                newline: input.newline,
-            },
+            out: Lines::new(input, flow::steps_estimate(input)),
             number: 0,
         };
         w.blocks(&input.plan.body, 0);

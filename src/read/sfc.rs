@@ -382,6 +382,8 @@ impl<'t> Stream<'t> {
                         let (name, program, _) = pou.clone().unwrap_or((None, false, 0));
                         let _ = (span, els);
                         let (span, _, els) = sfc.take().expect("checked");
+                        let mut els = els;
+                        els.shrink_to_fit();
                         self.found.push(Pou {
                             name,
                             program,
@@ -556,7 +558,10 @@ impl<'t> Stream<'t> {
                         });
                         sfc_done = true;
                     } else {
-                        sfc = Some((tag, depth, Vec::new()));
+                        // Sized from the bytes left (an element takes about 300-400 bytes):
+                        // growing by doubling would hold the old and the new vector at once.
+                        let left = self.text.len().saturating_sub(tag.range.end);
+                        sfc = Some((tag, depth, Vec::with_capacity((left / 320).min(1 << 24))));
                     }
                 }
                 _ => {
@@ -774,7 +779,12 @@ impl<'t> Stream<'t> {
             kind,
             span: b.span,
             x: b.x.unwrap_or(0.0),
-            inputs: b.inputs,
+            inputs: {
+                // Most elements have one input: no slack kept for 100,000 of them.
+                let mut inputs = b.inputs;
+                inputs.shrink_to_fit();
+                inputs
+            },
         })
     }
 
@@ -944,7 +954,12 @@ impl<'t> Stream<'t> {
             resource: b.resource.clone(),
             skill: b.skill.clone(),
             duration: b.duration,
-            variables,
+            variables: {
+                // A step has a few variables: no slack kept for 100,000 steps.
+                let mut variables = variables;
+                variables.shrink_to_fit();
+                variables
+            },
             invalid_variables,
         }
     }
