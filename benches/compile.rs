@@ -21,6 +21,11 @@
 //! binary's own figure comes from `bench/run.sh` (`/usr/bin/time -v`).
 //!
 //! It prints markdown tables of medians.
+//!
+//! **Shapes** (issue 13, label `100k-shapes`; `cargo bench --bench compile -- shapes` runs only
+//! this): the same 100,000 skill steps straight, with parallel branches, with selections and as a
+//! loop closed by a jumpStep, each compiled in turns for several rounds; it prints the time per
+//! step and the ratio to the straight project, by wall time and by the thread's on-CPU time.
 
 use std::collections::HashMap;
 use std::hint::black_box;
@@ -125,6 +130,88 @@ const CASES: &[Case] = &[
         iters: 5,
         shape: None,
     },
+    // Issue 11's flow project: every 50 main-line steps a two-way selection, the whole line a
+    // loop closed by a jumpStep.
+    Case {
+        label: "100k-looped",
+        spec: Spec {
+            steps: 100_000,
+            branch_every: 0,
+            branch_width: 0,
+            select_every: 50,
+            looped: true,
+        },
+        iters: 5,
+        shape: None,
+    },
+];
+
+/// Issue 13's side-by-side comparison (label `100k-shapes`): the same 100,000 skill steps
+/// straight, branched and looping, compiled in turns (each round starts at another shape, so a
+/// change in the machine's load falls on all of them). The first is the reference.
+const SHAPES_LABEL: &str = "100k-shapes";
+const SHAPES_ROUNDS: usize = 7;
+const SHAPES: &[(&str, Spec)] = &[
+    (
+        "straight",
+        Spec {
+            steps: 100_000,
+            branch_every: 0,
+            branch_width: 0,
+            select_every: 0,
+            looped: false,
+        },
+    ),
+    (
+        "parallel every 50 (3-way, one nested)",
+        Spec {
+            steps: 100_000,
+            branch_every: 50,
+            branch_width: 3,
+            select_every: 0,
+            looped: false,
+        },
+    ),
+    (
+        "parallel every 4 (4-way, one nested)",
+        Spec {
+            steps: 100_000,
+            branch_every: 4,
+            branch_width: 4,
+            select_every: 0,
+            looped: false,
+        },
+    ),
+    (
+        "selection every 50 (2-way)",
+        Spec {
+            steps: 100_000,
+            branch_every: 0,
+            branch_width: 0,
+            select_every: 50,
+            looped: false,
+        },
+    ),
+    (
+        "selection every 10 (2-way)",
+        Spec {
+            steps: 100_000,
+            branch_every: 0,
+            branch_width: 0,
+            select_every: 10,
+            looped: false,
+        },
+    ),
+    (
+        "loop (jumpStep) + selection every 50",
+        Spec {
+            steps: 100_000,
+            branch_every: 0,
+            branch_width: 0,
+            select_every: 50,
+            looped: true,
+        },
+    ),
 ];
 
 /// Stage names, in pipeline order.
@@ -198,7 +285,179 @@ fn main() {
         }
         rows.push(run_case(case, tmp.path()));
     }
-    print_tables(&rows);
+    if !rows.is_empty() {
+        print_tables(&rows);
+    }
+    if filters.is_empty() || filters.iter().any(|f| SHAPES_LABEL.contains(f.as_str())) {
+        print_shapes(&run_shapes(tmp.path()));
+    }
+}
+
+/// One shape's samples: per round, wall time, on-CPU time and run-queue wait of the compile.
+struct ShapeRow {
+    label: &'static str,
+    stats: generator::Stats,
+    wall: Vec<Duration>,
+    cpu: Vec<Duration>,
+    waited: Vec<Duration>,
+}
+
+fn run_shapes(tmp: &Path) -> Vec<ShapeRow> {
+    let mut rows: Vec<(ShapeRow, PathBuf)> = SHAPES
+        .iter()
+        .enumerate()
+        .map(|(k, (label, spec))| {
+            let dir = tmp.join(format!("shape-{k}"));
+            let t = Instant::now();
+            let p = generator::write_project(&dir, spec).expect("generate the project");
+            eprintln!(
+                "{SHAPES_LABEL}: {label}: generated {} steps, {} elements, {:.1} MB in {:.2} s",
+                p.stats.skill_steps,
+                p.stats.elements,
+                p.stats.sfc_bytes as f64 / 1e6,
+                t.elapsed().as_secs_f64()
+            );
+            let row = ShapeRow {
+                label,
+                stats: p.stats,
+                wall: Vec::new(),
+                cpu: Vec::new(),
+                waited: Vec::new(),
+            };
+            (row, p.blackboard)
+        })
+        .collect();
+    let n = rows.len();
+    // Round 0 warms up (page cache, allocator) and is not counted.
+    for round in 0..=SHAPES_ROUNDS {
+        for k in 0..n {
+            let (row, bb) = &mut rows[(round + k) % n];
+            let sched = schedstat();
+            let t = Instant::now();
+            let c = compile::compile(&FsSource::default(), bb, &options());
+            let wall = t.elapsed();
+            let sched_after = schedstat();
+            assert!(
+                !c.has_errors(),
+                "{}: the generated project has errors",
+                row.label
+            );
+            assert!(
+                c.outputs.iter().any(|(_, f)| f.extension == "src"),
+                "{}: no .src output",
+                row.label
+            );
+            drop(c);
+            if round > 0 {
+                row.wall.push(wall);
+                if let (Some((c0, w0)), Some((c1, w1))) = (sched, sched_after) {
+                    row.cpu.push(c1.saturating_sub(c0));
+                    row.waited.push(w1.saturating_sub(w0));
+                }
+            }
+        }
+        eprintln!("{SHAPES_LABEL}: round {round} of {SHAPES_ROUNDS} done");
+    }
+    for (k, _) in SHAPES.iter().enumerate() {
+        let _ = std::fs::remove_dir_all(tmp.join(format!("shape-{k}")));
+    }
+    rows.into_iter().map(|(r, _)| r).collect()
+}
+
+/// This thread's time on a CPU and waiting for one (`/proc/thread-self/schedstat`, ns; Linux).
+fn schedstat() -> Option<(Duration, Duration)> {
+    let text = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    let mut f = text.split_whitespace().map(|w| w.parse::<u64>().ok());
+    let on_cpu = f.next()??;
+    let waited = f.next()??;
+    Some((Duration::from_nanos(on_cpu), Duration::from_nanos(waited)))
+}
+
+/// The median of the per-round ratios `a[i] / b[i]` (paired: the same round, so the same load).
+fn paired_ratio(a: &[Duration], b: &[Duration]) -> f64 {
+    let mut r: Vec<f64> = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| x.as_secs_f64() / y.as_secs_f64())
+        .collect();
+    r.sort_by(f64::total_cmp);
+    match r.len() {
+        0 => f64::NAN,
+        n if n % 2 == 1 => r[n / 2],
+        n => (r[n / 2 - 1] + r[n / 2]) / 2.0,
+    }
+}
+
+fn print_shapes(rows: &[ShapeRow]) {
+    let Some(base) = rows.first() else { return };
+    println!();
+    println!(
+        "Shapes ({SHAPES_LABEL}): compile::compile of each project, {SHAPES_ROUNDS} rounds in turns;"
+    );
+    println!(
+        "medians. Per step = time / skill steps. Ratio = median of the per-round ratios to `{}`",
+        base.label
+    );
+    println!(
+        "(goal: within 10 %). CPU = the thread's time on a CPU (/proc/thread-self/schedstat);"
+    );
+    println!("waited = its time runnable but waiting for a CPU (other processes). Per element =");
+    println!("the CPU ratio per SFC element instead of per skill step.");
+    println!();
+    println!(
+        "| shape | skill steps | SFC elements | SFC MB | wall ms | wall µs/step | wall ratio | CPU ms | CPU µs/step | CPU ratio | CPU ratio per element | waited ms | within 10 % per step |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
+    let mut spread: Vec<f64> = Vec::new();
+    for r in rows {
+        let steps = r.stats.skill_steps.max(1) as f64;
+        let wall = median(&mut r.wall.clone());
+        let cpu = median(&mut r.cpu.clone());
+        let waited = median(&mut r.waited.clone());
+        let wall_ratio = paired_ratio(&r.wall, &base.wall);
+        let cpu_ratio = paired_ratio(&r.cpu, &base.cpu);
+        // The per-step figures: every shape has the same skill steps, but compare per step anyway.
+        let per = |d: Duration| d.as_secs_f64() * 1e6 / steps;
+        let base_steps = base.stats.skill_steps.max(1) as f64;
+        let scale = base_steps / steps;
+        // Judged by CPU time where there is one (the wall time carries the other processes).
+        let judged = if r.cpu.is_empty() {
+            wall_ratio
+        } else {
+            cpu_ratio
+        };
+        let verdict = if (judged * scale - 1.0).abs() <= 0.10 {
+            "yes"
+        } else {
+            "**no**"
+        };
+        println!(
+            "| {} | {} | {} | {:.1} | {} | {:.2} | {:.3} | {} | {:.2} | {:.3} | {:.3} | {} | {} |",
+            r.label,
+            r.stats.skill_steps,
+            r.stats.elements,
+            r.stats.sfc_bytes as f64 / 1e6,
+            ms(wall),
+            per(wall),
+            wall_ratio * scale,
+            ms(cpu),
+            per(cpu),
+            cpu_ratio * scale,
+            cpu_ratio * base.stats.elements as f64 / r.stats.elements.max(1) as f64,
+            ms(waited),
+            verdict,
+        );
+        spread.push(judged * scale);
+    }
+    let (lo, hi) = spread
+        .iter()
+        .fold((f64::INFINITY, 0f64), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+    println!();
+    println!(
+        "Spread per step (slowest / fastest shape, by {}): {:.3}.",
+        if base.cpu.is_empty() { "wall" } else { "CPU" },
+        hi / lo
+    );
 }
 
 fn run_case(case: &Case, tmp: &Path) -> Row {
