@@ -181,55 +181,100 @@ fn rotvec([w, x, y, z]: [f64; 4]) -> [f64; 3] {
 /// The rounding is done on the shortest decimal that reads back as `x` (what `{}` prints), so
 /// `5e-7` gives `0.000001` although the nearest `f64` is a hair below it.
 pub fn format_number(x: f64) -> Option<String> {
+    let mut out = String::new();
+    write_number(x, &mut out).then_some(out)
+}
+
+/// [`format_number`] appended to `out`, without allocating; `false` (and `out` unchanged) for a
+/// value that cannot be written.
+pub fn write_number(x: f64, out: &mut String) -> bool {
+    use std::io::Write as _;
     const DECIMALS: usize = 6;
     if !x.is_finite() || x.abs() >= 1e15 {
-        return None;
+        return false;
     }
-    // Display of a finite f64 never uses an exponent: digits, maybe `.` and more digits.
-    let text = x.abs().to_string();
-    let (int, frac) = text.split_once('.').unwrap_or((&text, ""));
-    let mut digits: Vec<u8> = int
-        .bytes()
-        .chain(frac.bytes().chain(std::iter::repeat(b'0')).take(DECIMALS))
-        .collect();
-    if frac.as_bytes().get(DECIMALS).is_some_and(|&d| d >= b'5') {
-        // Round up (away from zero): carry through the nines.
-        match digits.iter().rposition(|&d| d != b'9') {
-            Some(i) => {
-                digits[i] += 1;
-                digits[i + 1..].fill(b'0');
-            }
-            None => {
-                digits.fill(b'0');
-                digits.insert(0, b'1');
-            }
+    if x.abs() < 5e-7 {
+        // Rounds to zero (and its shortest form may be hundreds of digits long).
+        out.push('0');
+        return true;
+    }
+    // Display of a finite f64 never uses an exponent: digits, maybe `.` and more digits. Below
+    // 1e15 the shortest form that reads back fits easily in 64 bytes.
+    let mut buf = [0u8; 64];
+    let len = {
+        let mut c = std::io::Cursor::new(&mut buf[..]);
+        if write!(c, "{}", x.abs()).is_err() {
+            return false;
         }
+        c.position() as usize
+    };
+    let text = &buf[..len];
+    let (int, frac) = match text.iter().position(|&b| b == b'.') {
+        Some(i) => (&text[..i], &text[i + 1..]),
+        None => (text, &[][..]),
+    };
+    // d[0] takes a carry out of the integer digits.
+    let mut d = [b'0'; 48];
+    let il = int.len();
+    if il + DECIMALS + 1 > d.len() {
+        return false;
     }
-    let (int, frac) = digits.split_at(digits.len() - DECIMALS);
-    let frac = &frac[..frac.iter().rposition(|&d| d != b'0').map_or(0, |i| i + 1)];
-    if frac.is_empty() && int.iter().all(|&d| d == b'0') {
-        return Some("0".to_owned());
+    d[1..1 + il].copy_from_slice(int);
+    for k in 0..DECIMALS {
+        d[1 + il + k] = frac.get(k).copied().unwrap_or(b'0');
     }
-    let mut out = String::with_capacity(int.len() + frac.len() + 2);
+    let end = 1 + il + DECIMALS;
+    if frac.get(DECIMALS).is_some_and(|&c| c >= b'5') {
+        // Round up (away from zero): carry through the nines; d[0] is '0', so it stops there.
+        let mut i = end - 1;
+        while d[i] == b'9' {
+            d[i] = b'0';
+            i -= 1;
+        }
+        d[i] += 1;
+    }
+    let int_digits = if d[0] == b'0' { &d[1..1 + il] } else { &d[..1 + il] };
+    let frac_digits = &d[1 + il..end];
+    let frac_digits = &frac_digits[..frac_digits
+        .iter()
+        .rposition(|&c| c != b'0')
+        .map_or(0, |i| i + 1)];
+    if frac_digits.is_empty() && int_digits.iter().all(|&c| c == b'0') {
+        out.push('0');
+        return true;
+    }
     if x < 0.0 {
         out.push('-');
     }
-    out.extend(int.iter().map(|&d| d as char));
-    if !frac.is_empty() {
+    out.extend(int_digits.iter().map(|&c| c as char));
+    if !frac_digits.is_empty() {
         out.push('.');
-        out.extend(frac.iter().map(|&d| d as char));
+        out.extend(frac_digits.iter().map(|&c| c as char));
     }
-    Some(out)
+    true
 }
 
 /// Writes the results of one conversion joined by ", " (e.g. quat → "1, 0, 0, 0"); `None` if any
 /// of them is non-finite or |x| >= 1e15, as [`format_number`].
 pub fn format_results(values: &[f64]) -> Option<String> {
-    let parts = values
-        .iter()
-        .map(|&v| format_number(v))
-        .collect::<Option<Vec<_>>>()?;
-    Some(parts.join(", "))
+    let mut out = String::new();
+    write_results(values, &mut out).then_some(out)
+}
+
+/// [`format_results`] appended to `out`; `false` (and `out` as it was) when one cannot be
+/// written.
+pub fn write_results(values: &[f64], out: &mut String) -> bool {
+    let at = out.len();
+    for (k, &v) in values.iter().enumerate() {
+        if k > 0 {
+            out.push_str(", ");
+        }
+        if !write_number(v, out) {
+            out.truncate(at);
+            return false;
+        }
+    }
+    true
 }
 
 #[cfg(test)]

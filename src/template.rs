@@ -486,11 +486,11 @@ impl Template {
                     }
                     let mut res = [0.0; 4];
                     conv.conversion.apply(&args[..conv.args.len()], &mut res);
-                    let text = crate::convert::format_results(&res[..conv.conversion.results()])
-                        .ok_or(ConvError::OutOfRange {
+                    if !crate::convert::write_results(&res[..conv.conversion.results()], out) {
+                        return Err(ConvError::OutOfRange {
                             conversion: conv.conversion,
-                        })?;
-                    out.push_str(&text);
+                        });
+                    }
                 }
             }
         }
