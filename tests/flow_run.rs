@@ -835,3 +835,280 @@ fn a_wrong_krl_program_fails() {
     assert!(!run(out.main.clone()));
     assert!(run(drop_line(&out.main, "EXIT")));
 }
+
+// ---------------------------------------------------------------------------------------------
+// Conditions of every form
+// ---------------------------------------------------------------------------------------------
+
+fn bit(p: &Phase, name: &str) -> bool {
+    p[name] != 0
+}
+
+/// Conditions of every form the ST subset has (XML-escaped as in a chart), each with its
+/// meaning written out in Rust: independent of the project's ST parser, whose tree the chart
+/// player evaluates.
+#[allow(clippy::type_complexity, clippy::nonminimal_bool)]
+fn condition_forms() -> Vec<(&'static str, fn(&Phase) -> bool)> {
+    vec![
+        ("NOT Part_OK = Release", |p| {
+            !bit(p, "Part_OK") == bit(p, "Release")
+        }),
+        ("Part_OK = FALSE", |p| !bit(p, "Part_OK")),
+        ("Release = TRUE", |p| bit(p, "Release")),
+        ("Variant &lt;&gt; 3 XOR Part_OK", |p| {
+            (p["Variant"] != 3) != bit(p, "Part_OK")
+        }),
+        ("NOT (Variant = 1 OR Release)", |p| {
+            !(p["Variant"] == 1 || bit(p, "Release"))
+        }),
+        (
+            "(Part_OK OR Release) AND NOT (Magazine_Empty XOR Door_Closed)",
+            |p| {
+                (bit(p, "Part_OK") || bit(p, "Release"))
+                    && (bit(p, "Magazine_Empty") == bit(p, "Door_Closed"))
+            },
+        ),
+        (
+            "Part_OK AND Release OR Magazine_Empty AND NOT Door_Closed",
+            |p| {
+                bit(p, "Part_OK") && bit(p, "Release")
+                    || bit(p, "Magazine_Empty") && !bit(p, "Door_Closed")
+            },
+        ),
+        ("Part_OK OR Release AND Magazine_Empty", |p| {
+            bit(p, "Part_OK") || bit(p, "Release") && bit(p, "Magazine_Empty")
+        }),
+        ("Part_OK XOR Release OR Magazine_Empty", |p| {
+            (bit(p, "Part_OK") != bit(p, "Release")) || bit(p, "Magazine_Empty")
+        }),
+        ("Part_OK OR Release XOR Magazine_Empty", |p| {
+            bit(p, "Part_OK") || (bit(p, "Release") != bit(p, "Magazine_Empty"))
+        }),
+        ("Part_OK XOR Release XOR Door_Closed", |p| {
+            (bit(p, "Part_OK") != bit(p, "Release")) != bit(p, "Door_Closed")
+        }),
+        ("Part_OK XOR Release AND Door_Closed", |p| {
+            bit(p, "Part_OK") != (bit(p, "Release") && bit(p, "Door_Closed"))
+        }),
+        ("Part_OK &amp; NOT Gripper_Closed", |p| {
+            bit(p, "Part_OK") && !bit(p, "Gripper_Closed")
+        }),
+        ("-Variant &lt; -2", |p| -p["Variant"] < -2),
+        ("Variant &gt; 1 = Part_OK", |p| {
+            (p["Variant"] > 1) == bit(p, "Part_OK")
+        }),
+        ("Variant &lt;= 2 AND Variant &gt;= 1", |p| {
+            (1..=2).contains(&p["Variant"])
+        }),
+        ("NOT NOT Release", |p| bit(p, "Release")),
+        ("Variant = 12 OR Variant = 15", |p| {
+            p["Variant"] == 12 || p["Variant"] == 15
+        }),
+        ("Gripper_Closed &lt;&gt; Door_Closed", |p| {
+            bit(p, "Gripper_Closed") != bit(p, "Door_Closed")
+        }),
+        ("NOT Part_OK AND NOT Release", |p| {
+            !bit(p, "Part_OK") && !bit(p, "Release")
+        }),
+        ("NOT (Part_OK AND Release) = Door_Closed", |p| {
+            !(bit(p, "Part_OK") && bit(p, "Release")) == bit(p, "Door_Closed")
+        }),
+    ]
+}
+
+fn unescape(s: &str) -> String {
+    s.replace("&lt;", "<")
+        .replace("&gt;", ">")
+        .replace("&amp;", "&")
+}
+
+/// The chart player reads the conditions as their meaning written out.
+#[test]
+fn the_chart_player_reads_st_with_st_precedence() {
+    let forms = condition_forms();
+    for seq in sequences(11, 60) {
+        for p in &seq {
+            for (c, f) in &forms {
+                let e = skillpost::cond::parse(&unescape(c), &|o| o).unwrap();
+                assert_eq!(chart::st_eval(&e, p) != 0, f(p), "`{c}` under {p:?}");
+            }
+        }
+    }
+}
+
+/// Every form of condition, in selections (with and without an unconditional branch) and
+/// waits, compiled in `lang` and run against the chart's meaning.
+fn conditions(lang: Lang) {
+    let forms = condition_forms();
+    let tmp = tempfile::tempdir().unwrap();
+    lang.setup(tmp.path());
+    // A few forms per chart, so the program reaches the waits within the actions compared.
+    for (k, group) in forms.chunks(4).enumerate() {
+        let conds: Vec<&str> = group.iter().map(|f| f.0).collect();
+        let text = ChartGen::conditions(&conds);
+        let sfc = tmp.path().join("sfc.xml");
+        std::fs::write(&sfc, &text).unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_skillpost"))
+            .args(["--lf", "Blackboard.aml", "R"])
+            .current_dir(tmp.path())
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{lang:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let output = lang.read(tmp.path(), "R");
+        if let Err(e) = output.syntax("R") {
+            panic!("conditions ({lang:?}): {e}\n{}", output.main);
+        }
+        let chart = Chart::read(&sfc);
+        let case = format!("conditions {conds:?}");
+        let seen = check_compiled(&case, &output, "R", &chart, 3 + k as u64, 400);
+        println!("{case} ({lang:?}): {seen:?}");
+        // The selections always take a branch: every run reaches the waits.
+        assert!(!seen.contains_key("Running"), "{case}: {seen:?}");
+    }
+}
+
+#[test]
+fn conditions_keep_their_meaning_krl() {
+    conditions(Lang::Krl);
+}
+
+#[test]
+fn conditions_keep_their_meaning_rapid() {
+    conditions(Lang::Rapid);
+}
+
+#[test]
+fn conditions_keep_their_meaning_urscript() {
+    conditions(Lang::UrScript);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The readers' precedence and the URScript check
+// ---------------------------------------------------------------------------------------------
+
+fn precedence_phase() -> Phase {
+    let mut p: Phase = SIGNALS.iter().map(|s| (s.name, 0)).collect();
+    p.insert("Part_OK", 1);
+    p.insert("Variant", 3);
+    p
+}
+
+/// RAPID's priorities (comparisons, then `AND`, then `OR`/`XOR`/`NOT`), and what RAPID's
+/// grammar refuses: a condition without the emitted parentheses fails or means something else.
+#[test]
+fn the_rapid_reader_uses_rapid_priorities() {
+    let p = precedence_phase();
+    let t = |s: &str| machine::truth(&rapid::expr(s), &p, true);
+    assert!(t("gi_Variant = 3 AND di_Part_OK = 1"));
+    assert!(t("NOT di_Release = 1"));
+    assert!(t("di_Part_OK = 1 OR di_Release = 1 AND FALSE"));
+    assert!(!t("(di_Part_OK = 1 OR di_Release = 1) AND FALSE"));
+    assert!(t("(di_Part_OK = 1) XOR (di_Release = 1)"));
+    assert!(t("-gi_Variant < -2"));
+    for bad in [
+        "di_Part_OK = 1 AND NOT di_Release = 1",
+        "NOT di_Part_OK = 1 OR di_Release = 1",
+        "di_Part_OK AND TRUE",
+        "gi_Variant = 3 = TRUE",
+        "(di_Part_OK = 1",
+        "di_Part_OK = 1 di_Release = 1",
+        "di_Unknown = 1",
+    ] {
+        assert!(
+            fails(|| {
+                t(bad);
+            }),
+            "`{bad}` is no RAPID condition"
+        );
+    }
+}
+
+/// URScript's (Python-like) precedence: `not` binds weaker than comparisons.
+#[test]
+fn the_urscript_reader_uses_urscript_precedence() {
+    let p = precedence_phase();
+    let t = |s: &str| machine::truth(&urscript::expr(s), &p, false);
+    assert!(!t("not read_input_integer_register(9) == 3"));
+    assert!(t(
+        "read_input_integer_register(9) == 3 and get_standard_digital_in(1)"
+    ));
+    assert!(t(
+        "get_standard_digital_in(1) or get_standard_digital_in(3) and False"
+    ));
+    assert!(!t(
+        "(get_standard_digital_in(1) or get_standard_digital_in(3)) and False"
+    ));
+    assert!(t(
+        "not get_standard_digital_in(3) and get_standard_digital_in(1)"
+    ));
+    assert!(t(
+        "get_standard_digital_in(1) xor get_standard_digital_in(3)"
+    ));
+    for bad in [
+        "get_standard_digital_in(1) xor get_standard_digital_in(3) or True",
+        "get_standard_digital_in(1) and get_standard_digital_in(3) xor True",
+        "get_standard_digital_in(1) == 1",
+        "read_input_integer_register(9) == 3 == True",
+        "get_standard_digital_in(1) and not",
+        "get_standard_digital_in(7)",
+        "(get_standard_digital_in(1)",
+    ] {
+        assert!(
+            fails(|| {
+                t(bad);
+            }),
+            "`{bad}` is no URScript condition here"
+        );
+    }
+}
+
+/// The block-structure check accepts URScript and refuses what is not.
+#[test]
+fn the_urscript_check_refuses_what_is_not_urscript() {
+    let ok = "def P():\n  # c\n  skp_branch = 0\n  while skp_branch == 0:\n    while not ((get_standard_digital_in(1)) or (read_input_integer_register(9) >= -2)):\n      sync()\n    end\n    if get_standard_digital_in(1):\n      skp_branch = 1\n    elif True:\n      skp_branch = 2\n    else:\n      break\n    end\n  end\n  movel(p[0.5, 10, 0, 0, 0, 0], a=1.2, v=0.25)\n  textmsg(\"a # b\")\nend\nP()\n";
+    urscript_check::check_urscript(ok).unwrap();
+    let check = |s: &str| urscript_check::check_urscript(s);
+    for (bad, why) in [
+        ("def P():\n  elif True:\n  end\nend\n", "elif"),
+        (
+            "def P():\n  if True:\n  else:\n  else:\n  end\nend\n",
+            "else",
+        ),
+        (
+            "def P():\n  if True:\n  else:\n  elif True:\n  end\nend\n",
+            "elif",
+        ),
+        ("def P():\n  break\nend\n", "break"),
+        ("def P():\n  if True:\n    break\n  end\nend\n", "break"),
+        ("while True:\n  break\nend\n", "outside a function"),
+        ("def P():\n  while True:\n  end\n", "ends inside"),
+        ("def P():\nend\nend\n", "without a block"),
+        ("def P():\n  x = 007\nend\n", "leading zero"),
+        ("def P():\n  x = 1e3\nend\n", "malformed number"),
+        ("def P():\n  x = 1.\nend\n", "after the point"),
+        ("def P():\n  x = {1, 2}\nend\n", "unexpected character"),
+        ("def P():\n  if True\n  end\nend\n", "without `:`"),
+        ("def P():\n  foo():\nend\n", "opens no block"),
+        ("def P():\n  x = end\nend\n", "keyword"),
+        ("def P():\n  True = 1\nend\n", "keyword"),
+        ("def P():\n  1abc = 2\nend\n", "malformed number"),
+        ("def P():\n  movel(p[1, 2)\nend\n", "expected"),
+        ("def P():\n  textmsg(\"a)\nend\n", "unterminated"),
+        ("def 1f():\nend\n", "malformed"),
+        ("def P():\n  x = 1 +\nend\n", "operand"),
+        ("def P():\n  x\nend\n", "neither a call"),
+        ("def P():\n  end x\nend\n", "alone"),
+        ("def P():\n  if (True:\n  end\nend\n", "expected"),
+        ("def P():\n  x = $IN[3]\nend\n", "unexpected character"),
+        ("def P():\n  LIN {1, 2}\nend\n", "unexpected character"),
+    ] {
+        match check(bad) {
+            Ok(()) => panic!("accepted:\n{bad}"),
+            Err(e) => assert!(e.contains(why), "`{e}` does not say `{why}`:\n{bad}"),
+        }
+    }
+}

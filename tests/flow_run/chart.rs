@@ -122,7 +122,7 @@ impl Chart {
 }
 
 /// Evaluates a condition with ST's meaning (the parser's tree already has ST's precedence).
-fn st_eval(e: &StExpr, phase: &Phase) -> i64 {
+pub fn st_eval(e: &StExpr, phase: &Phase) -> i64 {
     match &e.kind {
         ExprKind::Bool(b) => *b as i64,
         ExprKind::Int(s) => s.parse().unwrap(),
@@ -599,17 +599,60 @@ impl ChartGen {
         let last = g.items(start, 0);
         if g.pick(5) == 0 {
             g.looped(last, 0, true);
+            g.document()
         } else {
             let t = g.trans(last, None, 0);
-            let id = g.id();
-            g.parts.push(format!(
-                "<step localId=\"{id}\" name=\"End\"><position x=\"0\" y=\"{id}\"/>{}</step>",
-                ChartGen::conn(&[t])
-            ));
+            g.end(t)
         }
+    }
+
+    /// A chart that reads each of `conditions` (ST, XML-escaped) in three ways: a selection
+    /// between it and an unconditional branch; a selection between it and its negation (no
+    /// unconditional branch: the program waits for either); then, after all of those, a wait
+    /// for each.
+    pub fn conditions(conditions: &[&str]) -> String {
+        let mut g = ChartGen {
+            rng: Rng(1),
+            parts: Vec::new(),
+            next: 0,
+        };
+        let mut tail = g.step(None, false, 0);
+        for c in conditions {
+            let negated = format!("NOT ({c})");
+            for other in [None, Some(negated.as_str())] {
+                let div = g.node("selectionDivergence", &[tail], 0);
+                let mut ends = Vec::new();
+                for (x, cond) in [(0, Some(*c)), (10, other)] {
+                    let t = g.trans(div, cond, x);
+                    let s = g.step(Some(t), true, x);
+                    ends.push(g.trans(s, None, x));
+                }
+                let conv = g.node("selectionConvergence", &ends, 0);
+                tail = g.step(Some(conv), true, 0);
+            }
+        }
+        for c in conditions {
+            let t = g.trans(tail, Some(c), 0);
+            tail = g.step(Some(t), true, 0);
+        }
+        let t = g.trans(tail, None, 0);
+        g.end(t)
+    }
+
+    /// The end step after transition `t`, and the whole document.
+    fn end(mut self, t: u64) -> String {
+        let id = self.id();
+        self.parts.push(format!(
+            "<step localId=\"{id}\" name=\"End\"><position x=\"0\" y=\"{id}\"/>{}</step>",
+            ChartGen::conn(&[t])
+        ));
+        self.document()
+    }
+
+    fn document(&self) -> String {
         format!(
             "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<project xmlns=\"http://www.plcopen.org/xml/tc6_0201\"><fileHeader companyName=\"t\" productName=\"random\" productVersion=\"1\" creationDateTime=\"2026-11-23T08:00:00\"/><types><pous><pou name=\"R\" pouType=\"program\"><body><SFC>\n{}\n</SFC></body></pou></pous></types></project>\n",
-            g.parts.join("\n")
+            self.parts.join("\n")
         )
     }
 }

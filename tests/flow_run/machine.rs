@@ -298,3 +298,23 @@ pub fn tokens(s: &str, ops: &[&str]) -> Vec<String> {
     }
     out
 }
+
+/// The truth of `e` under `phase` (tests of the readers).
+pub fn truth(e: &Expr, phase: &Phase, bits_are_numbers: bool) -> bool {
+    let program = Program {
+        body: Vec::new(),
+        declared: None,
+        bits_are_numbers,
+    };
+    let seq = [phase.clone()];
+    let m = Machine {
+        program: &program,
+        seq: &seq,
+        flicker: false,
+        reads: std::cell::Cell::new(0),
+        actions: Vec::new(),
+        vars: HashMap::new(),
+        steps: 0,
+    };
+    m.truth(e)
+}
