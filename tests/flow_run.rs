@@ -278,15 +278,20 @@ impl Lang {
         out
     }
 
-    /// The flow base's IRL file in this language: URScript moves instead of KRL's (the
-    /// block-structure check reads every line; the interpreters do not read a step's code).
+    /// The flow base's IRL file in this language: RAPID's and URScript's moves instead of
+    /// KRL's (the syntax checks read every line; the interpreters do not read a step's code).
     fn irl(self, text: &str) -> String {
-        if self != Lang::UrScript {
-            return text.to_owned();
-        }
+        let (lin, ptp) = match self {
+            Lang::Krl => return text.to_owned(),
+            Lang::Rapid => (
+                "MoveL RelTool(pHome, X, Y, Z \\Rx:=A \\Ry:=B \\Rz:=C), v100, fine, tool0;",
+                "MoveJ RelTool(pHome, X, Y, Z \\Rx:=A \\Ry:=B \\Rz:=C), v100, fine, tool0;",
+            ),
+            Lang::UrScript => ("movel(p[X, Y, Z, A, B, C])", "movej(p[X, Y, Z, A, B, C])"),
+        };
         let out = text
-            .replace("LIN {X, Y, Z, A, B, C}", "movel(p[X, Y, Z, A, B, C])")
-            .replace("PTP {X, Y, Z, A, B, C}", "movej(p[X, Y, Z, A, B, C])");
+            .replace("LIN {X, Y, Z, A, B, C}", lin)
+            .replace("PTP {X, Y, Z, A, B, C}", ptp);
         assert!(
             !out.contains("LIN {") && !out.contains("PTP {"),
             "the flow base changed"
@@ -337,6 +342,87 @@ impl Output {
     }
 }
 
+/// RAPID's syntax check, `rapidchecker` (PyPI; SPEC.md 8), run once over a batch of modules
+/// (it is a Python program: one start per module would be slow). Without `python3 -m
+/// rapidchecker` on this machine the batch is skipped with a note. It takes about half a second
+/// per module, so of the random and retargeted charts only a sample is checked, unless
+/// `SKILLPOST_RAPIDCHECK_ALL=1`.
+struct RapidChecker {
+    dir: tempfile::TempDir,
+    /// Module file and what it is (for the failure message).
+    names: Vec<(String, String)>,
+}
+
+impl RapidChecker {
+    fn new() -> Self {
+        RapidChecker {
+            dir: tempfile::tempdir().unwrap(),
+            names: Vec::new(),
+        }
+    }
+
+    /// Adds the `k`th module of a long series when it is in the sample (every `every`th).
+    fn add_sampled(&mut self, what: &str, output: &Output, k: usize, every: usize) {
+        if k.is_multiple_of(every)
+            || std::env::var("SKILLPOST_RAPIDCHECK_ALL").as_deref() == Ok("1")
+        {
+            self.add(what, output);
+        }
+    }
+
+    fn add(&mut self, what: &str, output: &Output) {
+        if output.lang == Lang::Rapid {
+            let file = format!("m{}.mod", self.names.len());
+            std::fs::write(self.dir.path().join(&file), &output.main).unwrap();
+            self.names.push((file, what.to_owned()));
+        }
+    }
+
+    /// Runs the check (`None`: not installed); `Err` holds its report and the failed modules.
+    fn run(&self) -> Option<Result<(), String>> {
+        if self.names.is_empty() {
+            return Some(Ok(()));
+        }
+        static AVAILABLE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+        let available = AVAILABLE.get_or_init(|| {
+            Command::new("python3")
+                .args(["-m", "rapidchecker", "--help"])
+                .output()
+                .is_ok_and(|o| o.status.success())
+        });
+        if !available {
+            eprintln!("skipped: RAPID syntax check (`python3 -m rapidchecker` is not installed)");
+            return None;
+        }
+        let out = Command::new("python3")
+            .args(["-m", "rapidchecker"])
+            .args(self.names.iter().map(|(f, _)| f))
+            .current_dir(self.dir.path())
+            .output()
+            .unwrap();
+        let report = String::from_utf8_lossy(&out.stdout).into_owned()
+            + &String::from_utf8_lossy(&out.stderr);
+        if out.status.success() {
+            return Some(Ok(()));
+        }
+        let mut msg = String::new();
+        for (file, what) in &self.names {
+            if report.contains(file.as_str()) {
+                let text = std::fs::read_to_string(self.dir.path().join(file)).unwrap();
+                msg.push_str(&format!("{file} = {what}:\n{text}\n"));
+            }
+        }
+        Some(Err(format!("{report}\n{msg}")))
+    }
+
+    /// Runs the check and fails on an error.
+    fn check(&self) {
+        if let Some(Err(e)) = self.run() {
+            panic!("rapidchecker refuses generated RAPID:\n{e}");
+        }
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // The cases
 // ---------------------------------------------------------------------------------------------
@@ -383,13 +469,8 @@ fn compile(case: &str, lang: Lang) -> (String, Output, Chart) {
     (program, output, Chart::read(&tmp.path().join("sfc.xml")))
 }
 
-/// Runs the case under many input sequences; returns how many ended in each way.
-fn check(case: &str, lang: Lang, seed: u64) -> BTreeMap<String, usize> {
-    let (program, output, chart) = compile(case, lang);
-    check_compiled(case, &output, &program, &chart, seed, 400)
-}
-
-/// Runs the program under `count` input sequences against the chart's meaning.
+/// Runs the program under `count` input sequences against the chart's meaning; returns how
+/// many ended in each way.
 ///
 /// Then once more with inputs that change at every read: the program must still follow the
 /// chart's paths (every pair of consecutive actions one the chart can produce whatever its
@@ -450,7 +531,15 @@ fn check_compiled(
 }
 
 fn run_case(case: &str, lang: Lang) {
-    let seen = check(case, lang, 0x5eed ^ case.len() as u64);
+    let (program, output, chart) = compile(case, lang);
+    let seen = check_compiled(
+        case,
+        &output,
+        &program,
+        &chart,
+        0x5eed ^ case.len() as u64,
+        400,
+    );
     println!("{case} ({lang:?}): {seen:?}");
 }
 
@@ -477,6 +566,17 @@ macro_rules! flow_cases {
                 }
             }
         )*
+        /// Every flow fixture's RAPID module passes `rapidchecker` (one batch).
+        #[test]
+        fn every_rapid_flow_fixture_passes_rapidchecker() {
+            let mut rapid = RapidChecker::new();
+            for case in [$($dir),*] {
+                let (_, output, _) = compile(case, Lang::Rapid);
+                rapid.add(case, &output);
+            }
+            rapid.check();
+        }
+
         /// Every flow fixture is run.
         #[test]
         fn every_flow_fixture_is_run() {
@@ -537,6 +637,7 @@ fn random_charts(lang: Lang) {
     let tmp = tempfile::tempdir().unwrap();
     lang.setup(tmp.path());
     let mut shapes = BTreeMap::new();
+    let mut rapid = RapidChecker::new();
     for seed in 1..=150u64 {
         let text = ChartGen::chart(seed);
         let sfc = tmp.path().join("sfc.xml");
@@ -558,6 +659,7 @@ fn random_charts(lang: Lang) {
                 output.main
             );
         }
+        rapid.add_sampled(&format!("random chart {seed}"), &output, seed as usize, 10);
         let chart = Chart::read(&sfc);
         let seen = check_compiled(
             &format!("random chart {seed}"),
@@ -576,6 +678,7 @@ fn random_charts(lang: Lang) {
             }
         }
     }
+    rapid.check();
     println!("random charts ({lang:?}): {shapes:?}");
     for kw in constructs(lang) {
         assert!(
@@ -608,6 +711,7 @@ fn retargeted_jumps(lang: Lang) -> (BTreeSet<u64>, BTreeMap<String, usize>) {
     let tmp = tempfile::tempdir().unwrap();
     lang.setup(tmp.path());
     let (mut refused, mut compiled) = (0, BTreeSet::new());
+    let mut rapid = RapidChecker::new();
     let mut codes = BTreeMap::new();
     for seed in 1..=300u64 {
         let text = ChartGen::chart(seed);
@@ -645,6 +749,12 @@ fn retargeted_jumps(lang: Lang) -> (BTreeSet<u64>, BTreeMap<String, usize>) {
                 output.syntax("R").unwrap_or_else(|e| {
                     panic!("retargeted chart {seed} ({lang:?}): {e}\n{}", output.main)
                 });
+                rapid.add_sampled(
+                    &format!("retargeted chart {seed}"),
+                    &output,
+                    compiled.len(),
+                    4,
+                );
                 let chart = Chart::read(&sfc);
                 check_compiled(
                     &format!("retargeted chart {seed}"),
@@ -672,6 +782,7 @@ fn retargeted_jumps(lang: Lang) -> (BTreeSet<u64>, BTreeMap<String, usize>) {
             ),
         }
     }
+    rapid.check();
     println!(
         "retargeted jumps ({lang:?}): {} compiled, {refused} refused: {codes:?}",
         compiled.len()
@@ -801,6 +912,24 @@ fn a_wrong_rapid_program_fails() {
         &text[close + 1..]
     );
     assert!(noticed(case, &program, &chart, Lang::Rapid, bare));
+    // A wait for several conditions as the writer wrote it before: `WaitUntil (a) OR (b);`
+    // is RAPID, but `rapidchecker` reads `WaitUntil (a)` as a call and refuses the rest.
+    let old = text
+        .replace("WaitUntil ((", "WaitUntil (")
+        .replace("));\n", ");\n");
+    assert_ne!(old, text);
+    let mut rapid = RapidChecker::new();
+    rapid.add(
+        "old wait",
+        &Output {
+            lang: Lang::Rapid,
+            main: old,
+            dat: String::new(),
+        },
+    );
+    if let Some(r) = rapid.run() {
+        assert!(r.is_err(), "rapidchecker accepts `WaitUntil (a) OR (b);`");
+    }
     // An `ENDIF` swapped with the `ENDWHILE` after it.
     let lines: Vec<&str> = text.lines().collect();
     let k = lines
@@ -942,6 +1071,7 @@ fn conditions(lang: Lang) {
     let forms = condition_forms();
     let tmp = tempfile::tempdir().unwrap();
     lang.setup(tmp.path());
+    let mut rapid = RapidChecker::new();
     // A few forms per chart, so the program reaches the waits within the actions compared.
     for (k, group) in forms.chunks(4).enumerate() {
         let conds: Vec<&str> = group.iter().map(|f| f.0).collect();
@@ -962,13 +1092,15 @@ fn conditions(lang: Lang) {
         if let Err(e) = output.syntax("R") {
             panic!("conditions ({lang:?}): {e}\n{}", output.main);
         }
-        let chart = Chart::read(&sfc);
         let case = format!("conditions {conds:?}");
+        rapid.add(&case, &output);
+        let chart = Chart::read(&sfc);
         let seen = check_compiled(&case, &output, "R", &chart, 3 + k as u64, 400);
         println!("{case} ({lang:?}): {seen:?}");
         // The selections always take a branch: every run reaches the waits.
         assert!(!seen.contains_key("Running"), "{case}: {seen:?}");
     }
+    rapid.check();
 }
 
 #[test]

@@ -238,6 +238,17 @@ impl Profile for Rapid {
     }
 }
 
+/// `WaitUntil c;`. A condition that begins with `(` is parenthesised as a whole:
+/// `WaitUntil (a) OR (b);` is read by `rapidchecker` as the call `WaitUntil(a)` followed by
+/// garbage; `WaitUntil ((a) OR (b));` means the same to RAPID and passes.
+fn wait_until(c: &str) -> String {
+    if c.starts_with('(') {
+        format!("WaitUntil ({c});")
+    } else {
+        format!("WaitUntil {c};")
+    }
+}
+
 /// Whether `b` leaves the loop it stands in (a branch ending in a leave, not inside a nested
 /// loop, whose leaves are that loop's).
 fn may_leave(b: &Block) -> bool {
@@ -308,7 +319,7 @@ impl Writer<'_> {
                         level,
                         &format!("transition localId {}: {text}", el[*t].local_id),
                     );
-                    self.out.line(level, &format!("WaitUntil {c};"));
+                    self.out.line(level, &wait_until(&c));
                 }
             }
             Block::Parallel { branches, .. } => {
@@ -434,8 +445,7 @@ impl Writer<'_> {
             .collect();
         self.out.line(level, &format!("{BRANCH_VAR} := 0;"));
         self.out.line(level, &format!("WHILE {BRANCH_VAR} = 0 DO"));
-        self.out
-            .line(level + 1, &format!("WaitUntil {};", any.join(" OR ")));
+        self.out.line(level + 1, &wait_until(&any.join(" OR ")));
         for (n, c) in conds.iter().enumerate() {
             let c = c.as_deref().unwrap_or("TRUE");
             let kw = if n == 0 { "IF" } else { "ELSEIF" };
