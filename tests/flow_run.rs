@@ -14,7 +14,8 @@
 //!   only at the start of an expression, no chained comparisons, a `signaldi` is a number).
 //! - URScript (`flow_run/urscript.rs`): `def`/`end`, `if`/`elif`/`else`, `while`/`break`,
 //!   `sync()`, Python-like precedence; and every generated script passes the block-structure
-//!   check of `common/urscript.rs`.
+//!   check of `common/urscript.rs`. Every generated RAPID module passes `rapidchecker` when it
+//!   is installed (random and retargeted charts: a sample).
 //!
 //! The languages share the machine of `flow_run/machine.rs` (RAPID and URScript) and everything
 //! else: the chart player and the random chart generator (`flow_run/chart.rs`), the input
@@ -22,13 +23,16 @@
 //! `Language` attribute; the test rewrites the flow base's blackboard so every signal is readable
 //! in that language (RAPID: an `Address` `di_<Name>`/`do_<Name>`/`gi_<Name>`; URScript: standard
 //! digital I/O by `Number`, the integer group and the `$CYCFLAG` flag through register calls),
-//! and, for URScript, the IRL's motion templates so every line is URScript.
+//! and the IRL's motion templates so every line is in the language (the interpreters treat a
+//! step's code lines as opaque; the syntax checks read them).
 //!
 //! Besides the fixtures, 150 random structured charts (guarded sequences, selections with empty
 //! and unconditional branches, simultaneous branches, loops left by one branch or two that join,
 //! loops left early by a selection before the deciding one, endless loops, nested in each
-//! other) and 300 charts with a retargeted jump are compiled and run the same way, in each
-//! language.
+//! other), 300 charts with a retargeted jump, and charts holding every form of condition (whose
+//! meaning is also written out in Rust, independent of the project's ST parser) are compiled
+//! and run the same way, in each language. Tests with mutated programs show that each check can
+//! fail.
 //!
 //! Inputs change only when the robot acts: phase `k` of an input sequence holds while `k`
 //! actions have run (the last phase holds after). A wait whose condition is false with inputs
@@ -323,8 +327,8 @@ impl Lang {
 }
 
 impl Output {
-    /// The language's syntax check of the generated files (RAPID's is `rapidchecker`, outside
-    /// these tests).
+    /// The language's syntax check of the generated files, one at a time (RAPID's,
+    /// `rapidchecker`, runs over batches: [`RapidChecker`]).
     fn syntax(&self, program: &str) -> Result<(), String> {
         match self.lang {
             Lang::Krl => krl_syntax::check_krl(&self.main, &self.dat, program, true),
