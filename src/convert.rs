@@ -233,7 +233,11 @@ pub fn write_number(x: f64, out: &mut String) -> bool {
         }
         d[i] += 1;
     }
-    let int_digits = if d[0] == b'0' { &d[1..1 + il] } else { &d[..1 + il] };
+    let int_digits = if d[0] == b'0' {
+        &d[1..1 + il]
+    } else {
+        &d[..1 + il]
+    };
     let frac_digits = &d[1 + il..end];
     let frac_digits = &frac_digits[..frac_digits
         .iter()

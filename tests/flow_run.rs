@@ -1,30 +1,68 @@
-//! The emitted control flow, checked by running it: every `fixtures/ok/flow-*` case is compiled
-//! with the binary, and the generated `.src`/`.dat` are executed by a small KRL interpreter
-//! (statements, `IF`, `LOOP`/`EXIT`, `REPEAT`/`UNTIL`, `SWITCH`, `WAIT FOR`, `$IN`/`$OUT`,
-//! `SIGNAL` groups, KRL's own operator precedence) under many input sequences. The robot's
-//! actions (the step FOLDs executed, in order) must be what the chart means: an independent
-//! token player runs the SFC graph itself (IEC 61131-3: a transition fires when its condition
-//! holds; a selection takes its first branch, left to right, whose condition holds; simultaneous
-//! branches run one after another, left to right; a jump continues at its target step).
+//! The emitted control flow, checked by running it, in every robot language (KRL, RAPID,
+//! URScript): every `fixtures/ok/flow-*` case is compiled with the binary, and the generated
+//! program is executed by a small interpreter of its language under many input sequences. The
+//! robot's actions (the steps executed, in order: KRL's step FOLDs, RAPID's `! step` and
+//! URScript's `# step` lines) must be what the chart means: an independent token player runs the
+//! SFC graph itself (IEC 61131-3: a transition fires when its condition holds; a selection takes
+//! its first branch, left to right, whose condition holds; simultaneous branches run one after
+//! another, left to right; a jump continues at its target step).
+//!
+//! - KRL (`flow_run/krl.rs`): statements, `IF`, `LOOP`/`EXIT`, `REPEAT`/`UNTIL`, `SWITCH`,
+//!   `WAIT FOR`, `$IN`/`$OUT`, `SIGNAL` groups, KRL's own operator precedence.
+//! - RAPID (`flow_run/rapid.rs`): `WaitUntil`, `IF`/`ELSEIF`/`ELSE`, `WHILE` with flags,
+//!   `VAR` declarations, the RAPID kernel's expression grammar and priorities (strictly: `NOT`
+//!   only at the start of an expression, no chained comparisons, a `signaldi` is a number).
+//! - URScript (`flow_run/urscript.rs`): `def`/`end`, `if`/`elif`/`else`, `while`/`break`,
+//!   `sync()`, Python-like precedence; and every generated script passes the block-structure
+//!   check of `common/urscript.rs`. Every generated RAPID module passes `rapidchecker` when it
+//!   is installed (random and retargeted charts: a sample).
+//!
+//! The languages share the machine of `flow_run/machine.rs` (RAPID and URScript) and everything
+//! else: the chart player and the random chart generator (`flow_run/chart.rs`), the input
+//! sequences and the comparisons. A project is switched to a language by its resource's
+//! `Language` attribute; the test rewrites the flow base's blackboard so every signal is readable
+//! in that language (RAPID: an `Address` `di_<Name>`/`do_<Name>`/`gi_<Name>`; URScript: standard
+//! digital I/O by `Number`, the integer group and the `$CYCFLAG` flag through register calls),
+//! and the IRL's motion templates so every line is in the language (the interpreters treat a
+//! step's code lines as opaque; the syntax checks read them).
 //!
 //! Besides the fixtures, 150 random structured charts (guarded sequences, selections with empty
 //! and unconditional branches, simultaneous branches, loops left by one branch or two that join,
 //! loops left early by a selection before the deciding one, endless loops, nested in each
-//! other) are compiled and run the same way.
+//! other), 300 charts with a retargeted jump, and charts holding every form of condition (whose
+//! meaning is also written out in Rust, independent of the project's ST parser) are compiled
+//! and run the same way, in each language. Tests with mutated programs show that each check can
+//! fail.
 //!
 //! Inputs change only when the robot acts: phase `k` of an input sequence holds while `k`
 //! actions have run (the last phase holds after). A wait whose condition is false with inputs
 //! that cannot change any more is "stuck"; both sides must get stuck at the same place. Endless
 //! programs are compared over their first actions.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use skillpost::cond::{BinOp, Expr as StExpr, ExprKind};
-
 #[path = "common/krl_check.rs"]
 mod krl_syntax;
+#[allow(dead_code)]
+#[path = "common/rapid.rs"]
+mod rapid_check;
+#[path = "common/urscript.rs"]
+mod urscript_check;
+
+#[path = "flow_run/chart.rs"]
+mod chart;
+#[path = "flow_run/krl.rs"]
+mod krl;
+#[path = "flow_run/machine.rs"]
+mod machine;
+#[path = "flow_run/rapid.rs"]
+mod rapid;
+#[path = "flow_run/urscript.rs"]
+mod urscript;
+
+use chart::{Chart, ChartGen, Paths, chart_meaning};
 
 /// How many actions are compared at most (endless programs).
 const MAX_ACTIONS: usize = 40;
@@ -33,44 +71,72 @@ const MAX_ACTIONS: usize = 40;
 // The world: signal values per phase
 // ---------------------------------------------------------------------------------------------
 
-/// The flow base's signals (fixtures/base/flow/Blackboard.aml), as the chart and the
-/// controller see them.
+/// How KRL reads a signal.
 #[derive(Clone, Copy)]
 enum Io {
     Bit(&'static str),
     Group(u32, u32),
 }
 
-const SIGNALS: &[(&str, Io)] = &[
-    ("Part_OK", Io::Bit("$IN[1]")),
-    ("Magazine_Empty", Io::Bit("$IN[2]")),
-    ("Release", Io::Bit("$IN[3]")),
-    ("Variant", Io::Group(9, 4)),
-    ("Gripper_Closed", Io::Bit("$OUT[5]")),
-    ("Door_Closed", Io::Bit("$CYCFLAG[3]")),
+/// One signal of the flow base (fixtures/base/flow/Blackboard.aml) and how each language reads
+/// it.
+struct Sig {
+    name: &'static str,
+    integer: bool,
+    krl: Io,
+    /// RAPID: the configured signal name (`Address`).
+    rapid: &'static str,
+    /// URScript: the call that reads it (`Number` for standard digital I/O, else `Address`).
+    ur: &'static str,
+}
+
+const SIGNALS: &[Sig] = &[
+    Sig {
+        name: "Part_OK",
+        integer: false,
+        krl: Io::Bit("$IN[1]"),
+        rapid: "di_Part_OK",
+        ur: "get_standard_digital_in(1)",
+    },
+    Sig {
+        name: "Magazine_Empty",
+        integer: false,
+        krl: Io::Bit("$IN[2]"),
+        rapid: "di_Magazine_Empty",
+        ur: "get_standard_digital_in(2)",
+    },
+    Sig {
+        name: "Release",
+        integer: false,
+        krl: Io::Bit("$IN[3]"),
+        rapid: "di_Release",
+        ur: "get_standard_digital_in(3)",
+    },
+    Sig {
+        name: "Variant",
+        integer: true,
+        krl: Io::Group(9, 4),
+        rapid: "gi_Variant",
+        ur: "read_input_integer_register(9)",
+    },
+    Sig {
+        name: "Gripper_Closed",
+        integer: false,
+        krl: Io::Bit("$OUT[5]"),
+        rapid: "do_Gripper_Closed",
+        ur: "get_standard_digital_out(5)",
+    },
+    Sig {
+        name: "Door_Closed",
+        integer: false,
+        krl: Io::Bit("$CYCFLAG[3]"),
+        rapid: "di_Door_Closed",
+        ur: "read_input_boolean_register(3)",
+    },
 ];
 
 /// One phase: each signal's value (booleans as 0/1).
 type Phase = BTreeMap<&'static str, i64>;
-
-/// The controller's view of a phase: every addressed bit.
-fn bits(phase: &Phase) -> HashMap<String, bool> {
-    let mut out = HashMap::new();
-    for (name, io) in SIGNALS {
-        let v = phase.get(name).copied().unwrap_or(0);
-        match io {
-            Io::Bit(addr) => {
-                out.insert((*addr).to_owned(), v != 0);
-            }
-            Io::Group(first, len) => {
-                for k in 0..*len {
-                    out.insert(format!("$IN[{}]", first + k), (v >> k) & 1 == 1);
-                }
-            }
-        }
-    }
-    out
-}
 
 /// A deterministic pseudo-random sequence (xorshift).
 struct Rng(u64);
@@ -94,13 +160,14 @@ fn sequences(seed: u64, count: usize) -> Vec<Vec<Phase>> {
         let mut seq = Vec::new();
         for _ in 0..phases {
             let mut p = Phase::new();
-            for (name, io) in SIGNALS {
-                let v = match io {
-                    Io::Bit(_) => (rng.next() % 4 < ones) as i64,
+            for s in SIGNALS {
+                let v = if s.integer {
                     // Mostly the values the fixtures compare with, sometimes others.
-                    Io::Group(..) => [0, 1, 2, 3, 12, 15][(rng.next() % 6) as usize],
+                    [0, 1, 2, 3, 12, 15][(rng.next() % 6) as usize]
+                } else {
+                    (rng.next() % 4 < ones) as i64
                 };
-                p.insert(name, v);
+                p.insert(s.name, v);
             }
             seq.push(p);
         }
@@ -120,749 +187,254 @@ enum Outcome {
 }
 
 // ---------------------------------------------------------------------------------------------
-// The chart's meaning: a token player over the SFC graph
+// The languages
 // ---------------------------------------------------------------------------------------------
 
-#[derive(Debug)]
-struct Node {
-    tag: String,
-    name: String,
-    x: f64,
-    inputs: Vec<u64>,
-    condition: Option<String>,
-    target: Option<String>,
-    skill: bool,
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Lang {
+    Krl,
+    Rapid,
+    UrScript,
 }
 
-struct Chart {
-    nodes: BTreeMap<u64, Node>,
-    /// Document order of the ids.
-    order: Vec<u64>,
-    /// Successors, left to right by x, ties in document order.
-    succ: BTreeMap<u64, Vec<u64>>,
-    /// Parsed conditions.
-    conds: BTreeMap<u64, StExpr>,
+/// A generated program: its main file (and KRL's `.dat`).
+struct Output {
+    lang: Lang,
+    main: String,
+    dat: String,
 }
 
-impl Chart {
-    fn read(path: &Path) -> Chart {
-        let text = std::fs::read_to_string(path).unwrap();
-        let doc = roxmltree::Document::parse(&text).unwrap();
-        let sfc = doc
-            .descendants()
-            .find(|n| n.is_element() && n.tag_name().name() == "SFC")
-            .expect("an SFC body");
-        let mut nodes = BTreeMap::new();
-        let mut order = Vec::new();
-        for e in sfc.children().filter(|n| n.is_element()) {
-            let id: u64 = e.attribute("localId").unwrap().parse().unwrap();
-            let d = |tag: &'static str| {
-                e.descendants()
-                    .filter(move |n| n.is_element() && n.tag_name().name() == tag)
-            };
-            let inputs = d("connection")
-                .map(|c| c.attribute("refLocalId").unwrap().parse().unwrap())
-                .collect();
-            let x = d("position")
-                .next()
-                .and_then(|p| p.attribute("x"))
-                .map_or(0.0, |x| x.parse().unwrap());
-            let condition = d("condition").next().map(|c| {
-                match c
-                    .descendants()
-                    .find(|n| n.is_element() && n.tag_name().name() == "reference")
-                {
-                    Some(r) => r.attribute("name").unwrap().to_owned(),
-                    None => c
-                        .descendants()
-                        .filter(|n| n.is_text())
-                        .map(|n| n.text().unwrap())
-                        .collect(),
-                }
-            });
-            nodes.insert(
-                id,
-                Node {
-                    tag: e.tag_name().name().to_owned(),
-                    name: e.attribute("name").unwrap_or("").to_owned(),
-                    x,
-                    inputs,
-                    condition,
-                    target: e.attribute("targetName").map(str::to_owned),
-                    skill: d("skill").next().is_some(),
-                },
-            );
-            order.push(id);
-        }
-        let mut succ: BTreeMap<u64, Vec<(usize, u64)>> = BTreeMap::new();
-        for (pos, id) in order.iter().enumerate() {
-            for i in &nodes[id].inputs {
-                succ.entry(*i).or_default().push((pos, *id));
-            }
-        }
-        let succ = succ
-            .into_iter()
-            .map(|(k, mut v)| {
-                v.sort_by(|a, b| nodes[&a.1].x.total_cmp(&nodes[&b.1].x).then(a.0.cmp(&b.0)));
-                (k, v.into_iter().map(|(_, id)| id).collect())
-            })
-            .collect();
-        let conds = nodes
-            .iter()
-            .filter_map(|(id, n)| {
-                let text = n.condition.as_ref()?;
-                let e = skillpost::cond::parse(text, &|o| o).expect("the chart's condition");
-                Some((*id, e))
-            })
-            .collect();
-        Chart {
-            nodes,
-            order,
-            succ,
-            conds,
-        }
-    }
+/// A program ready to run.
+enum Runnable {
+    Krl(Vec<krl::Stmt>, String),
+    Structured(machine::Program),
+}
 
-    /// Successors, left to right by x, ties in document order.
-    fn succs(&self, id: u64) -> Vec<u64> {
-        self.succ.get(&id).cloned().unwrap_or_default()
-    }
-
-    fn holds(&self, transition: u64, phase: &Phase) -> bool {
-        match self.conds.get(&transition) {
-            None => true,
-            Some(e) => st_eval(e, phase) != 0,
+impl Runnable {
+    fn run(&self, seq: &[Phase], flicker: bool) -> (Vec<String>, Outcome) {
+        match self {
+            Runnable::Krl(program, dat) => krl::krl_run_with(program, dat, seq, flicker),
+            Runnable::Structured(p) => machine::run(p, seq, flicker),
         }
     }
 }
 
-/// Evaluates a condition with ST's meaning (the parser's tree already has ST's precedence).
-fn st_eval(e: &StExpr, phase: &Phase) -> i64 {
-    match &e.kind {
-        ExprKind::Bool(b) => *b as i64,
-        ExprKind::Int(s) => s.parse().unwrap(),
-        ExprKind::Real(_) => panic!("no decimals in the fixtures"),
-        ExprKind::Name(n) => {
-            *phase
+impl Lang {
+    fn ext(self) -> &'static str {
+        match self {
+            Lang::Krl => "src",
+            Lang::Rapid => "mod",
+            Lang::UrScript => "script",
+        }
+    }
+
+    /// The flow base's blackboard in this language: the resource's `Language` and every
+    /// signal readable in it.
+    fn blackboard(self, text: &str) -> String {
+        if self == Lang::Krl {
+            return text.to_owned();
+        }
+        let language = match self {
+            Lang::Rapid => "RAPID",
+            _ => "URScript",
+        };
+        let mut out = String::new();
+        let mut signal: Option<&Sig> = None;
+        let mut found = 0;
+        let mut resource = false;
+        for l in text.lines() {
+            let t = l.trim();
+            if let Some(s) = SIGNALS
                 .iter()
-                .find(|(k, _)| k.eq_ignore_ascii_case(n))
-                .unwrap_or_else(|| panic!("unknown signal {n}"))
-                .1
-        }
-        ExprKind::Not(a) => (st_eval(a, phase) == 0) as i64,
-        ExprKind::Neg(a) => -st_eval(a, phase),
-        ExprKind::Bin(op, a, b) => {
-            let (x, y) = (st_eval(a, phase), st_eval(b, phase));
-            (match op {
-                BinOp::Or => x != 0 || y != 0,
-                BinOp::Xor => (x != 0) != (y != 0),
-                BinOp::And => x != 0 && y != 0,
-                BinOp::Eq => x == y,
-                BinOp::Ne => x != y,
-                BinOp::Lt => x < y,
-                BinOp::Gt => x > y,
-                BinOp::Le => x <= y,
-                BinOp::Ge => x >= y,
-            }) as i64
-        }
-    }
-}
-
-struct Player<'a> {
-    chart: &'a Chart,
-    seq: &'a [Phase],
-    actions: Vec<String>,
-    /// Free mode: every transition fires and a selection takes a branch at random (the chart's
-    /// paths, whatever the conditions).
-    free: Option<Rng>,
-}
-
-enum Stop {
-    Conv(u64),
-    Done,
-    Stuck,
-    Running,
-}
-
-impl Player<'_> {
-    fn phase(&self) -> &Phase {
-        &self.seq[self.actions.len().min(self.seq.len() - 1)]
-    }
-
-    /// Runs from `id` until the flow ends or reaches a simultaneous convergence (returned).
-    fn run(&mut self, mut id: u64) -> Stop {
-        let c = self.chart;
-        let mut moves = 0usize;
-        loop {
-            moves += 1;
-            if self.actions.len() >= MAX_ACTIONS || moves > 100_000 {
-                return Stop::Running;
+                .find(|s| t.starts_with(&format!("<ExternalInterface Name=\"{}\"", s.name)))
+            {
+                signal = Some(s);
+                found += 1;
             }
-            let n = &c.nodes[&id];
-            let succs = c.succs(id);
-            match n.tag.as_str() {
-                "step" => {
-                    if n.skill {
-                        self.actions.push(n.name.clone());
-                    }
-                    match succs.as_slice() {
-                        [] => return Stop::Done,
-                        [s] => id = *s,
-                        _ => panic!("step with several successors"),
-                    }
-                }
-                "transition" => {
-                    if self.free.is_none() && !c.holds(id, self.phase()) {
-                        return Stop::Stuck;
-                    }
-                    id = succs[0];
-                }
-                "selectionDivergence" => {
-                    let t = match &mut self.free {
-                        Some(rng) => succs[(rng.next() % succs.len() as u64) as usize],
-                        None => match succs.iter().find(|t| c.holds(**t, self.phase())) {
-                            Some(t) => *t,
-                            None => return Stop::Stuck,
-                        },
-                    };
-                    id = c.succs(t)[0];
-                }
-                "selectionConvergence" => id = succs[0],
-                "simultaneousDivergence" => {
-                    let mut conv = None;
-                    for b in succs {
-                        match self.run(b) {
-                            Stop::Conv(cv) => conv = Some(cv),
-                            other => return other,
-                        }
-                    }
-                    id = c.succs(conv.expect("a convergence"))[0];
-                }
-                "simultaneousConvergence" => return Stop::Conv(id),
-                "jumpStep" => {
-                    let target = n.target.as_ref().unwrap();
-                    id = *c
-                        .order
-                        .iter()
-                        .find(|s| c.nodes[s].tag == "step" && &c.nodes[s].name == target)
-                        .unwrap();
-                }
-                other => panic!("unexpected element {other}"),
-            }
-        }
-    }
-}
-
-fn chart_meaning(chart: &Chart, seq: &[Phase]) -> (Vec<String>, Outcome) {
-    chart_run(chart, seq, None)
-}
-
-fn chart_run(chart: &Chart, seq: &[Phase], free: Option<Rng>) -> (Vec<String>, Outcome) {
-    let start = *chart
-        .order
-        .iter()
-        .find(|id| chart.nodes[id].tag == "step" && chart.nodes[id].inputs.is_empty())
-        .unwrap();
-    let mut p = Player {
-        chart,
-        seq,
-        actions: Vec::new(),
-        free,
-    };
-    let outcome = match p.run(start) {
-        Stop::Done => Outcome::Done,
-        Stop::Stuck => Outcome::Stuck,
-        Stop::Running => Outcome::Running,
-        Stop::Conv(_) => panic!("a convergence without divergence"),
-    };
-    (p.actions, outcome)
-}
-
-// ---------------------------------------------------------------------------------------------
-// The KRL interpreter
-// ---------------------------------------------------------------------------------------------
-
-#[derive(Debug, Clone)]
-enum KExpr {
-    Int(i64),
-    Bool(bool),
-    /// A variable or a `SIGNAL` name.
-    Name(String),
-    /// `$IN[3]`, `$OUT[5]`, `$CYCFLAG[3]`.
-    Sys(String),
-    Not(Box<KExpr>),
-    Neg(Box<KExpr>),
-    Bin(String, Box<KExpr>, Box<KExpr>),
-}
-
-#[derive(Debug, Clone)]
-enum Stmt {
-    /// A step's FOLD: the step name from its title (`;FOLD 2 Grip: Move LIN @ …`).
-    Fold(String),
-    Wait(KExpr),
-    If(KExpr, Vec<Stmt>, Vec<Stmt>),
-    Loop(Vec<Stmt>),
-    Exit,
-    Repeat(Vec<Stmt>, KExpr),
-    /// `SWITCH e`, cases (`None` = `DEFAULT`).
-    Switch(KExpr, Vec<(Option<i64>, Vec<Stmt>)>),
-    Assign(String, KExpr),
-}
-
-/// Tokens of a KRL expression.
-fn ktokens(s: &str) -> Vec<String> {
-    let mut out = Vec::new();
-    let c: Vec<char> = s.chars().collect();
-    let mut i = 0;
-    while i < c.len() {
-        let ch = c[i];
-        if ch.is_whitespace() {
-            i += 1;
-        } else if ch == '$' || ch.is_ascii_alphanumeric() || ch == '_' {
-            let st = i;
-            i += 1;
-            while i < c.len() && (c[i].is_ascii_alphanumeric() || c[i] == '_') {
-                i += 1;
-            }
-            if i < c.len() && c[i] == '[' {
-                while c[i] != ']' {
-                    i += 1;
-                }
-                i += 1;
-            }
-            out.push(c[st..i].iter().collect());
-        } else {
-            let two: String = c[i..(i + 2).min(c.len())].iter().collect();
-            if ["==", "<>", "<=", ">="].contains(&two.as_str()) {
-                out.push(two);
-                i += 2;
-            } else {
-                out.push(ch.to_string());
-                i += 1;
-            }
-        }
-    }
-    out
-}
-
-/// KRL precedence, loosest first: comparisons, `OR`, `EXOR`, `AND`, then `NOT` and unary `-`.
-struct KParser {
-    t: Vec<String>,
-    i: usize,
-}
-
-impl KParser {
-    fn peek(&self) -> Option<String> {
-        self.t.get(self.i).map(|s| s.to_ascii_uppercase())
-    }
-
-    fn expr(&mut self) -> KExpr {
-        let mut l = self.or();
-        while let Some(op) = self
-            .peek()
-            .filter(|p| ["==", "<>", "<", ">", "<=", ">="].contains(&p.as_str()))
-        {
-            self.i += 1;
-            let r = self.or();
-            l = KExpr::Bin(op, Box::new(l), Box::new(r));
-        }
-        l
-    }
-
-    fn level(&mut self, ops: &[&str], next: fn(&mut Self) -> KExpr) -> KExpr {
-        let mut l = next(self);
-        while let Some(op) = self.peek().filter(|p| ops.contains(&p.as_str())) {
-            self.i += 1;
-            let r = next(self);
-            l = KExpr::Bin(op, Box::new(l), Box::new(r));
-        }
-        l
-    }
-
-    fn or(&mut self) -> KExpr {
-        self.level(&["OR"], Self::exor)
-    }
-
-    fn exor(&mut self) -> KExpr {
-        self.level(&["EXOR"], Self::and)
-    }
-
-    fn and(&mut self) -> KExpr {
-        self.level(&["AND"], Self::unary)
-    }
-
-    fn unary(&mut self) -> KExpr {
-        let t = self.peek().expect("an operand");
-        self.i += 1;
-        match t.as_str() {
-            "NOT" => KExpr::Not(Box::new(self.unary())),
-            "-" => KExpr::Neg(Box::new(self.unary())),
-            "(" => {
-                let e = self.expr();
-                assert_eq!(self.peek().as_deref(), Some(")"), "unclosed (");
-                self.i += 1;
-                e
-            }
-            "TRUE" => KExpr::Bool(true),
-            "FALSE" => KExpr::Bool(false),
-            _ if t.starts_with('$') => KExpr::Sys(t),
-            _ if t.chars().all(|c| c.is_ascii_digit()) => KExpr::Int(t.parse().unwrap()),
-            _ => KExpr::Name(t),
-        }
-    }
-}
-
-fn kexpr(s: &str) -> KExpr {
-    let mut p = KParser {
-        t: ktokens(s),
-        i: 0,
-    };
-    let e = p.expr();
-    assert_eq!(p.i, p.t.len(), "trailing tokens in `{s}`");
-    e
-}
-
-/// The code of a line (without a `;` comment), upper-cased keywords kept as written.
-fn code(line: &str) -> &str {
-    line.split(';').next().unwrap().trim()
-}
-
-/// Parses the main program's statements (between its `DEF` and `END`).
-fn parse_program(src: &str) -> Vec<Stmt> {
-    let lines: Vec<&str> = src.lines().collect();
-    let start = lines
-        .iter()
-        .position(|l| l.trim_start().starts_with("DEF "))
-        .unwrap()
-        + 1;
-    let mut i = start;
-    let body = parse_block(&lines, &mut i, &["END"]);
-    body.0
-}
-
-/// Parses statements until a line whose first word is one of `until`; returns them and that
-/// line's code.
-fn parse_block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, String) {
-    let mut out = Vec::new();
-    while *i < lines.len() {
-        let raw = lines[*i].trim();
-        *i += 1;
-        if let Some(title) = raw.strip_prefix(";FOLD ") {
-            // Skip to the matching ;ENDFOLD.
-            let mut depth = 1;
-            while depth > 0 {
-                let l = lines[*i].trim();
-                *i += 1;
-                if l.starts_with(";FOLD") {
-                    depth += 1;
-                } else if l.starts_with(";ENDFOLD") {
-                    depth -= 1;
-                }
-            }
-            let mut words = title.split_whitespace();
-            if words.next().is_some_and(|n| n.parse::<usize>().is_ok()) {
-                let name = words.next().unwrap().trim_end_matches(':');
-                out.push(Stmt::Fold(name.to_owned()));
-            }
-            continue;
-        }
-        let c = code(raw);
-        if c.is_empty() {
-            continue;
-        }
-        let first = c.split_whitespace().next().unwrap().to_ascii_uppercase();
-        if until.contains(&first.as_str()) {
-            return (out, c.to_owned());
-        }
-        match first.as_str() {
-            "WAIT" => {
-                let rest = c[4..].trim_start();
-                assert!(rest.to_ascii_uppercase().starts_with("FOR "), "WAIT SEC?");
-                out.push(Stmt::Wait(kexpr(&rest[4..])));
-            }
-            "IF" => {
-                let cond = c[2..].trim().strip_suffix("THEN").unwrap();
-                let (then, end) = parse_block(lines, i, &["ELSE", "ENDIF"]);
-                let otherwise = if end.eq_ignore_ascii_case("ELSE") {
-                    parse_block(lines, i, &["ENDIF"]).0
-                } else {
-                    Vec::new()
+            if let Some(s) = signal {
+                let address = match self {
+                    Lang::Rapid => Some(s.rapid),
+                    _ if s.ur.starts_with("get_standard_digital_") => None,
+                    _ => Some(s.ur),
                 };
-                out.push(Stmt::If(kexpr(cond), then, otherwise));
-            }
-            "LOOP" => out.push(Stmt::Loop(parse_block(lines, i, &["ENDLOOP"]).0)),
-            "EXIT" => out.push(Stmt::Exit),
-            "REPEAT" => {
-                let (body, end) = parse_block(lines, i, &["UNTIL"]);
-                out.push(Stmt::Repeat(body, kexpr(&end[5..])));
-            }
-            "SWITCH" => {
-                let sel = kexpr(&c[6..]);
-                let mut cases = Vec::new();
-                let (none, mut end) = parse_block(lines, i, &["CASE", "DEFAULT", "ENDSWITCH"]);
-                assert!(none.is_empty(), "statements before the first CASE");
-                while !end.eq_ignore_ascii_case("ENDSWITCH") {
-                    let label = if end.to_ascii_uppercase().starts_with("CASE") {
-                        Some(end[4..].trim().parse().unwrap())
-                    } else {
-                        None
-                    };
-                    let (body, next) = parse_block(lines, i, &["CASE", "DEFAULT", "ENDSWITCH"]);
-                    cases.push((label, body));
-                    end = next;
-                }
-                out.push(Stmt::Switch(sel, cases));
-            }
-            _ => {
-                // `NAME = expr` for a program variable; anything else (INI, BAS, PTP HOME,
-                // system variables) does not concern the control flow.
-                if let Some((lhs, rhs)) = c.split_once('=')
-                    && !lhs.trim().starts_with('$')
-                    && lhs
-                        .trim()
-                        .chars()
-                        .all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
-                    && !rhs.starts_with('=')
-                {
-                    out.push(Stmt::Assign(lhs.trim().to_ascii_uppercase(), kexpr(rhs)));
-                }
-            }
-        }
-    }
-    panic!("the program ends inside a block (expected {until:?})");
-}
-
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum KVal {
-    I(i64),
-    B(bool),
-}
-
-struct Machine<'a> {
-    seq: &'a [Phase],
-    /// Inputs change at every read (not only when the robot acts): signals that flicker
-    /// between a wait and the test after it.
-    flicker: bool,
-    reads: std::cell::Cell<usize>,
-    /// The controller's view of each phase.
-    bits: Vec<HashMap<String, bool>>,
-    actions: Vec<String>,
-    vars: HashMap<String, i64>,
-    /// `SIGNAL` name → (first input, last input).
-    signals: HashMap<String, (u32, u32)>,
-    steps: usize,
-}
-
-enum Flow {
-    Next,
-    Exit,
-    Stuck,
-    Running,
-}
-
-impl Machine<'_> {
-    fn bits(&self) -> &HashMap<String, bool> {
-        if self.flicker {
-            let r = self.reads.get();
-            self.reads.set(r + 1);
-            return &self.bits[r % self.seq.len()];
-        }
-        &self.bits[self.actions.len().min(self.seq.len() - 1)]
-    }
-
-    fn eval(&self, e: &KExpr) -> KVal {
-        match e {
-            KExpr::Int(i) => KVal::I(*i),
-            KExpr::Bool(b) => KVal::B(*b),
-            KExpr::Sys(s) => KVal::B(*self.bits().get(s).unwrap_or_else(|| panic!("unknown {s}"))),
-            KExpr::Name(n) => {
-                if let Some((a, b)) = self.signals.get(n) {
-                    let bits = self.bits();
-                    let mut v = 0;
-                    for (k, ix) in (*a..=*b).enumerate() {
-                        if bits[&format!("$IN[{ix}]")] {
-                            v |= 1 << k;
-                        }
+                if let Some(a) = address {
+                    let attr = |n: &str| t.starts_with(&format!("<Attribute Name=\"{n}\""));
+                    if attr("Number") || attr("Length") || attr("Address") {
+                        continue;
                     }
-                    KVal::I(v)
-                } else {
-                    KVal::I(*self.vars.get(n).unwrap_or_else(|| panic!("undeclared {n}")))
+                    if t == "</ExternalInterface>" {
+                        out.push_str(&format!(
+                            "          <Attribute Name=\"Address\" AttributeDataType=\"xs:string\"><Value>{a}</Value></Attribute>\n"
+                        ));
+                    }
+                }
+                if t == "</ExternalInterface>" {
+                    signal = None;
                 }
             }
-            KExpr::Not(a) => match self.eval(a) {
-                KVal::B(b) => KVal::B(!b),
-                v => panic!("NOT of {v:?}"),
+            out.push_str(l);
+            out.push('\n');
+            if t.starts_with("<InternalElement Name=\"KUKA KR15-2\"") {
+                resource = true;
+                out.push_str(&format!(
+                    "        <Attribute Name=\"Language\" AttributeDataType=\"xs:string\"><Value>{language}</Value></Attribute>\n"
+                ));
+            }
+        }
+        assert!(resource && found == SIGNALS.len(), "the flow base changed");
+        out
+    }
+
+    /// The flow base's IRL file in this language: RAPID's and URScript's moves instead of
+    /// KRL's (the syntax checks read every line; the interpreters do not read a step's code).
+    fn irl(self, text: &str) -> String {
+        let (lin, ptp) = match self {
+            Lang::Krl => return text.to_owned(),
+            Lang::Rapid => (
+                "MoveL RelTool(pHome, X, Y, Z \\Rx:=A \\Ry:=B \\Rz:=C), v100, fine, tool0;",
+                "MoveJ RelTool(pHome, X, Y, Z \\Rx:=A \\Ry:=B \\Rz:=C), v100, fine, tool0;",
+            ),
+            Lang::UrScript => ("movel(p[X, Y, Z, A, B, C])", "movej(p[X, Y, Z, A, B, C])"),
+        };
+        let out = text
+            .replace("LIN {X, Y, Z, A, B, C}", lin)
+            .replace("PTP {X, Y, Z, A, B, C}", ptp);
+        assert!(
+            !out.contains("LIN {") && !out.contains("PTP {"),
+            "the flow base changed"
+        );
+        out
+    }
+
+    /// A project folder with the flow base in this language.
+    fn setup(self, dir: &Path) {
+        let base = repo().join("fixtures/base/flow");
+        let bb = std::fs::read_to_string(base.join("Blackboard.aml")).unwrap();
+        std::fs::write(dir.join("Blackboard.aml"), self.blackboard(&bb)).unwrap();
+        let irl = std::fs::read_to_string(base.join("kr15-2.irl")).unwrap();
+        std::fs::write(dir.join("kr15-2.irl"), self.irl(&irl)).unwrap();
+    }
+
+    fn read(self, dir: &Path, program: &str) -> Output {
+        let read = |ext: &str| std::fs::read_to_string(dir.join(format!("{program}.{ext}")));
+        Output {
+            lang: self,
+            main: read(self.ext()).unwrap(),
+            dat: if self == Lang::Krl {
+                read("dat").unwrap()
+            } else {
+                String::new()
             },
-            KExpr::Neg(a) => match self.eval(a) {
-                KVal::I(i) => KVal::I(-i),
-                v => panic!("- of {v:?}"),
-            },
-            KExpr::Bin(op, a, b) => {
-                let (x, y) = (self.eval(a), self.eval(b));
-                KVal::B(match (op.as_str(), x, y) {
-                    ("AND", KVal::B(x), KVal::B(y)) => x && y,
-                    ("OR", KVal::B(x), KVal::B(y)) => x || y,
-                    ("EXOR", KVal::B(x), KVal::B(y)) => x != y,
-                    ("==", x, y) => x == y,
-                    ("<>", x, y) => x != y,
-                    ("<", KVal::I(x), KVal::I(y)) => x < y,
-                    (">", KVal::I(x), KVal::I(y)) => x > y,
-                    ("<=", KVal::I(x), KVal::I(y)) => x <= y,
-                    (">=", KVal::I(x), KVal::I(y)) => x >= y,
-                    // A type error: what a missing parenthesis would cause in KRL.
-                    _ => panic!("KRL type error: {x:?} {op} {y:?}"),
-                })
+        }
+    }
+}
+
+impl Output {
+    /// The language's syntax check of the generated files, one at a time (RAPID's,
+    /// `rapidchecker`, runs over batches: [`RapidChecker`]).
+    fn syntax(&self, program: &str) -> Result<(), String> {
+        match self.lang {
+            Lang::Krl => krl_syntax::check_krl(&self.main, &self.dat, program, true),
+            Lang::Rapid => Ok(()),
+            Lang::UrScript => urscript_check::check_urscript(&self.main),
+        }
+    }
+
+    fn parse(&self, program: &str) -> Runnable {
+        match self.lang {
+            Lang::Krl => Runnable::Krl(krl::parse_program(&self.main), self.dat.clone()),
+            Lang::Rapid => Runnable::Structured(rapid::parse(&self.main, program)),
+            Lang::UrScript => Runnable::Structured(urscript::parse(&self.main, program)),
+        }
+    }
+}
+
+/// RAPID's syntax check, `rapidchecker` (PyPI; SPEC.md 8), run once over a batch of modules
+/// (it is a Python program: one start per module would be slow), the pinned version of
+/// `tests/common/rapid.rs`. Without it the batch is skipped with a note (a failure under
+/// `SKILLPOST_STRICT_TESTS=1`). It takes about half a second
+/// per module, so of the random and retargeted charts only a sample is checked, unless
+/// `SKILLPOST_RAPIDCHECK_ALL=1`.
+struct RapidChecker {
+    dir: tempfile::TempDir,
+    /// Module file and what it is (for the failure message).
+    names: Vec<(String, String)>,
+}
+
+impl RapidChecker {
+    fn new() -> Self {
+        RapidChecker {
+            dir: tempfile::tempdir().unwrap(),
+            names: Vec::new(),
+        }
+    }
+
+    /// Adds the `k`th module of a long series when it is in the sample (every `every`th).
+    fn add_sampled(&mut self, what: &str, output: &Output, k: usize, every: usize) {
+        if k.is_multiple_of(every)
+            || std::env::var("SKILLPOST_RAPIDCHECK_ALL").as_deref() == Ok("1")
+        {
+            self.add(what, output);
+        }
+    }
+
+    fn add(&mut self, what: &str, output: &Output) {
+        if output.lang == Lang::Rapid {
+            let file = format!("m{}.mod", self.names.len());
+            std::fs::write(self.dir.path().join(&file), &output.main).unwrap();
+            self.names.push((file, what.to_owned()));
+        }
+    }
+
+    /// Runs the check (`None`: not installed); `Err` holds its report and the failed modules.
+    fn run(&self) -> Option<Result<(), String>> {
+        if self.names.is_empty() {
+            return Some(Ok(()));
+        }
+        let python = match rapid_check::rapidchecker_python() {
+            Ok(p) => p,
+            Err(why) => {
+                // Under SKILLPOST_STRICT_TESTS=1 (CI) a missing checker is a failure.
+                if std::env::var("SKILLPOST_STRICT_TESTS").as_deref() == Ok("1") {
+                    panic!("cannot run the RAPID syntax check: {why}");
+                }
+                eprintln!("skipped: RAPID syntax check ({why})");
+                return None;
+            }
+        };
+        // The pinned rapidchecker (tests/common/rapid.rs), in a folder without a
+        // rapidchecker.toml, its output not wrapped.
+        let out = Command::new(python)
+            .args(["-m", "rapidchecker"])
+            .args(self.names.iter().map(|(f, _)| f))
+            .current_dir(self.dir.path())
+            .env("COLUMNS", "100000")
+            .env("NO_COLOR", "1")
+            .env("TERM", "dumb")
+            .env("PYTHONUTF8", "1")
+            .output()
+            .unwrap();
+        let report = String::from_utf8_lossy(&out.stdout).into_owned()
+            + &String::from_utf8_lossy(&out.stderr);
+        if out.status.success() {
+            return Some(Ok(()));
+        }
+        let mut msg = String::new();
+        for (file, what) in &self.names {
+            if report.contains(file.as_str()) {
+                let text = std::fs::read_to_string(self.dir.path().join(file)).unwrap();
+                msg.push_str(&format!("{file} = {what}:\n{text}\n"));
             }
         }
+        Some(Err(format!("{report}\n{msg}")))
     }
 
-    fn truth(&self, e: &KExpr) -> bool {
-        match self.eval(e) {
-            KVal::B(b) => b,
-            v => panic!("a condition evaluated to {v:?}"),
+    /// Runs the check and fails on an error.
+    fn check(&self) {
+        if let Some(Err(e)) = self.run() {
+            panic!("rapidchecker refuses generated RAPID:\n{e}");
         }
     }
-
-    fn run(&mut self, stmts: &[Stmt]) -> Flow {
-        for s in stmts {
-            self.steps += 1;
-            assert!(self.steps < 1_000_000, "the interpreter runs away");
-            let f = match s {
-                Stmt::Fold(name) => {
-                    if self.actions.len() >= MAX_ACTIONS {
-                        return Flow::Running;
-                    }
-                    self.actions.push(name.clone());
-                    Flow::Next
-                }
-                Stmt::Wait(c) => {
-                    // Inputs change only when the robot acts: a false condition stays false.
-                    if self.truth(c) {
-                        Flow::Next
-                    } else {
-                        Flow::Stuck
-                    }
-                }
-                Stmt::If(c, then, otherwise) => {
-                    if self.truth(c) {
-                        self.run(then)
-                    } else {
-                        self.run(otherwise)
-                    }
-                }
-                Stmt::Loop(body) => loop {
-                    let before = self.actions.len();
-                    match self.run(body) {
-                        Flow::Next => {}
-                        Flow::Exit => break Flow::Next,
-                        other => break other,
-                    }
-                    if self.actions.len() == before {
-                        // A round without an action and without a change: it never ends.
-                        break Flow::Stuck;
-                    }
-                },
-                Stmt::Exit => Flow::Exit,
-                Stmt::Repeat(body, until) => {
-                    let mut rounds = 0;
-                    loop {
-                        match self.run(body) {
-                            Flow::Next => {}
-                            other => break other,
-                        }
-                        if self.truth(until) {
-                            break Flow::Next;
-                        }
-                        rounds += 1;
-                        if rounds > 100 {
-                            break Flow::Stuck;
-                        }
-                    }
-                }
-                Stmt::Switch(sel, cases) => {
-                    let v = match self.eval(sel) {
-                        KVal::I(i) => i,
-                        v => panic!("SWITCH on {v:?}"),
-                    };
-                    let body = cases
-                        .iter()
-                        .find(|(l, _)| *l == Some(v))
-                        .or_else(|| cases.iter().find(|(l, _)| l.is_none()))
-                        .map(|(_, b)| b.clone())
-                        .unwrap_or_default();
-                    self.run(&body)
-                }
-                Stmt::Assign(n, e) => {
-                    let v = match self.eval(e) {
-                        KVal::I(i) => i,
-                        KVal::B(b) => b as i64,
-                    };
-                    assert!(self.vars.contains_key(n), "assignment to undeclared {n}");
-                    self.vars.insert(n.clone(), v);
-                    Flow::Next
-                }
-            };
-            match f {
-                Flow::Next => {}
-                other => return other,
-            }
-        }
-        Flow::Next
-    }
-}
-
-/// Reads the `.dat`: `SIGNAL` groups and `DECL INT` variables.
-fn read_dat(dat: &str) -> (HashMap<String, (u32, u32)>, HashMap<String, i64>) {
-    let mut signals = HashMap::new();
-    let mut vars = HashMap::new();
-    for l in dat.lines().map(code) {
-        let w: Vec<&str> = l.split_whitespace().collect();
-        if w.first() == Some(&"SIGNAL") {
-            let ix = |s: &str| -> u32 {
-                s.strip_prefix("$IN[")
-                    .and_then(|r| r.strip_suffix(']'))
-                    .unwrap()
-                    .parse()
-                    .unwrap()
-            };
-            assert_eq!(w[3], "TO");
-            signals.insert(w[1].to_ascii_uppercase(), (ix(w[2]), ix(w[4])));
-        } else if w.first() == Some(&"DECL") && w.get(1) == Some(&"INT") {
-            let (name, init) = w[2].split_once('=').unwrap_or((w[2], "0"));
-            vars.insert(name.to_ascii_uppercase(), init.parse().unwrap());
-        }
-    }
-    (signals, vars)
-}
-
-fn krl_run(program: &[Stmt], dat: &str, seq: &[Phase]) -> (Vec<String>, Outcome) {
-    krl_run_with(program, dat, seq, false)
-}
-
-fn krl_run_with(
-    program: &[Stmt],
-    dat: &str,
-    seq: &[Phase],
-    flicker: bool,
-) -> (Vec<String>, Outcome) {
-    let (signals, vars) = read_dat(dat);
-    let mut m = Machine {
-        seq,
-        flicker,
-        reads: std::cell::Cell::new(0),
-        bits: seq.iter().map(bits).collect(),
-        actions: Vec::new(),
-        vars,
-        signals,
-        steps: 0,
-    };
-    let outcome = match m.run(program) {
-        Flow::Next => Outcome::Done,
-        Flow::Exit => panic!("EXIT outside a loop"),
-        Flow::Stuck => Outcome::Stuck,
-        Flow::Running => Outcome::Running,
-    };
-    (m.actions, outcome)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -882,10 +454,10 @@ fn copy_dir(from: &Path, to: &Path) {
     }
 }
 
-/// Compiles a flow fixture; returns the `.src`, the `.dat` and the chart.
-fn compile(case: &str) -> (String, String, Chart) {
+/// Compiles a flow fixture in `lang`; returns the program's name, its files and the chart.
+fn compile(case: &str, lang: Lang) -> (String, Output, Chart) {
     let tmp = tempfile::tempdir().unwrap();
-    copy_dir(&repo().join("fixtures/base/flow"), tmp.path());
+    lang.setup(tmp.path());
     copy_dir(&repo().join("fixtures/ok").join(case), tmp.path());
     let toml = std::fs::read_to_string(tmp.path().join("case.toml")).unwrap();
     let program = toml
@@ -901,106 +473,124 @@ fn compile(case: &str) -> (String, String, Chart) {
         .unwrap();
     assert!(
         out.status.success(),
-        "{case}: {}",
+        "{case} ({lang:?}): {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let read =
-        |ext: &str| std::fs::read_to_string(tmp.path().join(format!("{program}.{ext}"))).unwrap();
-    (
-        read("src"),
-        read("dat"),
-        Chart::read(&tmp.path().join("sfc.xml")),
-    )
+    let output = lang.read(tmp.path(), &program);
+    if let Err(e) = output.syntax(&program) {
+        panic!("{case} ({lang:?}): syntax check: {e}\n{}", output.main);
+    }
+    (program, output, Chart::read(&tmp.path().join("sfc.xml")))
 }
 
-/// Runs the case under many input sequences; returns how many ended in each way.
+/// Runs the program under `count` input sequences against the chart's meaning; returns how
+/// many ended in each way.
 ///
 /// Then once more with inputs that change at every read: the program must still follow the
-/// chart's paths (every pair of consecutive actions one the chart produced above, the first
-/// and, when it ends, the last action too), so a selection is never passed without taking a
-/// branch when a signal changes between the wait and the test.
-fn check(case: &str, seed: u64) -> BTreeMap<String, usize> {
-    let (src, dat, chart) = compile(case);
-    check_compiled(case, &src, &dat, &chart, seed, 400)
-}
-
+/// chart's paths (every pair of consecutive actions one the chart can produce whatever its
+/// conditions, the first and, when it ends, the last action too), so a selection is never
+/// passed without taking a branch when a signal changes between the wait and the test.
 fn check_compiled(
     case: &str,
-    src: &str,
-    dat: &str,
+    output: &Output,
+    program: &str,
     chart: &Chart,
     seed: u64,
     count: usize,
 ) -> BTreeMap<String, usize> {
-    let program = parse_program(src);
+    let lang = output.lang;
+    let text = &output.main;
+    let runnable = output.parse(program);
     let mut seen = BTreeMap::new();
-    let mut pairs = std::collections::BTreeSet::new();
-    let mut firsts = std::collections::BTreeSet::new();
-    let mut lasts = std::collections::BTreeSet::new();
     let all = sequences(seed, count);
     for (k, seq) in all.iter().enumerate() {
         let want = chart_meaning(chart, seq);
-        let got = krl_run(&program, dat, seq);
+        let got = runnable.run(seq, false);
         assert_eq!(
             got, want,
-            "{case}: input sequence {k} ({seq:?}): the KRL program (left) does not do what the chart means (right)\n{src}"
+            "{case}: input sequence {k} ({seq:?}): the {lang:?} program (left) does not do what the chart means (right)\n{text}"
         );
-        for w in want.0.windows(2) {
-            pairs.insert((w[0].clone(), w[1].clone()));
-        }
-        firsts.extend(want.0.first().cloned());
-        if want.1 == Outcome::Done {
-            lasts.insert(want.0.last().cloned());
-        }
         *seen.entry(format!("{:?}", want.1)).or_insert(0) += 1;
     }
-    // The chart's paths whatever the conditions: every pair of consecutive actions possible.
-    for r in 0..500u64 {
-        let (actions, outcome) =
-            chart_run(chart, &all[0], Some(Rng(seed ^ ((r + 1) * 0x2545_F491))));
-        for w in actions.windows(2) {
-            pairs.insert((w[0].clone(), w[1].clone()));
-        }
-        firsts.extend(actions.first().cloned());
-        if outcome == Outcome::Done {
-            lasts.insert(actions.last().cloned());
-        }
-    }
+    // The chart's paths whatever the conditions.
+    let Paths {
+        firsts,
+        pairs,
+        lasts,
+    } = chart.paths();
     for (k, seq) in all.iter().enumerate() {
-        let (actions, outcome) = krl_run_with(&program, dat, seq, true);
+        let (actions, outcome) = runnable.run(seq, true);
         let bad = actions
             .windows(2)
             .find(|w| !pairs.contains(&(w[0].clone(), w[1].clone())));
         assert!(
             bad.is_none(),
-            "{case}: flickering inputs {k}: `{:?}` is no path of the chart (actions {actions:?})",
+            "{case} ({lang:?}): flickering inputs {k}: `{:?}` is no path of the chart (actions {actions:?})\n{text}",
             bad
         );
         if let Some(f) = actions.first() {
             assert!(
                 firsts.contains(f),
-                "{case}: flickering inputs {k}: starts with {f}"
+                "{case} ({lang:?}): flickering inputs {k}: starts with {f}\n{text}"
             );
         }
         if outcome == Outcome::Done {
             assert!(
                 lasts.contains(&actions.last().cloned()),
-                "{case}: flickering inputs {k}: ends after {actions:?}"
+                "{case} ({lang:?}): flickering inputs {k}: ends after {actions:?}\n{text}"
             );
         }
     }
     seen
 }
 
+fn run_case(case: &str, lang: Lang) {
+    let (program, output, chart) = compile(case, lang);
+    let seen = check_compiled(
+        case,
+        &output,
+        &program,
+        &chart,
+        0x5eed ^ case.len() as u64,
+        400,
+    );
+    println!("{case} ({lang:?}): {seen:?}");
+}
+
 macro_rules! flow_cases {
     ($($test:ident => $dir:literal,)*) => {
         $(
-            #[test]
-            fn $test() {
-                let seen = check($dir, 0x5eed ^ $dir.len() as u64);
-                println!("{}: {seen:?}", $dir);
+            /// The fixture in each language.
+            mod $test {
+                use super::{Lang, run_case};
+
+                #[test]
+                fn krl() {
+                    run_case($dir, Lang::Krl);
+                }
+
+                #[test]
+                fn rapid() {
+                    run_case($dir, Lang::Rapid);
+                }
+
+                #[test]
+                fn urscript() {
+                    run_case($dir, Lang::UrScript);
+                }
             }
         )*
+        /// Every flow fixture's RAPID module passes `rapidchecker` (one batch).
+        #[test]
+        fn every_rapid_flow_fixture_passes_rapidchecker() {
+            let mut rapid = RapidChecker::new();
+            for case in [$($dir),*] {
+                let (_, output, _) = compile(case, Lang::Rapid);
+                rapid.add(case, &output);
+            }
+            rapid.check();
+        }
+
         /// Every flow fixture is run.
         #[test]
         fn every_flow_fixture_is_run() {
@@ -1029,333 +619,39 @@ flow_cases! {
     flow_selection_two_way => "flow-selection-two-way",
 }
 
-/// The interpreter itself: KRL's precedence is not ST's, so a condition without the emitted
-/// parentheses would mean something else (or not type-check).
-#[test]
-fn the_interpreter_uses_krl_precedence() {
-    let phase: Phase = [("Part_OK", 1), ("Release", 0), ("Variant", 3)]
-        .into_iter()
-        .collect();
-    let seq = vec![phase];
-    let m = Machine {
-        seq: &seq,
-        flicker: false,
-        reads: std::cell::Cell::new(0),
-        bits: seq.iter().map(bits).collect(),
-        actions: Vec::new(),
-        vars: HashMap::new(),
-        signals: [("V".to_owned(), (9, 12))].into_iter().collect(),
-        steps: 0,
-    };
-    // `$IN[1] OR $IN[3] == FALSE` is `($IN[1] OR $IN[3]) == FALSE` in KRL.
-    assert!(!m.truth(&kexpr("$IN[1] OR $IN[3] == FALSE")));
-    assert!(m.truth(&kexpr("$IN[1] OR ($IN[3] == FALSE)")));
-    assert!(m.truth(&kexpr("(V == 3) AND $IN[1]")));
-    assert!(m.truth(&kexpr("NOT $IN[3] AND $IN[1]")));
-    assert!(m.truth(&kexpr("$IN[1] EXOR $IN[3]")));
-    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        m.truth(&kexpr("V == 3 AND $IN[1]"))
-    }));
-    assert!(r.is_err(), "`3 AND $IN[1]` is a KRL type error");
-}
-
-/// The interpreter runs the constructs the emitter writes.
-#[test]
-fn the_interpreter_runs_loops_and_switches() {
-    let src = "DEF t( )\nLOOP\n;FOLD 1 A: x\n;ENDFOLD\nX = 0\nREPEAT\nIF $IN[1] THEN\nX = 2\nENDIF\nUNTIL X <> 0\nSWITCH X\nCASE 1\n;FOLD 2 B: x\n;ENDFOLD\nDEFAULT\nEXIT\nENDSWITCH\nENDLOOP\n;FOLD 3 C: x\n;ENDFOLD\nEND\n";
-    let program = parse_program(src);
-    let on: Phase = [("Part_OK", 1)].into_iter().collect();
-    let (actions, outcome) = krl_run(&program, "DECL INT X=0\n", &[on]);
-    assert_eq!(actions, ["A", "C"]);
-    assert_eq!(outcome, Outcome::Done);
-    let off: Phase = [("Part_OK", 0)].into_iter().collect();
-    let (actions, outcome) = krl_run(&program, "DECL INT X=0\n", &[off]);
-    assert_eq!(actions, ["A"]);
-    assert_eq!(outcome, Outcome::Stuck);
-}
-
 // ---------------------------------------------------------------------------------------------
 // Random charts
 // ---------------------------------------------------------------------------------------------
 
-/// Writes random structured charts: sequences with guarded transitions, selections (2 or 3
-/// branches, sometimes an empty or unconditional one), simultaneous branches, loops closed by a
-/// jump back (left by one branch or by two that join), nested in each other; sometimes the
-/// whole chart ends in an endless loop.
-struct ChartGen {
-    rng: Rng,
-    parts: Vec<String>,
-    next: u64,
-}
-
-const CONDITIONS: &[&str] = &[
-    "Part_OK",
-    "NOT Part_OK",
-    "Magazine_Empty",
-    "Release OR Magazine_Empty",
-    "Variant = 1",
-    "Variant &gt;= 2 AND NOT Release",
-    "Door_Closed XOR Part_OK",
-    "Gripper_Closed",
-];
-
-impl ChartGen {
-    fn id(&mut self) -> u64 {
-        self.next += 1;
-        self.next
-    }
-
-    fn pick(&mut self, n: u64) -> u64 {
-        self.rng.next() % n
-    }
-
-    fn cond(&mut self) -> Option<&'static str> {
-        match self.pick(3) {
-            0 => None,
-            _ => Some(CONDITIONS[self.pick(CONDITIONS.len() as u64) as usize]),
-        }
-    }
-
-    fn conn(inputs: &[u64]) -> String {
-        let c: String = inputs
-            .iter()
-            .map(|i| format!("<connection refLocalId=\"{i}\"/>"))
-            .collect();
-        format!("<connectionPointIn>{c}</connectionPointIn>")
-    }
-
-    fn step(&mut self, input: Option<u64>, skill: bool, x: u64) -> u64 {
-        let id = self.id();
-        let name = if input.is_none() {
-            "Start".to_owned()
-        } else {
-            format!("S{id}")
-        };
-        let mut s = format!(
-            "<step localId=\"{id}\" name=\"{name}\"{}><position x=\"{x}\" y=\"{id}\"/>",
-            if input.is_none() {
-                " initialStep=\"true\""
-            } else {
-                ""
-            }
-        );
-        if let Some(i) = input {
-            s.push_str(&Self::conn(&[i]));
-        }
-        if skill {
-            s.push_str(&format!(
-                "<addData><data name=\"iwb\" handleUnknown=\"preserve\"><iwb><ressources><ressource name=\"KUKA KR15-2\"/></ressources><skill name=\"Move LIN\"/><Variable name=\"Frame\" Value=\"({id}, 0, 0, 0, 0, 0)\"/></iwb></data></addData>"
-            ));
-        }
-        s.push_str("</step>");
-        self.parts.push(s);
-        id
-    }
-
-    fn trans(&mut self, input: u64, cond: Option<&str>, x: u64) -> u64 {
-        let id = self.id();
-        let c = cond
-            .map(|c| format!("<condition><inline name=\"\"><ST>{c}</ST></inline></condition>"))
-            .unwrap_or_default();
-        self.parts.push(format!(
-            "<transition localId=\"{id}\"><position x=\"{x}\" y=\"{id}\"/>{}{c}</transition>",
-            Self::conn(&[input])
-        ));
-        id
-    }
-
-    fn node(&mut self, tag: &str, inputs: &[u64], x: u64) -> u64 {
-        let id = self.id();
-        self.parts.push(format!(
-            "<{tag} localId=\"{id}\"><position x=\"{x}\" y=\"{id}\"/>{}</{tag}>",
-            Self::conn(inputs)
-        ));
-        id
-    }
-
-    fn jump(&mut self, input: u64, target: u64) {
-        let id = self.id();
-        self.parts.push(format!(
-            "<jumpStep localId=\"{id}\" targetName=\"S{target}\"><position x=\"0\" y=\"{id}\"/>{}</jumpStep>",
-            Self::conn(&[input])
-        ));
-    }
-
-    /// Items after step `tail`; returns the last step.
-    fn items(&mut self, tail: u64, depth: u32) -> u64 {
-        let mut tail = tail;
-        for _ in 0..1 + self.pick(3) {
-            tail = self.item(tail, depth);
-        }
-        tail
-    }
-
-    /// One item after step `tail`; returns the step it ends with.
-    fn item(&mut self, tail: u64, depth: u32) -> u64 {
-        let kind = if depth >= 3 { 0 } else { self.pick(5) };
-        match kind {
-            // A guarded step.
-            0 | 1 => {
-                let c = self.cond();
-                let t = self.trans(tail, c, 0);
-                self.step(Some(t), true, 0)
-            }
-            // A selection.
-            2 => {
-                let n = 2 + self.pick(2);
-                let div = self.node("selectionDivergence", &[tail], 0);
-                let default = self.pick(2) == 0;
-                let mut ends = Vec::new();
-                for k in 0..n {
-                    let x = 10 * (n - k); // left to right = reverse document order
-                    let c = if default && k == n - 1 {
-                        None
-                    } else {
-                        Some(CONDITIONS[self.pick(CONDITIONS.len() as u64) as usize])
-                    };
-                    let t = self.trans(div, c, x);
-                    if self.pick(4) == 0 {
-                        ends.push(t); // an empty branch
-                    } else {
-                        let s = self.step(Some(t), true, x);
-                        let last = self.items(s, depth + 1);
-                        let c2 = self.cond();
-                        ends.push(self.trans(last, c2, x));
-                    }
-                }
-                let conv = self.node("selectionConvergence", &ends, 0);
-                self.step(Some(conv), true, 0)
-            }
-            // Simultaneous branches.
-            3 => {
-                let c = self.cond();
-                let t = self.trans(tail, c, 0);
-                let div = self.node("simultaneousDivergence", &[t], 0);
-                let mut lasts = Vec::new();
-                for k in 0..2 {
-                    let s = self.step(Some(div), true, 10 * k);
-                    lasts.push(self.items(s, depth + 1));
-                }
-                let conv = self.node("simultaneousConvergence", &lasts, 0);
-                let c = self.cond();
-                let t = self.trans(conv, c, 0);
-                self.step(Some(t), true, 0)
-            }
-            // A loop.
-            _ => self.looped(tail, depth, false),
-        }
-    }
-
-    /// A loop after step `tail`; returns the step after it (endless: the last step inside).
-    fn looped(&mut self, tail: u64, depth: u32, endless: bool) -> u64 {
-        let c = self.cond();
-        let t = self.trans(tail, c, 0);
-        let head = self.step(Some(t), true, 0);
-        let mut last = self.items(head, depth + 1);
-        // Sometimes a selection leaves the loop early; its exit joins the others later.
-        let mut early = Vec::new();
-        if !endless && self.pick(3) == 0 {
-            let div = self.node("selectionDivergence", &[last], 0);
-            let (xe, xg) = if self.pick(2) == 0 { (0, 10) } else { (10, 0) };
-            let ce = Some(CONDITIONS[self.pick(CONDITIONS.len() as u64) as usize]);
-            let te = self.trans(div, ce, xe);
-            if self.pick(2) == 0 {
-                let s = self.step(Some(te), true, xe);
-                let c = self.cond();
-                early.push(self.trans(s, c, xe));
-            } else {
-                early.push(te);
-            }
-            let cg = if xg > xe { None } else { self.cond() };
-            let tg = self.trans(div, cg, xg);
-            let sg = self.step(Some(tg), true, xg);
-            last = self.items(sg, depth + 1);
-        }
-        if endless {
-            let c = self.cond();
-            let t = self.trans(last, c, 0);
-            self.jump(t, head);
-            return last;
-        }
-        let div = self.node("selectionDivergence", &[last], 0);
-        let repeat = Some(CONDITIONS[self.pick(CONDITIONS.len() as u64) as usize]);
-        let two_exits = self.pick(3) == 0;
-        // The repeat branch is first or last (priority).
-        let repeat_first = self.pick(2) == 0;
-        let xs: [u64; 3] = if repeat_first {
-            [0, 10, 20]
-        } else {
-            [20, 0, 10]
-        };
-        let tr = self.trans(div, repeat, xs[0]);
-        if self.pick(2) == 0 {
-            let s = self.step(Some(tr), true, xs[0]);
-            let c = self.cond();
-            let t = self.trans(s, c, xs[0]);
-            self.jump(t, head);
-        } else {
-            self.jump(tr, head);
-        }
-        let exit_cond = if self.pick(2) == 0 && !repeat_first {
-            Some(CONDITIONS[self.pick(CONDITIONS.len() as u64) as usize])
-        } else if repeat_first && self.pick(2) == 0 {
-            None
-        } else {
-            Some(CONDITIONS[self.pick(CONDITIONS.len() as u64) as usize])
-        };
-        if two_exits {
-            let a = self.trans(div, Some("Release"), xs[1]);
-            let sa = self.step(Some(a), true, xs[1]);
-            let ta = self.trans(sa, None, xs[1]);
-            let b = self.trans(div, exit_cond, xs[2]);
-            let mut ins = vec![ta, b];
-            ins.extend(early);
-            let conv = self.node("selectionConvergence", &ins, 0);
-            self.step(Some(conv), true, 0)
-        } else if !early.is_empty() {
-            let e = self.trans(div, exit_cond, xs[1]);
-            let mut ins = vec![e];
-            ins.extend(early);
-            let conv = self.node("selectionConvergence", &ins, 0);
-            self.step(Some(conv), true, 0)
-        } else {
-            let e = self.trans(div, exit_cond, xs[1]);
-            self.step(Some(e), true, 0)
-        }
-    }
-
-    fn chart(seed: u64) -> String {
-        let mut g = ChartGen {
-            rng: Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1),
-            parts: Vec::new(),
-            next: 0,
-        };
-        let start = g.step(None, false, 0);
-        let last = g.items(start, 0);
-        if g.pick(5) == 0 {
-            g.looped(last, 0, true);
-        } else {
-            let t = g.trans(last, None, 0);
-            let id = g.id();
-            g.parts.push(format!(
-                "<step localId=\"{id}\" name=\"End\"><position x=\"0\" y=\"{id}\"/>{}</step>",
-                ChartGen::conn(&[t])
-            ));
-        }
-        format!(
-            "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<project xmlns=\"http://www.plcopen.org/xml/tc6_0201\"><fileHeader companyName=\"t\" productName=\"random\" productVersion=\"1\" creationDateTime=\"2026-11-23T08:00:00\"/><types><pous><pou name=\"R\" pouType=\"program\"><body><SFC>\n{}\n</SFC></body></pou></pous></types></project>\n",
-            g.parts.join("\n")
-        )
+/// What each language's random programs must contain in more than 10 charts (the generator
+/// reaches every construct).
+fn constructs(lang: Lang) -> &'static [&'static str] {
+    match lang {
+        Lang::Krl => &["LOOP", "SWITCH", "IF ", "WAIT FOR"],
+        Lang::Rapid => &[
+            "WHILE skp_loop",
+            "WHILE TRUE DO",
+            "WHILE skp_branch = 0 DO",
+            "ELSEIF",
+            "WaitUntil",
+        ],
+        Lang::UrScript => &[
+            "while True:",
+            "break",
+            "while skp_branch == 0:",
+            "elif ",
+            "while not (",
+        ],
     }
 }
 
-/// 150 random charts, each compiled by the binary and run under 60 input sequences (and again
-/// with flickering inputs) against the chart's meaning.
-#[test]
-fn random_charts_do_what_they_mean() {
+/// 150 random charts, each compiled by the binary in `lang` and run under 60 input sequences
+/// (and again with flickering inputs) against the chart's meaning.
+fn random_charts(lang: Lang) {
     let tmp = tempfile::tempdir().unwrap();
-    copy_dir(&repo().join("fixtures/base/flow"), tmp.path());
+    lang.setup(tmp.path());
     let mut shapes = BTreeMap::new();
+    let mut rapid = RapidChecker::new();
     for seed in 1..=150u64 {
         let text = ChartGen::chart(seed);
         let sfc = tmp.path().join("sfc.xml");
@@ -1367,48 +663,69 @@ fn random_charts_do_what_they_mean() {
             .unwrap();
         assert!(
             out.status.success(),
-            "random chart {seed} does not compile:\n{}\n{text}",
+            "random chart {seed} does not compile in {lang:?}:\n{}\n{text}",
             String::from_utf8_lossy(&out.stderr)
         );
-        let src = std::fs::read_to_string(tmp.path().join("R.src")).unwrap();
-        let dat = std::fs::read_to_string(tmp.path().join("R.dat")).unwrap();
-        if let Err(e) = krl_syntax::check_krl(&src, &dat, "R", true) {
-            panic!("random chart {seed}: KRL structure check: {e}\n{src}");
+        let output = lang.read(tmp.path(), "R");
+        if let Err(e) = output.syntax("R") {
+            panic!(
+                "random chart {seed}: {lang:?} structure check: {e}\n{}",
+                output.main
+            );
         }
+        rapid.add_sampled(&format!("random chart {seed}"), &output, seed as usize, 10);
         let chart = Chart::read(&sfc);
         let seen = check_compiled(
             &format!("random chart {seed}"),
-            &src,
-            &dat,
+            &output,
+            "R",
             &chart,
             seed,
             60,
         );
         for (k, v) in seen {
-            *shapes.entry(k).or_insert(0) += v;
+            *shapes.entry(k.to_owned()).or_insert(0) += v;
         }
-        for kw in ["LOOP", "SWITCH", "IF ", "WAIT FOR"] {
-            if src.contains(kw) {
-                *shapes.entry(kw.to_owned()).or_insert(0) += 1;
+        for kw in constructs(lang) {
+            if output.main.contains(kw) {
+                *shapes.entry((*kw).to_owned()).or_insert(0) += 1;
             }
         }
     }
-    println!("random charts: {shapes:?}");
-    // The generator reaches every construct.
-    for kw in ["LOOP", "SWITCH", "IF ", "WAIT FOR"] {
-        assert!(shapes.get(kw).copied().unwrap_or(0) > 10, "{shapes:?}");
+    rapid.check();
+    println!("random charts ({lang:?}): {shapes:?}");
+    for kw in constructs(lang) {
+        assert!(
+            shapes.get(*kw).copied().unwrap_or(0) > 10,
+            "{lang:?}: {shapes:?}"
+        );
     }
+}
+
+#[test]
+fn random_charts_do_what_they_mean_krl() {
+    random_charts(Lang::Krl);
+}
+
+#[test]
+fn random_charts_do_what_they_mean_rapid() {
+    random_charts(Lang::Rapid);
+}
+
+#[test]
+fn random_charts_do_what_they_mean_urscript() {
+    random_charts(Lang::UrScript);
 }
 
 /// Charts that may not be structured: a random chart with one jump retargeted to a random step
 /// (forward, into another branch, out of a loop, ...). The compiler must never crash: it either
 /// refuses the chart with located errors (exit status 1) or compiles it into a program that does
-/// what the chart means.
-#[test]
-fn retargeted_jumps_are_refused_or_right() {
+/// what the chart means. Returns which charts compiled and the codes of the refusals.
+fn retargeted_jumps(lang: Lang) -> (BTreeSet<u64>, BTreeMap<String, usize>) {
     let tmp = tempfile::tempdir().unwrap();
-    copy_dir(&repo().join("fixtures/base/flow"), tmp.path());
-    let (mut refused, mut compiled) = (0, 0);
+    lang.setup(tmp.path());
+    let (mut refused, mut compiled) = (0, BTreeSet::new());
+    let mut rapid = RapidChecker::new();
     let mut codes = BTreeMap::new();
     for seed in 1..=300u64 {
         let text = ChartGen::chart(seed);
@@ -1441,16 +758,22 @@ fn retargeted_jumps_are_refused_or_right() {
         let stderr = String::from_utf8_lossy(&out.stderr);
         match out.status.code() {
             Some(0) => {
-                compiled += 1;
-                let src = std::fs::read_to_string(tmp.path().join("R.src")).unwrap();
-                let dat = std::fs::read_to_string(tmp.path().join("R.dat")).unwrap();
-                krl_syntax::check_krl(&src, &dat, "R", true)
-                    .unwrap_or_else(|e| panic!("retargeted chart {seed}: {e}\n{src}"));
+                compiled.insert(seed);
+                let output = lang.read(tmp.path(), "R");
+                output.syntax("R").unwrap_or_else(|e| {
+                    panic!("retargeted chart {seed} ({lang:?}): {e}\n{}", output.main)
+                });
+                rapid.add_sampled(
+                    &format!("retargeted chart {seed}"),
+                    &output,
+                    compiled.len(),
+                    4,
+                );
                 let chart = Chart::read(&sfc);
                 check_compiled(
                     &format!("retargeted chart {seed}"),
-                    &src,
-                    &dat,
+                    &output,
+                    "R",
                     &chart,
                     seed,
                     40,
@@ -1465,15 +788,473 @@ fn retargeted_jumps_are_refused_or_right() {
                 }
                 assert!(
                     stderr.contains("sfc.xml:"),
-                    "retargeted chart {seed}: an error without a place:\n{stderr}"
+                    "retargeted chart {seed} ({lang:?}): an error without a place:\n{stderr}"
                 );
             }
-            other => panic!("retargeted chart {seed}: exit status {other:?}\n{stderr}\n{mutated}"),
+            other => panic!(
+                "retargeted chart {seed} ({lang:?}): exit status {other:?}\n{stderr}\n{mutated}"
+            ),
         }
     }
-    println!("retargeted jumps: {compiled} compiled, {refused} refused: {codes:?}");
-    assert!(
-        compiled > 10 && refused > 10,
-        "{compiled} compiled, {refused} refused"
+    rapid.check();
+    println!(
+        "retargeted jumps ({lang:?}): {} compiled, {refused} refused: {codes:?}",
+        compiled.len()
     );
+    assert!(
+        compiled.len() > 10 && refused > 10,
+        "{lang:?}: {} compiled, {refused} refused",
+        compiled.len()
+    );
+    (compiled, codes)
+}
+
+#[test]
+fn retargeted_jumps_are_refused_or_right_krl() {
+    retargeted_jumps(Lang::Krl);
+}
+
+#[test]
+fn retargeted_jumps_are_refused_or_right_rapid() {
+    retargeted_jumps(Lang::Rapid);
+}
+
+#[test]
+fn retargeted_jumps_are_refused_or_right_urscript() {
+    retargeted_jumps(Lang::UrScript);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The checks can fail
+// ---------------------------------------------------------------------------------------------
+
+/// Whether `f` panics (a check failed).
+fn fails(f: impl FnOnce()) -> bool {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).is_err()
+}
+
+/// `text` with the first line equal to `line` (trimmed) removed.
+fn drop_line(text: &str, line: &str) -> String {
+    let lines: Vec<&str> = text.lines().collect();
+    let k = lines
+        .iter()
+        .position(|l| l.trim() == line)
+        .unwrap_or_else(|| panic!("no line `{line}` in\n{text}"));
+    let mut out: Vec<&str> = lines[..k].to_vec();
+    out.extend(&lines[k + 1..]);
+    out.join("\n") + "\n"
+}
+
+/// Runs a mutated program of the fixture against its chart; `true` when the suite notices
+/// (the syntax check, the reader or a run fails).
+fn noticed(case: &str, program: &str, chart: &Chart, lang: Lang, text: String) -> bool {
+    let output = Output {
+        lang,
+        main: text,
+        dat: String::new(),
+    };
+    output.syntax(program).is_err()
+        || fails(|| {
+            check_compiled(case, &output, program, chart, 7, 100);
+        })
+}
+
+#[test]
+fn a_wrong_urscript_program_fails() {
+    let case = "flow-loop-early-exit";
+    let (program, out, chart) = compile(case, Lang::UrScript);
+    let text = out.main.clone();
+    assert!(!noticed(
+        case,
+        &program,
+        &chart,
+        Lang::UrScript,
+        text.clone()
+    ));
+    // A `break` dropped: still a well-formed script, but it goes round again instead of
+    // leaving.
+    let no_break = drop_line(&text, "break");
+    urscript_check::check_urscript(&no_break).unwrap();
+    assert!(noticed(case, &program, &chart, Lang::UrScript, no_break));
+    // A parenthesis dropped.
+    let at = text.find("((").unwrap();
+    let unbalanced = format!("{}{}", &text[..at], &text[at + 1..]);
+    assert!(urscript_check::check_urscript(&unbalanced).is_err());
+    assert!(noticed(case, &program, &chart, Lang::UrScript, unbalanced));
+    // An `end` swapped with the line after it: the branch is run inside the loop that
+    // chooses it.
+    let lines: Vec<&str> = text.lines().collect();
+    let k = lines
+        .windows(2)
+        .position(|w| w[0].trim() == "end" && w[1].trim().starts_with("if skp_branch"))
+        .unwrap();
+    let mut swapped = lines.clone();
+    swapped.swap(k, k + 1);
+    assert!(noticed(
+        case,
+        &program,
+        &chart,
+        Lang::UrScript,
+        swapped.join("\n") + "\n"
+    ));
+    // An `end` dropped, a `break` outside its loop, an `elif` outside an `if`.
+    assert!(urscript_check::check_urscript(&drop_line(&text, "end")).is_err());
+    assert!(urscript_check::check_urscript(&drop_line(&text, "while True:")).is_err());
+    assert!(urscript_check::check_urscript(&text.replacen("    if ", "    elif ", 1)).is_err());
+}
+
+#[test]
+fn a_wrong_rapid_program_fails() {
+    let case = "flow-loop-early-exit";
+    let (program, out, chart) = compile(case, Lang::Rapid);
+    let text = out.main.clone();
+    assert!(!noticed(case, &program, &chart, Lang::Rapid, text.clone()));
+    // The loop's flag not cleared: it goes round again instead of leaving.
+    let stays = drop_line(&text, "skp_loop1 := FALSE;");
+    assert!(noticed(case, &program, &chart, Lang::Rapid, stays));
+    // The wrong branch recorded.
+    let wrong = text.replacen("skp_branch := 2;", "skp_branch := 1;", 1);
+    assert_ne!(wrong, text);
+    assert!(noticed(case, &program, &chart, Lang::Rapid, wrong));
+    // A parenthesis pair dropped: `NOT` inside an expression is a syntax error in RAPID.
+    let at = text.find("(NOT ").unwrap();
+    let close = at + text[at..].find("))").unwrap() + 1;
+    let bare = format!(
+        "{}{}{}",
+        &text[..at],
+        &text[at + 1..close],
+        &text[close + 1..]
+    );
+    assert!(noticed(case, &program, &chart, Lang::Rapid, bare));
+    // A wait for several conditions as the writer wrote it before: `WaitUntil (a) OR (b);`
+    // is RAPID, but `rapidchecker` reads `WaitUntil (a)` as a call and refuses the rest.
+    let old = text
+        .replace("WaitUntil ((", "WaitUntil (")
+        .replace("));\n", ");\n");
+    assert_ne!(old, text);
+    let mut rapid = RapidChecker::new();
+    rapid.add(
+        "old wait",
+        &Output {
+            lang: Lang::Rapid,
+            main: old,
+            dat: String::new(),
+        },
+    );
+    if let Some(r) = rapid.run() {
+        assert!(r.is_err(), "rapidchecker accepts `WaitUntil (a) OR (b);`");
+    }
+    // An `ENDIF` swapped with the `ENDWHILE` after it.
+    let lines: Vec<&str> = text.lines().collect();
+    let k = lines
+        .windows(2)
+        .position(|w| w[0].trim() == "ENDIF" && w[1].trim() == "ENDWHILE")
+        .unwrap();
+    let mut swapped = lines.clone();
+    swapped.swap(k, k + 1);
+    assert!(noticed(
+        case,
+        &program,
+        &chart,
+        Lang::Rapid,
+        swapped.join("\n") + "\n"
+    ));
+}
+
+#[test]
+fn a_wrong_krl_program_fails() {
+    let case = "flow-loop-early-exit";
+    let (program, out, chart) = compile(case, Lang::Krl);
+    let run = |main: String| {
+        let output = Output {
+            lang: Lang::Krl,
+            main,
+            dat: out.dat.clone(),
+        };
+        fails(|| {
+            check_compiled(case, &output, &program, &chart, 7, 100);
+        })
+    };
+    assert!(!run(out.main.clone()));
+    assert!(run(drop_line(&out.main, "EXIT")));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Conditions of every form
+// ---------------------------------------------------------------------------------------------
+
+fn bit(p: &Phase, name: &str) -> bool {
+    p[name] != 0
+}
+
+/// Conditions of every form the ST subset has (XML-escaped as in a chart), each with its
+/// meaning written out in Rust: independent of the project's ST parser, whose tree the chart
+/// player evaluates.
+#[allow(clippy::type_complexity, clippy::nonminimal_bool)]
+fn condition_forms() -> Vec<(&'static str, fn(&Phase) -> bool)> {
+    vec![
+        ("NOT Part_OK = Release", |p| {
+            !bit(p, "Part_OK") == bit(p, "Release")
+        }),
+        ("Part_OK = FALSE", |p| !bit(p, "Part_OK")),
+        ("Release = TRUE", |p| bit(p, "Release")),
+        ("Variant &lt;&gt; 3 XOR Part_OK", |p| {
+            (p["Variant"] != 3) != bit(p, "Part_OK")
+        }),
+        ("NOT (Variant = 1 OR Release)", |p| {
+            !(p["Variant"] == 1 || bit(p, "Release"))
+        }),
+        (
+            "(Part_OK OR Release) AND NOT (Magazine_Empty XOR Door_Closed)",
+            |p| {
+                (bit(p, "Part_OK") || bit(p, "Release"))
+                    && (bit(p, "Magazine_Empty") == bit(p, "Door_Closed"))
+            },
+        ),
+        (
+            "Part_OK AND Release OR Magazine_Empty AND NOT Door_Closed",
+            |p| {
+                bit(p, "Part_OK") && bit(p, "Release")
+                    || bit(p, "Magazine_Empty") && !bit(p, "Door_Closed")
+            },
+        ),
+        ("Part_OK OR Release AND Magazine_Empty", |p| {
+            bit(p, "Part_OK") || bit(p, "Release") && bit(p, "Magazine_Empty")
+        }),
+        ("Part_OK XOR Release OR Magazine_Empty", |p| {
+            (bit(p, "Part_OK") != bit(p, "Release")) || bit(p, "Magazine_Empty")
+        }),
+        ("Part_OK OR Release XOR Magazine_Empty", |p| {
+            bit(p, "Part_OK") || (bit(p, "Release") != bit(p, "Magazine_Empty"))
+        }),
+        ("Part_OK XOR Release XOR Door_Closed", |p| {
+            (bit(p, "Part_OK") != bit(p, "Release")) != bit(p, "Door_Closed")
+        }),
+        ("Part_OK XOR Release AND Door_Closed", |p| {
+            bit(p, "Part_OK") != (bit(p, "Release") && bit(p, "Door_Closed"))
+        }),
+        ("Part_OK &amp; NOT Gripper_Closed", |p| {
+            bit(p, "Part_OK") && !bit(p, "Gripper_Closed")
+        }),
+        ("-Variant &lt; -2", |p| -p["Variant"] < -2),
+        ("Variant &gt; 1 = Part_OK", |p| {
+            (p["Variant"] > 1) == bit(p, "Part_OK")
+        }),
+        ("Variant &lt;= 2 AND Variant &gt;= 1", |p| {
+            (1..=2).contains(&p["Variant"])
+        }),
+        ("NOT NOT Release", |p| bit(p, "Release")),
+        ("Variant = 12 OR Variant = 15", |p| {
+            p["Variant"] == 12 || p["Variant"] == 15
+        }),
+        ("Gripper_Closed &lt;&gt; Door_Closed", |p| {
+            bit(p, "Gripper_Closed") != bit(p, "Door_Closed")
+        }),
+        ("NOT Part_OK AND NOT Release", |p| {
+            !bit(p, "Part_OK") && !bit(p, "Release")
+        }),
+        ("NOT (Part_OK AND Release) = Door_Closed", |p| {
+            !(bit(p, "Part_OK") && bit(p, "Release")) == bit(p, "Door_Closed")
+        }),
+    ]
+}
+
+fn unescape(s: &str) -> String {
+    s.replace("&lt;", "<")
+        .replace("&gt;", ">")
+        .replace("&amp;", "&")
+}
+
+/// The chart player reads the conditions as their meaning written out.
+#[test]
+fn the_chart_player_reads_st_with_st_precedence() {
+    let forms = condition_forms();
+    for seq in sequences(11, 60) {
+        for p in &seq {
+            for (c, f) in &forms {
+                let e = skillpost::cond::parse(&unescape(c), &|o| o).unwrap();
+                assert_eq!(chart::st_eval(&e, p) != 0, f(p), "`{c}` under {p:?}");
+            }
+        }
+    }
+}
+
+/// Every form of condition, in selections (with and without an unconditional branch) and
+/// waits, compiled in `lang` and run against the chart's meaning.
+fn conditions(lang: Lang) {
+    let forms = condition_forms();
+    let tmp = tempfile::tempdir().unwrap();
+    lang.setup(tmp.path());
+    let mut rapid = RapidChecker::new();
+    // A few forms per chart, so the program reaches the waits within the actions compared.
+    for (k, group) in forms.chunks(4).enumerate() {
+        let conds: Vec<&str> = group.iter().map(|f| f.0).collect();
+        let text = ChartGen::conditions(&conds);
+        let sfc = tmp.path().join("sfc.xml");
+        std::fs::write(&sfc, &text).unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_skillpost"))
+            .args(["--lf", "Blackboard.aml", "R"])
+            .current_dir(tmp.path())
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{lang:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let output = lang.read(tmp.path(), "R");
+        if let Err(e) = output.syntax("R") {
+            panic!("conditions ({lang:?}): {e}\n{}", output.main);
+        }
+        let case = format!("conditions {conds:?}");
+        rapid.add(&case, &output);
+        let chart = Chart::read(&sfc);
+        let seen = check_compiled(&case, &output, "R", &chart, 3 + k as u64, 400);
+        println!("{case} ({lang:?}): {seen:?}");
+        // The selections always take a branch: every run reaches the waits.
+        assert!(!seen.contains_key("Running"), "{case}: {seen:?}");
+    }
+    rapid.check();
+}
+
+#[test]
+fn conditions_keep_their_meaning_krl() {
+    conditions(Lang::Krl);
+}
+
+#[test]
+fn conditions_keep_their_meaning_rapid() {
+    conditions(Lang::Rapid);
+}
+
+#[test]
+fn conditions_keep_their_meaning_urscript() {
+    conditions(Lang::UrScript);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The readers' precedence and the URScript check
+// ---------------------------------------------------------------------------------------------
+
+fn precedence_phase() -> Phase {
+    let mut p: Phase = SIGNALS.iter().map(|s| (s.name, 0)).collect();
+    p.insert("Part_OK", 1);
+    p.insert("Variant", 3);
+    p
+}
+
+/// RAPID's priorities (comparisons, then `AND`, then `OR`/`XOR`/`NOT`), and what RAPID's
+/// grammar refuses: a condition without the emitted parentheses fails or means something else.
+#[test]
+fn the_rapid_reader_uses_rapid_priorities() {
+    let p = precedence_phase();
+    let t = |s: &str| machine::truth(&rapid::expr(s), &p, true);
+    assert!(t("gi_Variant = 3 AND di_Part_OK = 1"));
+    assert!(t("NOT di_Release = 1"));
+    assert!(t("di_Part_OK = 1 OR di_Release = 1 AND FALSE"));
+    assert!(!t("(di_Part_OK = 1 OR di_Release = 1) AND FALSE"));
+    assert!(t("(di_Part_OK = 1) XOR (di_Release = 1)"));
+    assert!(t("-gi_Variant < -2"));
+    for bad in [
+        "di_Part_OK = 1 AND NOT di_Release = 1",
+        "NOT di_Part_OK = 1 OR di_Release = 1",
+        "di_Part_OK AND TRUE",
+        "gi_Variant = 3 = TRUE",
+        "(di_Part_OK = 1",
+        "di_Part_OK = 1 di_Release = 1",
+        "di_Unknown = 1",
+    ] {
+        assert!(
+            fails(|| {
+                t(bad);
+            }),
+            "`{bad}` is no RAPID condition"
+        );
+    }
+}
+
+/// URScript's (Python-like) precedence: `not` binds weaker than comparisons.
+#[test]
+fn the_urscript_reader_uses_urscript_precedence() {
+    let p = precedence_phase();
+    let t = |s: &str| machine::truth(&urscript::expr(s), &p, false);
+    assert!(!t("not read_input_integer_register(9) == 3"));
+    assert!(t(
+        "read_input_integer_register(9) == 3 and get_standard_digital_in(1)"
+    ));
+    assert!(t(
+        "get_standard_digital_in(1) or get_standard_digital_in(3) and False"
+    ));
+    assert!(!t(
+        "(get_standard_digital_in(1) or get_standard_digital_in(3)) and False"
+    ));
+    assert!(t(
+        "not get_standard_digital_in(3) and get_standard_digital_in(1)"
+    ));
+    assert!(t(
+        "get_standard_digital_in(1) xor get_standard_digital_in(3)"
+    ));
+    for bad in [
+        "get_standard_digital_in(1) xor get_standard_digital_in(3) or True",
+        "get_standard_digital_in(1) and get_standard_digital_in(3) xor True",
+        "get_standard_digital_in(1) == 1",
+        "read_input_integer_register(9) == 3 == True",
+        "get_standard_digital_in(1) and not",
+        "get_standard_digital_in(7)",
+        "(get_standard_digital_in(1)",
+    ] {
+        assert!(
+            fails(|| {
+                t(bad);
+            }),
+            "`{bad}` is no URScript condition here"
+        );
+    }
+}
+
+/// The block-structure check accepts URScript and refuses what is not.
+#[test]
+fn the_urscript_check_refuses_what_is_not_urscript() {
+    let ok = "def P():\n  # c\n  skp_branch = 0\n  while skp_branch == 0:\n    while not ((get_standard_digital_in(1)) or (read_input_integer_register(9) >= -2)):\n      sync()\n    end\n    if get_standard_digital_in(1):\n      skp_branch = 1\n    elif True:\n      skp_branch = 2\n    else:\n      break\n    end\n  end\n  movel(p[0.5, 10, 0, 0, 0, 0], a=1.2, v=0.25)\n  textmsg(\"a # b\")\nend\nP()\n";
+    urscript_check::check_urscript(ok).unwrap();
+    let check = |s: &str| urscript_check::check_urscript(s);
+    for (bad, why) in [
+        ("def P():\n  elif True:\n  end\nend\n", "elif"),
+        (
+            "def P():\n  if True:\n  else:\n  else:\n  end\nend\n",
+            "else",
+        ),
+        (
+            "def P():\n  if True:\n  else:\n  elif True:\n  end\nend\n",
+            "elif",
+        ),
+        ("def P():\n  break\nend\n", "break"),
+        ("def P():\n  if True:\n    break\n  end\nend\n", "break"),
+        ("while True:\n  break\nend\n", "outside a function"),
+        ("def P():\n  while True:\n  end\n", "ends inside"),
+        ("def P():\nend\nend\n", "without a block"),
+        ("def P():\n  x = 007\nend\n", "leading zero"),
+        ("def P():\n  x = 1e3\nend\n", "malformed number"),
+        ("def P():\n  x = 1.\nend\n", "after the point"),
+        ("def P():\n  x = {1, 2}\nend\n", "unexpected character"),
+        ("def P():\n  if True\n  end\nend\n", "without `:`"),
+        ("def P():\n  foo():\nend\n", "opens no block"),
+        ("def P():\n  x = end\nend\n", "keyword"),
+        ("def P():\n  True = 1\nend\n", "keyword"),
+        ("def P():\n  1abc = 2\nend\n", "malformed number"),
+        ("def P():\n  movel(p[1, 2)\nend\n", "expected"),
+        ("def P():\n  textmsg(\"a)\nend\n", "unterminated"),
+        ("def 1f():\nend\n", "malformed"),
+        ("def P():\n  x = 1 +\nend\n", "operand"),
+        ("def P():\n  x\nend\n", "neither a call"),
+        ("def P():\n  end x\nend\n", "alone"),
+        ("def P():\n  if (True:\n  end\nend\n", "expected"),
+        ("def P():\n  x = $IN[3]\nend\n", "unexpected character"),
+        ("def P():\n  LIN {1, 2}\nend\n", "unexpected character"),
+    ] {
+        match check(bad) {
+            Ok(()) => panic!("accepted:\n{bad}"),
+            Err(e) => assert!(e.contains(why), "`{e}` does not say `{why}`:\n{bad}"),
+        }
+    }
 }

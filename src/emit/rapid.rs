@@ -486,3 +486,21 @@ impl Writer<'_> {
         self.out.line(level, "ENDIF");
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_wait_never_begins_its_argument_with_a_parenthesis() {
+        assert_eq!(wait_until("di_Part = 1"), "WaitUntil di_Part = 1;");
+        assert_eq!(
+            wait_until("NOT (di_Part = 1)"),
+            "WaitUntil NOT (di_Part = 1);"
+        );
+        assert_eq!(
+            wait_until("(di_Part = 1) OR (gi_Type > 2)"),
+            "WaitUntil ((di_Part = 1) OR (gi_Type > 2));"
+        );
+    }
+}

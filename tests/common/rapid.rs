@@ -73,6 +73,11 @@ fn python() -> &'static Result<PathBuf, String> {
     })
 }
 
+/// The Python to run `-m rapidchecker` with (for a batch of files), or why there is none.
+pub fn rapidchecker_python() -> Result<PathBuf, String> {
+    python().clone()
+}
+
 /// Whether rapidchecker [`RAPIDCHECKER_VERSION`] can be run here.
 pub fn rapidchecker_available() -> bool {
     python().is_ok()

@@ -1,0 +1,658 @@
+//! The chart's meaning (a token player over the SFC graph, IEC 61131-3) and the generator of
+//! random structured charts; shared by every language.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+
+use skillpost::cond::{BinOp, Expr as StExpr, ExprKind};
+
+use crate::{MAX_ACTIONS, Outcome, Phase, Rng};
+
+#[derive(Debug)]
+struct Node {
+    tag: String,
+    name: String,
+    x: f64,
+    inputs: Vec<u64>,
+    condition: Option<String>,
+    target: Option<String>,
+    skill: bool,
+}
+
+pub struct Chart {
+    nodes: BTreeMap<u64, Node>,
+    /// Document order of the ids.
+    order: Vec<u64>,
+    /// Successors, left to right by x, ties in document order.
+    succ: BTreeMap<u64, Vec<u64>>,
+    /// Parsed conditions.
+    conds: BTreeMap<u64, StExpr>,
+}
+
+impl Chart {
+    pub fn read(path: &Path) -> Chart {
+        let text = std::fs::read_to_string(path).unwrap();
+        let doc = roxmltree::Document::parse(&text).unwrap();
+        let sfc = doc
+            .descendants()
+            .find(|n| n.is_element() && n.tag_name().name() == "SFC")
+            .expect("an SFC body");
+        let mut nodes = BTreeMap::new();
+        let mut order = Vec::new();
+        for e in sfc.children().filter(|n| n.is_element()) {
+            let id: u64 = e.attribute("localId").unwrap().parse().unwrap();
+            let d = |tag: &'static str| {
+                e.descendants()
+                    .filter(move |n| n.is_element() && n.tag_name().name() == tag)
+            };
+            let inputs = d("connection")
+                .map(|c| c.attribute("refLocalId").unwrap().parse().unwrap())
+                .collect();
+            let x = d("position")
+                .next()
+                .and_then(|p| p.attribute("x"))
+                .map_or(0.0, |x| x.parse().unwrap());
+            let condition = d("condition").next().map(|c| {
+                match c
+                    .descendants()
+                    .find(|n| n.is_element() && n.tag_name().name() == "reference")
+                {
+                    Some(r) => r.attribute("name").unwrap().to_owned(),
+                    None => c
+                        .descendants()
+                        .filter(|n| n.is_text())
+                        .map(|n| n.text().unwrap())
+                        .collect(),
+                }
+            });
+            nodes.insert(
+                id,
+                Node {
+                    tag: e.tag_name().name().to_owned(),
+                    name: e.attribute("name").unwrap_or("").to_owned(),
+                    x,
+                    inputs,
+                    condition,
+                    target: e.attribute("targetName").map(str::to_owned),
+                    skill: d("skill").next().is_some(),
+                },
+            );
+            order.push(id);
+        }
+        let mut succ: BTreeMap<u64, Vec<(usize, u64)>> = BTreeMap::new();
+        for (pos, id) in order.iter().enumerate() {
+            for i in &nodes[id].inputs {
+                succ.entry(*i).or_default().push((pos, *id));
+            }
+        }
+        let succ = succ
+            .into_iter()
+            .map(|(k, mut v)| {
+                v.sort_by(|a, b| nodes[&a.1].x.total_cmp(&nodes[&b.1].x).then(a.0.cmp(&b.0)));
+                (k, v.into_iter().map(|(_, id)| id).collect())
+            })
+            .collect();
+        let conds = nodes
+            .iter()
+            .filter_map(|(id, n)| {
+                let text = n.condition.as_ref()?;
+                let e = skillpost::cond::parse(text, &|o| o).expect("the chart's condition");
+                Some((*id, e))
+            })
+            .collect();
+        Chart {
+            nodes,
+            order,
+            succ,
+            conds,
+        }
+    }
+
+    /// Successors, left to right by x, ties in document order.
+    fn succs(&self, id: u64) -> Vec<u64> {
+        self.succ.get(&id).cloned().unwrap_or_default()
+    }
+
+    fn holds(&self, transition: u64, phase: &Phase) -> bool {
+        match self.conds.get(&transition) {
+            None => true,
+            Some(e) => st_eval(e, phase) != 0,
+        }
+    }
+}
+
+/// Evaluates a condition with ST's meaning (the parser's tree already has ST's precedence).
+pub fn st_eval(e: &StExpr, phase: &Phase) -> i64 {
+    match &e.kind {
+        ExprKind::Bool(b) => *b as i64,
+        ExprKind::Int(s) => s.parse().unwrap(),
+        ExprKind::Real(_) => panic!("no decimals in the fixtures"),
+        ExprKind::Name(n) => {
+            *phase
+                .iter()
+                .find(|(k, _)| k.eq_ignore_ascii_case(n))
+                .unwrap_or_else(|| panic!("unknown signal {n}"))
+                .1
+        }
+        ExprKind::Not(a) => (st_eval(a, phase) == 0) as i64,
+        ExprKind::Neg(a) => -st_eval(a, phase),
+        ExprKind::Bin(op, a, b) => {
+            let (x, y) = (st_eval(a, phase), st_eval(b, phase));
+            (match op {
+                BinOp::Or => x != 0 || y != 0,
+                BinOp::Xor => (x != 0) != (y != 0),
+                BinOp::And => x != 0 && y != 0,
+                BinOp::Eq => x == y,
+                BinOp::Ne => x != y,
+                BinOp::Lt => x < y,
+                BinOp::Gt => x > y,
+                BinOp::Le => x <= y,
+                BinOp::Ge => x >= y,
+            }) as i64
+        }
+    }
+}
+
+struct Player<'a> {
+    chart: &'a Chart,
+    seq: &'a [Phase],
+    actions: Vec<String>,
+}
+
+enum Stop {
+    Conv(u64),
+    Done,
+    Stuck,
+    Running,
+}
+
+impl Player<'_> {
+    fn phase(&self) -> &Phase {
+        &self.seq[self.actions.len().min(self.seq.len() - 1)]
+    }
+
+    /// Runs from `id` until the flow ends or reaches a simultaneous convergence (returned).
+    fn run(&mut self, mut id: u64) -> Stop {
+        let c = self.chart;
+        let mut moves = 0usize;
+        loop {
+            moves += 1;
+            if self.actions.len() >= MAX_ACTIONS || moves > 100_000 {
+                return Stop::Running;
+            }
+            let n = &c.nodes[&id];
+            let succs = c.succs(id);
+            match n.tag.as_str() {
+                "step" => {
+                    if n.skill {
+                        self.actions.push(n.name.clone());
+                    }
+                    match succs.as_slice() {
+                        [] => return Stop::Done,
+                        [s] => id = *s,
+                        _ => panic!("step with several successors"),
+                    }
+                }
+                "transition" => {
+                    if !c.holds(id, self.phase()) {
+                        return Stop::Stuck;
+                    }
+                    id = succs[0];
+                }
+                "selectionDivergence" => {
+                    let t = match succs.iter().find(|t| c.holds(**t, self.phase())) {
+                        Some(t) => *t,
+                        None => return Stop::Stuck,
+                    };
+                    id = c.succs(t)[0];
+                }
+                "selectionConvergence" => id = succs[0],
+                "simultaneousDivergence" => {
+                    let mut conv = None;
+                    for b in succs {
+                        match self.run(b) {
+                            Stop::Conv(cv) => conv = Some(cv),
+                            other => return other,
+                        }
+                    }
+                    id = c.succs(conv.expect("a convergence"))[0];
+                }
+                "simultaneousConvergence" => return Stop::Conv(id),
+                "jumpStep" => id = c.jump_target(id),
+                other => panic!("unexpected element {other}"),
+            }
+        }
+    }
+}
+
+impl Chart {
+    fn start(&self) -> u64 {
+        *self
+            .order
+            .iter()
+            .find(|id| self.nodes[id].tag == "step" && self.nodes[id].inputs.is_empty())
+            .unwrap()
+    }
+
+    fn jump_target(&self, jump: u64) -> u64 {
+        let target = self.nodes[&jump].target.as_ref().unwrap();
+        *self
+            .order
+            .iter()
+            .find(|s| self.nodes[s].tag == "step" && &self.nodes[s].name == target)
+            .unwrap()
+    }
+
+    /// The chart's paths whatever the conditions (every transition may fire, a selection may
+    /// take any branch): which actions can come first, which can follow which, and which can
+    /// come last when the chart ends (`None`: it ends without an action). An exhaustive search
+    /// over the player's states: an element, the simultaneous branches being run (divergence,
+    /// branch) and the last action.
+    pub fn paths(&self) -> Paths {
+        let mut paths = Paths::default();
+        type State = (u64, Vec<(u64, usize)>, Option<String>);
+        let mut seen: BTreeSet<State> = BTreeSet::new();
+        let mut todo: Vec<State> = vec![(self.start(), Vec::new(), None)];
+        while let Some(state) = todo.pop() {
+            if !seen.insert(state.clone()) {
+                continue;
+            }
+            let (id, stack, last) = state;
+            let n = &self.nodes[&id];
+            let succs = self.succs(id);
+            let mut go = |to: u64, stack: Vec<(u64, usize)>, last: Option<String>| {
+                todo.push((to, stack, last));
+            };
+            match n.tag.as_str() {
+                "step" => {
+                    let mut last = last;
+                    if n.skill {
+                        match &last {
+                            Some(l) => {
+                                paths.pairs.insert((l.clone(), n.name.clone()));
+                            }
+                            None => {
+                                paths.firsts.insert(n.name.clone());
+                            }
+                        }
+                        last = Some(n.name.clone());
+                    }
+                    match succs.as_slice() {
+                        [] => {
+                            assert!(stack.is_empty(), "a branch that ends the chart");
+                            paths.lasts.insert(last);
+                        }
+                        [s] => go(*s, stack, last),
+                        _ => panic!("step with several successors"),
+                    }
+                }
+                "transition" | "selectionConvergence" => go(succs[0], stack, last),
+                "selectionDivergence" => {
+                    for t in succs {
+                        go(self.succs(t)[0], stack.clone(), last.clone());
+                    }
+                }
+                "simultaneousDivergence" => {
+                    let mut stack = stack;
+                    stack.push((id, 0));
+                    go(succs[0], stack, last);
+                }
+                "simultaneousConvergence" => {
+                    let mut stack = stack;
+                    let (div, k) = stack.pop().expect("a convergence without divergence");
+                    let branches = self.succs(div);
+                    if k + 1 < branches.len() {
+                        stack.push((div, k + 1));
+                        go(branches[k + 1], stack, last);
+                    } else {
+                        go(succs[0], stack, last);
+                    }
+                }
+                "jumpStep" => go(self.jump_target(id), stack, last),
+                other => panic!("unexpected element {other}"),
+            }
+        }
+        paths
+    }
+}
+
+/// See [`Chart::paths`].
+#[derive(Debug, Default)]
+pub struct Paths {
+    pub firsts: BTreeSet<String>,
+    pub pairs: BTreeSet<(String, String)>,
+    pub lasts: BTreeSet<Option<String>>,
+}
+
+pub fn chart_meaning(chart: &Chart, seq: &[Phase]) -> (Vec<String>, Outcome) {
+    let mut p = Player {
+        chart,
+        seq,
+        actions: Vec::new(),
+    };
+    let outcome = match p.run(chart.start()) {
+        Stop::Done => Outcome::Done,
+        Stop::Stuck => Outcome::Stuck,
+        Stop::Running => Outcome::Running,
+        Stop::Conv(_) => panic!("a convergence without divergence"),
+    };
+    (p.actions, outcome)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Random charts
+// ---------------------------------------------------------------------------------------------
+
+/// Writes random structured charts: sequences with guarded transitions, selections (2 or 3
+/// branches, sometimes an empty or unconditional one), simultaneous branches, loops closed by a
+/// jump back (left by one branch or by two that join), nested in each other; sometimes the
+/// whole chart ends in an endless loop.
+pub struct ChartGen {
+    rng: Rng,
+    parts: Vec<String>,
+    next: u64,
+}
+
+pub const CONDITIONS: &[&str] = &[
+    "Part_OK",
+    "NOT Part_OK",
+    "Magazine_Empty",
+    "Release OR Magazine_Empty",
+    "Variant = 1",
+    "Variant &gt;= 2 AND NOT Release",
+    "Door_Closed XOR Part_OK",
+    "Gripper_Closed",
+];
+
+impl ChartGen {
+    fn id(&mut self) -> u64 {
+        self.next += 1;
+        self.next
+    }
+
+    fn pick(&mut self, n: u64) -> u64 {
+        self.rng.next() % n
+    }
+
+    fn cond(&mut self) -> Option<&'static str> {
+        match self.pick(3) {
+            0 => None,
+            _ => Some(CONDITIONS[self.pick(CONDITIONS.len() as u64) as usize]),
+        }
+    }
+
+    fn conn(inputs: &[u64]) -> String {
+        let c: String = inputs
+            .iter()
+            .map(|i| format!("<connection refLocalId=\"{i}\"/>"))
+            .collect();
+        format!("<connectionPointIn>{c}</connectionPointIn>")
+    }
+
+    fn step(&mut self, input: Option<u64>, skill: bool, x: u64) -> u64 {
+        let id = self.id();
+        let name = if input.is_none() {
+            "Start".to_owned()
+        } else {
+            format!("S{id}")
+        };
+        let mut s = format!(
+            "<step localId=\"{id}\" name=\"{name}\"{}><position x=\"{x}\" y=\"{id}\"/>",
+            if input.is_none() {
+                " initialStep=\"true\""
+            } else {
+                ""
+            }
+        );
+        if let Some(i) = input {
+            s.push_str(&Self::conn(&[i]));
+        }
+        if skill {
+            s.push_str(&format!(
+                "<addData><data name=\"iwb\" handleUnknown=\"preserve\"><iwb><ressources><ressource name=\"KUKA KR15-2\"/></ressources><skill name=\"Move LIN\"/><Variable name=\"Frame\" Value=\"({id}, 0, 0, 0, 0, 0)\"/></iwb></data></addData>"
+            ));
+        }
+        s.push_str("</step>");
+        self.parts.push(s);
+        id
+    }
+
+    fn trans(&mut self, input: u64, cond: Option<&str>, x: u64) -> u64 {
+        let id = self.id();
+        let c = cond
+            .map(|c| format!("<condition><inline name=\"\"><ST>{c}</ST></inline></condition>"))
+            .unwrap_or_default();
+        self.parts.push(format!(
+            "<transition localId=\"{id}\"><position x=\"{x}\" y=\"{id}\"/>{}{c}</transition>",
+            Self::conn(&[input])
+        ));
+        id
+    }
+
+    fn node(&mut self, tag: &str, inputs: &[u64], x: u64) -> u64 {
+        let id = self.id();
+        self.parts.push(format!(
+            "<{tag} localId=\"{id}\"><position x=\"{x}\" y=\"{id}\"/>{}</{tag}>",
+            Self::conn(inputs)
+        ));
+        id
+    }
+
+    fn jump(&mut self, input: u64, target: u64) {
+        let id = self.id();
+        self.parts.push(format!(
+            "<jumpStep localId=\"{id}\" targetName=\"S{target}\"><position x=\"0\" y=\"{id}\"/>{}</jumpStep>",
+            Self::conn(&[input])
+        ));
+    }
+
+    /// Items after step `tail`; returns the last step.
+    fn items(&mut self, tail: u64, depth: u32) -> u64 {
+        let mut tail = tail;
+        for _ in 0..1 + self.pick(3) {
+            tail = self.item(tail, depth);
+        }
+        tail
+    }
+
+    /// One item after step `tail`; returns the step it ends with.
+    fn item(&mut self, tail: u64, depth: u32) -> u64 {
+        let kind = if depth >= 3 { 0 } else { self.pick(5) };
+        match kind {
+            // A guarded step.
+            0 | 1 => {
+                let c = self.cond();
+                let t = self.trans(tail, c, 0);
+                self.step(Some(t), true, 0)
+            }
+            // A selection.
+            2 => {
+                let n = 2 + self.pick(2);
+                let div = self.node("selectionDivergence", &[tail], 0);
+                let default = self.pick(2) == 0;
+                let mut ends = Vec::new();
+                for k in 0..n {
+                    let x = 10 * (n - k); // left to right = reverse document order
+                    let c = if default && k == n - 1 {
+                        None
+                    } else {
+                        Some(CONDITIONS[self.pick(CONDITIONS.len() as u64) as usize])
+                    };
+                    let t = self.trans(div, c, x);
+                    if self.pick(4) == 0 {
+                        ends.push(t); // an empty branch
+                    } else {
+                        let s = self.step(Some(t), true, x);
+                        let last = self.items(s, depth + 1);
+                        let c2 = self.cond();
+                        ends.push(self.trans(last, c2, x));
+                    }
+                }
+                let conv = self.node("selectionConvergence", &ends, 0);
+                self.step(Some(conv), true, 0)
+            }
+            // Simultaneous branches.
+            3 => {
+                let c = self.cond();
+                let t = self.trans(tail, c, 0);
+                let div = self.node("simultaneousDivergence", &[t], 0);
+                let mut lasts = Vec::new();
+                for k in 0..2 {
+                    let s = self.step(Some(div), true, 10 * k);
+                    lasts.push(self.items(s, depth + 1));
+                }
+                let conv = self.node("simultaneousConvergence", &lasts, 0);
+                let c = self.cond();
+                let t = self.trans(conv, c, 0);
+                self.step(Some(t), true, 0)
+            }
+            // A loop.
+            _ => self.looped(tail, depth, false),
+        }
+    }
+
+    /// A loop after step `tail`; returns the step after it (endless: the last step inside).
+    fn looped(&mut self, tail: u64, depth: u32, endless: bool) -> u64 {
+        let c = self.cond();
+        let t = self.trans(tail, c, 0);
+        let head = self.step(Some(t), true, 0);
+        let mut last = self.items(head, depth + 1);
+        // Sometimes a selection leaves the loop early; its exit joins the others later.
+        let mut early = Vec::new();
+        if !endless && self.pick(3) == 0 {
+            let div = self.node("selectionDivergence", &[last], 0);
+            let (xe, xg) = if self.pick(2) == 0 { (0, 10) } else { (10, 0) };
+            let ce = Some(CONDITIONS[self.pick(CONDITIONS.len() as u64) as usize]);
+            let te = self.trans(div, ce, xe);
+            if self.pick(2) == 0 {
+                let s = self.step(Some(te), true, xe);
+                let c = self.cond();
+                early.push(self.trans(s, c, xe));
+            } else {
+                early.push(te);
+            }
+            let cg = if xg > xe { None } else { self.cond() };
+            let tg = self.trans(div, cg, xg);
+            let sg = self.step(Some(tg), true, xg);
+            last = self.items(sg, depth + 1);
+        }
+        if endless {
+            let c = self.cond();
+            let t = self.trans(last, c, 0);
+            self.jump(t, head);
+            return last;
+        }
+        let div = self.node("selectionDivergence", &[last], 0);
+        let repeat = Some(CONDITIONS[self.pick(CONDITIONS.len() as u64) as usize]);
+        let two_exits = self.pick(3) == 0;
+        // The repeat branch is first or last (priority).
+        let repeat_first = self.pick(2) == 0;
+        let xs: [u64; 3] = if repeat_first {
+            [0, 10, 20]
+        } else {
+            [20, 0, 10]
+        };
+        let tr = self.trans(div, repeat, xs[0]);
+        if self.pick(2) == 0 {
+            let s = self.step(Some(tr), true, xs[0]);
+            let c = self.cond();
+            let t = self.trans(s, c, xs[0]);
+            self.jump(t, head);
+        } else {
+            self.jump(tr, head);
+        }
+        let exit_cond = if self.pick(2) == 0 && !repeat_first {
+            Some(CONDITIONS[self.pick(CONDITIONS.len() as u64) as usize])
+        } else if repeat_first && self.pick(2) == 0 {
+            None
+        } else {
+            Some(CONDITIONS[self.pick(CONDITIONS.len() as u64) as usize])
+        };
+        if two_exits {
+            let a = self.trans(div, Some("Release"), xs[1]);
+            let sa = self.step(Some(a), true, xs[1]);
+            let ta = self.trans(sa, None, xs[1]);
+            let b = self.trans(div, exit_cond, xs[2]);
+            let mut ins = vec![ta, b];
+            ins.extend(early);
+            let conv = self.node("selectionConvergence", &ins, 0);
+            self.step(Some(conv), true, 0)
+        } else if !early.is_empty() {
+            let e = self.trans(div, exit_cond, xs[1]);
+            let mut ins = vec![e];
+            ins.extend(early);
+            let conv = self.node("selectionConvergence", &ins, 0);
+            self.step(Some(conv), true, 0)
+        } else {
+            let e = self.trans(div, exit_cond, xs[1]);
+            self.step(Some(e), true, 0)
+        }
+    }
+
+    pub fn chart(seed: u64) -> String {
+        let mut g = ChartGen {
+            rng: Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1),
+            parts: Vec::new(),
+            next: 0,
+        };
+        let start = g.step(None, false, 0);
+        let last = g.items(start, 0);
+        if g.pick(5) == 0 {
+            g.looped(last, 0, true);
+            g.document()
+        } else {
+            let t = g.trans(last, None, 0);
+            g.end(t)
+        }
+    }
+
+    /// A chart that reads each of `conditions` (ST, XML-escaped) in three ways: a selection
+    /// between it and an unconditional branch; a selection between it and its negation (no
+    /// unconditional branch: the program waits for either); then, after all of those, a wait
+    /// for each.
+    pub fn conditions(conditions: &[&str]) -> String {
+        let mut g = ChartGen {
+            rng: Rng(1),
+            parts: Vec::new(),
+            next: 0,
+        };
+        let mut tail = g.step(None, false, 0);
+        for c in conditions {
+            let negated = format!("NOT ({c})");
+            for other in [None, Some(negated.as_str())] {
+                let div = g.node("selectionDivergence", &[tail], 0);
+                let mut ends = Vec::new();
+                for (x, cond) in [(0, Some(*c)), (10, other)] {
+                    let t = g.trans(div, cond, x);
+                    let s = g.step(Some(t), true, x);
+                    ends.push(g.trans(s, None, x));
+                }
+                let conv = g.node("selectionConvergence", &ends, 0);
+                tail = g.step(Some(conv), true, 0);
+            }
+        }
+        for c in conditions {
+            let t = g.trans(tail, Some(c), 0);
+            tail = g.step(Some(t), true, 0);
+        }
+        let t = g.trans(tail, None, 0);
+        g.end(t)
+    }
+
+    /// The end step after transition `t`, and the whole document.
+    fn end(mut self, t: u64) -> String {
+        let id = self.id();
+        self.parts.push(format!(
+            "<step localId=\"{id}\" name=\"End\"><position x=\"0\" y=\"{id}\"/>{}</step>",
+            ChartGen::conn(&[t])
+        ));
+        self.document()
+    }
+
+    fn document(&self) -> String {
+        format!(
+            "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<project xmlns=\"http://www.plcopen.org/xml/tc6_0201\"><fileHeader companyName=\"t\" productName=\"random\" productVersion=\"1\" creationDateTime=\"2026-11-23T08:00:00\"/><types><pous><pou name=\"R\" pouType=\"program\"><body><SFC>\n{}\n</SFC></body></pou></pous></types></project>\n",
+            self.parts.join("\n")
+        )
+    }
+}

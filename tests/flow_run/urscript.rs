@@ -1,0 +1,300 @@
+//! A URScript reader for the machine: `def P():` … `end` and the call `P()`, `# step` comments,
+//! `if`/`elif`/`else`/`end`, `while c:` … `end`, `break`, `sync()`, `name = value`.
+//!
+//! Expressions with URScript's (Python-like) precedence, loosest first: `or` and `xor`, `and`,
+//! `not`, comparisons, unary `-`. So `not a == b` is `not (a == b)`. Where the meaning is not
+//! clear from the manual the reader refuses the expression, so the writer must parenthesise:
+//! `xor` next to `or` or `and` without parentheses, and chained comparisons (`a == b == c`).
+//! Signals are read by calls (`get_standard_digital_in(1)`, `read_input_integer_register(9)`);
+//! a boolean signal is a boolean, not a number.
+
+use super::machine::{Expr, Op, Program, Stmt, step_name, tokens};
+use crate::SIGNALS;
+
+const OPS: &[&str] = &["==", "!=", "<=", ">=", "<", ">", "-", "="];
+
+struct P {
+    t: Vec<String>,
+    i: usize,
+    text: String,
+}
+
+impl P {
+    fn peek(&self) -> Option<&str> {
+        self.t.get(self.i).map(String::as_str)
+    }
+
+    fn bump(&mut self) -> String {
+        let t = self
+            .t
+            .get(self.i)
+            .cloned()
+            .unwrap_or_else(|| panic!("URScript: `{}` ends too early", self.text));
+        self.i += 1;
+        t
+    }
+
+    /// `or`/`xor` chains; returns the expression and whether it is such a chain.
+    fn disjunction(&mut self) -> Expr {
+        let (mut l, mut bare_and) = self.conjunction();
+        let mut ops = Vec::new();
+        while let Some(op) = self.peek().and_then(|p| match p {
+            "or" => Some(Op::Or),
+            "xor" => Some(Op::Xor),
+            _ => None,
+        }) {
+            self.i += 1;
+            ops.push(op);
+            let (r, and) = self.conjunction();
+            bare_and |= and;
+            l = Expr::Bin(op, Box::new(l), Box::new(r));
+        }
+        if ops.contains(&Op::Xor) {
+            assert!(
+                ops.iter().all(|o| *o == Op::Xor) && !bare_and,
+                "URScript: `xor` beside `or`/`and` without parentheses: `{}`",
+                self.text
+            );
+        }
+        l
+    }
+
+    /// `and` chains; returns the expression and whether it holds an `and`.
+    fn conjunction(&mut self) -> (Expr, bool) {
+        let mut l = self.negation();
+        let mut and = false;
+        while self.peek() == Some("and") {
+            self.i += 1;
+            and = true;
+            let r = self.negation();
+            l = Expr::Bin(Op::And, Box::new(l), Box::new(r));
+        }
+        (l, and)
+    }
+
+    fn negation(&mut self) -> Expr {
+        if self.peek() == Some("not") {
+            self.i += 1;
+            return Expr::Not(Box::new(self.negation()));
+        }
+        self.comparison()
+    }
+
+    fn cmp(&self) -> Option<Op> {
+        Some(match self.peek()? {
+            "==" => Op::Eq,
+            "!=" => Op::Ne,
+            "<" => Op::Lt,
+            ">" => Op::Gt,
+            "<=" => Op::Le,
+            ">=" => Op::Ge,
+            _ => return None,
+        })
+    }
+
+    fn comparison(&mut self) -> Expr {
+        let l = self.unary();
+        let Some(op) = self.cmp() else {
+            return l;
+        };
+        self.i += 1;
+        let r = self.unary();
+        assert!(
+            self.cmp().is_none(),
+            "URScript: chained comparison in `{}`",
+            self.text
+        );
+        Expr::Bin(op, Box::new(l), Box::new(r))
+    }
+
+    fn unary(&mut self) -> Expr {
+        if self.peek() == Some("-") {
+            self.i += 1;
+            return Expr::Neg(Box::new(self.unary()));
+        }
+        self.primary()
+    }
+
+    fn primary(&mut self) -> Expr {
+        let t = self.bump();
+        match t.as_str() {
+            "(" => {
+                let e = self.disjunction();
+                assert_eq!(
+                    self.bump(),
+                    ")",
+                    "URScript: unclosed `(` in `{}`",
+                    self.text
+                );
+                e
+            }
+            "True" => Expr::Bool(true),
+            "False" => Expr::Bool(false),
+            _ if t.bytes().all(|c| c.is_ascii_digit()) => {
+                assert!(
+                    t == "0" || !t.starts_with('0'),
+                    "URScript: leading zero in `{t}`"
+                );
+                Expr::Int(t.parse().unwrap())
+            }
+            _ if t.as_bytes()[0].is_ascii_alphabetic() || t.starts_with('_') => {
+                assert!(
+                    !["not", "and", "or", "xor", "if", "elif", "while", "end"]
+                        .contains(&t.as_str()),
+                    "URScript: `{t}` where an operand belongs in `{}`",
+                    self.text
+                );
+                if self.peek() == Some("(") {
+                    self.i += 1;
+                    let arg = self.bump();
+                    assert_eq!(
+                        self.bump(),
+                        ")",
+                        "URScript: a call of `{t}` with one number"
+                    );
+                    let call = format!("{t}({arg})");
+                    let k = SIGNALS
+                        .iter()
+                        .position(|s| s.ur == call)
+                        .unwrap_or_else(|| panic!("URScript: unknown call `{call}`"));
+                    Expr::Signal(k)
+                } else {
+                    assert!(
+                        t.starts_with("skp_"),
+                        "URScript: unknown name `{t}` in `{}`",
+                        self.text
+                    );
+                    Expr::Var(t)
+                }
+            }
+            _ => panic!(
+                "URScript: `{t}` where an operand belongs in `{}`",
+                self.text
+            ),
+        }
+    }
+}
+
+/// Parses a URScript expression.
+pub fn expr(s: &str) -> Expr {
+    let mut p = P {
+        t: tokens(s, OPS),
+        i: 0,
+        text: s.to_owned(),
+    };
+    let e = p.disjunction();
+    assert_eq!(p.i, p.t.len(), "URScript: trailing tokens in `{s}`");
+    e
+}
+
+/// Reads the script of program `name`.
+pub fn parse(text: &str, name: &str) -> Program {
+    let lines: Vec<&str> = text.lines().map(|l| l.trim()).collect();
+    let code = |l: &&str| !l.is_empty() && !l.starts_with('#');
+    let mut i = lines
+        .iter()
+        .position(&code)
+        .expect("URScript: an empty file");
+    assert_eq!(lines[i], format!("def {name}():"));
+    i += 1;
+    let (body, end) = block(&lines, &mut i, &["end"]);
+    assert_eq!(end, "end");
+    let rest: Vec<&str> = lines[i..].iter().copied().filter(code).collect();
+    assert_eq!(
+        rest,
+        [format!("{name}()")],
+        "URScript: the program is called once after its definition"
+    );
+    Program {
+        body,
+        declared: None,
+        bits_are_numbers: false,
+    }
+}
+
+/// `head` without the `keyword ` before and the `:` after.
+fn condition<'a>(head: &'a str, keyword: &str) -> &'a str {
+    head[keyword.len()..]
+        .strip_suffix(':')
+        .unwrap_or_else(|| panic!("URScript: `{head}` without `:`"))
+}
+
+/// Statements up to a line whose first word is in `until`; returns them and that line.
+fn block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, String) {
+    let mut out = Vec::new();
+    // After a step title, lines that are no statement of the control flow are the step's code.
+    let mut in_step = false;
+    while *i < lines.len() {
+        let l = lines[*i];
+        *i += 1;
+        if l.is_empty() {
+            continue;
+        }
+        if let Some(c) = l.strip_prefix('#') {
+            match c.trim_start().strip_prefix("step ") {
+                Some(title) => {
+                    out.push(Stmt::Step(step_name(title)));
+                    in_step = true;
+                }
+                None => in_step = false,
+            }
+            continue;
+        }
+        let first = l
+            .split(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+            .next()
+            .unwrap();
+        if until.contains(&first) {
+            return (out, l.to_owned());
+        }
+        let stmt = match first {
+            "if" => {
+                let mut arms = Vec::new();
+                let mut head = l.to_owned();
+                let otherwise = loop {
+                    let kw = if head.starts_with("if ") {
+                        "if "
+                    } else {
+                        "elif "
+                    };
+                    let c = expr(condition(&head, kw));
+                    let (body, end) = block(lines, i, &["elif", "else", "end"]);
+                    arms.push((c, body));
+                    match end.as_str() {
+                        "end" => break Vec::new(),
+                        "else:" => {
+                            let (body, end) = block(lines, i, &["end"]);
+                            assert_eq!(end, "end");
+                            break body;
+                        }
+                        _ if end.starts_with("elif ") => head = end,
+                        _ => panic!("URScript: unexpected `{end}`"),
+                    }
+                };
+                Some(Stmt::If(arms, otherwise))
+            }
+            "while" => {
+                let c = expr(condition(l, "while "));
+                let (body, end) = block(lines, i, &["end"]);
+                assert_eq!(end, "end");
+                Some(Stmt::While(c, body))
+            }
+            "break" if l == "break" => Some(Stmt::Break),
+            "sync" if l == "sync()" => Some(Stmt::Sync),
+            _ => match l.split_once(" = ") {
+                Some((var, e)) if var.bytes().all(|c| c.is_ascii_alphanumeric() || c == b'_') => {
+                    Some(Stmt::Assign(var.to_owned(), expr(e)))
+                }
+                _ => None,
+            },
+        };
+        match stmt {
+            Some(s) => {
+                out.push(s);
+                in_step = false;
+            }
+            None => assert!(in_step, "URScript: unexpected line `{l}`"),
+        }
+    }
+    panic!("URScript: the script ends inside a block (expected {until:?})");
+}
