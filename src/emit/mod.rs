@@ -13,6 +13,7 @@
 pub mod flow;
 pub mod krl;
 pub mod rapid;
+pub mod structured;
 pub mod urscript;
 
 use std::borrow::Cow;

@@ -8,12 +8,11 @@
 
 use std::borrow::Cow;
 
-use super::flow::{self, Lines};
+use super::structured::{self, BRANCH_VAR, Dialect, Leave};
 use super::{EmitInput, Generated, Language, Profile};
 use crate::cond::{BinOp, Ops};
 use crate::diag::Diagnostics;
 use crate::model::{Signal, SignalKind};
-use crate::plan::{Block, Branch, BranchEnd};
 use crate::template::Syntax;
 use crate::value::Literal;
 
@@ -86,9 +85,6 @@ const MAX_NAME: usize = 32;
 /// The longest RAPID string.
 const MAX_STRING: usize = 80;
 
-/// The variable that holds the branch a selection without an unconditional branch chose.
-pub const BRANCH_VAR: &str = "skp_branch";
-
 fn is_reserved(w: &str) -> bool {
     RESERVED.iter().any(|r| r.eq_ignore_ascii_case(w))
 }
@@ -122,6 +118,33 @@ fn rapid_op(op: BinOp) -> &'static str {
         BinOp::Ge => ">=",
     }
 }
+
+/// RAPID's words for the program tree; loops are left through flags.
+const DIALECT: Dialect = Dialect {
+    ops: &OPS,
+    comment: "!",
+    if_: ("IF ", " THEN"),
+    elif: ("ELSEIF ", " THEN"),
+    else_: "ELSE",
+    end_if: "ENDIF",
+    while_: ("WHILE ", " DO"),
+    end_while: "ENDWHILE",
+    assign: (" := ", ";"),
+    equals: " = ",
+    wait: |out, level, c| out.line(level, &wait_until(c)),
+    leave: Leave::Flag,
+    empty_block: None,
+    declare: |branch, flags| {
+        let mut d = Vec::new();
+        if branch {
+            d.push(format!("VAR num {BRANCH_VAR} := 0;"));
+        }
+        for n in 1..=flags {
+            d.push(format!("VAR bool skp_loop{n} := TRUE;"));
+        }
+        d
+    },
+};
 
 /// The RAPID profile.
 pub struct Rapid;
@@ -232,26 +255,7 @@ impl Profile for Rapid {
     }
 
     fn generate(&self, input: &EmitInput, _diags: &mut Diagnostics) -> Option<Generated> {
-        let mut w = Writer {
-            input,
-            out: Lines::new(input, flow::steps_estimate(input)),
-            number: 0,
-            uses_branch_var: false,
-            flags: 0,
-            loops: Vec::new(),
-        };
-        w.blocks(&input.plan.body, 0);
-        let mut declarations = Vec::new();
-        if w.uses_branch_var {
-            declarations.push(format!("VAR num {BRANCH_VAR} := 0;"));
-        }
-        for n in 1..=w.flags {
-            declarations.push(format!("VAR bool skp_loop{n} := TRUE;"));
-        }
-        Some(Generated {
-            steps: w.out.out,
-            declarations,
-        })
+        Some(structured::generate(input, &DIALECT))
     }
 }
 
@@ -263,227 +267,6 @@ fn wait_until(c: &str) -> String {
         format!("WaitUntil ({c});")
     } else {
         format!("WaitUntil {c};")
-    }
-}
-
-/// Whether `b` leaves the loop it stands in (a branch ending in a leave, not inside a nested
-/// loop, whose leaves are that loop's).
-fn may_leave(b: &Block) -> bool {
-    match b {
-        Block::Choice { branches, .. } => branches
-            .iter()
-            .any(|br| br.end == BranchEnd::Leave || br.body.iter().any(may_leave)),
-        Block::Parallel { branches, .. } => branches.iter().flatten().any(may_leave),
-        Block::Step(_) | Block::Wait(_) | Block::Loop { .. } => false,
-    }
-}
-
-struct Writer<'a> {
-    input: &'a EmitInput<'a>,
-    out: Lines<'a>,
-    number: usize,
-    uses_branch_var: bool,
-    /// Loop flags used so far.
-    flags: usize,
-    /// The flag of each enclosing loop (`None`: endless, never left).
-    loops: Vec<Option<String>>,
-}
-
-impl Writer<'_> {
-    fn comment(&mut self, level: usize, text: &str) {
-        self.out
-            .line(level, &format!("! {}", flow::comment_text(text)));
-    }
-
-    /// A list of blocks; after one that may leave the loop, the rest only while its flag holds.
-    fn blocks(&mut self, blocks: &[Block], level: usize) {
-        let mut level = level;
-        let mut open = 0;
-        for (k, b) in blocks.iter().enumerate() {
-            self.block(b, level);
-            if k + 1 < blocks.len()
-                && may_leave(b)
-                && let Some(Some(flag)) = self.loops.last().cloned()
-            {
-                self.out.line(level, &format!("IF {flag} THEN"));
-                level += 1;
-                open += 1;
-            }
-        }
-        for _ in 0..open {
-            level -= 1;
-            self.out.line(level, "ENDIF");
-        }
-    }
-
-    fn block(&mut self, b: &Block, level: usize) {
-        let input = self.input;
-        let el = &input.sfc.elements;
-        match b {
-            Block::Step(i) => {
-                let Some(bs) = &input.bound.steps[*i] else {
-                    return;
-                };
-                self.number += 1;
-                let title = flow::step_title(input, *i, bs, self.number);
-                self.out.line(level, &format!("! step {title}"));
-                self.out.code(level, input.step_indent, &bs.code);
-            }
-            Block::Wait(t) => {
-                if let Some(c) = flow::condition(input, *t, &OPS) {
-                    let text = flow::condition_text(input, *t);
-                    self.comment(
-                        level,
-                        &format!("transition localId {}: {text}", el[*t].local_id),
-                    );
-                    self.out.line(level, &wait_until(&c));
-                }
-            }
-            Block::Parallel { branches, .. } => {
-                // One after another; after a branch that may leave, the rest only while the
-                // loop goes on.
-                let mut lvl = level;
-                let mut open = 0;
-                for (k, br) in branches.iter().enumerate() {
-                    self.blocks(br, lvl);
-                    if k + 1 < branches.len()
-                        && br.iter().any(may_leave)
-                        && let Some(Some(flag)) = self.loops.last().cloned()
-                    {
-                        self.out.line(lvl, &format!("IF {flag} THEN"));
-                        lvl += 1;
-                        open += 1;
-                    }
-                }
-                for _ in 0..open {
-                    lvl -= 1;
-                    self.out.line(lvl, "ENDIF");
-                }
-            }
-            Block::Choice {
-                divergence,
-                branches,
-                ..
-            } => self.choice(*divergence, branches, level),
-            Block::Loop {
-                head,
-                jumps,
-                body,
-                endless,
-            } => {
-                self.comment(
-                    level,
-                    &format!(
-                        "loop back to step localId {} (jump localId {}){}",
-                        el[*head].local_id,
-                        flow::local_ids(input, jumps),
-                        if *endless { ", endless" } else { "" }
-                    ),
-                );
-                if *endless {
-                    self.loops.push(None);
-                    self.out.line(level, "WHILE TRUE DO");
-                } else {
-                    self.flags += 1;
-                    let flag = format!("skp_loop{}", self.flags);
-                    self.out.line(level, &format!("{flag} := TRUE;"));
-                    self.out.line(level, &format!("WHILE {flag} DO"));
-                    self.loops.push(Some(flag));
-                }
-                self.blocks(body, level + 1);
-                self.loops.pop();
-                self.out.line(level, "ENDWHILE");
-            }
-        }
-    }
-
-    fn branch(&mut self, n: usize, br: &Branch, level: usize) {
-        let el = &self.input.sfc.elements;
-        let text = flow::condition_text(self.input, br.transition);
-        self.comment(
-            level,
-            &format!(
-                "branch {n} (transition localId {}): {text}",
-                el[br.transition].local_id
-            ),
-        );
-        self.blocks(&br.body, level);
-        match br.end {
-            BranchEnd::Join => {}
-            BranchEnd::Repeat(j) => self.comment(
-                level,
-                &format!("round again (jump localId {})", el[j].local_id),
-            ),
-            BranchEnd::Leave => {
-                if let Some(Some(flag)) = self.loops.last().cloned() {
-                    self.out.line(level, &format!("{flag} := FALSE;"));
-                }
-            }
-        }
-    }
-
-    /// Selection branches in priority order: an `IF`/`ELSEIF` chain whose `ELSE` is the first
-    /// unconditional branch; without one, the branch is chosen first (waiting for any
-    /// condition, testing again if none holds any more), then run.
-    fn choice(&mut self, div: usize, branches: &[Branch], level: usize) {
-        let input = self.input;
-        let conds: Vec<Option<String>> = branches
-            .iter()
-            .map(|b| flow::condition(input, b.transition, &OPS))
-            .collect();
-        self.comment(
-            level,
-            &format!(
-                "selection localId {}: {} branches, the first whose condition holds",
-                input.sfc.elements[div].local_id,
-                branches.len()
-            ),
-        );
-        if let Some(k) = conds.iter().position(Option::is_none) {
-            if k == 0 {
-                self.branch(1, &branches[0], level);
-                return;
-            }
-            for (n, br) in branches.iter().enumerate().take(k) {
-                let c = conds[n].as_deref().unwrap_or("TRUE");
-                let kw = if n == 0 { "IF" } else { "ELSEIF" };
-                self.out.line(level, &format!("{kw} {c} THEN"));
-                self.branch(n + 1, br, level + 1);
-            }
-            self.out.line(level, "ELSE");
-            self.branch(k + 1, &branches[k], level + 1);
-            self.out.line(level, "ENDIF");
-            return;
-        }
-        self.uses_branch_var = true;
-        let any: Vec<String> = conds
-            .iter()
-            .map(|c| format!("({})", c.as_deref().unwrap_or("TRUE")))
-            .collect();
-        self.out.line(level, &format!("{BRANCH_VAR} := 0;"));
-        self.out.line(level, &format!("WHILE {BRANCH_VAR} = 0 DO"));
-        self.out.line(level + 1, &wait_until(&any.join(" OR ")));
-        for (n, c) in conds.iter().enumerate() {
-            let c = c.as_deref().unwrap_or("TRUE");
-            let kw = if n == 0 { "IF" } else { "ELSEIF" };
-            self.out.line(level + 1, &format!("{kw} {c} THEN"));
-            self.out
-                .line(level + 2, &format!("{BRANCH_VAR} := {};", n + 1));
-        }
-        self.out.line(level + 1, "ENDIF");
-        self.out.line(level, "ENDWHILE");
-        for (n, br) in branches.iter().enumerate() {
-            if n == 0 {
-                self.out.line(level, &format!("IF {BRANCH_VAR} = 1 THEN"));
-            } else if n + 1 < branches.len() {
-                self.out
-                    .line(level, &format!("ELSEIF {BRANCH_VAR} = {} THEN", n + 1));
-            } else {
-                self.out.line(level, "ELSE");
-            }
-            self.branch(n + 1, br, level + 1);
-        }
-        self.out.line(level, "ENDIF");
     }
 }
 

@@ -6,12 +6,11 @@
 
 use std::borrow::Cow;
 
-use super::flow::{self, Lines};
+use super::structured::{self, Dialect, Leave};
 use super::{EmitInput, Generated, Language, Profile};
 use crate::cond::{BinOp, Ops};
 use crate::diag::Diagnostics;
 use crate::model::{Signal, SignalKind};
-use crate::plan::{Block, Branch, BranchEnd};
 use crate::template::Syntax;
 use crate::value::Literal;
 
@@ -53,9 +52,6 @@ const KEYWORDS: &[&str] = &[
 
 /// The longest URScript program name.
 const MAX_NAME: usize = 63;
-
-/// The variable that holds the branch a selection without an unconditional branch chose.
-pub const BRANCH_VAR: &str = "skp_branch";
 
 /// The highest standard digital input or output.
 const MAX_STANDARD_IO: u32 = 7;
@@ -150,6 +146,31 @@ fn ur_number(n: &str) -> Result<Cow<'_, str>, String> {
     Ok(Cow::Owned(out))
 }
 
+/// URScript's words for the program tree; loops are left by `break`.
+const DIALECT: Dialect = Dialect {
+    ops: &OPS,
+    comment: "#",
+    if_: ("if ", ":"),
+    elif: ("elif ", ":"),
+    else_: "else:",
+    end_if: "end",
+    while_: ("while ", ":"),
+    end_while: "end",
+    assign: (" = ", ""),
+    equals: " == ",
+    // `while not (c): sync() end`: waits a control cycle at a time.
+    wait: |out, level, c| {
+        out.line(level, &format!("while not ({c}):"));
+        out.line(level + 1, "sync()");
+        out.line(level, "end");
+    },
+    leave: Leave::Statement("break"),
+    // A block of comments only is no block to URScript's Python-like parser: a branch without
+    // steps waits one control cycle.
+    empty_block: Some("sync()"),
+    declare: |_, _| Vec::new(),
+};
+
 /// The URScript profile.
 pub struct UrScript;
 
@@ -240,191 +261,7 @@ impl Profile for UrScript {
     }
 
     fn generate(&self, input: &EmitInput, _diags: &mut Diagnostics) -> Option<Generated> {
-        let mut w = Writer {
-            input,
-            out: Lines::new(input, flow::steps_estimate(input)),
-            number: 0,
-        };
-        w.blocks(&input.plan.body, 0);
-        Some(Generated {
-            steps: w.out.out,
-            declarations: Vec::new(),
-        })
-    }
-}
-
-struct Writer<'a> {
-    input: &'a EmitInput<'a>,
-    out: Lines<'a>,
-    number: usize,
-}
-
-impl Writer<'_> {
-    fn comment(&mut self, level: usize, text: &str) {
-        self.out
-            .line(level, &format!("# {}", flow::comment_text(text)));
-    }
-
-    fn blocks(&mut self, blocks: &[Block], level: usize) {
-        for b in blocks {
-            self.block(b, level);
-        }
-    }
-
-    /// `while not (c): sync() end`: waits a control cycle at a time.
-    fn wait(&mut self, level: usize, c: &str) {
-        self.out.line(level, &format!("while not ({c}):"));
-        self.out.line(level + 1, "sync()");
-        self.out.line(level, "end");
-    }
-
-    fn block(&mut self, b: &Block, level: usize) {
-        let input = self.input;
-        let el = &input.sfc.elements;
-        match b {
-            Block::Step(i) => {
-                let Some(bs) = &input.bound.steps[*i] else {
-                    return;
-                };
-                self.number += 1;
-                let title = flow::step_title(input, *i, bs, self.number);
-                self.out.line(level, &format!("# step {title}"));
-                self.out.code(level, input.step_indent, &bs.code);
-            }
-            Block::Wait(t) => {
-                if let Some(c) = flow::condition(input, *t, &OPS) {
-                    let text = flow::condition_text(input, *t);
-                    self.comment(
-                        level,
-                        &format!("transition localId {}: {text}", el[*t].local_id),
-                    );
-                    self.wait(level, &c);
-                }
-            }
-            Block::Parallel { branches, .. } => {
-                for br in branches {
-                    self.blocks(br, level);
-                }
-            }
-            Block::Choice {
-                divergence,
-                branches,
-                ..
-            } => self.choice(*divergence, branches, level),
-            Block::Loop {
-                head,
-                jumps,
-                body,
-                endless,
-            } => {
-                self.comment(
-                    level,
-                    &format!(
-                        "loop back to step localId {} (jump localId {}){}",
-                        el[*head].local_id,
-                        flow::local_ids(input, jumps),
-                        if *endless { ", endless" } else { "" }
-                    ),
-                );
-                self.out.line(level, "while True:");
-                self.blocks(body, level + 1);
-                self.out.line(level, "end");
-            }
-        }
-    }
-
-    fn branch(&mut self, n: usize, br: &Branch, level: usize) {
-        let el = &self.input.sfc.elements;
-        let text = flow::condition_text(self.input, br.transition);
-        self.comment(
-            level,
-            &format!(
-                "branch {n} (transition localId {}): {text}",
-                el[br.transition].local_id
-            ),
-        );
-        let start = self.out.out.len();
-        self.blocks(&br.body, level);
-        match br.end {
-            BranchEnd::Join => {}
-            BranchEnd::Repeat(j) => self.comment(
-                level,
-                &format!("round again (jump localId {})", el[j].local_id),
-            ),
-            BranchEnd::Leave => self.out.line(level, "break"),
-        }
-        // A block of comments only is no block to URScript's Python-like parser: a branch
-        // without steps waits one control cycle.
-        let body = &self.out.out[start..];
-        if body.lines().all(|l| {
-            let t = l.trim();
-            t.is_empty() || t.starts_with('#')
-        }) {
-            self.out.line(level, "sync()");
-        }
-    }
-
-    /// Selection branches in priority order: `if`/`elif` whose `else` is the first
-    /// unconditional branch; without one, the branch is chosen first (waiting for any
-    /// condition, testing again if none holds any more), then run.
-    fn choice(&mut self, div: usize, branches: &[Branch], level: usize) {
-        let input = self.input;
-        let conds: Vec<Option<String>> = branches
-            .iter()
-            .map(|b| flow::condition(input, b.transition, &OPS))
-            .collect();
-        self.comment(
-            level,
-            &format!(
-                "selection localId {}: {} branches, the first whose condition holds",
-                input.sfc.elements[div].local_id,
-                branches.len()
-            ),
-        );
-        if let Some(k) = conds.iter().position(Option::is_none) {
-            if k == 0 {
-                self.branch(1, &branches[0], level);
-                return;
-            }
-            for (n, br) in branches.iter().enumerate().take(k) {
-                let c = conds[n].as_deref().unwrap_or("True");
-                let kw = if n == 0 { "if" } else { "elif" };
-                self.out.line(level, &format!("{kw} {c}:"));
-                self.branch(n + 1, br, level + 1);
-            }
-            self.out.line(level, "else:");
-            self.branch(k + 1, &branches[k], level + 1);
-            self.out.line(level, "end");
-            return;
-        }
-        let any: Vec<String> = conds
-            .iter()
-            .map(|c| format!("({})", c.as_deref().unwrap_or("True")))
-            .collect();
-        self.out.line(level, &format!("{BRANCH_VAR} = 0"));
-        self.out.line(level, &format!("while {BRANCH_VAR} == 0:"));
-        self.wait(level + 1, &any.join(" or "));
-        for (n, c) in conds.iter().enumerate() {
-            let c = c.as_deref().unwrap_or("True");
-            let kw = if n == 0 { "if" } else { "elif" };
-            self.out.line(level + 1, &format!("{kw} {c}:"));
-            self.out
-                .line(level + 2, &format!("{BRANCH_VAR} = {}", n + 1));
-        }
-        self.out.line(level + 1, "end");
-        self.out.line(level, "end");
-        for (n, br) in branches.iter().enumerate() {
-            if n == 0 {
-                self.out.line(level, &format!("if {BRANCH_VAR} == 1:"));
-            } else if n + 1 < branches.len() {
-                self.out
-                    .line(level, &format!("elif {BRANCH_VAR} == {}:", n + 1));
-            } else {
-                self.out.line(level, "else:");
-            }
-            self.branch(n + 1, br, level + 1);
-        }
-        self.out.line(level, "end");
+        Some(structured::generate(input, &DIALECT))
     }
 }
 

@@ -1,0 +1,310 @@
+//! The program-tree writer of the languages with `IF`/`ELSEIF`/`ELSE` chains and `WHILE` loops:
+//! RAPID and URScript. A [`Dialect`] gives the keywords; the structure is the same:
+//!
+//! - a step: a comment line `step n …`, then its code;
+//! - a guarded transition: the dialect's wait;
+//! - simultaneous branches: one after another;
+//! - a selection with an unconditional branch: `if c1 … elif c2 … else` (that branch) `end`;
+//!   without one: the branch is chosen first into `skp_branch` (waiting for any condition,
+//!   testing again if none holds any more), then run by an `if` chain on it;
+//! - a loop: `while true` left by the dialect's way ([`Leave`]).
+
+use super::flow::{self, Lines};
+use super::{EmitInput, Generated};
+use crate::cond::Ops;
+use crate::plan::{Block, Branch, BranchEnd};
+
+/// The variable that holds the branch a selection without an unconditional branch chose.
+pub const BRANCH_VAR: &str = "skp_branch";
+
+/// How a dialect leaves a loop.
+#[derive(Debug)]
+pub enum Leave {
+    /// A statement that leaves the innermost loop (`break`).
+    Statement(&'static str),
+    /// A flag per loop (`skp_loopN`): the loop runs while it holds, a leaving branch clears it,
+    /// and what follows a block that may leave runs only while it holds (RAPID has no `EXIT`
+    /// from a `WHILE` that `rapidchecker` accepts, and no labels).
+    Flag,
+}
+
+/// One language's words for the structure.
+#[derive(Debug)]
+pub struct Dialect {
+    pub ops: &'static Ops,
+    /// Starts a comment (`!`, `#`).
+    pub comment: &'static str,
+    /// `(before, after)` a condition.
+    pub if_: (&'static str, &'static str),
+    pub elif: (&'static str, &'static str),
+    pub else_: &'static str,
+    pub end_if: &'static str,
+    pub while_: (&'static str, &'static str),
+    pub end_while: &'static str,
+    /// `(between, after)` in an assignment (` := `, `;`).
+    pub assign: (&'static str, &'static str),
+    /// The equality operator with its spaces.
+    pub equals: &'static str,
+    /// Writes a wait for the condition.
+    pub wait: fn(&mut Lines, usize, &str),
+    pub leave: Leave,
+    /// A statement for a branch that would hold no statement (`None`: an empty block is fine).
+    pub empty_block: Option<&'static str>,
+    /// The declarations of the variables used: whether `skp_branch` was, how many loop flags.
+    pub declare: fn(bool, usize) -> Vec<String>,
+}
+
+/// Writes the program tree in `dialect`.
+pub fn generate(input: &EmitInput, dialect: &Dialect) -> Generated {
+    let mut w = Writer {
+        input,
+        d: dialect,
+        out: Lines::new(input, flow::steps_estimate(input)),
+        number: 0,
+        uses_branch_var: false,
+        flags: 0,
+        loops: Vec::new(),
+    };
+    w.blocks(&input.plan.body, 0);
+    Generated {
+        steps: w.out.out,
+        declarations: (dialect.declare)(w.uses_branch_var, w.flags),
+    }
+}
+
+/// Whether `b` leaves the loop it stands in (a branch ending in a leave, not inside a nested
+/// loop, whose leaves are that loop's).
+fn may_leave(b: &Block) -> bool {
+    match b {
+        Block::Choice { branches, .. } => branches
+            .iter()
+            .any(|br| br.end == BranchEnd::Leave || br.body.iter().any(may_leave)),
+        Block::Parallel { branches, .. } => branches.iter().flatten().any(may_leave),
+        Block::Step(_) | Block::Wait(_) | Block::Loop { .. } => false,
+    }
+}
+
+struct Writer<'a> {
+    input: &'a EmitInput<'a>,
+    d: &'a Dialect,
+    out: Lines<'a>,
+    number: usize,
+    uses_branch_var: bool,
+    /// Loop flags used so far ([`Leave::Flag`]).
+    flags: usize,
+    /// The flag of each enclosing loop (`None`: left by a statement, or endless).
+    loops: Vec<Option<String>>,
+}
+
+impl Writer<'_> {
+    fn comment(&mut self, level: usize, text: &str) {
+        let line = format!("{} {}", self.d.comment, flow::comment_text(text));
+        self.out.line(level, &line);
+    }
+
+    fn if_line(&mut self, level: usize, first: bool, c: &str) {
+        let (a, b) = if first { self.d.if_ } else { self.d.elif };
+        self.out.line(level, &format!("{a}{c}{b}"));
+    }
+
+    fn assign(&mut self, level: usize, var: &str, value: &str) {
+        let (a, b) = self.d.assign;
+        self.out.line(level, &format!("{var}{a}{value}{b}"));
+    }
+
+    /// Blocks one after another. After one that may leave the loop (with a flag), the rest
+    /// runs only while the flag holds.
+    fn sequence<'b>(&mut self, parts: impl Iterator<Item = &'b [Block]>, level: usize) {
+        let mut level = level;
+        let mut open = 0;
+        let mut parts = parts.peekable();
+        while let Some(part) = parts.next() {
+            for (k, b) in part.iter().enumerate() {
+                self.block(b, level);
+                let more = k + 1 < part.len() || parts.peek().is_some();
+                if more
+                    && may_leave(b)
+                    && let Some(Some(flag)) = self.loops.last().cloned()
+                {
+                    self.if_line(level, true, &flag);
+                    level += 1;
+                    open += 1;
+                }
+            }
+        }
+        for _ in 0..open {
+            level -= 1;
+            self.out.line(level, self.d.end_if);
+        }
+    }
+
+    fn blocks(&mut self, blocks: &[Block], level: usize) {
+        self.sequence(std::iter::once(blocks), level);
+    }
+
+    fn block(&mut self, b: &Block, level: usize) {
+        let input = self.input;
+        let el = &input.sfc.elements;
+        match b {
+            Block::Step(i) => {
+                let Some(bs) = &input.bound.steps[*i] else {
+                    return;
+                };
+                self.number += 1;
+                let title = flow::step_title(input, *i, bs, self.number);
+                self.out
+                    .line(level, &format!("{} step {title}", self.d.comment));
+                self.out.code(level, input.step_indent, &bs.code);
+            }
+            Block::Wait(t) => {
+                if let Some(c) = flow::condition(input, *t, self.d.ops) {
+                    let text = flow::condition_text(input, *t);
+                    self.comment(
+                        level,
+                        &format!("transition localId {}: {text}", el[*t].local_id),
+                    );
+                    (self.d.wait)(&mut self.out, level, &c);
+                }
+            }
+            Block::Parallel { branches, .. } => {
+                self.sequence(branches.iter().map(Vec::as_slice), level);
+            }
+            Block::Choice {
+                divergence,
+                branches,
+                ..
+            } => self.choice(*divergence, branches, level),
+            Block::Loop {
+                head,
+                jumps,
+                body,
+                endless,
+            } => {
+                self.comment(
+                    level,
+                    &format!(
+                        "loop back to step localId {} (jump localId {}){}",
+                        el[*head].local_id,
+                        flow::local_ids(input, jumps),
+                        if *endless { ", endless" } else { "" }
+                    ),
+                );
+                let (a, b) = self.d.while_;
+                let flag = match self.d.leave {
+                    Leave::Flag if !*endless => {
+                        self.flags += 1;
+                        let flag = format!("skp_loop{}", self.flags);
+                        self.assign(level, &flag, self.d.ops.true_);
+                        self.out.line(level, &format!("{a}{flag}{b}"));
+                        Some(flag)
+                    }
+                    _ => {
+                        self.out.line(level, &format!("{a}{}{b}", self.d.ops.true_));
+                        None
+                    }
+                };
+                self.loops.push(flag);
+                self.blocks(body, level + 1);
+                self.loops.pop();
+                self.out.line(level, self.d.end_while);
+            }
+        }
+    }
+
+    fn branch(&mut self, n: usize, br: &Branch, level: usize) {
+        let el = &self.input.sfc.elements;
+        let text = flow::condition_text(self.input, br.transition);
+        self.comment(
+            level,
+            &format!(
+                "branch {n} (transition localId {}): {text}",
+                el[br.transition].local_id
+            ),
+        );
+        let start = self.out.out.len();
+        self.blocks(&br.body, level);
+        match br.end {
+            BranchEnd::Join => {}
+            BranchEnd::Repeat(j) => self.comment(
+                level,
+                &format!("round again (jump localId {})", el[j].local_id),
+            ),
+            BranchEnd::Leave => match (&self.d.leave, self.loops.last().cloned()) {
+                (Leave::Statement(s), _) => self.out.line(level, s),
+                (Leave::Flag, Some(Some(flag))) => self.assign(level, &flag, self.d.ops.false_),
+                (Leave::Flag, _) => {}
+            },
+        }
+        if let Some(stmt) = self.d.empty_block {
+            let comment = self.d.comment;
+            let body = &self.out.out[start..];
+            if body.lines().all(|l| {
+                let t = l.trim();
+                t.is_empty() || t.starts_with(comment)
+            }) {
+                self.out.line(level, stmt);
+            }
+        }
+    }
+
+    /// Selection branches in priority order: an `if`/`elif` chain whose `else` is the first
+    /// unconditional branch; without one, the branch is chosen first (waiting for any
+    /// condition, testing again if none holds any more), then run.
+    fn choice(&mut self, div: usize, branches: &[Branch], level: usize) {
+        let input = self.input;
+        let conds: Vec<Option<String>> = branches
+            .iter()
+            .map(|b| flow::condition(input, b.transition, self.d.ops))
+            .collect();
+        self.comment(
+            level,
+            &format!(
+                "selection localId {}: {} branches, the first whose condition holds",
+                input.sfc.elements[div].local_id,
+                branches.len()
+            ),
+        );
+        if let Some(k) = conds.iter().position(Option::is_none) {
+            // Branches after an unconditional one are never taken.
+            if k == 0 {
+                self.branch(1, &branches[0], level);
+                return;
+            }
+            for (n, br) in branches.iter().enumerate().take(k) {
+                self.if_line(level, n == 0, conds[n].as_deref().unwrap_or_default());
+                self.branch(n + 1, br, level + 1);
+            }
+            self.out.line(level, self.d.else_);
+            self.branch(k + 1, &branches[k], level + 1);
+            self.out.line(level, self.d.end_if);
+            return;
+        }
+        self.uses_branch_var = true;
+        let any: Vec<String> = conds
+            .iter()
+            .map(|c| format!("({})", c.as_deref().unwrap_or_default()))
+            .collect();
+        let or = format!(" {} ", (self.d.ops.op)(crate::cond::BinOp::Or));
+        let (a, b) = self.d.while_;
+        self.assign(level, BRANCH_VAR, "0");
+        self.out
+            .line(level, &format!("{a}{BRANCH_VAR}{}0{b}", self.d.equals));
+        (self.d.wait)(&mut self.out, level + 1, &any.join(&or));
+        for (n, c) in conds.iter().enumerate() {
+            self.if_line(level + 1, n == 0, c.as_deref().unwrap_or_default());
+            self.assign(level + 2, BRANCH_VAR, &(n + 1).to_string());
+        }
+        self.out.line(level + 1, self.d.end_if);
+        self.out.line(level, self.d.end_while);
+        for (n, br) in branches.iter().enumerate() {
+            if n + 1 < branches.len() || n == 0 {
+                let test = format!("{BRANCH_VAR}{}{}", self.d.equals, n + 1);
+                self.if_line(level, n == 0, &test);
+            } else {
+                self.out.line(level, self.d.else_);
+            }
+            self.branch(n + 1, br, level + 1);
+        }
+        self.out.line(level, self.d.end_if);
+    }
+}
