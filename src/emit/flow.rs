@@ -133,3 +133,47 @@ pub fn steps_estimate(input: &EmitInput) -> usize {
         .sum::<usize>()
         + 1024
 }
+
+/// The comment before a guarded transition's wait.
+pub fn transition_comment(input: &EmitInput, t: usize) -> String {
+    format!(
+        "transition localId {}: {}",
+        input.sfc.elements[t].local_id,
+        condition_text(input, t)
+    )
+}
+
+/// The comment before a loop.
+pub fn loop_comment(input: &EmitInput, head: usize, jumps: &[usize], endless: bool) -> String {
+    format!(
+        "loop back to step localId {} (jump localId {}){}",
+        input.sfc.elements[head].local_id,
+        local_ids(input, jumps),
+        if endless { ", endless" } else { "" }
+    )
+}
+
+/// The comment at the head of selection branch `n` (from 1).
+pub fn branch_comment(input: &EmitInput, n: usize, transition: usize) -> String {
+    format!(
+        "branch {n} (transition localId {}): {}",
+        input.sfc.elements[transition].local_id,
+        condition_text(input, transition)
+    )
+}
+
+/// The comment at the end of a branch that goes round the loop again.
+pub fn round_again_comment(input: &EmitInput, jump: usize) -> String {
+    format!(
+        "round again (jump localId {})",
+        input.sfc.elements[jump].local_id
+    )
+}
+
+/// The comment before a selection.
+pub fn selection_comment(input: &EmitInput, divergence: usize, branches: usize) -> String {
+    format!(
+        "selection localId {}: {branches} branches, the first whose condition holds",
+        input.sfc.elements[divergence].local_id
+    )
+}

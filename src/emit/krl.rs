@@ -129,7 +129,6 @@ impl Writer<'_> {
 
     fn block(&mut self, b: &Block, level: usize) {
         let input = self.input;
-        let el = &input.sfc.elements;
         match b {
             Block::Step(i) => {
                 let Some(bs) = &input.bound.steps[*i] else {
@@ -143,11 +142,7 @@ impl Writer<'_> {
             }
             Block::Wait(t) => {
                 if let Some(c) = self.condition(*t) {
-                    let text = flow::condition_text(input, *t);
-                    self.comment(
-                        level,
-                        &format!("transition localId {}: {text}", el[*t].local_id),
-                    );
+                    self.comment(level, &flow::transition_comment(input, *t));
                     self.line(level, &format!("WAIT FOR {c}"));
                 }
             }
@@ -167,15 +162,7 @@ impl Writer<'_> {
                 body,
                 endless,
             } => {
-                self.comment(
-                    level,
-                    &format!(
-                        "loop back to step localId {} (jump localId {}){}",
-                        el[*head].local_id,
-                        flow::local_ids(input, jumps),
-                        if *endless { ", endless" } else { "" }
-                    ),
-                );
+                self.comment(level, &flow::loop_comment(input, *head, jumps, *endless));
                 self.line(level, "LOOP");
                 self.blocks(body, level + 1);
                 self.line(level, "ENDLOOP");
@@ -185,22 +172,11 @@ impl Writer<'_> {
 
     /// A branch's body and how it ends.
     fn branch(&mut self, n: usize, br: &Branch, level: usize) {
-        let el = &self.input.sfc.elements;
-        let text = flow::condition_text(self.input, br.transition);
-        self.comment(
-            level,
-            &format!(
-                "branch {n} (transition localId {}): {text}",
-                el[br.transition].local_id
-            ),
-        );
+        self.comment(level, &flow::branch_comment(self.input, n, br.transition));
         self.blocks(&br.body, level);
         match br.end {
             BranchEnd::Join => {}
-            BranchEnd::Repeat(j) => self.comment(
-                level,
-                &format!("round again (jump localId {})", el[j].local_id),
-            ),
+            BranchEnd::Repeat(j) => self.comment(level, &flow::round_again_comment(self.input, j)),
             BranchEnd::Leave => self.line(level, "EXIT"),
         }
     }
@@ -210,18 +186,13 @@ impl Writer<'_> {
     /// first that holds in [`BRANCH_VAR`] (testing again if none holds any more) and then runs
     /// that branch, so it never passes the selection without taking a branch.
     fn choice(&mut self, div: usize, branches: &[Branch], level: usize) {
-        let el = &self.input.sfc.elements;
         let conds: Vec<Option<String>> = branches
             .iter()
             .map(|b| self.condition(b.transition))
             .collect();
         self.comment(
             level,
-            &format!(
-                "selection localId {}: {} branches, the first whose condition holds",
-                el[div].local_id,
-                branches.len()
-            ),
+            &flow::selection_comment(self.input, div, branches.len()),
         );
         if let Some(k) = conds.iter().position(Option::is_none) {
             // Branches after an unconditional one are never taken.

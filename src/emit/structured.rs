@@ -144,7 +144,6 @@ impl Writer<'_> {
 
     fn block(&mut self, b: &Block, level: usize) {
         let input = self.input;
-        let el = &input.sfc.elements;
         match b {
             Block::Step(i) => {
                 let Some(bs) = &input.bound.steps[*i] else {
@@ -158,11 +157,7 @@ impl Writer<'_> {
             }
             Block::Wait(t) => {
                 if let Some(c) = flow::condition(input, *t, self.d.ops) {
-                    let text = flow::condition_text(input, *t);
-                    self.comment(
-                        level,
-                        &format!("transition localId {}: {text}", el[*t].local_id),
-                    );
+                    self.comment(level, &flow::transition_comment(input, *t));
                     (self.d.wait)(&mut self.out, level, &c);
                 }
             }
@@ -180,15 +175,7 @@ impl Writer<'_> {
                 body,
                 endless,
             } => {
-                self.comment(
-                    level,
-                    &format!(
-                        "loop back to step localId {} (jump localId {}){}",
-                        el[*head].local_id,
-                        flow::local_ids(input, jumps),
-                        if *endless { ", endless" } else { "" }
-                    ),
-                );
+                self.comment(level, &flow::loop_comment(input, *head, jumps, *endless));
                 let (a, b) = self.d.while_;
                 let flag = match self.d.leave {
                     Leave::Flag if !*endless => {
@@ -212,23 +199,12 @@ impl Writer<'_> {
     }
 
     fn branch(&mut self, n: usize, br: &Branch, level: usize) {
-        let el = &self.input.sfc.elements;
-        let text = flow::condition_text(self.input, br.transition);
-        self.comment(
-            level,
-            &format!(
-                "branch {n} (transition localId {}): {text}",
-                el[br.transition].local_id
-            ),
-        );
+        self.comment(level, &flow::branch_comment(self.input, n, br.transition));
         let start = self.out.out.len();
         self.blocks(&br.body, level);
         match br.end {
             BranchEnd::Join => {}
-            BranchEnd::Repeat(j) => self.comment(
-                level,
-                &format!("round again (jump localId {})", el[j].local_id),
-            ),
+            BranchEnd::Repeat(j) => self.comment(level, &flow::round_again_comment(self.input, j)),
             BranchEnd::Leave => match (&self.d.leave, self.loops.last().cloned()) {
                 (Leave::Statement(s), _) => self.out.line(level, s),
                 (Leave::Flag, Some(Some(flag))) => self.assign(level, &flag, self.d.ops.false_),
@@ -258,11 +234,7 @@ impl Writer<'_> {
             .collect();
         self.comment(
             level,
-            &format!(
-                "selection localId {}: {} branches, the first whose condition holds",
-                input.sfc.elements[div].local_id,
-                branches.len()
-            ),
+            &flow::selection_comment(self.input, div, branches.len()),
         );
         if let Some(k) = conds.iter().position(Option::is_none) {
             // Branches after an unconditional one are never taken.
