@@ -504,4 +504,18 @@ mod tests {
         assert_eq!(Language::parse("krl"), Some(Language::Krl));
         assert_eq!(Language::parse("C++"), None);
     }
+
+    #[test]
+    fn program_names_follow_each_languages_rules() {
+        let ok = |l: Language, n: &str| l.profile().check_program_name(n).is_ok();
+        use Language::*;
+        assert!(ok(Krl, &"a".repeat(24)) && !ok(Krl, &"a".repeat(25)));
+        assert!(ok(Krl, "_cell") && !ok(Krl, "LOOP") && !ok(Krl, "1a"));
+        assert!(ok(Rapid, &"a".repeat(32)) && !ok(Rapid, &"a".repeat(33)));
+        assert!(!ok(Rapid, "_cell") && !ok(Rapid, "EndProc") && !ok(Rapid, "a-b"));
+        assert!(ok(UrScript, &"a".repeat(63)) && !ok(UrScript, &"a".repeat(64)));
+        assert!(ok(UrScript, "_cell") && !ok(UrScript, "1a") && !ok(UrScript, "end"));
+        // URScript is case-sensitive: `End` is a name.
+        assert!(ok(UrScript, "End"));
+    }
 }

@@ -196,9 +196,9 @@ impl Profile for UrScript {
     }
 
     fn check_program_name(&self, name: &str) -> Result<(), String> {
-        if !is_ur_name(name, MAX_NAME) || name.as_bytes()[0] == b'_' {
+        if !is_ur_name(name, MAX_NAME) {
             Err(format!(
-                "not a URScript program name: a letter, then letters, digits or `_`, at most {MAX_NAME} characters"
+                "not a URScript program name: letters, digits or `_`, not starting with a digit, at most {MAX_NAME} characters"
             ))
         } else if is_keyword(name) {
             Err("a URScript keyword cannot name a program".to_owned())
