@@ -200,7 +200,8 @@ impl<'t> Compiler<'t> {
 
     /// At a word `start..end` that names a conversion: the conversion call up to its `)`,
     /// compiled into a piece. Returns where scanning goes on; `None` leaves the word to the
-    /// other rules (not a call: no `(` follows, or the word follows `.`/`#`/`'`).
+    /// other rules (not a call: no `(` follows, or the word follows `.`/`#`/`'`; or a call that
+    /// cannot be a conversion, recorded in `errors`).
     fn conversion(&mut self, start: usize, end: usize) -> Option<usize> {
         let b = self.text.as_bytes();
         let conversion = Conversion::from_name(&self.text[start..end])?;
@@ -214,11 +215,14 @@ impl<'t> Compiler<'t> {
         if b.get(open) != Some(&b'(') {
             return None;
         }
-        let line_end = self.text[open..].find('\n').map_or(b.len(), |k| open + k);
-        let Some(close) = self.text[open + 1..line_end]
-            .find(')')
+        // The `)` on the same line, before a comment or a string starts.
+        let comment = self.syntax.comment;
+        let close = b[open + 1..]
+            .iter()
+            .position(|&c| c == b')' || c == b'\n' || c == comment || c == b'"')
             .map(|k| open + 1 + k)
-        else {
+            .filter(|&k| b[k] == b')');
+        let Some(close) = close else {
             self.errors.push((
                 start,
                 format!(
@@ -226,7 +230,8 @@ impl<'t> Compiler<'t> {
                     conversion.name()
                 ),
             ));
-            return Some(line_end);
+            // Not a conversion: the words go on by the other rules.
+            return None;
         };
         let inner = &self.text[open + 1..close];
         let mut args = Vec::new();
@@ -264,7 +269,8 @@ impl<'t> Compiler<'t> {
                 start,
                 format!("conversion `{}`: {why}", &self.text[start..=close]),
             ));
-            return Some(close + 1);
+            // Not a conversion: the words go on by the other rules.
+            return None;
         }
         self.flush(start);
         for a in &args {
@@ -875,5 +881,61 @@ mod tests {
         assert!(params_from_brackets(&deep).is_empty());
         let t = Template::compile(&deep, &params(&["X", "A"]));
         assert_eq!(t.used(), &[true, false]);
+    }
+
+    #[test]
+    fn conversions_are_evaluated_or_refused_with_the_words_substituted() {
+        let p = |n: &[&str]| n.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let ur = Syntax {
+            comment: b'#',
+            aggregates: false,
+            case_sensitive: true,
+        };
+        let t = Template::compile_for(
+            "movel(p[m(X), 0, rotvec(A, 0, 90)], a=1.2)",
+            &p(&["X", "A"]),
+            ur,
+        );
+        assert!(t.errors().is_empty(), "{:?}", t.errors());
+        assert_eq!(t.conversions(), 2);
+        let mut out = String::new();
+        t.render_with(
+            &["1500", "180"],
+            &|i| [1500.0, 180.0].get(i).copied(),
+            &mut out,
+        )
+        .unwrap();
+        let mut r = [0.0; 4];
+        Conversion::Rotvec.apply(&[180.0, 0.0, 90.0], &mut r);
+        let rotvec = crate::convert::format_results(&r[..3]).unwrap();
+        // `a=1.2` is URScript's keyword argument: parameter `A` is matched case-sensitively.
+        assert_eq!(out, format!("movel(p[1.5, 0, {rotvec}], a=1.2)"));
+        // Not a number: the error names the conversion and the parameter.
+        let err = t.render_with(&["x", "180"], &|_| None, &mut String::new());
+        assert!(
+            matches!(err, Err(ConvError::NotANumber { param: 0, .. })),
+            "{err:?}"
+        );
+        // A `)` only inside a comment does not close a conversion: refused, and the words of
+        // the line are substituted by the usual rules.
+        let t = Template::compile("PTP {X m(X ; m(X)", &p(&["X"]));
+        assert_eq!(t.errors().len(), 1, "{:?}", t.errors());
+        let mut out = String::new();
+        t.render(&["7"], &mut out);
+        assert_eq!(out, "PTP {X m(7 ; m(X)");
+        // Arguments that are neither parameters nor numbers, or too many.
+        assert_eq!(
+            Template::compile("quat(A, B)", &p(&["A", "B"]))
+                .errors()
+                .len(),
+            1
+        );
+        assert_eq!(Template::compile("m(A + 1)", &p(&["A"])).errors().len(), 1);
+        assert_eq!(Template::compile("deg(1.5707963)", &[]).conversions(), 1);
+        // Not a call, or a member: left alone.
+        assert_eq!(
+            Template::compile("m := 3; x.m(1); mm", &[]).conversions(),
+            0
+        );
     }
 }
