@@ -8,7 +8,9 @@
 //! profile's writer and fills its template.
 //!
 //! Adding a language: a module beside [`krl`], [`rapid`] and [`urscript`] implementing
-//! [`Profile`], a `templates/<lang>.toml`, and a [`Language`] variant.
+//! [`Profile`] (a language of `if`/`while` blocks describes its words in a
+//! [`structured::Dialect`]), a `templates/<lang>.toml` whose keys are `step_indent` and the
+//! profile's files, and a [`Language`] variant.
 
 pub mod flow;
 pub mod krl;
@@ -17,8 +19,6 @@ pub mod structured;
 pub mod urscript;
 
 use std::borrow::Cow;
-
-use serde::Deserialize;
 
 use crate::bind::Bound;
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
@@ -152,17 +152,6 @@ const INLINE: &[&str] = &["program", "comment"];
 /// Placeholders that stand on a line of their own.
 const BLOCKS: &[&str] = &["steps", "definitions", "declarations"];
 
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawTemplate {
-    step_indent: String,
-    src: Option<String>,
-    dat: Option<String>,
-    #[serde(rename = "mod")]
-    module: Option<String>,
-    script: Option<String>,
-}
-
 impl OutputTemplate {
     /// The built-in template of `language`.
     pub fn builtin(language: Language) -> Self {
@@ -202,7 +191,7 @@ impl OutputTemplate {
         diags: &mut Diagnostics,
     ) -> Option<Self> {
         let text = &sources.get(file).text;
-        let raw: RawTemplate = match toml::from_str(text) {
+        let table: toml::Table = match toml::from_str(text) {
             Ok(t) => t,
             Err(e) => {
                 let range = e.span().unwrap_or(0..0);
@@ -226,34 +215,53 @@ impl OutputTemplate {
             );
             ok = false;
         };
-        let given = [
-            ("src", raw.src),
-            ("dat", raw.dat),
-            ("mod", raw.module),
-            ("script", raw.script),
-        ];
+        // The keys: `step_indent` and one per output file of the language.
+        let mut step_indent = None;
         let mut files = Vec::new();
-        for (key, body) in given {
-            let wanted = profile.files().iter().find(|e| **e == key);
-            match (wanted, body) {
-                (Some(ext), Some(body)) => files.push((*ext, body)),
-                (Some(_), None) => bad(
-                    format!(
-                        "a {language} template needs `{key}` (it has {})",
-                        list(profile.files())
-                    ),
-                    "step_indent",
-                ),
-                (None, Some(_)) => bad(
+        for (key, value) in &table {
+            let ext = profile.files().iter().find(|e| **e == key.as_str());
+            let other = Language::ALL
+                .iter()
+                .any(|l| l.profile().files().contains(&key.as_str()));
+            match (key.as_str(), value.as_str()) {
+                ("step_indent", Some(v)) => step_indent = Some(v.to_owned()),
+                (_, Some(body)) if ext.is_some() => {
+                    files.push((*ext.expect("checked"), body.to_owned()));
+                }
+                (_, None) if key == "step_indent" || ext.is_some() => {
+                    bad(format!("`{key}` must be a string"), key)
+                }
+                _ if other => bad(
                     format!(
                         "`{key}` is not a file of a {language} program, which has {}: is this a template for another language?",
                         list(profile.files())
                     ),
                     key,
                 ),
-                (None, None) => {}
+                _ => bad(
+                    format!(
+                        "unknown field `{key}`; a {language} template has `step_indent` and {}",
+                        list(profile.files())
+                    ),
+                    key,
+                ),
             }
         }
+        for ext in profile.files() {
+            if !files.iter().any(|(e, _)| e == ext) {
+                bad(
+                    format!(
+                        "a {language} template needs `{ext}` (it has {})",
+                        list(profile.files())
+                    ),
+                    "step_indent",
+                );
+            }
+        }
+        let step_indent = step_indent.unwrap_or_else(|| {
+            bad("missing field `step_indent`".to_owned(), "");
+            String::new()
+        });
         files.sort_by_key(|(e, _)| profile.files().iter().position(|x| x == e));
         let mut steps = 0;
         for (key, body) in &files {
@@ -292,7 +300,7 @@ impl OutputTemplate {
                 main,
             );
         }
-        if !raw.step_indent.chars().all(|c| c == ' ' || c == '\t') {
+        if !step_indent.chars().all(|c| c == ' ' || c == '\t') {
             bad(
                 "`step_indent` may only hold spaces and tabs".to_owned(),
                 "step_indent",
@@ -300,7 +308,7 @@ impl OutputTemplate {
         }
         ok.then_some(OutputTemplate {
             language,
-            step_indent: raw.step_indent,
+            step_indent,
             files,
         })
     }
