@@ -240,6 +240,8 @@ fn run(a: Args) -> u8 {
         template: a.template.clone(),
         confine_to: None,
         pou: a.pou.clone(),
+        // The SFC model only for the listings.
+        keep_model: !a.print.is_empty(),
     };
     let c = compile::compile(&fs, blackboard, &opts);
     if std::env::var_os("SKILLPOST_TIMINGS").is_some() {

@@ -30,6 +30,9 @@ pub struct Options {
     /// The SFC POU to use (`--pou`); else the SFC reference's `#fragment`, else the first
     /// program with an SFC body.
     pub pou: Option<String>,
+    /// Return the SFC model and the plan in the [`Compilation`] (for the listings); else they
+    /// are freed before the compile ends.
+    pub keep_model: bool,
 }
 
 /// The write-back to do after a successful compile.
@@ -82,6 +85,8 @@ pub struct Compilation {
     pub outputs: Vec<(PathBuf, OutputFile)>,
     pub write_back: Option<WriteBack>,
     pub blackboard: Option<Blackboard>,
+    /// The SFC model and the plan: with [`Options::keep_model`] (and always from
+    /// [`check_sfc`]).
     pub sfc: Option<Sfc>,
     pub plan: Option<Plan>,
     pub irls: Vec<Irl>,
@@ -206,14 +211,68 @@ impl<'a> Ctx<'a> {
         }
         self.refs.push((path.clone(), at.clone()));
         let display = path.display().to_string();
-        xml::load(
+        let file = xml::load(
             &self.fs,
             &path,
             display,
             Some(at.clone()),
             &mut self.sources,
             &mut self.diags,
-        )
+        )?;
+        // A file read before whose text was dropped (the SFC named again, as an IRL file):
+        // its text again, or an I/O error when it changed meanwhile.
+        if self.sources.is_dropped(file) && !self.reload(file) {
+            self.diags.push(
+                Diagnostic::error(
+                    Code::FileUnreadable,
+                    format!(
+                        "`{}` changed while it was being compiled; run again",
+                        self.sources.get(file).display
+                    ),
+                )
+                .at(at.clone()),
+            );
+            return None;
+        }
+        Some(file)
+    }
+
+    /// Reads a file whose text was dropped again and puts the text back if it is the same.
+    fn reload(&mut self, file: crate::diag::FileId) -> bool {
+        let path = self.sources.get(file).path.clone();
+        let Ok(mut bytes) = self.fs.read(&path) else {
+            return false;
+        };
+        if self.sources.get(file).bom {
+            if !bytes.starts_with(b"\xEF\xBB\xBF") {
+                return false;
+            }
+            bytes.drain(..3);
+        }
+        match String::from_utf8(bytes) {
+            Ok(text) => self.sources.restore_text(file, text),
+            Err(_) => false,
+        }
+    }
+
+    /// Puts back the text of every dropped file a diagnostic points into, so they render with
+    /// their lines. When a file changed meanwhile, its diagnostics lose their place and say so.
+    fn restore_for_diagnostics(&mut self) {
+        let mut files: Vec<crate::diag::FileId> = self
+            .diags
+            .iter()
+            .flat_map(|d| d.span.iter().chain(d.related.iter().map(|(s, _)| s)))
+            .map(|s| s.file)
+            .filter(|&f| self.sources.is_dropped(f))
+            .collect();
+        files.sort_unstable();
+        files.dedup();
+        for f in files {
+            if !self.reload(f) {
+                self.diags
+                    .forget_file(f, &self.sources.get(f).display.clone());
+            }
+        }
     }
 }
 
@@ -309,11 +368,16 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         .pou
         .clone()
         .or_else(|| bb.sfc_ref.as_ref().and_then(|r| fragment(&r.value)));
-    let sfc = bb
+    let sfc_file = bb
         .sfc_ref
         .clone()
-        .and_then(|r| cx.load_ref(&r.value, &r.span))
-        .and_then(|f| read_sfc_pou(&cx.sources, f, pou.as_deref(), &mut cx.diags));
+        .and_then(|r| cx.load_ref(&r.value, &r.span));
+    let sfc = sfc_file.and_then(|f| read_sfc_pou(&cx.sources, f, pou.as_deref(), &mut cx.diags));
+    // The model holds all the rest needs: the SFC's text (the largest input: 78 MB for 100,000
+    // steps) is freed now and read again only if a diagnostic points into it.
+    if let Some(f) = sfc_file {
+        cx.sources.drop_text(f);
+    }
     lap(&mut out, "read-sfc");
     let plan = sfc.as_ref().and_then(|s| plan::plan(s, &mut cx.diags));
     lap(&mut out, "plan");
@@ -449,8 +513,15 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
     }
     out.language = language;
     out.blackboard = Some(bb);
-    out.sfc = sfc;
-    out.plan = plan;
+    if opts.keep_model {
+        out.sfc = sfc;
+        out.plan = plan;
+    } else {
+        // Freed before the SFC's text may be read again for the diagnostics (`finish`): the
+        // two together were the compile's peak.
+        drop(plan);
+        drop(sfc);
+    }
     out.irls = irls;
     finish(cx, out)
 }
@@ -604,7 +675,8 @@ pub fn check_sfc_pou(fs: &dyn FileSource, path: &Path, pou: Option<&str>) -> Com
     finish(cx, out)
 }
 
-fn finish(cx: Ctx, mut out: Compilation) -> Compilation {
+fn finish(mut cx: Ctx, mut out: Compilation) -> Compilation {
+    cx.restore_for_diagnostics();
     let mut diags = cx.diags;
     diags.sort();
     out.diagnostics = diags.into_vec();

@@ -32,6 +32,8 @@ pub struct SourceFile {
     pub bom: bool,
     /// Byte offsets of line starts, computed on the first diagnostic that needs them.
     line_starts: std::sync::OnceLock<Vec<usize>>,
+    /// Set while the text is not kept ([`Sources::drop_text`]): its length and content hash.
+    dropped: Option<(usize, u64)>,
 }
 
 impl SourceFile {
@@ -52,6 +54,7 @@ impl Sources {
             display,
             text,
             bom,
+            dropped: None,
             line_starts: std::sync::OnceLock::new(),
         });
         self.files.len() - 1
@@ -60,6 +63,39 @@ impl Sources {
     /// The file with this id.
     pub fn get(&self, id: FileId) -> &SourceFile {
         &self.files[id]
+    }
+
+    /// Frees a file's text once the model is read from it (the SFC: the largest input by far),
+    /// keeping its length and hash so [`Sources::restore_text`] can put the same text back for
+    /// diagnostics that point into it.
+    pub fn drop_text(&mut self, id: FileId) {
+        let f = &mut self.files[id];
+        if f.dropped.is_none() {
+            f.dropped = Some((f.text.len(), crate::load::hash_bytes(f.text.as_bytes())));
+            f.text = String::new();
+            f.line_starts = std::sync::OnceLock::new();
+        }
+    }
+
+    /// Whether the file's text was dropped and not put back.
+    pub fn is_dropped(&self, id: FileId) -> bool {
+        self.files[id].dropped.is_some()
+    }
+
+    /// Puts a dropped file's text back: `true` when `text` is the text that was dropped (same
+    /// length and hash), else the file stays without text.
+    pub fn restore_text(&mut self, id: FileId, text: String) -> bool {
+        let f = &mut self.files[id];
+        match f.dropped {
+            Some((len, hash))
+                if text.len() == len && crate::load::hash_bytes(text.as_bytes()) == hash =>
+            {
+                f.text = text;
+                f.dropped = None;
+                true
+            }
+            _ => false,
+        }
     }
 
     /// All files, in the order they were read.
@@ -211,6 +247,26 @@ pub struct Diagnostics {
 }
 
 impl Diagnostics {
+    /// Takes `file` out of every diagnostic's places (its text is gone: it changed while the
+    /// compile ran), saying so in a note.
+    pub fn forget_file(&mut self, file: FileId, display: &str) {
+        for d in self.list.iter_mut() {
+            let mut lost = false;
+            if d.span.as_ref().is_some_and(|s| s.file == file) {
+                d.span = None;
+                lost = true;
+            }
+            let before = d.related.len();
+            d.related.retain(|(s, _)| s.file != file);
+            lost |= d.related.len() != before;
+            if lost {
+                d.notes.push(format!(
+                    "`{display}` changed while it was being compiled: run again for the line and column"
+                ));
+            }
+        }
+    }
+
     pub fn push(&mut self, d: Diagnostic) {
         self.list.push(d);
     }

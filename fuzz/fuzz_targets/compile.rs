@@ -55,6 +55,7 @@ fuzz_target!(|data: &[u8]| {
         template: None,
         confine_to: None,
         pou: None,
+        keep_model: data.len() % 3 == 0,
     };
     let c = compile(&fs, Path::new(BLACKBOARD), &opts);
     assert_eq!(c.files_read.first(), Some(&PathBuf::from(BLACKBOARD)));

@@ -71,10 +71,14 @@ impl FileSource for Hashing {
     fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
         let r = self.fs.read(path);
         let h = r.as_ref().ok().map(|b| hash_bytes(b));
+        // The first read is what the compile used: a second one (the SFC read again for a
+        // diagnostic's line) must not hide a save made in between from the check after the
+        // compile.
         self.seen
             .lock()
             .unwrap_or_else(|p| p.into_inner())
-            .insert(path.to_owned(), h);
+            .entry(path.to_owned())
+            .or_insert(h);
         r
     }
 }
@@ -256,6 +260,7 @@ impl Job {
             template: self.spec.template.clone(),
             confine_to: self.confine.then(|| self.key.clone()),
             pou: self.spec.pou.clone(),
+            keep_model: false,
         };
         let c = compile::compile(&fs, &blackboard, &opts);
         let mut inputs = fs.seen.into_inner().unwrap_or_else(|p| p.into_inner());

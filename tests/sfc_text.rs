@@ -1,0 +1,133 @@
+//! The SFC's text is freed once the model is read (it is the largest input by far) and read
+//! again only for diagnostics that point into it (`compile.rs`). Through the library's
+//! `compile` with a file source that counts reads and can change the file between them.
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use skillpost::compile::{Options, compile};
+use skillpost::load::{FileSource, FsSource};
+
+/// Reads from disk; the SFC's second read returns `second` instead (a save in between).
+struct Source {
+    fs: FsSource,
+    second: Option<Vec<u8>>,
+    sfc_reads: Mutex<usize>,
+}
+
+impl FileSource for Source {
+    fn real_path(&self, path: &Path) -> Option<PathBuf> {
+        self.fs.real_path(path)
+    }
+
+    fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
+        if path.file_name().is_some_and(|n| n == "sfc.xml") {
+            let mut n = self.sfc_reads.lock().unwrap();
+            *n += 1;
+            if *n > 1
+                && let Some(b) = &self.second
+            {
+                return Ok(b.clone());
+            }
+        }
+        self.fs.read(path)
+    }
+}
+
+fn case() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/err/e314_missing_variable")
+}
+
+fn run(second: Option<Vec<u8>>) -> (skillpost::compile::Compilation, usize) {
+    let src = Source {
+        fs: FsSource::default(),
+        second,
+        sfc_reads: Mutex::new(0),
+    };
+    let c = compile(
+        &src,
+        &case().join("Blackboard.aml"),
+        &Options {
+            program: Some("out".into()),
+            ..Default::default()
+        },
+    );
+    let n = *src.sfc_reads.lock().unwrap();
+    (c, n)
+}
+
+#[test]
+fn an_sfc_diagnostic_gets_its_line_from_the_text_read_again() {
+    let (c, reads) = run(None);
+    let d = c
+        .diagnostics
+        .iter()
+        .find(|d| d.code.as_str() == "E314")
+        .expect("E314");
+    let span = d.span.as_ref().expect("located");
+    assert_eq!(c.sources.line_col(span.file, span.range.start).0, 29);
+    assert_eq!(reads, 2, "read once for the model, once for the diagnostic");
+    // Rendering works on the text put back.
+    let text = skillpost::diag::render(
+        &c.diagnostics,
+        &c.sources,
+        skillpost::diag::Format::Short,
+        false,
+        false,
+    );
+    assert!(text.contains("sfc.xml:29"), "{text}");
+}
+
+#[test]
+fn a_compile_without_sfc_diagnostics_reads_the_sfc_once() {
+    // The ABB cell: no diagnostic at all, so nothing to locate.
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/base/abb");
+    let src = Source {
+        fs: FsSource::default(),
+        second: None,
+        sfc_reads: Mutex::new(0),
+    };
+    let c = compile(
+        &src,
+        &sample.join("Cell.aml"),
+        &Options {
+            program: Some("out".into()),
+            ..Default::default()
+        },
+    );
+    assert!(c.diagnostics.is_empty(), "{:?}", c.diagnostics);
+    assert_eq!(*src.sfc_reads.lock().unwrap(), 1);
+    // The model is freed unless asked for (the listings ask).
+    assert!(c.sfc.is_none() && c.plan.is_none());
+}
+
+#[test]
+fn an_sfc_saved_during_the_compile_loses_the_place_and_says_so() {
+    let mut changed = std::fs::read(case().join("sfc.xml")).unwrap();
+    changed.splice(0..0, b"<!-- saved meanwhile -->\n".iter().copied());
+    let (c, _) = run(Some(changed));
+    let d = c
+        .diagnostics
+        .iter()
+        .find(|d| d.code.as_str() == "E314")
+        .expect("E314 still reported");
+    assert!(
+        d.span.is_none(),
+        "no line from a text that is not the one compiled"
+    );
+    assert!(
+        d.notes
+            .iter()
+            .any(|n| n.contains("changed while it was being compiled")),
+        "{:?}",
+        d.notes
+    );
+    // And it renders.
+    let _ = skillpost::diag::render(
+        &c.diagnostics,
+        &c.sources,
+        skillpost::diag::Format::Short,
+        false,
+        false,
+    );
+}
