@@ -243,11 +243,8 @@ impl<'a> Ctx<'a> {
         let Ok(mut bytes) = self.fs.read(&path) else {
             return false;
         };
-        if self.sources.get(file).bom {
-            if !bytes.starts_with(b"\xEF\xBB\xBF") {
-                return false;
-            }
-            bytes.drain(..3);
+        if xml::strip_bom(&mut bytes) != self.sources.get(file).bom {
+            return false;
         }
         match String::from_utf8(bytes) {
             Ok(text) => self.sources.restore_text(file, text),
@@ -577,51 +574,50 @@ fn languages(
             v.insert(irl::declared_language(&cx.sources, file, &mut cx.diags));
         }
     }
+    // Each used resource once, in first-use order, with its IRL files: one pass over each
+    // list (the number of resources is an input dimension).
+    let mut by_resource: HashMap<usize, Vec<(usize, crate::diag::FileId)>> = HashMap::new();
+    for &((r, f), file) in files {
+        by_resource.entry(r).or_default().push((f, file));
+    }
+    let mut seen = std::collections::HashSet::new();
+    let order: Vec<usize> = res
+        .used
+        .iter()
+        .map(|&(r, _)| r)
+        .filter(|&r| seen.insert(r))
+        .collect();
     let mut resources: HashMap<usize, Language> = HashMap::new();
     let mut reported: std::collections::HashSet<crate::diag::FileId> = Default::default();
-    let mut order: Vec<usize> = Vec::new();
-    for &(r, _) in &res.used {
-        if !order.contains(&r) {
-            order.push(r);
-        }
-    }
     for &r in &order {
         let resource = &bb.resources[r];
-        let from_irl = files
-            .iter()
-            .filter(|((fr, _), _)| *fr == r)
-            .find_map(|(_, file)| declared[file].clone());
-        let lang = resource
+        let own = by_resource.get(&r).map_or(&[][..], Vec::as_slice);
+        let from_irl = own.iter().find_map(|(_, file)| declared[file].clone());
+        let decided = resource
             .language
             .as_ref()
-            .map(|(l, _)| *l)
-            .or(from_irl.as_ref().map(|(l, _)| *l))
-            .unwrap_or(Language::Krl);
+            .map(|(l, at)| (*l, at.clone(), "the resource's Language"))
+            .or(from_irl.map(|(l, at)| (l, at, "the first IRL file's language")));
+        let lang = decided.as_ref().map_or(Language::Krl, |d| d.0);
         resources.insert(r, lang);
-        for ((fr, f), file) in files {
-            if *fr != r {
-                continue;
-            }
+        for (f, file) in own {
             if let Some((l, span)) = &declared[file]
                 && *l != lang
                 && reported.insert(*file)
             {
-                let why = match (&resource.language, &from_irl) {
-                    (Some((_, at)), _) => (at.clone(), "the resource's Language"),
-                    (None, Some((_, at))) => (at.clone(), "the first IRL file's language"),
-                    (None, None) => (span.clone(), "here"),
-                };
-                cx.diags.push(
-                    Diagnostic::error(
-                        Code::TwoLanguages,
-                        format!(
-                            "IRL file of function `{}` is {l}, but resource `{}` is {lang}: one program is in one language",
-                            resource.functions[*f].name.text, resource.name.text
-                        ),
-                    )
-                    .at(span.clone())
-                    .related(why.0, why.1),
-                );
+                let mut d = Diagnostic::error(
+                    Code::TwoLanguages,
+                    format!(
+                        "IRL file of function `{}` is {l}, but resource `{}` is {lang}: one program is in one language",
+                        resource.functions[*f].name.text, resource.name.text
+                    ),
+                )
+                .at(span.clone());
+                // A declaration differs from the language only when something decided it.
+                if let Some((_, at, what)) = &decided {
+                    d = d.related(at.clone(), *what);
+                }
+                cx.diags.push(d);
             }
         }
     }

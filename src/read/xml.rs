@@ -49,10 +49,7 @@ pub fn load(
         }
     };
     let mut bytes = bytes;
-    let bom = bytes.starts_with(b"\xEF\xBB\xBF");
-    if bom {
-        bytes.drain(..3);
-    }
+    let bom = strip_bom(&mut bytes);
     match String::from_utf8(bytes) {
         Ok(text) => Some(sources.add(path.to_owned(), display, text, bom)),
         Err(e) => {
@@ -70,6 +67,15 @@ pub fn load(
             None
         }
     }
+}
+
+/// Removes a leading UTF-8 byte order mark; whether there was one.
+pub fn strip_bom(bytes: &mut Vec<u8>) -> bool {
+    let bom = bytes.starts_with(b"\xEF\xBB\xBF");
+    if bom {
+        bytes.drain(..3);
+    }
+    bom
 }
 
 /// Parses a file's text as XML, without DTDs (no entity expansion attacks, no external
