@@ -704,24 +704,29 @@ fn with_seq(mut head: Vec<u8>, seq: u64, tail: &[u8]) -> Vec<u8> {
     head
 }
 
+/// An event output in memory, for the unit tests of the daemon's modules.
+#[cfg(test)]
+#[derive(Clone, Default)]
+pub(crate) struct MemOut(pub(crate) Arc<Mutex<Vec<u8>>>);
+
+#[cfg(test)]
+impl Write for MemOut {
+    fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+        self.0.lock().unwrap().extend_from_slice(b);
+        Ok(b.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use std::collections::BTreeSet;
     use std::sync::mpsc;
 
-    #[derive(Clone, Default)]
-    struct Buf(Arc<Mutex<Vec<u8>>>);
-
-    impl Write for Buf {
-        fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
-            self.0.lock().unwrap().extend_from_slice(b);
-            Ok(b.len())
-        }
-        fn flush(&mut self) -> std::io::Result<()> {
-            Ok(())
-        }
-    }
+    use super::MemOut as Buf;
 
     #[test]
     fn envelope_and_sequence() {

@@ -438,21 +438,8 @@ pub(super) fn half_written(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::io::Write;
-    use std::sync::Mutex;
 
-    #[derive(Clone, Default)]
-    struct Buf(Arc<Mutex<Vec<u8>>>);
-
-    impl Write for Buf {
-        fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
-            self.0.lock().unwrap().extend_from_slice(b);
-            Ok(b.len())
-        }
-        fn flush(&mut self) -> std::io::Result<()> {
-            Ok(())
-        }
-    }
+    use crate::daemon::events::MemOut as Buf;
 
     /// The events `after_panic` emits for a run that got to `state`: (event, run_id).
     fn after_panic_at(state: u8) -> Vec<(String, u64)> {

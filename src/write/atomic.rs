@@ -373,13 +373,7 @@ mod tests {
 
     // ---- files ---------------------------------------------------------------------------------
 
-    fn temp_leftovers(dir: &Path) -> Vec<String> {
-        fs::read_dir(dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .filter(|n| n.starts_with(".skillpost-"))
-            .collect()
-    }
+    use crate::write::temp_leftovers;
 
     fn old_time() -> std::time::SystemTime {
         std::time::UNIX_EPOCH + std::time::Duration::from_secs(1_000_000_000)

@@ -22,3 +22,14 @@ pub mod writeback;
 pub use atomic::{WriteOutcome, is_temporary, write_all_if_changed, write_if_changed};
 pub use splice::{SpliceSite, splice_at, splice_value};
 pub use writeback::{WriteBackOutcome, write_back};
+
+/// The names in `dir` that start like our temporary files (any suffix: a leftover of another
+/// shape is one too), for the unit tests of the writers.
+#[cfg(test)]
+pub(crate) fn temp_leftovers(dir: &std::path::Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(".skillpost-"))
+        .collect()
+}

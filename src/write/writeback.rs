@@ -592,13 +592,7 @@ mod tests {
         .unwrap()
     }
 
-    fn temp_leftovers(dir: &Path) -> Vec<String> {
-        fs::read_dir(dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .filter(|n| n.starts_with(".skillpost-"))
-            .collect()
-    }
+    use crate::write::temp_leftovers;
 
     /// A rename save: a new file renamed over the name.
     fn rename_save(p: &Path, text: &str) {
