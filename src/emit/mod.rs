@@ -263,6 +263,7 @@ impl OutputTemplate {
             String::new()
         });
         files.sort_by_key(|(e, _)| profile.files().iter().position(|x| x == e));
+        let main = profile.files()[0];
         let mut steps = 0;
         for (key, body) in &files {
             if let Some(pos) = body.find(|c: char| !c.is_ascii()) {
@@ -277,7 +278,13 @@ impl OutputTemplate {
                     continue;
                 }
                 let marker = format!("{{{{{name}}}}}");
-                if BLOCKS.contains(&name) {
+                if name == "steps" && *key != main {
+                    // The program goes into the main file, the one written back.
+                    bad(
+                        format!("`{marker}` belongs in `{main}`, not in `{key}`"),
+                        &marker,
+                    );
+                } else if BLOCKS.contains(&name) {
                     if !body.lines().any(|l| l.trim() == marker) {
                         bad(
                             format!("`{marker}` must stand on a line of its own in `{key}`"),
@@ -291,10 +298,11 @@ impl OutputTemplate {
                     );
                 }
             }
-            steps += body.lines().filter(|l| l.trim() == "{{steps}}").count();
+            if *key == main {
+                steps = body.lines().filter(|l| l.trim() == "{{steps}}").count();
+            }
         }
         if steps != 1 {
-            let main = profile.files()[0];
             bad(
                 format!("`{main}` must hold `{{{{steps}}}}` exactly once (found {steps})"),
                 main,
@@ -496,6 +504,13 @@ mod tests {
         );
         assert!(t.is_none());
         assert!(m[0].contains("unknown field"), "{m:?}");
+        // The program belongs in the main file.
+        let (t, m) = parse(
+            k,
+            "step_indent = \" \"\nsrc = \"\"\"\n{{steps}}\n\"\"\"\ndat = \"\"\"\n{{steps}}\n\"\"\"\n",
+        );
+        assert!(t.is_none());
+        assert!(m.iter().any(|m| m.contains("belongs in `src`")), "{m:?}");
         // A KRL template given to a RAPID program.
         let (t, m) = parse(
             Language::Rapid,
