@@ -168,7 +168,7 @@ impl<'a> Ctx<'a> {
         if file.is_none() {
             out.io_failure = self.sources.find(path).is_none();
         }
-        file
+        self.with_text(file?, None)
     }
 
     /// Whether `path` stays inside `root`: by its text, and, where the file system can tell,
@@ -219,8 +219,16 @@ impl<'a> Ctx<'a> {
             &mut self.sources,
             &mut self.diags,
         )?;
-        // A file read before whose text was dropped (the SFC named again, as an IRL file):
-        // its text again, or an I/O error when it changed meanwhile.
+        self.with_text(file, Some(at))
+    }
+
+    /// `file` with its text: a file read before whose text was dropped (the SFC named again,
+    /// as an IRL file or the template) is read again, or is an error when it changed meanwhile.
+    fn with_text(
+        &mut self,
+        file: crate::diag::FileId,
+        at: Option<&Span>,
+    ) -> Option<crate::diag::FileId> {
         if self.sources.is_dropped(file) && !self.reload(file) {
             self.diags.push(
                 Diagnostic::error(
@@ -230,7 +238,7 @@ impl<'a> Ctx<'a> {
                         self.sources.get(file).display
                     ),
                 )
-                .at(at.clone()),
+                .at_opt(at.cloned()),
             );
             return None;
         }

@@ -131,3 +131,28 @@ fn an_sfc_saved_during_the_compile_loses_the_place_and_says_so() {
         false,
     );
 }
+
+#[test]
+fn the_sfc_named_again_later_is_read_with_its_text() {
+    // The template named is the SFC itself: it is parsed as what it is (XML is no TOML),
+    // not as the empty text left after the SFC was read.
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/base/abb");
+    let c = compile(
+        &FsSource::default(),
+        &dir.join("Cell.aml"),
+        &Options {
+            program: Some("out".into()),
+            template: Some(dir.join("sfc.xml")),
+            ..Default::default()
+        },
+    );
+    let e603: Vec<&str> = c
+        .diagnostics
+        .iter()
+        .filter(|d| d.code.as_str() == "E603")
+        .map(|d| d.message.as_str())
+        .collect();
+    // One TOML syntax error at the start of the XML, not the complaints about an empty table.
+    assert_eq!(e603.len(), 1, "{e603:?}");
+    assert!(e603[0].contains("expected `=`"), "{e603:?}");
+}
