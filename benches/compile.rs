@@ -3,6 +3,7 @@
 //! ```text
 //! cargo bench --bench compile               # every case
 //! cargo bench --bench compile -- 100k       # cases whose label contains `100k`
+//! cargo bench --bench compile -- =100k      # the case labelled `100k` only
 //! ```
 //!
 //! For each case it generates a project (`benches/common/generator.rs`) into a temporary folder,
@@ -269,7 +270,8 @@ fn main() {
         child(&mode, Path::new(&path));
         return;
     }
-    // `cargo bench` passes `--bench`; any other argument filters the cases by label.
+    // `cargo bench` passes `--bench`; any other argument filters the cases by label (`=LABEL`:
+    // that label only).
     let filters: Vec<String> = std::env::args()
         .skip(1)
         .filter(|a| !a.starts_with("--"))
@@ -280,7 +282,11 @@ fn main() {
         .expect("temporary folder");
     let mut rows = Vec::new();
     for case in CASES {
-        if !filters.is_empty() && !filters.iter().any(|f| case.label.contains(f.as_str())) {
+        let matches = |f: &String| match f.strip_prefix('=') {
+            Some(exact) => case.label == exact,
+            None => case.label.contains(f.as_str()),
+        };
+        if !filters.is_empty() && !filters.iter().any(matches) {
             continue;
         }
         rows.push(run_case(case, tmp.path()));
@@ -288,7 +294,11 @@ fn main() {
     if !rows.is_empty() {
         print_tables(&rows);
     }
-    if filters.is_empty() || filters.iter().any(|f| SHAPES_LABEL.contains(f.as_str())) {
+    if filters.is_empty()
+        || filters
+            .iter()
+            .any(|f| !f.starts_with('=') && SHAPES_LABEL.contains(f.as_str()))
+    {
         print_shapes(&run_shapes(tmp.path()));
     }
 }
