@@ -120,12 +120,22 @@ impl FileSource for Recorder<'_> {
     }
 
     fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
+        self.record(path);
+        self.fs.read(path)
+    }
+
+    fn open(&self, path: &Path) -> std::io::Result<crate::load::Opened<'_>> {
+        self.record(path);
+        self.fs.open(path)
+    }
+}
+
+impl Recorder<'_> {
+    fn record(&self, path: &Path) {
         let mut r = self.read.borrow_mut();
         if !r.iter().any(|p| p == path) {
             r.push(path.to_owned());
         }
-        drop(r);
-        self.fs.read(path)
     }
 }
 
@@ -185,6 +195,22 @@ impl<'a> Ctx<'a> {
 
     /// Resolves a `refURI` and loads the file; errors are located at the reference.
     fn load_ref(&mut self, value: &str, at: &Span) -> Option<crate::diag::FileId> {
+        let path = self.ref_path(value, at)?;
+        let display = path.display().to_string();
+        let file = xml::load(
+            &self.fs,
+            &path,
+            display,
+            Some(at.clone()),
+            &mut self.sources,
+            &mut self.diags,
+        )?;
+        self.with_text(file, Some(at))
+    }
+
+    /// The file a `refURI` names, recorded as an input; `None` (reported) when it is malformed
+    /// or leaves the project folder.
+    fn ref_path(&mut self, value: &str, at: &Span) -> Option<PathBuf> {
         let path = match paths::resolve_ref(&self.base, value) {
             Ok(p) => p,
             Err(why) => {
@@ -210,16 +236,111 @@ impl<'a> Ctx<'a> {
             return None;
         }
         self.refs.push((path.clone(), at.clone()));
+        Some(path)
+    }
+
+    /// Reads the SFC at `path` as a stream: its text is never whole in memory (100,000 steps
+    /// make 78 MB), only the model is kept. `origin`: the `refURI` naming it. The file's length
+    /// and hash are kept, so its text can be read again, and checked to be the same, for the
+    /// diagnostics that point into it. A file already read (named before as another input) is
+    /// read from its text.
+    fn read_sfc(
+        &mut self,
+        path: &Path,
+        origin: Option<&Span>,
+        pou: Option<&str>,
+        out: &mut Compilation,
+    ) -> (Option<crate::diag::FileId>, Option<Sfc>) {
+        use std::hash::Hasher as _;
+        use std::io::BufRead as _;
+        if let Some(file) = self.sources.find(path) {
+            let Some(file) = self.with_text(file, origin) else {
+                return (None, None);
+            };
+            return (
+                Some(file),
+                read_sfc_pou(&self.sources, file, pou, &mut self.diags),
+            );
+        }
         let display = path.display().to_string();
-        let file = xml::load(
-            &self.fs,
-            &path,
-            display,
-            Some(at.clone()),
-            &mut self.sources,
-            &mut self.diags,
-        )?;
-        self.with_text(file, Some(at))
+        let opened = match self.fs.open(path) {
+            Ok(o) => o,
+            Err(e) => {
+                self.diags
+                    .push(xml::unreadable(&display, path, origin.cloned(), &e));
+                out.io_failure = origin.is_none();
+                return (None, None);
+            }
+        };
+        let file = self.sources.add_streamed(path.to_owned(), display.clone());
+        /// Counts and hashes the bytes as they pass.
+        struct Fingerprint<R> {
+            inner: R,
+            len: usize,
+            hash: std::hash::DefaultHasher,
+        }
+        impl<R: std::io::Read> std::io::Read for Fingerprint<R> {
+            fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+                let n = self.inner.read(buf)?;
+                self.len += n;
+                self.hash.write(&buf[..n]);
+                Ok(n)
+            }
+        }
+        let (read, rest, bom) = {
+            let mut fp = Fingerprint {
+                inner: opened.reader,
+                len: 0,
+                hash: std::hash::DefaultHasher::new(),
+            };
+            let mut input = std::io::BufReader::with_capacity(64 * 1024, &mut fp);
+            let bom = match input.fill_buf() {
+                Ok(head) => head.starts_with(b"\xEF\xBB\xBF"),
+                Err(_) => false,
+            };
+            if bom {
+                input.consume(3);
+            }
+            let len_hint = opened
+                .len
+                .unwrap_or(0)
+                .saturating_sub(if bom { 3 } else { 0 });
+            let read =
+                crate::read::sfc::read_sfc_stream(&mut input, file, len_hint, pou, &mut self.diags);
+            // The rest of the file, so its length and hash are the whole file's (the reader
+            // stops at a syntax error; the daemon's hash of an input is taken at its end).
+            let rest = std::io::copy(&mut input, &mut std::io::sink());
+            drop(input);
+            self.sources.streamed(file, bom, fp.len, fp.hash.finish());
+            (read, rest, bom)
+        };
+        let failed = match (read, rest) {
+            (Ok(sfc), Ok(_)) => return (Some(file), sfc),
+            (Err(crate::read::sfc::StreamError::NotUtf8), Ok(_)) => None,
+            (Err(crate::read::sfc::StreamError::Io(e)), _) | (_, Err(e)) => Some(e),
+        };
+        match failed {
+            Some(e) => {
+                self.diags
+                    .push(xml::unreadable(&display, path, origin.cloned(), &e));
+            }
+            None => {
+                // Not UTF-8: located like the loader does, at the first bad byte of the text
+                // read again (when it is still the same).
+                let at = self.fs.read(path).ok().and_then(|raw| {
+                    let skip = if bom { 3 } else { 0 };
+                    let valid = std::str::from_utf8(raw.get(skip..)?)
+                        .err()
+                        .map(|e| e.valid_up_to());
+                    self.sources
+                        .restore_text(file, raw)
+                        .then_some(valid)
+                        .flatten()
+                });
+                self.diags.push(xml::not_utf8(&display, file, at));
+            }
+        }
+        (Some(file), None)
     }
 
     /// `file` with its text: a file read before whose text was dropped (the SFC named again,
@@ -245,17 +366,11 @@ impl<'a> Ctx<'a> {
         Some(file)
     }
 
-    /// Reads a file whose text was dropped again and puts the text back if it is the same.
+    /// Reads a file whose text was not kept again and puts the text back if it is the same.
     fn reload(&mut self, file: crate::diag::FileId) -> bool {
         let path = self.sources.get(file).path.clone();
-        let Ok(mut bytes) = self.fs.read(&path) else {
-            return false;
-        };
-        if xml::strip_bom(&mut bytes) != self.sources.get(file).bom {
-            return false;
-        }
-        match String::from_utf8(bytes) {
-            Ok(text) => self.sources.restore_text(file, text),
+        match self.fs.read(&path) {
+            Ok(bytes) => self.sources.restore_text(file, bytes),
             Err(_) => false,
         }
     }
@@ -373,16 +488,16 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         .pou
         .clone()
         .or_else(|| bb.sfc_ref.as_ref().and_then(|r| fragment(&r.value)));
-    let sfc_file = bb
+    // The model holds all the rest needs: the SFC's text (the largest input: 78 MB for 100,000
+    // steps) is read as a stream, and read again only if a diagnostic points into it.
+    let (_, sfc) = match bb
         .sfc_ref
         .clone()
-        .and_then(|r| cx.load_ref(&r.value, &r.span));
-    let sfc = sfc_file.and_then(|f| read_sfc_pou(&cx.sources, f, pou.as_deref(), &mut cx.diags));
-    // The model holds all the rest needs: the SFC's text (the largest input: 78 MB for 100,000
-    // steps) is freed now and read again only if a diagnostic points into it.
-    if let Some(f) = sfc_file {
-        cx.sources.drop_text(f);
-    }
+        .and_then(|r| Some((cx.ref_path(&r.value, &r.span)?, r.span)))
+    {
+        Some((path, at)) => cx.read_sfc(&path, Some(&at), pou.as_deref(), &mut out),
+        None => (None, None),
+    };
     lap(&mut out, "read-sfc");
     let plan = sfc.as_ref().and_then(|s| plan::plan(s, &mut cx.diags));
     lap(&mut out, "plan");
@@ -667,10 +782,10 @@ pub fn check_sfc(fs: &dyn FileSource, path: &Path) -> Compilation {
 pub fn check_sfc_pou(fs: &dyn FileSource, path: &Path, pou: Option<&str>) -> Compilation {
     let mut cx = Ctx::new(fs, PathBuf::new(), None);
     let mut out = Compilation::default();
-    let Some(file) = cx.load_top(path, &mut out) else {
+    let (Some(_), sfc) = cx.read_sfc(path, None, pou, &mut out) else {
         return finish(cx, out);
     };
-    out.sfc = read_sfc_pou(&cx.sources, file, pou, &mut cx.diags);
+    out.sfc = sfc;
     if let Some(sfc) = &out.sfc {
         // Without a blackboard the names stay unresolved: only what the literals tell.
         bind::check_conditions_unresolved(sfc, &mut cx.diags);
@@ -681,6 +796,7 @@ pub fn check_sfc_pou(fs: &dyn FileSource, path: &Path, pou: Option<&str>) -> Com
 
 fn finish(mut cx: Ctx, mut out: Compilation) -> Compilation {
     cx.restore_for_diagnostics();
+    cx.diags.snap(&cx.sources);
     let mut diags = cx.diags;
     diags.sort();
     out.diagnostics = diags.into_vec();

@@ -65,33 +65,46 @@ impl Sources {
         &self.files[id]
     }
 
-    /// Frees a file's text once the model is read from it (the SFC: the largest input by far),
-    /// keeping its length and hash so [`Sources::restore_text`] can put the same text back for
-    /// diagnostics that point into it.
-    pub fn drop_text(&mut self, id: FileId) {
-        let f = &mut self.files[id];
-        if f.dropped.is_none() {
-            f.dropped = Some((f.text.len(), crate::load::hash_bytes(f.text.as_bytes())));
-            f.text = String::new();
-            f.line_starts = std::sync::OnceLock::new();
-        }
+    /// Adds a file whose text is read as a stream and not kept (the SFC): no text until
+    /// [`Sources::streamed`] records what was read and [`Sources::restore_text`] puts the same
+    /// bytes back for diagnostics that point into it.
+    pub fn add_streamed(&mut self, path: PathBuf, display: String) -> FileId {
+        let id = self.add(path, display, String::new(), false);
+        self.files[id].dropped = Some((0, 0));
+        id
     }
 
-    /// Whether the file's text was dropped and not put back.
+    /// A streamed file was read to its end: whether it had a byte-order mark, its length and
+    /// [`crate::load::hash_bytes`] of its bytes (the mark included).
+    pub fn streamed(&mut self, id: FileId, bom: bool, len: usize, hash: u64) {
+        let f = &mut self.files[id];
+        f.bom = bom;
+        f.dropped = Some((len, hash));
+    }
+
+    /// Whether the file's text is not there (streamed, or dropped) and not put back.
     pub fn is_dropped(&self, id: FileId) -> bool {
         self.files[id].dropped.is_some()
     }
 
-    /// Puts a dropped file's text back: `true` when `text` is the text that was dropped (same
-    /// length and hash), else the file stays without text.
-    pub fn restore_text(&mut self, id: FileId, text: String) -> bool {
+    /// Puts a streamed file's text back from the file's bytes `raw`, read again: `true` when
+    /// they are the bytes that were read (same length and hash), else the file stays without
+    /// text. Bytes that are not UTF-8 are put back with replacement characters (their
+    /// diagnostic points at the first bad byte, which keeps its offset).
+    pub fn restore_text(&mut self, id: FileId, mut raw: Vec<u8>) -> bool {
         let f = &mut self.files[id];
         match f.dropped {
-            Some((len, hash))
-                if text.len() == len && crate::load::hash_bytes(text.as_bytes()) == hash =>
-            {
-                f.text = text;
+            Some((len, hash)) if raw.len() == len && crate::load::hash_bytes(&raw) == hash => {
+                let bom = crate::read::xml::strip_bom(&mut raw);
+                if bom != f.bom {
+                    return false;
+                }
+                f.text = match String::from_utf8(raw) {
+                    Ok(t) => t,
+                    Err(e) => String::from_utf8_lossy(e.as_bytes()).into_owned(),
+                };
                 f.dropped = None;
+                f.line_starts = std::sync::OnceLock::new();
                 true
             }
             _ => false,
@@ -263,6 +276,37 @@ impl Diagnostics {
                 d.notes.push(format!(
                     "`{display}` changed while it was being compiled: run again for the line and column"
                 ));
+            }
+        }
+    }
+
+    /// Puts every span on its file's character boundaries and inside the file. A streamed
+    /// reader places diagnostics by byte positions without the text (a syntax error may fall
+    /// inside a multi-byte character, or at the end of the file); this runs once the texts are
+    /// back, before anything renders them.
+    pub fn snap(&mut self, sources: &Sources) {
+        let snap = |s: &mut Span| {
+            let f = &sources.files[s.file];
+            if f.dropped.is_some() {
+                return;
+            }
+            let text = f.text.as_str();
+            let mut start = s.range.start.min(text.len());
+            while !text.is_char_boundary(start) {
+                start -= 1;
+            }
+            let mut end = s.range.end.clamp(start, text.len());
+            while !text.is_char_boundary(end) {
+                end += 1;
+            }
+            s.range = start..end;
+        };
+        for d in self.list.iter_mut() {
+            if let Some(s) = &mut d.span {
+                snap(s);
+            }
+            for (s, _) in d.related.iter_mut() {
+                snap(s);
             }
         }
     }

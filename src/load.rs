@@ -15,10 +15,50 @@ pub trait FileSource {
     /// Reads a whole file.
     fn read(&self, path: &Path) -> std::io::Result<Vec<u8>>;
 
+    /// Opens a file to be read as a stream (the SFC: the one input that grows with the product,
+    /// so its text is never whole in memory). By default, [`FileSource::read`] into memory.
+    fn open(&self, path: &Path) -> std::io::Result<Opened<'_>> {
+        let bytes = self.read(path)?;
+        Ok(Opened {
+            len: Some(bytes.len() as u64),
+            reader: Box::new(std::io::Cursor::new(bytes)),
+        })
+    }
+
     /// The path with every symbolic link resolved, if the source knows it (for confining a
     /// project to its folder). `None`: take the path as it is.
     fn real_path(&self, _path: &Path) -> Option<PathBuf> {
         None
+    }
+}
+
+/// A file opened by [`FileSource::open`]: its bytes, and its size if known.
+pub struct Opened<'a> {
+    pub reader: Box<dyn Read + 'a>,
+    pub len: Option<u64>,
+}
+
+/// Reads at most `max` bytes: one more is an error (the file grew past the limit after its
+/// size was checked).
+struct Limited<R> {
+    inner: R,
+    left: u64,
+    max: u64,
+}
+
+impl<R: Read> Read for Limited<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        // One byte past the limit may be read, to tell "exactly at" from "over".
+        let room = (self.left + 1).min(buf.len() as u64) as usize;
+        let n = self.inner.read(&mut buf[..room])?;
+        if n as u64 > self.left {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!("is larger than the limit of {} bytes", self.max),
+            ));
+        }
+        self.left -= n as u64;
+        Ok(n)
     }
 }
 
@@ -133,6 +173,34 @@ impl FileSource for FsSource {
     fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
         read_limited(path, self.max_file_size)
     }
+
+    fn open(&self, path: &Path) -> std::io::Result<Opened<'_>> {
+        open_limited(path, self.max_file_size)
+    }
+}
+
+/// Opens a regular file of at most `max` bytes to be read as a stream, like [`read_limited`]
+/// (a FIFO or device is an error at once; reading past `max` bytes is an error).
+pub fn open_limited(path: &Path, max: u64) -> std::io::Result<Opened<'static>> {
+    use std::io::{Error, ErrorKind};
+    let (file, meta) = open_regular(path)?;
+    if meta.len() > max {
+        return Err(Error::new(
+            ErrorKind::InvalidData,
+            format!(
+                "is {} bytes, more than the limit of {max} bytes",
+                meta.len()
+            ),
+        ));
+    }
+    Ok(Opened {
+        len: Some(meta.len()),
+        reader: Box::new(Limited {
+            inner: file,
+            left: max,
+            max,
+        }),
+    })
 }
 
 /// An in-memory file source, for tests and fuzzing.

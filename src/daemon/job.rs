@@ -70,16 +70,83 @@ impl FileSource for Hashing {
 
     fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
         let r = self.fs.read(path);
-        let h = r.as_ref().ok().map(|b| hash_bytes(b));
-        // The first read is what the compile used: a second one (the SFC read again for a
-        // diagnostic's line) must not hide a save made in between from the check after the
-        // compile.
+        self.saw(path, r.as_ref().ok().map(|b| hash_bytes(b)));
+        r
+    }
+
+    fn open(&self, path: &Path) -> std::io::Result<crate::load::Opened<'_>> {
+        match self.fs.open(path) {
+            Ok(o) => Ok(crate::load::Opened {
+                len: o.len,
+                reader: Box::new(HashingReader {
+                    inner: o.reader,
+                    hash: Some(std::hash::DefaultHasher::new()),
+                    path: path.to_owned(),
+                    to: self,
+                }),
+            }),
+            Err(e) => {
+                self.saw(path, None);
+                Err(e)
+            }
+        }
+    }
+}
+
+impl Hashing {
+    /// Records a file's hash. The first read is what the compile used: a second one (the SFC
+    /// read again for a diagnostic's line) must not hide a save made in between from the check
+    /// after the compile.
+    fn saw(&self, path: &Path, hash: Option<u64>) {
         self.seen
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .entry(path.to_owned())
-            .or_insert(h);
-        r
+            .or_insert(hash);
+    }
+}
+
+/// Hashes a streamed file as it is read ([`crate::load::hash_bytes`] of its bytes), recorded at
+/// its end; a stream that fails or is left before its end records no hash (the file is then
+/// compiled again).
+struct HashingReader<'a> {
+    inner: Box<dyn std::io::Read + 'a>,
+    hash: Option<std::hash::DefaultHasher>,
+    path: PathBuf,
+    to: &'a Hashing,
+}
+
+impl std::io::Read for HashingReader<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        use std::hash::Hasher as _;
+        match self.inner.read(buf) {
+            Ok(0) if !buf.is_empty() => {
+                if let Some(h) = self.hash.take() {
+                    self.to.saw(&self.path, Some(h.finish()));
+                }
+                Ok(0)
+            }
+            Ok(n) => {
+                if let Some(h) = &mut self.hash {
+                    h.write(&buf[..n]);
+                }
+                Ok(n)
+            }
+            Err(e) => {
+                if self.hash.take().is_some() {
+                    self.to.saw(&self.path, None);
+                }
+                Err(e)
+            }
+        }
+    }
+}
+
+impl Drop for HashingReader<'_> {
+    fn drop(&mut self) {
+        if self.hash.take().is_some() {
+            self.to.saw(&self.path, None);
+        }
     }
 }
 

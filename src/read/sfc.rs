@@ -2,10 +2,12 @@
 //! their connections, and the skill steps' data (SPEC.md section 3).
 //!
 //! The SFC is the one input that grows with the product (100,000 steps make 78 MB), so it is read
-//! in one streaming pass (`quick-xml`), without building a document tree: the model is all that
-//! is kept. Byte positions are taken from the reader and from the attribute slices, which point
-//! into the text. The graph rules are checked by [`crate::plan`].
+//! as a stream ([`read_sfc_stream`], `quick-xml` over any [`BufRead`]): the compile hands it the
+//! file itself, so the text is never whole in memory, and no document tree is built. The model is
+//! all that is kept. Byte positions come from the reader's position and from where the attribute
+//! slices sit in the event's buffer. The graph rules are checked by [`crate::plan`].
 
+use std::io::BufRead;
 use std::ops::Range;
 
 use quick_xml::events::{BytesStart, Event};
@@ -17,7 +19,18 @@ use crate::model::{
 
 pub use crate::value::MAX_LIST_DEPTH;
 
-/// Reads the SFC file. `None` when the file is not well-formed or has no usable program body.
+/// Why a streamed read stopped before it could judge the file: the caller reports these (it has
+/// the file's bytes, or knows why it has none).
+#[derive(Debug)]
+pub enum StreamError {
+    /// The bytes are not UTF-8 (the reader names no place: the caller's loader locates it).
+    NotUtf8,
+    /// Reading the input failed.
+    Io(std::io::Error),
+}
+
+/// Reads the SFC file's text as [`Sources`] holds it. `None` when the file is not well-formed or
+/// has no usable program body.
 pub fn read_sfc(sources: &Sources, file: FileId, diags: &mut Diagnostics) -> Option<Sfc> {
     read_sfc_pou(sources, file, None, diags)
 }
@@ -32,20 +45,53 @@ pub fn read_sfc_pou(
     pou: Option<&str>,
     diags: &mut Diagnostics,
 ) -> Option<Sfc> {
-    let text = sources.get(file).text.as_str();
+    let text = sources.get(file).text.as_bytes();
+    // The text is a `str`: it cannot fail to be UTF-8, and memory cannot fail to be read.
+    read_sfc_stream(text, file, text.len() as u64, pou, diags).unwrap_or(None)
+}
+
+/// [`read_sfc_pou`] from a stream of the file's bytes after its byte-order mark (positions count
+/// from there, as in [`Sources`]). `len_hint`: the file's size, if known (sizes the element
+/// vector). Diagnostics are located by byte ranges only; their lines need the text, read again
+/// when they are rendered.
+pub fn read_sfc_stream<R: BufRead>(
+    mut input: R,
+    file: FileId,
+    len_hint: u64,
+    pou: Option<&str>,
+    diags: &mut Diagnostics,
+) -> Result<Option<Sfc>, StreamError> {
+    // The loader strips one byte-order mark; another one is not XML (and the parser would
+    // skip it silently, shifting every position it reports).
+    let head = loop {
+        match input.fill_buf() {
+            Ok(b) => break b,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(StreamError::Io(e)),
+        }
+    };
+    if head.starts_with(b"\xEF\xBB\xBF") {
+        diags.push(
+            Diagnostic::error(
+                Code::XmlSyntax,
+                "not well-formed XML: a second byte-order mark at the start of the file",
+            )
+            .at(Span::new(file, 0..3)),
+        );
+        return Ok(None);
+    }
     let mut r = Stream {
         wanted: pou.map(|p| p.trim().to_owned()).filter(|p| !p.is_empty()),
         pous: Vec::new(),
-        text,
+        len_hint: usize::try_from(len_hint).unwrap_or(usize::MAX),
         file,
         names: Interner::default(),
         found: Vec::new(),
         ignored: Vec::new(),
     };
-    let before = diags.error_count();
     let mut local = Diagnostics::default();
-    let outcome = r.run(&mut local);
-    match outcome {
+    let outcome = r.run(quick_xml::Reader::from_reader(input), &mut local)?;
+    Ok(match outcome {
         Err(d) => {
             // Not well-formed: only the syntax error counts (the rest may be an artefact of it).
             diags.push(*d);
@@ -70,77 +116,9 @@ pub fn read_sfc_pou(
                 diags.push(d);
             }
             report_ignored(&r.ignored, diags);
-            let _ = before;
-            let chosen = r
-                .found
-                .iter()
-                .position(|p| p.program)
-                .or(if r.found.is_empty() { None } else { Some(0) });
-            let with_sfc: Vec<&str> = r
-                .pous
-                .iter()
-                .filter(|p| p.1)
-                .map(|p| p.0.as_str())
-                .collect();
-            let list = |names: &[&str]| {
-                let v: Vec<String> = names.iter().take(12).map(|n| format!("`{n}`")).collect();
-                let more = if names.len() > 12 { ", ..." } else { "" };
-                format!("{}{more}", v.join(", "))
-            };
-            let Some(i) = chosen else {
-                let all: Vec<&str> = r.pous.iter().map(|p| p.0.as_str()).collect();
-                let message = match (&r.wanted, &first_pou) {
-                    (Some(w), _) if !with_sfc.is_empty() => format!(
-                        "no POU named `{w}` with an SFC body; the POUs with one: {}",
-                        list(&with_sfc)
-                    ),
-                    (Some(w), Some(_)) => format!(
-                        "no POU named `{w}` with an SFC body; none of the {} POUs ({}) has one",
-                        all.len(),
-                        list(&all)
-                    ),
-                    (_, None) => "the SFC file has no `pou` (types/pous/pou)".to_owned(),
-                    (None, Some((_, name))) if all.len() == 1 => {
-                        format!("pou `{name}` has no SFC body (body/SFC)")
-                    }
-                    (None, Some(_)) => format!(
-                        "none of the {} POUs ({}) has an SFC body (body/SFC)",
-                        all.len(),
-                        list(&all)
-                    ),
-                };
-                diags.push(
-                    Diagnostic::error(Code::NoSfcBody, message)
-                        .at(first_pou.map(|(s, _)| s).unwrap_or(root)),
-                );
-                return None;
-            };
-            if r.wanted.is_none() && with_sfc.len() > 1 {
-                let used = r.found[i].name.clone().unwrap_or_default();
-                let others: Vec<&str> = with_sfc.iter().copied().filter(|n| *n != used).collect();
-                diags.push(
-                    Diagnostic::warning(
-                        Code::SeveralPous,
-                        format!(
-                            "{} POUs have an SFC body; `{used}` is used ({}), not {}: name the one meant with `--pou NAME` or `#NAME` after the SFC file's name in the blackboard",
-                            with_sfc.len(),
-                            if r.found[i].program { "the first program" } else { "the first with one" },
-                            list(&others)
-                        ),
-                    )
-                    .at(r.found[i].sfc_span.clone()),
-                );
-            }
-            let pou = r.found.swap_remove(i);
-            Some(Sfc {
-                file,
-                header,
-                pou_name: pou.name,
-                elements: pou.elements,
-                span: Some(pou.sfc_span),
-            })
+            r.choose(header, root, first_pou, diags)
         }
-    }
+    })
 }
 
 enum Outcome {
@@ -162,9 +140,10 @@ struct Pou {
     elements: Vec<Element>,
 }
 
-struct Stream<'t> {
-    text: &'t str,
+struct Stream {
     file: FileId,
+    /// The file's size, if known (0: unknown).
+    len_hint: usize,
     names: Interner,
     found: Vec<Pou>,
     /// Elements of the SFC body that are ignored: tag, place, label.
@@ -175,27 +154,167 @@ struct Stream<'t> {
     pous: Vec<(String, bool)>,
 }
 
-/// An attribute: its local name, value (entities resolved) and the raw value's byte range.
-struct Attr<'t> {
-    name: &'t str,
-    value: std::borrow::Cow<'t, str>,
+/// The local names the reader looks for; anything else is `Other`. The stack of open elements
+/// holds these, so reading allocates nothing per element.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Tag {
+    Project,
+    FileHeader,
+    Types,
+    Pous,
+    Pou,
+    Body,
+    Sfc,
+    Position,
+    ConnectionPointIn,
+    Connection,
+    Variable,
+    AddData,
+    Data,
+    Iwb,
+    /// `ressources` or `resources`.
+    Resources,
+    /// `ressource` or `resource`.
+    Resource,
+    Skill,
+    Time,
+    Condition,
+    Inline,
+    Reference,
+    Step,
+    Transition,
+    SimultaneousDivergence,
+    SimultaneousConvergence,
+    SelectionDivergence,
+    SelectionConvergence,
+    JumpStep,
+    MacroStep,
+    Other,
+}
+
+impl Tag {
+    fn of(local: &str) -> Tag {
+        match local {
+            "project" => Tag::Project,
+            "fileHeader" => Tag::FileHeader,
+            "types" => Tag::Types,
+            "pous" => Tag::Pous,
+            "pou" => Tag::Pou,
+            "body" => Tag::Body,
+            "SFC" => Tag::Sfc,
+            "position" => Tag::Position,
+            "connectionPointIn" => Tag::ConnectionPointIn,
+            "connection" => Tag::Connection,
+            "Variable" => Tag::Variable,
+            "addData" => Tag::AddData,
+            "data" => Tag::Data,
+            "iwb" => Tag::Iwb,
+            "ressources" | "resources" => Tag::Resources,
+            "ressource" | "resource" => Tag::Resource,
+            "skill" => Tag::Skill,
+            "time" => Tag::Time,
+            "condition" => Tag::Condition,
+            "inline" => Tag::Inline,
+            "reference" => Tag::Reference,
+            "step" => Tag::Step,
+            "transition" => Tag::Transition,
+            "simultaneousDivergence" => Tag::SimultaneousDivergence,
+            "simultaneousConvergence" => Tag::SimultaneousConvergence,
+            "selectionDivergence" => Tag::SelectionDivergence,
+            "selectionConvergence" => Tag::SelectionConvergence,
+            "jumpStep" => Tag::JumpStep,
+            "macroStep" => Tag::MacroStep,
+            _ => Tag::Other,
+        }
+    }
+}
+
+/// The open elements: their tags, and their local names one after another in `text` (for
+/// messages), each tag with where its name starts.
+#[derive(Default)]
+struct Open {
+    tags: Vec<(Tag, usize)>,
+    text: String,
+}
+
+impl Open {
+    fn push(&mut self, tag: Tag, name: &str) {
+        self.tags.push((tag, self.text.len()));
+        self.text.push_str(name);
+    }
+
+    fn pop(&mut self) {
+        if let Some((_, at)) = self.tags.pop() {
+            self.text.truncate(at);
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.tags.len()
+    }
+
+    fn last_name(&self) -> Option<&str> {
+        self.tags.last().map(|&(_, at)| &self.text[at..])
+    }
+
+    /// The tags from depth `from` on, at most [`Open::PLACES`] + 1 of them: the reader looks at
+    /// places at most that deep below an element, so a longer list (cut, it matches none of
+    /// them) need not be copied at every start tag of a deeply nested file.
+    fn below(&self, from: usize, out: &mut Vec<Tag>) {
+        out.clear();
+        let below = &self.tags[from.min(self.tags.len())..];
+        out.extend(below.iter().take(Self::PLACES + 1).map(|t| t.0));
+    }
+
+    /// The deepest place below an SFC element that the reader looks at
+    /// (`addData/data/iwb/resources`).
+    const PLACES: usize = 4;
+}
+
+/// A picked attribute's value, kept in a scratch string: where it is there, its raw value's byte
+/// range in the file, and whether the value is the raw bytes one to one (no references or
+/// normalized whitespace, so offsets into it are offsets into the file).
+#[derive(Debug, Clone)]
+struct Val {
+    at: Range<usize>,
     range: Range<usize>,
+    exact: bool,
+}
+
+impl Val {
+    fn get<'s>(&self, scratch: &'s str) -> &'s str {
+        &scratch[self.at.clone()]
+    }
+}
+
+/// One `Variable`: its tag and its `name` and `Value`.
+#[derive(Clone)]
+struct VarAttrs {
+    tag: Span,
+    name: Option<Val>,
+    value: Option<Val>,
+    /// Read inside `iwb` (these come after the direct ones).
+    iwb: bool,
 }
 
 /// The element being read (a direct child of `SFC`), with what its descendants contributed.
-struct Building<'t> {
-    tag: &'t str,
+/// One is reused for every element, so its buffers are allocated once.
+struct Building {
+    tag: Tag,
+    /// The tag's local name when it is [`Tag::Other`].
+    other: String,
     span: Span,
     depth: usize,
-    /// `localId`, `name`, `initialStep`, `targetName`.
-    attrs: [Option<Attr<'t>>; 4],
+    /// Attribute values and variable names and values, one after another.
+    scratch: String,
+    local_id: Option<Val>,
+    name: Option<Val>,
+    initial: Option<Val>,
+    target: Option<Val>,
     x: Option<f64>,
     inputs: Vec<(u64, Range<usize>)>,
     bad_inputs: Vec<Diagnostic>,
-    /// `Variable` elements: direct ones, then those in `iwb`.
-    /// `name`, `Value`.
-    direct_vars: Vec<(Span, [Option<Attr<'t>>; 2])>,
-    iwb_vars: Vec<(Span, [Option<Attr<'t>>; 2])>,
+    vars: Vec<VarAttrs>,
     iwb: IwbState,
     resource: Option<Name>,
     resources_seen: bool,
@@ -212,20 +331,96 @@ struct Building<'t> {
     reference: Option<(String, Range<usize>)>,
     /// `condition/connectionPointIn`: a condition wired from FBD/LD elements.
     wired: bool,
+    /// The tags below the element (reused).
+    rel: Vec<Tag>,
 }
 
-impl<'t> Building<'t> {
-    /// The element's attribute `name`, if it has it.
-    fn attr(&self, name: &str) -> Option<&Attr<'t>> {
-        self.attrs.iter().flatten().find(|a| a.name == name)
+impl Building {
+    fn new(file: FileId) -> Self {
+        Building {
+            tag: Tag::Other,
+            other: String::new(),
+            span: Span::new(file, 0..0),
+            depth: 0,
+            scratch: String::new(),
+            local_id: None,
+            name: None,
+            initial: None,
+            target: None,
+            x: None,
+            inputs: Vec::new(),
+            bad_inputs: Vec::new(),
+            vars: Vec::new(),
+            iwb: IwbState::Before,
+            resource: None,
+            resources_seen: false,
+            skill: None,
+            duration: None,
+            time_seen: false,
+            condition: None,
+            condition_done: false,
+            inline: None,
+            inline_map: Vec::new(),
+            reference: None,
+            wired: false,
+            rel: Vec::new(),
+        }
+    }
+
+    /// Ready for the next element, keeping the buffers.
+    fn reset(&mut self, tag: Tag, other: &str, span: Span, depth: usize) {
+        self.tag = tag;
+        self.other.clear();
+        if tag == Tag::Other {
+            self.other.push_str(other);
+        }
+        self.span = span;
+        self.depth = depth;
+        self.scratch.clear();
+        self.local_id = None;
+        self.name = None;
+        self.initial = None;
+        self.target = None;
+        self.x = None;
+        self.inputs.clear();
+        self.bad_inputs.clear();
+        self.vars.clear();
+        self.iwb = IwbState::Before;
+        self.resource = None;
+        self.resources_seen = false;
+        self.skill = None;
+        self.duration = None;
+        self.time_seen = false;
+        self.condition = None;
+        self.condition_done = false;
+        self.inline = None;
+        self.inline_map.clear();
+        self.reference = None;
+        self.wired = false;
+    }
+
+    fn val(&self, v: &Option<Val>) -> Option<&str> {
+        v.as_ref().map(|v| v.get(&self.scratch))
     }
 
     /// How diagnostics name the element: `localId N` (`?` without one).
     fn id_label(&self) -> String {
-        format!(
-            "localId {}",
-            self.attr("localId").map(|a| &*a.value).unwrap_or("?")
-        )
+        format!("localId {}", self.val(&self.local_id).unwrap_or("?"))
+    }
+
+    /// The element's local name.
+    fn tag_name(&self) -> &str {
+        match self.tag {
+            Tag::Step => "step",
+            Tag::Transition => "transition",
+            Tag::SimultaneousDivergence => "simultaneousDivergence",
+            Tag::SimultaneousConvergence => "simultaneousConvergence",
+            Tag::SelectionDivergence => "selectionDivergence",
+            Tag::SelectionConvergence => "selectionConvergence",
+            Tag::JumpStep => "jumpStep",
+            Tag::MacroStep => "macroStep",
+            _ => &self.other,
+        }
     }
 }
 
@@ -236,59 +431,63 @@ enum IwbState {
     Done,
 }
 
-impl<'t> Stream<'t> {
-    fn span(&self, r: Range<usize>) -> Span {
-        Span::new(self.file, r)
-    }
+/// Where the bytes of a start tag's event sit in the file: the event's content begins one byte
+/// after `at` (the `<`).
+struct Tagged<'e, 'b> {
+    e: &'e BytesStart<'b>,
+    at: usize,
+}
 
-    /// The byte offset of `s` in the text (it is a slice of it), or `fallback`.
+impl Tagged<'_, '_> {
+    /// The file offset of `s`, a slice of the event's bytes (`fallback` if it is not one).
     fn offset_of(&self, s: &str, fallback: usize) -> usize {
-        let base = self.text.as_ptr() as usize;
+        let content: &str = self.e;
+        let base = content.as_ptr() as usize;
         let p = s.as_ptr() as usize;
-        if p >= base && p + s.len() <= base + self.text.len() {
-            p - base
+        if p >= base && p + s.len() <= base + content.len() {
+            self.at + 1 + (p - base)
         } else {
             fallback
         }
     }
 
+    /// The local name of the tag.
+    fn local_name(&self) -> &str {
+        let content: &str = self.e;
+        let raw = self.e.name();
+        let full: &str = raw.as_ref();
+        let local = full.rsplit(':').next().unwrap_or(full);
+        // `full` is the start of the content; the local name ends where it does.
+        let end = full.len().min(content.len());
+        &content[end - local.len()..end]
+    }
+}
+
+impl Stream {
+    fn span(&self, r: Range<usize>) -> Span {
+        Span::new(self.file, r)
+    }
+
     fn syntax_error(&self, at: usize, msg: String) -> Box<Diagnostic> {
-        // The parser's position may fall inside a multi-byte character: mark the character.
-        let mut at = at.min(self.text.len());
-        while !self.text.is_char_boundary(at) {
-            at -= 1;
-        }
-        let end = (at + 1).min(self.text.len()).max(at);
+        // A position inside a multi-byte character is moved to its start when the diagnostic
+        // gets its text (`Diagnostics::snap`).
         Box::new(
             Diagnostic::error(Code::XmlSyntax, format!("not well-formed XML: {msg}"))
-                .at(self.span(at..end)),
+                .at(self.span(at..at + 1)),
         )
     }
 
-    /// The local name of a start tag, as a slice of the text.
-    fn local_name(&self, e: &BytesStart<'t>) -> &'t str {
-        let raw = e.name();
-        let full: &str = raw.as_ref();
-        let start = self.offset_of(full, usize::MAX);
-        let local = full.rsplit(':').next().unwrap_or(full);
-        if start == usize::MAX {
-            return "";
-        }
-        let off = start + (full.len() - local.len());
-        &self.text[off..off + local.len()]
-    }
-
-    /// The attributes named `names` (local names), in that order; others are skipped (not
-    /// unescaped). No allocation unless a value has references to resolve.
+    /// The attributes named `names` (local names), in that order, their values appended to
+    /// `scratch`; others are skipped (not unescaped).
     fn pick<const N: usize>(
         &self,
-        e: &BytesStart<'t>,
-        tag_at: usize,
+        t: &Tagged,
         names: [&str; N],
-    ) -> Result<[Option<Attr<'t>>; N], Box<Diagnostic>> {
-        let mut out: [Option<Attr<'t>>; N] = std::array::from_fn(|_| None);
-        for a in e.attributes() {
-            let a = a.map_err(|err| self.syntax_error(tag_at, err.to_string()))?;
+        scratch: &mut String,
+    ) -> Result<[Option<Val>; N], Box<Diagnostic>> {
+        let mut out: [Option<Val>; N] = std::array::from_fn(|_| None);
+        for a in t.e.attributes() {
+            let a = a.map_err(|err| self.syntax_error(t.at, err.to_string()))?;
             let key_raw: &str = a.key.as_ref();
             let local = match key_raw.rfind(':') {
                 Some(i) => &key_raw[i + 1..],
@@ -300,45 +499,38 @@ impl<'t> Stream<'t> {
             if out[slot].is_some() {
                 continue;
             }
-            let key_at = self.offset_of(key_raw, tag_at);
-            let name_at = key_at + (key_raw.len() - local.len());
-            let name: &'t str = self.text.get(name_at..name_at + local.len()).unwrap_or("");
-            let raw_at = self.offset_of(&a.value, tag_at);
+            let raw_at = t.offset_of(&a.value, t.at);
             let range = raw_at..raw_at + a.value.len();
-            let raw: Option<&'t str> = match &a.value {
-                std::borrow::Cow::Borrowed(_) => self.text.get(range.clone()),
-                std::borrow::Cow::Owned(_) => None,
-            };
-            let value = match raw {
-                Some(raw) if !raw.contains(['&', '\t', '\n', '\r']) => {
-                    std::borrow::Cow::Borrowed(raw)
+            let start = scratch.len();
+            let exact = match &a.value {
+                std::borrow::Cow::Borrowed(raw) if !raw.contains(['&', '\t', '\n', '\r']) => {
+                    scratch.push_str(raw);
+                    true
                 }
-                _ => std::borrow::Cow::Owned(
-                    a.normalized_value(quick_xml::XmlVersion::Implicit1_0)
-                        .map_err(|err| self.syntax_error(raw_at, err.to_string()))?
-                        .into_owned(),
-                ),
+                _ => {
+                    let v = a
+                        .normalized_value(quick_xml::XmlVersion::Implicit1_0)
+                        .map_err(|err| self.syntax_error(raw_at, err.to_string()))?;
+                    scratch.push_str(&v);
+                    v.len() == range.len()
+                }
             };
-            out[slot] = Some(Attr { name, value, range });
+            out[slot] = Some(Val {
+                at: start..scratch.len(),
+                range,
+                exact,
+            });
         }
         Ok(out)
     }
 
-    fn run(&mut self, diags: &mut Diagnostics) -> Result<Outcome, Box<Diagnostic>> {
-        // The loader strips one byte-order mark; another one is not XML (and the parser would
-        // skip it silently, shifting every position it reports).
-        if self.text.starts_with('\u{feff}') {
-            return Err(Box::new(
-                Diagnostic::error(
-                    Code::XmlSyntax,
-                    "not well-formed XML: a second byte-order mark at the start of the file",
-                )
-                .at(self.span(0..3)),
-            ));
-        }
-        let mut reader = quick_xml::Reader::from_str(self.text);
-        // Stack of open elements' local names.
-        let mut stack: Vec<&'t str> = Vec::new();
+    fn run<R: BufRead>(
+        &mut self,
+        mut reader: quick_xml::Reader<R>,
+        diags: &mut Diagnostics,
+    ) -> Result<Result<Outcome, Box<Diagnostic>>, StreamError> {
+        let mut buf: Vec<u8> = Vec::with_capacity(4096);
+        let mut stack = Open::default();
         let mut header = FileHeader::default();
         let mut root = self.span(0..0);
         let mut first_pou: Option<(Span, String)> = None;
@@ -348,14 +540,27 @@ impl<'t> Stream<'t> {
         let mut body_seen = false;
         let mut sfc: Option<(Span, usize, Vec<Element>)> = None;
         let mut sfc_done = false;
-        let mut building: Option<Building<'t>> = None;
+        // The element being built, and whether one is.
+        let mut b = Building::new(self.file);
+        let mut building = false;
         let mut seen_root = false;
+        let mut scratch = String::new();
         loop {
             let at = reader.buffer_position() as usize;
-            let ev = match reader.read_event() {
+            buf.clear();
+            let ev = match reader.read_event_into(&mut buf) {
                 Ok(ev) => ev,
+                Err(quick_xml::Error::Encoding(_)) => return Err(StreamError::NotUtf8),
+                Err(quick_xml::Error::Io(e)) => {
+                    return Err(StreamError::Io(std::io::Error::new(
+                        e.kind(),
+                        e.to_string(),
+                    )));
+                }
                 Err(e) => {
-                    return Err(self.syntax_error(reader.error_position() as usize, e.to_string()));
+                    return Ok(Err(
+                        self.syntax_error(reader.error_position() as usize, e.to_string())
+                    ));
                 }
             };
             let (start, empty) = match ev {
@@ -364,25 +569,21 @@ impl<'t> Stream<'t> {
                 Event::End(_) => {
                     let depth = stack.len();
                     stack.pop();
-                    if let Some(b) = &building
-                        && depth == b.depth
-                    {
-                        let b = building.take().expect("checked");
-                        if let Some(el) = self.finish(b, diags)
+                    if building && depth == b.depth {
+                        building = false;
+                        if let Some(el) = self.finish(&mut b, diags)
                             && let Some((_, _, els)) = &mut sfc
                         {
                             els.push(el);
                         }
-                    } else if let Some(b) = &mut building {
-                        end_inside(b, &stack);
-                    } else if let Some((span, d, els)) = &sfc
+                    } else if building {
+                        end_inside(&mut b, &stack);
+                    } else if let Some((_, d, _)) = &sfc
                         && depth == *d
                     {
                         // `</SFC>`
                         let (name, program, _) = pou.clone().unwrap_or((None, false, 0));
-                        let _ = (span, els);
-                        let (span, _, els) = sfc.take().expect("checked");
-                        let mut els = els;
+                        let (span, _, mut els) = sfc.take().expect("checked");
                         els.shrink_to_fit();
                         self.found.push(Pou {
                             name,
@@ -400,18 +601,22 @@ impl<'t> Stream<'t> {
                     continue;
                 }
                 Event::Text(t) => {
-                    let end = reader.buffer_position() as usize;
-                    inline_text(&mut building, &stack, at..end, || {
-                        t.xml_content(quick_xml::XmlVersion::Implicit1_0)
-                    });
+                    if building {
+                        let end = reader.buffer_position() as usize;
+                        inline_text(&mut b, &stack, at..end, || {
+                            t.xml_content(quick_xml::XmlVersion::Implicit1_0)
+                        });
+                    }
                     continue;
                 }
                 Event::CData(t) => {
-                    // `<![CDATA[` … `]]>`
-                    let end = (reader.buffer_position() as usize).saturating_sub(3);
-                    inline_text(&mut building, &stack, (at + 9).min(end)..end, || {
-                        t.xml_content(quick_xml::XmlVersion::Implicit1_0)
-                    });
+                    if building {
+                        // `<![CDATA[` … `]]>`
+                        let end = (reader.buffer_position() as usize).saturating_sub(3);
+                        inline_text(&mut b, &stack, (at + 9).min(end)..end, || {
+                            t.xml_content(quick_xml::XmlVersion::Implicit1_0)
+                        });
+                    }
                     continue;
                 }
                 Event::GeneralRef(r) => {
@@ -424,17 +629,18 @@ impl<'t> Stream<'t> {
                             "apos" => Some('\''),
                             "quot" => Some('"'),
                             other => {
-                                return Err(self.syntax_error(
+                                return Ok(Err(self.syntax_error(
                                     at,
                                     format!("unknown entity reference `&{other};`"),
-                                ));
+                                )));
                             }
                         },
-                        Err(e) => return Err(self.syntax_error(at, e.to_string())),
+                        Err(e) => return Ok(Err(self.syntax_error(at, e.to_string()))),
                     };
-                    if let (Some(c), Some(b)) = (ch, &mut building)
+                    if let Some(c) = ch
+                        && building
                         && b.inline.is_some()
-                        && in_inline(b, &stack)
+                        && in_inline(&b, &stack)
                     {
                         let inline = b.inline.as_mut().expect("checked");
                         b.inline_map.push((inline.len(), at, false));
@@ -443,87 +649,102 @@ impl<'t> Stream<'t> {
                     continue;
                 }
                 Event::DocType(_) => {
-                    return Err(Box::new(
+                    return Ok(Err(Box::new(
                         Diagnostic::error(
                             Code::XmlSyntax,
                             "a document type declaration (DTD) is not accepted: entity definitions could expand without bound",
                         )
-                        .at(self.span(at..at + 9.min(self.text.len() - at))),
-                    ));
+                        .at(self.span(at..at + 9)),
+                    )));
                 }
                 Event::Eof => {
-                    if let Some(open) = stack.last() {
-                        return Err(self.syntax_error(
-                            self.text.len(),
-                            format!("the file ends inside `<{open}>`"),
+                    let end = reader.buffer_position() as usize;
+                    if let Some(open) = stack.last_name() {
+                        return Ok(Err(
+                            self.syntax_error(end, format!("the file ends inside `<{open}>`"))
                         ));
                     }
                     if !seen_root {
-                        return Err(self.syntax_error(0, "no root element".to_owned()));
+                        return Ok(Err(self.syntax_error(0, "no root element".to_owned())));
                     }
-                    return Ok(Outcome::Done {
+                    return Ok(Ok(Outcome::Done {
                         header,
                         root,
                         first_pou,
-                    });
+                    }));
                 }
                 _ => continue,
             };
-            let name = self.local_name(&start);
-            let tag = self.span(at..(at + 1 + name.len()).min(self.text.len()));
-            if stack.is_empty() {
+            let t = Tagged { e: &start, at };
+            let name = t.local_name();
+            let tag = Tag::of(name);
+            let tag_span = self.span(at..at + 1 + name.len());
+            if stack.len() == 0 {
                 if seen_root {
-                    return Err(self.syntax_error(at, "a second root element".to_owned()));
+                    return Ok(Err(
+                        self.syntax_error(at, "a second root element".to_owned())
+                    ));
                 }
                 seen_root = true;
-                root = tag.clone();
-                if name != "project" {
+                root = tag_span.clone();
+                if tag != Tag::Project {
                     // Read no further: the caller reports E103 (the rest may be any XML).
-                    return Ok(Outcome::WrongRoot(tag, name.to_owned()));
+                    return Ok(Ok(Outcome::WrongRoot(tag_span, name.to_owned())));
                 }
             }
             let depth = stack.len() + 1;
+            if building {
+                if let Err(d) = self.inside(&mut b, &stack, tag, tag_span, &t) {
+                    return Ok(Err(d));
+                }
+                if empty {
+                    end_inside(&mut b, &stack);
+                } else {
+                    stack.push(tag, name);
+                }
+                continue;
+            }
             // The element's place, relative to the document.
-            let path = PathKind::of(&stack, name);
+            let path = PathKind::of(&stack, tag);
             if matches!(path, PathKind::Sfc)
                 && let Some(p) = self.pous.last_mut()
             {
                 p.1 = true;
             }
-            if let Some(b) = &mut building {
-                self.inside(b, &stack, name, tag, &start, at)?;
-                if empty {
-                    end_inside(b, &stack);
-                } else {
-                    stack.push(name);
-                }
-                continue;
-            }
             match path {
                 PathKind::FileHeader => {
-                    let [company, product, version, time] = self.pick(
-                        &start,
-                        at,
+                    scratch.clear();
+                    let picked = self.pick(
+                        &t,
                         [
                             "companyName",
                             "productName",
                             "productVersion",
                             "creationDateTime",
                         ],
-                    )?;
-                    let v = |a: Option<Attr>| a.map(|a| a.value.into_owned());
+                        &mut scratch,
+                    );
+                    let [company, product, version, time] = match picked {
+                        Ok(p) => p,
+                        Err(d) => return Ok(Err(d)),
+                    };
+                    let v = |a: Option<Val>| a.map(|a| a.get(&scratch).to_owned());
                     header.company_name = v(company);
                     header.product_name = v(product);
                     header.product_version = v(version);
                     header.creation_date_time = v(time);
                 }
                 PathKind::Pou => {
-                    let [pou_name, pou_type] = self.pick(&start, at, ["name", "pouType"])?;
-                    let get = |a: &Option<Attr>| a.as_ref().map(|a| a.value.to_string());
-                    let pname = get(&pou_name);
-                    let program = get(&pou_type).as_deref() == Some("program");
+                    scratch.clear();
+                    let [pou_name, pou_type] =
+                        match self.pick(&t, ["name", "pouType"], &mut scratch) {
+                            Ok(p) => p,
+                            Err(d) => return Ok(Err(d)),
+                        };
+                    let pname = pou_name.map(|a| a.get(&scratch).to_owned());
+                    let program = pou_type.is_some_and(|a| a.get(&scratch) == "program");
                     if first_pou.is_none() {
-                        first_pou = Some((tag.clone(), pname.clone().unwrap_or_default()));
+                        first_pou = Some((tag_span.clone(), pname.clone().unwrap_or_default()));
                     }
                     self.pous.push((pname.clone().unwrap_or_default(), false));
                     let have_program = self.found.iter().any(|p| p.program);
@@ -553,61 +774,54 @@ impl<'t> Stream<'t> {
                         self.found.push(Pou {
                             name: pname,
                             program,
-                            sfc_span: tag,
+                            sfc_span: tag_span,
                             elements: Vec::new(),
                         });
                         sfc_done = true;
                     } else {
                         // Sized from the bytes left (an element takes about 300-400 bytes):
                         // growing by doubling would hold the old and the new vector at once.
-                        let left = self.text.len().saturating_sub(tag.range.end);
-                        sfc = Some((tag, depth, Vec::with_capacity((left / 320).min(1 << 24))));
+                        let left = self.len_hint.saturating_sub(tag_span.range.end);
+                        sfc = Some((
+                            tag_span,
+                            depth,
+                            Vec::with_capacity((left / 320).min(1 << 24)),
+                        ));
                     }
                 }
                 _ => {
                     if let Some((_, d, els)) = &mut sfc
                         && depth == *d + 1
                     {
-                        let attrs = self.pick(
-                            &start,
-                            at,
+                        b.reset(tag, name, tag_span, depth);
+                        let mut scratch = std::mem::take(&mut b.scratch);
+                        let picked = self.pick(
+                            &t,
                             ["localId", "name", "initialStep", "targetName"],
-                        )?;
-                        let b = Building {
-                            tag: name,
-                            span: tag,
-                            depth,
-                            attrs,
-                            x: None,
-                            inputs: Vec::new(),
-                            bad_inputs: Vec::new(),
-                            direct_vars: Vec::new(),
-                            iwb_vars: Vec::new(),
-                            iwb: IwbState::Before,
-                            resource: None,
-                            resources_seen: false,
-                            skill: None,
-                            duration: None,
-                            time_seen: false,
-                            condition: None,
-                            condition_done: false,
-                            inline: None,
-                            inline_map: Vec::new(),
-                            reference: None,
-                            wired: false,
-                        };
+                            &mut scratch,
+                        );
+                        b.scratch = scratch;
+                        match picked {
+                            Ok([id, n, initial, target]) => {
+                                b.local_id = id;
+                                b.name = n;
+                                b.initial = initial;
+                                b.target = target;
+                            }
+                            Err(d) => return Ok(Err(d)),
+                        }
                         if empty {
-                            if let Some(el) = self.finish(b, diags) {
+                            if let Some(el) = self.finish(&mut b, diags) {
                                 els.push(el);
                             }
                         } else {
-                            building = Some(b);
+                            building = true;
                         }
                     }
                 }
             }
             if !empty {
-                stack.push(name);
+                stack.push(tag, name);
             }
         }
     }
@@ -615,113 +829,169 @@ impl<'t> Stream<'t> {
     /// A descendant of the element being built, at `stack` (which ends below the element).
     fn inside(
         &mut self,
-        b: &mut Building<'t>,
-        stack: &[&'t str],
-        name: &'t str,
-        tag: Span,
-        start: &BytesStart<'t>,
-        at: usize,
+        b: &mut Building,
+        stack: &Open,
+        tag: Tag,
+        tag_span: Span,
+        t: &Tagged,
     ) -> Result<(), Box<Diagnostic>> {
-        let rel = &stack[b.depth..];
-        match (rel, name) {
-            ([], "position") if b.x.is_none() => {
-                let [x] = self.pick(start, at, ["x"])?;
-                b.x = Some(
-                    x.and_then(|a| a.value.trim().parse::<f64>().ok())
-                        .filter(|x| x.is_finite())
-                        .unwrap_or(0.0),
-                );
-            }
-            (["connectionPointIn"], "connection") => match self.pick(start, at, ["refLocalId"])? {
-                [Some(a)] => match a.value.trim().parse::<u64>() {
-                    Ok(r) => b.inputs.push((r, a.range.clone())),
-                    Err(_) => b.bad_inputs.push(
-                        Diagnostic::error(
-                            Code::DanglingReference,
-                            format!("refLocalId `{}` is not a number", a.value),
-                        )
-                        .at(self.span(a.range.clone())),
-                    ),
+        let mut rel = std::mem::take(&mut b.rel);
+        stack.below(b.depth, &mut rel);
+        let r = self.inside_at(b, &rel, tag, tag_span, t);
+        b.rel = rel;
+        r
+    }
+
+    fn inside_at(
+        &mut self,
+        b: &mut Building,
+        rel: &[Tag],
+        tag: Tag,
+        tag_span: Span,
+        t: &Tagged,
+    ) -> Result<(), Box<Diagnostic>> {
+        use Tag as T;
+        let mut scratch = std::mem::take(&mut b.scratch);
+        let r = (|| {
+            match (rel, tag) {
+                ([], T::Position) if b.x.is_none() => {
+                    let [x] = self.pick(t, ["x"], &mut scratch)?;
+                    b.x = Some(
+                        x.and_then(|a| a.get(&scratch).trim().parse::<f64>().ok())
+                            .filter(|x| x.is_finite())
+                            .unwrap_or(0.0),
+                    );
+                }
+                ([T::ConnectionPointIn], T::Connection) => {
+                    let mark = scratch.len();
+                    match self.pick(t, ["refLocalId"], &mut scratch)? {
+                        [Some(a)] => match a.get(&scratch).trim().parse::<u64>() {
+                            Ok(r) => b.inputs.push((r, a.range.clone())),
+                            Err(_) => b.bad_inputs.push(
+                                Diagnostic::error(
+                                    Code::DanglingReference,
+                                    format!("refLocalId `{}` is not a number", a.get(&scratch)),
+                                )
+                                .at(self.span(a.range.clone())),
+                            ),
+                        },
+                        [None] => b.bad_inputs.push(
+                            Diagnostic::error(
+                                Code::DanglingReference,
+                                "connection without refLocalId",
+                            )
+                            .at(tag_span),
+                        ),
+                    }
+                    scratch.truncate(mark);
+                }
+                ([], T::Variable) => {
+                    let [name, value] = self.pick(t, ["name", "Value"], &mut scratch)?;
+                    b.vars.push(VarAttrs {
+                        tag: tag_span,
+                        name,
+                        value,
+                        iwb: false,
+                    });
+                }
+                ([T::AddData, T::Data], T::Iwb) if b.iwb == IwbState::Before => {
+                    b.iwb = IwbState::Inside;
+                }
+                ([T::AddData, T::Data, T::Iwb], _) if b.iwb == IwbState::Inside => match tag {
+                    T::Resources if !b.resources_seen => b.resources_seen = true,
+                    T::Skill if b.skill.is_none() => {
+                        let mark = scratch.len();
+                        let [n] = self.pick(t, ["name"], &mut scratch)?;
+                        b.skill = n
+                            .map(|a| {
+                                self.names
+                                    .name(a.get(&scratch), Span::new(self.file, a.range.clone()))
+                            })
+                            .filter(|n| !n.key.is_empty());
+                        scratch.truncate(mark);
+                    }
+                    T::Time if !b.time_seen => {
+                        b.time_seen = true;
+                        let mark = scratch.len();
+                        let [d] = self.pick(t, ["duration"], &mut scratch)?;
+                        b.duration = d
+                            .and_then(|a| a.get(&scratch).trim().parse::<f64>().ok())
+                            .filter(|d| d.is_finite() && *d >= 0.0);
+                        scratch.truncate(mark);
+                    }
+                    T::Variable => {
+                        let [name, value] = self.pick(t, ["name", "Value"], &mut scratch)?;
+                        b.vars.push(VarAttrs {
+                            tag: tag_span,
+                            name,
+                            value,
+                            iwb: true,
+                        });
+                    }
+                    _ => {}
                 },
-                [None] => b.bad_inputs.push(
-                    Diagnostic::error(Code::DanglingReference, "connection without refLocalId")
-                        .at(tag),
-                ),
-            },
-            ([], "Variable") => {
-                let attrs = self.pick(start, at, ["name", "Value"])?;
-                b.direct_vars.push((tag, attrs));
-            }
-            (["addData", "data"], "iwb") if b.iwb == IwbState::Before => {
-                b.iwb = IwbState::Inside;
-            }
-            (["addData", "data", "iwb"], _) if b.iwb == IwbState::Inside => match name {
-                "ressources" | "resources" if !b.resources_seen => b.resources_seen = true,
-                "skill" if b.skill.is_none() => {
-                    let [n] = self.pick(start, at, ["name"])?;
-                    b.skill = n
-                        .map(|a| self.names.name(&a.value, self.span(a.range.clone())))
+                ([T::AddData, T::Data, T::Iwb, T::Resources], T::Resource)
+                    if b.iwb == IwbState::Inside && b.resource.is_none() =>
+                {
+                    let mark = scratch.len();
+                    let [n] = self.pick(t, ["name"], &mut scratch)?;
+                    b.resource = n
+                        .map(|a| {
+                            self.names
+                                .name(a.get(&scratch), Span::new(self.file, a.range.clone()))
+                        })
                         .filter(|n| !n.key.is_empty());
+                    scratch.truncate(mark);
                 }
-                "time" if !b.time_seen => {
-                    b.time_seen = true;
-                    let [d] = self.pick(start, at, ["duration"])?;
-                    b.duration = d
-                        .and_then(|a| a.value.trim().parse::<f64>().ok())
-                        .filter(|d| d.is_finite() && *d >= 0.0);
+                ([], T::Condition) if b.condition.is_none() && !b.condition_done => {
+                    b.condition = Some(tag_span);
                 }
-                "Variable" => {
-                    let attrs = self.pick(start, at, ["name", "Value"])?;
-                    b.iwb_vars.push((tag, attrs));
+                ([T::Condition], T::Inline)
+                    if b.condition.is_some() && b.inline.is_none() && b.reference.is_none() =>
+                {
+                    b.inline = Some(String::new());
                 }
+                ([T::Condition], T::Reference)
+                    if b.condition.is_some() && b.inline.is_none() && b.reference.is_none() =>
+                {
+                    let mark = scratch.len();
+                    let [n] = self.pick(t, ["name"], &mut scratch)?;
+                    b.reference = Some(match n {
+                        Some(a) => (a.get(&scratch).to_owned(), a.range),
+                        None => (String::new(), tag_span.range.clone()),
+                    });
+                    scratch.truncate(mark);
+                }
+                ([T::Condition], T::ConnectionPointIn) if b.condition.is_some() => b.wired = true,
                 _ => {}
-            },
-            (["addData", "data", "iwb", "ressources" | "resources"], "ressource" | "resource")
-                if b.iwb == IwbState::Inside && b.resource.is_none() =>
-            {
-                let [n] = self.pick(start, at, ["name"])?;
-                b.resource = n
-                    .map(|a| self.names.name(&a.value, self.span(a.range.clone())))
-                    .filter(|n| !n.key.is_empty());
             }
-            ([], "condition") if b.condition.is_none() && !b.condition_done => {
-                b.condition = Some(tag);
-            }
-            (["condition"], "inline")
-                if b.condition.is_some() && b.inline.is_none() && b.reference.is_none() =>
-            {
-                b.inline = Some(String::new());
-            }
-            (["condition"], "reference")
-                if b.condition.is_some() && b.inline.is_none() && b.reference.is_none() =>
-            {
-                let [n] = self.pick(start, at, ["name"])?;
-                b.reference = Some(match n {
-                    Some(a) => (a.value.into_owned(), a.range),
-                    None => (String::new(), tag.range.clone()),
-                });
-            }
-            (["condition"], "connectionPointIn") if b.condition.is_some() => b.wired = true,
-            _ => {}
-        }
-        Ok(())
+            Ok(())
+        })();
+        b.scratch = scratch;
+        r
     }
 
     /// The element is complete: check it and turn it into the model.
-    fn finish(&mut self, b: Building<'t>, diags: &mut Diagnostics) -> Option<Element> {
+    fn finish(&mut self, b: &mut Building, diags: &mut Diagnostics) -> Option<Element> {
         let file = self.file;
-        let attr = |n: &str| b.attr(n);
         let kind = match b.tag {
-            "step" => ElementKind::Step(Box::new(self.step(&b, diags))),
-            "transition" => ElementKind::Transition(self.condition(&b, diags)),
-            "simultaneousDivergence" => ElementKind::SimultaneousDivergence,
-            "simultaneousConvergence" => ElementKind::SimultaneousConvergence,
-            "selectionDivergence" => ElementKind::SelectionDivergence,
-            "selectionConvergence" => ElementKind::SelectionConvergence,
-            "jumpStep" => {
-                let target = attr("targetName")
-                    .filter(|a| !a.value.trim().is_empty())
-                    .map(|a| Box::new(self.names.name(&a.value, Span::new(file, a.range.clone()))));
+            Tag::Step => ElementKind::Step(Box::new(self.step(b, diags))),
+            Tag::Transition => ElementKind::Transition(self.condition(b, diags)),
+            Tag::SimultaneousDivergence => ElementKind::SimultaneousDivergence,
+            Tag::SimultaneousConvergence => ElementKind::SimultaneousConvergence,
+            Tag::SelectionDivergence => ElementKind::SelectionDivergence,
+            Tag::SelectionConvergence => ElementKind::SelectionConvergence,
+            Tag::JumpStep => {
+                let target = b
+                    .target
+                    .as_ref()
+                    .filter(|a| !a.get(&b.scratch).trim().is_empty())
+                    .map(|a| {
+                        Box::new(
+                            self.names
+                                .name(a.get(&b.scratch), Span::new(file, a.range.clone())),
+                        )
+                    });
                 if target.is_none() {
                     diags.push(
                         Diagnostic::error(
@@ -734,19 +1004,24 @@ impl<'t> Stream<'t> {
                 }
                 ElementKind::JumpStep(target)
             }
-            "macroStep" => ElementKind::MacroStep,
-            tag => {
+            Tag::MacroStep => ElementKind::MacroStep,
+            _ => {
                 // Reported once per kind and chart (see `report_ignored`).
+                let tag = b.tag_name();
                 let n = self.ignored.iter().filter(|i| i.0 == tag).count() + 1;
-                let label = match attr("localId") {
-                    Some(a) => format!("localId {}", a.value.trim()),
+                let label = match b.val(&b.local_id) {
+                    Some(v) => format!("localId {}", v.trim()),
                     None => format!("{tag} no. {n} of the SFC body"),
                 };
                 self.ignored.push((tag.to_owned(), b.span.clone(), label));
                 return None;
             }
         };
-        let local_id = match attr("localId").map(|a| (a.value.trim().parse::<u64>(), a)) {
+        let local_id = match b
+            .local_id
+            .as_ref()
+            .map(|a| (a.get(&b.scratch).trim().parse::<u64>(), a))
+        {
             Some((Ok(id), _)) => id,
             Some((Err(_), a)) => {
                 diags.push(
@@ -754,8 +1029,8 @@ impl<'t> Stream<'t> {
                         Code::BadLocalId,
                         format!(
                             "`{}` has localId `{}`, which is not a number from 0 to {}",
-                            b.tag,
-                            a.value,
+                            b.tag_name(),
+                            a.get(&b.scratch),
                             u64::MAX
                         ),
                     )
@@ -765,32 +1040,31 @@ impl<'t> Stream<'t> {
             }
             None => {
                 diags.push(
-                    Diagnostic::error(Code::BadLocalId, format!("`{}` without localId", b.tag))
-                        .at(b.span.clone()),
+                    Diagnostic::error(
+                        Code::BadLocalId,
+                        format!("`{}` without localId", b.tag_name()),
+                    )
+                    .at(b.span.clone()),
                 );
                 return None;
             }
         };
-        for d in b.bad_inputs {
+        for d in b.bad_inputs.drain(..) {
             diags.push(d.element(format!("localId {local_id}")));
         }
         Some(Element {
             local_id,
             kind,
-            span: b.span,
+            span: b.span.clone(),
             x: b.x.unwrap_or(0.0),
-            inputs: {
-                // Most elements have one input: no slack kept for 100,000 of them.
-                let mut inputs = b.inputs;
-                inputs.shrink_to_fit();
-                inputs
-            },
+            // Exactly sized: most elements have one input, and there are 100,000 of them.
+            inputs: b.inputs.as_slice().to_vec(),
         })
     }
 
     /// A transition's condition: parsed, syntax errors located in the file. `None` when the
     /// transition always fires (no condition, or `TRUE`).
-    fn condition(&self, b: &Building<'t>, diags: &mut Diagnostics) -> Option<Box<Condition>> {
+    fn condition(&self, b: &Building, diags: &mut Diagnostics) -> Option<Box<Condition>> {
         let c = b.condition.as_ref()?;
         let label = || b.id_label();
         let file = self.file;
@@ -865,15 +1139,8 @@ impl<'t> Stream<'t> {
                     let e = map_offset(&b.inline_map, err.at.end.saturating_sub(1)) + 1;
                     s..e.max(s + 1)
                 };
-                // On character boundaries of the file, whatever the pieces' mapping gave.
-                let (mut s, mut e) = (at.start.min(self.text.len()), at.end.min(self.text.len()));
-                while !self.text.is_char_boundary(s) {
-                    s -= 1;
-                }
-                while !self.text.is_char_boundary(e) {
-                    e += 1;
-                }
-                let at = s..e.max(s);
+                // On character boundaries of the file once the text is there
+                // (`Diagnostics::snap`), whatever the pieces' mapping gave.
                 diags.push(
                     Diagnostic::error(
                         Code::BadCondition,
@@ -887,47 +1154,55 @@ impl<'t> Stream<'t> {
         }
     }
 
-    fn step(&mut self, b: &Building<'t>, diags: &mut Diagnostics) -> Step {
+    fn step(&mut self, b: &Building, diags: &mut Diagnostics) -> Step {
         let file = self.file;
         let label = || b.id_label();
-        let mut variables = Vec::new();
+        let s = &b.scratch;
+        let mut variables = Vec::with_capacity(b.vars.len());
         let mut invalid_variables = Vec::new();
-        for (tag, attrs) in b.direct_vars.iter().chain(b.iwb_vars.iter()) {
-            let get = |n: &str| attrs.iter().flatten().find(|a| a.name == n);
-            let Some(name) = get("name") else {
+        // The direct ones first, then those in `iwb`.
+        let ordered = b
+            .vars
+            .iter()
+            .filter(|v| !v.iwb)
+            .chain(b.vars.iter().filter(|v| v.iwb));
+        for v in ordered {
+            let Some(name) = &v.name else {
                 diags.push(
                     Diagnostic::error(Code::BadVariableSyntax, "Variable without `name`")
-                        .at(tag.clone())
+                        .at(v.tag.clone())
                         .element(label()),
                 );
                 continue;
             };
-            let Some(value) = get("Value") else {
+            let name_text = name.get(s);
+            let Some(value) = &v.value else {
                 diags.push(
                     Diagnostic::error(
                         Code::BadVariableSyntax,
-                        format!("Variable `{}` without `Value`", name.value),
+                        format!("Variable `{name_text}` without `Value`"),
                     )
-                    .at(tag.clone())
+                    .at(v.tag.clone())
                     .element(label()),
                 );
-                invalid_variables.push(self.names.strings(&name.value).1);
+                invalid_variables.push(self.names.strings(name_text).1);
                 continue;
             };
+            let value_text = value.get(s);
             let value_span = Span::new(file, value.range.clone());
-            match crate::value::check_value(&value.value) {
+            match crate::value::check_value(value_text) {
                 Ok(()) => variables.push(Variable {
                     name: self
                         .names
-                        .name(&name.value, Span::new(file, name.range.clone())),
-                    raw: value.value.trim().to_owned(),
+                        .name(name_text, Span::new(file, name.range.clone())),
+                    raw: value_text.trim().to_owned(),
                     value_span,
                 }),
                 Err((offset, msg)) => {
-                    invalid_variables.push(self.names.strings(&name.value).1);
+                    invalid_variables.push(self.names.strings(name_text).1);
                     // Point into the raw value when it has no references (then offsets agree).
                     let raw_len = value.range.len();
-                    let at = if raw_len == value.value.len() {
+                    let at = if value.exact {
                         value.range.start + offset.min(raw_len)
                     } else {
                         value.range.start
@@ -935,7 +1210,7 @@ impl<'t> Stream<'t> {
                     diags.push(
                         Diagnostic::error(
                             Code::BadVariableSyntax,
-                            format!("variable `{}`: {msg}", name.value),
+                            format!("variable `{name_text}`: {msg}"),
                         )
                         .at(Span::new(file, at..(at + 1).min(value.range.end.max(at))))
                         .element(label()),
@@ -943,25 +1218,95 @@ impl<'t> Stream<'t> {
                 }
             }
         }
-        let attr = |n: &str| b.attr(n);
         Step {
-            name: self
-                .names
-                .strings(attr("name").map(|a| &*a.value).unwrap_or(""))
-                .0,
-            initial: attr("initialStep")
-                .is_some_and(|a| a.value.trim() == "true" || a.value.trim() == "1"),
+            name: self.names.strings(b.val(&b.name).unwrap_or("")).0,
+            initial: b
+                .val(&b.initial)
+                .is_some_and(|v| v.trim() == "true" || v.trim() == "1"),
             resource: b.resource.clone(),
             skill: b.skill.clone(),
             duration: b.duration,
-            variables: {
-                // A step has a few variables: no slack kept for 100,000 steps.
-                let mut variables = variables;
-                variables.shrink_to_fit();
-                variables
-            },
+            variables,
             invalid_variables,
         }
+    }
+
+    /// The POU to use, once the whole file is read.
+    fn choose(
+        &mut self,
+        header: FileHeader,
+        root: Span,
+        first_pou: Option<(Span, String)>,
+        diags: &mut Diagnostics,
+    ) -> Option<Sfc> {
+        let chosen = self
+            .found
+            .iter()
+            .position(|p| p.program)
+            .or(if self.found.is_empty() { None } else { Some(0) });
+        let with_sfc: Vec<&str> = self
+            .pous
+            .iter()
+            .filter(|p| p.1)
+            .map(|p| p.0.as_str())
+            .collect();
+        let list = |names: &[&str]| {
+            let v: Vec<String> = names.iter().take(12).map(|n| format!("`{n}`")).collect();
+            let more = if names.len() > 12 { ", ..." } else { "" };
+            format!("{}{more}", v.join(", "))
+        };
+        let Some(i) = chosen else {
+            let all: Vec<&str> = self.pous.iter().map(|p| p.0.as_str()).collect();
+            let message = match (&self.wanted, &first_pou) {
+                (Some(w), _) if !with_sfc.is_empty() => format!(
+                    "no POU named `{w}` with an SFC body; the POUs with one: {}",
+                    list(&with_sfc)
+                ),
+                (Some(w), Some(_)) => format!(
+                    "no POU named `{w}` with an SFC body; none of the {} POUs ({}) has one",
+                    all.len(),
+                    list(&all)
+                ),
+                (_, None) => "the SFC file has no `pou` (types/pous/pou)".to_owned(),
+                (None, Some((_, name))) if all.len() == 1 => {
+                    format!("pou `{name}` has no SFC body (body/SFC)")
+                }
+                (None, Some(_)) => format!(
+                    "none of the {} POUs ({}) has an SFC body (body/SFC)",
+                    all.len(),
+                    list(&all)
+                ),
+            };
+            diags.push(
+                Diagnostic::error(Code::NoSfcBody, message)
+                    .at(first_pou.map(|(s, _)| s).unwrap_or(root)),
+            );
+            return None;
+        };
+        if self.wanted.is_none() && with_sfc.len() > 1 {
+            let used = self.found[i].name.clone().unwrap_or_default();
+            let others: Vec<&str> = with_sfc.iter().copied().filter(|n| *n != used).collect();
+            diags.push(
+                Diagnostic::warning(
+                    Code::SeveralPous,
+                    format!(
+                        "{} POUs have an SFC body; `{used}` is used ({}), not {}: name the one meant with `--pou NAME` or `#NAME` after the SFC file's name in the blackboard",
+                        with_sfc.len(),
+                        if self.found[i].program { "the first program" } else { "the first with one" },
+                        list(&others)
+                    ),
+                )
+                .at(self.found[i].sfc_span.clone()),
+            );
+        }
+        let pou = self.found.swap_remove(i);
+        Some(Sfc {
+            file: self.file,
+            header,
+            pou_name: pou.name,
+            elements: pou.elements,
+            span: Some(pou.sfc_span),
+        })
     }
 }
 
@@ -1009,23 +1354,39 @@ enum PathKind {
 }
 
 impl PathKind {
-    fn of(stack: &[&str], name: &str) -> Self {
-        match (stack, name) {
-            (["project"], "fileHeader") => PathKind::FileHeader,
-            (["project", "types", "pous"], "pou") => PathKind::Pou,
-            (["project", "types", "pous", "pou"], "body") => PathKind::Body,
-            (["project", "types", "pous", "pou", "body"], "SFC") => PathKind::Sfc,
+    fn of(stack: &Open, tag: Tag) -> Self {
+        use Tag as T;
+        let open = |i: usize| stack.tags[i].0;
+        match (stack.len(), tag) {
+            (1, T::FileHeader) if open(0) == T::Project => PathKind::FileHeader,
+            (3, T::Pou) if [open(0), open(1), open(2)] == [T::Project, T::Types, T::Pous] => {
+                PathKind::Pou
+            }
+            (4, T::Body) if open(3) == T::Pou && PathKind::of_pous(stack) => PathKind::Body,
+            (5, T::Sfc) if open(3) == T::Pou && open(4) == T::Body && PathKind::of_pous(stack) => {
+                PathKind::Sfc
+            }
             _ => PathKind::Other,
         }
+    }
+
+    /// Whether the stack starts `project/types/pous`.
+    fn of_pous(stack: &Open) -> bool {
+        stack.tags.len() >= 3
+            && stack.tags[..3]
+                .iter()
+                .map(|t| t.0)
+                .eq([Tag::Project, Tag::Types, Tag::Pous])
     }
 }
 
 /// An element inside the one being built closed; `stack` is what remains open.
-fn end_inside(b: &mut Building, stack: &[&str]) {
-    let rel = &stack[b.depth.min(stack.len())..];
+fn end_inside(b: &mut Building, stack: &Open) {
+    let depth = b.depth.min(stack.len());
+    let rel = &stack.tags[depth..];
     match rel {
         // `</iwb>` closed: only the first iwb counts.
-        ["addData", "data"] if b.iwb == IwbState::Inside => b.iwb = IwbState::Done,
+        [(Tag::AddData, _), (Tag::Data, _)] if b.iwb == IwbState::Inside => b.iwb = IwbState::Done,
         // `</condition>` closed: only the first condition counts.
         [] if b.condition.is_some() => b.condition_done = true,
         _ => {}
@@ -1035,15 +1396,12 @@ fn end_inside(b: &mut Building, stack: &[&str]) {
 /// Adds text (read from `raw`, a range of the file) to the element's inline condition when the
 /// stack is inside it.
 fn inline_text<'s>(
-    building: &mut Option<Building>,
-    stack: &[&str],
+    b: &mut Building,
+    stack: &Open,
     raw: Range<usize>,
     text: impl FnOnce() -> std::borrow::Cow<'s, str>,
 ) {
-    if let Some(b) = building
-        && b.inline.is_some()
-        && in_inline(b, stack)
-    {
+    if b.inline.is_some() && in_inline(b, stack) {
         let t = text();
         let inline = b.inline.get_or_insert_default();
         b.inline_map
@@ -1063,9 +1421,9 @@ fn map_offset(map: &[(usize, usize, bool)], o: usize) -> usize {
 }
 
 /// Whether the stack is inside the element's `condition/inline`.
-fn in_inline(b: &Building, stack: &[&str]) -> bool {
-    let rel = &stack[b.depth.min(stack.len())..];
-    rel.len() >= 2 && rel[0] == "condition" && rel[1] == "inline"
+fn in_inline(b: &Building, stack: &Open) -> bool {
+    let rel = &stack.tags[b.depth.min(stack.len())..];
+    rel.len() >= 2 && rel[0].0 == Tag::Condition && rel[1].0 == Tag::Inline
 }
 
 #[cfg(test)]

@@ -29,22 +29,10 @@ pub fn load(
     if let Some(id) = sources.find(path) {
         return Some(id);
     }
-    let unreadable = |why: String| {
-        Diagnostic::error(
-            Code::FileUnreadable,
-            format!("cannot read `{display}`: {why}"),
-        )
-        .at_opt(origin.clone())
-        .path(path)
-    };
     let bytes = match fs.read(path) {
         Ok(b) => b,
         Err(e) => {
-            let why = match e.kind() {
-                std::io::ErrorKind::NotFound => "no such file".to_owned(),
-                _ => e.to_string(),
-            };
-            diags.push(unreadable(why));
+            diags.push(unreadable(&display, path, origin, &e));
             return None;
         }
     };
@@ -57,15 +45,41 @@ pub fn load(
             let lossy = String::from_utf8_lossy(e.as_bytes()).into_owned();
             let id = sources.add(path.to_owned(), display.clone(), lossy, bom);
             // The lossy text has the same bytes up to `valid`, so the offset holds.
-            diags.push(
-                Diagnostic::error(
-                    Code::FileUnreadable,
-                    format!("`{display}` is not UTF-8 text (only UTF-8 is read)"),
-                )
-                .at(Span::new(id, valid..valid + 1)),
-            );
+            diags.push(not_utf8(&display, id, Some(valid)));
             None
         }
+    }
+}
+
+/// `E101` for a file that cannot be read, located at `origin` (the `refURI` that named it) or
+/// naming the path.
+pub fn unreadable(
+    display: &str,
+    path: &Path,
+    origin: Option<Span>,
+    e: &std::io::Error,
+) -> Diagnostic {
+    let why = match e.kind() {
+        std::io::ErrorKind::NotFound => "no such file".to_owned(),
+        _ => e.to_string(),
+    };
+    Diagnostic::error(
+        Code::FileUnreadable,
+        format!("cannot read `{display}`: {why}"),
+    )
+    .at_opt(origin)
+    .path(path)
+}
+
+/// `E101` for a file that is not UTF-8, at its first bad byte (`at`; `None`: not known).
+pub fn not_utf8(display: &str, file: FileId, at: Option<usize>) -> Diagnostic {
+    let d = Diagnostic::error(
+        Code::FileUnreadable,
+        format!("`{display}` is not UTF-8 text (only UTF-8 is read)"),
+    );
+    match at {
+        Some(at) => d.at(Span::new(file, at..at + 1)),
+        None => d,
     }
 }
 
