@@ -375,24 +375,48 @@ impl<'a> Ctx<'a> {
         }
     }
 
-    /// Puts back the text of every dropped file a diagnostic points into, so they render with
-    /// their lines. When a file changed meanwhile, its diagnostics lose their place and say so.
+    /// Reads again the lines of every file whose text was not kept (the SFC) that a diagnostic
+    /// points into ([`crate::excerpt`]: only those lines are kept, never the whole text), so the
+    /// diagnostics render with their lines. When a file changed meanwhile (another length or
+    /// hash), its diagnostics lose their place and say so.
     fn restore_for_diagnostics(&mut self) {
-        let mut files: Vec<crate::diag::FileId> = self
+        let mut places: Vec<(crate::diag::FileId, usize)> = self
             .diags
             .iter()
             .flat_map(|d| d.span.iter().chain(d.related.iter().map(|(s, _)| s)))
-            .map(|s| s.file)
-            .filter(|&f| self.sources.is_dropped(f))
+            .filter(|s| self.sources.needs_lines(s.file))
+            .map(|s| (s.file, s.range.start))
             .collect();
-        files.sort_unstable();
-        files.dedup();
-        for f in files {
-            if !self.reload(f) {
+        places.sort_unstable();
+        for group in places.chunk_by(|a, b| a.0 == b.0) {
+            let f = group[0].0;
+            let offsets = group.iter().map(|p| p.1).collect();
+            if !self.read_lines(f, offsets) {
                 self.diags
                     .forget_file(f, &self.sources.get(f).display.clone());
             }
         }
+    }
+
+    /// Reads file `f` again as a stream, keeping the lines around `places`; `false` when it
+    /// cannot be read or is not the same as the first time.
+    fn read_lines(&mut self, f: crate::diag::FileId, places: Vec<usize>) -> bool {
+        let path = self.sources.get(f).path.clone();
+        let Ok(opened) = self.fs.open(&path) else {
+            return false;
+        };
+        let mut reader = opened.reader;
+        let mut collector = crate::excerpt::Collector::new(places, self.sources.bom(f));
+        let mut buf = vec![0u8; 64 * 1024];
+        loop {
+            match reader.read(&mut buf) {
+                Ok(0) => break,
+                Ok(n) => collector.feed(&buf[..n]),
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(_) => return false,
+            }
+        }
+        self.sources.set_excerpts(f, collector.finish())
     }
 }
 

@@ -32,8 +32,10 @@ pub struct SourceFile {
     pub bom: bool,
     /// Byte offsets of line starts, computed on the first diagnostic that needs them.
     line_starts: std::sync::OnceLock<Vec<usize>>,
-    /// Set while the text is not kept ([`Sources::drop_text`]): its length and content hash.
+    /// Set while the text is not kept (a streamed file): its length and content hash.
     dropped: Option<(usize, u64)>,
+    /// For a file whose text is not kept: the lines that diagnostics point into.
+    excerpts: Option<crate::excerpt::Excerpts>,
 }
 
 impl SourceFile {
@@ -55,6 +57,7 @@ impl Sources {
             text,
             bom,
             dropped: None,
+            excerpts: None,
             line_starts: std::sync::OnceLock::new(),
         });
         self.files.len() - 1
@@ -87,6 +90,30 @@ impl Sources {
         self.files[id].dropped.is_some()
     }
 
+    /// Whether the file's text is not there and neither are the lines its diagnostics need.
+    pub fn needs_lines(&self, id: FileId) -> bool {
+        self.files[id].dropped.is_some() && self.files[id].excerpts.is_none()
+    }
+
+    /// Whether the file has the byte-order mark (known once it was read).
+    pub fn bom(&self, id: FileId) -> bool {
+        self.files[id].bom
+    }
+
+    /// Gives a file whose text is not kept the lines its diagnostics point into, read again
+    /// ([`crate::excerpt::Collector`]): `true` when the bytes read were the same as the first
+    /// time (length and hash), else the file stays without them.
+    pub fn set_excerpts(&mut self, id: FileId, c: crate::excerpt::Collected) -> bool {
+        let f = &mut self.files[id];
+        match f.dropped {
+            Some((len, hash)) if c.len == len && c.hash == hash => {
+                f.excerpts = Some(c.excerpts);
+                true
+            }
+            _ => false,
+        }
+    }
+
     /// Puts a streamed file's text back from the file's bytes `raw`, read again: `true` when
     /// they are the bytes that were read (same length and hash), else the file stays without
     /// text. Bytes that are not UTF-8 are put back with replacement characters (their
@@ -104,6 +131,7 @@ impl Sources {
                     Err(e) => String::from_utf8_lossy(e.as_bytes()).into_owned(),
                 };
                 f.dropped = None;
+                f.excerpts = None;
                 f.line_starts = std::sync::OnceLock::new();
                 true
             }
@@ -124,6 +152,10 @@ impl Sources {
     /// 1-based line and column (in characters) of a byte offset.
     pub fn line_col(&self, id: FileId, offset: usize) -> (usize, usize) {
         let f = &self.files[id];
+        if let Some(x) = &f.excerpts {
+            // Every place a diagnostic names was kept (`Diagnostics::snap`).
+            return x.line_col(offset).unwrap_or((1, 1));
+        }
         let offset = offset.min(f.text.len());
         let starts = f.line_starts();
         let line = match starts.binary_search(&offset) {
@@ -287,19 +319,26 @@ impl Diagnostics {
     pub fn snap(&mut self, sources: &Sources) {
         let snap = |s: &mut Span| {
             let f = &sources.files[s.file];
-            if f.dropped.is_some() {
-                return;
-            }
-            let text = f.text.as_str();
-            let mut start = s.range.start.min(text.len());
+            // The text the span must lie in, and its file offset.
+            let (text, base) = match (&f.excerpts, f.dropped) {
+                (Some(x), _) => match x.find(s.range.start) {
+                    Some(e) => (e.text.as_str(), e.start),
+                    None => return,
+                },
+                (None, Some(_)) => return,
+                (None, None) => (f.text.as_str(), 0),
+            };
+            // Within the piece kept: a span that goes on to other lines is cut at the end of
+            // its first (the renderer would need every line between).
+            let mut start = s.range.start.saturating_sub(base).min(text.len());
             while !text.is_char_boundary(start) {
                 start -= 1;
             }
-            let mut end = s.range.end.clamp(start, text.len());
+            let mut end = s.range.end.saturating_sub(base).clamp(start, text.len());
             while !text.is_char_boundary(end) {
                 end += 1;
             }
-            s.range = start..end;
+            s.range = base + start..base + end;
         };
         for d in self.list.iter_mut() {
             if let Some(s) = &mut d.span {
@@ -627,12 +666,8 @@ pub fn render(
         }
         Format::Human => {
             use codespan_reporting::diagnostic as cs;
-            use codespan_reporting::files::SimpleFiles;
             use codespan_reporting::term;
-            let mut files = SimpleFiles::new();
-            for f in sources.iter() {
-                files.add(f.display.as_str(), f.text.as_str());
-            }
+            let files = RenderFiles::new(sources);
             let config = term::Config::default();
             let mut buf: Vec<u8> = Vec::new();
             for d in shown {
@@ -645,14 +680,17 @@ pub fn render(
                 let mut labels = Vec::new();
                 if let Some(s) = &d.span {
                     let end = s.range.end.max(s.range.start);
-                    let label = cs::Label::primary(s.file, s.range.start..end);
+                    let label = cs::Label::primary(s.file, files.range(s.file, s.range.start..end));
                     labels.push(match &d.element {
                         Some(e) => label.with_message(e.clone()),
                         None => label,
                     });
                 }
                 for (s, m) in &d.related {
-                    labels.push(cs::Label::secondary(s.file, s.range.clone()).with_message(m));
+                    labels.push(
+                        cs::Label::secondary(s.file, files.range(s.file, s.range.clone()))
+                            .with_message(m),
+                    );
                 }
                 let mut notes = d.notes.clone();
                 if d.span.is_none() {
@@ -687,6 +725,175 @@ pub fn render(
         }
     }
     out
+}
+
+/// The files as the renderer sees them. A file whose text is not kept shows the pieces of its
+/// lines that were read again ([`crate::excerpt`]) one after another: to the renderer each piece
+/// is a line of its own (a long line may have two), shown with its real line number and
+/// columns; offsets into such a file go through [`RenderFiles::range`].
+struct RenderFiles<'a> {
+    sources: &'a Sources,
+    /// Per file with pieces: their texts joined by line breaks, and per piece where it starts
+    /// in that text and the line index the renderer knows it by.
+    joined: Vec<Option<Joined>>,
+}
+
+/// The pieces of a file as one text.
+struct Joined {
+    text: String,
+    starts: Vec<usize>,
+    /// Grows by one from a piece to the piece of the next line, and by three across a gap (or
+    /// between two pieces of one line), so the renderer marks the gap (`·`) instead of asking
+    /// for a line that was not kept.
+    index: Vec<usize>,
+}
+
+impl<'a> RenderFiles<'a> {
+    fn new(sources: &'a Sources) -> Self {
+        let joined = sources
+            .files
+            .iter()
+            .map(|f| {
+                let x = f.excerpts.as_ref()?;
+                let mut j = Joined {
+                    text: String::new(),
+                    starts: Vec::with_capacity(x.pieces().len()),
+                    index: Vec::with_capacity(x.pieces().len()),
+                };
+                let mut prev: Option<(usize, usize)> = None;
+                for e in x.pieces() {
+                    j.starts.push(j.text.len());
+                    j.text.push_str(&e.text);
+                    j.text.push('\n');
+                    let index = match prev {
+                        None => 0,
+                        Some((line, index)) if e.line == line + 1 => index + 1,
+                        Some((_, index)) => index + 3,
+                    };
+                    j.index.push(index);
+                    prev = Some((e.line, index));
+                }
+                Some(j)
+            })
+            .collect();
+        RenderFiles { sources, joined }
+    }
+
+    /// The pieces of `file`, if its text is not kept.
+    fn pieces(&self, file: FileId) -> Option<(&[crate::excerpt::Excerpt], &Joined)> {
+        let x = self.sources.files[file].excerpts.as_ref()?;
+        Some((x.pieces(), self.joined[file].as_ref()?))
+    }
+
+    /// The piece the renderer knows by line index `index`.
+    fn piece_of(&self, file: FileId, index: usize) -> Option<(&crate::excerpt::Excerpt, usize)> {
+        let (pieces, j) = self.pieces(file)?;
+        let i = j.index.binary_search(&index).ok()?;
+        Some((&pieces[i], i))
+    }
+
+    /// A range of the file as a range of what [`codespan_reporting::files::Files::source`]
+    /// gives (`Diagnostics::snap` put it inside one piece).
+    fn range(&self, file: FileId, r: Range<usize>) -> Range<usize> {
+        let Some((pieces, j)) = self.pieces(file) else {
+            return r;
+        };
+        let x = self.sources.files[file]
+            .excerpts
+            .as_ref()
+            .expect("has pieces");
+        match x.find_index(r.start) {
+            Some(i) => {
+                let start = j.starts[i] + (r.start - pieces[i].start);
+                start..start + (r.end - r.start)
+            }
+            None => 0..0,
+        }
+    }
+}
+
+impl<'a> codespan_reporting::files::Files<'a> for RenderFiles<'a> {
+    type FileId = FileId;
+    type Name = &'a str;
+    type Source = &'a str;
+
+    fn name(&'a self, id: FileId) -> Result<&'a str, codespan_reporting::files::Error> {
+        Ok(self.sources.files[id].display.as_str())
+    }
+
+    fn source(&'a self, id: FileId) -> Result<&'a str, codespan_reporting::files::Error> {
+        Ok(match &self.joined[id] {
+            Some(j) => j.text.as_str(),
+            None => self.sources.files[id].text.as_str(),
+        })
+    }
+
+    /// For a file of pieces: the piece's index.
+    fn line_index(
+        &'a self,
+        id: FileId,
+        byte_index: usize,
+    ) -> Result<usize, codespan_reporting::files::Error> {
+        if let Some((_, j)) = self.pieces(id) {
+            let i = j
+                .starts
+                .partition_point(|&s| s <= byte_index)
+                .saturating_sub(1);
+            return Ok(j.index.get(i).copied().unwrap_or(0));
+        }
+        let starts = self.sources.files[id].line_starts();
+        Ok(starts
+            .partition_point(|&s| s <= byte_index)
+            .saturating_sub(1))
+    }
+
+    fn line_number(
+        &'a self,
+        id: FileId,
+        line_index: usize,
+    ) -> Result<usize, codespan_reporting::files::Error> {
+        Ok(match self.pieces(id) {
+            Some(_) => self.piece_of(id, line_index).map_or(0, |(e, _)| e.line) + 1,
+            None => line_index + 1,
+        })
+    }
+
+    fn column_number(
+        &'a self,
+        id: FileId,
+        line_index: usize,
+        byte_index: usize,
+    ) -> Result<usize, codespan_reporting::files::Error> {
+        let source = self.source(id)?;
+        let range = self.line_range(id, line_index)?;
+        let col0 = self.piece_of(id, line_index).map_or(0, |(e, _)| e.col0);
+        let before = source
+            .get(range.start..byte_index.clamp(range.start, range.end))
+            .map_or(0, |s| s.chars().count());
+        Ok(col0 + before + 1)
+    }
+
+    fn line_range(
+        &'a self,
+        id: FileId,
+        line_index: usize,
+    ) -> Result<Range<usize>, codespan_reporting::files::Error> {
+        use codespan_reporting::files::Error;
+        if let Some((_, j)) = self.pieces(id) {
+            let (_, i) = self.piece_of(id, line_index).ok_or(Error::LineTooLarge {
+                given: line_index,
+                max: j.index.last().copied().unwrap_or(0),
+            })?;
+            return Ok(j.starts[i]..j.starts.get(i + 1).copied().unwrap_or(j.text.len()));
+        }
+        let f = &self.sources.files[id];
+        let (starts, len) = (f.line_starts(), f.text.len());
+        let start = *starts.get(line_index).ok_or(Error::LineTooLarge {
+            given: line_index,
+            max: starts.len().saturating_sub(1),
+        })?;
+        Ok(start..starts.get(line_index + 1).copied().unwrap_or(len))
+    }
 }
 
 fn severity_word(s: Severity) -> &'static str {

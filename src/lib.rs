@@ -20,6 +20,8 @@
 //! - [`daemon`]: `skillpost watch`, the long-running service over the same pipeline.
 //! - [`print`]: the `-pB`/`-pS`/`-pF`/`-pO` and `--info` listings.
 //! - [`diag`]: diagnostics, their codes and their rendering.
+//! - [`excerpt`]: the lines of a streamed file (the SFC) that diagnostics point into, read
+//!   again without holding the file.
 //! - [`names`]: case-insensitive name keys, KRL names, transliteration.
 //! - [`umask`]: the process's umask (the mode of new output files).
 //! - [`paths`]: `refURI` values → paths, lexical normalisation, absolute paths.
@@ -33,6 +35,7 @@ pub mod convert;
 pub mod daemon;
 pub mod diag;
 pub mod emit;
+pub mod excerpt;
 pub mod load;
 pub mod model;
 pub mod names;

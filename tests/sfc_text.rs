@@ -156,3 +156,104 @@ fn the_sfc_named_again_later_is_read_with_its_text() {
     assert_eq!(e603.len(), 1, "{e603:?}");
     assert!(e603[0].contains("expected `=`"), "{e603:?}");
 }
+
+/// The diagnostics of every error fixture render the same from the pieces of the SFC's lines
+/// read again (`skillpost::excerpt`) as from its whole text: human, short and JSON, warnings
+/// included.
+#[test]
+fn pieces_of_lines_render_like_the_whole_text() {
+    use skillpost::diag::{Format, render};
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/err");
+    let mut with_pieces = 0;
+    let mut cases: Vec<PathBuf> = std::fs::read_dir(&root)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    cases.sort();
+    for case in cases {
+        let expect = std::fs::read_to_string(case.join("expect.toml")).unwrap_or_default();
+        if expect.contains("base =") {
+            // Its files are spread over a base folder and the case.
+            continue;
+        }
+        let Some(bb) = std::fs::read_dir(&case)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .find(|p| p.extension().is_some_and(|e| e == "aml"))
+        else {
+            continue;
+        };
+        let mut c = compile(
+            &FsSource::default(),
+            &bb,
+            &Options {
+                program: Some("out".into()),
+                ..Default::default()
+            },
+        );
+        let all = |c: &skillpost::compile::Compilation| {
+            [Format::Human, Format::Short, Format::Json]
+                .map(|f| render(&c.diagnostics, &c.sources, f, true, false))
+        };
+        let pieces = all(&c);
+        let ids: Vec<usize> = (0..c.sources.iter().count())
+            .filter(|&id| c.sources.is_dropped(id))
+            .collect();
+        if c.diagnostics
+            .iter()
+            .any(|d| d.span.as_ref().is_some_and(|s| ids.contains(&s.file)))
+        {
+            with_pieces += 1;
+        }
+        for id in ids {
+            let raw = std::fs::read(&c.sources.get(id).path).unwrap();
+            assert!(c.sources.restore_text(id, raw), "{}", case.display());
+        }
+        let whole = all(&c);
+        for (p, w) in pieces.iter().zip(&whole) {
+            assert_eq!(p, w, "{}", case.display());
+        }
+    }
+    assert!(
+        with_pieces >= 80,
+        "only {with_pieces} cases with SFC diagnostics rendered from pieces"
+    );
+}
+
+/// An SFC written as one long line: its diagnostic shows the part of the line around the place
+/// (not the whole file), with the true column.
+#[test]
+fn a_one_line_sfc_shows_the_part_of_the_line_around_the_place() {
+    let dir = tempfile::tempdir().unwrap();
+    for entry in std::fs::read_dir(case()).unwrap() {
+        let p = entry.unwrap().path();
+        std::fs::copy(&p, dir.path().join(p.file_name().unwrap())).unwrap();
+    }
+    let sfc = std::fs::read_to_string(dir.path().join("sfc.xml")).unwrap();
+    // Padding so the step is far from the start of its (only) line.
+    let one_line = sfc.replace("\r\n", " ").replace('\n', " ").replacen(
+        "<pous>",
+        &format!("<pous>{}", " ".repeat(20_000)),
+        1,
+    );
+    std::fs::write(dir.path().join("sfc.xml"), &one_line).unwrap();
+    let col = one_line.find("<step localId=\"3\"").unwrap() + 1;
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["--validate", "Blackboard.aml"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains(&format!("sfc.xml:1:{col}")), "{err}");
+    let shown = err
+        .lines()
+        .find(|l| l.starts_with("1 │"))
+        .unwrap_or_else(|| panic!("the line is shown: {err}"));
+    assert!(shown.contains("<step localId=\"3\""), "{shown}");
+    assert!(
+        shown.len() < 2 * skillpost::excerpt::WINDOW + 100,
+        "{} bytes shown",
+        shown.len()
+    );
+}
