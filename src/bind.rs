@@ -372,7 +372,7 @@ pub fn bind(
             continue;
         };
         let skill = &bb.resources[res].skills[sk];
-        let vars = StepVars::new(&st.variables, &p.variables);
+        let vars = StepVars::new(sfc, st, &p.variables);
         let mut ok = check_variables(st, &vars, skill, &p.variables, e, &mut extras, diags);
         let mut code = String::new();
         for pc in &p.calls {
@@ -451,9 +451,9 @@ fn conversion_error(
                         }
                         n
                     },
-                    match crate::value::lookup(&v.raw, &p.indices) {
+                    match crate::value::lookup(vars.raw(v), &p.indices) {
                         crate::value::Lookup::Scalar(s) => s.to_owned(),
-                        _ => v.raw.clone(),
+                        _ => vars.raw(v).to_owned(),
                     },
                     v.value_span.clone(),
                 ),
@@ -492,7 +492,13 @@ fn label(e: &crate::model::Element) -> String {
 
 /// A step's variables by key: a scan for the few of a usual step, a hash map for many (a step
 /// may carry any number of variables; one lookup per parameter must not cost their number).
-enum StepVars<'a> {
+struct StepVars<'a> {
+    /// The values' texts ([`Sfc::values`]), which [`crate::model::Variable::raw`] indexes.
+    values: &'a str,
+    by: ByKey<'a>,
+}
+
+enum ByKey<'a> {
     Few(&'a [crate::model::Variable]),
     /// The variables the skill reads, by key, and the others in document order.
     Many {
@@ -506,9 +512,14 @@ impl<'a> StepVars<'a> {
     const SCAN: usize = 16;
 
     /// `read`: the keys of the variables the skill reads.
-    fn new(vars: &'a [crate::model::Variable], read: &HashSet<Arc<str>>) -> Self {
+    fn new(sfc: &'a Sfc, st: &Step, read: &HashSet<Arc<str>>) -> Self {
+        let vars = sfc.variables_of(st);
+        let values = sfc.values.as_str();
         if vars.len() <= Self::SCAN {
-            return StepVars::Few(vars);
+            return StepVars {
+                values,
+                by: ByKey::Few(vars),
+            };
         }
         let mut used = HashMap::new();
         let mut unused = Vec::new();
@@ -520,14 +531,22 @@ impl<'a> StepVars<'a> {
                 unused.push(v);
             }
         }
-        StepVars::Many { used, unused }
+        StepVars {
+            values,
+            by: ByKey::Many { used, unused },
+        }
+    }
+
+    /// A variable's value as written, trimmed.
+    fn raw(&self, v: &crate::model::Variable) -> &'a str {
+        self.values.get(v.raw.clone()).unwrap_or("")
     }
 
     /// The variable of this key, if the skill reads that key (or the step has few variables).
     fn get(&self, key: &str) -> Option<&'a crate::model::Variable> {
-        match self {
-            StepVars::Few(vars) => vars.iter().find(|v| &*v.name.key == key),
-            StepVars::Many { used, .. } => used.get(key).copied(),
+        match &self.by {
+            ByKey::Few(vars) => vars.iter().find(|v| &*v.name.key == key),
+            ByKey::Many { used, .. } => used.get(key).copied(),
         }
     }
 }
@@ -564,8 +583,8 @@ fn check_variables(
             );
         }
     }
-    match vars {
-        StepVars::Few(list) => {
+    match &vars.by {
+        ByKey::Few(list) => {
             for v in *list {
                 // A usual skill has a handful of parameters: a scan beats hashing.
                 let read = if skill.params.len() <= StepVars::SCAN {
@@ -581,7 +600,7 @@ fn check_variables(
                 }
             }
         }
-        StepVars::Many { unused, .. } => {
+        ByKey::Many { unused, .. } => {
             for v in unused {
                 extras.add(skill, v, e);
             }
@@ -713,7 +732,7 @@ fn value_of<'a>(
         }
         s
     };
-    let s = match lookup(&var.raw, &p.indices) {
+    let s = match lookup(vars.raw(var), &p.indices) {
         Lookup::Scalar(s) => s,
         Lookup::OutOfRange { depth, len } => {
             return Err(err(

@@ -514,7 +514,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         .or_else(|| bb.sfc_ref.as_ref().and_then(|r| fragment(&r.value)));
     // The model holds all the rest needs: the SFC's text (the largest input: 78 MB for 100,000
     // steps) is read as a stream, and read again only if a diagnostic points into it.
-    let (_, sfc) = match bb
+    let (_, mut sfc) = match bb
         .sfc_ref
         .clone()
         .and_then(|r| Some((cx.ref_path(&r.value, &r.span)?, r.span)))
@@ -529,7 +529,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
     // Bind, loading the IRL files the used skills need.
     let mut irls: Vec<Irl> = Vec::new();
     let mut language = None;
-    if let Some(sfc) = &sfc {
+    if let Some(sfc) = &mut sfc {
         // Bind even when the flow has errors (in document order), so one run reports every
         // problem; emit only a planned flow.
         let order = match &plan {
@@ -587,6 +587,10 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             &mut cx.diags,
         );
         out.skill_steps = bound.steps.iter().filter(|s| s.is_some()).count();
+        if !opts.keep_model {
+            sfc.drop_variables();
+        }
+        let sfc = &*sfc;
         lap(&mut out, "bind");
         // The output template: like the blackboard, one the command names, so a template
         // that cannot be read at all is an I/O failure.

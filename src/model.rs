@@ -314,6 +314,37 @@ pub struct Sfc {
     pub elements: Vec<Element>,
     /// The `SFC` element.
     pub span: Option<Span>,
+    /// Every step's variables one after another, and their values' texts: two allocations
+    /// for all steps (not two per step), so freeing them ([`Sfc::drop_variables`]) gives the
+    /// memory back rather than leaving holes between the steps.
+    pub variables: Vec<Variable>,
+    pub values: String,
+}
+
+impl Sfc {
+    /// A step's variables (none once [`Sfc::drop_variables`] ran).
+    pub fn variables_of(&self, step: &Step) -> &[Variable] {
+        self.variables.get(step.variables.clone()).unwrap_or(&[])
+    }
+
+    /// A variable's value as written, trimmed.
+    pub fn raw(&self, v: &Variable) -> &str {
+        self.values.get(v.raw.clone()).unwrap_or("")
+    }
+
+    /// A variable's value as a tree (for listings).
+    pub fn value_of(&self, v: &Variable) -> Value {
+        let raw = self.raw(v);
+        crate::value::parse_value(raw).unwrap_or_else(|_| Value::Scalar(raw.to_owned()))
+    }
+
+    /// Frees what only the binder reads, the steps' variables, once it is done: the writers
+    /// need the rest (names, ids, conditions). With 100,000 steps the variables are a third of
+    /// the model, and the steps block the writer makes comes after them.
+    pub fn drop_variables(&mut self) {
+        self.variables = Vec::new();
+        self.values = String::new();
+    }
 }
 
 #[derive(Debug, Default, Clone)]
@@ -391,7 +422,8 @@ pub struct Step {
     pub skill: Option<Name>,
     /// `time@duration` in seconds.
     pub duration: Option<f64>,
-    pub variables: Vec<Variable>,
+    /// This step's variables: a range of [`Sfc::variables`] (see [`Sfc::variables_of`]).
+    pub variables: Range<usize>,
     /// Keys of variables that are present but malformed (reported): not "missing".
     pub invalid_variables: Vec<Arc<str>>,
 }
@@ -399,18 +431,12 @@ pub struct Step {
 #[derive(Debug)]
 pub struct Variable {
     pub name: Name,
-    /// The value as written, trimmed; its syntax was checked by the reader. Items are looked up
-    /// without building a tree ([`crate::value::lookup`]); [`Variable::value`] builds one.
-    pub raw: String,
+    /// The value as written, trimmed: a range of [`Sfc::values`] (see [`Sfc::raw`]); its
+    /// syntax was checked by the reader. Items are looked up without building a tree
+    /// ([`crate::value::lookup`]); [`Sfc::value_of`] builds one.
+    pub raw: Range<usize>,
     /// The `Value` attribute's value.
     pub value_span: Span,
-}
-
-impl Variable {
-    /// The value as a tree (for listings).
-    pub fn value(&self) -> Value {
-        crate::value::parse_value(&self.raw).unwrap_or(Value::Scalar(self.raw.clone()))
-    }
 }
 
 /// An SFC variable's value: `(a, (b, c))` nests lists, anything else is one trimmed value.

@@ -159,8 +159,8 @@ pub fn sfc(sfc: &Sfc) -> String {
                 if let Some(s) = &st.skill {
                     let _ = writeln!(o, "            Skill:      {}", s.text);
                 }
-                for v in &st.variables {
-                    let value = v.value();
+                for v in sfc.variables_of(st) {
+                    let value = sfc.value_of(v);
                     let kind = match value {
                         Value::Scalar(_) => "(Value)",
                         Value::List(_) => "(List) ",
@@ -641,9 +641,9 @@ pub mod json {
                         o["resource"] = json!(st.resource.as_ref().map(|r| &*r.text));
                         o["skill"] = json!(st.skill.as_ref().map(|s| &*s.text));
                         o["variables"] = Json::Array(
-                            st.variables
+                            sfc.variables_of(st)
                                 .iter()
-                                .map(|v| json!({"name": &*v.name.text, "value": value(&v.value())}))
+                                .map(|v| json!({"name": &*v.name.text, "value": value(&sfc.value_of(v))}))
                                 .collect(),
                         );
                     }

@@ -19,17 +19,17 @@ fuzz_target!(|data: &[u8]| {
         let _ = print::sfc(sfc);
         for e in &sfc.elements {
             if let ElementKind::Step(step) = &e.kind {
-                for v in &step.variables {
+                for v in sfc.variables_of(step) {
+                    let raw = sfc.raw(v);
                     // The reader keeps only values whose syntax it checked.
                     assert!(
-                        parse_value(&v.raw).is_ok(),
-                        "the reader kept a malformed value: {:?}",
-                        v.raw
+                        parse_value(raw).is_ok(),
+                        "the reader kept a malformed value: {raw:?}"
                     );
-                    let _ = v.value();
+                    let _ = sfc.value_of(v);
                     for path in [&[][..], &[0], &[1, 0], &[0, 2, 1]] {
-                        if let Lookup::Scalar(s) = lookup(&v.raw, path) {
-                            assert!(v.raw.contains(s));
+                        if let Lookup::Scalar(s) = lookup(raw, path) {
+                            assert!(raw.contains(s));
                         }
                     }
                 }

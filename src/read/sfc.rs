@@ -88,6 +88,8 @@ pub fn read_sfc_stream<R: BufRead>(
         names: Interner::default(),
         found: Vec::new(),
         ignored: Vec::new(),
+        variables: Vec::new(),
+        values: String::new(),
     };
     let mut local = Diagnostics::default();
     let outcome = r.run(quick_xml::Reader::from_reader(input), &mut local)?;
@@ -152,6 +154,9 @@ struct Stream {
     wanted: Option<String>,
     /// Every POU: name, whether it has an SFC body.
     pous: Vec<(String, bool)>,
+    /// Every step's variables and their values' texts ([`Sfc::variables`], [`Sfc::values`]).
+    variables: Vec<Variable>,
+    values: String,
 }
 
 /// The local names the reader looks for; anything else is `Other`. The stack of open elements
@@ -1158,7 +1163,7 @@ impl Stream {
         let file = self.file;
         let label = || b.id_label();
         let s = &b.scratch;
-        let mut variables = Vec::with_capacity(b.vars.len());
+        let first = self.variables.len();
         let mut invalid_variables = Vec::new();
         // The direct ones first, then those in `iwb`.
         let ordered = b
@@ -1191,13 +1196,18 @@ impl Stream {
             let value_text = value.get(s);
             let value_span = Span::new(file, value.range.clone());
             match crate::value::check_value(value_text) {
-                Ok(()) => variables.push(Variable {
-                    name: self
+                Ok(()) => {
+                    let at = self.values.len();
+                    self.values.push_str(value_text.trim());
+                    let name = self
                         .names
-                        .name(name_text, Span::new(file, name.range.clone())),
-                    raw: value_text.trim().to_owned(),
-                    value_span,
-                }),
+                        .name(name_text, Span::new(file, name.range.clone()));
+                    self.variables.push(Variable {
+                        name,
+                        raw: at..self.values.len(),
+                        value_span,
+                    });
+                }
                 Err((offset, msg)) => {
                     invalid_variables.push(self.names.strings(name_text).1);
                     // Point into the raw value when it has no references (then offsets agree).
@@ -1226,7 +1236,7 @@ impl Stream {
             resource: b.resource.clone(),
             skill: b.skill.clone(),
             duration: b.duration,
-            variables,
+            variables: first..self.variables.len(),
             invalid_variables,
         }
     }
@@ -1306,6 +1316,8 @@ impl Stream {
             pou_name: pou.name,
             elements: pou.elements,
             span: Some(pou.sfc_span),
+            variables: std::mem::take(&mut self.variables),
+            values: std::mem::take(&mut self.values),
         })
     }
 }
