@@ -251,7 +251,6 @@ impl<'a> Ctx<'a> {
         pou: Option<&str>,
         out: &mut Compilation,
     ) -> (Option<crate::diag::FileId>, Option<Sfc>) {
-        use std::hash::Hasher as _;
         use std::io::BufRead as _;
         if let Some(file) = self.sources.find(path) {
             let Some(file) = self.with_text(file, origin) else {
@@ -277,13 +276,13 @@ impl<'a> Ctx<'a> {
         struct Fingerprint<R> {
             inner: R,
             len: usize,
-            hash: std::hash::DefaultHasher,
+            hash: crate::load::ContentHash,
         }
         impl<R: std::io::Read> std::io::Read for Fingerprint<R> {
             fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
                 let n = self.inner.read(buf)?;
                 self.len += n;
-                self.hash.write(&buf[..n]);
+                self.hash.update(&buf[..n]);
                 Ok(n)
             }
         }
@@ -291,7 +290,7 @@ impl<'a> Ctx<'a> {
             let mut fp = Fingerprint {
                 inner: opened.reader,
                 len: 0,
-                hash: std::hash::DefaultHasher::new(),
+                hash: crate::load::ContentHash::new(),
             };
             let mut input = std::io::BufReader::with_capacity(64 * 1024, &mut fp);
             let bom = match input.fill_buf() {

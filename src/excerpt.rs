@@ -10,8 +10,6 @@
 //!
 //! Offsets are the file's, after its byte-order mark, like every [`crate::diag::Span`].
 
-use std::hash::Hasher as _;
-
 /// Bytes kept on either side of a place on its line.
 pub const WINDOW: usize = 512;
 
@@ -98,7 +96,7 @@ pub struct Collector {
     bom: bool,
     /// Bytes seen, the mark included.
     raw_len: usize,
-    hash: std::hash::DefaultHasher,
+    hash: crate::load::ContentHash,
     /// File offset (after the mark) of the next byte.
     pos: usize,
     line: usize,
@@ -130,7 +128,7 @@ impl Collector {
             next: 0,
             bom,
             raw_len: 0,
-            hash: std::hash::DefaultHasher::new(),
+            hash: crate::load::ContentHash::new(),
             pos: 0,
             line: 0,
             chars: 0,
@@ -145,7 +143,7 @@ impl Collector {
     /// The next bytes of the file.
     pub fn feed(&mut self, mut bytes: &[u8]) {
         self.raw_len += bytes.len();
-        self.hash.write(bytes);
+        self.hash.update(bytes);
         if self.bom && self.head.len() < 3 {
             let n = (3 - self.head.len()).min(bytes.len());
             self.head.extend_from_slice(&bytes[..n]);
@@ -187,6 +185,11 @@ impl Collector {
         if self.window.is_none() {
             // Where the next place's window opens: `WINDOW` before it, not before its line.
             let Some(&place) = self.places.get(self.next) else {
+                if !self.want_next_line {
+                    // Nothing more to keep: the rest only counts for the length and hash.
+                    self.pos += bytes.len();
+                    return bytes.len();
+                }
                 return self.skip(bytes, bytes.len());
             };
             let open_at = place.saturating_sub(WINDOW);

@@ -80,7 +80,7 @@ impl FileSource for Hashing {
                 len: o.len,
                 reader: Box::new(HashingReader {
                     inner: o.reader,
-                    hash: Some(std::hash::DefaultHasher::new()),
+                    hash: Some(crate::load::ContentHash::new()),
                     path: path.to_owned(),
                     to: self,
                 }),
@@ -111,14 +111,13 @@ impl Hashing {
 /// compiled again).
 struct HashingReader<'a> {
     inner: Box<dyn std::io::Read + 'a>,
-    hash: Option<std::hash::DefaultHasher>,
+    hash: Option<crate::load::ContentHash>,
     path: PathBuf,
     to: &'a Hashing,
 }
 
 impl std::io::Read for HashingReader<'_> {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        use std::hash::Hasher as _;
         match self.inner.read(buf) {
             Ok(0) if !buf.is_empty() => {
                 if let Some(h) = self.hash.take() {
@@ -128,7 +127,7 @@ impl std::io::Read for HashingReader<'_> {
             }
             Ok(n) => {
                 if let Some(h) = &mut self.hash {
-                    h.write(&buf[..n]);
+                    h.update(&buf[..n]);
                 }
                 Ok(n)
             }

@@ -459,12 +459,9 @@ impl Tagged<'_, '_> {
     /// The local name of the tag.
     fn local_name(&self) -> &str {
         let content: &str = self.e;
-        let raw = self.e.name();
-        let full: &str = raw.as_ref();
-        let local = full.rsplit(':').next().unwrap_or(full);
-        // `full` is the start of the content; the local name ends where it does.
-        let end = full.len().min(content.len());
-        &content[end - local.len()..end]
+        // The name is the start of the content.
+        let len = self.e.name().as_ref().len();
+        local_part(&content[..len.min(content.len())])
     }
 }
 
@@ -494,10 +491,7 @@ impl Stream {
         for a in t.e.attributes() {
             let a = a.map_err(|err| self.syntax_error(t.at, err.to_string()))?;
             let key_raw: &str = a.key.as_ref();
-            let local = match key_raw.rfind(':') {
-                Some(i) => &key_raw[i + 1..],
-                None => key_raw,
-            };
+            let local = local_part(key_raw);
             let Some(slot) = names.iter().position(|n| *n == local) else {
                 continue;
             };
@@ -1389,6 +1383,16 @@ impl PathKind {
                 .iter()
                 .map(|t| t.0)
                 .eq([Tag::Project, Tag::Types, Tag::Pous])
+    }
+}
+
+/// The part of a qualified name after its prefix (`xhtml:p` → `p`). Names are short: a byte
+/// loop, not a `char` search.
+fn local_part(name: &str) -> &str {
+    match name.as_bytes().iter().rposition(|&b| b == b':') {
+        // `:` is ASCII: the next byte starts a character.
+        Some(i) => &name[i + 1..],
+        None => name,
     }
 }
 
