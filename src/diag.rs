@@ -95,6 +95,11 @@ impl Sources {
         self.files[id].dropped.is_some() && self.files[id].excerpts.is_none()
     }
 
+    /// The pieces of lines kept for a file whose text is not (see [`Sources::set_excerpts`]).
+    pub fn excerpts(&self, id: FileId) -> Option<&crate::excerpt::Excerpts> {
+        self.files[id].excerpts.as_ref()
+    }
+
     /// Whether the file has the byte-order mark (known once it was read).
     pub fn bom(&self, id: FileId) -> bool {
         self.files[id].bom

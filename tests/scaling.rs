@@ -138,3 +138,9 @@ fn nesting_depth() {
 fn loops() {
     check("loops", 150, 2400);
 }
+
+#[test]
+fn nesting_inside_an_element() {
+    // The reader's stack of open elements must not be copied whole at every start tag.
+    check("nest", 2000, 32000);
+}

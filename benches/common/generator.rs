@@ -767,6 +767,10 @@ pub const DIMENSIONS: &[(&str, &str)] = &[
         "nesting depth of 2-way simultaneous branches (at most 127)",
     ),
     ("loops", "loops one after another, each closed by a jump"),
+    (
+        "nest",
+        "elements unknown to the reader nested n deep inside one step (16 steps)",
+    ),
 ];
 
 /// Writes a project that grows in one dimension of [`DIMENSIONS`] with `n`; the rest stays
@@ -820,6 +824,9 @@ pub fn write_shape(dir: &Path, dim: &str, n: usize) -> Option<io::Result<Project
             for i in 0..n {
                 let _ = writeln!(extra, " <Variable name=\"Extra{i}\" Value=\"{i}\"/>");
             }
+        }
+        "nest" => {
+            extra = format!(" {}{}\n", "<x>".repeat(n), "</x>".repeat(n));
         }
         "skills" => {
             let mut t = String::new();

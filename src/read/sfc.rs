@@ -47,7 +47,10 @@ pub fn read_sfc_pou(
 ) -> Option<Sfc> {
     let text = sources.get(file).text.as_bytes();
     // The text is a `str`: it cannot fail to be UTF-8, and memory cannot fail to be read.
-    read_sfc_stream(text, file, text.len() as u64, pou, diags).unwrap_or(None)
+    let sfc = read_sfc_stream(text, file, text.len() as u64, pou, diags).unwrap_or(None);
+    // The stream's places are bytes; with the text at hand they go on its characters.
+    diags.snap(sources);
+    sfc
 }
 
 /// [`read_sfc_pou`] from a stream of the file's bytes after its byte-order mark (positions count
@@ -1452,6 +1455,23 @@ mod tests {
         let mut d = Diagnostics::default();
         let sfc = read_sfc(&sources, f, &mut d);
         (sfc, d.into_vec())
+    }
+
+    /// Syntax errors at the end of the text (or in an empty one) point inside it: the stream
+    /// places them one byte on, the text-based entry puts them back (fuzz finding).
+    #[test]
+    fn places_at_the_end_stay_inside_the_text() {
+        for text in ["", "<project", "<project>", "<project>\u{e4}"] {
+            let (sfc, d) = read(text);
+            assert!(sfc.is_none());
+            let s = d[0].span.as_ref().expect("located");
+            assert!(
+                s.range.start <= s.range.end && s.range.end <= text.len(),
+                "{text:?}: {:?}",
+                s.range
+            );
+            assert!(text.is_char_boundary(s.range.start), "{text:?}");
+        }
     }
 
     #[test]
