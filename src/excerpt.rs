@@ -107,6 +107,8 @@ pub struct Collector {
     window: Option<Window>,
     /// The mark's bytes seen so far (it may come in pieces).
     head: Vec<u8>,
+    /// The buffer of the window being kept, between windows.
+    spare: Vec<u8>,
     out: Vec<Excerpt>,
 }
 
@@ -136,6 +138,7 @@ impl Collector {
             want_next_line: false,
             window: None,
             head: Vec::new(),
+            spare: Vec::new(),
             out: Vec::new(),
         }
     }
@@ -157,6 +160,10 @@ impl Collector {
 
     /// The end of the file.
     pub fn finish(mut self) -> Collected {
+        // The line after a place's line may be the empty one after a final line break.
+        if self.window.is_none() && self.want_next_line && self.at_line_start {
+            self.open(0, true);
+        }
         // Places at the very end (or past it) belong to the last line.
         if self.next < self.places.len() {
             if self.window.is_none() {
@@ -234,19 +241,21 @@ impl Collector {
             line: self.line,
             start: self.pos,
             col0: self.chars,
-            bytes: Vec::new(),
+            // One buffer for every window: a piece's text is then allocated once, at its size.
+            bytes: std::mem::take(&mut self.spare),
             until: self.pos + len,
             keep,
             holds_place: false,
         });
     }
 
-    /// Adds bytes to the open window up to its end, the end of the line or of `bytes`.
+    /// Adds bytes to the open window up to its end, the end of the line or of `bytes`; in runs
+    /// up to the next place, the window's end or a line break, not byte by byte.
     fn keep_bytes(&mut self, bytes: &[u8]) -> usize {
         let w = self.window.as_mut().expect("a window is open");
         let mut taken = 0;
-        for &b in bytes {
-            // The places at or before this byte are inside the window.
+        loop {
+            // The places at or before the next byte are inside the window.
             while let Some(&p) = self.places.get(self.next)
                 && p <= self.pos
             {
@@ -255,36 +264,47 @@ impl Collector {
                 w.holds_place = true;
                 self.next += 1;
             }
-            if b == b'\n' {
-                taken += 1;
-                self.pos += 1;
-                self.line += 1;
-                self.chars = 0;
-                self.at_line_start = true;
-                self.close();
+            let rest = &bytes[taken..];
+            let Some(&first) = rest.first() else {
                 return taken;
+            };
+            let mut run = rest.len().min(w.until.saturating_sub(self.pos));
+            if let Some(&p) = self.places.get(self.next) {
+                run = run.min(p - self.pos);
             }
-            if self.pos >= w.until && !is_continuation(b) {
-                break;
+            if run == 0 {
+                // The window's end: at the line break, else on a character's first byte.
+                if first != b'\n' && !is_continuation(first) {
+                    self.close();
+                    return taken;
+                }
+                run = 1;
             }
-            w.bytes.push(b);
-            taken += 1;
-            self.pos += 1;
-            self.at_line_start = false;
-            if !is_continuation(b) {
-                self.chars += 1;
+            let seg = &rest[..run];
+            match seg.iter().position(|&b| b == b'\n') {
+                Some(i) => {
+                    w.bytes.extend_from_slice(&seg[..i]);
+                    taken += i + 1;
+                    self.pos += i + 1;
+                    self.line += 1;
+                    self.chars = 0;
+                    self.at_line_start = true;
+                    self.close();
+                    return taken;
+                }
+                None => {
+                    w.bytes.extend_from_slice(seg);
+                    taken += run;
+                    self.pos += run;
+                    self.chars += count_chars(seg);
+                    self.at_line_start = false;
+                }
             }
         }
-        if taken < bytes.len() {
-            // The window's end, inside a line.
-            self.close();
-        }
-        // Possibly none: the window ended before the first byte; the caller goes on without it.
-        taken
     }
 
     fn close(&mut self) {
-        let Some(w) = self.window.take() else {
+        let Some(mut w) = self.window.take() else {
             return;
         };
         if w.holds_place {
@@ -295,9 +315,11 @@ impl Collector {
                 line: w.line,
                 start: w.start,
                 col0: w.col0,
-                text: text_keeping_offsets(w.bytes),
+                text: text_keeping_offsets(w.bytes.to_vec()),
             });
         }
+        w.bytes.clear();
+        self.spare = w.bytes;
     }
 }
 
@@ -424,8 +446,68 @@ mod tests {
     #[test]
     fn bytes_that_are_not_utf8_keep_their_offsets() {
         let c = collect(b"a\xFF\xFEb\n", &[3], false, 2);
-        assert_eq!(lines(&c), vec![(0, 0, 0, "a??b")]);
+        // With the (empty) line after it.
+        assert_eq!(lines(&c), vec![(0, 0, 0, "a??b"), (1, 5, 0, "")]);
         assert_eq!(c.excerpts.line_col(3), Some((1, 4)));
+    }
+
+    use proptest::prelude::*;
+
+    proptest! {
+        /// Against the whole text: every place is in a piece, with the line and column counted
+        /// over the whole text; every piece is the text at its offsets; the line after a place's
+        /// line is there (its start); the length and hash are the whole text's. Texts of a few
+        /// bytes (line breaks, multi-byte and invalid bytes) and long lines, fed in pieces of
+        /// any size.
+        #[test]
+        fn pieces_agree_with_the_whole_text(
+            parts in proptest::collection::vec(
+                prop_oneof![
+                    Just("\n".to_owned()),
+                    Just("ä".to_owned()),
+                    Just("\u{1F600}".to_owned()),
+                    "[a-c]{1,3}",
+                    (1usize..1500).prop_map(|n| "x".repeat(n)),
+                ],
+                0..40,
+            ),
+            bad in proptest::option::of(0usize..1000),
+            places in proptest::collection::vec(0usize..4000, 0..6),
+            piece in 1usize..300,
+        ) {
+            let mut text: Vec<u8> = parts.concat().into_bytes();
+            if let Some(b) = bad.filter(|&b| b < text.len()) {
+                text[b] = 0xFF;
+            }
+            let len = text.len();
+            let places: Vec<usize> = places.into_iter().map(|p| p.min(len)).collect();
+            let c = collect(&text, &places, false, piece);
+            prop_assert_eq!(c.len, len);
+            prop_assert_eq!(c.hash, crate::load::hash_bytes(&text));
+            let shown = text_keeping_offsets(text.clone());
+            for e in c.excerpts.iter() {
+                prop_assert_eq!(&shown[e.start..e.start + e.text.len()], e.text.as_str());
+                prop_assert!(!e.text.contains('\n'));
+            }
+            for &p in &places {
+                // Where the place starts a character (the stream may name any byte).
+                let p = (0..=p).rev().find(|&q| shown.is_char_boundary(q)).unwrap_or(0);
+                let line = shown[..p].matches('\n').count();
+                let line_start = shown[..p].rfind('\n').map_or(0, |i| i + 1);
+                let col = shown[line_start..p].chars().count();
+                let got = c.excerpts.line_col(p);
+                prop_assert_eq!(got.map(|g| g.0), Some(line + 1), "place {}", p);
+                // Columns count characters; after bytes that are not UTF-8 on the same line
+                // they are approximate (such a file is refused whole, E101, and its text kept).
+                if std::str::from_utf8(&text).is_ok() {
+                    prop_assert_eq!(got, Some((line + 1, col + 1)), "place {}", p);
+                }
+                if let Some(next) = shown[p..].find('\n').map(|i| p + i + 1) {
+                    let e = c.excerpts.find(next);
+                    prop_assert!(e.is_some_and(|e| e.line == line + 1), "line after {}", p);
+                }
+            }
+        }
     }
 
     #[test]
