@@ -487,7 +487,22 @@ fn conversion_error(
 }
 
 fn label(e: &crate::model::Element) -> String {
-    format!("localId {}", e.local_id)
+    let mut digits = [0u8; 20];
+    let mut n = e.local_id;
+    let mut i = digits.len();
+    loop {
+        i -= 1;
+        digits[i] = b'0' + (n % 10) as u8;
+        n /= 10;
+        if n == 0 {
+            break;
+        }
+    }
+    let digits = std::str::from_utf8(&digits[i..]).expect("ASCII digits");
+    let mut s = String::with_capacity(8 + digits.len());
+    s.push_str("localId ");
+    s.push_str(digits);
+    s
 }
 
 /// A step's variables by key: a scan for the few of a usual step, a hash map for many (a step
@@ -653,23 +668,42 @@ impl Extras {
         v: &crate::model::Variable,
         e: &crate::model::Element,
     ) {
-        if let Some(at) = self.find(&skill.name.key, &v.name.key) {
-            self.list[at].steps.push(e.local_id);
-            return;
+        if self.list.len() > Self::SCAN && !self.index.is_empty() {
+            // One hash for the look-up and the insertion (a step may bring 100,000 of them).
+            use std::collections::hash_map::Entry;
+            match self
+                .index
+                .entry((skill.name.key.clone(), v.name.key.clone()))
+            {
+                Entry::Occupied(at) => {
+                    self.list[*at.get()].steps.push(e.local_id);
+                    return;
+                }
+                Entry::Vacant(slot) => {
+                    slot.insert(self.list.len());
+                }
+            }
+        } else {
+            if let Some(at) = self.find(&skill.name.key, &v.name.key) {
+                self.list[at].steps.push(e.local_id);
+                return;
+            }
+            if !self.index.is_empty() {
+                let key = (skill.name.key.clone(), v.name.key.clone());
+                self.index.insert(key, self.list.len());
+            }
         }
-        if !self.index.is_empty() {
-            let key = (skill.name.key.clone(), v.name.key.clone());
-            self.index.insert(key, self.list.len());
-        }
-        let d = Diagnostic::warning(
-            Code::ExtraVariable,
-            format!(
-                "variable `{}` is not used by skill `{}`",
-                v.name.text, skill.name.text
-            ),
-        )
-        .at(v.name.span.clone())
-        .element(label(e));
+        // Without `format!`: 100,000 distinct variables make 100,000 of these.
+        let (name, skill_name) = (&*v.name.text, &*skill.name.text);
+        let mut message = String::with_capacity(35 + name.len() + skill_name.len());
+        message.push_str("variable `");
+        message.push_str(name);
+        message.push_str("` is not used by skill `");
+        message.push_str(skill_name);
+        message.push('`');
+        let d = Diagnostic::warning(Code::ExtraVariable, message)
+            .at(v.name.span.clone())
+            .element(label(e));
         self.list.push(Extra {
             skill: skill.name.key.clone(),
             variable: v.name.key.clone(),
