@@ -301,7 +301,7 @@ fn fast_micros(a: f64) -> Option<u64> {
 }
 
 /// Appends the decimal digits of `n`.
-fn push_u64(out: &mut String, mut n: u64) {
+pub(crate) fn push_u64(out: &mut String, mut n: u64) {
     let mut buf = [0u8; 20];
     let mut i = buf.len();
     loop {

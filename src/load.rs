@@ -103,16 +103,7 @@ pub fn open_regular(path: &Path) -> std::io::Result<(std::fs::File, std::fs::Met
 /// once; nothing is read past `max + 1` bytes, so a file that grows meanwhile cannot fill memory.
 pub fn read_limited(path: &Path, max: u64) -> std::io::Result<Vec<u8>> {
     use std::io::{Error, ErrorKind};
-    let (file, meta) = open_regular(path)?;
-    if meta.len() > max {
-        return Err(Error::new(
-            ErrorKind::InvalidData,
-            format!(
-                "is {} bytes, more than the limit of {max} bytes",
-                meta.len()
-            ),
-        ));
-    }
+    let (file, meta) = open_within(path, max)?;
     let mut buf = Vec::with_capacity(meta.len() as usize + 1);
     // Read at most one byte past the limit, in case the file grew since the metadata call.
     file.take(max + 1).read_to_end(&mut buf)?;
@@ -197,20 +188,25 @@ impl FileSource for FsSource {
     }
 }
 
-/// Opens a regular file of at most `max` bytes to be read as a stream, like [`read_limited`]
-/// (a FIFO or device is an error at once; reading past `max` bytes is an error).
-pub fn open_limited(path: &Path, max: u64) -> std::io::Result<Opened<'static>> {
-    use std::io::{Error, ErrorKind};
+/// [`open_regular`], and an error when the file is larger than `max` bytes.
+fn open_within(path: &Path, max: u64) -> std::io::Result<(std::fs::File, std::fs::Metadata)> {
     let (file, meta) = open_regular(path)?;
     if meta.len() > max {
-        return Err(Error::new(
-            ErrorKind::InvalidData,
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
             format!(
                 "is {} bytes, more than the limit of {max} bytes",
                 meta.len()
             ),
         ));
     }
+    Ok((file, meta))
+}
+
+/// Opens a regular file of at most `max` bytes to be read as a stream, like [`read_limited`]
+/// (a FIFO or device is an error at once; reading past `max` bytes is an error).
+pub fn open_limited(path: &Path, max: u64) -> std::io::Result<Opened<'static>> {
+    let (file, meta) = open_within(path, max)?;
     Ok(Opened {
         len: Some(meta.len()),
         reader: Box::new(Limited {

@@ -482,6 +482,24 @@ impl Stream {
         )
     }
 
+    /// The `name` attribute as a [`Name`]; `None` when it is missing or blank.
+    fn name_attr(
+        &mut self,
+        t: &Tagged,
+        scratch: &mut String,
+    ) -> Result<Option<Name>, Box<Diagnostic>> {
+        let mark = scratch.len();
+        let [n] = self.pick(t, ["name"], scratch)?;
+        let name = n
+            .map(|a| {
+                self.names
+                    .name(a.get(scratch), Span::new(self.file, a.range.clone()))
+            })
+            .filter(|n| !n.key.is_empty());
+        scratch.truncate(mark);
+        Ok(name)
+    }
+
     /// The attributes named `names` (local names), in that order, their values appended to
     /// `scratch`; others are skipped (not unescaped).
     fn pick<const N: usize>(
@@ -902,15 +920,7 @@ impl Stream {
                 ([T::AddData, T::Data, T::Iwb], _) if b.iwb == IwbState::Inside => match tag {
                     T::Resources if !b.resources_seen => b.resources_seen = true,
                     T::Skill if b.skill.is_none() => {
-                        let mark = scratch.len();
-                        let [n] = self.pick(t, ["name"], &mut scratch)?;
-                        b.skill = n
-                            .map(|a| {
-                                self.names
-                                    .name(a.get(&scratch), Span::new(self.file, a.range.clone()))
-                            })
-                            .filter(|n| !n.key.is_empty());
-                        scratch.truncate(mark);
+                        b.skill = self.name_attr(t, &mut scratch)?;
                     }
                     T::Time if !b.time_seen => {
                         b.time_seen = true;
@@ -935,15 +945,7 @@ impl Stream {
                 ([T::AddData, T::Data, T::Iwb, T::Resources], T::Resource)
                     if b.iwb == IwbState::Inside && b.resource.is_none() =>
                 {
-                    let mark = scratch.len();
-                    let [n] = self.pick(t, ["name"], &mut scratch)?;
-                    b.resource = n
-                        .map(|a| {
-                            self.names
-                                .name(a.get(&scratch), Span::new(self.file, a.range.clone()))
-                        })
-                        .filter(|n| !n.key.is_empty());
-                    scratch.truncate(mark);
+                    b.resource = self.name_attr(t, &mut scratch)?;
                 }
                 ([], T::Condition) if b.condition.is_none() && !b.condition_done => {
                     b.condition = Some(tag_span);
