@@ -45,7 +45,13 @@ impl Interner {
             return (t.clone(), k.clone());
         }
         let t: Arc<str> = Arc::from(raw.trim());
-        let k: Arc<str> = Arc::from(crate::names::key(raw));
+        let key = crate::names::key(raw);
+        // A name already in lower case is its own key: one allocation shared.
+        let k: Arc<str> = if *key == *t {
+            t.clone()
+        } else {
+            Arc::from(key)
+        };
         self.map.insert(raw.into(), (t.clone(), k.clone()));
         (t, k)
     }

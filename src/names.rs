@@ -4,8 +4,9 @@
 /// The comparison key of a name: trimmed and lower-cased (Unicode, so `Ä` and `ä` are one letter).
 pub fn key(name: &str) -> String {
     let t = name.trim();
-    if t.bytes().all(|b| b.is_ascii() && !b.is_ascii_uppercase()) {
-        t.to_owned()
+    if t.is_ascii() {
+        // The same as `to_lowercase` for ASCII, without its per-`char` path.
+        t.to_ascii_lowercase()
     } else {
         t.to_lowercase()
     }
