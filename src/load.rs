@@ -34,7 +34,7 @@ pub trait FileSource {
 
 /// A file opened by [`FileSource::open`]: its bytes, and its size if known.
 pub struct Opened<'a> {
-    pub reader: Box<dyn Read + 'a>,
+    pub reader: Box<dyn Read + Send + 'a>,
     pub len: Option<u64>,
 }
 

@@ -110,7 +110,7 @@ impl Hashing {
 /// its end; a stream that fails or is left before its end records no hash (the file is then
 /// compiled again).
 struct HashingReader<'a> {
-    inner: Box<dyn std::io::Read + 'a>,
+    inner: Box<dyn std::io::Read + Send + 'a>,
     hash: Option<crate::load::ContentHash>,
     path: PathBuf,
     to: &'a Hashing,

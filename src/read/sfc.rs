@@ -10,7 +10,9 @@
 use std::io::BufRead;
 use std::ops::Range;
 
-use quick_xml::events::{BytesStart, Event};
+use quick_xml::events::{BytesCData, BytesRef, BytesStart, BytesText};
+
+use super::tape::{self, Batch, Kind, Pipeline, Rec, Stop, Tape};
 
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
 use crate::model::{
@@ -57,12 +59,36 @@ pub fn read_sfc_pou(
 /// from there, as in [`Sources`]). `len_hint`: the file's size, if known (sizes the element
 /// vector). Diagnostics are located by byte ranges only; their lines need the text, read again
 /// when they are rendered.
-pub fn read_sfc_stream<R: BufRead>(
+pub fn read_sfc_stream<R: BufRead + Send>(
+    input: R,
+    file: FileId,
+    len_hint: u64,
+    pou: Option<&str>,
+    diags: &mut Diagnostics,
+) -> Result<Option<Sfc>, StreamError> {
+    let pipeline = Pipeline::choose(len_hint);
+    read_sfc_stream_with(
+        input,
+        file,
+        len_hint,
+        pou,
+        diags,
+        pipeline,
+        tape::BATCH_BYTES,
+    )
+}
+
+/// [`read_sfc_stream`] with the events produced as `pipeline` says, in batches of about
+/// `batch_bytes` of text (the tests compare the ways; the result is the same).
+#[doc(hidden)]
+pub fn read_sfc_stream_with<R: BufRead + Send>(
     mut input: R,
     file: FileId,
     len_hint: u64,
     pou: Option<&str>,
     diags: &mut Diagnostics,
+    pipeline: Pipeline,
+    batch_bytes: usize,
 ) -> Result<Option<Sfc>, StreamError> {
     // The loader strips one byte-order mark; another one is not XML (and the parser would
     // skip it silently, shifting every position it reports).
@@ -95,7 +121,7 @@ pub fn read_sfc_stream<R: BufRead>(
         values: String::new(),
     };
     let mut local = Diagnostics::default();
-    let outcome = r.run(quick_xml::Reader::from_reader(input), &mut local)?;
+    let outcome = tape::read(input, pipeline, batch_bytes, |t| r.run(t, &mut local))?;
     Ok(match outcome {
         Err(d) => {
             // Not well-formed: only the syntax error counts (the rest may be an artefact of it).
@@ -165,7 +191,7 @@ struct Stream {
 /// The local names the reader looks for; anything else is `Other`. The stack of open elements
 /// holds these, so reading allocates nothing per element.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Tag {
+pub(crate) enum Tag {
     Project,
     FileHeader,
     Types,
@@ -201,7 +227,7 @@ enum Tag {
 }
 
 impl Tag {
-    fn of(local: &str) -> Tag {
+    pub(crate) fn of(local: &str) -> Tag {
         match local {
             "project" => Tag::Project,
             "fileHeader" => Tag::FileHeader,
@@ -439,17 +465,28 @@ enum IwbState {
     Done,
 }
 
-/// Where the bytes of a start tag's event sit in the file: the event's content begins one byte
-/// after `at` (the `<`).
-struct Tagged<'e, 'b> {
-    e: &'e BytesStart<'b>,
+/// A start tag's event on the tape, and where its bytes sit in the file: the event's content
+/// begins one byte after `at` (the `<`).
+struct Tagged<'a> {
+    e: BytesStart<'a>,
+    /// The local name, a part of the content.
+    local: &'a str,
     at: usize,
 }
 
-impl Tagged<'_, '_> {
+impl<'a> Tagged<'a> {
+    fn new(rec: &Rec, batch: &'a Batch) -> Self {
+        let content = &batch.text[rec.text.clone()];
+        Tagged {
+            e: BytesStart::from_content(content, rec.name.end - rec.text.start),
+            local: &batch.text[rec.name.clone()],
+            at: rec.at,
+        }
+    }
+
     /// The file offset of `s`, a slice of the event's bytes (`fallback` if it is not one).
     fn offset_of(&self, s: &str, fallback: usize) -> usize {
-        let content: &str = self.e;
+        let content: &str = &self.e;
         let base = content.as_ptr() as usize;
         let p = s.as_ptr() as usize;
         if p >= base && p + s.len() <= base + content.len() {
@@ -460,11 +497,8 @@ impl Tagged<'_, '_> {
     }
 
     /// The local name of the tag.
-    fn local_name(&self) -> &str {
-        let content: &str = self.e;
-        // The name is the start of the content.
-        let len = self.e.name().as_ref().len();
-        local_part(&content[..len.min(content.len())])
+    fn local_name(&self) -> &'a str {
+        self.local
     }
 }
 
@@ -512,7 +546,7 @@ impl Stream {
         for a in t.e.attributes() {
             let a = a.map_err(|err| self.syntax_error(t.at, err.to_string()))?;
             let key_raw: &str = a.key.as_ref();
-            let local = local_part(key_raw);
+            let local = tape::local_part(key_raw);
             let Some(slot) = names.iter().position(|n| *n == local) else {
                 continue;
             };
@@ -544,12 +578,11 @@ impl Stream {
         Ok(out)
     }
 
-    fn run<R: BufRead>(
+    fn run(
         &mut self,
-        mut reader: quick_xml::Reader<R>,
+        tape: &mut dyn Tape,
         diags: &mut Diagnostics,
     ) -> Result<Result<Outcome, Box<Diagnostic>>, StreamError> {
-        let mut buf: Vec<u8> = Vec::with_capacity(4096);
         let mut stack = Open::default();
         let mut header = FileHeader::default();
         let mut root = self.span(0..0);
@@ -565,283 +598,279 @@ impl Stream {
         let mut building = false;
         let mut seen_root = false;
         let mut scratch = String::new();
+        let mut batch = Batch::default();
         loop {
-            let at = reader.buffer_position() as usize;
-            buf.clear();
-            let ev = match reader.read_event_into(&mut buf) {
-                Ok(ev) => ev,
-                Err(quick_xml::Error::Encoding(_)) => return Err(StreamError::NotUtf8),
-                Err(quick_xml::Error::Io(e)) => {
-                    return Err(StreamError::Io(std::io::Error::new(
-                        e.kind(),
-                        e.to_string(),
-                    )));
-                }
-                Err(e) => {
-                    return Ok(Err(
-                        self.syntax_error(reader.error_position() as usize, e.to_string())
-                    ));
-                }
-            };
-            let (start, empty) = match ev {
-                Event::Start(e) => (e, false),
-                Event::Empty(e) => (e, true),
-                Event::End(_) => {
-                    let depth = stack.len();
-                    stack.pop();
-                    if building && depth == b.depth {
-                        building = false;
-                        if let Some(el) = self.finish(&mut b, diags)
-                            && let Some((_, _, els)) = &mut sfc
-                        {
-                            els.push(el);
-                        }
-                    } else if building {
-                        end_inside(&mut b, &stack);
-                    } else if let Some((_, d, _)) = &sfc
-                        && depth == *d
-                    {
-                        // `</SFC>`
-                        let (name, program, _) = pou.clone().unwrap_or((None, false, 0));
-                        let (span, _, mut els) = sfc.take().expect("checked");
-                        els.shrink_to_fit();
-                        self.found.push(Pou {
-                            name,
-                            program,
-                            sfc_span: span,
-                            elements: els,
-                        });
-                        sfc_done = true;
-                    } else if let Some((_, _, d)) = &pou
-                        && depth == *d
-                    {
-                        pou = None;
-                        want_pou = false;
-                    }
-                    continue;
-                }
-                Event::Text(t) => {
-                    if building {
-                        let end = reader.buffer_position() as usize;
-                        inline_text(&mut b, &stack, at..end, || {
-                            t.xml_content(quick_xml::XmlVersion::Implicit1_0)
-                        });
-                    }
-                    continue;
-                }
-                Event::CData(t) => {
-                    if building {
-                        // `<![CDATA[` … `]]>`
-                        let end = (reader.buffer_position() as usize).saturating_sub(3);
-                        inline_text(&mut b, &stack, (at + 9).min(end)..end, || {
-                            t.xml_content(quick_xml::XmlVersion::Implicit1_0)
-                        });
-                    }
-                    continue;
-                }
-                Event::GeneralRef(r) => {
-                    let ch = match r.resolve_char_ref() {
-                        Ok(Some(c)) => Some(c),
-                        Ok(None) => match &*r {
-                            "lt" => Some('<'),
-                            "gt" => Some('>'),
-                            "amp" => Some('&'),
-                            "apos" => Some('\''),
-                            "quot" => Some('"'),
-                            other => {
-                                return Ok(Err(self.syntax_error(
-                                    at,
-                                    format!("unknown entity reference `&{other};`"),
-                                )));
+            batch = tape.next(batch);
+            for rec in &batch.recs {
+                let at = rec.at;
+                let empty = match rec.kind {
+                    Kind::Start => false,
+                    Kind::Empty => true,
+                    Kind::End => {
+                        let depth = stack.len();
+                        stack.pop();
+                        if building && depth == b.depth {
+                            building = false;
+                            if let Some(el) = self.finish(&mut b, diags)
+                                && let Some((_, _, els)) = &mut sfc
+                            {
+                                els.push(el);
                             }
-                        },
-                        Err(e) => return Ok(Err(self.syntax_error(at, e.to_string()))),
-                    };
-                    if let Some(c) = ch
-                        && building
-                        && b.inline.is_some()
-                        && in_inline(&b, &stack)
-                    {
-                        let inline = b.inline.as_mut().expect("checked");
-                        b.inline_map.push((inline.len(), at, false));
-                        inline.push(c);
+                        } else if building {
+                            end_inside(&mut b, &stack);
+                        } else if let Some((_, d, _)) = &sfc
+                            && depth == *d
+                        {
+                            // `</SFC>`
+                            let (name, program, _) = pou.clone().unwrap_or((None, false, 0));
+                            let (span, _, mut els) = sfc.take().expect("checked");
+                            els.shrink_to_fit();
+                            self.found.push(Pou {
+                                name,
+                                program,
+                                sfc_span: span,
+                                elements: els,
+                            });
+                            sfc_done = true;
+                        } else if let Some((_, _, d)) = &pou
+                            && depth == *d
+                        {
+                            pou = None;
+                            want_pou = false;
+                        }
+                        continue;
                     }
-                    continue;
-                }
-                Event::DocType(_) => {
-                    return Ok(Err(Box::new(
+                    Kind::Text => {
+                        if building {
+                            let raw = &batch.text[rec.text.clone()];
+                            inline_text(&mut b, &stack, at..rec.end, || {
+                                BytesText::from_escaped(raw)
+                                    .xml_content(quick_xml::XmlVersion::Implicit1_0)
+                            });
+                        }
+                        continue;
+                    }
+                    Kind::CData => {
+                        if building {
+                            // `<![CDATA[` … `]]>`
+                            let end = rec.end.saturating_sub(3);
+                            let raw = &batch.text[rec.text.clone()];
+                            inline_text(&mut b, &stack, (at + 9).min(end)..end, || {
+                                BytesCData::new(raw).xml_content(quick_xml::XmlVersion::Implicit1_0)
+                            });
+                        }
+                        continue;
+                    }
+                    Kind::GeneralRef => {
+                        let raw = &batch.text[rec.text.clone()];
+                        let ch = match BytesRef::new(raw).resolve_char_ref() {
+                            Ok(Some(c)) => Some(c),
+                            Ok(None) => match raw {
+                                "lt" => Some('<'),
+                                "gt" => Some('>'),
+                                "amp" => Some('&'),
+                                "apos" => Some('\''),
+                                "quot" => Some('"'),
+                                other => {
+                                    return Ok(Err(self.syntax_error(
+                                        at,
+                                        format!("unknown entity reference `&{other};`"),
+                                    )));
+                                }
+                            },
+                            Err(e) => return Ok(Err(self.syntax_error(at, e.to_string()))),
+                        };
+                        if let Some(c) = ch
+                            && building
+                            && b.inline.is_some()
+                            && in_inline(&b, &stack)
+                        {
+                            let inline = b.inline.as_mut().expect("checked");
+                            b.inline_map.push((inline.len(), at, false));
+                            inline.push(c);
+                        }
+                        continue;
+                    }
+                    Kind::DocType => {
+                        return Ok(Err(Box::new(
                         Diagnostic::error(
                             Code::XmlSyntax,
                             "a document type declaration (DTD) is not accepted: entity definitions could expand without bound",
                         )
                         .at(self.span(at..at + 9)),
                     )));
-                }
-                Event::Eof => {
-                    let end = reader.buffer_position() as usize;
-                    if let Some(open) = stack.last_name() {
+                    }
+                    Kind::Eof => {
+                        let end = rec.end;
+                        if let Some(open) = stack.last_name() {
+                            return Ok(Err(
+                                self.syntax_error(end, format!("the file ends inside `<{open}>`"))
+                            ));
+                        }
+                        if !seen_root {
+                            return Ok(Err(self.syntax_error(0, "no root element".to_owned())));
+                        }
+                        return Ok(Ok(Outcome::Done {
+                            header,
+                            root,
+                            first_pou,
+                        }));
+                    }
+                };
+                let t = Tagged::new(rec, &batch);
+                let name = t.local_name();
+                let tag = rec.tag;
+                let tag_span = self.span(at..at + 1 + name.len());
+                if stack.len() == 0 {
+                    if seen_root {
                         return Ok(Err(
-                            self.syntax_error(end, format!("the file ends inside `<{open}>`"))
+                            self.syntax_error(at, "a second root element".to_owned())
                         ));
                     }
-                    if !seen_root {
-                        return Ok(Err(self.syntax_error(0, "no root element".to_owned())));
+                    seen_root = true;
+                    root = tag_span.clone();
+                    if tag != Tag::Project {
+                        // Read no further: the caller reports E103 (the rest may be any XML).
+                        return Ok(Ok(Outcome::WrongRoot(tag_span, name.to_owned())));
                     }
-                    return Ok(Ok(Outcome::Done {
-                        header,
-                        root,
-                        first_pou,
-                    }));
                 }
-                _ => continue,
-            };
-            let t = Tagged { e: &start, at };
-            let name = t.local_name();
-            let tag = Tag::of(name);
-            let tag_span = self.span(at..at + 1 + name.len());
-            if stack.len() == 0 {
-                if seen_root {
-                    return Ok(Err(
-                        self.syntax_error(at, "a second root element".to_owned())
-                    ));
+                let depth = stack.len() + 1;
+                if building {
+                    if let Err(d) = self.inside(&mut b, &stack, tag, tag_span, &t) {
+                        return Ok(Err(d));
+                    }
+                    if empty {
+                        end_inside(&mut b, &stack);
+                    } else {
+                        stack.push(tag, name);
+                    }
+                    continue;
                 }
-                seen_root = true;
-                root = tag_span.clone();
-                if tag != Tag::Project {
-                    // Read no further: the caller reports E103 (the rest may be any XML).
-                    return Ok(Ok(Outcome::WrongRoot(tag_span, name.to_owned())));
+                // The element's place, relative to the document.
+                let path = PathKind::of(&stack, tag);
+                if matches!(path, PathKind::Sfc)
+                    && let Some(p) = self.pous.last_mut()
+                {
+                    p.1 = true;
                 }
-            }
-            let depth = stack.len() + 1;
-            if building {
-                if let Err(d) = self.inside(&mut b, &stack, tag, tag_span, &t) {
-                    return Ok(Err(d));
-                }
-                if empty {
-                    end_inside(&mut b, &stack);
-                } else {
-                    stack.push(tag, name);
-                }
-                continue;
-            }
-            // The element's place, relative to the document.
-            let path = PathKind::of(&stack, tag);
-            if matches!(path, PathKind::Sfc)
-                && let Some(p) = self.pous.last_mut()
-            {
-                p.1 = true;
-            }
-            match path {
-                PathKind::FileHeader => {
-                    scratch.clear();
-                    let picked = self.pick(
-                        &t,
-                        [
-                            "companyName",
-                            "productName",
-                            "productVersion",
-                            "creationDateTime",
-                        ],
-                        &mut scratch,
-                    );
-                    let [company, product, version, time] = match picked {
-                        Ok(p) => p,
-                        Err(d) => return Ok(Err(d)),
-                    };
-                    let v = |a: Option<Val>| a.map(|a| a.get(&scratch).to_owned());
-                    header.company_name = v(company);
-                    header.product_name = v(product);
-                    header.product_version = v(version);
-                    header.creation_date_time = v(time);
-                }
-                PathKind::Pou => {
-                    scratch.clear();
-                    let [pou_name, pou_type] =
-                        match self.pick(&t, ["name", "pouType"], &mut scratch) {
+                match path {
+                    PathKind::FileHeader => {
+                        scratch.clear();
+                        let picked = self.pick(
+                            &t,
+                            [
+                                "companyName",
+                                "productName",
+                                "productVersion",
+                                "creationDateTime",
+                            ],
+                            &mut scratch,
+                        );
+                        let [company, product, version, time] = match picked {
                             Ok(p) => p,
                             Err(d) => return Ok(Err(d)),
                         };
-                    let pname = pou_name.map(|a| a.get(&scratch).to_owned());
-                    let program = pou_type.is_some_and(|a| a.get(&scratch) == "program");
-                    if first_pou.is_none() {
-                        first_pou = Some((tag_span.clone(), pname.clone().unwrap_or_default()));
+                        let v = |a: Option<Val>| a.map(|a| a.get(&scratch).to_owned());
+                        header.company_name = v(company);
+                        header.product_name = v(product);
+                        header.product_version = v(version);
+                        header.creation_date_time = v(time);
                     }
-                    self.pous.push((pname.clone().unwrap_or_default(), false));
-                    let have_program = self.found.iter().any(|p| p.program);
-                    want_pou = match &self.wanted {
-                        Some(w) => {
-                            self.found.is_empty()
-                                && pname.as_deref().is_some_and(|n| crate::names::eq(n, w))
+                    PathKind::Pou => {
+                        scratch.clear();
+                        let [pou_name, pou_type] =
+                            match self.pick(&t, ["name", "pouType"], &mut scratch) {
+                                Ok(p) => p,
+                                Err(d) => return Ok(Err(d)),
+                            };
+                        let pname = pou_name.map(|a| a.get(&scratch).to_owned());
+                        let program = pou_type.is_some_and(|a| a.get(&scratch) == "program");
+                        if first_pou.is_none() {
+                            first_pou = Some((tag_span.clone(), pname.clone().unwrap_or_default()));
                         }
-                        None => !have_program && (program || self.found.is_empty()),
-                    };
-                    if want_pou && !empty {
-                        pou = Some((pname, program, depth));
-                        body_seen = false;
-                        sfc_done = false;
-                    }
-                }
-                PathKind::Body if want_pou && pou.is_some() => {
-                    if body_seen {
-                        // Only the first body counts.
-                        want_pou = false;
-                    }
-                    body_seen = true;
-                }
-                PathKind::Sfc if want_pou && pou.is_some() && !sfc_done && sfc.is_none() => {
-                    if empty {
-                        let (pname, program, _) = pou.clone().expect("checked");
-                        self.found.push(Pou {
-                            name: pname,
-                            program,
-                            sfc_span: tag_span,
-                            elements: Vec::new(),
-                        });
-                        sfc_done = true;
-                    } else {
-                        // Sized from the bytes left (an element takes about 300-400 bytes):
-                        // growing by doubling would hold the old and the new vector at once.
-                        let left = self.len_hint.saturating_sub(tag_span.range.end);
-                        sfc = Some((
-                            tag_span,
-                            depth,
-                            Vec::with_capacity((left / 320).min(1 << 24)),
-                        ));
-                    }
-                }
-                _ => {
-                    if let Some((_, d, els)) = &mut sfc
-                        && depth == *d + 1
-                    {
-                        b.reset(tag, name, tag_span, depth);
-                        let mut scratch = std::mem::take(&mut b.scratch);
-                        let picked = self.pick(
-                            &t,
-                            ["localId", "name", "initialStep", "targetName"],
-                            &mut scratch,
-                        );
-                        b.scratch = scratch;
-                        match picked {
-                            Ok([id, n, initial, target]) => {
-                                b.local_id = id;
-                                b.name = n;
-                                b.initial = initial;
-                                b.target = target;
+                        self.pous.push((pname.clone().unwrap_or_default(), false));
+                        let have_program = self.found.iter().any(|p| p.program);
+                        want_pou = match &self.wanted {
+                            Some(w) => {
+                                self.found.is_empty()
+                                    && pname.as_deref().is_some_and(|n| crate::names::eq(n, w))
                             }
-                            Err(d) => return Ok(Err(d)),
+                            None => !have_program && (program || self.found.is_empty()),
+                        };
+                        if want_pou && !empty {
+                            pou = Some((pname, program, depth));
+                            body_seen = false;
+                            sfc_done = false;
                         }
+                    }
+                    PathKind::Body if want_pou && pou.is_some() => {
+                        if body_seen {
+                            // Only the first body counts.
+                            want_pou = false;
+                        }
+                        body_seen = true;
+                    }
+                    PathKind::Sfc if want_pou && pou.is_some() && !sfc_done && sfc.is_none() => {
                         if empty {
-                            if let Some(el) = self.finish(&mut b, diags) {
-                                els.push(el);
-                            }
+                            let (pname, program, _) = pou.clone().expect("checked");
+                            self.found.push(Pou {
+                                name: pname,
+                                program,
+                                sfc_span: tag_span,
+                                elements: Vec::new(),
+                            });
+                            sfc_done = true;
                         } else {
-                            building = true;
+                            // Sized from the bytes left (an element takes about 300-400 bytes):
+                            // growing by doubling would hold the old and the new vector at once.
+                            let left = self.len_hint.saturating_sub(tag_span.range.end);
+                            sfc = Some((
+                                tag_span,
+                                depth,
+                                Vec::with_capacity((left / 320).min(1 << 24)),
+                            ));
                         }
                     }
+                    _ => {
+                        if let Some((_, d, els)) = &mut sfc
+                            && depth == *d + 1
+                        {
+                            b.reset(tag, name, tag_span, depth);
+                            let mut scratch = std::mem::take(&mut b.scratch);
+                            let picked = self.pick(
+                                &t,
+                                ["localId", "name", "initialStep", "targetName"],
+                                &mut scratch,
+                            );
+                            b.scratch = scratch;
+                            match picked {
+                                Ok([id, n, initial, target]) => {
+                                    b.local_id = id;
+                                    b.name = n;
+                                    b.initial = initial;
+                                    b.target = target;
+                                }
+                                Err(d) => return Ok(Err(d)),
+                            }
+                            if empty {
+                                if let Some(el) = self.finish(&mut b, diags) {
+                                    els.push(el);
+                                }
+                            } else {
+                                building = true;
+                            }
+                        }
+                    }
+                }
+                if !empty {
+                    stack.push(tag, name);
                 }
             }
-            if !empty {
-                stack.push(tag, name);
+            match batch.stop.take() {
+                None => {}
+                Some(Stop::NotUtf8) => return Err(StreamError::NotUtf8),
+                Some(Stop::Io(e)) => return Err(StreamError::Io(e)),
+                Some(Stop::Syntax(at, msg)) => return Ok(Err(self.syntax_error(at, msg))),
             }
         }
     }
@@ -1393,13 +1422,6 @@ impl PathKind {
 
 /// The part of a qualified name after its prefix (`xhtml:p` → `p`). Names are short: a byte
 /// loop, not a `char` search.
-fn local_part(name: &str) -> &str {
-    match name.as_bytes().iter().rposition(|&b| b == b':') {
-        // `:` is ASCII: the next byte starts a character.
-        Some(i) => &name[i + 1..],
-        None => name,
-    }
-}
 
 /// An element inside the one being built closed; `stack` is what remains open.
 fn end_inside(b: &mut Building, stack: &Open) {
