@@ -1420,9 +1420,6 @@ impl PathKind {
     }
 }
 
-/// The part of a qualified name after its prefix (`xhtml:p` → `p`). Names are short: a byte
-/// loop, not a `char` search.
-
 /// An element inside the one being built closed; `stack` is what remains open.
 fn end_inside(b: &mut Building, stack: &Open) {
     let depth = b.depth.min(stack.len());

@@ -13,7 +13,7 @@
 
 use std::io::BufRead;
 use std::ops::Range;
-use std::sync::mpsc::{Receiver, SyncSender, TryRecvError};
+use std::sync::mpsc::{Receiver, SyncSender};
 
 use quick_xml::events::Event;
 
@@ -116,7 +116,8 @@ impl Batch {
     }
 }
 
-/// The local part of a qualified name.
+/// The part of a qualified name after its prefix (`xhtml:p` → `p`). Names are short: a byte
+/// loop, not a `char` search.
 pub(crate) fn local_part(name: &str) -> &str {
     match name.as_bytes().iter().rposition(|&b| b == b':') {
         // `:` is ASCII: the next byte starts a character.
@@ -275,10 +276,7 @@ where
                     return;
                 };
                 loop {
-                    let mut b = match spent_rx.try_recv() {
-                        Ok(b) => b,
-                        Err(TryRecvError::Empty | TryRecvError::Disconnected) => Batch::default(),
-                    };
+                    let mut b = spent_rx.try_recv().unwrap_or_default();
                     p.fill(&mut b);
                     let last = p.done;
                     // The reader stopped early (its own error): so does this thread.
