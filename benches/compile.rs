@@ -234,6 +234,7 @@ const CHILD_ENV: &str = "SKILLPOST_BENCH_CHILD";
 struct Samples {
     floor: Vec<Duration>,
     stream_floor: Vec<Duration>,
+    tokenize: Vec<Duration>,
     compile: Vec<Duration>,
     write: Vec<Duration>,
     stages: Vec<Vec<Duration>>,
@@ -246,6 +247,10 @@ struct Row {
     iters: usize,
     floor: Duration,
     stream_floor: Duration,
+    /// compile / quick-xml floor, the median of the ratios of each iteration (measured back to
+    /// back, so a slower stretch of a shared machine weighs on both).
+    stream_ratio: f64,
+    tokenize: Duration,
     compile: Duration,
     write: Duration,
     stages: Vec<Duration>,
@@ -497,6 +502,7 @@ fn run_case(case: &Case, tmp: &Path) -> Row {
     for i in 0..=case.iters {
         let floor = floor(&text);
         let stream_floor = stream_floor(&text);
+        let tokenize = tokenize(&text);
         let run = dir.join(format!("run-{i}"));
         let bb = fresh_project(&run);
         let (compile, write, outputs, diagnostics) = compile_and_apply(&bb);
@@ -514,6 +520,7 @@ fn run_case(case: &Case, tmp: &Path) -> Row {
         } else {
             s.floor.push(floor);
             s.stream_floor.push(stream_floor);
+            s.tokenize.push(tokenize);
             s.compile.push(compile);
             s.write.push(write);
             for (k, d) in stages.into_iter().enumerate() {
@@ -532,7 +539,18 @@ fn run_case(case: &Case, tmp: &Path) -> Row {
         stats: project.stats,
         iters: case.iters,
         floor: median(&mut s.floor),
+        stream_ratio: {
+            let mut r: Vec<f64> = s
+                .compile
+                .iter()
+                .zip(&s.stream_floor)
+                .map(|(c, f)| c.as_secs_f64() / f.as_secs_f64())
+                .collect();
+            r.sort_by(f64::total_cmp);
+            r.get(r.len() / 2).copied().unwrap_or(f64::NAN)
+        },
         stream_floor: median(&mut s.stream_floor),
+        tokenize: median(&mut s.tokenize),
         compile: median(&mut s.compile),
         write: median(&mut s.write),
         stages: s.stages.iter_mut().map(|v| median(v)).collect(),
@@ -639,6 +657,19 @@ fn stream_floor(text: &str) -> Duration {
         }
     }
     black_box(attributes);
+    t.elapsed()
+}
+
+/// The SFC reader's first half alone (`read::tape`: tokenizing, UTF-8, the copy into batches),
+/// in one thread, over the text in memory: what the second thread does while the reader builds
+/// the model.
+fn tokenize(text: &str) -> Duration {
+    let t = Instant::now();
+    let n = skillpost::read::tape::tokenize_only(
+        text.as_bytes(),
+        skillpost::read::tape::Pipeline::Inline,
+    );
+    black_box(n);
     t.elapsed()
 }
 
@@ -822,28 +853,37 @@ fn print_tables(rows: &[Row]) {
     println!(
         "quick-xml floor = a bare quick-xml event pass over it; compile = compile::compile from"
     );
-    println!("the blackboard path (reads every file); ratio = compile / roxmltree floor; write =");
-    println!("compile::apply into a fresh folder.");
+    println!(
+        "the blackboard path (reads every file); ratio = compile / roxmltree floor; ÷ quick-xml ="
+    );
+    println!(
+        "compile / quick-xml floor (median of the ratios of each iteration); tokenize = the SFC"
+    );
+    println!(
+        "reader's producer alone (read::tape, one thread); write = compile::apply into a fresh folder."
+    );
     println!();
     println!(
-        "| case | steps | SFC MB | runs | roxmltree floor ms | quick-xml floor ms | compile ms | ratio | write ms | compile + write ms | roxmltree floor peak MB | compile peak MB |"
+        "| case | steps | SFC MB | runs | roxmltree floor ms | quick-xml floor ms | tokenize ms | compile ms | ratio | ÷ quick-xml | write ms | compile + write ms | roxmltree floor peak MB | compile peak MB |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     let mb = |p: Option<Peak>| match p {
         Some(p) => format!("{:.0}", p.rss_kb as f64 / 1024.0),
         None => "n/a".to_owned(),
     };
     for r in rows {
         println!(
-            "| {} | {} | {:.1} | {} | {} | {} | {} | {:.2} | {} | {} | {} | {} |",
+            "| {} | {} | {:.1} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {} | {} | {} | {} |",
             r.label,
             r.stats.skill_steps,
             r.stats.sfc_bytes as f64 / 1e6,
             r.iters,
             ms(r.floor),
             ms(r.stream_floor),
+            ms(r.tokenize),
             ms(r.compile),
             r.compile.as_secs_f64() / r.floor.as_secs_f64(),
+            r.stream_ratio,
             ms(r.write),
             ms(r.compile + r.write),
             mb(r.floor_peak),
