@@ -33,6 +33,9 @@ pub struct Options {
     /// Return the SFC model and the plan in the [`Compilation`] (for the listings); else they
     /// are freed before the compile ends.
     pub keep_model: bool,
+    /// Keep no warnings (the command line without `--warn` shows none): none is built, and the
+    /// SFC is not read again to locate them. The daemon keeps them (its events count them).
+    pub drop_warnings: bool,
 }
 
 /// The write-back to do after a successful compile.
@@ -491,6 +494,9 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         opts.confine_to.as_ref().map(|p| paths::absolute(p)),
     );
     let mut out = Compilation::default();
+    if opts.drop_warnings {
+        cx.diags.drop_warnings();
+    }
     let mut clock = std::time::Instant::now();
     let mut lap = |out: &mut Compilation, stage: &'static str| {
         let now = std::time::Instant::now();

@@ -294,9 +294,23 @@ impl Diagnostic {
 #[derive(Debug, Default)]
 pub struct Diagnostics {
     list: Vec<Diagnostic>,
+    /// Warnings are not kept ([`Diagnostics::drop_warnings`]).
+    no_warnings: bool,
 }
 
 impl Diagnostics {
+    /// Keeps no warnings from now on (and drops those kept): for a run that will not show them,
+    /// so no stage spends time building or locating them.
+    pub fn drop_warnings(&mut self) {
+        self.no_warnings = true;
+        self.list.retain(|d| d.severity != Severity::Warning);
+    }
+
+    /// Whether a warning pushed now is kept: a stage may skip building one that is not.
+    pub fn keeps_warnings(&self) -> bool {
+        !self.no_warnings
+    }
+
     /// Takes `file` out of every diagnostic's places (its text is gone: it changed while the
     /// compile ran), saying so in a note.
     pub fn forget_file(&mut self, file: FileId, display: &str) {
@@ -356,6 +370,9 @@ impl Diagnostics {
     }
 
     pub fn push(&mut self, d: Diagnostic) {
+        if self.no_warnings && d.severity == Severity::Warning {
+            return;
+        }
         self.list.push(d);
     }
 

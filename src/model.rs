@@ -27,9 +27,22 @@ impl Name {
 }
 
 /// Shares the strings of names read many times (step types, resources, skills, variables).
+///
+/// Each name is hashed once (SipHash with a random key, as `std`'s maps: a crafted file cannot
+/// make names collide) and its hash kept, so growing the table does not hash every name again.
 #[derive(Debug, Default)]
 pub struct Interner {
-    map: std::collections::HashMap<Box<str>, (Arc<str>, Arc<str>)>,
+    table: hashbrown::HashTable<Interned>,
+    hasher: std::hash::RandomState,
+}
+
+#[derive(Debug)]
+struct Interned {
+    hash: u64,
+    /// The name as written (the trimmed text's string when it has no surrounding spaces).
+    raw: Arc<str>,
+    text: Arc<str>,
+    key: Arc<str>,
 }
 
 impl Interner {
@@ -41,19 +54,40 @@ impl Interner {
 
     /// The shared trimmed text and key of `raw`.
     pub fn strings(&mut self, raw: &str) -> (Arc<str>, Arc<str>) {
-        if let Some((t, k)) = self.map.get(raw) {
-            return (t.clone(), k.clone());
+        use std::hash::BuildHasher as _;
+        let hash = self.hasher.hash_one(raw);
+        if let Some(e) = self.table.find(hash, |e| *e.raw == *raw) {
+            return (e.text.clone(), e.key.clone());
         }
-        let t: Arc<str> = Arc::from(raw.trim());
-        let key = crate::names::key(raw);
+        let trimmed = raw.trim();
+        let text: Arc<str> = Arc::from(trimmed);
         // A name already in lower case is its own key: one allocation shared.
-        let k: Arc<str> = if *key == *t {
-            t.clone()
+        let key = if trimmed.is_ascii() && !trimmed.bytes().any(|b| b.is_ascii_uppercase()) {
+            text.clone()
         } else {
-            Arc::from(key)
+            let key = crate::names::key(raw);
+            if *key == *text {
+                text.clone()
+            } else {
+                Arc::from(key)
+            }
         };
-        self.map.insert(raw.into(), (t.clone(), k.clone()));
-        (t, k)
+        let raw = if raw.len() == trimmed.len() {
+            text.clone()
+        } else {
+            Arc::from(raw)
+        };
+        self.table.insert_unique(
+            hash,
+            Interned {
+                hash,
+                raw,
+                text: text.clone(),
+                key: key.clone(),
+            },
+            |e| e.hash,
+        );
+        (text, key)
     }
 }
 

@@ -257,3 +257,44 @@ fn a_one_line_sfc_shows_the_part_of_the_line_around_the_place() {
         shown.len()
     );
 }
+
+/// A run that will not show its warnings (`Options::drop_warnings`: the command line without
+/// `--warn`) builds none, so it does not read the SFC again to locate them; a run that keeps them
+/// does. The sample's steps carry a variable no skill reads (`W303`).
+#[test]
+fn warnings_not_kept_are_not_located() {
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/ok/reference-sample");
+    let run = |drop_warnings: bool| {
+        let src = Source {
+            fs: FsSource::default(),
+            second: None,
+            sfc_reads: Mutex::new(0),
+        };
+        let c = compile(
+            &src,
+            &sample.join("Blackboard.aml"),
+            &Options {
+                program: Some("out".into()),
+                drop_warnings,
+                ..Default::default()
+            },
+        );
+        let reads = *src.sfc_reads.lock().unwrap();
+        (c, reads)
+    };
+    let (kept, reads) = run(false);
+    assert!(kept.diagnostics.iter().any(|d| d.code.as_str() == "W303"));
+    assert_eq!(reads, 2, "read again for the warnings' lines");
+    let (dropped, reads) = run(true);
+    assert!(dropped.diagnostics.is_empty(), "{:?}", dropped.diagnostics);
+    assert_eq!(reads, 1, "read once: nothing to locate");
+    // The same program either way.
+    let texts = |c: &skillpost::compile::Compilation| {
+        c.outputs
+            .iter()
+            .map(|(p, f)| (p.clone(), f.text.clone()))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(texts(&kept), texts(&dropped));
+    assert!(!texts(&kept).is_empty());
+}

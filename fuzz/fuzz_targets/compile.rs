@@ -56,6 +56,7 @@ fuzz_target!(|data: &[u8]| {
         confine_to: None,
         pou: None,
         keep_model: data.len() % 3 == 0,
+        drop_warnings: data.len() % 5 == 0,
     };
     let c = compile(&fs, Path::new(BLACKBOARD), &opts);
     assert_eq!(c.files_read.first(), Some(&PathBuf::from(BLACKBOARD)));

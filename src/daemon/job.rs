@@ -327,6 +327,7 @@ impl Job {
             confine_to: self.confine.then(|| self.key.clone()),
             pou: self.spec.pou.clone(),
             keep_model: false,
+            drop_warnings: false,
         };
         let c = compile::compile(&fs, &blackboard, &opts);
         let mut inputs = fs.seen.into_inner().unwrap_or_else(|p| p.into_inner());
