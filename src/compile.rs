@@ -673,7 +673,9 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         // Freed before the SFC's text may be read again for the diagnostics (`finish`): the
         // two together were the compile's peak. A large model is freed on another thread
         // meanwhile (100,000 steps: ~40 ms the caller need not wait for).
-        let large = sfc.as_ref().is_some_and(|s| s.elements.len() >= FREE_ASIDE_FROM);
+        let large = sfc
+            .as_ref()
+            .is_some_and(|s| s.elements.len() >= FREE_ASIDE_FROM);
         if large {
             free_aside((plan, sfc));
         } else {

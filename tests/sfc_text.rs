@@ -34,6 +34,18 @@ impl FileSource for Source {
     }
 }
 
+/// Compiles from disk; also says how often the SFC was read.
+fn compile_counting(blackboard: &Path, opts: &Options) -> (skillpost::compile::Compilation, usize) {
+    let src = Source {
+        fs: FsSource::default(),
+        second: None,
+        sfc_reads: Mutex::new(0),
+    };
+    let c = compile(&src, blackboard, opts);
+    let reads = *src.sfc_reads.lock().unwrap();
+    (c, reads)
+}
+
 fn case() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/err/e314_missing_variable")
 }
@@ -82,13 +94,7 @@ fn an_sfc_diagnostic_gets_its_line_from_the_text_read_again() {
 fn a_compile_without_sfc_diagnostics_reads_the_sfc_once() {
     // The ABB cell: no diagnostic at all, so nothing to locate.
     let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/base/abb");
-    let src = Source {
-        fs: FsSource::default(),
-        second: None,
-        sfc_reads: Mutex::new(0),
-    };
-    let c = compile(
-        &src,
+    let (c, reads) = compile_counting(
         &sample.join("Cell.aml"),
         &Options {
             program: Some("out".into()),
@@ -96,7 +102,7 @@ fn a_compile_without_sfc_diagnostics_reads_the_sfc_once() {
         },
     );
     assert!(c.diagnostics.is_empty(), "{:?}", c.diagnostics);
-    assert_eq!(*src.sfc_reads.lock().unwrap(), 1);
+    assert_eq!(reads, 1);
     // The model is freed unless asked for (the listings ask).
     assert!(c.sfc.is_none() && c.plan.is_none());
 }
@@ -265,22 +271,14 @@ fn a_one_line_sfc_shows_the_part_of_the_line_around_the_place() {
 fn warnings_not_kept_are_not_located() {
     let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/ok/reference-sample");
     let run = |drop_warnings: bool| {
-        let src = Source {
-            fs: FsSource::default(),
-            second: None,
-            sfc_reads: Mutex::new(0),
-        };
-        let c = compile(
-            &src,
+        compile_counting(
             &sample.join("Blackboard.aml"),
             &Options {
                 program: Some("out".into()),
                 drop_warnings,
                 ..Default::default()
             },
-        );
-        let reads = *src.sfc_reads.lock().unwrap();
-        (c, reads)
+        )
     };
     let (kept, reads) = run(false);
     assert!(kept.diagnostics.iter().any(|d| d.code.as_str() == "W303"));
