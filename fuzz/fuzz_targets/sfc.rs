@@ -1,7 +1,8 @@
 //! The SFC reader: bytes → `read::xml::load` → `read_sfc` (the streaming reader) → `plan::plan`
 //! → the listings; every variable the reader accepted parses and looks up; the program tree's
 //! invariants (each step once, waits and branches on transitions, loops start at their head);
-//! the diagnostics in every format.
+//! the diagnostics in every format; the same model and diagnostics however the events were
+//! produced (`read::tape`).
 #![no_main]
 
 mod common;
@@ -75,4 +76,27 @@ fuzz_target!(|data: &[u8]| {
     let mut diags = diags;
     diags.sort();
     common::render_all(&diags.into_vec(), &sources);
+    same_every_way(data);
 });
+
+/// The reader's model and diagnostics do not depend on how its events were produced: in its own
+/// thread in one batch, or in batches of a few bytes (on a second thread for every fourth input).
+fn same_every_way(data: &[u8]) {
+    use skillpost::read::sfc::read_sfc_stream_with;
+    use skillpost::read::tape::Pipeline;
+    let read = |pipeline, batch| {
+        let mut d = skillpost::diag::Diagnostics::default();
+        let r = read_sfc_stream_with(data, 0, data.len() as u64, None, &mut d, pipeline, batch);
+        format!("{r:?}\n{:?}", d.into_vec())
+    };
+    let plain = read(Pipeline::Inline, usize::MAX);
+    let (pipeline, batch) = if data.len() % 4 == 0 {
+        (Pipeline::Threaded, data.len() % 61 + 1)
+    } else {
+        (Pipeline::Inline, data.len() % 13 + 1)
+    };
+    assert!(
+        read(pipeline, batch) == plain,
+        "{pipeline:?} in batches of {batch} bytes reads differently"
+    );
+}
