@@ -343,6 +343,28 @@ pub fn bind(
     profile: &dyn Profile,
     diags: &mut Diagnostics,
 ) -> Bound {
+    bind_split(bb, sfc, order, r, calls_in, profile, diags, PARALLEL_FROM)
+}
+
+/// Steps from which [`bind`] renders the second half of them on a second thread.
+pub const PARALLEL_FROM: usize = 2_000;
+
+/// [`bind`], the steps split in two halves, the second rendered on another thread, when there
+/// are `split_from` steps or more. The result is the same either way (the tests compare them):
+/// each half keeps its diagnostics, unused variables and definitions in step order, and the
+/// second half's are put after the first's.
+#[allow(clippy::too_many_arguments)]
+#[doc(hidden)]
+pub fn bind_split(
+    bb: &Blackboard,
+    sfc: &Sfc,
+    order: &StepOrder,
+    r: &Resolution,
+    calls_in: &Calls,
+    profile: &dyn Profile,
+    diags: &mut Diagnostics,
+    split_from: usize,
+) -> Bound {
     let (irls, fn_irl) = (calls_in.irls, calls_in.fn_irl);
     let mut prepared: HashMap<(usize, usize), Option<Prepared>> = HashMap::new();
     let calls = CallIndex::new(irls);
@@ -350,81 +372,181 @@ pub fn bind(
         let p = prepare(bb, res, sk, irls, &calls, fn_irl, diags);
         prepared.insert((res, sk), p);
     }
+    let cx = StepCx {
+        bb,
+        sfc,
+        r,
+        prepared: &prepared,
+        irls,
+        calls: &calls,
+        profile,
+    };
+    let steps = &order.steps[..];
+    let (mut first, second) = if steps.len() >= split_from.max(2) {
+        let (a, b) = steps.split_at(steps.len() / 2);
+        std::thread::scope(|s| {
+            let mut other = diags.empty_like();
+            let cx = &cx;
+            let started = std::thread::Builder::new()
+                .name("skillpost-bind".into())
+                .spawn_scoped(s, move || {
+                    let part = cx.run(b, &mut other);
+                    (part, other)
+                });
+            let first = cx.run(a, diags);
+            let second = match started {
+                Ok(h) => h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)),
+                Err(_) => {
+                    let mut other = diags.empty_like();
+                    (cx.run(b, &mut other), other)
+                }
+            };
+            (first, Some(second))
+        })
+    } else {
+        (cx.run(steps, diags), None)
+    };
+    if let Some((part, other)) = second {
+        for d in other.into_vec() {
+            diags.push(d);
+        }
+        first.append(part);
+    }
     let mut bound = Bound {
         steps: (0..sfc.elements.len()).map(|_| None).collect(),
-        definitions: Vec::new(),
+        definitions: first.definitions.into_iter().map(|(d, _)| d).collect(),
         resource: r.resource,
         signals: Vec::new(),
     };
-    let mut def_keys: HashSet<&str> = HashSet::new();
-    let mut values: Vec<Cow<str>> = Vec::new();
-    let mut numbers: Vec<Option<f64>> = Vec::new();
-    let mut extras = Extras::default();
-    for &i in &order.steps {
-        let Some((res, sk)) = r.step_skill[i] else {
-            continue;
+    for (i, step) in first.steps {
+        bound.steps[i] = Some(step);
+    }
+    first.extras.report(diags);
+    bound
+}
+
+/// What [`bind`] renders steps with.
+struct StepCx<'a> {
+    bb: &'a Blackboard,
+    sfc: &'a Sfc,
+    r: &'a Resolution,
+    prepared: &'a HashMap<(usize, usize), Option<Prepared>>,
+    irls: &'a [Irl],
+    calls: &'a CallIndex<'a>,
+    profile: &'a dyn Profile,
+}
+
+/// Some steps rendered, in their order: their code, the definitions they used first (with their
+/// keys), and their unused variables.
+struct Part<'a> {
+    steps: Vec<(usize, BoundStep)>,
+    /// `(irl, definition)` and the called name's key, in order of first use.
+    definitions: Vec<((usize, usize), &'a str)>,
+    def_keys: HashSet<&'a str>,
+    extras: Extras,
+}
+
+impl<'a> Part<'a> {
+    /// `later` (the steps after these) added after these.
+    fn append(&mut self, later: Part<'a>) {
+        self.steps.extend(later.steps);
+        for (d, key) in later.definitions {
+            if self.def_keys.insert(key) {
+                self.definitions.push((d, key));
+            }
+        }
+        self.extras.merge(later.extras);
+    }
+}
+
+impl<'a> StepCx<'a> {
+    fn run(&self, steps: &[usize], diags: &mut Diagnostics) -> Part<'a> {
+        let StepCx {
+            bb,
+            sfc,
+            r,
+            prepared,
+            irls,
+            calls,
+            profile,
+        } = *self;
+        let mut part = Part {
+            steps: Vec::new(),
+            definitions: Vec::new(),
+            def_keys: HashSet::new(),
+            extras: Extras::default(),
         };
-        let Some(Some(p)) = prepared.get(&(res, sk)) else {
-            continue;
-        };
-        let e = &sfc.elements[i];
-        let ElementKind::Step(st) = &e.kind else {
-            continue;
-        };
-        let skill = &bb.resources[res].skills[sk];
-        let vars = StepVars::new(sfc, st, &p.variables);
-        let mut ok = check_variables(st, &vars, skill, &p.variables, e, &mut extras, diags);
-        let mut code = String::new();
-        for pc in &p.calls {
-            let call = &irls[pc.irl].calls[pc.call];
-            values.clear();
-            numbers.clear();
-            for &pi in &pc.args {
-                match value_of(&vars, skill, pi, e.local_id, profile) {
-                    Ok((v, n)) => {
-                        values.push(v);
-                        numbers.push(n);
+        let mut values: Vec<Cow<str>> = Vec::new();
+        let mut numbers: Vec<Option<f64>> = Vec::new();
+        for &i in steps {
+            let Some((res, sk)) = r.step_skill[i] else {
+                continue;
+            };
+            let Some(Some(p)) = prepared.get(&(res, sk)) else {
+                continue;
+            };
+            let e = &sfc.elements[i];
+            let ElementKind::Step(st) = &e.kind else {
+                continue;
+            };
+            let skill = &bb.resources[res].skills[sk];
+            let vars = StepVars::new(sfc, st, &p.variables);
+            let mut ok =
+                check_variables(st, &vars, skill, &p.variables, e, &mut part.extras, diags);
+            let mut code = String::new();
+            for pc in &p.calls {
+                let call = &irls[pc.irl].calls[pc.call];
+                values.clear();
+                numbers.clear();
+                for &pi in &pc.args {
+                    match value_of(&vars, skill, pi, e.local_id, profile) {
+                        Ok((v, n)) => {
+                            values.push(v);
+                            numbers.push(n);
+                        }
+                        Err(Some(d)) => {
+                            diags.push(*d);
+                            ok = false;
+                        }
+                        Err(None) => ok = false, // missing variable: reported by check_variables
                     }
-                    Err(Some(d)) => {
-                        diags.push(*d);
+                }
+                if ok {
+                    if !code.is_empty() {
+                        code.push('\n');
+                    }
+                    let at = code.len();
+                    if let Err(why) = call.template.render_with(
+                        &values,
+                        &|k| numbers.get(k).copied().flatten(),
+                        &mut code,
+                    ) {
+                        code.truncate(at);
                         ok = false;
+                        diags.push(conversion_error(&why, call, pc, skill, e, &vars));
+                        continue;
                     }
-                    Err(None) => ok = false, // missing variable: reported by check_variables
+                    if !part.def_keys.contains(&*call.name.key)
+                        && let Some(&d) = calls.definitions[pc.irl].get(&*call.name.key)
+                    {
+                        part.def_keys.insert(&call.name.key);
+                        part.definitions.push(((pc.irl, d), &call.name.key));
+                    }
                 }
             }
             if ok {
-                if !code.is_empty() {
-                    code.push('\n');
-                }
-                let at = code.len();
-                if let Err(why) = call.template.render_with(
-                    &values,
-                    &|k| numbers.get(k).copied().flatten(),
-                    &mut code,
-                ) {
-                    code.truncate(at);
-                    ok = false;
-                    diags.push(conversion_error(&why, call, pc, skill, e, &vars));
-                    continue;
-                }
-                if !def_keys.contains(&*call.name.key)
-                    && let Some(&d) = calls.definitions[pc.irl].get(&*call.name.key)
-                {
-                    def_keys.insert(&call.name.key);
-                    bound.definitions.push((pc.irl, d));
-                }
+                part.steps.push((
+                    i,
+                    BoundStep {
+                        resource: res,
+                        skill: sk,
+                        code,
+                    },
+                ));
             }
         }
-        if ok {
-            bound.steps[i] = Some(BoundStep {
-                resource: res,
-                skill: sk,
-                code,
-            });
-        }
+        part
     }
-    extras.report(diags);
-    bound
 }
 
 /// `E505`: a conversion in a template got a value that is not a number (or a result too large
@@ -704,6 +826,22 @@ impl Extras {
             first: d,
             steps: vec![e.local_id],
         });
+    }
+
+    /// `later` (the groups of the steps after these) added after these.
+    fn merge(&mut self, later: Extras) {
+        for x in later.list {
+            match self.find(&x.skill, &x.variable) {
+                Some(at) => self.list[at].steps.extend(x.steps),
+                None => {
+                    if !self.index.is_empty() {
+                        self.index
+                            .insert((x.skill.clone(), x.variable.clone()), self.list.len());
+                    }
+                    self.list.push(x);
+                }
+            }
+        }
     }
 
     fn report(self, diags: &mut Diagnostics) {

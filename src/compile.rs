@@ -36,6 +36,10 @@ pub struct Options {
     /// Keep no warnings (the command line without `--warn` shows none): none is built, and the
     /// SFC is not read again to locate them. The daemon keeps them (its events count them).
     pub drop_warnings: bool,
+    /// Steps from which the binder renders on two threads (`None`: [`bind::PARALLEL_FROM`]).
+    /// For the tests, which compare the two ways.
+    #[doc(hidden)]
+    pub bind_split_from: Option<usize>,
 }
 
 /// The write-back to do after a successful compile.
@@ -569,7 +573,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         }
         let profile = langs.program.profile();
         check_program_name(&mut cx, opts, Some(langs.program));
-        let mut bound = bind::bind(
+        let mut bound = bind::bind_split(
             &bb,
             sfc,
             &order,
@@ -580,6 +584,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             },
             profile,
             &mut cx.diags,
+            opts.bind_split_from.unwrap_or(bind::PARALLEL_FROM),
         );
         // A language named wrongly (E210) makes the language a guess: its signal rules are
         // not applied then.

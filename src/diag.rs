@@ -306,6 +306,14 @@ impl Diagnostics {
         self.list.retain(|d| d.severity != Severity::Warning);
     }
 
+    /// An empty list that keeps what this one keeps (for work done aside, appended later).
+    pub fn empty_like(&self) -> Diagnostics {
+        Diagnostics {
+            list: Vec::new(),
+            no_warnings: self.no_warnings,
+        }
+    }
+
     /// Whether a warning pushed now is kept: a stage may skip building one that is not.
     pub fn keeps_warnings(&self) -> bool {
         !self.no_warnings

@@ -328,6 +328,7 @@ impl Job {
             pou: self.spec.pou.clone(),
             keep_model: false,
             drop_warnings: false,
+            bind_split_from: None,
         };
         let c = compile::compile(&fs, &blackboard, &opts);
         let mut inputs = fs.seen.into_inner().unwrap_or_else(|p| p.into_inner());

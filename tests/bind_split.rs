@@ -1,0 +1,143 @@
+//! A chart of `bind::PARALLEL_FROM` steps or more is bound on two threads, the second half of
+//! the steps on the other one, and the halves' diagnostics, unused variables (`W303`, grouped
+//! over all steps) and definitions (in order of first use) joined after. The result must be what
+//! one thread gives: compared through `compile` over every fixture (split at every chart of two
+//! steps or more) and a generated 3,000-step project with errors and warnings in both halves.
+
+use std::path::{Path, PathBuf};
+
+use skillpost::compile::{Compilation, Options, compile};
+use skillpost::diag::{Format, render};
+use skillpost::load::FsSource;
+
+#[path = "../benches/common/generator.rs"]
+mod generator;
+
+/// What a user sees of a compile: the outputs, the write-back, every diagnostic with its place.
+fn seen(c: &Compilation) -> String {
+    let outputs: Vec<(PathBuf, &str)> = c
+        .outputs
+        .iter()
+        .map(|(p, f)| (p.clone(), f.text.as_str()))
+        .collect();
+    let wb = c.write_back.as_ref().map(|w| w.value.clone());
+    format!(
+        "{outputs:#?}\n{wb:?}\n{}",
+        render(&c.diagnostics, &c.sources, Format::Json, true, false)
+    )
+}
+
+fn same_both_ways(bb: &Path) {
+    for drop_warnings in [false, true] {
+        let run = |split: usize| {
+            compile(
+                &FsSource::default(),
+                bb,
+                &Options {
+                    program: Some("out".into()),
+                    drop_warnings,
+                    bind_split_from: Some(split),
+                    ..Default::default()
+                },
+            )
+        };
+        let one = seen(&run(usize::MAX));
+        let two = seen(&run(1));
+        assert!(
+            one == two,
+            "{}: bound on two threads differs from one (drop_warnings {drop_warnings}):\n--- one\n{one}\n--- two\n{two}",
+            bb.display()
+        );
+    }
+}
+
+fn blackboards(dir: &Path, out: &mut Vec<PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            blackboards(&p, out);
+        } else if p.extension().is_some_and(|e| e == "aml") {
+            out.push(p);
+        }
+    }
+}
+
+#[test]
+fn every_fixture_binds_the_same_on_two_threads() {
+    let mut bbs = Vec::new();
+    blackboards(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures"),
+        &mut bbs,
+    );
+    bbs.sort();
+    assert!(bbs.len() > 100, "blackboards found: {}", bbs.len());
+    for bb in &bbs {
+        same_both_ways(bb);
+    }
+}
+
+/// `text` with the `n`th occurrence of `what` replaced by `with`.
+fn replace_nth(text: &str, what: &str, n: usize, with: &str) -> String {
+    let (at, _) = text.match_indices(what).nth(n).expect("enough occurrences");
+    format!("{}{with}{}", &text[..at], &text[at + what.len()..])
+}
+
+#[test]
+fn a_large_chart_with_problems_in_both_halves_binds_the_same_on_two_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = generator::Spec {
+        steps: 3000,
+        branch_every: 0,
+        branch_width: 0,
+        select_every: 25,
+        looped: false,
+    };
+    let project = generator::write_project(dir.path(), &spec).unwrap();
+    let mut sfc = std::fs::read_to_string(&project.sfc).unwrap();
+    let velocity = "<Variable name=\"Velocity\" Value=\"";
+    let n = sfc.matches(velocity).count();
+    assert!(n > 2000, "{n} steps with a velocity");
+    // Unused variables: one in both halves (one W303 group over both), one in the second half
+    // only; a missing variable (E314) and a value that is not one (E50x) in each half.
+    for (k, with) in [
+        (
+            10,
+            "<Variable name=\"Extra1\" Value=\"1\"/><Variable name=\"Velocity\" Value=\"",
+        ),
+        (
+            n - 10,
+            "<Variable name=\"Extra1\" Value=\"2\"/><Variable name=\"Velocity\" Value=\"",
+        ),
+        (
+            n - 20,
+            "<Variable name=\"Extra2\" Value=\"3\"/><Variable name=\"Velocity\" Value=\"",
+        ),
+        (30, "<Variable name=\"Speed\" Value=\""),
+        (n - 30, "<Variable name=\"Speed\" Value=\""),
+    ] {
+        sfc = replace_nth(&sfc, velocity, k, with);
+    }
+    std::fs::write(&project.sfc, &sfc).unwrap();
+    let c = compile(
+        &FsSource::default(),
+        &project.blackboard,
+        &Options {
+            program: Some("out".into()),
+            ..Default::default()
+        },
+    );
+    let codes: Vec<&str> = c.diagnostics.iter().map(|d| d.code.as_str()).collect();
+    assert!(codes.contains(&"E314"), "{codes:?}");
+    assert_eq!(
+        c.diagnostics
+            .iter()
+            .filter(|d| d.message.contains("`Extra1`"))
+            .count(),
+        1,
+        "one W303 for Extra1 over both halves"
+    );
+    same_both_ways(&project.blackboard);
+    // And the same without the problems: the outputs themselves.
+    let clean = generator::write_project(&dir.path().join("clean"), &spec).unwrap();
+    same_both_ways(&clean.blackboard);
+}
