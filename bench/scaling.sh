@@ -20,8 +20,9 @@ SCALE=${SCALE:-1}
 declare -A BASE=(
   [steps]=1000 [vars]=2000 [skills]=250 [resources]=1000 [functions]=250 [irl]=250
   [signals]=1000 [cond]=20 [width]=250 [depth]=8 [loops]=250 [nest]=2000
+  [loopnest]=8
 )
-DIMS=${DIMS:-"steps vars skills resources functions irl signals cond width depth loops nest"}
+DIMS=${DIMS:-"steps vars skills resources functions irl signals cond width depth loops nest loopnest"}
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 count() { # dim n -> instructions
@@ -38,7 +39,7 @@ echo "|---|---:|---:|---:|---:|---:|---:|---:|"
 for d in $DIMS; do
   n=$(( ${BASE[$d]} * SCALE ))
   n16=$(( n * 16 ))
-  [ "$d" = depth ] && [ "$n16" -gt 127 ] && n16=127
+  case $d in depth | loopnest) [ "$n16" -gt 127 ] && n16=127 ;; esac
   a=$(count "$d" "$n"); b=$(count "$d" $(( n * 4 ))); c=$(count "$d" "$n16")
   awk -v d="$d" -v n="$n" -v a="$a" -v b="$b" -v c="$c" -v n16="$n16" 'BEGIN {
     note = (n16 != n * 16) ? sprintf(" (16x: n = %d)", n16) : "";

@@ -140,6 +140,12 @@ fn loops() {
 }
 
 #[test]
+fn loop_nesting() {
+    // Loops inside loops, bounded like branches (plan::MAX_NESTING = 128): 1× = 7, 16× = 112.
+    check("loopnest", 7, 112);
+}
+
+#[test]
 fn nesting_inside_an_element() {
     // The reader's stack of open elements must not be copied whole at every start tag.
     check("nest", 2000, 32000);

@@ -917,7 +917,7 @@ pub fn write_shape(dir: &Path, dim: &str, n: usize) -> Option<io::Result<Project
             }
             cond = Some(c);
         }
-        "width" | "depth" | "loops" => {}
+        "width" | "depth" | "loops" | "loopnest" => {}
         _ => return None,
     }
     Some((|| {
@@ -955,6 +955,24 @@ pub fn write_shape(dir: &Path, dim: &str, n: usize) -> Option<io::Result<Project
                     let t2 = g.transition(head);
                     let body = g.skill_step(Pred::Plain(t2), 0);
                     t = g.loop_end_named(body, &name);
+                }
+                g.special_step("End", Some(t));
+            }
+            "loopnest" => {
+                // Loop k inside loop k - 1: the heads `Loop0` … in a row, one body step, then
+                // the ends from the innermost out, a step between two of them.
+                let start = g.special_step("Start", None);
+                let mut t = g.transition(start);
+                for k in 0..n {
+                    let head = g.loop_head_named(t, &format!("Loop{k}"));
+                    t = g.transition(head);
+                }
+                let mut last = g.skill_step(Pred::Plain(t), 0);
+                for k in (0..n).rev() {
+                    t = g.loop_end_named(last, &format!("Loop{k}"));
+                    if k > 0 {
+                        last = g.skill_step(Pred::Plain(t), 0);
+                    }
                 }
                 g.special_step("End", Some(t));
             }
