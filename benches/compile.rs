@@ -825,6 +825,7 @@ fn stages(bb_path: &Path) -> (Vec<Duration>, Vec<(&'static str, String)>) {
         },
         profile,
         &mut diags,
+        bind::PARALLEL_FROM,
     );
     lap(&mut times);
 
@@ -940,16 +941,7 @@ fn print_tables(rows: &[Row]) {
     println!("Stages (ms, medians of the staged pipeline; `read_sfc` includes its XML parse,");
     println!("`bind` includes resolve and the IRL files, `drop` frees everything):");
     println!();
-    let mut head = String::from("| case |");
-    let mut rule = String::from("|---|");
-    for s in STAGES {
-        head.push_str(&format!(" {s} |"));
-        rule.push_str("---:|");
-    }
-    head.push_str(" sum |");
-    rule.push_str("---:|");
-    println!("{head}");
-    println!("{rule}");
+    print_head(STAGES.iter().chain(&["sum"]));
     for r in rows {
         let mut line = format!("| {} |", r.label);
         for d in &r.stages {
@@ -964,16 +956,12 @@ fn print_tables(rows: &[Row]) {
     println!("includes resolve, the IRL files and the conditions; `rest` = compile - the stages:");
     println!("output checks, the write-back's text, sorting and locating diagnostics):");
     println!();
-    let mut head = String::from("| case |");
-    let mut rule = String::from("|---|");
-    for s in OWN_STAGES.iter().chain(&["rest"]) {
-        head.push_str(&format!(" {s} |"));
-        rule.push_str("---:|");
-    }
-    head.push_str(" compile | read-sfc ÷ quick-xml | after reading ÷ quick-xml |");
-    rule.push_str("---:|---:|---:|");
-    println!("{head}");
-    println!("{rule}");
+    print_head(OWN_STAGES.iter().chain(&[
+        "rest",
+        "compile",
+        "read-sfc ÷ quick-xml",
+        "after reading ÷ quick-xml",
+    ]));
     for r in rows {
         let mut line = format!("| {} |", r.label);
         for d in &r.own {
@@ -990,4 +978,16 @@ fn print_tables(rows: &[Row]) {
         ));
         println!("{line}");
     }
+}
+
+/// A markdown table's head: `case`, then `columns`, right-aligned.
+fn print_head<'a>(columns: impl Iterator<Item = &'a &'a str>) {
+    let mut head = String::from("| case |");
+    let mut rule = String::from("|---|");
+    for c in columns {
+        head.push_str(&format!(" {c} |"));
+        rule.push_str("---:|");
+    }
+    println!("{head}");
+    println!("{rule}");
 }

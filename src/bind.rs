@@ -332,30 +332,17 @@ pub struct Calls<'a> {
 /// A value as the language writes it, and as a number (for conversions) when it is one.
 type Valued<'a> = (Cow<'a, str>, Option<f64>);
 
-/// Renders every step. `fn_irl` maps `(resource, function)` to the loaded IRL file (absent when
-/// it could not be loaded; that was reported).
-pub fn bind(
-    bb: &Blackboard,
-    sfc: &Sfc,
-    order: &StepOrder,
-    r: &Resolution,
-    calls_in: &Calls,
-    profile: &dyn Profile,
-    diags: &mut Diagnostics,
-) -> Bound {
-    bind_split(bb, sfc, order, r, calls_in, profile, diags, PARALLEL_FROM)
-}
-
 /// Steps from which [`bind`] renders the second half of them on a second thread.
 pub const PARALLEL_FROM: usize = 2_000;
 
-/// [`bind`], the steps split in two halves, the second rendered on another thread, when there
-/// are `split_from` steps or more. The result is the same either way (the tests compare them):
-/// each half keeps its diagnostics, unused variables and definitions in step order, and the
-/// second half's are put after the first's.
+/// Renders every step. `fn_irl` maps `(resource, function)` to the loaded IRL file (absent when
+/// it could not be loaded; that was reported). From `split_from` steps ([`PARALLEL_FROM`] as the
+/// compile calls it) the steps are split in two halves, the second rendered on another thread.
+/// The result is the same either way (the tests compare them): each half keeps its diagnostics,
+/// unused variables and definitions in step order, and the second half's are put after the
+/// first's.
 #[allow(clippy::too_many_arguments)]
-#[doc(hidden)]
-pub fn bind_split(
+pub fn bind(
     bb: &Blackboard,
     sfc: &Sfc,
     order: &StepOrder,

@@ -573,7 +573,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         }
         let profile = langs.program.profile();
         check_program_name(&mut cx, opts, Some(langs.program));
-        let mut bound = bind::bind_split(
+        let mut bound = bind::bind(
             &bb,
             sfc,
             &order,

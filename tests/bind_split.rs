@@ -10,6 +10,7 @@ use skillpost::compile::{Compilation, Options, compile};
 use skillpost::diag::{Format, render};
 use skillpost::load::FsSource;
 
+mod common;
 #[path = "../benches/common/generator.rs"]
 mod generator;
 
@@ -51,25 +52,9 @@ fn same_both_ways(bb: &Path) {
     }
 }
 
-fn blackboards(dir: &Path, out: &mut Vec<PathBuf>) {
-    for e in std::fs::read_dir(dir).unwrap() {
-        let p = e.unwrap().path();
-        if p.is_dir() {
-            blackboards(&p, out);
-        } else if p.extension().is_some_and(|e| e == "aml") {
-            out.push(p);
-        }
-    }
-}
-
 #[test]
 fn every_fixture_binds_the_same_on_two_threads() {
-    let mut bbs = Vec::new();
-    blackboards(
-        &Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures"),
-        &mut bbs,
-    );
-    bbs.sort();
+    let bbs = common::fixture_files("aml");
     assert!(bbs.len() > 100, "blackboards found: {}", bbs.len());
     for bb in &bbs {
         same_both_ways(bb);

@@ -5,12 +5,11 @@
 //! fixture, a generated 2,000-step project with branches, selections and a loop, and files that
 //! go wrong in the middle (syntax, UTF-8, a DTD, the end of the file).
 
-use std::path::{Path, PathBuf};
-
 use skillpost::diag::Diagnostics;
 use skillpost::read::sfc::read_sfc_stream_with;
 use skillpost::read::tape::Pipeline;
 
+mod common;
 #[path = "../benches/common/generator.rs"]
 mod generator;
 
@@ -40,25 +39,9 @@ fn same_every_way(name: &str, text: &[u8], pou: Option<&str>) {
     }
 }
 
-fn xml_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for e in std::fs::read_dir(dir).unwrap() {
-        let p = e.unwrap().path();
-        if p.is_dir() {
-            xml_files(&p, out);
-        } else if p.extension().is_some_and(|e| e == "xml") {
-            out.push(p);
-        }
-    }
-}
-
 #[test]
 fn every_fixture_reads_the_same_every_way() {
-    let mut files = Vec::new();
-    xml_files(
-        &Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures"),
-        &mut files,
-    );
-    files.sort();
+    let files = common::fixture_files("xml");
     assert!(files.len() > 100, "fixtures found: {}", files.len());
     for f in &files {
         let mut text = std::fs::read(f).unwrap();

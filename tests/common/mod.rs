@@ -32,6 +32,28 @@ pub fn sample() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/ok/reference-sample")
 }
 
+/// The files below `fixtures/` whose name ends in `.{ext}`, sorted.
+pub fn fixture_files(ext: &str) -> Vec<PathBuf> {
+    fn walk(dir: &Path, ext: &str, out: &mut Vec<PathBuf>) {
+        for e in fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                walk(&p, ext, out);
+            } else if p.extension().is_some_and(|e| e == ext) {
+                out.push(p);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures"),
+        ext,
+        &mut out,
+    );
+    out.sort();
+    out
+}
+
 /// Copies the regular files of the reference sample into `dir`.
 pub fn copy_sample(dir: &Path) {
     for e in fs::read_dir(sample()).unwrap() {
