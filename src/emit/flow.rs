@@ -43,6 +43,21 @@ impl<'a> Lines<'a> {
         }
     }
 
+    /// A step's title line at `level`: the `prefix` pieces, then [`push_step_title`].
+    pub fn step_title(
+        &mut self,
+        level: usize,
+        prefix: &[&str],
+        input: &EmitInput,
+        i: usize,
+        bs: &BoundStep,
+        number: usize,
+    ) {
+        self.indent(level);
+        push_step_title(&mut self.out, prefix, input, i, bs, number);
+        self.out.push_str(self.newline);
+    }
+
     /// A step's code: each non-empty line at `level` after `step_indent`.
     pub fn code(&mut self, level: usize, step_indent: &str, code: &str) {
         for line in code.split('\n') {
@@ -56,8 +71,20 @@ impl<'a> Lines<'a> {
     }
 }
 
-/// A step's title: `N name: skill @ resource (localId n)`, on one line of ASCII.
-pub fn step_title(input: &EmitInput, i: usize, bs: &BoundStep, number: usize) -> String {
+/// A step's title: `N name: skill @ resource (localId n)`, on one line of ASCII, after the
+/// `prefix` pieces, appended to `out` (100,000 steps: no string of their own for the titles).
+pub fn push_step_title(
+    out: &mut String,
+    prefix: &[&str],
+    input: &EmitInput,
+    i: usize,
+    bs: &BoundStep,
+    number: usize,
+) {
+    use std::fmt::Write as _;
+    for p in prefix {
+        out.push_str(p);
+    }
     let e = &input.sfc.elements[i];
     let name = match &e.kind {
         ElementKind::Step(st) => &*st.name,
@@ -65,14 +92,19 @@ pub fn step_title(input: &EmitInput, i: usize, bs: &BoundStep, number: usize) ->
     };
     let res = &input.blackboard.resources[bs.resource];
     let skill = &res.skills[bs.skill];
-    let title = format!(
-        "{number} {name}: {} @ {} (localId {})",
-        skill.name.text, res.name.text, e.local_id
-    );
-    if title.is_ascii() && !title.contains(['\r', '\n']) {
-        title
-    } else {
-        transliterate(&title)
+    let at = out.len();
+    let _ = write!(out, "{number} ");
+    out.push_str(name);
+    out.push_str(": ");
+    out.push_str(&skill.name.text);
+    out.push_str(" @ ");
+    out.push_str(&res.name.text);
+    let _ = write!(out, " (localId {})", e.local_id);
+    let title = &out[at..];
+    if !title.is_ascii() || title.contains(['\r', '\n']) {
+        let clean = transliterate(title);
+        out.truncate(at);
+        out.push_str(&clean);
     }
 }
 

@@ -135,8 +135,8 @@ impl Writer<'_> {
                     return;
                 };
                 self.number += 1;
-                let title = flow::step_title(input, *i, bs, self.number);
-                self.line(level, &format!(";FOLD {title}"));
+                self.out
+                    .step_title(level, &[";FOLD "], input, *i, bs, self.number);
                 self.out.code(level, input.step_indent, &bs.code);
                 self.line(level, ";ENDFOLD");
             }

@@ -150,9 +150,14 @@ impl Writer<'_> {
                     return;
                 };
                 self.number += 1;
-                let title = flow::step_title(input, *i, bs, self.number);
-                self.out
-                    .line(level, &format!("{} step {title}", self.d.comment));
+                self.out.step_title(
+                    level,
+                    &[self.d.comment, " step "],
+                    input,
+                    *i,
+                    bs,
+                    self.number,
+                );
                 self.out.code(level, input.step_indent, &bs.code);
             }
             Block::Wait(t) => {
