@@ -447,7 +447,7 @@ pub fn emit_files(
                 }
             }
         }
-        if let Some(pos) = text.find(|c: char| !c.is_ascii()) {
+        if let Some(pos) = first_non_ascii(&text) {
             // Values and templates are checked before; this is the last line of defence.
             diags.push(Diagnostic::error(
                 Code::NonAscii,
@@ -465,9 +465,33 @@ pub fn emit_files(
     Some(out)
 }
 
+/// The byte index of the first non-ASCII character. `is_ascii` reads words at a time; the place
+/// is looked for only when there is one (13 MB of program text for 100,000 steps).
+fn first_non_ascii(text: &str) -> Option<usize> {
+    if text.is_ascii() {
+        None
+    } else {
+        text.bytes().position(|b| !b.is_ascii())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_first_non_ascii_character_is_found_where_it_starts() {
+        assert_eq!(first_non_ascii("PTP HOME\r\n"), None);
+        assert_eq!(first_non_ascii(""), None);
+        assert_eq!(first_non_ascii("ab\u{e4}c\u{20ac}"), Some(2));
+        let long = format!("{}\u{20ac}", "x".repeat(1000));
+        assert_eq!(first_non_ascii(&long), Some(1000));
+        assert_eq!(
+            first_non_ascii(&long),
+            long.find(|c: char| !c.is_ascii()),
+            "the place a char search gives"
+        );
+    }
 
     fn parse(lang: Language, text: &str) -> (Option<OutputTemplate>, Vec<String>) {
         let mut s = Sources::default();
