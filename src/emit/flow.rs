@@ -101,7 +101,10 @@ pub fn push_step_title(
     out.push_str(&res.name.text);
     let _ = write!(out, " (localId {})", e.local_id);
     let title = &out[at..];
-    if !title.is_ascii() || title.contains(['\r', '\n']) {
+    if title
+        .bytes()
+        .any(|b| !b.is_ascii() || b == b'\r' || b == b'\n')
+    {
         let clean = transliterate(title);
         out.truncate(at);
         out.push_str(&clean);
