@@ -465,6 +465,7 @@ impl<'a> StepCx<'a> {
         };
         let mut values: Vec<Cow<str>> = Vec::new();
         let mut numbers: Vec<Option<f64>> = Vec::new();
+        let mut lists = crate::value::ItemCache::default();
         for &i in steps {
             let Some((res, sk)) = r.step_skill[i] else {
                 continue;
@@ -486,7 +487,7 @@ impl<'a> StepCx<'a> {
                 values.clear();
                 numbers.clear();
                 for &pi in &pc.args {
-                    match value_of(&vars, skill, pi, e.local_id, profile) {
+                    match value_of(&vars, skill, pi, e.local_id, profile, &mut lists) {
                         Ok((v, n)) => {
                             values.push(v);
                             numbers.push(n);
@@ -861,8 +862,9 @@ fn value_of<'a>(
     pi: usize,
     local_id: u64,
     profile: &dyn Profile,
+    lists: &mut crate::value::ItemCache<'a>,
 ) -> Result<Valued<'a>, Option<Box<Diagnostic>>> {
-    use crate::value::{Lookup, lookup};
+    use crate::value::{Lookup, lookup_in};
     let p = &skill.params[pi];
     let Some(var_name) = &p.variable else {
         return Err(None);
@@ -885,7 +887,7 @@ fn value_of<'a>(
         }
         s
     };
-    let s = match lookup(vars.raw(var), &p.indices) {
+    let s = match lookup_in(vars.raw(var), &p.indices, lists) {
         Lookup::Scalar(s) => s,
         Lookup::OutOfRange { depth, len } => {
             return Err(err(

@@ -46,6 +46,48 @@ pub fn lookup<'a>(raw: &'a str, indices: &[usize]) -> Lookup<'a> {
     }
 }
 
+/// The items of the list [`lookup_in`] looked into last: a skill reads a frame's six items one
+/// after another, and each would otherwise be found by scanning the list from its start.
+#[derive(Debug, Default)]
+pub struct ItemCache<'a> {
+    list: Option<&'a str>,
+    items: Vec<&'a str>,
+}
+
+/// [`lookup`], the items of the outermost list kept in `cache` for the next look-up into the
+/// same text (the same place in memory, not equal text). The result is [`lookup`]'s.
+pub fn lookup_in<'a>(raw: &'a str, indices: &[usize], cache: &mut ItemCache<'a>) -> Lookup<'a> {
+    let cur = raw.trim();
+    let Some((&first, rest)) = indices.split_first() else {
+        return lookup(raw, indices);
+    };
+    if !cur.starts_with('(') {
+        return Lookup::NotAList { depth: 0 };
+    }
+    let same = cache
+        .list
+        .is_some_and(|l| l.as_ptr() == cur.as_ptr() && l.len() == cur.len());
+    if !same {
+        cache.items.clear();
+        cache.items.extend(items(cur));
+        cache.list = Some(cur);
+    }
+    match cache.items.get(first) {
+        None => Lookup::OutOfRange {
+            depth: 0,
+            len: cache.items.len(),
+        },
+        Some(item) => match lookup(item, rest) {
+            Lookup::OutOfRange { depth, len } => Lookup::OutOfRange {
+                depth: depth + 1,
+                len,
+            },
+            Lookup::NotAList { depth } => Lookup::NotAList { depth: depth + 1 },
+            found => found,
+        },
+    }
+}
+
 /// The trimmed items of a well-formed list `( … )`.
 fn items(list: &str) -> impl Iterator<Item = &str> {
     let inner = list
@@ -404,6 +446,53 @@ mod tests {
             Value::List(vec![s("\"a,b\""), s("c")])
         );
         assert_eq!(parse_value("abc def").unwrap(), s("abc def"));
+    }
+
+    #[test]
+    fn a_cached_lookup_finds_what_a_lookup_finds() {
+        let values = [
+            "( 100, (1, \"a,b\"), (), 7 )",
+            "(-137.9, -118.9, 306.1, -73, 10, -68)",
+            "((1, (2, 3)), ((4)), \"(x, y)\", ( ))",
+            "0.5",
+            " abc ",
+            "()",
+            "( ( ) , 1 )",
+        ];
+        for v in values {
+            assert!(check_value(v).is_ok(), "{v}");
+        }
+        let mut paths: Vec<Vec<usize>> = vec![vec![]];
+        for a in 0..6 {
+            paths.push(vec![a]);
+            for b in 0..4 {
+                paths.push(vec![a, b]);
+                for c in 0..3 {
+                    paths.push(vec![a, b, c]);
+                }
+            }
+        }
+        // One cache across every value and path, in an order that goes back and forth between
+        // the values (the cache must notice the list changed).
+        let mut cache = ItemCache::default();
+        for round in 0..2 {
+            for (k, p) in paths.iter().enumerate() {
+                for (j, _) in values.iter().enumerate() {
+                    let v = values[(j + k + round) % values.len()];
+                    assert_eq!(lookup_in(v, p, &mut cache), lookup(v, p), "{v} {p:?}");
+                }
+            }
+        }
+        // Another list of the same length.
+        let a = String::from("(1, 2)");
+        let b = String::from("(3, 4)");
+        assert_eq!(lookup_in(&a, &[1], &mut cache), Lookup::Scalar("2"));
+        assert_eq!(lookup_in(&b, &[1], &mut cache), Lookup::Scalar("4"));
+        assert_eq!(lookup_in(&a, &[0], &mut cache), Lookup::Scalar("1"));
+        assert_eq!(
+            lookup_in(&a, &[2], &mut cache),
+            Lookup::OutOfRange { depth: 0, len: 2 }
+        );
     }
 
     #[test]
