@@ -3,12 +3,13 @@
 //! - `check_value` accepts exactly what `parse_value` accepts, and both report the same error
 //!   offset (inside the text, on a character boundary);
 //! - a parsed value printed back as `(a, b, (c))` parses to the same value;
-//! - `lookup` with small index paths finds what walking the parsed tree finds.
+//! - `lookup` with small index paths finds what walking the parsed tree finds, and so does
+//!   `lookup_in` with one item cache over all the paths.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
 use skillpost::model::Value;
-use skillpost::value::{Lookup, check_value, lookup, parse_value};
+use skillpost::value::{ItemCache, Lookup, check_value, lookup, lookup_in, parse_value};
 
 fuzz_target!(|data: &[u8]| {
     // The first byte picks the index path checked besides the fixed ones.
@@ -39,8 +40,15 @@ fuzz_target!(|data: &[u8]| {
             let depth = (sel >> 6) as usize;
             let mut paths: Vec<&[usize]> = vec![&[], &[0], &[1], &[0, 0], &[1, 1], &[0, 1, 0]];
             paths.push(&own[..depth.min(3)]);
+            let mut cache = ItemCache::default();
             for p in paths {
-                assert_eq!(lookup(text, p), walk(v, p), "lookup {p:?} in {text:?}");
+                let walked = walk(v, p);
+                assert_eq!(lookup(text, p), walked, "lookup {p:?} in {text:?}");
+                assert_eq!(
+                    lookup_in(text, p, &mut cache),
+                    walked,
+                    "lookup_in {p:?} in {text:?}"
+                );
             }
         }
         (Err((a, _)), Err((b, _))) => {
