@@ -766,36 +766,37 @@ impl Extras {
         self.index.get(&(skill.clone(), variable.clone())).copied()
     }
 
+    /// The group of `(skill, variable)`: `Some` its place, or `None` when there is none yet; the
+    /// group pushed next is then it (an index, once built, already points to that place).
+    fn group(&mut self, skill: &Arc<str>, variable: &Arc<str>) -> Option<usize> {
+        if self.list.len() > Self::SCAN && !self.index.is_empty() {
+            // One hash for the look-up and the insertion (a step may bring 100,000 of them).
+            use std::collections::hash_map::Entry;
+            return match self.index.entry((skill.clone(), variable.clone())) {
+                Entry::Occupied(at) => Some(*at.get()),
+                Entry::Vacant(slot) => {
+                    slot.insert(self.list.len());
+                    None
+                }
+            };
+        }
+        let found = self.find(skill, variable);
+        if found.is_none() && !self.index.is_empty() {
+            self.index
+                .insert((skill.clone(), variable.clone()), self.list.len());
+        }
+        found
+    }
+
     fn add(
         &mut self,
         skill: &crate::model::Skill,
         v: &crate::model::Variable,
         e: &crate::model::Element,
     ) {
-        if self.list.len() > Self::SCAN && !self.index.is_empty() {
-            // One hash for the look-up and the insertion (a step may bring 100,000 of them).
-            use std::collections::hash_map::Entry;
-            match self
-                .index
-                .entry((skill.name.key.clone(), v.name.key.clone()))
-            {
-                Entry::Occupied(at) => {
-                    self.list[*at.get()].steps.push(e.local_id);
-                    return;
-                }
-                Entry::Vacant(slot) => {
-                    slot.insert(self.list.len());
-                }
-            }
-        } else {
-            if let Some(at) = self.find(&skill.name.key, &v.name.key) {
-                self.list[at].steps.push(e.local_id);
-                return;
-            }
-            if !self.index.is_empty() {
-                let key = (skill.name.key.clone(), v.name.key.clone());
-                self.index.insert(key, self.list.len());
-            }
+        if let Some(at) = self.group(&skill.name.key, &v.name.key) {
+            self.list[at].steps.push(e.local_id);
+            return;
         }
         // Without `format!`: 100,000 distinct variables make 100,000 of these.
         let (name, skill_name) = (&*v.name.text, &*skill.name.text);
@@ -819,15 +820,9 @@ impl Extras {
     /// `later` (the groups of the steps after these) added after these.
     fn merge(&mut self, later: Extras) {
         for x in later.list {
-            match self.find(&x.skill, &x.variable) {
+            match self.group(&x.skill, &x.variable) {
                 Some(at) => self.list[at].steps.extend(x.steps),
-                None => {
-                    if !self.index.is_empty() {
-                        self.index
-                            .insert((x.skill.clone(), x.variable.clone()), self.list.len());
-                    }
-                    self.list.push(x);
-                }
+                None => self.list.push(x),
             }
         }
     }

@@ -83,16 +83,25 @@ fn a_large_chart_with_problems_in_both_halves_binds_the_same_on_two_threads() {
     let n = sfc.matches(velocity).count();
     assert!(n > 2000, "{n} steps with a velocity");
     // Unused variables: one in both halves (one W303 group over both), one in the second half
-    // only; a missing variable (E314) and a value that is not one (E50x) in each half.
+    // only, and twelve more in each half, six of them in both (more groups than the binder
+    // scans: they are found by their index when the halves are joined); a missing variable
+    // (E314) and a value that is not one (E50x) in each half.
+    let many = |from: usize| -> String {
+        (from..from + 12)
+            .map(|m| format!("<Variable name=\"Many{m}\" Value=\"{m}\"/>"))
+            .collect()
+    };
+    let first = format!(
+        "<Variable name=\"Extra1\" Value=\"1\"/>{}<Variable name=\"Velocity\" Value=\"",
+        many(0)
+    );
+    let second = format!(
+        "<Variable name=\"Extra1\" Value=\"2\"/>{}<Variable name=\"Velocity\" Value=\"",
+        many(6)
+    );
     for (k, with) in [
-        (
-            10,
-            "<Variable name=\"Extra1\" Value=\"1\"/><Variable name=\"Velocity\" Value=\"",
-        ),
-        (
-            n - 10,
-            "<Variable name=\"Extra1\" Value=\"2\"/><Variable name=\"Velocity\" Value=\"",
-        ),
+        (10, first.as_str()),
+        (n - 10, second.as_str()),
         (
             n - 20,
             "<Variable name=\"Extra2\" Value=\"3\"/><Variable name=\"Velocity\" Value=\"",
@@ -121,6 +130,17 @@ fn a_large_chart_with_problems_in_both_halves_binds_the_same_on_two_threads() {
         1,
         "one W303 for Extra1 over both halves"
     );
+    for m in [0, 8, 17] {
+        let name = format!("`Many{m}`");
+        assert_eq!(
+            c.diagnostics
+                .iter()
+                .filter(|d| d.message.contains(&name))
+                .count(),
+            1,
+            "one W303 for {name}"
+        );
+    }
     same_both_ways(&project.blackboard);
     // And the same without the problems: the outputs themselves.
     let clean = generator::write_project(&dir.path().join("clean"), &spec).unwrap();
