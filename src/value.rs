@@ -24,8 +24,12 @@ pub enum Lookup<'a> {
 
 /// Looks up `indices` in a value whose syntax [`check_value`] accepted, without allocating.
 pub fn lookup<'a>(raw: &'a str, indices: &[usize]) -> Lookup<'a> {
-    let mut cur = raw.trim();
-    for (depth, &ix) in indices.iter().enumerate() {
+    lookup_from(raw.trim(), indices, 0)
+}
+
+/// [`lookup`] in `cur`, a value found at `depth0` levels down (for the depths it reports).
+fn lookup_from<'a>(mut cur: &'a str, indices: &[usize], depth0: usize) -> Lookup<'a> {
+    for (depth, &ix) in (depth0..).zip(indices) {
         if !cur.starts_with('(') {
             return Lookup::NotAList { depth };
         }
@@ -77,14 +81,7 @@ pub fn lookup_in<'a>(raw: &'a str, indices: &[usize], cache: &mut ItemCache<'a>)
             depth: 0,
             len: cache.items.len(),
         },
-        Some(item) => match lookup(item, rest) {
-            Lookup::OutOfRange { depth, len } => Lookup::OutOfRange {
-                depth: depth + 1,
-                len,
-            },
-            Lookup::NotAList { depth } => Lookup::NotAList { depth: depth + 1 },
-            found => found,
-        },
+        Some(item) => lookup_from(item, rest, 1),
     }
 }
 
