@@ -350,12 +350,12 @@ fn run_shapes(tmp: &Path) -> Vec<ShapeRow> {
     for round in 0..=SHAPES_ROUNDS {
         for k in 0..n {
             let (row, bb) = &mut rows[(round + k) % n];
-            let sched = schedstat();
+            let sched = run_queue_wait();
             let process = process_cpu();
             let t = Instant::now();
             let c = compile::compile(&FsSource::default(), bb, &options());
             let wall = t.elapsed();
-            let sched_after = schedstat();
+            let sched_after = run_queue_wait();
             let process_after = process_cpu();
             assert!(
                 !c.has_errors(),
@@ -376,7 +376,7 @@ fn run_shapes(tmp: &Path) -> Vec<ShapeRow> {
                 if let (Some(p0), Some(p1)) = (process, process_after) {
                     row.cpu.push(p1.saturating_sub(p0));
                 }
-                if let (Some((_, w0)), Some((_, w1))) = (sched, sched_after) {
+                if let (Some(w0), Some(w1)) = (sched, sched_after) {
                     row.waited.push(w1.saturating_sub(w0));
                 }
             }
@@ -389,13 +389,12 @@ fn run_shapes(tmp: &Path) -> Vec<ShapeRow> {
     rows.into_iter().map(|(r, _)| r).collect()
 }
 
-/// This thread's time on a CPU and waiting for one (`/proc/thread-self/schedstat`, ns; Linux).
-fn schedstat() -> Option<(Duration, Duration)> {
+/// This thread's time waiting for a CPU (the second field of `/proc/thread-self/schedstat`, ns;
+/// Linux).
+fn run_queue_wait() -> Option<Duration> {
     let text = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
-    let mut f = text.split_whitespace().map(|w| w.parse::<u64>().ok());
-    let on_cpu = f.next()??;
-    let waited = f.next()??;
-    Some((Duration::from_nanos(on_cpu), Duration::from_nanos(waited)))
+    let waited = text.split_whitespace().nth(1)?.parse().ok()?;
+    Some(Duration::from_nanos(waited))
 }
 
 /// This process's CPU time, every thread's (also of threads that ended): `utime + stime` of
@@ -575,16 +574,7 @@ fn run_case(case: &Case, tmp: &Path) -> Row {
         stats: project.stats,
         iters: case.iters,
         floor: median(&mut s.floor),
-        stream_ratio: {
-            let mut r: Vec<f64> = s
-                .compile
-                .iter()
-                .zip(&s.stream_floor)
-                .map(|(c, f)| c.as_secs_f64() / f.as_secs_f64())
-                .collect();
-            r.sort_by(f64::total_cmp);
-            r.get(r.len() / 2).copied().unwrap_or(f64::NAN)
-        },
+        stream_ratio: paired_ratio(&s.compile, &s.stream_floor),
         stream_floor: median(&mut s.stream_floor),
         tokenize: median(&mut s.tokenize),
         compile: median(&mut s.compile),

@@ -89,17 +89,18 @@ fn validate_writes_nothing_and_shows_warnings() {
 #[test]
 fn warnings_hidden_without_warn() {
     let p = project();
+    let written = || {
+        ["out.src", "out.dat", "Blackboard.aml"].map(|f| std::fs::read(p.path().join(f)).unwrap())
+    };
     let o = run(&["Blackboard.aml", "out"], p.path());
     assert_eq!(o.status.code(), Some(0));
     assert!(!stderr(&o).contains("W303"));
-    let quiet =
-        ["out.src", "out.dat", "Blackboard.aml"].map(|f| std::fs::read(p.path().join(f)).unwrap());
+    let quiet = written();
     // The warnings are not even built without `--warn`: what is written is the same.
     let o = run(&["--warn", "Blackboard.aml", "out"], p.path());
     assert_eq!(o.status.code(), Some(0));
     assert!(stderr(&o).contains("W303"));
-    let shown =
-        ["out.src", "out.dat", "Blackboard.aml"].map(|f| std::fs::read(p.path().join(f)).unwrap());
+    let shown = written();
     assert!(quiet == shown, "the outputs differ with --warn");
 }
 
