@@ -103,7 +103,7 @@ pub fn read_sfc_stream_with<R: BufRead + Send>(
         diags.push(
             Diagnostic::error(
                 Code::XmlSyntax,
-                "not well-formed XML: a second byte-order mark at the start of the file",
+                format!("not well-formed XML: {}", tape::SECOND_BOM),
             )
             .at(Span::new(file, 0..3)),
         );
@@ -469,6 +469,8 @@ enum IwbState {
 /// begins one byte after `at` (the `<`).
 struct Tagged<'a> {
     e: BytesStart<'a>,
+    /// The length of the qualified name, at the start of the content.
+    name_len: usize,
     /// The local name, a part of the content.
     local: &'a str,
     at: usize,
@@ -477,8 +479,10 @@ struct Tagged<'a> {
 impl<'a> Tagged<'a> {
     fn new(rec: &Rec, batch: &'a Batch) -> Self {
         let content = &batch.text[rec.text.clone()];
+        let name_len = rec.name.end - rec.text.start;
         Tagged {
-            e: BytesStart::from_content(content, rec.name.end - rec.text.start),
+            e: BytesStart::from_content(content, name_len),
+            name_len,
             local: &batch.text[rec.name.clone()],
             at: rec.at,
         }
@@ -542,40 +546,70 @@ impl Stream {
         names: [&str; N],
         scratch: &mut String,
     ) -> Result<[Option<Val>; N], Box<Diagnostic>> {
+        let mark = scratch.len();
+        let mut out: [Option<Val>; N] = std::array::from_fn(|_| None);
+        let content: &str = &t.e;
+        let quick = tape::each_attribute(content, t.name_len, |key, raw| {
+            self.take(t, key, raw, &names, &mut out, scratch)
+        });
+        if let Some(done) = quick {
+            return done.map(|()| out);
+        }
+        // Not read there: quick-xml's iterator, for its words about the error.
+        scratch.truncate(mark);
         let mut out: [Option<Val>; N] = std::array::from_fn(|_| None);
         for a in t.e.attributes() {
             let a = a.map_err(|err| self.syntax_error(t.at, err.to_string()))?;
-            let key_raw: &str = a.key.as_ref();
-            let local = tape::local_part(key_raw);
-            let Some(slot) = names.iter().position(|n| *n == local) else {
-                continue;
-            };
-            if out[slot].is_some() {
-                continue;
-            }
-            let raw_at = t.offset_of(&a.value, t.at);
-            let range = raw_at..raw_at + a.value.len();
-            let start = scratch.len();
-            let exact = match &a.value {
-                std::borrow::Cow::Borrowed(raw) if !raw.contains(['&', '\t', '\n', '\r']) => {
-                    scratch.push_str(raw);
-                    true
-                }
-                _ => {
-                    let v = a
-                        .normalized_value(quick_xml::XmlVersion::Implicit1_0)
-                        .map_err(|err| self.syntax_error(raw_at, err.to_string()))?;
-                    scratch.push_str(&v);
-                    v.len() == range.len()
-                }
-            };
-            out[slot] = Some(Val {
-                at: start..scratch.len(),
-                range,
-                exact,
-            });
+            self.take(t, a.key.as_ref(), &a.value, &names, &mut out, scratch)?;
         }
         Ok(out)
+    }
+
+    /// One attribute for [`Self::pick`]: its value appended to `scratch` and put in `out` when
+    /// its local name is one of `names` and not given before.
+    fn take<const N: usize>(
+        &self,
+        t: &Tagged,
+        key: &str,
+        raw: &str,
+        names: &[&str; N],
+        out: &mut [Option<Val>; N],
+        scratch: &mut String,
+    ) -> Result<(), Box<Diagnostic>> {
+        let local = tape::local_part(key);
+        let Some(slot) = names.iter().position(|n| *n == local) else {
+            return Ok(());
+        };
+        if out[slot].is_some() {
+            return Ok(());
+        }
+        let raw_at = t.offset_of(raw, t.at);
+        let range = raw_at..raw_at + raw.len();
+        let start = scratch.len();
+        // (A byte loop: a search for any of several `char`s goes a character at a time.)
+        let plain = !raw
+            .bytes()
+            .any(|c| matches!(c, b'&' | b'\t' | b'\n' | b'\r'));
+        let exact = if plain {
+            scratch.push_str(raw);
+            true
+        } else {
+            let attr = quick_xml::events::attributes::Attribute {
+                key: quick_xml::name::QName(key),
+                value: std::borrow::Cow::Borrowed(raw),
+            };
+            let v = attr
+                .normalized_value(quick_xml::XmlVersion::Implicit1_0)
+                .map_err(|err| self.syntax_error(raw_at, err.to_string()))?;
+            scratch.push_str(&v);
+            v.len() == range.len()
+        };
+        out[slot] = Some(Val {
+            at: start..scratch.len(),
+            range,
+            exact,
+        });
+        Ok(())
     }
 
     fn run(

@@ -11,7 +11,7 @@
 //! memory a read holds stays flat however large the file; emptied batches go back to the producer
 //! to be filled again.
 
-use std::io::BufRead;
+use std::io::{BufRead, Read};
 use std::ops::Range;
 use std::sync::mpsc::{Receiver, SyncSender};
 
@@ -21,8 +21,6 @@ use super::sfc::Tag;
 
 /// The text a batch holds before it is handed over (one event may make it longer).
 pub const BATCH_BYTES: usize = 128 * 1024;
-/// Records a batch holds before it is handed over.
-const BATCH_RECORDS: usize = 4096;
 /// Filled batches waiting for the reader.
 const QUEUE: usize = 4;
 /// Files from this size on are tokenized on a second thread ([`Pipeline::choose`]).
@@ -104,16 +102,6 @@ impl Batch {
         self.recs.clear();
         self.stop = None;
     }
-
-    fn push_text(&mut self, s: &str) -> Range<usize> {
-        let start = self.text.len();
-        self.text.push_str(s);
-        start..self.text.len()
-    }
-
-    fn full(&self, batch_bytes: usize) -> bool {
-        self.text.len() >= batch_bytes || self.recs.len() >= BATCH_RECORDS
-    }
 }
 
 /// The part of a qualified name after its prefix (`xhtml:p` → `p`). Names are short: a byte
@@ -127,20 +115,83 @@ pub(crate) fn local_part(name: &str) -> &str {
 }
 
 /// Tokenizes the XML of one input into batches.
+///
+/// A batch's text is a piece of the file itself, read straight into it: the events are parsed
+/// where they lie (quick-xml's reader over a string slice), so an event's bytes are copied once,
+/// from the file, and its UTF-8 is checked with the whole piece. A piece ends before its last
+/// `<`: everything before that is whole events, except where the `<` is inside a comment, CDATA
+/// section or other markup that began earlier. Such an event is cut by the end of the piece; it
+/// goes, with the bytes after it, to the start of the next piece (`carry`), which is read longer
+/// until the event fits.
+///
+/// Each piece has a reader of its own, so quick-xml cannot match an end tag with a start tag in
+/// an earlier piece: the producer does that itself (`open`), with quick-xml's words and place.
 pub(crate) struct Producer<R> {
-    reader: quick_xml::Reader<R>,
-    buf: Vec<u8>,
+    input: R,
+    /// Bytes read and not yet made into events: an event cut by the end of the last piece, the
+    /// bytes after it, and the first bytes of a character cut by it.
+    carry: Vec<u8>,
+    /// The file offset of `carry[0]`.
+    base: usize,
+    /// The input has nothing more (or failed: `failed`).
+    eof: bool,
+    failed: Option<std::io::Error>,
     done: bool,
     batch_bytes: usize,
+    /// The names of the open elements, one after another, and where each starts.
+    open: String,
+    open_starts: Vec<usize>,
+    /// The first bytes were looked at (for a byte-order mark).
+    started: bool,
+}
+
+/// A UTF-8 byte-order mark.
+const BOM: &[u8] = b"\xEF\xBB\xBF";
+
+/// Why a text that starts with a byte-order mark is refused: the caller strips one (the
+/// loader's), so this is a second one, which quick-xml would skip silently, shifting every place
+/// it reports.
+pub(crate) const SECOND_BOM: &str = "a second byte-order mark at the start of the file";
+
+/// How a piece's parse ended.
+enum Piece {
+    /// Every event up to the cut was made (or a stop was set).
+    Parsed,
+    /// The event starting at this offset of the piece is cut by its end.
+    Cut(usize),
 }
 
 impl<R: BufRead> Producer<R> {
     pub fn new(input: R, batch_bytes: usize) -> Self {
         Producer {
-            reader: quick_xml::Reader::from_reader(input),
-            buf: Vec::with_capacity(4096),
+            input,
+            carry: Vec::new(),
+            base: 0,
+            eof: false,
+            failed: None,
             done: false,
             batch_bytes: batch_bytes.max(1),
+            open: String::new(),
+            open_starts: Vec::new(),
+            started: false,
+        }
+    }
+
+    /// Appends up to `n` bytes of the input to `buf`; sets `eof` at the end of the input or a
+    /// read error (kept in `failed`).
+    fn read_more(&mut self, buf: &mut Vec<u8>, n: usize) {
+        if self.eof {
+            return;
+        }
+        buf.reserve(n.min(1 << 20));
+        let want = u64::try_from(n).unwrap_or(u64::MAX);
+        match (&mut self.input).take(want).read_to_end(buf) {
+            Ok(got) if (got as u64) < want => self.eof = true,
+            Ok(_) => {}
+            Err(e) => {
+                self.eof = true;
+                self.failed = Some(e);
+            }
         }
     }
 
@@ -148,72 +199,360 @@ impl<R: BufRead> Producer<R> {
     /// nothing more.
     fn fill(&mut self, b: &mut Batch) {
         b.clear();
-        while !self.done && !b.full(self.batch_bytes) {
-            self.one(b);
+        if self.done {
+            return;
+        }
+        let mut bytes = std::mem::take(&mut b.text).into_bytes();
+        bytes.clear();
+        bytes.append(&mut self.carry);
+        let mut want = self.batch_bytes;
+        loop {
+            if bytes.len() < want {
+                let n = want - bytes.len();
+                self.read_more(&mut bytes, n);
+            }
+            if !self.started {
+                if bytes.len() < BOM.len() && !self.eof {
+                    want = want.max(bytes.len()).saturating_mul(2);
+                    continue;
+                }
+                self.started = true;
+                if bytes.starts_with(BOM) {
+                    self.done = true;
+                    b.stop = Some(Stop::Syntax(0, SECOND_BOM.to_owned()));
+                    return;
+                }
+            }
+            // Where the piece is cut: at the end of the file, or before the last `<` (ASCII:
+            // never inside a character).
+            let cut = if self.eof {
+                bytes.len()
+            } else {
+                match bytes.iter().rposition(|&c| c == b'<') {
+                    Some(cut) if cut > 0 => cut,
+                    _ => {
+                        // Not one whole event yet.
+                        want = want.max(bytes.len()).saturating_mul(2);
+                        continue;
+                    }
+                }
+            };
+            let mut tail = bytes.split_off(cut);
+            // The UTF-8 is checked once, for the whole piece.
+            let (final_piece, stop) = match String::from_utf8(bytes) {
+                Ok(text) => {
+                    b.text = text;
+                    let failed = self.failed.take();
+                    (
+                        self.eof,
+                        failed.map(|e| Stop::Io(std::io::Error::new(e.kind(), e.to_string()))),
+                    )
+                }
+                Err(e) => {
+                    // The events end at the first byte that is not UTF-8, or at a character
+                    // cut by the end of the file (not UTF-8) or by a read error (not known to
+                    // be wrong: the read error is the reason).
+                    let err = e.utf8_error();
+                    let mut valid = e.into_bytes();
+                    valid.truncate(err.valid_up_to());
+                    b.text = String::from_utf8(valid).unwrap_or_default();
+                    let stop = match self.failed.take() {
+                        Some(io) if err.error_len().is_none() => {
+                            Stop::Io(std::io::Error::new(io.kind(), io.to_string()))
+                        }
+                        _ => Stop::NotUtf8,
+                    };
+                    (true, Some(stop))
+                }
+            };
+            match self.parse(b, final_piece, stop) {
+                Piece::Parsed => {
+                    if !self.done {
+                        self.base += b.text.len();
+                        self.carry = tail;
+                    }
+                    return;
+                }
+                Piece::Cut(at) if at > 0 => {
+                    // Some events were made; the cut one goes to the next piece.
+                    let mut carry = b.text.as_bytes()[at..].to_vec();
+                    carry.append(&mut tail);
+                    b.text.truncate(at);
+                    self.base += at;
+                    self.carry = carry;
+                    return;
+                }
+                Piece::Cut(_) => {
+                    // Not one whole event yet: read more (twice as much each time, so an event
+                    // of any length is parsed a bounded number of times).
+                    bytes = std::mem::take(&mut b.text).into_bytes();
+                    bytes.append(&mut tail);
+                    b.recs.clear();
+                    want = want.max(bytes.len()).saturating_mul(2);
+                }
+            }
         }
     }
 
-    fn one(&mut self, b: &mut Batch) {
-        let at = self.reader.buffer_position() as usize;
-        self.buf.clear();
-        let ev = match self.reader.read_event_into(&mut self.buf) {
-            Ok(ev) => ev,
-            Err(e) => {
-                self.done = true;
-                b.stop = Some(match e {
-                    quick_xml::Error::Encoding(_) => Stop::NotUtf8,
-                    quick_xml::Error::Io(e) => {
-                        Stop::Io(std::io::Error::new(e.kind(), e.to_string()))
+    /// Makes the events of `b.text`, a piece starting at `self.base`. In the last piece of the
+    /// file (`final_piece`) the end of the text is the end of the events, with `stop` the
+    /// reason if they stopped early.
+    fn parse(&mut self, b: &mut Batch, final_piece: bool, stop: Option<Stop>) -> Piece {
+        let text = b.text.as_str();
+        let base = self.base;
+        let mut reader = quick_xml::Reader::from_str(text);
+        let config = reader.config_mut();
+        config.check_end_names = false;
+        config.allow_unmatched_ends = true;
+        // Where `s`, a part of the piece, lies in it.
+        let range = |s: &str| {
+            let start = (s.as_ptr() as usize).wrapping_sub(text.as_ptr() as usize);
+            start..start + s.len()
+        };
+        let mut stop = stop;
+        loop {
+            let at = reader.buffer_position() as usize;
+            let ev = reader.read_event();
+            let end = reader.buffer_position() as usize;
+            // An event that runs to the end of the piece.
+            let at_cut = match &ev {
+                Ok(_) => end >= text.len(),
+                Err(e) => runs_to_end(e, at, end, text.len(), matches!(stop, Some(Stop::NotUtf8))),
+            };
+            let ev = match ev {
+                // (A text is never cut: it ends at the `<` where the piece is cut.)
+                Err(_) if at_cut && !final_piece => return Piece::Cut(at),
+                // The file stops being UTF-8 or readable inside this event.
+                Ok(Event::Text(_)) | Err(_) if at_cut && stop.is_some() => {
+                    self.done = true;
+                    b.stop = stop.take();
+                    return Piece::Parsed;
+                }
+                Ok(Event::Eof) if !final_piece => return Piece::Parsed,
+                Ok(ev) => ev,
+                Err(e) => {
+                    self.done = true;
+                    b.stop = Some(match e {
+                        quick_xml::Error::Io(e) => {
+                            Stop::Io(std::io::Error::new(e.kind(), e.to_string()))
+                        }
+                        e => Stop::Syntax(base + reader.error_position() as usize, e.to_string()),
+                    });
+                    return Piece::Parsed;
+                }
+            };
+            let mut rec = Rec {
+                kind: Kind::Eof,
+                tag: Tag::Other,
+                at: base + at,
+                end: base + end,
+                text: 0..0,
+                name: 0..0,
+            };
+            match ev {
+                Event::Start(ref e) | Event::Empty(ref e) => {
+                    let content: &str = e;
+                    // The name is the start of the content.
+                    let len = e.name().as_ref().len().min(content.len());
+                    let local = local_part(&content[..len]);
+                    rec.tag = Tag::of(local);
+                    rec.text = range(content);
+                    rec.name = rec.text.start + (len - local.len())..rec.text.start + len;
+                    if matches!(ev, Event::Start(_)) {
+                        rec.kind = Kind::Start;
+                        self.open_starts.push(self.open.len());
+                        self.open.push_str(&content[..len]);
+                    } else {
+                        rec.kind = Kind::Empty;
                     }
-                    e => Stop::Syntax(self.reader.error_position() as usize, e.to_string()),
-                });
-                return;
+                }
+                Event::End(ref e) => {
+                    rec.kind = Kind::End;
+                    let name = e.name();
+                    let found: &str = name.as_ref();
+                    let err = match self.open_starts.pop() {
+                        Some(start) => {
+                            let expected = &self.open[start..];
+                            let err = (expected != found).then(|| {
+                                quick_xml::errors::IllFormedError::MismatchedEndTag {
+                                    expected: expected.to_owned(),
+                                    found: found.to_owned(),
+                                }
+                            });
+                            self.open.truncate(start);
+                            err
+                        }
+                        None => Some(quick_xml::errors::IllFormedError::UnmatchedEndTag(
+                            found.to_owned(),
+                        )),
+                    };
+                    if let Some(err) = err {
+                        // At the `<` of the end tag, as quick-xml reports it.
+                        self.done = true;
+                        b.stop = Some(Stop::Syntax(
+                            base + at,
+                            quick_xml::Error::IllFormed(err).to_string(),
+                        ));
+                        return Piece::Parsed;
+                    }
+                }
+                Event::Text(ref t) => {
+                    rec.kind = Kind::Text;
+                    rec.text = range(t);
+                }
+                Event::CData(ref t) => {
+                    rec.kind = Kind::CData;
+                    rec.text = range(t);
+                }
+                Event::GeneralRef(ref r) => {
+                    rec.kind = Kind::GeneralRef;
+                    rec.text = range(r);
+                }
+                Event::DocType(_) => rec.kind = Kind::DocType,
+                Event::Eof => {
+                    self.done = true;
+                    b.stop = stop.take();
+                    if b.stop.is_some() {
+                        return Piece::Parsed;
+                    }
+                }
+                // Declarations, comments, processing instructions.
+                _ => continue,
             }
-        };
-        let end = self.reader.buffer_position() as usize;
-        let mut rec = Rec {
-            kind: Kind::Eof,
-            tag: Tag::Other,
-            at,
-            end,
-            text: 0..0,
-            name: 0..0,
-        };
-        match ev {
-            Event::Start(ref e) | Event::Empty(ref e) => {
-                rec.kind = if matches!(ev, Event::Start(_)) {
-                    Kind::Start
-                } else {
-                    Kind::Empty
-                };
-                let content: &str = e;
-                // The name is the start of the content.
-                let len = e.name().as_ref().len().min(content.len());
-                let local = local_part(&content[..len]);
-                rec.tag = Tag::of(local);
-                rec.text = b.push_text(content);
-                rec.name = rec.text.start + (len - local.len())..rec.text.start + len;
+            debug_assert!(rec.text.end <= text.len(), "an event outside its piece");
+            let last = rec.kind == Kind::Eof;
+            b.recs.push(rec);
+            if last {
+                return Piece::Parsed;
             }
-            Event::End(_) => rec.kind = Kind::End,
-            Event::Text(ref t) => {
-                rec.kind = Kind::Text;
-                rec.text = b.push_text(t);
-            }
-            Event::CData(ref t) => {
-                rec.kind = Kind::CData;
-                rec.text = b.push_text(t);
-            }
-            Event::GeneralRef(ref r) => {
-                rec.kind = Kind::GeneralRef;
-                rec.text = b.push_text(r);
-            }
-            Event::DocType(_) => rec.kind = Kind::DocType,
-            Event::Eof => self.done = true,
-            // Declarations, comments, processing instructions.
-            _ => return,
         }
-        b.recs.push(rec);
     }
+}
+
+/// Whitespace as quick-xml reads it between attributes.
+fn is_space(b: u8) -> bool {
+    matches!(b, b' ' | b'\r' | b'\n' | b'\t')
+}
+
+/// The attributes of a tag's `content` after its name (which ends at `from`), each handed to
+/// `each` as `(qualified name, raw value)`, in order, as quick-xml's attribute iterator gives
+/// them, without its per-attribute state machine.
+///
+/// `None` where that iterator would report an error (a name without `=` or a value, a value
+/// without quotes or its closing quote, a name given twice), and for a tag of more than 16
+/// attributes: the caller reads the tag again with quick-xml, for its words. `each` may have
+/// been called for the attributes before. An error from `each` ends the reading.
+pub(crate) fn each_attribute<'a, E>(
+    content: &'a str,
+    from: usize,
+    mut each: impl FnMut(&'a str, &'a str) -> Result<(), E>,
+) -> Option<Result<(), E>> {
+    let b = content.as_bytes();
+    let mut keys = [(0usize, 0usize); 16];
+    let mut n = 0;
+    let mut i = from;
+    loop {
+        while i < b.len() && is_space(b[i]) {
+            i += 1;
+        }
+        if i >= b.len() {
+            return Some(Ok(()));
+        }
+        let key = i;
+        // The first byte is the name's, whatever it is (as in quick-xml).
+        i += 1;
+        while i < b.len() && b[i] != b'=' && !is_space(b[i]) {
+            i += 1;
+        }
+        let key_end = i;
+        while i < b.len() && is_space(b[i]) {
+            i += 1;
+        }
+        if b.get(i) != Some(&b'=') {
+            return None;
+        }
+        i += 1;
+        while i < b.len() && is_space(b[i]) {
+            i += 1;
+        }
+        let quote = *b.get(i).filter(|&&q| q == b'"' || q == b'\'')?;
+        let value = i + 1;
+        let value_end = value + memchr::memchr(quote, b.get(value..)?)?;
+        let name = &b[key..key_end];
+        if n == keys.len() || keys[..n].iter().any(|&(s, e)| &b[s..e] == name) {
+            return None;
+        }
+        keys[n] = (key, key_end);
+        n += 1;
+        // Every bound is at an ASCII byte or the end: a character boundary.
+        if let Err(e) = each(&content[key..key_end], &content[value..value_end]) {
+            return Some(Err(e));
+        }
+        i = value_end + 1;
+    }
+}
+
+/// [`each_attribute`] beside quick-xml's iterator over the same tag content (for the tests and
+/// the fuzz target): `Err` with both lists where they differ; a tag [`each_attribute`] leaves
+/// to quick-xml must be one quick-xml reports an error for, or has more than 16 attributes.
+#[doc(hidden)]
+pub fn compare_attributes(content: &str) -> Result<(), String> {
+    let name_len = content
+        .bytes()
+        .position(|c| is_space(c) || c == b'/')
+        .unwrap_or(content.len());
+    let e = quick_xml::events::BytesStart::from_content(content, name_len);
+    let mut theirs = Vec::new();
+    let mut their_error = None;
+    for a in e.attributes() {
+        match a {
+            Ok(a) => {
+                let key: &str = a.key.as_ref();
+                theirs.push((key.to_owned(), a.value.to_string()));
+            }
+            Err(err) => {
+                their_error = Some(err.to_string());
+                break;
+            }
+        }
+    }
+    let mut ours = Vec::new();
+    let read = each_attribute(content, name_len, |k, v| {
+        ours.push((k.to_owned(), v.to_owned()));
+        Ok::<(), ()>(())
+    });
+    match (read, their_error) {
+        (Some(_), None) if ours == theirs => Ok(()),
+        (None, Some(_)) => Ok(()),
+        (None, None) if theirs.len() > 16 => Ok(()),
+        (read, err) => Err(format!(
+            "{content:?}: here {read:?} {ours:?}, quick-xml {err:?} {theirs:?}"
+        )),
+    }
+}
+
+/// Whether quick-xml stopped at `e` because its input ended inside the event from `at` (the
+/// input is `len` bytes; `end` is where the reader stopped).
+/// `next_not_utf8`: the input goes on with a byte that is not UTF-8.
+fn runs_to_end(
+    e: &quick_xml::Error,
+    at: usize,
+    end: usize,
+    len: usize,
+    next_not_utf8: bool,
+) -> bool {
+    use quick_xml::errors::SyntaxError;
+    end >= len
+        || match e {
+            // `<!` and then the end: the byte that says what it is, is still to come (unless
+            // it is known not to be UTF-8, so not one of those quick-xml looks for).
+            quick_xml::Error::Syntax(SyntaxError::InvalidBangMarkup) => {
+                at + 2 >= len && !next_not_utf8
+            }
+            // The others: markup not closed before the end of the input.
+            quick_xml::Error::Syntax(_) => true,
+            _ => false,
+        }
 }
 
 /// Where the reader gets its batches.
@@ -314,4 +653,88 @@ pub fn tokenize_only<R: BufRead + Send>(input: R, pipeline: Pipeline) -> usize {
             }
         }
     })
+}
+
+/// The records of `input` read in pieces of about `batch_bytes`, one line each, and the stop (for
+/// the tests and the fuzz target, beside [`reference_text`]).
+#[doc(hidden)]
+pub fn records_text<R: BufRead>(input: R, batch_bytes: usize) -> String {
+    let mut p = Producer::new(input, batch_bytes);
+    let mut out = String::new();
+    let mut b = Batch::default();
+    while !p.done {
+        p.fill(&mut b);
+        for r in &b.recs {
+            let text = b.text.get(r.text.clone()).unwrap_or("<outside the piece>");
+            let name = b.text.get(r.name.clone()).unwrap_or("<outside the piece>");
+            out.push_str(&record_line(r.kind, r.tag, r.at, r.end, text, name));
+        }
+        if let Some(stop) = &b.stop {
+            out.push_str(&stop_line(stop));
+        }
+    }
+    out
+}
+
+/// What [`records_text`] must give: quick-xml's reader over the whole input at once, with its own
+/// checks of end tags.
+#[doc(hidden)]
+pub fn reference_text(input: &[u8]) -> String {
+    let mut out = String::new();
+    if input.starts_with(BOM) {
+        // Refused (see `SECOND_BOM`).
+        out.push_str(&stop_line(&Stop::Syntax(0, SECOND_BOM.to_owned())));
+        return out;
+    }
+    let mut reader = quick_xml::Reader::from_reader(input);
+    loop {
+        let at = reader.buffer_position() as usize;
+        let ev = match reader.read_event() {
+            Ok(ev) => ev,
+            Err(e) => {
+                out.push_str(&stop_line(&match e {
+                    quick_xml::Error::Encoding(_) => Stop::NotUtf8,
+                    quick_xml::Error::Io(e) => Stop::Io(std::io::Error::new(e.kind(), "")),
+                    e => Stop::Syntax(reader.error_position() as usize, e.to_string()),
+                }));
+                return out;
+            }
+        };
+        let end = reader.buffer_position() as usize;
+        let (kind, text, name): (Kind, &str, &str) = match &ev {
+            Event::Start(e) | Event::Empty(e) => {
+                let content: &str = e;
+                let len = e.name().as_ref().len().min(content.len());
+                let kind = if matches!(ev, Event::Start(_)) {
+                    Kind::Start
+                } else {
+                    Kind::Empty
+                };
+                (kind, content, local_part(&content[..len]))
+            }
+            Event::End(_) => (Kind::End, "", ""),
+            Event::Text(t) => (Kind::Text, t, ""),
+            Event::CData(t) => (Kind::CData, t, ""),
+            Event::GeneralRef(r) => (Kind::GeneralRef, r, ""),
+            Event::DocType(_) => (Kind::DocType, "", ""),
+            Event::Eof => (Kind::Eof, "", ""),
+            _ => continue,
+        };
+        out.push_str(&record_line(kind, Tag::of(name), at, end, text, name));
+        if kind == Kind::Eof {
+            return out;
+        }
+    }
+}
+
+fn record_line(kind: Kind, tag: Tag, at: usize, end: usize, text: &str, name: &str) -> String {
+    format!("{kind:?} {at}..{end} {tag:?} {text:?} {name:?}\n")
+}
+
+fn stop_line(stop: &Stop) -> String {
+    match stop {
+        Stop::NotUtf8 => "stop: not UTF-8\n".to_owned(),
+        Stop::Io(_) => "stop: read error\n".to_owned(),
+        Stop::Syntax(at, msg) => format!("stop: at {at}: {msg}\n"),
+    }
 }
