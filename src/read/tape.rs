@@ -677,9 +677,27 @@ pub fn records_text<R: BufRead>(input: R, batch_bytes: usize) -> String {
 }
 
 /// What [`records_text`] must give: quick-xml's reader over the whole input at once, with its own
-/// checks of end tags.
+/// checks of end tags. One difference is chosen: where markup runs on to the end of an input that
+/// is not UTF-8 (a file cut inside a character, a bad byte in a tag never closed), quick-xml
+/// reports the markup not closed and the producer that the input is not UTF-8 (the compile then
+/// names the first bad byte); the events before are the same.
 #[doc(hidden)]
 pub fn reference_text(input: &[u8]) -> String {
+    let mut whole = quick_xml_text(input);
+    if std::str::from_utf8(input).is_err()
+        && let Some(last) = whole.lines().last()
+        && last.starts_with("stop: at ")
+        && last.contains(": syntax error: ")
+        && last.ends_with("not found before end of input")
+    {
+        whole.truncate(whole.len() - last.len() - 1);
+        whole.push_str(&stop_line(&Stop::NotUtf8));
+    }
+    whole
+}
+
+/// quick-xml's events over the whole input, as [`records_text`] writes them.
+fn quick_xml_text(input: &[u8]) -> String {
     let mut out = String::new();
     if input.starts_with(BOM) {
         // Refused (see `SECOND_BOM`).

@@ -54,6 +54,23 @@ pub fn fixture_files(ext: &str) -> Vec<PathBuf> {
     out
 }
 
+/// Every XML fixture (more than 100 of them), named by its path, as the SFC reader gets it: the
+/// compile strips one byte-order mark before the reader.
+pub fn fixture_xml() -> Vec<(String, Vec<u8>)> {
+    let files = fixture_files("xml");
+    assert!(files.len() > 100, "fixtures found: {}", files.len());
+    files
+        .iter()
+        .map(|f| {
+            let mut text = fs::read(f).unwrap();
+            if text.starts_with(b"\xEF\xBB\xBF") {
+                text.drain(..3);
+            }
+            (f.display().to_string(), text)
+        })
+        .collect()
+}
+
 /// Copies the regular files of the reference sample into `dir`.
 pub fn copy_sample(dir: &Path) {
     for e in fs::read_dir(sample()).unwrap() {
