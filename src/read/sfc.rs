@@ -82,7 +82,7 @@ pub fn read_sfc_stream<R: BufRead + Send>(
 /// `batch_bytes` of text (the tests compare the ways; the result is the same).
 #[doc(hidden)]
 pub fn read_sfc_stream_with<R: BufRead + Send>(
-    mut input: R,
+    input: R,
     file: FileId,
     len_hint: u64,
     pou: Option<&str>,
@@ -90,25 +90,6 @@ pub fn read_sfc_stream_with<R: BufRead + Send>(
     pipeline: Pipeline,
     batch_bytes: usize,
 ) -> Result<Option<Sfc>, StreamError> {
-    // The loader strips one byte-order mark; another one is not XML (and the parser would
-    // skip it silently, shifting every position it reports).
-    let head = loop {
-        match input.fill_buf() {
-            Ok(b) => break b,
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-            Err(e) => return Err(StreamError::Io(e)),
-        }
-    };
-    if head.starts_with(b"\xEF\xBB\xBF") {
-        diags.push(
-            Diagnostic::error(
-                Code::XmlSyntax,
-                format!("not well-formed XML: {}", tape::SECOND_BOM),
-            )
-            .at(Span::new(file, 0..3)),
-        );
-        return Ok(None);
-    }
     let mut r = Stream {
         wanted: pou.map(|p| p.trim().to_owned()).filter(|p| !p.is_empty()),
         pous: Vec::new(),
@@ -905,6 +886,15 @@ impl Stream {
                 Some(Stop::NotUtf8) => return Err(StreamError::NotUtf8),
                 Some(Stop::Io(e)) => return Err(StreamError::Io(e)),
                 Some(Stop::Syntax(at, msg)) => return Ok(Err(self.syntax_error(at, msg))),
+                Some(Stop::SecondBom) => {
+                    return Ok(Err(Box::new(
+                        Diagnostic::error(
+                            Code::XmlSyntax,
+                            "not well-formed XML: a second byte-order mark at the start of the file",
+                        )
+                        .at(self.span(0..3)),
+                    )));
+                }
             }
         }
     }
@@ -1596,6 +1586,23 @@ mod tests {
         assert_eq!(d.len(), 1);
         assert_eq!(d[0].code, Code::XmlSyntax);
         assert_eq!(d[0].span.as_ref().unwrap().range, 0..3);
+    }
+
+    /// A reader that hands out a byte at a time shows the producer a second byte-order mark
+    /// only after three reads: it is reported the same.
+    #[test]
+    fn second_bom_read_a_byte_at_a_time() {
+        let text = "\u{feff}<project/>";
+        for pipeline in [Pipeline::Inline, Pipeline::Threaded] {
+            let input = std::io::BufReader::with_capacity(1, text.as_bytes());
+            let mut d = Diagnostics::default();
+            let sfc = read_sfc_stream_with(input, 0, text.len() as u64, None, &mut d, pipeline, 1);
+            let d = d.into_vec();
+            assert!(matches!(sfc, Ok(None)), "{pipeline:?}");
+            assert_eq!(d.len(), 1, "{pipeline:?}: {d:?}");
+            assert_eq!(d[0].code, Code::XmlSyntax);
+            assert_eq!(d[0].span.as_ref().unwrap().range, 0..3);
+        }
     }
 
     #[test]

@@ -16,6 +16,7 @@ use std::ops::Range;
 use std::sync::mpsc::{Receiver, SyncSender};
 
 use quick_xml::events::Event;
+use quick_xml::utils::is_whitespace;
 
 use super::sfc::Tag;
 
@@ -85,6 +86,9 @@ pub(crate) enum Stop {
     Io(std::io::Error),
     /// Not well-formed XML: where, and the parser's words.
     Syntax(usize, String),
+    /// The text starts with a byte-order mark: the caller strips one (the loader's), so this is
+    /// a second one, which quick-xml would skip silently, shifting every place it reports.
+    SecondBom,
 }
 
 /// Events, in file order.
@@ -147,11 +151,6 @@ pub(crate) struct Producer<R> {
 
 /// A UTF-8 byte-order mark.
 const BOM: &[u8] = b"\xEF\xBB\xBF";
-
-/// Why a text that starts with a byte-order mark is refused: the caller strips one (the
-/// loader's), so this is a second one, which quick-xml would skip silently, shifting every place
-/// it reports.
-pub(crate) const SECOND_BOM: &str = "a second byte-order mark at the start of the file";
 
 /// How a piece's parse ended.
 enum Piece {
@@ -219,7 +218,7 @@ impl<R: BufRead> Producer<R> {
                 self.started = true;
                 if bytes.starts_with(BOM) {
                     self.done = true;
-                    b.stop = Some(Stop::Syntax(0, SECOND_BOM.to_owned()));
+                    b.stop = Some(Stop::SecondBom);
                     return;
                 }
             }
@@ -242,11 +241,7 @@ impl<R: BufRead> Producer<R> {
             let (final_piece, stop) = match String::from_utf8(bytes) {
                 Ok(text) => {
                     b.text = text;
-                    let failed = self.failed.take();
-                    (
-                        self.eof,
-                        failed.map(|e| Stop::Io(std::io::Error::new(e.kind(), e.to_string()))),
-                    )
+                    (self.eof, self.failed.take().map(Stop::Io))
                 }
                 Err(e) => {
                     // The events end at the first byte that is not UTF-8, or at a character
@@ -257,9 +252,7 @@ impl<R: BufRead> Producer<R> {
                     valid.truncate(err.valid_up_to());
                     b.text = String::from_utf8(valid).unwrap_or_default();
                     let stop = match self.failed.take() {
-                        Some(io) if err.error_len().is_none() => {
-                            Stop::Io(std::io::Error::new(io.kind(), io.to_string()))
-                        }
+                        Some(io) if err.error_len().is_none() => Stop::Io(io),
                         _ => Stop::NotUtf8,
                     };
                     (true, Some(stop))
@@ -429,11 +422,6 @@ impl<R: BufRead> Producer<R> {
     }
 }
 
-/// Whitespace as quick-xml reads it between attributes.
-fn is_space(b: u8) -> bool {
-    matches!(b, b' ' | b'\r' | b'\n' | b'\t')
-}
-
 /// The attributes of a tag's `content` after its name (which ends at `from`), each handed to
 /// `each` as `(qualified name, raw value)`, in order, as quick-xml's attribute iterator gives
 /// them, without its per-attribute state machine.
@@ -452,7 +440,7 @@ pub(crate) fn each_attribute<'a, E>(
     let mut n = 0;
     let mut i = from;
     loop {
-        while i < b.len() && is_space(b[i]) {
+        while i < b.len() && is_whitespace(b[i]) {
             i += 1;
         }
         if i >= b.len() {
@@ -461,18 +449,18 @@ pub(crate) fn each_attribute<'a, E>(
         let key = i;
         // The first byte is the name's, whatever it is (as in quick-xml).
         i += 1;
-        while i < b.len() && b[i] != b'=' && !is_space(b[i]) {
+        while i < b.len() && b[i] != b'=' && !is_whitespace(b[i]) {
             i += 1;
         }
         let key_end = i;
-        while i < b.len() && is_space(b[i]) {
+        while i < b.len() && is_whitespace(b[i]) {
             i += 1;
         }
         if b.get(i) != Some(&b'=') {
             return None;
         }
         i += 1;
-        while i < b.len() && is_space(b[i]) {
+        while i < b.len() && is_whitespace(b[i]) {
             i += 1;
         }
         let quote = *b.get(i).filter(|&&q| q == b'"' || q == b'\'')?;
@@ -499,7 +487,7 @@ pub(crate) fn each_attribute<'a, E>(
 pub fn compare_attributes(content: &str) -> Result<(), String> {
     let name_len = content
         .bytes()
-        .position(|c| is_space(c) || c == b'/')
+        .position(|c| is_whitespace(c) || c == b'/')
         .unwrap_or(content.len());
     let e = quick_xml::events::BytesStart::from_content(content, name_len);
     let mut theirs = Vec::new();
@@ -700,8 +688,7 @@ pub fn reference_text(input: &[u8]) -> String {
 fn quick_xml_text(input: &[u8]) -> String {
     let mut out = String::new();
     if input.starts_with(BOM) {
-        // Refused (see `SECOND_BOM`).
-        out.push_str(&stop_line(&Stop::Syntax(0, SECOND_BOM.to_owned())));
+        out.push_str(&stop_line(&Stop::SecondBom));
         return out;
     }
     let mut reader = quick_xml::Reader::from_reader(input);
@@ -752,6 +739,7 @@ fn record_line(kind: Kind, tag: Tag, at: usize, end: usize, text: &str, name: &s
 fn stop_line(stop: &Stop) -> String {
     match stop {
         Stop::NotUtf8 => "stop: not UTF-8\n".to_owned(),
+        Stop::SecondBom => "stop: a byte-order mark at the start\n".to_owned(),
         Stop::Io(_) => "stop: read error\n".to_owned(),
         Stop::Syntax(at, msg) => format!("stop: at {at}: {msg}\n"),
     }
