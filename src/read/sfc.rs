@@ -450,8 +450,6 @@ enum IwbState {
 /// begins one byte after `at` (the `<`).
 struct Tagged<'a> {
     e: BytesStart<'a>,
-    /// The length of the qualified name, at the start of the content.
-    name_len: usize,
     /// The local name, a part of the content.
     local: &'a str,
     at: usize,
@@ -460,10 +458,8 @@ struct Tagged<'a> {
 impl<'a> Tagged<'a> {
     fn new(rec: &Rec, batch: &'a Batch) -> Self {
         let content = &batch.text[rec.text.clone()];
-        let name_len = rec.name.end - rec.text.start;
         Tagged {
-            e: BytesStart::from_content(content, name_len),
-            name_len,
+            e: BytesStart::from_content(content, rec.name.end - rec.text.start),
             local: &batch.text[rec.name.clone()],
             at: rec.at,
         }
@@ -530,7 +526,8 @@ impl Stream {
         let mark = scratch.len();
         let mut out: [Option<Val>; N] = std::array::from_fn(|_| None);
         let content: &str = &t.e;
-        let quick = tape::each_attribute(content, t.name_len, |key, raw| {
+        let name_len = t.e.name().as_ref().len();
+        let quick = tape::each_attribute(content, name_len, |key, raw| {
             self.take(t, key, raw, &names, &mut out, scratch)
         });
         if let Some(done) = quick {
