@@ -457,11 +457,11 @@ struct Tagged<'a> {
 
 impl<'a> Tagged<'a> {
     fn new(rec: &Rec, batch: &'a Batch) -> Self {
-        let content = &batch.text[rec.text.clone()];
+        let (name, local, content) = batch.names_and_content(rec);
         Tagged {
-            e: BytesStart::from_content(content, rec.name.end - rec.text.start),
-            local: &batch.text[rec.name.clone()],
-            at: rec.at,
+            e: BytesStart::from_content(content, name.len()),
+            local,
+            at: batch.at(rec),
         }
     }
 
@@ -614,7 +614,7 @@ impl Stream {
         loop {
             batch = tape.next(batch);
             for rec in &batch.recs {
-                let at = rec.at;
+                let at = batch.at(rec);
                 let empty = match rec.kind {
                     Kind::Start => false,
                     Kind::Empty => true,
@@ -654,8 +654,8 @@ impl Stream {
                     }
                     Kind::Text => {
                         if building {
-                            let raw = &batch.text[rec.text.clone()];
-                            inline_text(&mut b, &stack, at..rec.end, || {
+                            let raw = batch.text(rec);
+                            inline_text(&mut b, &stack, at..batch.end(rec), || {
                                 BytesText::from_escaped(raw)
                                     .xml_content(quick_xml::XmlVersion::Implicit1_0)
                             });
@@ -665,8 +665,8 @@ impl Stream {
                     Kind::CData => {
                         if building {
                             // `<![CDATA[` … `]]>`
-                            let end = rec.end.saturating_sub(3);
-                            let raw = &batch.text[rec.text.clone()];
+                            let end = batch.end(rec).saturating_sub(3);
+                            let raw = batch.text(rec);
                             inline_text(&mut b, &stack, (at + 9).min(end)..end, || {
                                 BytesCData::new(raw).xml_content(quick_xml::XmlVersion::Implicit1_0)
                             });
@@ -674,7 +674,7 @@ impl Stream {
                         continue;
                     }
                     Kind::GeneralRef => {
-                        let raw = &batch.text[rec.text.clone()];
+                        let raw = batch.text(rec);
                         let ch = match BytesRef::new(raw).resolve_char_ref() {
                             Ok(Some(c)) => Some(c),
                             Ok(None) => match raw {
@@ -713,7 +713,7 @@ impl Stream {
                     )));
                     }
                     Kind::Eof => {
-                        let end = rec.end;
+                        let end = batch.end(rec);
                         if let Some(open) = stack.last_name() {
                             return Ok(Err(
                                 self.syntax_error(end, format!("the file ends inside `<{open}>`"))

@@ -12,7 +12,6 @@
 //! to be filled again.
 
 use std::io::{BufRead, Read};
-use std::ops::Range;
 use std::sync::mpsc::{Receiver, SyncSender};
 
 use quick_xml::events::Event;
@@ -62,21 +61,26 @@ pub(crate) enum Kind {
     Eof,
 }
 
-/// One event. Ranges are into [`Batch::text`]; `at` and `end` are the file offsets before and
-/// after the event.
-#[derive(Debug, Clone)]
+/// One event, 24 bytes: the reader touches every record once, on the other core, so a record is
+/// kept small. Offsets are into [`Batch::text`] (a piece is shorter than 4 GiB: `fill`); the
+/// [`Batch`] turns them into file offsets and text.
+#[derive(Debug, Clone, Copy)]
 pub(crate) struct Rec {
     pub kind: Kind,
     /// Of a start tag: its local name's tag.
     pub tag: Tag,
-    pub at: usize,
-    pub end: usize,
+    /// Start and empty tags: where the local name starts in the qualified name (`u16::MAX`: not
+    /// kept, a prefix that long is looked for again).
+    local: u16,
+    /// Where the event starts and ends in the piece.
+    at: u32,
+    end: u32,
     /// Start and empty tags: the tag's content (name and attributes, as the parser hands them
     /// out); text, CDATA, references: the raw content.
-    pub text: Range<usize>,
-    /// Start and empty tags: the qualified name, the start of `text`, and where in it the
-    /// local name starts.
-    pub name: Range<usize>,
+    text: u32,
+    text_end: u32,
+    /// Start and empty tags: the length of the qualified name, the start of the content.
+    name_len: u32,
 }
 
 /// Why the events stopped before the end of the file.
@@ -95,6 +99,8 @@ pub(crate) enum Stop {
 #[derive(Debug, Default)]
 pub(crate) struct Batch {
     pub text: String,
+    /// The file offset of `text`'s first byte.
+    base: usize,
     pub recs: Vec<Rec>,
     /// Set on the last batch when the events stopped early (the records come first).
     pub stop: Option<Stop>,
@@ -105,6 +111,38 @@ impl Batch {
         self.text.clear();
         self.recs.clear();
         self.stop = None;
+    }
+
+    /// The file offset where `r` starts.
+    #[inline]
+    pub fn at(&self, r: &Rec) -> usize {
+        self.base + r.at as usize
+    }
+
+    /// The file offset after `r`.
+    #[inline]
+    pub fn end(&self, r: &Rec) -> usize {
+        self.base + r.end as usize
+    }
+
+    /// The raw content of `r` (see [`Rec`]).
+    #[inline]
+    pub fn text(&self, r: &Rec) -> &str {
+        self.text
+            .get(r.text as usize..r.text_end as usize)
+            .unwrap_or_default()
+    }
+
+    /// Of a start or empty tag: its qualified name, its local name and its content.
+    #[inline]
+    pub fn names_and_content(&self, r: &Rec) -> (&str, &str, &str) {
+        let content = self.text(r);
+        let name = content.get(..r.name_len as usize).unwrap_or_default();
+        let local = match name.get(r.local as usize..) {
+            Some(local) if r.local != u16::MAX => local,
+            _ => local_part(name),
+        };
+        (name, local, content)
     }
 }
 
@@ -236,6 +274,16 @@ impl<R: BufRead> Producer<R> {
                     }
                 }
             };
+            if u32::try_from(cut).is_err() {
+                // Records keep offsets into the piece as `u32`; a piece this long is one event
+                // of 4 GiB (a file may be that large only where its limit was raised).
+                self.done = true;
+                b.stop = Some(Stop::Syntax(
+                    self.base,
+                    "one XML event is 4 GiB or longer".to_owned(),
+                ));
+                return;
+            }
             let mut tail = bytes.split_off(cut);
             // The UTF-8 is checked once, for the whole piece.
             let (final_piece, stop) = match String::from_utf8(bytes) {
@@ -297,10 +345,14 @@ impl<R: BufRead> Producer<R> {
         let config = reader.config_mut();
         config.check_end_names = false;
         config.allow_unmatched_ends = true;
+        b.base = base;
+        // Offsets into the piece: it is shorter than 4 GiB (`fill`).
+        debug_assert!(u32::try_from(text.len()).is_ok());
+        let off = |i: usize| i as u32;
         // Where `s`, a part of the piece, lies in it.
         let range = |s: &str| {
             let start = (s.as_ptr() as usize).wrapping_sub(text.as_ptr() as usize);
-            start..start + s.len()
+            (off(start), off(start + s.len()))
         };
         let mut stop = stop;
         loop {
@@ -337,10 +389,12 @@ impl<R: BufRead> Producer<R> {
             let mut rec = Rec {
                 kind: Kind::Eof,
                 tag: Tag::Other,
-                at: base + at,
-                end: base + end,
-                text: 0..0,
-                name: 0..0,
+                local: 0,
+                at: off(at),
+                end: off(end),
+                text: 0,
+                text_end: 0,
+                name_len: 0,
             };
             match ev {
                 Event::Start(ref e) | Event::Empty(ref e) => {
@@ -349,8 +403,9 @@ impl<R: BufRead> Producer<R> {
                     let len = e.name().as_ref().len().min(content.len());
                     let local = local_part(&content[..len]);
                     rec.tag = Tag::of(local);
-                    rec.text = range(content);
-                    rec.name = rec.text.start + (len - local.len())..rec.text.start + len;
+                    (rec.text, rec.text_end) = range(content);
+                    rec.name_len = off(len);
+                    rec.local = u16::try_from(len - local.len()).unwrap_or(u16::MAX);
                     if matches!(ev, Event::Start(_)) {
                         rec.kind = Kind::Start;
                         self.open_starts.push(self.open.len());
@@ -391,15 +446,15 @@ impl<R: BufRead> Producer<R> {
                 }
                 Event::Text(ref t) => {
                     rec.kind = Kind::Text;
-                    rec.text = range(t);
+                    (rec.text, rec.text_end) = range(t);
                 }
                 Event::CData(ref t) => {
                     rec.kind = Kind::CData;
-                    rec.text = range(t);
+                    (rec.text, rec.text_end) = range(t);
                 }
                 Event::GeneralRef(ref r) => {
                     rec.kind = Kind::GeneralRef;
-                    rec.text = range(r);
+                    (rec.text, rec.text_end) = range(r);
                 }
                 Event::DocType(_) => rec.kind = Kind::DocType,
                 Event::Eof => {
@@ -412,7 +467,7 @@ impl<R: BufRead> Producer<R> {
                 // Declarations, comments, processing instructions.
                 _ => continue,
             }
-            debug_assert!(rec.text.end <= text.len(), "an event outside its piece");
+            debug_assert!(rec.text_end as usize <= text.len(), "an event outside its piece");
             let last = rec.kind == Kind::Eof;
             b.recs.push(rec);
             if last {
@@ -653,9 +708,14 @@ pub fn records_text<R: BufRead>(input: R, batch_bytes: usize) -> String {
     while !p.done {
         p.fill(&mut b);
         for r in &b.recs {
-            let text = b.text.get(r.text.clone()).unwrap_or("<outside the piece>");
-            let name = b.text.get(r.name.clone()).unwrap_or("<outside the piece>");
-            out.push_str(&record_line(r.kind, r.tag, r.at, r.end, text, name));
+            let (name, text) = match r.kind {
+                Kind::Start | Kind::Empty => {
+                    let (_, local, content) = b.names_and_content(r);
+                    (local, content)
+                }
+                _ => ("", b.text(r)),
+            };
+            out.push_str(&record_line(r.kind, r.tag, b.at(r), b.end(r), text, name));
         }
         if let Some(stop) = &b.stop {
             out.push_str(&stop_line(stop));
