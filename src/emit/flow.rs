@@ -81,7 +81,6 @@ pub fn push_step_title(
     bs: &BoundStep,
     number: usize,
 ) {
-    use std::fmt::Write as _;
     for p in prefix {
         out.push_str(p);
     }
@@ -93,13 +92,16 @@ pub fn push_step_title(
     let res = &input.blackboard.resources[bs.resource];
     let skill = &res.skills[bs.skill];
     let at = out.len();
-    let _ = write!(out, "{number} ");
+    push_decimal(out, number as u64);
+    out.push(' ');
     out.push_str(name);
     out.push_str(": ");
     out.push_str(&skill.name.text);
     out.push_str(" @ ");
     out.push_str(&res.name.text);
-    let _ = write!(out, " (localId {})", e.local_id);
+    out.push_str(" (localId ");
+    push_decimal(out, e.local_id);
+    out.push(')');
     let title = &out[at..];
     if title
         .bytes()
@@ -108,6 +110,24 @@ pub fn push_step_title(
         let clean = transliterate(title);
         out.truncate(at);
         out.push_str(&clean);
+    }
+}
+
+/// Appends `n` in decimal (what `write!(out, "{n}")` gives, without the formatting machinery:
+/// two numbers in every step's title).
+pub fn push_decimal(out: &mut String, mut n: u64) {
+    let mut digits = [0u8; 20];
+    let mut i = digits.len();
+    loop {
+        i -= 1;
+        digits[i] = b'0' + (n % 10) as u8;
+        n /= 10;
+        if n == 0 {
+            break;
+        }
+    }
+    for &d in &digits[i..] {
+        out.push(char::from(d));
     }
 }
 
@@ -211,4 +231,24 @@ pub fn selection_comment(input: &EmitInput, divergence: usize, branches: usize) 
         "selection localId {}: {branches} branches, the first whose condition holds",
         input.sfc.elements[divergence].local_id
     )
+}
+
+#[cfg(test)]
+mod tests {
+    /// The same digits as `format!`, at the ends of the range and around each power of ten.
+    #[test]
+    fn push_decimal_is_format() {
+        let mut cases = vec![0, 1, 9, u64::MAX, u64::MAX - 1];
+        let mut p = 1u64;
+        while let Some(next) = p.checked_mul(10) {
+            cases.extend([p - 1, p, p + 1]);
+            p = next;
+        }
+        cases.extend([p - 1, p, p + 1]);
+        for n in cases {
+            let mut out = String::from("x");
+            super::push_decimal(&mut out, n);
+            assert_eq!(out, format!("x{n}"));
+        }
+    }
 }
