@@ -78,7 +78,8 @@ pub fn resolve(
         let ElementKind::Step(st) = &e.kind else {
             continue;
         };
-        let label = format!("localId {}", e.local_id);
+        // Only for a diagnostic: most steps make none.
+        let label = || format!("localId {}", e.local_id);
         let Some(skill_name) = &st.skill else {
             if order
                 .start_end
@@ -93,7 +94,7 @@ pub fn resolve(
                         ),
                     )
                     .at(e.span.clone())
-                    .element(label),
+                    .element(label()),
                 );
             }
             continue;
@@ -112,7 +113,7 @@ pub fn resolve(
                             ),
                         )
                         .at(rn.span.clone())
-                        .element(label),
+                        .element(label()),
                     );
                     continue;
                 }
@@ -132,7 +133,7 @@ pub fn resolve(
                                 ),
                             )
                             .at(e.span.clone())
-                            .element(label.clone()),
+                            .element(label()),
                         );
                         *ri
                     }
@@ -154,7 +155,7 @@ pub fn resolve(
                                 },
                             )
                             .at(e.span.clone())
-                            .element(label),
+                            .element(label()),
                         );
                         continue;
                     }
@@ -174,7 +175,7 @@ pub fn resolve(
                     ),
                 )
                 .at(skill_name.span.clone())
-                .element(label),
+                .element(label()),
             );
             continue;
         };
@@ -191,7 +192,7 @@ pub fn resolve(
                         ),
                     )
                     .at(st.resource.as_ref().map(|n| n.span.clone()).unwrap_or(e.span.clone()))
-                    .element(label.clone()),
+                    .element(label()),
                 );
             }
             _ => {}
@@ -201,8 +202,9 @@ pub fn resolve(
             let skill = &resource.skills[sk];
             for d in &skill.defects {
                 diags.push(d.clone().note(format!(
-                    "skill `{}` is used by step {label}",
-                    skill.name.text
+                    "skill `{}` is used by step {}",
+                    skill.name.text,
+                    label()
                 )));
             }
         }
