@@ -1120,6 +1120,15 @@ impl Stream {
     /// transition always fires (no condition, or `TRUE`).
     fn condition(&self, b: &Building, diags: &mut Diagnostics) -> Option<Box<Condition>> {
         let c = b.condition.as_ref()?;
+        // Most transitions always fire: `TRUE` alone, between the spaces the condition's lexer
+        // skips, is what the parser reads as the literal (no tokens, vector or string made).
+        if let Some(inline) = &b.inline
+            && inline
+                .trim_matches(|c: char| c.is_ascii_whitespace())
+                .eq_ignore_ascii_case("TRUE")
+        {
+            return None;
+        }
         let label = || b.id_label();
         let file = self.file;
         let (text, parsed, reference) = if let Some(inline) = &b.inline {
@@ -1573,6 +1582,33 @@ mod tests {
         ));
         assert_eq!(d[0].code, Code::Unsupported);
         assert!(d[0].message.contains("wired"), "{}", d[0].message);
+    }
+
+    /// The reader's shortcut for `TRUE` gives what the parser gives: no condition exactly where
+    /// the parser reads the literal `TRUE`, and the same diagnostics otherwise.
+    #[test]
+    fn true_conditions_as_the_parser_reads_them() {
+        let doc = |cond: &str| {
+            format!(
+                "<project xmlns=\"http://www.plcopen.org/xml/tc6_0201\"><types><pous><pou name=\"P\" pouType=\"program\"><body><SFC>\
+                 <transition localId=\"2\"><condition><inline><ST>{cond}</ST></inline></condition></transition>\
+                 </SFC></body></pou></pous></types></project>"
+            )
+        };
+        for text in [
+            "TRUE", "true", " True ", "\tTRUE\r\n", "&#12;TRUE", "\u{a0}TRUE", "TRUE\u{2003}",
+            "TRUEX", "TRU", "(TRUE)", "NOT FALSE", "TRUE TRUE", "(* c *) TRUE", "", "  ",
+        ] {
+            let (sfc, d) = read(&doc(text));
+            let sfc = sfc.unwrap();
+            let unescaped = text.replace("&#12;", "\u{c}");
+            let parsed = crate::cond::parse(&unescaped, &|o| o);
+            let fires = matches!(&parsed, Ok(e) if e.is_true());
+            let none = matches!(sfc.elements[0].kind, ElementKind::Transition(None));
+            // A condition the parser refuses is reported and left out.
+            assert_eq!(parsed.is_err(), !d.is_empty(), "{text:?}: {d:?}");
+            assert_eq!(none, fires || parsed.is_err(), "{text:?}: {d:?}");
+        }
     }
 
     #[test]
