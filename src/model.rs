@@ -553,7 +553,9 @@ mod tests {
     #[test]
     fn interner_recent_slots_do_not_mix_names() {
         let mut names = Interner::default();
-        let words = ["Frame", "Grame", " Frame", "frame", "FRAME", "Frame", "Grame"];
+        let words = [
+            "Frame", "Grame", " Frame", "frame", "FRAME", "Frame", "Grame",
+        ];
         let mut first: Vec<(&str, Arc<str>, Arc<str>)> = Vec::new();
         for _ in 0..3 {
             for w in words {

@@ -1596,8 +1596,21 @@ mod tests {
             )
         };
         for text in [
-            "TRUE", "true", " True ", "\tTRUE\r\n", "&#12;TRUE", "\u{a0}TRUE", "TRUE\u{2003}",
-            "TRUEX", "TRU", "(TRUE)", "NOT FALSE", "TRUE TRUE", "(* c *) TRUE", "", "  ",
+            "TRUE",
+            "true",
+            " True ",
+            "\tTRUE\r\n",
+            "&#12;TRUE",
+            "\u{a0}TRUE",
+            "TRUE\u{2003}",
+            "TRUEX",
+            "TRU",
+            "(TRUE)",
+            "NOT FALSE",
+            "TRUE TRUE",
+            "(* c *) TRUE",
+            "",
+            "  ",
         ] {
             let (sfc, d) = read(&doc(text));
             let sfc = sfc.unwrap();

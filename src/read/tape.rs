@@ -467,7 +467,10 @@ impl<R: BufRead> Producer<R> {
                 // Declarations, comments, processing instructions.
                 _ => continue,
             }
-            debug_assert!(rec.text_end as usize <= text.len(), "an event outside its piece");
+            debug_assert!(
+                rec.text_end as usize <= text.len(),
+                "an event outside its piece"
+            );
             let last = rec.kind == Kind::Eof;
             b.recs.push(rec);
             if last {
