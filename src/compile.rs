@@ -317,7 +317,9 @@ impl<'a> Ctx<'a> {
             // stops at a syntax error; the daemon's hash of an input is taken at its end).
             let rest = std::io::copy(&mut input, &mut std::io::sink());
             drop(input);
-            self.sources.streamed(file, bom, fp.len, fp.hash.finish());
+            let prefixes = fp.hash.prefixes().to_vec();
+            self.sources
+                .streamed(file, bom, fp.len, fp.hash.finish(), prefixes);
             (read, rest, bom)
         };
         let failed = match (read, rest) {
@@ -405,8 +407,11 @@ impl<'a> Ctx<'a> {
     }
 
     /// Reads file `f` again as a stream, keeping the lines around `places`; `false` when it
-    /// cannot be read or is not the same as the first time.
+    /// cannot be read or is not the same as the first time. It reads only as far as the lines
+    /// and up to the next whole MiB ([`crate::load::PREFIX_STEP`]) when that prefix is the one
+    /// compiled (its hash): a diagnostic near the start of a 78 MB SFC does not read it all.
     fn read_lines(&mut self, f: crate::diag::FileId, places: Vec<usize>) -> bool {
+        use crate::load::PREFIX_STEP;
         let path = self.sources.get(f).path.clone();
         let Ok(opened) = self.fs.open(&path) else {
             return false;
@@ -414,12 +419,23 @@ impl<'a> Ctx<'a> {
         let mut reader = opened.reader;
         let mut collector = crate::excerpt::Collector::new(places, self.sources.bom(f));
         let mut buf = vec![0u8; 64 * 1024];
+        // Once the lines are kept: how many prefixes of `PREFIX_STEP` bytes cover them.
+        let mut need: Option<usize> = None;
         loop {
             match reader.read(&mut buf) {
                 Ok(0) => break,
                 Ok(n) => collector.feed(&buf[..n]),
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
                 Err(_) => return false,
+            }
+            if need.is_none() && collector.done() {
+                need = Some(collector.fed().div_ceil(PREFIX_STEP).max(1));
+            }
+            if let Some(k) = need
+                && let Some(&prefix) = collector.prefixes().get(k - 1)
+            {
+                let c = collector.finish();
+                return self.sources.set_excerpts_prefix(f, c.excerpts, k, prefix);
             }
         }
         self.sources.set_excerpts(f, collector.finish())

@@ -36,6 +36,8 @@ pub struct SourceFile {
     dropped: Option<(usize, u64)>,
     /// For a file whose text is not kept: the lines that diagnostics point into.
     excerpts: Option<crate::excerpt::Excerpts>,
+    /// For a streamed file: [`crate::load::ContentHash::prefixes`] of the bytes read.
+    prefixes: Vec<u64>,
 }
 
 impl SourceFile {
@@ -58,6 +60,7 @@ impl Sources {
             bom,
             dropped: None,
             excerpts: None,
+            prefixes: Vec::new(),
             line_starts: std::sync::OnceLock::new(),
         });
         self.files.len() - 1
@@ -78,11 +81,13 @@ impl Sources {
     }
 
     /// A streamed file was read to its end: whether it had a byte-order mark, its length and
-    /// [`crate::load::hash_bytes`] of its bytes (the mark included).
-    pub fn streamed(&mut self, id: FileId, bom: bool, len: usize, hash: u64) {
+    /// [`crate::load::hash_bytes`] of its bytes (the mark included), and of each prefix of
+    /// [`crate::load::PREFIX_STEP`] bytes and its multiples.
+    pub fn streamed(&mut self, id: FileId, bom: bool, len: usize, hash: u64, prefixes: Vec<u64>) {
         let f = &mut self.files[id];
         f.bom = bom;
         f.dropped = Some((len, hash));
+        f.prefixes = prefixes;
     }
 
     /// Whether the file's text is not there (streamed, or dropped) and not put back.
@@ -113,6 +118,27 @@ impl Sources {
         match f.dropped {
             Some((len, hash)) if c.len == len && c.hash == hash => {
                 f.excerpts = Some(c.excerpts);
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// Like [`Sources::set_excerpts`] for lines read from only the first `k` prefixes of
+    /// [`crate::load::PREFIX_STEP`] bytes, whose hash is `prefix`: `true` when that prefix is
+    /// the one read the first time (the file was at least that long and had the same bytes
+    /// there), else the file stays without them.
+    pub fn set_excerpts_prefix(
+        &mut self,
+        id: FileId,
+        excerpts: crate::excerpt::Excerpts,
+        k: usize,
+        prefix: u64,
+    ) -> bool {
+        let f = &mut self.files[id];
+        match (f.dropped, k.checked_sub(1).and_then(|i| f.prefixes.get(i))) {
+            (Some(_), Some(&h)) if h == prefix => {
+                f.excerpts = Some(excerpts);
                 true
             }
             _ => false,

@@ -158,6 +158,21 @@ impl Collector {
         }
     }
 
+    /// Whether every place's lines are kept: the bytes after change nothing kept.
+    pub fn done(&self) -> bool {
+        self.next >= self.places.len() && self.window.is_none() && !self.want_next_line
+    }
+
+    /// The bytes fed so far, the mark included.
+    pub fn fed(&self) -> usize {
+        self.raw_len
+    }
+
+    /// [`crate::load::ContentHash::prefixes`] of the bytes fed so far.
+    pub fn prefixes(&self) -> &[u64] {
+        self.hash.prefixes()
+    }
+
     /// The end of the file.
     pub fn finish(mut self) -> Collected {
         // The line after a place's line may be the empty one after a final line break.

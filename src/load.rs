@@ -126,21 +126,43 @@ pub fn hash_bytes(b: &[u8]) -> u64 {
     xxhash_rust::xxh3::xxh3_64(b)
 }
 
-/// [`hash_bytes`] of bytes that come in pieces.
+/// [`ContentHash`] keeps the hash of every prefix of this many bytes, and of its multiples.
+pub const PREFIX_STEP: usize = 1 << 20;
+
+/// [`hash_bytes`] of bytes that come in pieces; also [`hash_bytes`] of each prefix of
+/// [`PREFIX_STEP`] bytes and its multiples ([`ContentHash::prefixes`]): a file read again only
+/// as far as some lines of it is the same there when that prefix has the same hash.
 #[derive(Clone, Default)]
-pub struct ContentHash(xxhash_rust::xxh3::Xxh3Default);
+pub struct ContentHash {
+    hash: xxhash_rust::xxh3::Xxh3Default,
+    len: usize,
+    prefixes: Vec<u64>,
+}
 
 impl ContentHash {
     pub fn new() -> Self {
         Self::default()
     }
 
-    pub fn update(&mut self, bytes: &[u8]) {
-        self.0.update(bytes);
+    pub fn update(&mut self, mut bytes: &[u8]) {
+        while !bytes.is_empty() {
+            let n = (PREFIX_STEP - self.len % PREFIX_STEP).min(bytes.len());
+            self.hash.update(&bytes[..n]);
+            self.len += n;
+            bytes = &bytes[n..];
+            if self.len.is_multiple_of(PREFIX_STEP) {
+                self.prefixes.push(self.hash.digest());
+            }
+        }
+    }
+
+    /// `prefixes()[k]`: [`hash_bytes`] of the first `(k + 1) * PREFIX_STEP` bytes.
+    pub fn prefixes(&self) -> &[u64] {
+        &self.prefixes
     }
 
     pub fn finish(&self) -> u64 {
-        self.0.digest()
+        self.hash.digest()
     }
 }
 
@@ -241,6 +263,42 @@ impl FileSource for MemSource {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Each prefix of `PREFIX_STEP` bytes and its multiples has the hash of those bytes,
+    /// however the bytes come; the whole has the hash of all of them.
+    #[test]
+    fn prefix_hashes_are_the_prefixes_hashes() {
+        let bytes: Vec<u8> = (0..3 * PREFIX_STEP + 12_345)
+            .map(|i| (i * 7 + i / 1000) as u8)
+            .collect();
+        for piece in [
+            1,
+            4096,
+            PREFIX_STEP - 1,
+            PREFIX_STEP,
+            PREFIX_STEP + 1,
+            bytes.len(),
+        ] {
+            if piece == 1 && bytes.len() > PREFIX_STEP {
+                // One byte at a time over 3 MiB is slow in a debug build: the first 1 MiB + 1.
+                let mut h = ContentHash::new();
+                for b in bytes[..PREFIX_STEP + 1].chunks(1) {
+                    h.update(b);
+                }
+                assert_eq!(h.prefixes(), [hash_bytes(&bytes[..PREFIX_STEP])]);
+                continue;
+            }
+            let mut h = ContentHash::new();
+            for b in bytes.chunks(piece) {
+                h.update(b);
+            }
+            let want: Vec<u64> = (1..=3)
+                .map(|k| hash_bytes(&bytes[..k * PREFIX_STEP]))
+                .collect();
+            assert_eq!(h.prefixes(), want, "pieces of {piece}");
+            assert_eq!(h.finish(), hash_bytes(&bytes), "pieces of {piece}");
+        }
+    }
 
     #[test]
     fn a_file_hashes_like_its_bytes() {

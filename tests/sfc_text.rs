@@ -296,3 +296,144 @@ fn warnings_not_kept_are_not_located() {
     assert_eq!(texts(&kept), texts(&dropped));
     assert!(!texts(&kept).is_empty());
 }
+
+/// Serves the e314 case with its SFC made large (a comment of 3 MiB after the root element):
+/// the first reading gets `first`, a second one `second` (or `first` again), and the bytes the
+/// second reading took are counted.
+struct Large {
+    fs: FsSource,
+    first: Vec<u8>,
+    second: Option<Vec<u8>>,
+    reads: Mutex<usize>,
+    second_bytes: std::sync::Arc<std::sync::atomic::AtomicUsize>,
+}
+
+/// A reader that counts what is read through it.
+struct Counting<R> {
+    inner: R,
+    n: std::sync::Arc<std::sync::atomic::AtomicUsize>,
+}
+
+impl<R: std::io::Read> std::io::Read for Counting<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.n.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+        Ok(n)
+    }
+}
+
+impl FileSource for Large {
+    fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
+        self.fs.read(path)
+    }
+
+    fn open(&self, path: &Path) -> std::io::Result<skillpost::load::Opened<'_>> {
+        if path.file_name().is_none_or(|n| n != "sfc.xml") {
+            return self.fs.open(path);
+        }
+        let mut reads = self.reads.lock().unwrap();
+        *reads += 1;
+        let bytes = match (&self.second, *reads) {
+            (Some(b), 2..) => b.clone(),
+            _ => self.first.clone(),
+        };
+        let counted = if *reads > 1 {
+            self.second_bytes.clone()
+        } else {
+            std::sync::Arc::default()
+        };
+        Ok(skillpost::load::Opened {
+            len: Some(bytes.len() as u64),
+            reader: Box::new(Counting {
+                inner: std::io::Cursor::new(bytes),
+                n: counted,
+            }),
+        })
+    }
+}
+
+fn large_sfc() -> Vec<u8> {
+    let mut sfc = std::fs::read(case().join("sfc.xml")).unwrap();
+    sfc.extend_from_slice(b"\n<!--");
+    sfc.extend(std::iter::repeat_n(b'x', 3 << 20));
+    sfc.extend_from_slice(b"-->\n");
+    sfc
+}
+
+/// Compiles the e314 case with the large SFC; the E314 diagnostic and the bytes the second
+/// reading took.
+fn run_large(second: Option<Vec<u8>>) -> (skillpost::diag::Diagnostic, usize) {
+    let src = Large {
+        fs: FsSource::default(),
+        first: large_sfc(),
+        second,
+        reads: Mutex::new(0),
+        second_bytes: std::sync::Arc::default(),
+    };
+    let c = compile(
+        &src,
+        &case().join("Blackboard.aml"),
+        &Options {
+            program: Some("out".into()),
+            ..Default::default()
+        },
+    );
+    let d = c
+        .diagnostics
+        .iter()
+        .find(|d| d.code.as_str() == "E314")
+        .expect("E314")
+        .clone();
+    if let Some(s) = &d.span {
+        assert_eq!(c.sources.line_col(s.file, s.range.start).0, 29);
+    }
+    let n = src.second_bytes.load(std::sync::atomic::Ordering::Relaxed);
+    (d, n)
+}
+
+#[test]
+fn a_large_sfc_is_read_again_only_as_far_as_its_diagnostics_lines() {
+    let len = large_sfc().len();
+    let (d, read_again) = run_large(None);
+    assert!(d.span.is_some(), "{d:?}");
+    // The first MiB holds line 29; it is read in 64 KiB pieces.
+    let step = skillpost::load::PREFIX_STEP;
+    assert!(
+        read_again >= step && read_again <= step + 64 * 1024,
+        "{read_again} of {len} bytes read again"
+    );
+}
+
+#[test]
+fn a_large_sfc_changed_after_its_diagnostics_lines_keeps_their_place() {
+    // A save that changed the comment 2 MiB on: the lines shown are still those compiled.
+    let mut changed = large_sfc();
+    changed[2 << 20] = b'y';
+    let (d, _) = run_large(Some(changed));
+    assert!(d.span.is_some(), "{d:?}");
+    assert!(
+        d.notes.iter().all(|n| !n.contains("changed")),
+        "{:?}",
+        d.notes
+    );
+}
+
+#[test]
+fn a_large_sfc_changed_before_its_diagnostics_lines_loses_their_place() {
+    // A save that changed the first MiB (the comment, after line 29 but inside the prefix that
+    // is checked): the place is not trusted.
+    let mut changed = large_sfc();
+    let at = changed.len() - (3 << 20) + 1000;
+    assert!(at < skillpost::load::PREFIX_STEP);
+    changed[at] = b'y';
+    let (d, read_again) = run_large(Some(changed));
+    assert!(d.span.is_none(), "{d:?}");
+    assert!(
+        d.notes
+            .iter()
+            .any(|n| n.contains("changed while it was being compiled")),
+        "{:?}",
+        d.notes
+    );
+    assert!(read_again < large_sfc().len());
+}
