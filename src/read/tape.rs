@@ -341,10 +341,6 @@ impl<R: BufRead> Producer<R> {
     fn parse(&mut self, b: &mut Batch, final_piece: bool, stop: Option<Stop>) -> Piece {
         let text = b.text.as_str();
         let base = self.base;
-        let mut reader = quick_xml::Reader::from_str(text);
-        let config = reader.config_mut();
-        config.check_end_names = false;
-        config.allow_unmatched_ends = true;
         b.base = base;
         // Offsets into the piece: it is shorter than 4 GiB (`fill`).
         debug_assert!(u32::try_from(text.len()).is_ok());
@@ -355,10 +351,26 @@ impl<R: BufRead> Producer<R> {
             (off(start), off(start + s.len()))
         };
         let mut stop = stop;
+        // Where the next event starts.
+        let mut pos = 0;
+        // Where quick-xml reported its error (when it read the event).
+        let mut error_at = 0;
         loop {
-            let at = reader.buffer_position() as usize;
-            let ev = reader.read_event();
-            let end = reader.buffer_position() as usize;
+            let at = pos;
+            let (ev, end) = match plain_event(text, at) {
+                Some((ev, end)) => (Ok(ev), end),
+                None => {
+                    // Anything else is quick-xml's, one event from its `<` or `&`.
+                    let mut reader = quick_xml::Reader::from_str(&text[at..]);
+                    let config = reader.config_mut();
+                    config.check_end_names = false;
+                    config.allow_unmatched_ends = true;
+                    let ev = reader.read_event();
+                    error_at = at + reader.error_position() as usize;
+                    (ev, at + reader.buffer_position() as usize)
+                }
+            };
+            pos = end;
             // An event that runs to the end of the piece.
             let at_cut = match &ev {
                 Ok(_) => end >= text.len(),
@@ -381,7 +393,7 @@ impl<R: BufRead> Producer<R> {
                         quick_xml::Error::Io(e) => {
                             Stop::Io(std::io::Error::new(e.kind(), e.to_string()))
                         }
-                        e => Stop::Syntax(base + reader.error_position() as usize, e.to_string()),
+                        e => Stop::Syntax(base + error_at, e.to_string()),
                     });
                     return Piece::Parsed;
                 }
@@ -478,6 +490,76 @@ impl<R: BufRead> Producer<R> {
             }
         }
     }
+}
+
+/// The event of `text` at `at` as quick-xml reads it (without end-name checks and with
+/// unmatched ends allowed), and where it ends, for the events most of an SFC is made of: a
+/// start, empty or end tag closed in `text`, a text without references, the end. `None` for
+/// everything else (`<!`, `<?`, `&`, a tag not closed): quick-xml reads those.
+///
+/// quick-xml checks the UTF-8 of every event again, which the producer did once for the whole
+/// piece: this was ~15 % of the producer's instructions. `tests/tape.rs` and the `sfc` fuzz
+/// target hold the events to quick-xml's over the whole text.
+fn plain_event(text: &str, at: usize) -> Option<(Event<'_>, usize)> {
+    use quick_xml::events::{BytesEnd, BytesStart, BytesText};
+    let b = text.as_bytes();
+    let Some(&first) = b.get(at) else {
+        return Some((Event::Eof, at));
+    };
+    match first {
+        b'<' => {
+            let next = *b.get(at + 1)?;
+            if next == b'!' || next == b'?' {
+                return None;
+            }
+            // The `>` outside quotes, from the `<` (quick-xml's `ElementParser`, which reads
+            // end tags too).
+            let mut quote = 0u8;
+            let mut close = None;
+            for i in memchr::memchr3_iter(b'>', b'\'', b'"', &b[at..]) {
+                let c = b[at + i];
+                if quote == 0 {
+                    if c == b'>' {
+                        close = Some(at + i);
+                        break;
+                    }
+                    quote = c;
+                } else if c == quote {
+                    quote = 0;
+                }
+            }
+            let close = close?;
+            let ev = if next == b'/' {
+                // The name without the white space after it.
+                let content = &text[at + 2..close];
+                let name = match content.bytes().rposition(|c| !is_whitespace(c)) {
+                    Some(last) => &content[..=last],
+                    None => content,
+                };
+                Event::End(BytesEnd::new(name))
+            } else if close - at >= 2 && b[close - 1] == b'/' {
+                let content = &text[at + 1..close - 1];
+                Event::Empty(BytesStart::from_content(content, name_len(content)))
+            } else {
+                let content = &text[at + 1..close];
+                Event::Start(BytesStart::from_content(content, name_len(content)))
+            };
+            Some((ev, close + 1))
+        }
+        b'&' => None,
+        _ => {
+            let end = memchr::memchr2(b'<', b'&', &b[at..]).map_or(b.len(), |i| at + i);
+            Some((Event::Text(BytesText::from_escaped(&text[at..end])), end))
+        }
+    }
+}
+
+/// The length of a tag's name at the start of its `content` (up to the first white space).
+fn name_len(content: &str) -> usize {
+    content
+        .bytes()
+        .position(is_whitespace)
+        .unwrap_or(content.len())
 }
 
 /// The attributes of a tag's `content` after its name (which ends at `from`), each handed to
