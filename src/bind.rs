@@ -332,7 +332,8 @@ pub struct Calls<'a> {
 }
 
 /// A value as the language writes it, and as a number (for conversions) when it is one.
-type Valued<'a> = (Cow<'a, str>, Option<f64>);
+/// The number is its text, read as a number only by a conversion that needs it.
+type Valued<'a> = (Cow<'a, str>, Option<Cow<'a, str>>);
 
 /// Steps from which [`bind`] renders the second half of them on a second thread.
 pub const PARALLEL_FROM: usize = 2_000;
@@ -466,7 +467,7 @@ impl<'a> StepCx<'a> {
             extras: Extras::default(),
         };
         let mut values: Vec<Cow<str>> = Vec::new();
-        let mut numbers: Vec<Option<f64>> = Vec::new();
+        let mut numbers: Vec<Option<Cow<str>>> = Vec::new();
         let mut lists = crate::value::ItemCache::default();
         for &i in steps {
             let Some((res, sk)) = r.step_skill[i] else {
@@ -508,7 +509,8 @@ impl<'a> StepCx<'a> {
                     let at = code.len();
                     if let Err(why) = call.template.render_with(
                         &values,
-                        &|k| numbers.get(k).copied().flatten(),
+                        // (`Literal::as_f64`, only where a conversion asks.)
+                        &|k| numbers.get(k)?.as_deref()?.parse().ok(),
                         &mut code,
                     ) {
                         code.truncate(at);
@@ -924,7 +926,10 @@ fn value_of<'a>(
         }
     };
     let typed = crate::value::literal(s, p.ty);
-    let number = typed.as_ref().ok().and_then(|l| l.as_f64());
+    let number = match &typed {
+        Ok(crate::value::Literal::Number(n)) => Some(n.clone()),
+        _ => None,
+    };
     let neutral = typed.is_ok();
     match typed.and_then(|l| profile.literal(&l)) {
         Ok(t) => Ok((t, number)),
