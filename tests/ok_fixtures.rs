@@ -90,6 +90,7 @@ cases! {
     mappings_overloads => "mappings-overloads",
     no_writeback_target => "no-writeback-target",
     reference_sample => "reference-sample",
+    step_name_line_break => "step-name-line-break",
     subfolders => "subfolders",
     typed_values => "typed-values",
     umlauts => "umlauts",

@@ -103,10 +103,8 @@ pub fn push_step_title(
     push_decimal(out, e.local_id);
     out.push(')');
     let title = &out[at..];
-    if title
-        .bytes()
-        .any(|b| !b.is_ascii() || b == b'\r' || b == b'\n')
-    {
+    // (`is_ascii` goes a word at a time.)
+    if !title.is_ascii() || memchr::memchr2(b'\r', b'\n', title.as_bytes()).is_some() {
         let clean = transliterate(title);
         out.truncate(at);
         out.push_str(&clean);
