@@ -328,16 +328,7 @@ fn string_text(s: &str) -> Result<&str, String> {
 /// A checked number in the common form every profile's language reads: no `+`, a digit on both
 /// sides of the point, `E` for the exponent without `+`.
 fn normal_number(s: &str) -> Cow<'_, str> {
-    let b = s.as_bytes();
-    let needs = s.starts_with('+')
-        || s.contains("E+")
-        || s.contains('e')
-        || b.windows(2).any(|w| {
-            (w[1] == b'.' && !w[0].is_ascii_digit()) || (w[0] == b'.' && !w[1].is_ascii_digit())
-        })
-        || s.starts_with('.')
-        || s.ends_with('.');
-    if !needs {
+    if !needs_normal(s.as_bytes()) {
         return Cow::Borrowed(s);
     }
     let body = s.strip_prefix('+').unwrap_or(s);
@@ -363,6 +354,21 @@ fn normal_number(s: &str) -> Cow<'_, str> {
         out.push_str(e.strip_prefix('+').unwrap_or(e));
     }
     Cow::Owned(out)
+}
+
+/// Whether [`normal_number`] changes `b`: a `+` in front or in the exponent, `e`, or a point
+/// without a digit on one side (one pass: every value of every step comes here).
+fn needs_normal(b: &[u8]) -> bool {
+    if matches!(b.first(), Some(b'+' | b'.')) || b.last() == Some(&b'.') {
+        return true;
+    }
+    let digit = |i: usize| b.get(i).is_some_and(u8::is_ascii_digit);
+    b.iter().enumerate().any(|(i, &c)| match c {
+        b'e' => true,
+        b'E' => b.get(i + 1) == Some(&b'+'),
+        b'.' => (i > 0 && !digit(i - 1)) || (i + 1 < b.len() && !digit(i + 1)),
+        _ => false,
+    })
 }
 
 fn is_integer(s: &str) -> bool {
@@ -416,6 +422,42 @@ pub fn is_ident(s: &str) -> bool {
 
 #[cfg(test)]
 mod tests {
+    /// [`needs_normal`] is the test it replaced, for every string of up to four characters
+    /// from those that matter.
+    #[test]
+    fn needs_normal_is_the_old_test() {
+        let old = |s: &str| {
+            let b = s.as_bytes();
+            s.starts_with('+')
+                || s.contains("E+")
+                || s.contains('e')
+                || b.windows(2).any(|w| {
+                    (w[1] == b'.' && !w[0].is_ascii_digit())
+                        || (w[0] == b'.' && !w[1].is_ascii_digit())
+                })
+                || s.starts_with('.')
+                || s.ends_with('.')
+        };
+        let alphabet = ['1', '0', '.', '+', '-', 'e', 'E', 'x', ' '];
+        let mut words = vec![String::new()];
+        let mut checked = 0;
+        for _ in 0..4 {
+            let mut longer = Vec::new();
+            for w in &words {
+                for c in alphabet {
+                    let mut n = w.clone();
+                    n.push(c);
+                    assert_eq!(needs_normal(n.as_bytes()), old(&n), "{n:?}");
+                    checked += 1;
+                    longer.push(n);
+                }
+            }
+            words = longer;
+        }
+        assert_eq!(needs_normal(b""), old(""));
+        assert!(checked > 7000);
+    }
+
     use super::*;
 
     fn s(v: &str) -> Value {
