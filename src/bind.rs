@@ -55,6 +55,9 @@ impl StepOrder {
     }
 }
 
+/// A resolved `(resource name, skill name)` pair, the names as the reader shares them.
+type Recent<'a> = (&'a Arc<str>, &'a Arc<str>, (usize, usize));
+
 /// Resolves every step's resource and skill.
 pub fn resolve(
     bb: &Blackboard,
@@ -73,11 +76,26 @@ pub fn resolve(
     for (ri, res) in bb.resources.iter().enumerate() {
         by_key.entry(&res.name.key).or_insert(ri);
     }
+    // The last few `(resource name, skill name)` pairs resolved without a diagnostic, by the
+    // names' places in memory (the reader shares one `Arc` per distinct name): a plan repeats
+    // a handful of skills, and each would otherwise hash its resource and its pair again.
+    let mut recent: [Option<Recent>; 4] = [None; 4];
+    let mut next_recent = 0;
     for &i in &order.steps {
         let e = &sfc.elements[i];
         let ElementKind::Step(st) = &e.kind else {
             continue;
         };
+        if let (Some(rn), Some(sn)) = (&st.resource, &st.skill)
+            && let Some(&(_, _, pair)) = recent
+                .iter()
+                .flatten()
+                .find(|(r, s, _)| Arc::ptr_eq(r, &rn.key) && Arc::ptr_eq(s, &sn.key))
+        {
+            // Seen: the same resource (so no second-resource error) and a pair already used.
+            r.step_skill[i] = Some(pair);
+            continue;
+        }
         // Only for a diagnostic: most steps make none.
         let label = || format!("localId {}", e.local_id);
         let Some(skill_name) = &st.skill else {
@@ -196,6 +214,12 @@ pub fn resolve(
                 );
             }
             _ => {}
+        }
+        if let Some(rn) = &st.resource
+            && r.resource == Some(res)
+        {
+            recent[next_recent] = Some((&rn.key, &skill_name.key, (res, sk)));
+            next_recent = (next_recent + 1) % recent.len();
         }
         if used.insert((res, sk)) {
             r.used.push((res, sk));
