@@ -150,3 +150,11 @@ fn nesting_inside_an_element() {
     // The reader's stack of open elements must not be copied whole at every start tag.
     check("nest", 2000, 32000);
 }
+
+#[test]
+fn markup_left_to_quick_xml() {
+    // References, comments and CDATA: the SFC's producer hands quick-xml one event at a time from
+    // its `<` or `&` (`read::tape::plain_event`); each must cost its own length, not the rest of
+    // the piece.
+    check("markup", 2000, 32000);
+}

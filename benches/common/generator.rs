@@ -771,6 +771,10 @@ pub const DIMENSIONS: &[(&str, &str)] = &[
         "nest",
         "elements unknown to the reader nested n deep inside one step (16 steps)",
     ),
+    (
+        "markup",
+        "references, comments and CDATA sections (what the SFC's producer leaves to quick-xml, one event at a time) in one element of one step, n of each (16 steps)",
+    ),
 ];
 
 /// Writes a project that grows in one dimension of [`DIMENSIONS`] with `n`; the rest stays
@@ -827,6 +831,12 @@ pub fn write_shape(dir: &Path, dim: &str, n: usize) -> Option<io::Result<Project
         }
         "nest" => {
             extra = format!(" {}{}\n", "<x>".repeat(n), "</x>".repeat(n));
+        }
+        "markup" => {
+            extra = format!(
+                " <x>{}</x>\n",
+                "a &amp; b &#x41;<!-- c --><![CDATA[d]]> ".repeat(n)
+            );
         }
         "skills" => {
             let mut t = String::new();
