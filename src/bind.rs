@@ -356,8 +356,9 @@ pub struct Calls<'a> {
 }
 
 /// A value as the language writes it, and as a number (for conversions) when it is one.
-/// The number is its text, read as a number only by a conversion that needs it.
-type Valued<'a> = (Cow<'a, str>, Option<Cow<'a, str>>);
+/// The number is the literal, read as one ([`crate::value::Literal::as_f64`]) only by a
+/// conversion that needs it.
+type Valued<'a> = (Cow<'a, str>, Option<crate::value::Literal<'a>>);
 
 /// Steps from which [`bind`] renders the second half of them on a second thread.
 pub const PARALLEL_FROM: usize = 2_000;
@@ -491,7 +492,7 @@ impl<'a> StepCx<'a> {
             extras: Extras::default(),
         };
         let mut values: Vec<Cow<str>> = Vec::new();
-        let mut numbers: Vec<Option<Cow<str>>> = Vec::new();
+        let mut numbers: Vec<Option<crate::value::Literal>> = Vec::new();
         let mut lists = crate::value::ItemCache::default();
         for &i in steps {
             let Some((res, sk)) = r.step_skill[i] else {
@@ -533,8 +534,7 @@ impl<'a> StepCx<'a> {
                     let at = code.len();
                     if let Err(why) = call.template.render_with(
                         &values,
-                        // (`Literal::as_f64`, only where a conversion asks.)
-                        &|k| numbers.get(k)?.as_deref()?.parse().ok(),
+                        &|k| numbers.get(k)?.as_ref()?.as_f64(),
                         &mut code,
                     ) {
                         code.truncate(at);
@@ -951,7 +951,7 @@ fn value_of<'a>(
     };
     let typed = crate::value::literal(s, p.ty);
     let number = match &typed {
-        Ok(crate::value::Literal::Number(n)) => Some(n.clone()),
+        Ok(n @ crate::value::Literal::Number(_)) => Some(n.clone()),
         _ => None,
     };
     let neutral = typed.is_ok();

@@ -502,6 +502,8 @@ impl<R: BufRead> Producer<R> {
 /// target hold the events to quick-xml's over the whole text.
 fn plain_event(text: &str, at: usize) -> Option<(Event<'_>, usize)> {
     use quick_xml::events::{BytesEnd, BytesStart, BytesText};
+    // (quick-xml's own: the name ends at the first white space.)
+    use quick_xml::utils::name_len;
     let b = text.as_bytes();
     let Some(&first) = b.get(at) else {
         return Some((Event::Eof, at));
@@ -539,10 +541,16 @@ fn plain_event(text: &str, at: usize) -> Option<(Event<'_>, usize)> {
                 Event::End(BytesEnd::new(name))
             } else if close - at >= 2 && b[close - 1] == b'/' {
                 let content = &text[at + 1..close - 1];
-                Event::Empty(BytesStart::from_content(content, name_len(content)))
+                Event::Empty(BytesStart::from_content(
+                    content,
+                    name_len(content.as_bytes()),
+                ))
             } else {
                 let content = &text[at + 1..close];
-                Event::Start(BytesStart::from_content(content, name_len(content)))
+                Event::Start(BytesStart::from_content(
+                    content,
+                    name_len(content.as_bytes()),
+                ))
             };
             Some((ev, close + 1))
         }
@@ -552,14 +560,6 @@ fn plain_event(text: &str, at: usize) -> Option<(Event<'_>, usize)> {
             Some((Event::Text(BytesText::from_escaped(&text[at..end])), end))
         }
     }
-}
-
-/// The length of a tag's name at the start of its `content` (up to the first white space).
-fn name_len(content: &str) -> usize {
-    content
-        .bytes()
-        .position(is_whitespace)
-        .unwrap_or(content.len())
 }
 
 /// The attributes of a tag's `content` after its name (which ends at `from`), each handed to
