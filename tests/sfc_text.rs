@@ -50,20 +50,25 @@ fn case() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/err/e314_missing_variable")
 }
 
+/// Compiles the e314 case (program `out`) with its files from `src`.
+fn compile_case(src: &dyn FileSource) -> skillpost::compile::Compilation {
+    compile(
+        src,
+        &case().join("Blackboard.aml"),
+        &Options {
+            program: Some("out".into()),
+            ..Default::default()
+        },
+    )
+}
+
 fn run(second: Option<Vec<u8>>) -> (skillpost::compile::Compilation, usize) {
     let src = Source {
         fs: FsSource::default(),
         second,
         sfc_reads: Mutex::new(0),
     };
-    let c = compile(
-        &src,
-        &case().join("Blackboard.aml"),
-        &Options {
-            program: Some("out".into()),
-            ..Default::default()
-        },
-    );
+    let c = compile_case(&src);
     let n = *src.sfc_reads.lock().unwrap();
     (c, n)
 }
@@ -370,14 +375,7 @@ fn run_large(second: Option<Vec<u8>>) -> (skillpost::diag::Diagnostic, usize) {
         reads: Mutex::new(0),
         second_bytes: std::sync::Arc::default(),
     };
-    let c = compile(
-        &src,
-        &case().join("Blackboard.aml"),
-        &Options {
-            program: Some("out".into()),
-            ..Default::default()
-        },
-    );
+    let c = compile_case(&src);
     let d = c
         .diagnostics
         .iter()
