@@ -400,8 +400,8 @@ impl<'a> Ctx<'a> {
             let f = group[0].0;
             let offsets = group.iter().map(|p| p.1).collect();
             if !self.read_lines(f, offsets) {
-                self.diags
-                    .forget_file(f, &self.sources.get(f).display.clone());
+                let file = self.sources.get(f);
+                self.diags.forget_file(f, &file.path, &file.display);
             }
         }
     }

@@ -346,12 +346,14 @@ impl Diagnostics {
     }
 
     /// Takes `file` out of every diagnostic's places (its text is gone: it changed while the
-    /// compile ran), saying so in a note.
-    pub fn forget_file(&mut self, file: FileId, display: &str) {
+    /// compile ran), saying so in a note. A diagnostic that was in `file` still names it (`path`):
+    /// the user learns which file to look at, and the daemon which file is still being written.
+    pub fn forget_file(&mut self, file: FileId, path: &Path, display: &str) {
         for d in self.list.iter_mut() {
             let mut lost = false;
             if d.span.as_ref().is_some_and(|s| s.file == file) {
                 d.span = None;
+                d.path.get_or_insert_with(|| path.to_owned());
                 lost = true;
             }
             let before = d.related.len();

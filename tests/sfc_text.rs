@@ -133,6 +133,10 @@ fn an_sfc_saved_during_the_compile_loses_the_place_and_says_so() {
         "{:?}",
         d.notes
     );
+    // It still names the file (the daemon retries a file still being written by this name).
+    let at = d.locate(&c.sources);
+    assert_eq!(at.file, Some(case().join("sfc.xml").display().to_string()));
+    assert_eq!((at.line, at.column), (None, None));
     // And it renders.
     let _ = skillpost::diag::render(
         &c.diagnostics,

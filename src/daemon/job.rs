@@ -531,6 +531,59 @@ mod tests {
             .collect()
     }
 
+    /// Reads from disk, but the SFC's first open finds it empty (truncated by a save) and the
+    /// save's bytes land right after: what an in-place `write` racing the compile looks like.
+    struct SavedDuring {
+        fs: FsSource,
+        sfc: PathBuf,
+        opened: std::sync::atomic::AtomicBool,
+    }
+
+    impl FileSource for SavedDuring {
+        fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
+            self.fs.read(path)
+        }
+
+        fn open(&self, path: &Path) -> std::io::Result<crate::load::Opened<'_>> {
+            if path == self.sfc && !self.opened.swap(true, std::sync::atomic::Ordering::SeqCst) {
+                let full = std::fs::read(path)?;
+                let o = crate::load::Opened {
+                    len: Some(0),
+                    reader: Box::new(std::io::Cursor::new(Vec::new())),
+                };
+                std::fs::write(path, full)?;
+                return Ok(o);
+            }
+            self.fs.open(path)
+        }
+    }
+
+    #[test]
+    fn an_sfc_read_empty_by_a_racing_save_is_still_being_written() {
+        let dir = tempfile::tempdir().unwrap();
+        let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/ok/reference-sample");
+        for f in ["Blackboard.aml", "sfc.xml", "kr15-2.irl"] {
+            std::fs::copy(sample.join(f), dir.path().join(f)).unwrap();
+        }
+        let sfc = dir.path().join("sfc.xml");
+        let fs = SavedDuring {
+            fs: FsSource::default(),
+            sfc: sfc.clone(),
+            opened: Default::default(),
+        };
+        let c = crate::compile::compile(
+            &fs,
+            &dir.path().join("Blackboard.aml"),
+            &crate::compile::Options::default(),
+        );
+        assert!(c.has_errors(), "an empty SFC does not compile");
+        // What `Hashing` records for the empty bytes the compile read.
+        let read = HashMap::from([(sfc.clone(), Some(crate::load::ContentHash::new().finish()))]);
+        // The file's text is not the one compiled, so the error has no line, but it still names
+        // the file: the daemon tries again instead of failing the run.
+        assert_eq!(half_written(&c, &read), Some((sfc, true)));
+    }
+
     #[test]
     fn a_panic_completes_the_run_with_exactly_one_outcome() {
         let started = ("compile-started".to_owned(), 7);
