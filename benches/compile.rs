@@ -559,6 +559,15 @@ fn run_case(case: &Case, tmp: &Path) -> Row {
             s.stream_floor.push(stream_floor);
             s.tokenize.push(tokenize);
             s.compile.push(compile);
+            // Each run's pair on stderr: on a shared machine the spread says how far to trust
+            // the medians.
+            eprintln!(
+                "{} run {i}: quick-xml floor {:.1} ms, compile {:.1} ms ({:.2}x)",
+                case.label,
+                stream_floor.as_secs_f64() * 1e3,
+                compile.as_secs_f64() * 1e3,
+                compile.as_secs_f64() / stream_floor.as_secs_f64()
+            );
             let mut rest = compile;
             for (k, stage) in OWN_STAGES.iter().enumerate() {
                 let d = own
