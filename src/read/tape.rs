@@ -753,7 +753,18 @@ where
                 }
             });
         match started {
-            Ok(_) => consume(&mut Threaded { filled, spent }),
+            Ok(producer) => {
+                // (The `Threaded`, and with it the receiver, is dropped at the end of this
+                // statement: a producer still sending stops, as the reader stopped early.)
+                let out = consume(&mut Threaded { filled, spent });
+                // The scope's own join waits only for the closure; joining the thread waits
+                // for its end, thread-local storage and all, so nothing of it outlives the
+                // reading (LeakSanitizer found its channel context still allocated).
+                if let Err(panic) = producer.join() {
+                    std::panic::resume_unwind(panic);
+                }
+                out
+            }
             Err(_) => {
                 let producer = slot
                     .lock()
