@@ -8,11 +8,45 @@ use std::sync::Mutex;
 use skillpost::compile::{Options, compile};
 use skillpost::load::{FileSource, FsSource};
 
-/// Reads from disk; the SFC's second read returns `second` instead (a save in between).
+/// Reads from disk, except the SFC: its first reading gets `first` (the file on disk when
+/// `None`), later ones `second` (a save in between; `first` again when `None`). The readings of
+/// the SFC are counted, and the bytes the later ones took.
+#[derive(Default)]
 struct Source {
     fs: FsSource,
+    first: Option<Vec<u8>>,
     second: Option<Vec<u8>>,
     sfc_reads: Mutex<usize>,
+    second_bytes: std::sync::Arc<std::sync::atomic::AtomicUsize>,
+}
+
+impl Source {
+    fn with(first: Option<Vec<u8>>, second: Option<Vec<u8>>) -> Self {
+        Source {
+            first,
+            second,
+            ..Default::default()
+        }
+    }
+
+    /// The SFC's bytes for its next reading, and whether it is a later one.
+    fn sfc(&self, path: &Path) -> std::io::Result<(Vec<u8>, bool)> {
+        let mut n = self.sfc_reads.lock().unwrap();
+        *n += 1;
+        let bytes = match (&self.first, &self.second, *n) {
+            (_, Some(b), 2..) | (Some(b), _, _) => b.clone(),
+            _ => self.fs.read(path)?,
+        };
+        Ok((bytes, *n > 1))
+    }
+
+    fn second_bytes(&self) -> usize {
+        self.second_bytes.load(std::sync::atomic::Ordering::Relaxed)
+    }
+}
+
+fn is_sfc(path: &Path) -> bool {
+    path.file_name().is_some_and(|n| n == "sfc.xml")
 }
 
 impl FileSource for Source {
@@ -21,26 +55,49 @@ impl FileSource for Source {
     }
 
     fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
-        if path.file_name().is_some_and(|n| n == "sfc.xml") {
-            let mut n = self.sfc_reads.lock().unwrap();
-            *n += 1;
-            if *n > 1
-                && let Some(b) = &self.second
-            {
-                return Ok(b.clone());
-            }
+        if is_sfc(path) {
+            return self.sfc(path).map(|(b, _)| b);
         }
         self.fs.read(path)
+    }
+
+    fn open(&self, path: &Path) -> std::io::Result<skillpost::load::Opened<'_>> {
+        if !is_sfc(path) {
+            return self.fs.open(path);
+        }
+        let (bytes, later) = self.sfc(path)?;
+        let counted = if later {
+            self.second_bytes.clone()
+        } else {
+            std::sync::Arc::default()
+        };
+        Ok(skillpost::load::Opened {
+            len: Some(bytes.len() as u64),
+            reader: Box::new(Counting {
+                inner: std::io::Cursor::new(bytes),
+                n: counted,
+            }),
+        })
+    }
+}
+
+/// A reader that counts what is read through it.
+struct Counting<R> {
+    inner: R,
+    n: std::sync::Arc<std::sync::atomic::AtomicUsize>,
+}
+
+impl<R: std::io::Read> std::io::Read for Counting<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.n.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+        Ok(n)
     }
 }
 
 /// Compiles from disk; also says how often the SFC was read.
 fn compile_counting(blackboard: &Path, opts: &Options) -> (skillpost::compile::Compilation, usize) {
-    let src = Source {
-        fs: FsSource::default(),
-        second: None,
-        sfc_reads: Mutex::new(0),
-    };
+    let src = Source::default();
     let c = compile(&src, blackboard, opts);
     let reads = *src.sfc_reads.lock().unwrap();
     (c, reads)
@@ -63,11 +120,7 @@ fn compile_case(src: &dyn FileSource) -> skillpost::compile::Compilation {
 }
 
 fn run(second: Option<Vec<u8>>) -> (skillpost::compile::Compilation, usize) {
-    let src = Source {
-        fs: FsSource::default(),
-        second,
-        sfc_reads: Mutex::new(0),
-    };
+    let src = Source::with(None, second);
     let c = compile_case(&src);
     let n = *src.sfc_reads.lock().unwrap();
     (c, n)
@@ -306,61 +359,7 @@ fn warnings_not_kept_are_not_located() {
     assert!(!texts(&kept).is_empty());
 }
 
-/// Serves the e314 case with its SFC made large (a comment of 3 MiB after the root element):
-/// the first reading gets `first`, a second one `second` (or `first` again), and the bytes the
-/// second reading took are counted.
-struct Large {
-    fs: FsSource,
-    first: Vec<u8>,
-    second: Option<Vec<u8>>,
-    reads: Mutex<usize>,
-    second_bytes: std::sync::Arc<std::sync::atomic::AtomicUsize>,
-}
-
-/// A reader that counts what is read through it.
-struct Counting<R> {
-    inner: R,
-    n: std::sync::Arc<std::sync::atomic::AtomicUsize>,
-}
-
-impl<R: std::io::Read> std::io::Read for Counting<R> {
-    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        let n = self.inner.read(buf)?;
-        self.n.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
-        Ok(n)
-    }
-}
-
-impl FileSource for Large {
-    fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
-        self.fs.read(path)
-    }
-
-    fn open(&self, path: &Path) -> std::io::Result<skillpost::load::Opened<'_>> {
-        if path.file_name().is_none_or(|n| n != "sfc.xml") {
-            return self.fs.open(path);
-        }
-        let mut reads = self.reads.lock().unwrap();
-        *reads += 1;
-        let bytes = match (&self.second, *reads) {
-            (Some(b), 2..) => b.clone(),
-            _ => self.first.clone(),
-        };
-        let counted = if *reads > 1 {
-            self.second_bytes.clone()
-        } else {
-            std::sync::Arc::default()
-        };
-        Ok(skillpost::load::Opened {
-            len: Some(bytes.len() as u64),
-            reader: Box::new(Counting {
-                inner: std::io::Cursor::new(bytes),
-                n: counted,
-            }),
-        })
-    }
-}
-
+/// The e314 case's SFC made large: a comment of 3 MiB after the root element.
 fn large_sfc() -> Vec<u8> {
     let mut sfc = std::fs::read(case().join("sfc.xml")).unwrap();
     sfc.extend_from_slice(b"\n<!--");
@@ -372,13 +371,7 @@ fn large_sfc() -> Vec<u8> {
 /// Compiles the e314 case with the large SFC; the E314 diagnostic and the bytes the second
 /// reading took.
 fn run_large(second: Option<Vec<u8>>) -> (skillpost::diag::Diagnostic, usize) {
-    let src = Large {
-        fs: FsSource::default(),
-        first: large_sfc(),
-        second,
-        reads: Mutex::new(0),
-        second_bytes: std::sync::Arc::default(),
-    };
+    let src = Source::with(Some(large_sfc()), second);
     let c = compile_case(&src);
     let d = c
         .diagnostics
@@ -389,8 +382,7 @@ fn run_large(second: Option<Vec<u8>>) -> (skillpost::diag::Diagnostic, usize) {
     if let Some(s) = &d.span {
         assert_eq!(c.sources.line_col(s.file, s.range.start).0, 29);
     }
-    let n = src.second_bytes.load(std::sync::atomic::Ordering::Relaxed);
-    (d, n)
+    (d, src.second_bytes())
 }
 
 #[test]
