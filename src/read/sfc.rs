@@ -1111,8 +1111,7 @@ impl Stream {
             kind,
             span: b.span.clone(),
             x: b.x.unwrap_or(0.0),
-            // Exactly sized: most elements have one input, and there are 100,000 of them.
-            inputs: b.inputs.as_slice().to_vec(),
+            inputs: b.inputs.as_slice().into(),
         })
     }
 
