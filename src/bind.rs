@@ -593,7 +593,7 @@ fn conversion_error(
                         crate::value::Lookup::Scalar(s) => s.to_owned(),
                         _ => vars.raw(v).to_owned(),
                     },
-                    v.value_span.clone(),
+                    v.value_span(),
                 ),
                 None => (p.path.text.to_string(), String::new(), e.span.clone()),
             };
@@ -898,7 +898,7 @@ fn value_of<'a>(
     let err = |code: Code, msg: String| {
         Some(Box::new(
             Diagnostic::error(code, msg)
-                .at(var.value_span.clone())
+                .at(var.value_span())
                 .element(format!("localId {local_id}")),
         ))
     };

@@ -551,8 +551,15 @@ pub struct Variable {
     /// syntax was checked by the reader. Items are looked up without building a tree
     /// ([`crate::value::lookup`]); [`Sfc::value_of`] builds one.
     pub raw: Range<usize>,
+    /// The `Value` attribute's value, in the file of the name (the SFC).
+    pub value_range: Range<usize>,
+}
+
+impl Variable {
     /// The `Value` attribute's value.
-    pub value_span: Span,
+    pub fn value_span(&self) -> Span {
+        Span::new(self.name.span.file, self.value_range.clone())
+    }
 }
 
 /// An SFC variable's value: `(a, (b, c))` nests lists, anything else is one trimmed value.

@@ -1251,7 +1251,6 @@ impl Stream {
                 continue;
             };
             let value_text = value.get(s);
-            let value_span = Span::new(file, value.range.clone());
             match crate::value::check_value(value_text) {
                 Ok(()) => {
                     let at = self.values.len();
@@ -1262,7 +1261,7 @@ impl Stream {
                     self.variables.push(Variable {
                         name,
                         raw: at..self.values.len(),
-                        value_span,
+                        value_range: value.range.clone(),
                     });
                 }
                 Err((offset, msg)) => {
