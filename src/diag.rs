@@ -180,6 +180,15 @@ impl Sources {
         self.files.iter().position(|f| f.path == path)
     }
 
+    /// `path` as diagnostics show it: the name of the file read from it, else the path itself
+    /// (a diagnostic without a place names its file as those with one do).
+    pub fn display_of(&self, path: &Path) -> String {
+        match self.find(path) {
+            Some(id) => self.files[id].display.clone(),
+            None => path.display().to_string(),
+        }
+    }
+
     /// 1-based line and column (in characters) of a byte offset.
     pub fn line_col(&self, id: FileId, offset: usize) -> (usize, usize) {
         let f = &self.files[id];
@@ -651,7 +660,7 @@ impl Diagnostic {
                 (Some(sources.get(s.file).display.clone()), Some(l), Some(c))
             }
             None => (
-                self.path.as_ref().map(|p| p.display().to_string()),
+                self.path.as_ref().map(|p| sources.display_of(p)),
                 None,
                 None,
             ),
@@ -753,7 +762,7 @@ pub fn render(
                 let mut notes = d.notes.clone();
                 if d.span.is_none() {
                     if let Some(p) = &d.path {
-                        notes.insert(0, format!("file: {}", p.display()));
+                        notes.insert(0, format!("file: {}", sources.display_of(p)));
                     }
                     if let Some(e) = &d.element {
                         notes.push(format!("element: {e}"));
@@ -977,6 +986,28 @@ mod tests {
                 c.as_str()
             );
         }
+    }
+
+    /// A diagnostic whose file changed while the compile ran loses its line and column, not its
+    /// file: that is named as the diagnostics with a place name it, and the daemon finds the
+    /// file by its path (`daemon::job::half_written`).
+    #[test]
+    fn a_forgotten_place_keeps_its_file() {
+        let mut s = Sources::default();
+        let path = PathBuf::from("/project/sfc.xml");
+        let f = s.add(path.clone(), "sfc.xml".into(), "<a/>".into(), false);
+        let mut diags = Diagnostics::default();
+        diags.push(Diagnostic::error(Code::XmlSyntax, "broken").at(Span::new(f, 0..1)));
+        diags.forget_file(f, &path, "sfc.xml");
+        let d = &diags.iter().next().unwrap();
+        assert!(d.span.is_none());
+        assert_eq!(d.path.as_deref(), Some(path.as_path()));
+        let at = d.locate(&s);
+        assert_eq!((at.file.as_deref(), at.line), (Some("sfc.xml"), None));
+        let human = render(&diags.into_vec(), &s, Format::Human, false, false);
+        assert!(human.contains("file: sfc.xml"), "{human}");
+        // A path that was not read is shown as it is.
+        assert_eq!(s.display_of(Path::new("/other.xml")), "/other.xml");
     }
 
     #[test]
