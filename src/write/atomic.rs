@@ -76,27 +76,13 @@ fn stage(path: &Path, bytes: &[u8]) -> io::Result<Option<Staged>> {
     };
     if let Some(m) = &existing {
         if m.file_type().is_symlink() {
-            return Err(io::Error::new(
-                io::ErrorKind::InvalidInput,
-                format!(
-                    "{} is a symbolic link; an output is never written through a link (remove the link)",
-                    target.display()
-                ),
-            ));
+            return Err(link_refused(&target));
         }
         if !m.is_file() {
-            return Err(io::Error::new(
-                io::ErrorKind::InvalidInput,
-                format!("{} exists and is not a regular file", target.display()),
-            ));
+            return Err(not_regular(&target));
         }
-        if m.len() == bytes.len() as u64 {
-            match fs::read(&target) {
-                Ok(old) if old == bytes => return Ok(None),
-                Ok(_) => {}
-                Err(e) if e.kind() == io::ErrorKind::NotFound => {}
-                Err(e) => return Err(e),
-            }
+        if m.len() == bytes.len() as u64 && holds_exactly(&target, bytes)? {
+            return Ok(None);
         }
         if read_only(m) {
             return Err(io::Error::new(
@@ -117,6 +103,71 @@ fn stage(path: &Path, bytes: &[u8]) -> io::Result<Option<Staged>> {
         existed: existing.is_some(),
         tmp,
     }))
+}
+
+/// Whether the regular file at `path` holds exactly `bytes`, compared a piece at a time: an
+/// output of 100,000 steps is 13 MB, and it is not read into memory a second time.
+///
+/// The caller checked the path's kind before; a file swapped in since then is not trusted. The
+/// file is opened without following a link and without blocking, and its kind is checked on the
+/// open handle: a symbolic link (say, to `/dev/zero`) is refused as [`stage`] refuses one, a FIFO
+/// or a device is refused as not a regular file, and nothing is read past `bytes.len() + 1`
+/// bytes (a file that grows meanwhile). A file gone meanwhile holds nothing.
+fn holds_exactly(path: &Path, bytes: &[u8]) -> io::Result<bool> {
+    use io::Read as _;
+    use std::os::unix::fs::OpenOptionsExt as _;
+    let flags = rustix::fs::OFlags::NOFOLLOW | rustix::fs::OFlags::NONBLOCK;
+    let file = match fs::File::options()
+        .read(true)
+        .custom_flags(flags.bits() as i32)
+        .open(path)
+    {
+        Ok(f) => f,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(false),
+        Err(e) if e.raw_os_error() == Some(rustix::io::Errno::LOOP.raw_os_error()) => {
+            return Err(link_refused(path));
+        }
+        Err(e) => return Err(e),
+    };
+    let meta = file.metadata()?;
+    if !meta.is_file() {
+        return Err(not_regular(path));
+    }
+    if meta.len() != bytes.len() as u64 {
+        return Ok(false);
+    }
+    let mut rest = bytes;
+    let mut piece = vec![0u8; (64 << 10).min(bytes.len() + 1)];
+    let mut file = file.take(bytes.len() as u64 + 1);
+    loop {
+        let n = match file.read(&mut piece) {
+            Ok(0) => return Ok(rest.is_empty()),
+            Ok(n) => n,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e),
+        };
+        match rest.split_at_checked(n) {
+            Some((head, tail)) if head == &piece[..n] => rest = tail,
+            _ => return Ok(false),
+        }
+    }
+}
+
+fn link_refused(path: &Path) -> io::Error {
+    io::Error::new(
+        io::ErrorKind::InvalidInput,
+        format!(
+            "{} is a symbolic link; an output is never written through a link (remove the link)",
+            path.display()
+        ),
+    )
+}
+
+fn not_regular(path: &Path) -> io::Error {
+    io::Error::new(
+        io::ErrorKind::InvalidInput,
+        format!("{} exists and is not a regular file", path.display()),
+    )
 }
 
 /// The folder a file is in (`.` for a bare name).
@@ -427,6 +478,64 @@ mod tests {
         );
         assert_eq!(fs::metadata(&p).unwrap().modified().unwrap(), old_time());
         assert!(temp_leftovers(d.path()).is_empty());
+    }
+
+    #[test]
+    fn an_output_is_compared_piece_by_piece() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("out.src");
+        // Longer than one piece (64 KiB), differing only in the last byte or past it.
+        let mut same: Vec<u8> = (0..200_000u32).map(|i| b'a' + (i % 26) as u8).collect();
+        fs::write(&p, &same).unwrap();
+        assert!(holds_exactly(&p, &same).unwrap());
+        *same.last_mut().unwrap() = b'!';
+        assert!(!holds_exactly(&p, &same).unwrap());
+        same.pop();
+        assert!(!holds_exactly(&p, &same).unwrap());
+        assert!(!holds_exactly(&p, b"").unwrap());
+        fs::write(&p, b"").unwrap();
+        assert!(holds_exactly(&p, b"").unwrap());
+        assert!(!holds_exactly(&p, b"x").unwrap());
+        fs::remove_file(&p).unwrap();
+        assert!(!holds_exactly(&p, b"").unwrap());
+    }
+
+    /// `holds_exactly` on `path` in a thread: its answer within 10 s, or `None` (it hangs).
+    #[cfg(unix)]
+    fn compared_in_time(path: &Path, bytes: &'static [u8]) -> Option<io::Result<bool>> {
+        let (tx, rx) = std::sync::mpsc::channel();
+        let path = path.to_path_buf();
+        std::thread::spawn(move || {
+            let _ = tx.send(holds_exactly(&path, bytes));
+        });
+        rx.recv_timeout(std::time::Duration::from_secs(10)).ok()
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_fifo_or_link_swapped_in_before_the_comparison_is_refused_not_read() {
+        // `stage` checked the path was a regular file; someone then replaced it. A FIFO must not
+        // make the comparison wait for a writer, a link to `/dev/zero` must not be followed and
+        // read without end.
+        let d = tempfile::tempdir().unwrap();
+        let fifo = d.path().join("fifo.src");
+        let st = std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap();
+        assert!(st.success());
+        let e = compared_in_time(&fifo, b"DEF x()\n")
+            .expect("the comparison waited on a FIFO")
+            .unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::InvalidInput);
+        assert!(e.to_string().contains("not a regular file"), "{e}");
+        let link = d.path().join("zero.src");
+        std::os::unix::fs::symlink("/dev/zero", &link).unwrap();
+        let e = compared_in_time(&link, b"DEF x()\n")
+            .expect("the comparison read through a link")
+            .unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::InvalidInput);
+        assert!(e.to_string().contains("symbolic link"), "{e}");
     }
 
     #[test]
