@@ -189,6 +189,8 @@ impl Default for Opts {
 /// Where [`write_back_with`] calls its hook (tests change the file there).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Point<'a> {
+    /// The new file is staged and synced; the blackboard, found a regular file, is opened next.
+    Staged,
     /// The new file is staged and synced, the blackboard open, leased (if possible) and read.
     Read,
     /// Right before the last lease check and the exchange.
@@ -275,10 +277,14 @@ pub(crate) fn write_back_with(
     let tmp = stage_in(&dir, &new_bytes, Some(&before))?;
     let new_id = id(&tmp.as_file().metadata()?);
     let old_id = id(&before);
-    // Never through a link swapped in meanwhile: `target` is the resolved file.
+    hook(Point::Staged);
+    // Never through a link swapped in meanwhile: `target` is the resolved file. Without
+    // blocking: a FIFO swapped in meanwhile opens at once (and is not the file `before` saw),
+    // instead of holding the compile until something writes to it.
+    let flags = rustix::fs::OFlags::NOFOLLOW | rustix::fs::OFlags::NONBLOCK;
     let file = match fs::File::options()
         .read(true)
-        .custom_flags(rustix::fs::OFlags::NOFOLLOW.bits() as i32)
+        .custom_flags(flags.bits() as i32)
         .open(&target)
     {
         Ok(f) => f,
@@ -688,6 +694,35 @@ mod tests {
             WriteBackOutcome::SkippedChangedOnDisk
         );
         assert!(!p.exists());
+        assert!(temp_leftovers(d.path()).is_empty());
+    }
+
+    #[test]
+    fn a_fifo_swapped_in_before_the_open_is_skipped_at_once() {
+        // The blackboard was a regular file when checked; a FIFO replaces it before it is
+        // opened. Opening it must not wait for a writer (the compile would hang for ever).
+        let (d, p) = project();
+        let (tx, rx) = std::sync::mpsc::channel();
+        let path = p.clone();
+        std::thread::spawn(move || {
+            let out = run(&path, Opts::default(), &mut |pt| {
+                if matches!(pt, Point::Staged) {
+                    fs::remove_file(&path).unwrap();
+                    let st = std::process::Command::new("mkfifo")
+                        .arg(&path)
+                        .status()
+                        .unwrap();
+                    assert!(st.success());
+                }
+            });
+            let _ = tx.send(out);
+        });
+        let out = rx
+            .recv_timeout(Duration::from_secs(10))
+            .expect("the write-back waited on a FIFO");
+        assert_eq!(out, WriteBackOutcome::SkippedChangedOnDisk);
+        use std::os::unix::fs::FileTypeExt as _;
+        assert!(fs::symlink_metadata(&p).unwrap().file_type().is_fifo());
         assert!(temp_leftovers(d.path()).is_empty());
     }
 
