@@ -114,7 +114,6 @@ fn stage(path: &Path, bytes: &[u8]) -> io::Result<Option<Staged>> {
 /// or a device is refused as not a regular file, and nothing is read past `bytes.len() + 1`
 /// bytes (a file that grows meanwhile). A file gone meanwhile holds nothing.
 fn holds_exactly(path: &Path, bytes: &[u8]) -> io::Result<bool> {
-    use io::Read as _;
     use std::os::unix::fs::OpenOptionsExt as _;
     let flags = rustix::fs::OFlags::NOFOLLOW | rustix::fs::OFlags::NONBLOCK;
     let file = match fs::File::options()
@@ -129,28 +128,10 @@ fn holds_exactly(path: &Path, bytes: &[u8]) -> io::Result<bool> {
         }
         Err(e) => return Err(e),
     };
-    let meta = file.metadata()?;
-    if !meta.is_file() {
+    if !file.metadata()?.is_file() {
         return Err(not_regular(path));
     }
-    if meta.len() != bytes.len() as u64 {
-        return Ok(false);
-    }
-    let mut rest = bytes;
-    let mut piece = vec![0u8; (64 << 10).min(bytes.len() + 1)];
-    let mut file = file.take(bytes.len() as u64 + 1);
-    loop {
-        let n = match file.read(&mut piece) {
-            Ok(0) => return Ok(rest.is_empty()),
-            Ok(n) => n,
-            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
-            Err(e) => return Err(e),
-        };
-        match rest.split_at_checked(n) {
-            Some((head, tail)) if head == &piece[..n] => rest = tail,
-            _ => return Ok(false),
-        }
-    }
+    super::holds(&file, bytes)
 }
 
 fn link_refused(path: &Path) -> io::Error {

@@ -23,6 +23,31 @@ pub use atomic::{WriteOutcome, is_temporary, write_all_if_changed, write_if_chan
 pub use splice::{SpliceSite, splice_at, splice_value};
 pub use writeback::{WriteBackOutcome, write_back};
 
+/// Whether the open `file` holds exactly `expected`: its length by `fstat`, then its bytes read
+/// through the descriptor from offset 0 (positional reads: the descriptor's own offset is left
+/// alone, so a file is checked again and again) and compared a piece of at most 64 KiB at a time
+/// (a 13 MB output is not held twice), and nothing after them (a file that grew meanwhile).
+pub(crate) fn holds(file: &std::fs::File, expected: &[u8]) -> std::io::Result<bool> {
+    use std::os::unix::fs::FileExt as _;
+    if file.metadata()?.len() != expected.len() as u64 {
+        return Ok(false);
+    }
+    let mut piece = vec![0u8; expected.len().clamp(1, 64 << 10)];
+    let mut at = 0;
+    while at < expected.len() {
+        let want = piece.len().min(expected.len() - at);
+        match file.read_at(&mut piece[..want], at as u64) {
+            Ok(0) => return Ok(false),
+            Ok(n) if piece[..n] == expected[at..at + n] => at += n,
+            Ok(_) => return Ok(false),
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    let mut probe = [0u8; 1];
+    Ok(file.read_at(&mut probe, at as u64)? == 0)
+}
+
 /// The names in `dir` that start like our temporary files (any suffix: a leftover of another
 /// shape is one too), for the unit tests of the writers.
 #[cfg(test)]

@@ -84,10 +84,11 @@
 
 use std::fs;
 use std::io;
-use std::os::unix::fs::{FileExt as _, MetadataExt as _, OpenOptionsExt as _};
+use std::os::unix::fs::{MetadataExt as _, OpenOptionsExt as _};
 use std::path::{Path, PathBuf};
 
 use super::atomic::{parent_dir, stage_in, sync_dir};
+use super::holds;
 use super::splice::{SpliceSite, splice_at};
 
 /// The UTF-8 byte order mark.
@@ -444,28 +445,6 @@ type Id = (u64, u64);
 
 fn id(m: &fs::Metadata) -> Id {
     (m.dev(), m.ino())
-}
-
-/// Whether the open file holds exactly `expected` (read through the descriptor, from offset 0).
-fn holds(file: &fs::File, expected: &[u8]) -> io::Result<bool> {
-    if file.metadata()?.len() != expected.len() as u64 {
-        return Ok(false);
-    }
-    let mut buf = vec![0; expected.len()];
-    let mut at = 0;
-    while at < buf.len() {
-        match file.read_at(&mut buf[at..], at as u64) {
-            Ok(0) => return Ok(false),
-            Ok(n) => at += n,
-            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-            Err(e) => return Err(e),
-        }
-    }
-    let mut probe = [0u8; 1];
-    if file.read_at(&mut probe, at as u64)? != 0 {
-        return Ok(false);
-    }
-    Ok(buf == expected)
 }
 
 /// `renameat2(from, to, RENAME_EXCHANGE)`.
