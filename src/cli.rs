@@ -305,6 +305,14 @@ fn run(a: Args) -> u8 {
                     "hard-linked",
                     "it has several names (hard links); writing it would split them",
                 )),
+                Some(W::SkippedReadOnly) => Some((
+                    "read-only",
+                    "it is read-only (no write permission); make it writable to get the value",
+                )),
+                Some(W::SkippedOwner) => Some((
+                    "owner",
+                    "its owner could not be kept (replacing it would make it this user's file); run as its owner, or with CAP_CHOWN",
+                )),
                 None => Some((
                     "no-target",
                     "no write-back target (Code -> KRL code -> refURI; W204 with --warn shows where)",

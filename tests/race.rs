@@ -8,10 +8,13 @@
 //! compiled** when the daemon goes quiet with the save's wrong value in the file (its own-write
 //! bookkeeping took the save for its own write). Both must be zero.
 //!
-//! Three modes: rename saves (write a temporary file, rename it over the blackboard), in-place
-//! saves (open with truncation, write), and a writer that opens the file as soon as the staged
-//! file appears and truncates and writes through that descriptor 0–2 ms later. `SKILLPOST_RACE_SAVES` saves per mode (default 150);
-//! `SKILLPOST_RACE_BIN` runs another binary (an older build, to show the test catches its bug).
+//! Four modes: rename saves (write a temporary file, rename it over the blackboard), in-place
+//! saves (open with truncation, write), a writer that opens the file as soon as the staged
+//! file appears and truncates and writes through that descriptor 0–2 ms later, and a rename
+//! save followed at once by an open of the name and a write through that descriptor 1 ms
+//! later. `SKILLPOST_RACE_SAVES` saves per mode (default 150, 500 for the last: it lost 1 in
+//! 500 before the fix); `bench/race.sh` runs 3,000 per mode. `SKILLPOST_RACE_BIN` runs another
+//! binary (an older build, to show the test catches its bug).
 
 mod common;
 
@@ -34,13 +37,22 @@ enum Mode {
     /// The writer opens the file at once when the staged file appears, and truncates and writes
     /// 0–2 ms later: it has the file open while the write-back starts.
     OpenEarly,
+    /// Issue 24, finding 1: a rename save, then at once an `open` of the name for writing and,
+    /// 1 ms later, the whole file written through that descriptor (`save N pre` by rename,
+    /// then `save N`). The open can land while the write-back's new file stands at the name.
+    RenameThenDescriptor,
 }
 
-fn saves() -> usize {
+fn saves(mode: Mode) -> usize {
     std::env::var("SKILLPOST_RACE_SAVES")
         .ok()
         .and_then(|s| s.parse().ok())
-        .unwrap_or(150)
+        // The descriptor race needs a few hundred trials to show (4-5 losses in 500 before).
+        .unwrap_or(if mode == Mode::RenameThenDescriptor {
+            500
+        } else {
+            150
+        })
 }
 
 fn bin() -> PathBuf {
@@ -75,6 +87,13 @@ fn save(p: &Path, text: &str, mode: Mode) {
             let tmp = p.with_file_name("Blackboard.aml.racesave");
             fs::write(&tmp, text).unwrap();
             fs::rename(&tmp, p).unwrap();
+        }
+        Mode::RenameThenDescriptor => {
+            save(p, &text.replacen(" -->", " pre -->", 1), Mode::Rename);
+            let mut f = fs::File::options().read(true).write(true).open(p).unwrap();
+            std::thread::sleep(Duration::from_millis(1));
+            f.set_len(0).unwrap();
+            f.write_all(text.as_bytes()).unwrap();
         }
         Mode::InPlace | Mode::OpenEarly => {
             let mut f = fs::File::options()
@@ -143,7 +162,7 @@ fn race(mode: Mode) -> Figures {
         .as_nanos() as u64
         | 1;
     let mut rng = Rng(seed);
-    let n = saves();
+    let n = saves(mode);
     let (mut lost, mut not_compiled, mut triggers) = (0, 0, 0);
     let started = Instant::now();
     // Save 1 starts the chain.
@@ -179,6 +198,12 @@ fn race(mode: Mode) -> Figures {
             Some(c) if c < latest => {
                 lost += 1;
                 eprintln!("race {mode:?}: save {latest} lost, the file holds save {c}");
+            }
+            _ if text.contains(&format!("<!-- save {latest} pre -->")) => {
+                lost += 1;
+                eprintln!(
+                    "race {mode:?}: the write through the descriptor of save {latest} was lost"
+                );
             }
             _ => {}
         }
@@ -260,4 +285,9 @@ fn in_place_saves_racing_the_write_back_are_never_lost() {
 #[test]
 fn saves_through_a_descriptor_opened_early_are_never_lost() {
     check(race(Mode::OpenEarly), Mode::OpenEarly);
+}
+
+#[test]
+fn writes_through_a_descriptor_opened_right_after_a_rename_save_are_never_lost() {
+    check(race(Mode::RenameThenDescriptor), Mode::RenameThenDescriptor);
 }

@@ -114,6 +114,13 @@ pub enum WriteBackOutcome {
     /// The blackboard has more than one name (hard links); replacing it would split them.
     /// Nothing was written; not retried.
     SkippedHardLinked,
+    /// The blackboard is read-only (no write permission bit): its owner keeps it from being
+    /// changed, so skillpost does not change it either. Nothing was written; not retried.
+    SkippedReadOnly,
+    /// The new file could not be given the blackboard's owner and group (a service without
+    /// `CAP_CHOWN` writing back another user's file): replacing it would hand the planner's
+    /// file to the service's user. Nothing was written; not retried.
+    SkippedOwner,
 }
 
 impl WriteBackOutcome {
@@ -130,6 +137,12 @@ impl WriteBackOutcome {
             ),
             WriteBackOutcome::SkippedHardLinked => Some(
                 "the blackboard has several names (hard links); writing it would split them, so the value is not written",
+            ),
+            WriteBackOutcome::SkippedReadOnly => Some(
+                "the blackboard is read-only (no write permission); the value is not written (make it writable to get it)",
+            ),
+            WriteBackOutcome::SkippedOwner => Some(
+                "the blackboard's owner could not be kept (writing it would make it the service user's file; the service needs CAP_CHOWN); the value is not written",
             ),
         }
     }
@@ -203,6 +216,9 @@ pub(crate) enum Point<'a> {
     /// The checks of what the exchange took out are done (the end of the window the module
     /// documentation describes).
     Checked,
+    /// The file the exchange took is leased by us and nobody else has it open; its bytes go
+    /// into ours next.
+    Adopt,
 }
 
 /// [`write_back`] with switches and a hook.
@@ -273,11 +289,28 @@ pub(crate) fn write_back_with(
     if before.nlink() > 1 {
         return Ok(WriteBackOutcome::SkippedHardLinked);
     }
+    if before.mode() & 0o222 == 0 {
+        // Read-only: outputs that are read-only are refused (E604); the blackboard, the
+        // planner's file, is left alone and reported.
+        return Ok(WriteBackOutcome::SkippedReadOnly);
+    }
     // Staged (written and synced) before the lease, so the lease is held for microseconds, not
     // for an `fsync`: an editor opening the file meanwhile waits that long at most.
     let tmp = stage_in(&dir, &new_bytes, Some(&before))?;
-    let new_id = id(&tmp.as_file().metadata()?);
+    let staged = tmp.as_file().metadata()?;
+    if (staged.uid(), staged.gid()) != (before.uid(), before.gid()) {
+        // Not allowed to give the new file the blackboard's owner (no CAP_CHOWN): the
+        // planner's file would become ours. Dropping `tmp` removes it.
+        return Ok(WriteBackOutcome::SkippedOwner);
+    }
+    let new_id = id(&staged);
     let old_id = id(&before);
+    // A lease on the new file too: from the exchange on it stands at the name, and whoever
+    // opens the name then (a planner's save through a descriptor) must not get a file that is
+    // then taken away unseen. The opener waits in `open` until this lease goes; by then the
+    // name holds what it must (see `adopt`).
+    let (new_file, tmp) = tmp.into_parts();
+    let new_leased = opts.lease && matches!(lease::take(&new_file), Ok(true));
     hook(Point::Staged);
     // Never through a link swapped in meanwhile: `target` is the resolved file. Without
     // blocking: a FIFO swapped in meanwhile opens at once (and is not the file `before` saw),
@@ -324,7 +357,6 @@ pub(crate) fn write_back_with(
     if leased && !lease::intact(&file) {
         return Ok(WriteBackOutcome::SkippedInUse);
     }
-    let tmp = tmp.into_temp_path();
     let exchanged = if opts.exchange {
         exchange(&tmp, &target)
     } else {
@@ -362,19 +394,158 @@ pub(crate) fn write_back_with(
     ok = ok && holds(&file, expected)?;
     hook(Point::Checked);
     if ok {
-        // `tmp` names the old file: dropping it removes it. Then the lease goes (closing the
-        // file), then the folder is synced.
+        // `tmp` names the old file: dropping it removes it. Then the leases go (closing the
+        // files), then the folder is synced.
         drop(tmp);
         drop(file);
+        drop(new_file);
         sync_dir(&dir);
         return Ok(WriteBackOutcome::Written);
     }
+    // The name must get back what the exchange took (a save). Anyone who opened the name since
+    // the exchange holds our new file and waits for its lease: the taken file's bytes go into
+    // the new file, which stays at the name, once nobody else has the taken file open.
+    if new_leased && let Some(taken) = out_id {
+        let held = (leased && taken == old_id).then_some(&file);
+        if adopt(&new_file, &tmp, taken, held, hook)? {
+            drop(tmp);
+            drop(file);
+            drop(new_file);
+            sync_dir(&dir);
+            return Ok(WriteBackOutcome::SkippedChangedOnDisk);
+        }
+    }
     swap_back(&tmp, &target, new_id, out_id, hook)?;
+    if new_leased && !lease::intact(&new_file) {
+        // Someone opened the name while our file stood there, and the taken file stayed open
+        // in another program for all of `ADOPT_WAIT`: both files have a writer and only one can
+        // have the name. Ours, with whatever its opener writes, is kept beside it.
+        let kept = keep_beside(&tmp, &target)?;
+        drop(file);
+        drop(new_file);
+        sync_dir(&dir);
+        return Err(io::Error::other(format!(
+            "a program opened the blackboard while the write-back put a save back; what it writes goes to {} (compare it with the blackboard)",
+            kept.display()
+        )));
+    }
     drop(tmp);
     // Only now: a writer held in `open` by the lease gets the file that is at the name again.
     drop(file);
+    drop(new_file);
     sync_dir(&dir);
     Ok(WriteBackOutcome::SkippedChangedOnDisk)
+}
+
+/// How long [`adopt`] waits for other programs to close the file the exchange took from the
+/// name (an editor finishing its save) while openers of the name wait for our lease.
+const ADOPT_WAIT: std::time::Duration = std::time::Duration::from_secs(1);
+
+/// After an exchange that took a file other than the one the compile read (`taken`, now at
+/// `tmp`: a save), or took that one while someone had it open: puts that file's bytes, mode
+/// and owner into `new_file`, which stands at the name under our lease, and returns `true`; the
+/// caller then removes `tmp`. A program that opened the name since the exchange (it waits in
+/// `open` for our lease) gets the save's bytes at the name, and what it writes stays there.
+///
+/// First waits (at most [`ADOPT_WAIT`]) until nobody else has the taken file open, shown by a
+/// write lease on it: a writer that opened it (under the name, before the exchange) finishes,
+/// and what it wrote is taken along. `held` is our descriptor of the taken file when it is the
+/// file the compile read (its lease is released for the wait, so a writer blocked by it goes
+/// on). `false` (nothing taken over) when it stays open, no lease can be had on it, or its
+/// owner cannot be given to the new file: the caller swaps back instead.
+fn adopt(
+    new_file: &fs::File,
+    tmp: &Path,
+    taken: Id,
+    held: Option<&fs::File>,
+    hook: &mut dyn FnMut(Point),
+) -> io::Result<bool> {
+    use std::os::unix::fs::FileExt as _;
+    let opened;
+    let old = match held {
+        Some(f) => {
+            // Let a writer blocked by our lease go on: it must be done before we read.
+            let _ = fdlease::set(f, fdlease::Lease::None);
+            f
+        }
+        None => {
+            let flags = rustix::fs::OFlags::NOFOLLOW | rustix::fs::OFlags::NONBLOCK;
+            opened = match fs::File::options()
+                .read(true)
+                .custom_flags(flags.bits() as i32)
+                .open(tmp)
+            {
+                Ok(f) => f,
+                Err(_) => return Ok(false),
+            };
+            &opened
+        }
+    };
+    let meta = old.metadata()?;
+    if id(&meta) != taken || !meta.is_file() || meta.nlink() != 1 {
+        return Ok(false);
+    }
+    let until = std::time::Instant::now() + ADOPT_WAIT;
+    loop {
+        match lease::take(old) {
+            Ok(true) => break,
+            Ok(false) => return Ok(false),
+            Err(_) if std::time::Instant::now() < until => {
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
+            Err(_) => return Ok(false),
+        }
+    }
+    hook(Point::Adopt);
+    // Nobody else has it open now, and a new opener would break the lease.
+    let meta = old.metadata()?;
+    let ours = new_file.metadata()?;
+    if (ours.uid(), ours.gid()) != (meta.uid(), meta.gid())
+        && std::os::unix::fs::fchown(new_file, Some(meta.uid()), Some(meta.gid())).is_err()
+    {
+        return Ok(false);
+    }
+    new_file.set_permissions(meta.permissions())?;
+    let mut piece = vec![0u8; 64 << 10];
+    let mut at = 0u64;
+    loop {
+        let n = match old.read_at(&mut piece, at) {
+            Ok(0) => break,
+            Ok(n) => n,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e),
+        };
+        new_file.write_all_at(&piece[..n], at)?;
+        at += n as u64;
+    }
+    new_file.set_len(at)?;
+    new_file.sync_all()?;
+    // Opened by someone meanwhile (a descriptor that looked the name up before the exchange):
+    // that file must go back to the name after all; what we wrote into ours is only a copy.
+    Ok(lease::intact(old))
+}
+
+/// Renames the file at `tmp` (ours, after a swap back, with an opener) to a free name beside
+/// `target` that the daemon never removes: `<name>.skillpost-kept-<n>`.
+fn keep_beside(tmp: &tempfile::TempPath, target: &Path) -> io::Result<PathBuf> {
+    let name = target.file_name().unwrap_or_default().to_string_lossy();
+    for n in 1..1000 {
+        let kept = target.with_file_name(format!("{name}.skillpost-kept-{n}"));
+        match rustix::fs::renameat_with(
+            rustix::fs::CWD,
+            tmp.as_os_str(),
+            rustix::fs::CWD,
+            kept.as_os_str(),
+            rustix::fs::RenameFlags::NOREPLACE,
+        ) {
+            Ok(()) => return Ok(kept),
+            Err(rustix::io::Errno::EXIST) => continue,
+            Err(e) => return Err(e.into()),
+        }
+    }
+    Err(io::Error::other(
+        "no free name to keep a file beside the blackboard",
+    ))
 }
 
 /// Puts the file at `tmp` (what the exchange took from the name, `taken`) back at `target`,
@@ -771,12 +942,19 @@ mod tests {
 
     #[test]
     fn saves_during_the_swap_back_end_with_the_newest() {
+        // With a lease on our file the save the exchange took is taken over in place (below)
+        // unless another program holds it open: `held` keeps it open (a reader) for the whole
+        // wait, so the swap back runs.
         let (d, p) = project();
         for opts in modes(d.path()) {
             fs::write(&p, SAMPLE).unwrap();
             let mut n = 0;
+            let mut held = None;
             let out = run(&p, opts, &mut |pt| match pt {
-                Point::BeforeExchange => rename_save(&p, "save A"),
+                Point::BeforeExchange => {
+                    rename_save(&p, "save A");
+                    held = Some(fs::File::open(&p).unwrap());
+                }
                 Point::SwapBack(_) if n < 3 => {
                     n += 1;
                     rename_save(&p, &format!("save B{n}"));
@@ -786,7 +964,128 @@ mod tests {
             assert_eq!(out, WriteBackOutcome::SkippedChangedOnDisk);
             assert_eq!(fs::read_to_string(&p).unwrap(), "save B3", "{opts:?}");
             assert!(temp_leftovers(d.path()).is_empty());
+            drop(held);
         }
+    }
+
+    #[test]
+    fn a_save_while_the_taken_save_is_copied_stays() {
+        let (d, p) = project();
+        if !leases_work(d.path()) {
+            return;
+        }
+        let out = run(&p, Opts::default(), &mut |pt| match pt {
+            Point::BeforeExchange => rename_save(&p, "save A"),
+            Point::Adopt => rename_save(&p, "save B"),
+            _ => {}
+        });
+        assert_eq!(out, WriteBackOutcome::SkippedChangedOnDisk);
+        assert_eq!(fs::read_to_string(&p).unwrap(), "save B");
+        assert!(temp_leftovers(d.path()).is_empty());
+    }
+
+    /// A writer in another thread: opens `p` for writing (without truncating) when started,
+    /// says so, and writes `text` over the whole file through that descriptor when told.
+    fn descriptor_writer(
+        p: &Path,
+        text: &'static str,
+    ) -> (
+        std::sync::mpsc::Receiver<()>,
+        std::sync::mpsc::Sender<()>,
+        std::thread::JoinHandle<()>,
+    ) {
+        let (opened_tx, opened) = std::sync::mpsc::channel();
+        let (go, go_rx) = std::sync::mpsc::channel::<()>();
+        let p = p.to_owned();
+        let t = std::thread::spawn(move || {
+            let mut f = fs::File::options().read(true).write(true).open(&p).unwrap();
+            opened_tx.send(()).unwrap();
+            go_rx.recv().unwrap();
+            f.set_len(0).unwrap();
+            f.write_all(text.as_bytes()).unwrap();
+        });
+        (opened, go, t)
+    }
+
+    #[test]
+    fn a_save_through_a_descriptor_opened_after_the_exchange_ends_at_the_name() {
+        // Issue 24, finding 1: the planner saves by rename (before our exchange, so the
+        // exchange takes the save), opens the name at once and writes through that descriptor a
+        // moment later. Its `open` lands while our new file stands at the name; the write must
+        // end up at the name, not in a file the write-back then removes.
+        let (d, p) = project();
+        if !leases_work(d.path()) {
+            return;
+        }
+        let mut writer = None;
+        let out = run(&p, Opts::default(), &mut |pt| match pt {
+            Point::BeforeExchange => rename_save(&p, "save 1"),
+            Point::AfterExchange(_) => {
+                let ino = fs::metadata(&p).unwrap().ino();
+                let w = descriptor_writer(&p, "save 2 through the descriptor");
+                // Its open is blocked by the lease on our file (now at the name).
+                assert!(lease_breaking(ino, Duration::from_secs(10)));
+                writer = Some(w);
+            }
+            _ => {}
+        });
+        assert_eq!(out, WriteBackOutcome::SkippedChangedOnDisk);
+        let (opened, go, t) = writer.unwrap();
+        opened.recv_timeout(Duration::from_secs(10)).unwrap();
+        // Meanwhile the name holds the save the exchange took.
+        assert_eq!(fs::read_to_string(&p).unwrap(), "save 1");
+        go.send(()).unwrap();
+        t.join().unwrap();
+        assert_eq!(
+            fs::read_to_string(&p).unwrap(),
+            "save 2 through the descriptor"
+        );
+        assert!(temp_leftovers(d.path()).is_empty());
+    }
+
+    #[test]
+    fn a_save_through_a_descriptor_opened_before_the_exchange_ends_at_the_name() {
+        // The same planner, faster: its open lands before the exchange and gets its rename
+        // save, which the exchange then takes away. Taking it over waits until the writer is
+        // done with it, so its write is in what goes back to the name.
+        let (d, p) = project();
+        if !leases_work(d.path()) {
+            return;
+        }
+        let mut writer = None;
+        let out = run(&p, Opts::default(), &mut |pt| match pt {
+            Point::BeforeExchange => {
+                rename_save(&p, "save 1");
+                let w = descriptor_writer(&p, "save 2 through the descriptor");
+                w.0.recv_timeout(Duration::from_secs(10)).unwrap();
+                w.1.send(()).unwrap();
+                writer = Some(w.2);
+            }
+            _ => {}
+        });
+        writer.unwrap().join().unwrap();
+        assert_eq!(out, WriteBackOutcome::SkippedChangedOnDisk);
+        assert_eq!(
+            fs::read_to_string(&p).unwrap(),
+            "save 2 through the descriptor"
+        );
+        assert!(temp_leftovers(d.path()).is_empty());
+    }
+
+    #[test]
+    fn a_read_only_blackboard_is_not_replaced() {
+        let (d, p) = project();
+        fs::set_permissions(&p, std::os::unix::fs::PermissionsExt::from_mode(0o444)).unwrap();
+        let ino = fs::metadata(&p).unwrap().ino();
+        for opts in modes(d.path()) {
+            assert_eq!(
+                run(&p, opts, &mut |_| {}),
+                WriteBackOutcome::SkippedReadOnly
+            );
+        }
+        assert_eq!(fs::read_to_string(&p).unwrap(), SAMPLE);
+        assert_eq!(fs::metadata(&p).unwrap().ino(), ino);
+        assert!(temp_leftovers(d.path()).is_empty());
     }
 
     #[test]
