@@ -308,3 +308,81 @@ fn daemon_writes_back_once_a_program_lets_go_of_the_blackboard_without_saving() 
             .contains("<Value>Blackboard.src</Value>")
     );
 }
+
+/// Issue 24, finding 4: a read-only blackboard is the planner's "do not change": the outputs
+/// are written, the blackboard keeps its bytes and inode, and stdout says why.
+#[test]
+fn cli_leaves_a_read_only_blackboard_alone() {
+    use std::os::unix::fs::MetadataExt as _;
+    let (_t, proj, _) = layout();
+    let bb = proj.join("Blackboard.aml");
+    fs::set_permissions(&bb, fs::Permissions::from_mode(0o444)).unwrap();
+    let (before, ino) = (fs::read(&bb).unwrap(), fs::metadata(&bb).unwrap().ino());
+    let o = run(&["Blackboard.aml", "Cell"], &proj);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("blackboard not updated") && out.contains("read-only"),
+        "{out}"
+    );
+    assert!(proj.join("Cell.src").exists() && proj.join("Cell.dat").exists());
+    assert_eq!(fs::read(&bb).unwrap(), before);
+    assert_eq!(fs::metadata(&bb).unwrap().ino(), ino);
+    assert_eq!(fs::metadata(&bb).unwrap().mode() & 0o7777, 0o444);
+}
+
+/// Issue 24, finding 4: a user who may replace files in the folder but cannot give a new file
+/// the blackboard's owner (no CAP_CHOWN) does not replace it: it would become that user's.
+#[test]
+fn cli_does_not_take_over_another_users_blackboard() {
+    use std::os::unix::fs::MetadataExt as _;
+    if !rustix::process::geteuid().is_root() {
+        common::skip("not root: cannot make a blackboard of another user");
+        return;
+    }
+    if Command::new("setpriv").arg("--version").output().is_err() {
+        common::skip("no setpriv (util-linux)");
+        return;
+    }
+    let (t, proj, _) = layout();
+    // The folder is the unprivileged user's (it may rename in it), the blackboard root's.
+    fs::set_permissions(t.path(), fs::Permissions::from_mode(0o755)).unwrap();
+    for e in fs::read_dir(&proj).unwrap() {
+        let p = e.unwrap().path();
+        fs::set_permissions(&p, fs::Permissions::from_mode(0o644)).unwrap();
+    }
+    std::os::unix::fs::chown(&proj, Some(65534), Some(65534)).unwrap();
+    let bb = proj.join("Blackboard.aml");
+    let (before, ino) = (fs::read(&bb).unwrap(), fs::metadata(&bb).unwrap().ino());
+    let o = Command::new("setpriv")
+        .args([
+            "--reuid=65534",
+            "--regid=65534",
+            "--clear-groups",
+            "--inh-caps=-all",
+            "--bounding-set=-all",
+        ])
+        .arg(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["Blackboard.aml", "Cell"])
+        .current_dir(&proj)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("blackboard not updated") && out.contains("owner"),
+        "{out}"
+    );
+    assert!(proj.join("Cell.src").exists());
+    assert_eq!(fs::read(&bb).unwrap(), before);
+    let m = fs::metadata(&bb).unwrap();
+    assert_eq!((m.ino(), m.uid(), m.gid()), (ino, 0, 0));
+    assert!(
+        fs::read_dir(&proj).unwrap().all(|e| !e
+            .unwrap()
+            .file_name()
+            .to_string_lossy()
+            .starts_with(".skillpost-")),
+        "a temporary file was left"
+    );
+}
