@@ -491,6 +491,18 @@ fn watch(w: WatchArgs) -> u8 {
     if config.projects.is_empty() && config.roots.is_empty() {
         tracing::warn!("no projects and no roots configured; waiting for a reload (SIGHUP)");
     }
+    // The daemon's own files, refused in a planner's folder before either is created.
+    let state_file = w.state.clone().unwrap_or_else(daemon::state::default_path);
+    let own: Vec<_> = config
+        .events
+        .iter()
+        .cloned()
+        .chain([state_file.clone()])
+        .collect();
+    if let Some(why) = daemon::config::own_files_problem(&config, &own) {
+        eprintln!("error: {why}");
+        return 2;
+    }
     let sink = match &config.events {
         Some(path) => match EventSink::append(path) {
             Ok(s) => s,
@@ -501,7 +513,7 @@ fn watch(w: WatchArgs) -> u8 {
         },
         None => EventSink::stdout(),
     };
-    let sink = sink.with_state_file(w.state.clone().unwrap_or_else(daemon::state::default_path));
+    let sink = sink.with_state_file(state_file);
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()

@@ -85,6 +85,47 @@ pub struct Config {
     pub roots: Vec<RootSpec>,
 }
 
+/// A path as the file system names it: the folder canonical (when it exists), the name kept.
+fn canonical_or_literal(p: &Path) -> PathBuf {
+    if let Ok(c) = std::fs::canonicalize(p) {
+        return c;
+    }
+    match (p.parent(), p.file_name()) {
+        (Some(dir), Some(name)) => std::fs::canonicalize(dir)
+            .map(|d| d.join(name))
+            .unwrap_or_else(|_| p.to_path_buf()),
+        _ => p.to_path_buf(),
+    }
+}
+
+/// Whether one of the daemon's own files (`own`: the events file, the state file) lies in a
+/// project folder or a root of `config`: the daemon would write into a planner's folder (with
+/// `--state P/Blackboard.aml`, replace the blackboard), and its own writes would be changes in
+/// a watched folder. The sentence says which file and which folder; `None` when all is well.
+pub fn own_files_problem(config: &Config, own: &[PathBuf]) -> Option<String> {
+    let folders = config
+        .projects
+        .iter()
+        .map(|p| ("project folder", &p.path))
+        .chain(config.roots.iter().map(|r| ("root", &r.path)));
+    let own: Vec<(PathBuf, &PathBuf)> = own.iter().map(|o| (canonical_or_literal(o), o)).collect();
+    for (what, folder) in folders {
+        let real = canonical_or_literal(folder);
+        for (o, given) in &own {
+            if o.starts_with(&real) || given.starts_with(folder) {
+                return Some(format!(
+                    "{} (the daemon's own events or state file) lies in the {what} {}: the daemon \
+                     never writes its files among a planner's; put it elsewhere (say, \
+                     /var/log/skillpost/events.jsonl, or --state in the runtime folder)",
+                    given.display(),
+                    folder.display()
+                ));
+            }
+        }
+    }
+    None
+}
+
 /// A `[[project]]` entry (or a folder named on the command line).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ProjectSpec {
@@ -223,6 +264,18 @@ pub struct ConfigError {
     pub line: Option<usize>,
     pub column: Option<usize>,
     pub message: String,
+}
+
+impl ConfigError {
+    /// An error of the whole configuration, without a line.
+    pub fn plain(message: String, file: Option<PathBuf>) -> Self {
+        ConfigError {
+            file,
+            line: None,
+            column: None,
+            message,
+        }
+    }
 }
 
 impl fmt::Display for ConfigError {

@@ -394,6 +394,18 @@ impl EventSink {
         self
     }
 
+    /// The files the daemon writes besides outputs: the events file (when events go to one)
+    /// and the state file. A project may not read them (`job`), and they may not lie in a
+    /// project's folder (`config::own_files_problem`).
+    pub fn own_files(&self) -> Vec<PathBuf> {
+        let mut v = Vec::new();
+        if let Kind::File(p) = &self.shared.lock().kind {
+            v.push(p.clone());
+        }
+        v.extend(self.state.path().map(Path::to_path_buf));
+        v
+    }
+
     /// The projects' results as the events told them.
     pub fn state(&self) -> &super::state::Tracker {
         &self.state
@@ -481,11 +493,44 @@ impl Drop for EventSink {
     }
 }
 
+/// Opens the events file for appending, created if missing (mode `0666 & !umask`). Without
+/// blocking, and only a regular file or a character device (`/dev/null`): a FIFO would hold the
+/// daemon in `open` until a reader came (at startup, or in the event loop at `SIGHUP`), and a
+/// reader that stops reading would stall every event.
 fn open_append(path: &Path) -> std::io::Result<File> {
-    std::fs::OpenOptions::new()
+    use std::os::unix::fs::{FileTypeExt as _, OpenOptionsExt as _};
+    let f = std::fs::OpenOptions::new()
         .create(true)
         .append(true)
+        .custom_flags(rustix::fs::OFlags::NONBLOCK.bits() as i32)
         .open(path)
+        .map_err(|e| {
+            if e.raw_os_error() == Some(rustix::io::Errno::NXIO.raw_os_error()) {
+                not_a_file(path, "a FIFO")
+            } else {
+                e
+            }
+        })?;
+    let kind = f.metadata()?.file_type();
+    if kind.is_fifo() {
+        return Err(not_a_file(path, "a FIFO"));
+    }
+    if !kind.is_file() && !kind.is_char_device() {
+        return Err(not_a_file(path, "not a regular file"));
+    }
+    // Writes block as they always did (a full disk is reported by the writer thread).
+    rustix::fs::fcntl_setfl(&f, rustix::fs::OFlags::APPEND)?;
+    Ok(f)
+}
+
+fn not_a_file(path: &Path, what: &str) -> std::io::Error {
+    std::io::Error::new(
+        std::io::ErrorKind::InvalidInput,
+        format!(
+            "{} is {what}; the events file must be a regular file (for a program that reads the events as they come, leave out --events and pipe stdout to it)",
+            path.display()
+        ),
+    )
 }
 
 /// Stdout as a file of its own (a duplicate descriptor): unbuffered, one `write` per line, and a

@@ -57,10 +57,29 @@ pub(super) fn hash_file(p: &Path) -> Option<u64> {
     crate::load::hash_file(p, max).ok()
 }
 
-/// Reads files like [`FsSource`] and keeps the hash of every file's bytes.
+/// Reads files like [`FsSource`] and keeps the hash of every file's bytes. The daemon's own
+/// files (`own`: the events and state files, canonical) are never read: a blackboard naming
+/// one gets an error at that reference, not a compile that starts again at every event.
 struct Hashing {
     fs: FsSource,
     seen: std::sync::Mutex<HashMap<PathBuf, Option<u64>>>,
+    own: Vec<PathBuf>,
+}
+
+impl Hashing {
+    fn refuse_own(&self, path: &Path) -> std::io::Result<()> {
+        if self.own.is_empty() {
+            return Ok(());
+        }
+        let real = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
+        if self.own.contains(&real) {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::PermissionDenied,
+                "this is the daemon's own events or state file, which no project may read",
+            ));
+        }
+        Ok(())
+    }
 }
 
 impl FileSource for Hashing {
@@ -69,12 +88,14 @@ impl FileSource for Hashing {
     }
 
     fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
+        self.refuse_own(path)?;
         let r = self.fs.read(path);
         self.saw(path, r.as_ref().ok().map(|b| hash_bytes(b)));
         r
     }
 
     fn open(&self, path: &Path) -> std::io::Result<crate::load::Opened<'_>> {
+        self.refuse_own(path)?;
         match self.fs.open(path) {
             Ok(o) => Ok(crate::load::Opened {
                 len: o.len,
@@ -306,6 +327,12 @@ impl Job {
                 max_file_size: self.max_file_size,
             },
             seen: Default::default(),
+            own: self
+                .sink
+                .own_files()
+                .iter()
+                .filter_map(|p| std::fs::canonicalize(p).ok())
+                .collect(),
         };
         let renamed = program.derived_from.as_ref().map(|from| {
             serde_json::json!({
@@ -341,6 +368,9 @@ impl Job {
             // ended in `compile-failed` while the saves went on).
             if let Some((file, moving)) = half_written(&c, &inputs)
                 && (self.may_retry || moving)
+                && !fs
+                    .own
+                    .contains(&std::fs::canonicalize(&file).unwrap_or_else(|_| file.clone()))
             {
                 tracing::info!("{project}: a file is still being written; trying again");
                 self.outcome(Event::CompileRetrying {
@@ -474,8 +504,10 @@ pub(super) fn add_link_targets(inputs: &mut HashMap<PathBuf, Option<u64>>) {
 }
 
 /// Whether the compile failed on a file caught while it was being written: a syntax error (or
-/// unreadable text) in a file whose bytes differ now from those read, or that was modified
-/// within the last second. Returns that file, and whether its bytes differ now from those read.
+/// unreadable text) in a regular file whose bytes differ now from those read, or, saved within
+/// the last second, differ [`STILL_WRITING`] later. Returns that file and `true` (its bytes are
+/// moving). A file that is not regular, or whose bytes stay, is not being written: the failure
+/// is reported at once.
 pub(super) fn half_written(
     c: &Compilation,
     read: &HashMap<PathBuf, Option<u64>>,
@@ -492,16 +524,34 @@ pub(super) fn half_written(
             .path
             .clone()
             .or_else(|| d.span.as_ref().map(|s| c.sources.get(s.file).path.clone()))?;
+        // Only a regular file can be in the middle of a save: a FIFO, a folder or a device
+        // stays what it is, however often it is tried.
+        let meta = std::fs::metadata(&file).ok().filter(|m| m.is_file())?;
         let now_hash = hash_file(&file);
-        let changed = read.get(&file).is_some_and(|h| *h != now_hash);
-        let recent = std::fs::metadata(&file)
-            .and_then(|m| m.modified())
+        if read.get(&file).is_some_and(|h| *h != now_hash) {
+            return Some((file, true));
+        }
+        // The bytes read are still there. Saved a moment ago, a writer may still be at it (an
+        // in-place save that truncated and has not written yet): look once more after a short
+        // while. A complete file that is wrong (a DOCTYPE, not UTF-8) stays the same and fails
+        // now, not after three retries.
+        let recent = meta
+            .modified()
             .ok()
             .and_then(|t| t.elapsed().ok())
             .is_some_and(|age| age < Duration::from_secs(1));
-        (changed || recent).then_some((file, changed))
+        if recent {
+            std::thread::sleep(STILL_WRITING);
+            if hash_file(&file) != now_hash {
+                return Some((file, true));
+            }
+        }
+        None
     })
 }
+
+/// How long [`half_written`] waits to see whether a file saved a moment ago is still changing.
+const STILL_WRITING: Duration = Duration::from_millis(50);
 
 #[cfg(test)]
 mod tests {

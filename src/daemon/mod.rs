@@ -435,6 +435,10 @@ impl Daemon {
                 if let Some(parent) = p.spec.path.parent() {
                     dirs.insert(parent.to_owned());
                 }
+                if p.sweep {
+                    p.sweep = false;
+                    project::remove_stale_temporaries(&p.spec.path, &inputs);
+                }
                 p.inputs = inputs;
                 p.outputs = outputs.into_iter().collect();
                 self.set_watches(&mut p, dirs);
@@ -445,7 +449,9 @@ impl Daemon {
                     // during the compile schedule one): without the force, that follow-up finds
                     // the inputs' hashes unchanged and compiles nothing, and the write-back is
                     // never tried again.
-                    p.trigger.get_or_insert("write-back-skipped");
+                    // The reason, whatever events of our own write came meanwhile: this run
+                    // skips the hash check, so no `change-detected` precedes it.
+                    p.trigger = Some("write-back-skipped");
                     p.force = true;
                     if !follow_up {
                         p.sched.change(now);
@@ -468,7 +474,15 @@ impl Daemon {
     }
 
     fn reload(&mut self, now: Instant) {
-        let loaded = self.sources.load();
+        let loaded = self.sources.load().and_then(|c| {
+            // The events file the new configuration names, and the state file.
+            let mut own: Vec<PathBuf> = c.events.iter().cloned().collect();
+            own.extend(self.sink.state().path().map(Path::to_path_buf));
+            match config::own_files_problem(&c, &own) {
+                Some(why) => Err(config::ConfigError::plain(why, c.file.clone())),
+                None => Ok(c),
+            }
+        });
         // The events file again (logrotate moved it away), or the one the configuration names now.
         let events = match &loaded {
             Ok(c) => c.events.clone(),

@@ -2,7 +2,7 @@
 //! directories are watched for it, and the index from directory to projects that routes file
 //! events without scanning every project.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -69,6 +69,9 @@ pub(super) struct Project {
     pub(super) refused: bool,
     /// Compile without the hash check (startup, rescan of a new project, retry).
     pub(super) force: bool,
+    /// Stale temporaries of ours are still to be removed from the folder (after the first
+    /// compile, which tells which files the project reads).
+    pub(super) sweep: bool,
 }
 
 impl Daemon {
@@ -493,8 +496,8 @@ impl Daemon {
             );
             return false;
         }
-        // Only now that the folder is ours: another daemon's staged files are not stale.
-        remove_stale_temporaries(&key);
+        // Stale temporaries are removed after the first compile (`sweep`), when the project's
+        // inputs are known: a file the project reads is never removed, whatever its name.
         let mut p = Project {
             spec,
             origin,
@@ -514,6 +517,7 @@ impl Daemon {
             claim: None,
             refused: false,
             force: true,
+            sweep: true,
         };
         let mut dirs = BTreeSet::new();
         dirs.insert(key.clone());
@@ -672,17 +676,32 @@ impl Daemon {
 }
 
 /// Removes the temporary files an interrupted run of ours left in a project folder (a crash or
-/// `kill -9` between writing and renaming). Only `.skillpost-*.tmp` files are touched; they are
-/// never anything but ours, and the daemon writes none while it sets a project up.
-pub(super) fn remove_stale_temporaries(folder: &Path) {
+/// `kill -9` between writing and renaming). Called after the project's first compile, with the
+/// files it read (`inputs`): a file is removed only when it is a regular file with one name,
+/// named exactly as our temporaries are (`.skillpost-` + six letters or digits + `.tmp`, see
+/// [`crate::write::is_temporary`]), and not one of the project's inputs (a planner may name a
+/// file anything: the command line compiles `.skillpost-plan.tmp` as it compiles any SFC).
+pub(super) fn remove_stale_temporaries(folder: &Path, inputs: &HashMap<PathBuf, Option<u64>>) {
+    use std::os::unix::fs::MetadataExt as _;
+    let inputs: HashSet<PathBuf> = inputs
+        .keys()
+        .map(|p| std::fs::canonicalize(p).unwrap_or_else(|_| p.clone()))
+        .collect();
     for e in std::fs::read_dir(folder).into_iter().flatten().flatten() {
         let name = e.file_name();
         let Some(name) = name.to_str() else { continue };
-        if crate::write::is_temporary(name) && e.file_type().is_ok_and(|t| t.is_file()) {
-            match std::fs::remove_file(e.path()) {
-                Ok(()) => tracing::info!("removed a stale temporary file {}", e.path().display()),
-                Err(err) => tracing::warn!("cannot remove {}: {err}", e.path().display()),
-            }
+        if !crate::write::is_temporary(name) {
+            continue;
+        }
+        let path = e.path();
+        let real = std::fs::canonicalize(&path).unwrap_or_else(|_| path.clone());
+        let single = std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_file() && m.nlink() == 1);
+        if !single || inputs.contains(&real) || inputs.contains(&path) {
+            continue;
+        }
+        match std::fs::remove_file(&path) {
+            Ok(()) => tracing::info!("removed a stale temporary file {}", path.display()),
+            Err(err) => tracing::warn!("cannot remove {}: {err}", path.display()),
         }
     }
 }

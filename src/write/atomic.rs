@@ -219,13 +219,25 @@ const TEMP_SUFFIX: &str = ".tmp";
 /// pattern ([`is_temporary`]), and its watchers ignore them.
 pub(super) fn temp_builder() -> tempfile::Builder<'static, 'static> {
     let mut b = tempfile::Builder::new();
-    b.prefix(TEMP_PREFIX).suffix(TEMP_SUFFIX);
+    b.prefix(TEMP_PREFIX)
+        .suffix(TEMP_SUFFIX)
+        .rand_bytes(TEMP_RANDOM);
     b
 }
 
-/// Whether a file name is one of our temporary files (see [`temp_builder`]).
+/// How many random letters and digits `tempfile` puts between prefix and suffix.
+const TEMP_RANDOM: usize = 6;
+
+/// Whether a file name is shaped exactly as our temporary files are (see [`temp_builder`]):
+/// `.skillpost-`, six ASCII letters or digits, `.tmp`. The name alone does not make a file
+/// ours: the daemon also checks that no project reads it before it removes one.
 pub fn is_temporary(name: &str) -> bool {
-    name.starts_with(TEMP_PREFIX) && name.ends_with(TEMP_SUFFIX)
+    name.len() == TEMP_PREFIX.len() + TEMP_RANDOM + TEMP_SUFFIX.len()
+        && name.starts_with(TEMP_PREFIX)
+        && name.ends_with(TEMP_SUFFIX)
+        && name[TEMP_PREFIX.len()..TEMP_PREFIX.len() + TEMP_RANDOM]
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric())
 }
 
 /// Best effort, see the doc comment of [`write_if_changed`].

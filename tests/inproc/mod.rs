@@ -218,9 +218,28 @@ impl InProc {
         Self::spawn(config, sources, true).unwrap_or_else(|e| panic!("the daemon stopped: {e}"))
     }
 
+    /// Like [`InProc::start`], with the state file at `state` (as `--state`).
+    pub fn start_with_state(config: Config, sources: Sources, state: &Path) -> Self {
+        Self::spawn_with(config, sources, false, Some(state.to_owned()))
+            .unwrap_or_else(|e| panic!("the daemon stopped: {e}"))
+    }
+
     fn spawn(config: Config, sources: Sources, paused: bool) -> Result<Self, String> {
+        Self::spawn_with(config, sources, paused, None)
+    }
+
+    fn spawn_with(
+        config: Config,
+        sources: Sources,
+        paused: bool,
+        state: Option<PathBuf>,
+    ) -> Result<Self, String> {
         let buf = Buffer::default();
-        let sink = Arc::new(EventSink::to(Box::new(buf.clone())));
+        let mut sink = EventSink::to(Box::new(buf.clone()));
+        if let Some(state) = state {
+            sink = sink.with_state_file(state);
+        }
+        let sink = Arc::new(sink);
         let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
         let thread = std::thread::spawn(move || {
             let rt = if paused {
