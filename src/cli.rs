@@ -578,7 +578,13 @@ fn status_command(s: StatusArgs) -> u8 {
         None => {
             let candidates = state::candidates();
             match candidates.iter().find(|p| p.exists()) {
-                Some(p) => p.clone(),
+                Some(p) => {
+                    if let Some(why) = p.parent().and_then(state::untrusted_folder) {
+                        eprintln!("error: {why}");
+                        return 2;
+                    }
+                    p.clone()
+                }
                 None => {
                     let list: Vec<String> =
                         candidates.iter().map(|p| p.display().to_string()).collect();

@@ -94,7 +94,35 @@ pub fn open_regular(path: &Path) -> std::io::Result<(std::fs::File, std::fs::Met
     if !meta.is_file() {
         return Err(Error::new(ErrorKind::InvalidInput, "is not a regular file"));
     }
+    if kernel_interface(&file) {
+        // `/proc/kmsg` is a "regular file" whose reading consumes the kernel's log; no file of
+        // /proc, /sys and their kin is a planner's (also when a link points there).
+        return Err(Error::new(
+            ErrorKind::InvalidInput,
+            "is a kernel interface (/proc, /sys and the like), not a file",
+        ));
+    }
     Ok((file, meta))
+}
+
+/// Whether the open file lies on one of the kernel's pseudo file systems (procfs, sysfs,
+/// debugfs, tracefs, securityfs, cgroup, configfs, bpf, efivarfs, pstore): their "regular
+/// files" are interfaces whose reading can change the system's state.
+fn kernel_interface(file: &std::fs::File) -> bool {
+    const PSEUDO: [u64; 11] = [
+        0x9fa0,      // proc
+        0x6265_6572, // sysfs
+        0x6462_6720, // debugfs
+        0x7472_6163, // tracefs
+        0x7363_6673, // securityfs
+        0x0027_e0eb, // cgroup
+        0x6367_7270, // cgroup2
+        0x6265_6570, // configfs
+        0xcafe_4a11, // bpf
+        0xde5e_81e4, // efivarfs
+        0x6165_676c, // pstore
+    ];
+    rustix::fs::fstatfs(file).is_ok_and(|s| PSEUDO.contains(&(s.f_type as u64)))
 }
 
 /// Reads a whole regular file of at most `max` bytes, without blocking: the one read of the

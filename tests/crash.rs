@@ -209,7 +209,7 @@ fn kill_minus_nine_leaves_only_whole_files() {
         }
         fs::write(
             ws.join(PROJECTS[it as usize % PROJECTS.len()])
-                .join(".skillpost-crash.tmp"),
+                .join(".skillpost-crash1.tmp"),
             "&ACCESS RVP\r\nDEF half",
         )
         .unwrap();

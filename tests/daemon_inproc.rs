@@ -361,7 +361,7 @@ fn a_second_daemon_on_the_same_folder_is_refused_and_touches_nothing() {
     let d = InProc::with_dirs(&[&a]);
     d.startup(&[&a]);
     // A file the first daemon has staged (it would be renamed into place next).
-    let staged = a.join(".skillpost-0123456789.tmp");
+    let staged = a.join(".skillpost-012345.tmp");
     fs::write(&staged, "staged").unwrap();
     // The second: the same folder under another name (a link), its own configuration.
     let link = w.ws().join("link");

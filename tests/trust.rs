@@ -386,3 +386,181 @@ fn runs_after_a_skipped_write_back_say_why() {
         }
     }
 }
+
+/// Finding 12: at most as many compiles at once as the machine has cores (at least 2), as
+/// docs/DAEMON.md says. Six projects whose blackboards another program holds open: each
+/// write-back waits about 1.3 s, so their compiles overlap as far as the limit lets them.
+#[test]
+fn compiles_at_once_are_at_most_the_cores() {
+    let w = Workspace::new();
+    let projects: Vec<_> = (0..6).map(|i| w.project(&format!("P{i}"))).collect();
+    let held: Vec<_> = projects
+        .iter()
+        .map(|p| {
+            fs::File::options()
+                .append(true)
+                .open(p.join("Blackboard.aml"))
+                .unwrap()
+        })
+        .collect();
+    let dirs: Vec<&Path> = projects.iter().map(|p| p.as_path()).collect();
+    let d = InProc::with_dirs(&dirs);
+    for p in &projects {
+        d.wait_for("a first outcome", Duration::from_secs(30), |e| {
+            is_for(e, "compile-succeeded", p)
+        });
+    }
+    let evs = d.events();
+    let skipped_for_open = evs.iter().any(|e| {
+        inproc::is(e, "write-back")
+            && e["reason"]
+                .as_str()
+                .is_some_and(|r| r.contains("has the blackboard open"))
+    });
+    drop(held);
+    if !skipped_for_open {
+        common::skip("no file lease here: the write-backs do not wait, nothing overlaps");
+        return;
+    }
+    let (mut now, mut most) = (0i32, 0i32);
+    for e in &evs {
+        match e["event"].as_str().unwrap() {
+            "compile-started" => {
+                now += 1;
+                most = most.max(now);
+            }
+            "compile-succeeded" | "compile-failed" | "compile-retrying" => now -= 1,
+            _ => {}
+        }
+    }
+    let cores = skillpost::daemon::parallel_compiles() as i32;
+    assert!(
+        most <= cores,
+        "{most} compiles at once on {cores} cores\n{}",
+        inproc::dump(&evs)
+    );
+    assert!(most >= 2, "the compiles did not overlap at all: {most}");
+}
+
+/// `skillpost status` with these arguments and environment changes; at most 10 s.
+fn status_exits(args: &[&str], env: &[(&str, Option<&Path>)]) -> Option<(i32, String)> {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_skillpost"));
+    c.arg("status").args(args);
+    for (k, v) in env {
+        match v {
+            Some(v) => c.env(k, v),
+            None => c.env_remove(k),
+        };
+    }
+    let mut child = c
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let end = Instant::now() + Duration::from_secs(10);
+    loop {
+        if let Some(st) = child.try_wait().unwrap() {
+            let out = child.wait_with_output().unwrap();
+            return Some((
+                st.code().unwrap_or(-1),
+                String::from_utf8_lossy(&out.stderr).into_owned(),
+            ));
+        }
+        if Instant::now() >= end {
+            let _ = child.kill();
+            let _ = child.wait();
+            return None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Finding 8: `skillpost status` on a FIFO, on a link to `/dev/zero` and on a 300 MB file ends
+/// at once with an error (it hung, read 4.2 GB, or read it whole).
+#[test]
+fn status_never_hangs_or_floods_on_an_odd_state_file() {
+    let w = Workspace::new();
+    let fifo = w.root.join("fifo.json");
+    inproc::mkfifo(&fifo);
+    let zero = w.root.join("zero.json");
+    std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
+    let big = w.root.join("big.json");
+    fs::File::create(&big).unwrap().set_len(300 << 20).unwrap();
+    for (p, says) in [
+        (&fifo, "not a regular file"),
+        (&zero, "not a regular file"),
+        (&big, "more than the limit"),
+    ] {
+        let (code, err) = status_exits(&["--state", p.to_str().unwrap()], &[])
+            .unwrap_or_else(|| panic!("status hung on {}", p.display()));
+        assert_eq!(code, 2, "{}: {err}", p.display());
+        assert!(err.contains(says), "{}: {err}", p.display());
+    }
+}
+
+/// Finding 8: the default state folder in /tmp made first by another user (holding a FIFO, say)
+/// is not read from.
+#[test]
+fn status_does_not_trust_a_default_folder_of_another_user() {
+    if !rustix::process::geteuid().is_root() {
+        common::skip("not root: cannot make a folder of another user");
+        return;
+    }
+    if Path::new("/run/skillpost/status.json").exists() {
+        common::skip("/run/skillpost/status.json exists here and is looked at first");
+        return;
+    }
+    let w = Workspace::new();
+    // Like /tmp: anyone may make a folder in it.
+    use std::os::unix::fs::PermissionsExt as _;
+    fs::set_permissions(&w.root, fs::Permissions::from_mode(0o1777)).unwrap();
+    let dir = w.root.join("skillpost-0");
+    fs::create_dir(&dir).unwrap();
+    inproc::mkfifo(&dir.join("status.json"));
+    std::os::unix::fs::chown(&dir, Some(65534), Some(65534)).unwrap();
+    let (code, err) = status_exits(
+        &[],
+        &[
+            ("TMPDIR", Some(&w.root)),
+            ("RUNTIME_DIRECTORY", None),
+            ("XDG_RUNTIME_DIR", None),
+        ],
+    )
+    .expect("status hung on the FIFO in another user's folder");
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("not a folder of this user"), "{err}");
+}
+
+/// Finding 17: an input that is a link to a kernel interface (`/proc/kmsg`, whose reading
+/// takes records from the kernel log; here the harmless `/proc/version`) is not read, by the
+/// command line or by a daemon with `allow_outside`.
+#[test]
+fn a_link_to_a_kernel_interface_is_never_read() {
+    let w = Workspace::new();
+    let p = w.project("P");
+    fs::remove_file(p.join("sfc.xml")).unwrap();
+    std::os::unix::fs::symlink("/proc/version", p.join("sfc.xml")).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["Blackboard.aml", "Cell"])
+        .current_dir(&p)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("kernel interface"), "{err}");
+    let sources = skillpost::daemon::Sources {
+        dirs: vec![p.clone()],
+        settle_ms: Some(inproc::SETTLE_MS),
+        ..Default::default()
+    };
+    let mut config = sources.load().unwrap();
+    config.allow_outside = true;
+    let d = InProc::start(config, sources);
+    let evs = d.wait_for("compile-failed", WAIT, |e| is_for(e, "compile-failed", &p));
+    let failed = evs
+        .iter()
+        .find(|e| is_for(e, "compile-failed", &p))
+        .unwrap();
+    assert!(failed.to_string().contains("kernel interface"), "{failed}");
+}

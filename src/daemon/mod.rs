@@ -102,6 +102,16 @@ const MAX_IN_USE_ROUNDS: u32 = 5;
 /// How often missing project folders are looked for again.
 const MISSING_RETRY: Duration = Duration::from_secs(2);
 
+/// How many compiles run at once: as many as the machine has cores, at least 2 (docs/DAEMON.md).
+/// Not more: each compile holds its inputs' trees in memory, so memory stays bounded by this
+/// many times the largest compile.
+pub fn parallel_compiles() -> usize {
+    std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(2)
+        .max(2)
+}
+
 /// Runs the daemon until a [`Control::Stop`]. Emits `started` first and `stopped` last.
 pub async fn run(
     config: Config,
@@ -132,11 +142,7 @@ pub async fn run(
         done: dtx,
         run_ids: HashMap::new(),
         running: 0,
-        // Compiles of small projects mostly wait for fsync: twice the cores, at least 4.
-        parallel: (2 * std::thread::available_parallelism()
-            .map(|n| n.get())
-            .unwrap_or(2))
-        .max(4),
+        parallel: parallel_compiles(),
         queue: Vec::new(),
         config: Config::default(),
         sources,

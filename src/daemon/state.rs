@@ -443,9 +443,42 @@ pub fn writer_alive(s: &Snapshot) -> bool {
 
 /// Reads a state file.
 pub fn read(path: &Path) -> Result<Snapshot, String> {
-    let text = std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    // Without blocking, a regular file only, at most MAX_STATE bytes: a FIFO, `/dev/zero` or a
+    // huge file at the path is an error at once, not a hang or a read without end.
+    let text = crate::load::read_limited(path, MAX_STATE)
+        .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     serde_json::from_slice(&text)
         .map_err(|e| format!("{} is not a skillpost state file: {e}", path.display()))
+}
+
+/// The largest state file `skillpost status` reads (64 MiB: 100,000 projects' lines fit).
+const MAX_STATE: u64 = 64 << 20;
+
+/// Whether a folder the state file is looked for in without `--state` is one only its owner
+/// can write to, and that owner is this user, root, or a user whose folder only a privileged
+/// one could have made (its parent is root's and not writable by others, like `/run`): a
+/// folder another user made first in `/tmp` (`/tmp/skillpost-<uid>`) is not trusted. The
+/// reason when not.
+pub fn untrusted_folder(dir: &Path) -> Option<String> {
+    use std::os::unix::fs::MetadataExt as _;
+    let m = match std::fs::symlink_metadata(dir) {
+        Ok(m) => m,
+        Err(e) => return Some(format!("{}: {e}", dir.display())),
+    };
+    let me = rustix::process::getuid().as_raw();
+    let parent_privileged = dir
+        .parent()
+        .and_then(|p| std::fs::symlink_metadata(p).ok())
+        .is_some_and(|p| p.uid() == 0 && p.mode() & 0o022 == 0);
+    if !m.is_dir() || m.mode() & 0o022 != 0 || !(m.uid() == me || m.uid() == 0 || parent_privileged)
+    {
+        return Some(format!(
+            "{} is not a folder of this user (or of a service) that only its owner can write to; \
+             not reading a state file from it (name the file with --state)",
+            dir.display()
+        ));
+    }
+    None
 }
 
 /// The state as an aligned table (spaces, no tabs), with a heading line.

@@ -361,7 +361,7 @@ mod tests {
     #[test]
     fn noise() {
         for n in [
-            ".skillpost-ab12.tmp",
+            ".skillpost-ab12cd.tmp",
             "sfc.xml~",
             ".sfc.xml.swp",
             "4913",

@@ -1053,15 +1053,14 @@ mod tests {
             return;
         }
         let mut writer = None;
-        let out = run(&p, Opts::default(), &mut |pt| match pt {
-            Point::BeforeExchange => {
+        let out = run(&p, Opts::default(), &mut |pt| {
+            if pt == Point::BeforeExchange {
                 rename_save(&p, "save 1");
                 let w = descriptor_writer(&p, "save 2 through the descriptor");
                 w.0.recv_timeout(Duration::from_secs(10)).unwrap();
                 w.1.send(()).unwrap();
                 writer = Some(w.2);
             }
-            _ => {}
         });
         writer.unwrap().join().unwrap();
         assert_eq!(out, WriteBackOutcome::SkippedChangedOnDisk);
