@@ -564,3 +564,113 @@ fn a_link_to_a_kernel_interface_is_never_read() {
         .unwrap();
     assert!(failed.to_string().contains("kernel interface"), "{failed}");
 }
+
+/// Finding 16: a project folder whose path is longer than the kernel takes is an error that
+/// says so (it was reported as "does not exist; waiting"): in the configuration at its line,
+/// on the command line at once.
+#[test]
+fn a_path_longer_than_the_kernel_takes_is_named_as_such() {
+    let w = Workspace::new();
+    let long = w.root.join(vec!["x".repeat(200); 25].join("/"));
+    let cfg = w.config(&format!("[[project]]\npath = \"{}\"\n", long.display()));
+    let (code, err) = watch_exits(
+        &["--config", cfg.to_str().unwrap()],
+        &w.root,
+        Duration::from_secs(10),
+    )
+    .expect("the daemon kept running");
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("skillpost.toml:2") && err.contains("bytes long"),
+        "{err}"
+    );
+    let (code, err) = watch_exits(&[long.to_str().unwrap()], &w.root, Duration::from_secs(10))
+        .expect("the daemon kept running");
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("bytes long"), "{err}");
+}
+
+/// Finding 13: a daemon of an unprivileged user; the planner edits the SFC and makes it (or the
+/// folder) unreadable before the compile reads it: `compile-failed`. Once the permission is
+/// back, the edit is compiled without another edit.
+#[test]
+fn an_edit_is_compiled_once_its_permission_comes_back() {
+    use std::os::unix::fs::PermissionsExt as _;
+    if !rustix::process::geteuid().is_root() {
+        common::skip("not root: cannot run the daemon as another user");
+        return;
+    }
+    if Command::new("setpriv").arg("--version").output().is_err() {
+        common::skip("no setpriv (util-linux)");
+        return;
+    }
+    let w = Workspace::new();
+    fs::set_permissions(&w.root, fs::Permissions::from_mode(0o755)).unwrap();
+    fs::set_permissions(w.ws(), fs::Permissions::from_mode(0o755)).unwrap();
+    let p = w.project("P");
+    let run = w.root.join("run");
+    fs::create_dir(&run).unwrap();
+    for d in [&p, &run] {
+        std::os::unix::fs::chown(d, Some(65534), Some(65534)).unwrap();
+    }
+    for f in inproc::FILES {
+        std::os::unix::fs::chown(p.join(f), Some(65534), Some(65534)).unwrap();
+    }
+    let ev = run.join("events.jsonl");
+    let mut child = Command::new("setpriv")
+        .args([
+            "--reuid=65534",
+            "--regid=65534",
+            "--clear-groups",
+            "--inh-caps=-all",
+            "--bounding-set=-all",
+        ])
+        .arg(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["watch", "--settle", "50", "--events"])
+        .arg(&ev)
+        .arg(&p)
+        .env("XDG_RUNTIME_DIR", &run)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let count = |what: &str| inproc::read_string(&ev).matches(what).count();
+    let ok = inproc::wait_until(Duration::from_secs(20), || count("\"write-back\"") >= 1);
+    let mut result = Ok(());
+    if !ok {
+        result = Err(format!("no startup write-back: {}", inproc::read_string(&ev)));
+    }
+    // The file, then the folder.
+    for (n, target, mode) in [(1u32, p.join("sfc.xml"), 0o644), (2, p.clone(), 0o755)] {
+        if result.is_err() {
+            break;
+        }
+        let failed = count("\"compile-failed\"");
+        fs::write(p.join("sfc.xml"), inproc::sfc_with_x(400 + n)).unwrap();
+        fs::set_permissions(&target, fs::Permissions::from_mode(0o000)).unwrap();
+        if !inproc::wait_until(Duration::from_secs(10), || count("\"compile-failed\"") > failed) {
+            result = Err(format!(
+                "{}: no compile-failed while unreadable: {}",
+                target.display(),
+                inproc::read_string(&ev)
+            ));
+            break;
+        }
+        fs::set_permissions(&target, fs::Permissions::from_mode(mode)).unwrap();
+        if !inproc::wait_until(Duration::from_secs(10), || {
+            inproc::read_string(&inproc::src_of(&p)).contains(&inproc::ptp_with_x(400 + n))
+        }) {
+            result = Err(format!(
+                "{}: the edit was not compiled after the permission came back: {}",
+                target.display(),
+                inproc::read_string(&ev)
+            ));
+        }
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+    if let Err(e) = result {
+        panic!("{e}");
+    }
+}

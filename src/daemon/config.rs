@@ -85,6 +85,24 @@ pub struct Config {
     pub roots: Vec<RootSpec>,
 }
 
+/// The longest path the kernel takes in one call (`PATH_MAX`, with its closing NUL).
+const PATH_MAX: usize = 4096;
+
+/// An error when `p` is longer than the kernel takes in one call: every operation on it would
+/// fail with "file name too long", which looked like a folder that does not exist.
+pub fn too_long(p: &Path) -> Result<(), String> {
+    use std::os::unix::ffi::OsStrExt as _;
+    let n = p.as_os_str().as_bytes().len();
+    if n >= PATH_MAX {
+        return Err(format!(
+            "the path is {n} bytes long; Linux takes paths of at most {} bytes (move the \
+             folder higher up, or give it a shorter name)",
+            PATH_MAX - 1
+        ));
+    }
+    Ok(())
+}
+
 /// A path as the file system names it: the folder canonical (when it exists), the name kept.
 fn canonical_or_literal(p: &Path) -> PathBuf {
     if let Ok(c) = std::fs::canonicalize(p) {
@@ -359,7 +377,9 @@ pub fn parse(text: &str, file: &Path) -> Result<Config, ConfigError> {
                 ),
             ));
         }
-        Ok(normalize(&base.join(s)))
+        let full = normalize(&base.join(s));
+        too_long(&full).map_err(|m| at(Some(value.span()), format!("`{key}`: {m}")))?;
+        Ok(full)
     };
 
     let events = raw.events.as_ref().map(|e| path(e, "events")).transpose()?;
@@ -615,6 +635,7 @@ pub fn command_line_targets(args: &[PathBuf]) -> Result<(Vec<PathBuf>, Vec<PathB
     let mut dirs = Vec::new();
     let mut blackboards = Vec::new();
     for arg in args {
+        too_long(&absolute(arg)).map_err(|m| format!("{}: {m}", arg.display()))?;
         match std::fs::metadata(arg) {
             Ok(m) if m.is_dir() => dirs.push(arg.clone()),
             Ok(m) if m.is_file() && arg.file_name().is_some_and(is_blackboard_name) => {

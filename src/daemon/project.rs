@@ -619,7 +619,12 @@ impl Daemon {
                             Some(&Self::key_str(&key)),
                             Event::WatchDegraded {
                                 root: None,
-                                reason: "the project folder does not exist; waiting for it".into(),
+                                reason: match config::too_long(&key) {
+                                    Err(why) => format!("the project folder cannot be used: {why}"),
+                                    Ok(()) => {
+                                        "the project folder does not exist; waiting for it".into()
+                                    }
+                                },
                                 backend: Some("none"),
                             },
                         );

@@ -64,8 +64,10 @@ impl Daemon {
             return;
         }
         // Polling reports a new write time (the content hash then tells a `touch` from an edit);
-        // other metadata (attributes, permissions; inotify's `touch`) never change bytes.
+        // other metadata (attributes, permissions; inotify's `touch`) never change bytes, but
+        // may make a file the last compile could not read readable again.
         if matches!(kind, K::Modify(ModifyKind::Metadata(m)) if m != MetadataKind::WriteTime) {
+            self.route_readable(&e.paths, now);
             return;
         }
         let data_write = matches!(
@@ -124,6 +126,29 @@ impl Daemon {
                 p.trigger.get_or_insert("change");
                 p.sched.change(now);
             }
+        }
+    }
+
+    /// A permission or owner change of `paths`: every project with an input the last compile
+    /// could not read (hash `None`) at or below one of them, or whose folder it is, checks its
+    /// inputs again (the hash check compiles only when a file's bytes differ now). Without this, a planner's edit
+    /// whose compile failed with "permission denied" (a `chmod 000` of the file or the folder
+    /// meanwhile) stayed uncompiled after the permission came back, until the next edit.
+    fn route_readable(&mut self, paths: &[PathBuf], now: Instant) {
+        for p in self.projects.values_mut() {
+            let unreadable = p.inputs.iter().find(|(input, hash)| {
+                hash.is_none() && paths.iter().any(|changed| input.starts_with(changed))
+            });
+            // The folder itself: a compile that could not list it knows no inputs.
+            let folder = paths.iter().any(|changed| p.spec.path.starts_with(changed));
+            if let Some((input, _)) = unreadable {
+                let input = input.clone();
+                p.changed.insert(input);
+            } else if !folder {
+                continue;
+            }
+            p.trigger.get_or_insert("change");
+            p.sched.change(now);
         }
     }
 
