@@ -639,7 +639,10 @@ fn an_edit_is_compiled_once_its_permission_comes_back() {
     let ok = inproc::wait_until(Duration::from_secs(20), || count("\"write-back\"") >= 1);
     let mut result = Ok(());
     if !ok {
-        result = Err(format!("no startup write-back: {}", inproc::read_string(&ev)));
+        result = Err(format!(
+            "no startup write-back: {}",
+            inproc::read_string(&ev)
+        ));
     }
     // The file, then the folder.
     for (n, target, mode) in [(1u32, p.join("sfc.xml"), 0o644), (2, p.clone(), 0o755)] {
@@ -649,7 +652,9 @@ fn an_edit_is_compiled_once_its_permission_comes_back() {
         let failed = count("\"compile-failed\"");
         fs::write(p.join("sfc.xml"), inproc::sfc_with_x(400 + n)).unwrap();
         fs::set_permissions(&target, fs::Permissions::from_mode(0o000)).unwrap();
-        if !inproc::wait_until(Duration::from_secs(10), || count("\"compile-failed\"") > failed) {
+        if !inproc::wait_until(Duration::from_secs(10), || {
+            count("\"compile-failed\"") > failed
+        }) {
             result = Err(format!(
                 "{}: no compile-failed while unreadable: {}",
                 target.display(),
@@ -673,4 +678,58 @@ fn an_edit_is_compiled_once_its_permission_comes_back() {
     if let Err(e) = result {
         panic!("{e}");
     }
+}
+
+/// The CPU time (user + system, clock ticks) the process has used so far.
+fn cpu_ticks(pid: u32) -> u64 {
+    let stat = fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
+    // After the command name in parentheses: state is field 3; utime 14, stime 15.
+    let rest = &stat[stat.rfind(')').unwrap() + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    f[11].parse::<u64>().unwrap() + f[12].parse::<u64>().unwrap()
+}
+
+/// Finding 10: while another program keeps an input open for writing after changing it, the
+/// daemon waits without spinning (it used ~100 ticks a second for ~4 s), and compiles once the
+/// file is closed.
+#[test]
+fn an_input_held_open_for_writing_costs_no_cpu() {
+    use std::io::Write as _;
+    let w = Workspace::new();
+    let p = w.project("P");
+    let ev = w.root.join("events.jsonl");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["watch", "--settle", "50", "--events"])
+        .arg(&ev)
+        .arg(&p)
+        .env("XDG_RUNTIME_DIR", &w.root)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let ok = inproc::wait_until(Duration::from_secs(20), || {
+        inproc::read_string(&ev).contains("\"write-back\"")
+    });
+    std::thread::sleep(Duration::from_millis(300));
+    let before = cpu_ticks(child.id());
+    // An editor writes the new SFC and keeps the file open for 4 s.
+    let mut f = fs::File::options()
+        .write(true)
+        .truncate(true)
+        .open(p.join("sfc.xml"))
+        .unwrap();
+    f.write_all(inproc::sfc_with_x(777).as_bytes()).unwrap();
+    std::thread::sleep(Duration::from_secs(4));
+    let used = cpu_ticks(child.id()) - before;
+    drop(f);
+    let compiled = inproc::wait_until(Duration::from_secs(10), || {
+        inproc::read_string(&inproc::src_of(&p)).contains(&inproc::ptp_with_x(777))
+    });
+    let _ = child.kill();
+    let _ = child.wait();
+    assert!(ok, "no startup write-back");
+    // 100 ticks are a second of CPU; a daemon that only waits uses next to none.
+    assert!(used < 40, "{used} clock ticks of CPU in 4 s of waiting");
+    assert!(compiled, "the closed file was not compiled");
 }

@@ -53,7 +53,15 @@ impl Scheduler {
     /// Wait again before compiling (a file still being written): one more quiet period, still
     /// within the cap of the burst.
     pub fn postpone(&mut self, now: Instant) {
-        self.change(now);
+        if self.running {
+            self.pending = true;
+            return;
+        }
+        // Always a quiet period from now: past the cap of the burst a deadline at the cap is
+        // already due, and the event loop would wake for it again and again (it did, about a
+        // hundred times a second while a program kept an input open for writing).
+        self.first.get_or_insert(now);
+        self.deadline = Some(now + self.settle);
     }
 
     /// Compile now, without a quiet period (startup, rescan).
@@ -176,6 +184,20 @@ mod tests {
         assert_eq!(starts[0], 1000, "{starts:?}");
         assert!(starts.len() <= 4, "{starts:?}");
         assert_eq!(*starts.last().unwrap(), 3050, "{starts:?}");
+    }
+
+    #[test]
+    fn postponing_past_the_cap_waits_a_quiet_period_from_now() {
+        // A writer keeps a file open past the cap of the burst: each postpone must give a
+        // deadline in the future, or the event loop wakes for it at once, again and again.
+        let t = Instant::now();
+        let mut s = Scheduler::new(S, S * 10);
+        s.change(t);
+        for ms in [1500, 1600, 5000] {
+            let now = t + Duration::from_millis(ms);
+            s.postpone(now);
+            assert_eq!(s.deadline(), Some(now + S), "at {ms} ms");
+        }
     }
 
     #[tokio::test(start_paused = true)]
