@@ -105,6 +105,9 @@ pub struct Compilation {
     pub language: Option<Language>,
     /// Wall time per stage, in order (`read-blackboard`, `read-sfc`, `plan`, `bind`, `emit`).
     pub timings: Vec<(&'static str, std::time::Duration)>,
+    /// The blackboard's folder, held open since before the blackboard was read: [`apply`]
+    /// writes through it (`None` where it could not be opened, e.g. a compile from memory).
+    pub folder: Option<crate::write::Folder>,
 }
 
 impl Compilation {
@@ -517,6 +520,11 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
     if opts.drop_warnings {
         cx.diags.drop_warnings();
     }
+    // Before the blackboard is read: the outputs go to the folder it was read from.
+    out.folder = crate::write::Folder::pin(match blackboard.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    });
     let mut clock = std::time::Instant::now();
     let mut lap = |out: &mut Compilation, stage: &'static str| {
         let now = std::time::Instant::now();
@@ -882,6 +890,19 @@ fn finish(mut cx: Ctx, mut out: Compilation) -> Compilation {
     out
 }
 
+/// Why nothing may be written: the blackboard's folder was moved away or replaced (by another
+/// folder or a link to one) since the compile opened it; `None` when it is still there.
+pub fn folder_replaced(c: &Compilation) -> Option<String> {
+    let f = c.folder.as_ref()?;
+    (!f.still_at_its_name()).then(|| {
+        format!(
+            "the project folder {} was moved or replaced during the compile; nothing was \
+             written (compile again)",
+            f.path().display()
+        )
+    })
+}
+
 /// What [`apply`] did.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Applied {
@@ -912,23 +933,45 @@ fn write_back_retrying(wb: &WriteBack) -> std::io::Result<crate::write::WriteBac
     }
 }
 
-/// Writes the outputs (atomically, only when their bytes change), then the write-back.
+/// Writes the outputs (atomically, only when their bytes change), then the write-back, into
+/// the folder the blackboard was read from ([`Compilation::folder`]); nothing when that folder
+/// is no longer at its name ([`folder_replaced`]).
 pub fn apply(c: &Compilation) -> std::io::Result<Applied> {
+    if let Some(why) = folder_replaced(c) {
+        return Err(std::io::Error::other(why));
+    }
+    let route = |p: &Path| match &c.folder {
+        Some(f) => f.route(p),
+        None => p.to_path_buf(),
+    };
+    let unroute = |e: std::io::Error| match &c.folder {
+        Some(f) => std::io::Error::new(e.kind(), f.unroute(&e.to_string())),
+        None => e,
+    };
     // The `.src` and `.dat` only work as a pair: both are replaced or neither is.
-    let files: Vec<(&Path, &[u8])> = c
-        .outputs
+    let routed: Vec<PathBuf> = c.outputs.iter().map(|(p, _)| route(p)).collect();
+    let files: Vec<(&Path, &[u8])> = routed
         .iter()
-        .map(|(p, f)| (p.as_path(), f.text.as_bytes()))
+        .zip(&c.outputs)
+        .map(|(p, (_, f))| (p.as_path(), f.text.as_bytes()))
         .collect();
-    let outputs = crate::write::write_all_if_changed(&files)?
+    let outputs = crate::write::write_all_if_changed(&files)
+        .map_err(unroute)?
         .into_iter()
         .zip(&c.outputs)
         .map(|(o, (p, _))| (p.clone(), o == crate::write::WriteOutcome::Written))
         .collect();
     let write_back = match &c.write_back {
-        Some(wb) => Some(write_back_retrying(wb).map_err(|e| {
-            std::io::Error::new(e.kind(), format!("{}: {e}", wb.blackboard.display()))
-        })?),
+        Some(wb) => {
+            let routed = WriteBack {
+                blackboard: route(&wb.blackboard),
+                ..wb.clone()
+            };
+            Some(write_back_retrying(&routed).map_err(|e| {
+                let e = unroute(e);
+                std::io::Error::new(e.kind(), format!("{}: {e}", wb.blackboard.display()))
+            })?)
+        }
         None => None,
     };
     Ok(Applied {

@@ -4,6 +4,9 @@
 //! the read-only and foreign blackboards of finding 4 in tests/outputs.rs.
 
 mod common;
+#[path = "../benches/common/generator.rs"]
+#[allow(dead_code)]
+mod generator;
 mod inproc;
 
 use std::fs;
@@ -732,4 +735,75 @@ fn an_input_held_open_for_writing_costs_no_cpu() {
     // 100 ticks are a second of CPU; a daemon that only waits uses next to none.
     assert!(used < 40, "{used} clock ticks of CPU in 4 s of waiting");
     assert!(compiled, "the closed file was not compiled");
+}
+
+/// Finding 3: the project folder moved away and a link to another folder put at its name
+/// during a compile (`mv P P.real; ln -s OUT P`): nothing lands in `OUT`. The command line
+/// either writes into the folder it read (the swap came after its last check) or writes
+/// nothing and says the folder was replaced.
+#[test]
+fn outputs_never_land_in_a_folder_swapped_in_mid_compile() {
+    let w = Workspace::new();
+    let p = w.root.join("P");
+    let real = w.root.join("P.real");
+    // OUT: another project with the same file names (the compile may read its IRL).
+    let out = w.root.join("OUT");
+    generator::write_project(&p, &generator::Spec::flat(20_000)).unwrap();
+    generator::write_project(&out, &generator::Spec::flat(10)).unwrap();
+    let out_files = |d: &Path| {
+        let mut v: Vec<_> = fs::read_dir(d)
+            .unwrap()
+            .map(|e| {
+                let e = e.unwrap();
+                (e.file_name(), fs::read(e.path()).unwrap())
+            })
+            .collect();
+        v.sort();
+        v
+    };
+    let out_before = out_files(&out);
+    let run = || {
+        Command::new(env!("CARGO_BIN_EXE_skillpost"))
+            .arg(p.join("Blackboard.aml"))
+            .arg("Cell")
+            .current_dir(&w.root)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    // How long a compile takes here, to swap in the middle of one.
+    let t = Instant::now();
+    assert!(run().wait().unwrap().success());
+    let took = t.elapsed();
+    let original_bb = fs::read(p.join("Blackboard.aml")).unwrap();
+    let mut refused = 0;
+    for k in 0..6u32 {
+        for f in ["Cell.src", "Cell.dat"] {
+            let _ = fs::remove_file(p.join(f));
+        }
+        fs::write(p.join("Blackboard.aml"), &original_bb).unwrap();
+        let child = run();
+        std::thread::sleep(took.mul_f64(0.1 + 0.15 * f64::from(k)));
+        fs::rename(&p, &real).unwrap();
+        std::os::unix::fs::symlink(&out, &p).unwrap();
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        let now: Vec<_> = out_files(&out).into_iter().map(|(n, _)| n).collect();
+        assert!(
+            out_files(&out) == out_before,
+            "trial {k}: OUT changed: {now:?}\n{err}"
+        );
+        if err.contains("moved or replaced") {
+            refused += 1;
+            assert_eq!(o.status.code(), Some(2), "{err}");
+            assert!(!real.join("Cell.src").exists(), "trial {k}: {err}");
+        }
+        fs::remove_file(&p).unwrap();
+        fs::rename(&real, &p).unwrap();
+    }
+    assert!(
+        refused > 0,
+        "no trial swapped the folder during a compile ({took:?} each)"
+    );
 }

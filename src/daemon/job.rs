@@ -397,6 +397,18 @@ impl Job {
                 in_use: false,
             };
         }
+        // The folder was moved or replaced meanwhile (its inputs may come from two folders):
+        // nothing is written; the next attempt reads whatever is at the name then.
+        if compile::folder_replaced(&c).is_some() && self.may_retry {
+            tracing::info!("{project}: the project folder was replaced during the compile");
+            self.outcome(Event::CompileRetrying {
+                run_id: self.run_id,
+                duration_ms: ms(),
+                file: Some(project.clone()),
+                attempt: self.attempt,
+            });
+            return Outcome::Retry { counted: true };
+        }
         let applied = match compile::apply(&c) {
             Ok(a) => a,
             Err(e) => {

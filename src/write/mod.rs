@@ -7,6 +7,9 @@
 //!   refuse symbolic links, non-regular files and read-only files.
 //! - [`splice`]: [`splice_at`] puts the value into the write-back target's `Value` by replacing
 //!   only the bytes the reader located ([`SpliceSite`]); pure.
+//! - [`folder`]: [`Folder`] holds the project folder open from before the blackboard is read
+//!   to the end of the writing; every write goes through it, so outputs land in the folder
+//!   whose inputs were read, whatever is put at its name meanwhile.
 //! - [`writeback`]: [`write_back`] replaces the blackboard with the spliced text under a lease
 //!   and an exchange, so that a newer file is never replaced by an older one.
 //!
@@ -16,10 +19,12 @@
 //! [`writeback`]).
 
 pub mod atomic;
+pub mod folder;
 pub mod splice;
 pub mod writeback;
 
 pub use atomic::{WriteOutcome, is_temporary, write_all_if_changed, write_if_changed};
+pub use folder::Folder;
 pub use splice::{SpliceSite, splice_at, splice_value};
 pub use writeback::{WriteBackOutcome, write_back};
 
