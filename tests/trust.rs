@@ -5,7 +5,6 @@
 
 mod common;
 #[path = "../benches/common/generator.rs"]
-#[allow(dead_code)]
 mod generator;
 mod inproc;
 
