@@ -118,10 +118,13 @@ impl Compilation {
     }
 }
 
-/// Records every path asked for.
+/// Records every path asked for, and keeps the files read whole within
+/// [`crate::load::WHOLE_FILES_BUDGET`] together.
 struct Recorder<'a> {
     fs: &'a dyn FileSource,
     read: std::cell::RefCell<Vec<PathBuf>>,
+    /// Bytes read whole so far.
+    whole: std::cell::Cell<u64>,
 }
 
 impl FileSource for Recorder<'_> {
@@ -131,7 +134,10 @@ impl FileSource for Recorder<'_> {
 
     fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
         self.record(path);
-        self.fs.read(path)
+        let left = crate::load::WHOLE_FILES_BUDGET.saturating_sub(self.whole.get());
+        let bytes = self.fs.read_max(path, left)?;
+        self.whole.set(self.whole.get() + bytes.len() as u64);
+        Ok(bytes)
     }
 
     fn open(&self, path: &Path) -> std::io::Result<crate::load::Opened<'_>> {
@@ -165,6 +171,7 @@ impl<'a> Ctx<'a> {
             fs: Recorder {
                 fs,
                 read: Default::default(),
+                whole: Default::default(),
             },
             sources: Sources::default(),
             diags: Diagnostics::default(),

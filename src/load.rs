@@ -30,6 +30,38 @@ pub trait FileSource {
     fn real_path(&self, _path: &Path) -> Option<PathBuf> {
         None
     }
+
+    /// Reads a whole file of at most `max` bytes (what is left of [`WHOLE_FILES_BUDGET`]): a
+    /// larger one is an `InvalidData` error, read no further than `max + 1` bytes where the
+    /// source can tell (the default reads it, then checks).
+    fn read_max(&self, path: &Path, max: u64) -> std::io::Result<Vec<u8>> {
+        let bytes = self.read(path)?;
+        if bytes.len() as u64 > max {
+            return Err(over_budget(max));
+        }
+        Ok(bytes)
+    }
+}
+
+/// How many bytes the files one compile reads whole (the blackboard, its IRL files, the output
+/// template) may have together: 32 MiB. Each is parsed into a tree that takes about 20 bytes
+/// of memory per byte of text (a 240 MB blackboard took 4.8 GB), so this bounds one compile's
+/// memory to well under 1 GB, whatever a planner saves; the SFC, which grows with the product,
+/// is streamed and not counted.
+pub const WHOLE_FILES_BUDGET: u64 = 32 * 1024 * 1024;
+
+/// The error of a file that does not fit what is left of [`WHOLE_FILES_BUDGET`].
+pub fn over_budget(left: u64) -> std::io::Error {
+    std::io::Error::new(
+        std::io::ErrorKind::InvalidData,
+        format!(
+            "is larger than the {} bytes left of the {} MiB that the blackboard, its IRL files \
+             and the template may take together (they are read whole, and each byte takes about \
+             20 in memory)",
+            left,
+            WHOLE_FILES_BUDGET >> 20
+        ),
+    )
 }
 
 /// A file opened by [`FileSource::open`]: its bytes, and its size if known.
@@ -231,6 +263,19 @@ impl FileSource for FsSource {
 
     fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
         read_limited(path, self.max_file_size)
+    }
+
+    fn read_max(&self, path: &Path, max: u64) -> std::io::Result<Vec<u8>> {
+        if max >= self.max_file_size {
+            return read_limited(path, self.max_file_size);
+        }
+        read_limited(path, max).map_err(|e| {
+            if e.kind() == std::io::ErrorKind::InvalidData && e.to_string().contains("limit") {
+                over_budget(max)
+            } else {
+                e
+            }
+        })
     }
 
     fn open(&self, path: &Path) -> std::io::Result<Opened<'_>> {

@@ -806,3 +806,53 @@ fn outputs_never_land_in_a_folder_swapped_in_mid_compile() {
         "no trial swapped the folder during a compile ({took:?} each)"
     );
 }
+
+/// A blackboard of 40 MB (under the 256 MiB file limit) made of 10 million empty elements: a
+/// tree of it takes gigabytes.
+fn huge_blackboard(p: &Path) {
+    let text = inproc::sample_text("Blackboard.aml").replace(
+        "</CAEXFile>",
+        &format!("<Junk>{}</Junk></CAEXFile>", "<a/>".repeat(10_000_000)),
+    );
+    fs::write(p.join("Blackboard.aml"), text).unwrap();
+}
+
+/// Finding 9: one compile's memory is bounded whatever a planner saves. Under a 400 MB address
+/// space limit the command line refuses the 40 MB blackboard with a clear error (it aborted:
+/// the tree did not fit); the daemon reports it and goes on with its other projects.
+#[test]
+fn a_huge_blackboard_is_refused_not_parsed() {
+    let w = Workspace::new();
+    let big = w.project("Big");
+    huge_blackboard(&big);
+    let o = Command::new("sh")
+        .args(["-c", "ulimit -v 400000; exec \"$0\" \"$@\""])
+        .arg(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["Blackboard.aml", "Cell"])
+        .current_dir(&big)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("32 MiB"), "{err}");
+    let small = w.project("Small");
+    let d = InProc::with_dirs(&[&big, &small]);
+    let evs = d.wait_for("the huge one fails", WAIT, |e| {
+        is_for(e, "compile-failed", &big)
+    });
+    let failed = evs
+        .iter()
+        .find(|e| is_for(e, "compile-failed", &big))
+        .unwrap();
+    assert!(failed.to_string().contains("32 MiB"), "{failed}");
+    d.wait_for("the other one compiles", WAIT, |e| {
+        is_for(e, "compile-succeeded", &small)
+    });
+    std::thread::sleep(Duration::from_millis(500));
+    let retried = d
+        .events()
+        .iter()
+        .filter(|e| is_for(e, "compile-retrying", &big))
+        .count();
+    assert_eq!(retried, 0);
+}

@@ -88,9 +88,20 @@ impl FileSource for Hashing {
     }
 
     fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
+        self.read_max(path, u64::MAX)
+    }
+
+    fn read_max(&self, path: &Path, max: u64) -> std::io::Result<Vec<u8>> {
         self.refuse_own(path)?;
-        let r = self.fs.read(path);
-        self.saw(path, r.as_ref().ok().map(|b| hash_bytes(b)));
+        let r = self.fs.read_max(path, max);
+        let hash = match &r {
+            Ok(b) => Some(hash_bytes(b)),
+            // Too large: a whole file nonetheless, whose hash tells a later save from it (else
+            // the failure looked like a file still being written, retried for ever).
+            Err(e) if e.kind() == std::io::ErrorKind::InvalidData => hash_file(path),
+            Err(_) => None,
+        };
+        self.saw(path, hash);
         r
     }
 
