@@ -856,3 +856,132 @@ fn a_huge_blackboard_is_refused_not_parsed() {
         .count();
     assert_eq!(retried, 0);
 }
+
+/// Finding 5: two daemons, one naming `real/P`, the other `alias/P` (a linked parent), the
+/// folder missing at both startups: when it appears, one keeps it and the other says so and
+/// waits; they do not both compile it (with other program names they rewrote the blackboard
+/// back and forth, 97 write-backs in 10 s).
+#[test]
+fn two_daemons_never_share_a_folder_that_appears_later() {
+    let w = Workspace::new();
+    fs::create_dir(w.root.join("real")).unwrap();
+    std::os::unix::fs::symlink(w.root.join("real"), w.root.join("alias")).unwrap();
+    let (real, alias) = (w.root.join("real/P"), w.root.join("alias/P"));
+    let start = |folder: &Path, program: &str| {
+        let cfg = w.root.join(format!("{program}.toml"));
+        fs::write(
+            &cfg,
+            format!(
+                "[[project]]\npath = \"{}\"\nprogram = \"{program}\"\n",
+                folder.display()
+            ),
+        )
+        .unwrap();
+        InProc::with_config(&cfg)
+    };
+    let a = start(&real, "ProgA");
+    let b = start(&alias, "ProgB");
+    inproc::copy_project(&real);
+    let compiled = |d: &InProc| {
+        d.events()
+            .iter()
+            .filter(|e| inproc::is(e, "compile-succeeded"))
+            .count()
+    };
+    assert!(
+        inproc::wait_until(Duration::from_secs(10), || compiled(&a) + compiled(&b) > 0),
+        "nobody compiled the folder"
+    );
+    std::thread::sleep(Duration::from_secs(3));
+    let (ca, cb) = (compiled(&a), compiled(&b));
+    assert!(
+        ca == 0 || cb == 0,
+        "both daemons compiled it: {ca} and {cb}\n{}\n{}",
+        inproc::dump(&a.events()),
+        inproc::dump(&b.events())
+    );
+    let (kept, other) = if ca > 0 { (&a, &b) } else { (&b, &a) };
+    assert!(
+        other
+            .events()
+            .iter()
+            .any(|e| inproc::is(e, "watch-degraded")
+                && e["reason"]
+                    .as_str()
+                    .is_some_and(|r| r.contains("another skillpost daemon"))),
+        "{}",
+        inproc::dump(&other.events())
+    );
+    let write_backs = kept
+        .events()
+        .iter()
+        .filter(|e| inproc::is(e, "write-back") && e["written"] == true)
+        .count();
+    assert!(
+        write_backs <= 1,
+        "{write_backs} write-backs without an edit"
+    );
+}
+
+/// Finding 7: 1,100 configured folders under an open-file limit of 1,024: the daemon starts
+/// (folders that do not exist hold no descriptor), keeps as many existing ones as the limit
+/// allows with descriptors left for the compiles, says which it cannot keep, compiles the
+/// others and still reads its configuration on `SIGHUP`.
+#[test]
+fn thousands_of_folders_never_exhaust_the_descriptors() {
+    let w = Workspace::new();
+    let mut cfg = String::new();
+    for i in 0..1100 {
+        let p = w.ws().join(format!("p{i:04}"));
+        if i < 900 {
+            fs::create_dir(&p).unwrap();
+        }
+        cfg.push_str(&format!("[[project]]\npath = \"{}\"\n", p.display()));
+    }
+    // One real project among them, last in the configuration's order of existing folders.
+    let real = w.ws().join("p0000");
+    inproc::copy_project(&real);
+    let cfg_file = w.config(&cfg);
+    let ev = w.root.join("events.jsonl");
+    let mut child = Command::new("sh")
+        .args(["-c", "ulimit -n 1024; exec \"$0\" \"$@\""])
+        .arg(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["watch", "--settle", "50", "--config"])
+        .arg(&cfg_file)
+        .arg("--events")
+        .arg(&ev)
+        .env("XDG_RUNTIME_DIR", &w.root)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = rustix::process::Pid::from_child(&child);
+    let ok = inproc::wait_until(Duration::from_secs(60), || {
+        inproc::read_string(&ev).contains("\"write-back\"")
+    });
+    let text = inproc::read_string(&ev);
+    let refused = text.matches("open-file limit").count();
+    rustix::process::kill_process(pid, rustix::process::Signal::HUP).unwrap();
+    let reloaded = inproc::wait_until(Duration::from_secs(30), || {
+        inproc::read_string(&ev).contains("\"reloaded\"")
+    });
+    let _ = child.kill();
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        ok,
+        "the real project was not compiled: {}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        text.lines().take(20).collect::<Vec<_>>().join("\n")
+    );
+    assert!(!text.contains("Too many open files"), "descriptors ran out");
+    assert!(
+        refused > 0,
+        "no folder was refused for the limit (is it above 1,024 here?)"
+    );
+    assert!(
+        reloaded,
+        "SIGHUP did not reload: {}",
+        inproc::read_string(&ev)
+    );
+}

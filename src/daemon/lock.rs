@@ -1,20 +1,45 @@
-//! One daemon per folder: an advisory lock (`flock`) per watched folder, so a second
-//! `skillpost watch` on a folder another one keeps (even with another configuration) is refused
-//! instead of deleting the first one's staged files and racing its writes.
+//! One daemon per folder: an advisory lock (`flock`) on each watched folder itself, so a second
+//! `skillpost watch` on a folder another one keeps is refused instead of deleting the first
+//! one's staged files and racing its writes, whatever its user, configuration or runtime
+//! directory, and under whatever name (a link, a bind mount: the lock is the folder's inode's).
 //!
-//! The lock files live in the runtime directory: `$RUNTIME_DIRECTORY` (systemd's
-//! `RuntimeDirectory=`), else `$XDG_RUNTIME_DIR/skillpost`, else `<temp dir>/skillpost-<uid>`.
-//! A folder's lock file is named by a hash of its canonical path (plus its last component, for
-//! people reading the directory) and holds the pid and path of the daemon that keeps it. The lock
-//! is the kernel's: it ends with the process, whatever the way it ends (`kill -9` included), so a
-//! stale file never blocks a restart. A released lock's file is removed; a daemon that took the
-//! lock on a file removed meanwhile notices (the path names another inode) and tries again.
+//! - The lock is taken on the folder opened read-only (`O_DIRECTORY`); it is the kernel's, so it
+//!   ends with the process whatever the way it ends (`kill -9` included). Where a file system
+//!   has no `flock` on folders (some network file systems), a lock file in the runtime
+//!   directory stands in, as before: `$RUNTIME_DIRECTORY` (systemd's `RuntimeDirectory=`), else
+//!   `$XDG_RUNTIME_DIR/skillpost`, else `<temp dir>/skillpost-<uid>`.
+//! - A note in the runtime directory names the holder's pid for the refusal's message (a hint
+//!   only: a daemon with another runtime directory is refused all the same, without its pid).
+//! - A folder that does not exist holds no lock and no descriptor: it is locked when it
+//!   appears ([`Locks::ensure`]); if another daemon keeps it by then, the project waits.
+//! - One descriptor per locked folder, never more than the process may open less
+//!   [`RESERVE`]: the compiles always have descriptors left ([`raise_open_file_limit`] lifts
+//!   the soft limit to the hard one first). A folder beyond that is refused with the reason.
 
 use std::collections::HashMap;
 use std::fs::File;
 use std::io::Write;
 use std::os::unix::fs::{DirBuilderExt, MetadataExt, OpenOptionsExt};
 use std::path::{Path, PathBuf};
+
+/// Descriptors left for everything but the folder locks (compiles, watches, events, state).
+pub const RESERVE: u64 = 256;
+
+/// Lifts the soft limit of open files to the hard one (a service may keep thousands of folders;
+/// the soft limit is often 1,024). Returns the limit in force.
+pub fn raise_open_file_limit() -> u64 {
+    use rustix::process::{Resource, getrlimit, setrlimit};
+    let mut l = getrlimit(Resource::Nofile);
+    if let (Some(cur), max) = (l.current, l.maximum)
+        && max.is_none_or(|m| m > cur)
+    {
+        l.current = max.or(Some(1 << 20));
+        if setrlimit(Resource::Nofile, l).is_err() {
+            l = getrlimit(Resource::Nofile);
+        }
+    }
+    l.current.unwrap_or(u64::MAX)
+}
 
 /// The directory of the lock files (see the module documentation).
 pub fn runtime_dir() -> PathBuf {
@@ -36,13 +61,25 @@ pub fn runtime_dir() -> PathBuf {
     std::env::temp_dir().join(format!("skillpost-{}", rustix::process::getuid().as_raw()))
 }
 
+/// A folder's identity: device and inode.
+type Id = (u64, u64);
+
+/// A lock held: how many names hold it, the open folder (or lock file) holding it, and the note
+/// naming our pid.
+struct Held {
+    names: usize,
+    _file: File,
+    note: Option<PathBuf>,
+}
+
 /// The folder locks this daemon holds.
 pub(super) struct Locks {
     dir: PathBuf,
-    /// Folder as given → its lock file (two names of one folder share it).
-    names: HashMap<PathBuf, PathBuf>,
-    /// Lock file → (the names holding it, the open file holding the lock).
-    held: HashMap<PathBuf, (usize, File)>,
+    /// Folder as given → the lock it holds, or `None` while the folder does not exist.
+    names: HashMap<PathBuf, Option<Id>>,
+    held: HashMap<Id, Held>,
+    /// The open-file limit (locks stop [`RESERVE`] below it).
+    limit: u64,
 }
 
 impl Locks {
@@ -51,28 +88,130 @@ impl Locks {
             dir,
             names: HashMap::new(),
             held: HashMap::new(),
+            limit: rustix::process::getrlimit(rustix::process::Resource::Nofile)
+                .current
+                .unwrap_or(u64::MAX),
         }
+    }
+
+    /// With this open-file limit instead of the process's (tests).
+    #[cfg(test)]
+    fn with_limit(mut self, limit: u64) -> Self {
+        self.limit = limit;
+        self
+    }
+
+    /// Whether no further folder can be locked (the open-file limit less [`RESERVE`]).
+    pub(super) fn at_limit(&self) -> bool {
+        self.held.len() as u64 + RESERVE >= self.limit
     }
 
     pub(super) fn holds(&self, folder: &Path) -> bool {
         self.names.contains_key(folder)
     }
 
-    /// Takes the lock of `folder` (by its canonical path, or the path itself while it does not
-    /// exist). Error: the sentence to report (another daemon keeps it, or the lock cannot be
-    /// taken).
+    /// Keeps `folder`: locks it if it exists, else remembers it for [`Locks::ensure`] when it
+    /// appears. Error: the sentence to report (another daemon keeps it, or it cannot be locked).
     pub(super) fn acquire(&mut self, folder: &Path) -> Result<(), String> {
         if self.holds(folder) {
+            return self.ensure(folder);
+        }
+        self.names.insert(folder.to_owned(), None);
+        let r = self.ensure(folder);
+        if r.is_err() {
+            self.names.remove(folder);
+        }
+        r
+    }
+
+    /// Locks `folder` (kept by [`Locks::acquire`]) if it exists now and is not locked yet.
+    pub(super) fn ensure(&mut self, folder: &Path) -> Result<(), String> {
+        match self.names.get(folder) {
+            Some(Some(id)) => {
+                // Still the folder we locked? One deleted (or moved away) and made again under
+                // the name is another inode, locked anew.
+                match std::fs::metadata(folder) {
+                    Ok(m) if (m.dev(), m.ino()) != *id => {
+                        self.release(folder);
+                        self.names.insert(folder.to_owned(), None);
+                    }
+                    _ => return Ok(()),
+                }
+            }
+            Some(None) => {}
+            None => return Err(format!("{} is not kept", folder.display())),
+        }
+        let Ok(dir) = std::fs::File::options()
+            .read(true)
+            .custom_flags(
+                (rustix::fs::OFlags::DIRECTORY | rustix::fs::OFlags::CLOEXEC).bits() as i32,
+            )
+            .open(folder)
+        else {
+            // Not there (yet): locked when it appears.
             return Ok(());
+        };
+        let meta = dir
+            .metadata()
+            .map_err(|e| format!("cannot lock {}: {e}", folder.display()))?;
+        let id = (meta.dev(), meta.ino());
+        if let Some(h) = self.held.get_mut(&id) {
+            // The same folder under another name: ours already.
+            h.names += 1;
+            self.names.insert(folder.to_owned(), Some(id));
+            return Ok(());
+        }
+        if self.at_limit() {
+            return Err(format!(
+                "cannot keep {}: this daemon keeps {} folders, as many as its open-file limit \
+                 ({}) allows with {RESERVE} descriptors left for the compiles; raise the limit \
+                 (systemd: LimitNOFILE=) or split the folders between services",
+                folder.display(),
+                self.held.len(),
+                self.limit
+            ));
         }
         let real = std::fs::canonicalize(folder).unwrap_or_else(|_| folder.to_owned());
-        let file = self.dir.join(lock_name(&real));
-        if let Some((n, _)) = self.held.get_mut(&file) {
-            // The same folder under another name: ours already.
-            *n += 1;
-            self.names.insert(folder.to_owned(), file);
-            return Ok(());
-        }
+        let note = self.dir.join(lock_name(&real));
+        let file =
+            match rustix::fs::flock(&dir, rustix::fs::FlockOperation::NonBlockingLockExclusive) {
+                Ok(()) => dir,
+                Err(rustix::io::Errno::WOULDBLOCK) => return Err(self.refusal(&real, &note)),
+                // No flock on folders here (a network file system): the lock file instead.
+                Err(_) => self.lock_file(&real, &note)?,
+            };
+        let note = self.write_note(&note, &real);
+        self.held.insert(
+            id,
+            Held {
+                names: 1,
+                _file: file,
+                note,
+            },
+        );
+        self.names.insert(folder.to_owned(), Some(id));
+        Ok(())
+    }
+
+    /// The message when another daemon keeps `real`; with its pid when its note is ours to read.
+    fn refusal(&self, real: &Path, note: &Path) -> String {
+        let holder = crate::load::read_limited(note, 4096)
+            .ok()
+            .and_then(|b| String::from_utf8(b).ok())
+            .and_then(|t| t.lines().next().map(str::to_owned))
+            .unwrap_or_default();
+        let pid = holder
+            .strip_prefix("pid ")
+            .map(|p| format!(" (pid {p})"))
+            .unwrap_or_default();
+        format!(
+            "another skillpost daemon{pid} already watches {}: one daemon per folder",
+            real.display()
+        )
+    }
+
+    /// The runtime directory, made if needed: a folder of our own nobody else can write to.
+    fn own_dir(&self) -> Result<(), String> {
         std::fs::DirBuilder::new()
             .recursive(true)
             .mode(0o700)
@@ -97,6 +236,27 @@ impl Locks {
                 self.dir.display()
             ));
         }
+        Ok(())
+    }
+
+    /// Writes the note naming our pid (best effort: it is only for messages).
+    fn write_note(&self, note: &Path, real: &Path) -> Option<PathBuf> {
+        self.own_dir().ok()?;
+        let mut f = std::fs::OpenOptions::new()
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .mode(0o600)
+            .custom_flags(rustix::fs::OFlags::NOFOLLOW.bits() as i32)
+            .open(note)
+            .ok()?;
+        writeln!(f, "pid {}\n{}", std::process::id(), real.display()).ok()?;
+        Some(note.to_owned())
+    }
+
+    /// The stand-in where folders cannot be locked: a lock file in the runtime directory.
+    fn lock_file(&self, real: &Path, file: &Path) -> Result<File, String> {
+        self.own_dir()?;
         for _ in 0..10 {
             let f = std::fs::OpenOptions::new()
                 .read(true)
@@ -105,41 +265,20 @@ impl Locks {
                 .truncate(false)
                 .mode(0o600)
                 .custom_flags(rustix::fs::OFlags::NOFOLLOW.bits() as i32)
-                .open(&file)
+                .open(file)
                 .map_err(|e| format!("cannot open the lock file {}: {e}", file.display()))?;
             match rustix::fs::flock(&f, rustix::fs::FlockOperation::NonBlockingLockExclusive) {
                 Ok(()) => {}
-                Err(rustix::io::Errno::WOULDBLOCK) => {
-                    let holder = crate::load::read_limited(&file, 4096)
-                        .ok()
-                        .and_then(|b| String::from_utf8(b).ok())
-                        .and_then(|t| t.lines().next().map(str::to_owned))
-                        .unwrap_or_default();
-                    let pid = holder
-                        .strip_prefix("pid ")
-                        .map(|p| format!(" (pid {p})"))
-                        .unwrap_or_default();
-                    return Err(format!(
-                        "another skillpost daemon{pid} already watches {}: one daemon per folder \
-                         (lock file {})",
-                        real.display(),
-                        file.display()
-                    ));
-                }
+                Err(rustix::io::Errno::WOULDBLOCK) => return Err(self.refusal(real, file)),
                 Err(e) => return Err(format!("cannot lock {}: {e}", file.display())),
             }
             // The holder before us may have removed the file between our open and our lock.
             let ours = f.metadata().map(|m| (m.dev(), m.ino())).ok();
-            let now = std::fs::metadata(&file).map(|m| (m.dev(), m.ino())).ok();
+            let now = std::fs::metadata(file).map(|m| (m.dev(), m.ino())).ok();
             if ours.is_none() || ours != now {
                 continue;
             }
-            let mut f = f;
-            let _ = f.set_len(0);
-            let _ = writeln!(f, "pid {}\n{}", std::process::id(), real.display());
-            self.held.insert(file.clone(), (1, f));
-            self.names.insert(folder.to_owned(), file);
-            return Ok(());
+            return Ok(f);
         }
         Err(format!(
             "cannot lock {}: it keeps being replaced",
@@ -147,26 +286,30 @@ impl Locks {
         ))
     }
 
-    /// Releases the lock of `folder` (removing its file first, while the lock is still ours).
+    /// Releases the lock of `folder` (removing its note first, while the lock is still ours).
     pub(super) fn release(&mut self, folder: &Path) {
-        let Some(file) = self.names.remove(folder) else {
+        let Some(Some(id)) = self.names.remove(folder) else {
             return;
         };
-        let Some((n, _)) = self.held.get_mut(&file) else {
+        let Some(h) = self.held.get_mut(&id) else {
             return;
         };
-        *n -= 1;
-        if *n == 0 {
-            let _ = std::fs::remove_file(&file);
-            self.held.remove(&file);
+        h.names -= 1;
+        if h.names == 0 {
+            if let Some(note) = &h.note {
+                let _ = std::fs::remove_file(note);
+            }
+            self.held.remove(&id);
         }
     }
 }
 
 impl Drop for Locks {
     fn drop(&mut self) {
-        for file in self.held.keys() {
-            let _ = std::fs::remove_file(file);
+        for h in self.held.values() {
+            if let Some(note) = &h.note {
+                let _ = std::fs::remove_file(note);
+            }
         }
     }
 }
@@ -229,14 +372,82 @@ mod tests {
     }
 
     #[test]
-    fn a_lock_directory_others_can_write_to_is_refused() {
+    fn daemons_with_other_runtime_directories_meet_at_the_folder() {
+        // Issue 27, item 2 (and issue 24, finding 5): the lock is the folder's own, so a
+        // daemon with another runtime directory (another user, a hand-started check) is refused.
+        let d = tempfile::tempdir().unwrap();
+        let folder = d.path().join("project");
+        std::fs::create_dir(&folder).unwrap();
+        let mut a = Locks::new(d.path().join("run-a"));
+        let mut b = Locks::new(d.path().join("run-b"));
+        a.acquire(&folder).unwrap();
+        let e = b.acquire(&folder).unwrap_err();
+        assert!(e.contains("another skillpost daemon"), "{e}");
+        drop(a);
+        b.acquire(&folder).unwrap();
+    }
+
+    #[test]
+    fn a_missing_folder_is_locked_when_it_appears_under_any_name() {
+        // Issue 24, finding 5: `real/P` in one daemon, `alias/P` (a linked parent) in another,
+        // both missing at startup: whichever locks it first when it appears keeps it.
+        let d = tempfile::tempdir().unwrap();
+        std::fs::create_dir(d.path().join("real")).unwrap();
+        std::os::unix::fs::symlink(d.path().join("real"), d.path().join("alias")).unwrap();
+        let (real, alias) = (d.path().join("real/P"), d.path().join("alias/P"));
+        let mut a = Locks::new(d.path().join("run-a"));
+        let mut b = Locks::new(d.path().join("run-b"));
+        a.acquire(&real).unwrap();
+        b.acquire(&alias).unwrap();
+        assert!(
+            a.held.is_empty() && b.held.is_empty(),
+            "no descriptor while missing"
+        );
+        std::fs::create_dir(&real).unwrap();
+        a.ensure(&real).unwrap();
+        let e = b.ensure(&alias).unwrap_err();
+        assert!(e.contains("another skillpost daemon"), "{e}");
+        // The folder made again (a new inode): the lock follows it.
+        drop(b);
+        std::fs::remove_dir(&real).unwrap();
+        std::fs::create_dir(&real).unwrap();
+        let mut c = Locks::new(d.path().join("run-c"));
+        c.acquire(&alias).unwrap();
+        assert!(a.ensure(&real).is_err(), "a kept the old inode's lock only");
+        drop(c);
+        a.ensure(&real).unwrap();
+    }
+
+    #[test]
+    fn locks_stop_short_of_the_open_file_limit() {
+        // Issue 24, finding 7: never more folder descriptors than the limit less the reserve.
+        let d = tempfile::tempdir().unwrap();
+        let mut a = Locks::new(d.path().join("run")).with_limit(RESERVE + 2);
+        let mut errors = Vec::new();
+        for i in 0..4 {
+            let f = d.path().join(format!("p{i}"));
+            std::fs::create_dir(&f).unwrap();
+            if let Err(e) = a.acquire(&f) {
+                errors.push(e);
+            }
+        }
+        assert_eq!(a.held.len(), 2);
+        assert_eq!(errors.len(), 2);
+        assert!(errors[0].contains("open-file limit"), "{}", errors[0]);
+    }
+
+    #[test]
+    fn a_note_is_never_written_where_others_can_write() {
         use std::os::unix::fs::PermissionsExt;
         let d = tempfile::tempdir().unwrap();
         let run = d.path().join("run");
         std::fs::create_dir(&run).unwrap();
         std::fs::set_permissions(&run, std::fs::Permissions::from_mode(0o777)).unwrap();
-        let e = Locks::new(run).acquire(d.path()).unwrap_err();
-        assert!(e.contains("only it can write to"), "{e}");
+        let folder = d.path().join("p");
+        std::fs::create_dir(&folder).unwrap();
+        // The folder's own lock does not need the runtime directory.
+        Locks::new(run.clone()).acquire(&folder).unwrap();
+        assert_eq!(std::fs::read_dir(&run).unwrap().count(), 0);
     }
 
     #[test]

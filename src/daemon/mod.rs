@@ -123,6 +123,7 @@ pub async fn run(
     let (dtx, mut drx) = mpsc::unbounded_channel();
     let force_poll = std::env::var_os("SKILLPOST_FORCE_POLL").is_some();
     // One daemon per folder: a second one on any of these folders stops here (exit status 2).
+    lock::raise_open_file_limit();
     let mut locks = lock::Locks::new(lock::runtime_dir());
     for folder in config.projects.iter().map(|p| p.path.clone()).chain(
         config
@@ -130,7 +131,13 @@ pub async fn run(
             .iter()
             .flat_map(|r| std::iter::once(r.path.clone()).chain(config::discover(&r.path))),
     ) {
-        locks.acquire(&folder)?;
+        // Beyond the open-file limit a folder is refused on its own (`watch-degraded`), and
+        // the daemon serves the others.
+        if let Err(e) = locks.acquire(&folder)
+            && !locks.at_limit()
+        {
+            return Err(e);
+        }
     }
     let mut d = Daemon {
         sink: sink.clone(),

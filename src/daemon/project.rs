@@ -72,6 +72,9 @@ pub(super) struct Project {
     /// Stale temporaries of ours are still to be removed from the folder (after the first
     /// compile, which tells which files the project reads).
     pub(super) sweep: bool,
+    /// The folder appeared, but another daemon keeps it: waited for like a missing folder
+    /// (said once, with `watch-degraded`).
+    pub(super) foreign: bool,
 }
 
 impl Daemon {
@@ -518,6 +521,7 @@ impl Daemon {
             refused: false,
             force: true,
             sweep: true,
+            foreign: false,
         };
         let mut dirs = BTreeSet::new();
         dirs.insert(key.clone());
@@ -558,6 +562,34 @@ impl Daemon {
         true
     }
 
+    /// Locks a project folder that has appeared (one that did not exist was kept without a
+    /// lock); `false` when another daemon keeps it: the project then waits as for a missing
+    /// folder, reported once, and tries again with the missing folders' check.
+    pub(super) fn claim_folder(&mut self, p: &mut Project) -> bool {
+        let key = p.spec.path.clone();
+        match self.locks.ensure(&key) {
+            Ok(()) => {
+                p.foreign = false;
+                true
+            }
+            Err(why) => {
+                p.missing = true;
+                if !p.foreign {
+                    p.foreign = true;
+                    self.sink.emit(
+                        Some(&Self::key_str(&key)),
+                        Event::WatchDegraded {
+                            root: None,
+                            reason: why,
+                            backend: Some("none"),
+                        },
+                    );
+                }
+                false
+            }
+        }
+    }
+
     pub(super) fn drop_project(&mut self, key: &Path) {
         if let Some(p) = self.projects.remove(key) {
             self.locks.release(key);
@@ -588,9 +620,12 @@ impl Daemon {
 
     /// Changes a project's watched directories to `dirs` (adding before removing, so a shared
     /// directory is never unwatched in between).
-    pub(super) fn set_watches(&mut self, p: &mut Project, dirs: BTreeSet<PathBuf>) {
+    pub(super) fn set_watches(&mut self, p: &mut Project, mut dirs: BTreeSet<PathBuf>) {
         let key = p.spec.path.clone();
         let poll = self.force_poll;
+        if dirs.contains(&key) && !p.watched.contains(&key) && !self.claim_folder(p) {
+            dirs.remove(&key);
+        }
         for d in dirs.difference(&p.watched.clone()) {
             match self.watchers.add(d, poll) {
                 Ok((backend, why)) => {

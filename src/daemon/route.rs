@@ -214,7 +214,7 @@ impl Daemon {
         let Some(mut p) = self.projects.remove(key) else {
             return;
         };
-        if key.is_dir() {
+        if key.is_dir() && self.claim_folder(&mut p) {
             let was_missing = p.missing;
             match self.watchers.renew(key, self.force_poll) {
                 Ok(b) => {
