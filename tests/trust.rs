@@ -985,3 +985,88 @@ fn thousands_of_folders_never_exhaust_the_descriptors() {
         inproc::read_string(&ev)
     );
 }
+
+/// Finding 3 through the daemon: the folder swapped for a link to another project during a
+/// compile. Nothing of the compile that read `P` lands in `OUT`: that run writes nothing and
+/// ends with `compile-retrying` (or wrote into `P.real`, the swap came after its check); what
+/// `OUT` (whose own compile fails) gets nothing.
+#[test]
+fn the_daemon_never_writes_a_compile_into_a_folder_swapped_in() {
+    let w = Workspace::new();
+    let p = w.ws().join("P");
+    let out = w.root.join("OUT");
+    generator::write_project(&p, &generator::Spec::flat(20_000)).unwrap();
+    generator::write_project(&out, &generator::Spec::flat(10)).unwrap();
+    // OUT's own compile fails (no SFC): any output in OUT comes from P's compile.
+    fs::remove_file(out.join("sfc.xml")).unwrap();
+    let d = InProc::with_dirs(&[&p]);
+    d.wait_for("the first compile", Duration::from_secs(60), |e| {
+        is_for(e, "compile-succeeded", &p)
+    });
+    let evs = d.events();
+    let took = evs
+        .iter()
+        .find(|e| is_for(e, "compile-succeeded", &p))
+        .and_then(|e| e["duration_ms"].as_u64())
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    // An edit, and the swap in the middle of its compile.
+    let mark = d.mark();
+    let sfc = fs::read_to_string(p.join("sfc.xml")).unwrap();
+    fs::write(p.join("sfc.xml"), sfc.replacen("?>", "?><!-- edit -->", 1)).unwrap();
+    d.wait_for("the edit's compile", Duration::from_secs(10), |e| {
+        inproc::is_after(e, "compile-started", &p, mark)
+    });
+    std::thread::sleep(Duration::from_millis(took / 3));
+    fs::rename(&p, w.ws().join("P.real")).unwrap();
+    std::os::unix::fs::symlink(&out, &p).unwrap();
+    d.wait_for("the edit's outcome", Duration::from_secs(60), |e| {
+        seq_after(e, mark)
+            && (is_for(e, "compile-retrying", &p) || is_for(e, "compile-succeeded", &p))
+    });
+    std::thread::sleep(Duration::from_secs(2));
+    for f in ["Blackboard.src", "Blackboard.dat"] {
+        assert!(
+            !out.join(f).exists(),
+            "{f} in OUT: P's compile landed there\n{}",
+            inproc::dump(&d.events())
+        );
+    }
+}
+
+fn seq_after(e: &serde_json::Value, mark: u64) -> bool {
+    inproc::seq(e) > mark
+}
+
+/// Finding 4 through the daemon: a read-only blackboard gets `write-back` with
+/// `written: false` and the reason, once, and is left alone.
+#[test]
+fn the_daemon_leaves_a_read_only_blackboard_alone() {
+    use std::os::unix::fs::{MetadataExt as _, PermissionsExt as _};
+    let w = Workspace::new();
+    let p = w.project("P");
+    let bb = p.join("Blackboard.aml");
+    fs::set_permissions(&bb, fs::Permissions::from_mode(0o444)).unwrap();
+    let (before, ino) = (fs::read(&bb).unwrap(), fs::metadata(&bb).unwrap().ino());
+    let d = InProc::with_dirs(&[&p]);
+    let evs = d.wait_for("the write-back", WAIT, |e| is_for(e, "write-back", &p));
+    let wb = evs.iter().find(|e| is_for(e, "write-back", &p)).unwrap();
+    assert_eq!(wb["written"], false, "{wb}");
+    assert!(
+        wb["reason"]
+            .as_str()
+            .unwrap_or_default()
+            .contains("read-only"),
+        "{wb}"
+    );
+    assert!(inproc::src_of(&p).exists());
+    std::thread::sleep(Duration::from_millis(500));
+    let compiles = d
+        .events()
+        .iter()
+        .filter(|e| is_for(e, "compile-started", &p))
+        .count();
+    assert_eq!(compiles, 1, "{}", inproc::dump(&d.events()));
+    assert_eq!(fs::read(&bb).unwrap(), before);
+    assert_eq!(fs::metadata(&bb).unwrap().ino(), ino);
+}
