@@ -354,14 +354,7 @@ fn cli_does_not_take_over_another_users_blackboard() {
     std::os::unix::fs::chown(&proj, Some(65534), Some(65534)).unwrap();
     let bb = proj.join("Blackboard.aml");
     let (before, ino) = (fs::read(&bb).unwrap(), fs::metadata(&bb).unwrap().ino());
-    let o = Command::new("setpriv")
-        .args([
-            "--reuid=65534",
-            "--regid=65534",
-            "--clear-groups",
-            "--inh-caps=-all",
-            "--bounding-set=-all",
-        ])
+    let o = common::as_nobody()
         .arg(env!("CARGO_BIN_EXE_skillpost"))
         .args(["Blackboard.aml", "Cell"])
         .current_dir(&proj)

@@ -15,19 +15,9 @@ use std::time::{Duration, Instant};
 
 use inproc::{InProc, WAIT, Workspace, is_for};
 
-/// Runs `skillpost watch ARGS` and waits at most `limit` for it to end: its exit status and
-/// stderr, or `None` when it was still running (then it is killed).
-fn watch_exits(args: &[&str], cwd: &Path, limit: Duration) -> Option<(i32, String)> {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_skillpost"))
-        .arg("watch")
-        .args(args)
-        .current_dir(cwd)
-        .env("XDG_RUNTIME_DIR", cwd)
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+/// Waits at most `limit` for `child` to end: its exit status and stderr (when piped), or `None`
+/// when it was still running (then it is killed).
+fn ended_within(mut child: std::process::Child, limit: Duration) -> Option<(i32, String)> {
     let end = Instant::now() + limit;
     loop {
         if let Some(st) = child.try_wait().unwrap() {
@@ -44,6 +34,21 @@ fn watch_exits(args: &[&str], cwd: &Path, limit: Duration) -> Option<(i32, Strin
         }
         std::thread::sleep(Duration::from_millis(20));
     }
+}
+
+/// Runs `skillpost watch ARGS` and waits at most `limit` for it to end (see [`ended_within`]).
+fn watch_exits(args: &[&str], cwd: &Path, limit: Duration) -> Option<(i32, String)> {
+    let child = Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .arg("watch")
+        .args(args)
+        .current_dir(cwd)
+        .env("XDG_RUNTIME_DIR", cwd)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    ended_within(child, limit)
 }
 
 /// Finding 2: `--events` or `--state` naming the blackboard (or any file in a watched folder)
@@ -196,7 +201,7 @@ fn a_fifo_swapped_in_before_sighup_does_not_block_the_daemon() {
     let w = Workspace::new();
     let p = w.project("P");
     let ev = w.root.join("events.jsonl");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_skillpost"))
+    let child = Command::new(env!("CARGO_BIN_EXE_skillpost"))
         .args(["watch", "--settle", "50", "--events"])
         .arg(&ev)
         .arg(&p)
@@ -222,18 +227,7 @@ fn a_fifo_swapped_in_before_sighup_does_not_block_the_daemon() {
         inproc::read_string(&inproc::src_of(&p)).contains(&inproc::ptp_with_x(222))
     });
     rustix::process::kill_process(pid, rustix::process::Signal::TERM).unwrap();
-    let end = Instant::now() + Duration::from_secs(15);
-    let status = loop {
-        if let Some(st) = child.try_wait().unwrap() {
-            break Some(st);
-        }
-        if Instant::now() >= end {
-            let _ = child.kill();
-            let _ = child.wait();
-            break None;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    let status = ended_within(child, Duration::from_secs(15));
     assert!(compiled, "the edit after SIGHUP was not compiled");
     assert!(status.is_some(), "SIGTERM did not stop the daemon");
 }
@@ -454,28 +448,13 @@ fn status_exits(args: &[&str], env: &[(&str, Option<&Path>)]) -> Option<(i32, St
             None => c.env_remove(k),
         };
     }
-    let mut child = c
+    let child = c
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let end = Instant::now() + Duration::from_secs(10);
-    loop {
-        if let Some(st) = child.try_wait().unwrap() {
-            let out = child.wait_with_output().unwrap();
-            return Some((
-                st.code().unwrap_or(-1),
-                String::from_utf8_lossy(&out.stderr).into_owned(),
-            ));
-        }
-        if Instant::now() >= end {
-            let _ = child.kill();
-            let _ = child.wait();
-            return None;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    ended_within(child, Duration::from_secs(10))
 }
 
 /// Finding 8: `skillpost status` on a FIFO, on a link to `/dev/zero` and on a 300 MB file ends
@@ -619,14 +598,7 @@ fn an_edit_is_compiled_once_its_permission_comes_back() {
         std::os::unix::fs::chown(p.join(f), Some(65534), Some(65534)).unwrap();
     }
     let ev = run.join("events.jsonl");
-    let mut child = Command::new("setpriv")
-        .args([
-            "--reuid=65534",
-            "--regid=65534",
-            "--clear-groups",
-            "--inh-caps=-all",
-            "--bounding-set=-all",
-        ])
+    let mut child = common::as_nobody()
         .arg(env!("CARGO_BIN_EXE_skillpost"))
         .args(["watch", "--settle", "50", "--events"])
         .arg(&ev)

@@ -386,17 +386,13 @@ impl Daemon {
             self.drop_project(&k);
             // A new project if it comes back: its run_ids start again at 1.
             self.run_ids.remove(&k);
-            self.sink.emit(
-                Some(&Self::key_str(&k)),
-                Event::WatchDegraded {
-                    root: None,
-                    reason: format!(
-                        "the project folder has been gone for {} s: the project is forgotten \
+            self.degraded(
+                &k,
+                format!(
+                    "the project folder has been gone for {} s: the project is forgotten \
                          (found again if it comes back)",
-                        after.as_secs()
-                    ),
-                    backend: Some("none"),
-                },
+                    after.as_secs()
+                ),
             );
         }
     }
@@ -489,14 +485,7 @@ impl Daemon {
             {
                 root.locked_out.insert(key.clone());
             }
-            self.sink.emit(
-                Some(&Self::key_str(&key)),
-                Event::WatchDegraded {
-                    root: None,
-                    reason: why,
-                    backend: Some("none"),
-                },
-            );
+            self.degraded(&key, why);
             return false;
         }
         // Stale temporaries are removed after the first compile (`sweep`), when the project's
@@ -576,18 +565,23 @@ impl Daemon {
                 p.missing = true;
                 if !p.foreign {
                     p.foreign = true;
-                    self.sink.emit(
-                        Some(&Self::key_str(&key)),
-                        Event::WatchDegraded {
-                            root: None,
-                            reason: why,
-                            backend: Some("none"),
-                        },
-                    );
+                    self.degraded(&key, why);
                 }
                 false
             }
         }
+    }
+
+    /// `watch-degraded` for a project that is not watched now (`backend` `none`), with why.
+    pub(super) fn degraded(&self, key: &Path, reason: String) {
+        self.sink.emit(
+            Some(&Self::key_str(key)),
+            Event::WatchDegraded {
+                root: None,
+                reason,
+                backend: Some("none"),
+            },
+        );
     }
 
     pub(super) fn drop_project(&mut self, key: &Path) {
@@ -650,32 +644,17 @@ impl Daemon {
                 Err(WatchFailure::Missing) if d == &key => {
                     if !p.missing {
                         p.missing = true;
-                        self.sink.emit(
-                            Some(&Self::key_str(&key)),
-                            Event::WatchDegraded {
-                                root: None,
-                                reason: match config::too_long(&key) {
-                                    Err(why) => format!("the project folder cannot be used: {why}"),
-                                    Ok(()) => {
-                                        "the project folder does not exist; waiting for it".into()
-                                    }
-                                },
-                                backend: Some("none"),
-                            },
-                        );
+                        let why = match config::too_long(&key) {
+                            Err(why) => format!("the project folder cannot be used: {why}"),
+                            Ok(()) => "the project folder does not exist; waiting for it".into(),
+                        };
+                        self.degraded(&key, why);
                     }
                 }
                 Err(WatchFailure::Missing) => {}
                 Err(WatchFailure::Other(e)) if d == &key => {
                     tracing::warn!("cannot watch {}: {e}", d.display());
-                    self.sink.emit(
-                        Some(&Self::key_str(&key)),
-                        Event::WatchDegraded {
-                            root: None,
-                            reason: format!("the project folder cannot be watched: {e}"),
-                            backend: Some("none"),
-                        },
-                    );
+                    self.degraded(&key, format!("the project folder cannot be watched: {e}"));
                 }
                 Err(WatchFailure::Other(e)) => {
                     tracing::warn!("cannot watch {}: {e}", d.display());

@@ -232,14 +232,7 @@ impl Daemon {
             p.sched.change(now);
         } else if !p.missing {
             p.missing = true;
-            self.sink.emit(
-                Some(&Self::key_str(key)),
-                Event::WatchDegraded {
-                    root: None,
-                    reason: "the project folder was removed; waiting for it".into(),
-                    backend: Some("none"),
-                },
-            );
+            self.degraded(key, "the project folder was removed; waiting for it".into());
         }
         self.projects.insert(key.to_owned(), p);
     }

@@ -189,3 +189,17 @@ impl Drop for Watch {
         let _ = self.child.wait();
     }
 }
+
+/// `setpriv` running what follows as `nobody` (uid and gid 65534) without any capability: an
+/// unprivileged user, for the tests of what such a user may not do (run as root).
+pub fn as_nobody() -> std::process::Command {
+    let mut c = std::process::Command::new("setpriv");
+    c.args([
+        "--reuid=65534",
+        "--regid=65534",
+        "--clear-groups",
+        "--inh-caps=-all",
+        "--bounding-set=-all",
+    ]);
+    c
+}
