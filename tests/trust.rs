@@ -36,6 +36,20 @@ fn ended_within(mut child: std::process::Child, limit: Duration) -> Option<(i32,
     }
 }
 
+/// `skillpost watch --settle 50 --events EV PROJECT`, its runtime folder `run`, output discarded.
+fn watch_with_events(ev: &Path, project: &Path, run: &Path) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["watch", "--settle", "50", "--events"])
+        .arg(ev)
+        .arg(project)
+        .env("XDG_RUNTIME_DIR", run)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap()
+}
+
 /// Runs `skillpost watch ARGS` and waits at most `limit` for it to end (see [`ended_within`]).
 fn watch_exits(args: &[&str], cwd: &Path, limit: Duration) -> Option<(i32, String)> {
     let child = Command::new(env!("CARGO_BIN_EXE_skillpost"))
@@ -201,16 +215,7 @@ fn a_fifo_swapped_in_before_sighup_does_not_block_the_daemon() {
     let w = Workspace::new();
     let p = w.project("P");
     let ev = w.root.join("events.jsonl");
-    let child = Command::new(env!("CARGO_BIN_EXE_skillpost"))
-        .args(["watch", "--settle", "50", "--events"])
-        .arg(&ev)
-        .arg(&p)
-        .env("XDG_RUNTIME_DIR", &w.root)
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
+    let child = watch_with_events(&ev, &p, &w.root);
     let pid = rustix::process::Pid::from_child(&child);
     assert!(
         inproc::wait_until(Duration::from_secs(20), || inproc::read_string(&ev)
@@ -672,16 +677,7 @@ fn an_input_held_open_for_writing_costs_no_cpu() {
     let w = Workspace::new();
     let p = w.project("P");
     let ev = w.root.join("events.jsonl");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_skillpost"))
-        .args(["watch", "--settle", "50", "--events"])
-        .arg(&ev)
-        .arg(&p)
-        .env("XDG_RUNTIME_DIR", &w.root)
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut child = watch_with_events(&ev, &p, &w.root);
     let ok = inproc::wait_until(Duration::from_secs(20), || {
         inproc::read_string(&ev).contains("\"write-back\"")
     });
