@@ -12,8 +12,8 @@
 //! saves (open with truncation, write), a writer that opens the file as soon as the staged
 //! file appears and truncates and writes through that descriptor 0–2 ms later, and a rename
 //! save followed at once by an open of the name and a write through that descriptor 1 ms
-//! later. `SKILLPOST_RACE_SAVES` saves per mode (default 150, 500 for the last: it lost 1 in
-//! 500 before the fix); `bench/race.sh` runs 3,000 per mode. `SKILLPOST_RACE_BIN` runs another
+//! later. `SKILLPOST_RACE_SAVES` saves per mode (default 150, 1,000 for the last: the build
+//! before lost 1 to 5 in 500); `bench/race.sh` runs 3,000 per mode. `SKILLPOST_RACE_BIN` runs another
 //! binary (an older build, to show the test catches its bug).
 
 mod common;
@@ -47,9 +47,10 @@ fn saves(mode: Mode) -> usize {
     std::env::var("SKILLPOST_RACE_SAVES")
         .ok()
         .and_then(|s| s.parse().ok())
-        // The descriptor race needs a few hundred trials to show (4-5 losses in 500 before).
+        // The descriptor race needs hundreds of trials to show (the build before lost 1 to 5
+        // in 500).
         .unwrap_or(if mode == Mode::RenameThenDescriptor {
-            500
+            1000
         } else {
             150
         })
