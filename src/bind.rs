@@ -197,16 +197,31 @@ pub fn resolve(
             );
             continue;
         };
+        // The program is the controller's (SPEC.md 9): a robot and the devices on it.
+        let controller = bb.controller_of(res);
         match r.resource {
-            None => r.resource = Some(res),
-            Some(first) if first != res && !several_reported => {
+            None => r.resource = Some(controller),
+            Some(first) if first != controller && !several_reported => {
                 several_reported = true;
+                let runs_on = |ri: usize| {
+                    let c = bb.controller_of(ri);
+                    if c == ri {
+                        format!("`{}`", bb.resources[ri].name.text)
+                    } else {
+                        format!(
+                            "`{}` (on the controller of `{}`)",
+                            bb.resources[ri].name.text, bb.resources[c].name.text
+                        )
+                    }
+                };
                 diags.push(
                     Diagnostic::error(
                         Code::Unsupported,
                         format!(
-                            "steps of several resources in one program are not supported yet: this step uses `{}`, earlier steps `{}`",
-                            resource.name.text, bb.resources[first].name.text
+                            "steps of several controllers are not supported yet: this step uses {}, earlier steps the controller of `{}`; a device on a robot's controller needs the attribute Controller = `{}` (or to stand inside that resource)",
+                            runs_on(res),
+                            bb.resources[first].name.text,
+                            bb.resources[first].name.text
                         ),
                     )
                     .at(st.resource.as_ref().map(|n| n.span.clone()).unwrap_or(e.span.clone()))
@@ -216,7 +231,7 @@ pub fn resolve(
             _ => {}
         }
         if let Some(rn) = &st.resource
-            && r.resource == Some(res)
+            && r.resource == Some(controller)
         {
             recent[next_recent] = Some((&rn.key, &skill_name.key, (res, sk)));
             next_recent = (next_recent + 1) % recent.len();

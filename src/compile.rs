@@ -804,11 +804,17 @@ fn languages(
         let resource = &bb.resources[r];
         let own = by_resource.get(&r).map_or(&[][..], Vec::as_slice);
         let from_irl = own.iter().find_map(|(_, file)| declared[file].clone());
+        // A device without a language of its own is in its controller's (SPEC.md 9).
+        let controller = &bb.resources[bb.controller_of(r)];
         let decided = resource
             .language
             .as_ref()
             .map(|(l, at)| (*l, at.clone(), "the resource's Language"))
-            .or(from_irl.map(|(l, at)| (l, at, "the first IRL file's language")));
+            .or(from_irl.map(|(l, at)| (l, at, "the first IRL file's language")))
+            .or(controller
+                .language
+                .as_ref()
+                .map(|(l, at)| (*l, at.clone(), "its controller's Language")));
         let lang = decided.as_ref().map_or(Language::Krl, |d| d.0);
         resources.insert(r, lang);
         for (f, file) in own {
@@ -838,6 +844,11 @@ fn languages(
         .unwrap_or(Language::Krl);
     if let Some(&other) = order.iter().find(|r| resources[r] != program)
         && let Some(first) = res.resource
+        // A device whose Language attribute differs from its controller's: reported at the
+        // attribute by the reader.
+        && !(bb.controller_of(other) == first
+            && bb.resources[other].language.is_some()
+            && bb.resources[first].language.is_some())
     {
         cx.diags.push(Diagnostic::error(
             Code::TwoLanguages,

@@ -511,6 +511,8 @@ codes! {
     /// A resource's `Language` or an IRL file's `info@language` names no language skillpost
     /// writes (KRL, RAPID, URScript).
     BadLanguage = "E210",
+    /// A chain of `Controller` attributes that comes back to where it started (SPEC.md 9).
+    ControllerLoop = "E211",
 
     /// No `pou` with an `SFC` body (or none of the name asked for).
     NoSfcBody = "E301",

@@ -123,6 +123,10 @@ impl Interner {
 pub struct Blackboard {
     pub file: FileId,
     pub resources: Vec<Resource>,
+    /// Which resource's controller runs each resource (SPEC.md 9), by resource index: its
+    /// `Controller` attribute when that names a resource, else the nearest enclosing resource's
+    /// controller, else itself. Empty for a blackboard built by hand (then each is its own).
+    pub controllers: Vec<usize>,
     /// The SFC file's `refURI` value.
     pub sfc_ref: Option<RefValue>,
     /// Where the `.src` path is written back.
@@ -167,6 +171,10 @@ pub struct Resource {
     /// Skills, functions and signals by key, built at the first lookup (after reading): a lookup
     /// per step must not cost the number of skills.
     pub index: std::sync::OnceLock<ResourceIndex>,
+    /// The resource this one stands inside (a device mounted on it), by index.
+    pub parent: Option<usize>,
+    /// The `Controller` (`Steuerung`) attribute's value and the value's span.
+    pub controller_attr: Option<(String, Span)>,
 }
 
 /// Key → index of the first skill, function and signal of that key.
@@ -175,6 +183,13 @@ pub struct ResourceIndex {
     skills: std::collections::HashMap<Arc<str>, usize>,
     functions: std::collections::HashMap<Arc<str>, usize>,
     signals: std::collections::HashMap<Arc<str>, usize>,
+}
+
+impl Blackboard {
+    /// The resource whose controller runs resource `r` (itself when none is recorded).
+    pub fn controller_of(&self, r: usize) -> usize {
+        self.controllers.get(r).copied().unwrap_or(r)
+    }
 }
 
 impl Resource {

@@ -29,6 +29,26 @@ pub fn language_text(
 
 /// `-pB`: resources (with their language), their skills with the calls they map, and functions
 /// with their IRL files.
+/// The `-pB` controller line of resource `ri` (SPEC.md 9), when there is anything to say: the
+/// resource whose controller runs it and why, or the controller a `Controller` value describes.
+fn controller_text(bb: &Blackboard, ri: usize) -> Option<String> {
+    let r = &bb.resources[ri];
+    let c = bb.controller_of(ri);
+    if c != ri {
+        let how = match (&r.controller_attr, r.parent) {
+            (Some((v, _)), _) if crate::names::key(v) == bb.resources[c].name.key.as_ref() => {
+                "its Controller attribute"
+            }
+            (_, Some(_)) => "mounted on it",
+            _ => "its Controller attribute",
+        };
+        return Some(format!("runs on {} ({how})", bb.resources[c].name.text));
+    }
+    r.controller_attr
+        .as_ref()
+        .map(|(v, _)| format!("its own: {v}"))
+}
+
 pub fn blackboard(
     bb: &Blackboard,
     languages: &std::collections::HashMap<usize, crate::emit::Language>,
@@ -37,6 +57,9 @@ pub fn blackboard(
     for (ri, r) in bb.resources.iter().enumerate() {
         let _ = writeln!(o, "{:<23} {}", r.name.text, r.id.as_deref().unwrap_or(""));
         let _ = writeln!(o, "        (Language) {}", language_text(bb, ri, languages));
+        if let Some(line) = controller_text(bb, ri) {
+            let _ = writeln!(o, "        (Controller) {line}");
+        }
         let mut skills: Vec<_> = r.skills.iter().collect();
         skills.sort_by(|a, b| a.name.key.cmp(&b.name.key));
         for s in skills {
@@ -589,9 +612,14 @@ pub mod json {
                     .get(&ri)
                     .copied()
                     .or(r.language.as_ref().map(|(l, _)| *l));
+                let controller = bb.controller_of(ri);
                 json!({
                     "name": &*r.name.text,
                     "id": r.id,
+                    "controller": &*bb.resources[controller].name.text,
+                    "controller_description": r.controller_attr.as_ref()
+                        .filter(|_| controller == ri)
+                        .map(|(v, _)| v),
                     "language": language.map(|l| l.name()),
                     "language_from": match (languages.get(&ri), &r.language) {
                         (_, Some(_)) => "attribute",

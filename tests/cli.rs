@@ -1214,3 +1214,57 @@ fn a_rapid_program_writes_one_module_and_refuses_a_krl_template() {
         before
     );
 }
+
+/// Issue 25, items 1 and 2: a gripper mounted on the robot (or naming it in `Controller`) runs
+/// on the robot's controller: one program holds both resources' steps, and `-pB` says which
+/// controller runs each resource (text and JSON).
+#[test]
+fn a_robot_and_its_gripper_make_one_program() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
+    for (case, how) in [
+        ("cell-robot-gripper", "mounted on it"),
+        (
+            "cell-gripper-controller-attribute",
+            "its Controller attribute",
+        ),
+    ] {
+        let t = tempfile::tempdir().unwrap();
+        for e in std::fs::read_dir(root.join("base/cell")).unwrap() {
+            let e = e.unwrap();
+            std::fs::copy(e.path(), t.path().join(e.file_name())).unwrap();
+        }
+        let own = root.join("ok").join(case).join("Blackboard.aml");
+        if own.exists() {
+            std::fs::copy(own, t.path().join("Blackboard.aml")).unwrap();
+        }
+        let o = run(&["Blackboard.aml", "Cell"], t.path());
+        assert_eq!(o.status.code(), Some(0), "{case}: {}", stderr(&o));
+        let src = std::fs::read_to_string(t.path().join("Cell.src")).unwrap();
+        assert!(
+            src.contains("GripClose (40)") && src.contains("LIN {X 8"),
+            "{case}: {src}"
+        );
+        let o = run(&["--validate", "-pB", "Blackboard.aml"], t.path());
+        assert!(
+            stdout(&o).contains(&format!("(Controller) runs on KUKA KR15-2 ({how})")),
+            "{case}: {}",
+            stdout(&o)
+        );
+        let o = run(
+            &["--validate", "-pB", "--format", "json", "Blackboard.aml"],
+            t.path(),
+        );
+        let listing = stdout(&o)
+            .lines()
+            .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+            .find(|v| v["resources"].is_array())
+            .unwrap_or_else(|| panic!("{case}: no -pB object: {}", stdout(&o)));
+        let gripper = listing["resources"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["name"] == "Greifer G1")
+            .unwrap();
+        assert_eq!(gripper["controller"], "KUKA KR15-2", "{case}");
+    }
+}

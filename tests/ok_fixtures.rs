@@ -75,6 +75,8 @@ macro_rules! cases {
 cases! {
     abb_irb1200 => "abb-irb1200",
     caex3_english => "caex3-english",
+    cell_gripper_controller_attribute => "cell-gripper-controller-attribute",
+    cell_robot_gripper => "cell-robot-gripper",
     flow_cyclic => "flow-cyclic",
     flow_guarded_sequence => "flow-guarded-sequence",
     flow_loop_early_exit => "flow-loop-early-exit",

@@ -134,9 +134,10 @@ pub fn is_safe_address(s: &str) -> bool {
 
 /// The resources under `Ressourcen`/`Resources` (SPEC.md 2): its children that have a child
 /// named `Skills` or `FunctionDescription(s)`, and at any depth below grouping elements (plant,
-/// line, cell) those that do; a child with no resource below it is a resource itself. Document
-/// order.
-fn resource_nodes<'a, 'i>(res: Node<'a, 'i>) -> Vec<Node<'a, 'i>> {
+/// line, cell) those that do; a child with no resource below it is a resource itself. Then the
+/// devices: resources standing inside a resource (SPEC.md 9), with the index of the resource
+/// they stand in. Top-level resources in document order, then each resource's devices.
+fn resource_nodes<'a, 'i>(res: Node<'a, 'i>) -> Vec<(Node<'a, 'i>, Option<usize>)> {
     let is_resource = |n: Node| {
         internal_element(
             n,
@@ -144,15 +145,26 @@ fn resource_nodes<'a, 'i>(res: Node<'a, 'i>) -> Vec<Node<'a, 'i>> {
         )
         .is_some()
     };
-    let mut out = Vec::new();
-    for c in children(res, "InternalElement") {
-        if is_resource(c) {
-            out.push(c);
-            continue;
-        }
+    // The resources below `top` (not below a resource found): depth-first, document order.
+    let below = |top: Node<'a, 'i>, skip_own: bool| {
         let mut found = Vec::new();
-        let mut stack: Vec<(Node, usize)> =
-            children(c, "InternalElement").map(|k| (k, 1)).collect();
+        let mut stack: Vec<(Node, usize)> = children(top, "InternalElement")
+            .filter(|k| {
+                !skip_own
+                    || !caex_name(*k).is_some_and(|n| {
+                        [
+                            "Skills",
+                            "FunctionDescription",
+                            "FunctionDescriptions",
+                            "Signals",
+                            "Signale",
+                        ]
+                        .iter()
+                        .any(|w| names::eq(n, w))
+                    })
+            })
+            .map(|k| (k, 1))
+            .collect();
         stack.reverse();
         while let Some((n, depth)) = stack.pop() {
             if is_resource(n) {
@@ -165,11 +177,29 @@ fn resource_nodes<'a, 'i>(res: Node<'a, 'i>) -> Vec<Node<'a, 'i>> {
                 stack.extend(kids);
             }
         }
-        if found.is_empty() {
-            out.push(c);
-        } else {
-            out.extend(found);
+        found
+    };
+    let mut out: Vec<(Node, Option<usize>)> = Vec::new();
+    for c in children(res, "InternalElement") {
+        if is_resource(c) {
+            out.push((c, None));
+            continue;
         }
+        let found = below(c, false);
+        if found.is_empty() {
+            out.push((c, None));
+        } else {
+            out.extend(found.into_iter().map(|n| (n, None)));
+        }
+    }
+    // Devices: a worklist over the resources found so far (it grows as devices are found).
+    let mut i = 0;
+    while i < out.len() {
+        let (r, _) = out[i];
+        if is_resource(r) {
+            out.extend(below(r, true).into_iter().map(|n| (n, Some(i))));
+        }
+        i += 1;
     }
     out
 }
@@ -213,8 +243,10 @@ impl Reader<'_> {
         let mut resources = Vec::new();
         match internal_element(h, &["Ressourcen", "Resources"]) {
             Some(res) => {
-                for r in resource_nodes(res) {
-                    resources.push(self.resource(r));
+                for (r, parent) in resource_nodes(res) {
+                    let mut resource = self.resource(r);
+                    resource.parent = parent;
+                    resources.push(resource);
                 }
                 self.check_unique(
                     resources.iter().map(|r| (&r.name, r.element.as_str())),
@@ -231,14 +263,115 @@ impl Reader<'_> {
             ),
         }
 
+        let controllers = self.controllers(&resources);
         let sfc_ref = self.sfc_reference(h);
         let write_back = self.write_back(h);
         Blackboard {
             file: self.file,
             resources,
+            controllers,
             sfc_ref,
             write_back,
         }
+    }
+
+    /// Which resource's controller runs each resource (SPEC.md 9): its `Controller` attribute
+    /// when that names another resource, else the nearest enclosing resource's, else itself;
+    /// followed along the chain. A chain that comes back to where it started is `E211` at the
+    /// attribute that closes it (that resource is then its own controller); a device whose
+    /// `Language` differs from its controller's is `E319` at the device's attribute.
+    fn controllers(&mut self, resources: &[Resource]) -> Vec<usize> {
+        let mut by_key: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
+        for (i, r) in resources.iter().enumerate() {
+            by_key.entry(&r.name.key).or_insert(i);
+        }
+        // The next resource up the chain of each one.
+        let next: Vec<Option<usize>> = resources
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let named = r
+                    .controller_attr
+                    .as_ref()
+                    .and_then(|(v, _)| by_key.get(&*names::key(v)).copied())
+                    .filter(|&t| t != i);
+                named.or(r.parent)
+            })
+            .collect();
+        let mut out = vec![usize::MAX; resources.len()];
+        for start in 0..resources.len() {
+            if out[start] != usize::MAX {
+                continue;
+            }
+            // Walk up until a known controller, a resource that is its own, or a loop.
+            let mut path = vec![start];
+            let mut on_path = std::collections::HashSet::from([start]);
+            let mut at = start;
+            let found = loop {
+                match next[at] {
+                    None => break at,
+                    Some(n) if out[n] != usize::MAX => break out[n],
+                    Some(n) if on_path.contains(&n) => {
+                        // A loop: the resource whose attribute closes it is its own controller.
+                        let r = &resources[at];
+                        if let Some((v, span)) = &r.controller_attr {
+                            let cycle: Vec<&str> = path
+                                [path.iter().position(|&p| p == n).unwrap_or(0)..]
+                                .iter()
+                                .map(|&p| resources[p].name.text.as_ref())
+                                .collect();
+                            self.diags.push(
+                                Diagnostic::error(
+                                    Code::ControllerLoop,
+                                    format!(
+                                        "resource `{}`: Controller `{}` makes a loop ({} -> {}): one resource of a cell must be a controller of its own",
+                                        r.name.text,
+                                        v,
+                                        cycle.join(" -> "),
+                                        resources[n].name.text
+                                    ),
+                                )
+                                .at(span.clone())
+                                .element(r.element.clone()),
+                            );
+                        }
+                        break at;
+                    }
+                    Some(n) => {
+                        path.push(n);
+                        on_path.insert(n);
+                        at = n;
+                    }
+                }
+            };
+            for p in path {
+                if out[p] == usize::MAX {
+                    out[p] = found;
+                }
+            }
+        }
+        for (i, r) in resources.iter().enumerate() {
+            let c = out[i];
+            if c == i {
+                continue;
+            }
+            if let (Some((own, at)), Some((theirs, _))) = (&r.language, &resources[c].language)
+                && own != theirs
+            {
+                self.diags.push(
+                    Diagnostic::error(
+                        Code::TwoLanguages,
+                        format!(
+                            "resource `{}` is {own}, but it runs on the controller of `{}`, which is {theirs}: a device is programmed in its controller's language",
+                            r.name.text, resources[c].name.text
+                        ),
+                    )
+                    .at(at.clone())
+                    .element(r.element.clone()),
+                );
+            }
+        }
+        out
     }
 
     fn check_unique<'n>(&mut self, names: impl Iterator<Item = (&'n Name, &'n str)>, what: &str) {
@@ -292,9 +425,15 @@ impl Reader<'_> {
         );
         let (signals, broken_signals) = self.signals(r);
         let language = self.language(r, &name);
+        let controller_attr = caex_attr(r, "Controller")
+            .or_else(|| caex_attr(r, "Steuerung"))
+            .and_then(|a| caex_value(self.file, a))
+            .filter(|(v, _)| !v.is_empty());
         Resource {
             name,
             language,
+            parent: None,
+            controller_attr,
             element: caex_element(r),
             id: r.attribute("ID").map(str::to_owned),
             skills,
