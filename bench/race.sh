@@ -6,4 +6,4 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SKILLPOST_RACE_SAVES="${SAVES:-${1:-3000}}" cargo test --release --test race -- --nocapture --test-threads=1 2>&1 |
-  grep -E '^race |^test result'
+  grep -oE 'race [A-Za-z]+: .*|test result.*'

@@ -7,7 +7,8 @@ use std::path::{Path, PathBuf};
 
 use crate::bind;
 use crate::diag::{Code, Diagnostic, Diagnostics, Sources, Span};
-use crate::emit::{EmitInput, Language, OutputFile, OutputTemplate};
+use crate::emit::{EmitInput, LanguageProfile as _, OutputFile, OutputTemplate};
+use crate::lang::Language;
 use crate::load::FileSource;
 use crate::model::{Blackboard, Irl, Sfc};
 use crate::paths;

@@ -153,7 +153,7 @@ impl Sources {
         let f = &mut self.files[id];
         match f.dropped {
             Some((len, hash)) if raw.len() == len && crate::load::hash_bytes(&raw) == hash => {
-                let bom = crate::read::xml::strip_bom(&mut raw);
+                let bom = crate::load::strip_bom(&mut raw);
                 if bom != f.bom {
                     return false;
                 }

@@ -7,6 +7,7 @@
 //! - [`load`]: the only file-system reads of the compiler core, behind the [`load::FileSource`]
 //!   trait; records every file a compile read.
 //! - [`read`]: blackboard, SFC and IRL files → [`model`], every item with its byte span.
+//! - [`lang`]: the robot languages as values (names, IRL syntax); their profiles are `emit`'s.
 //! - [`value`]: SFC variable values: list syntax, in-place lookup, typed neutral literals.
 //! - [`cond`]: transition conditions (an ST subset): parse, check, render as KRL.
 //! - [`plan`]: SFC graph checks → an ordered program tree ([`plan::Block`]).
@@ -36,6 +37,7 @@ pub mod daemon;
 pub mod diag;
 pub mod emit;
 pub mod excerpt;
+pub mod lang;
 pub mod load;
 pub mod model;
 pub mod names;

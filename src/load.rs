@@ -333,6 +333,15 @@ impl FileSource for MemSource {
     }
 }
 
+/// Removes a leading UTF-8 byte order mark; whether there was one.
+pub fn strip_bom(bytes: &mut Vec<u8>) -> bool {
+    let bom = bytes.starts_with(b"\xEF\xBB\xBF");
+    if bom {
+        bytes.drain(..3);
+    }
+    bom
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

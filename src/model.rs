@@ -149,14 +149,14 @@ pub struct WriteBackTarget {
     pub current: Option<String>,
     /// Where the value goes: the byte range the splice replaces, found by the reader's parse
     /// (`write::SpliceSite::of`).
-    pub site: crate::write::SpliceSite,
+    pub site: SpliceSite,
 }
 
 #[derive(Debug)]
 pub struct Resource {
     pub name: Name,
     /// The `Language` (`Sprache`) attribute: the language and the attribute's value span.
-    pub language: Option<(crate::emit::Language, Span)>,
+    pub language: Option<(crate::lang::Language, Span)>,
     /// The CAEX element, described for diagnostics (`InternalElement "KUKA KR15-2" {ID}`).
     pub element: String,
     pub id: Option<String>,
@@ -318,40 +318,7 @@ pub struct Param {
     pub leaf: bool,
 }
 
-/// The value types of SPEC.md 2.1.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ValueType {
-    Double,
-    Decimal,
-    Integer,
-    Boolean,
-    String,
-}
-
-impl ValueType {
-    pub fn parse(s: &str) -> Option<Self> {
-        let t = s.trim();
-        let local = t.rsplit(':').next().unwrap_or(t);
-        match local.to_ascii_lowercase().as_str() {
-            "double" | "float" => Some(ValueType::Double),
-            "decimal" => Some(ValueType::Decimal),
-            "integer" | "int" | "long" | "short" => Some(ValueType::Integer),
-            "boolean" => Some(ValueType::Boolean),
-            "string" | "anyuri" => Some(ValueType::String),
-            _ => None,
-        }
-    }
-
-    pub fn xs_name(self) -> &'static str {
-        match self {
-            ValueType::Double => "xs:double",
-            ValueType::Decimal => "xs:decimal",
-            ValueType::Integer => "xs:integer",
-            ValueType::Boolean => "xs:boolean",
-            ValueType::String => "xs:string",
-        }
-    }
-}
+pub use crate::value::{Value, ValueType};
 
 /// One mapped function call of a skill.
 #[derive(Debug, Clone)]
@@ -577,12 +544,6 @@ impl Variable {
     }
 }
 
-/// An SFC variable's value: `(a, (b, c))` nests lists, anything else is one trimmed value.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Value {
-    Scalar(String),
-    List(Vec<Value>),
-}
 
 /// An IRL file.
 #[derive(Debug)]
@@ -590,7 +551,7 @@ pub struct Irl {
     pub file: FileId,
     pub info: Option<String>,
     /// The language its templates were read in.
-    pub language: crate::emit::Language,
+    pub language: crate::lang::Language,
     pub calls: Vec<IrlCall>,
     pub definitions: Vec<IrlDefinition>,
 }
@@ -660,4 +621,18 @@ mod tests {
         // "Frame" and "frame" are different names as written, with the same key.
         assert_eq!(first.len(), 5);
     }
+}
+
+/// Where a value goes into a blackboard's text (without its BOM), found by `SpliceSite::of` (`read::site`).
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct SpliceSite {
+    /// The bytes replaced by `head` + the escaped value + `tail`.
+    pub replace: Range<usize>,
+    /// Markup before the value (`<Value>` for a missing `Value`, `>` for a self-closing one).
+    pub head: String,
+    /// Markup after the value (`</Value>`, `</Value></Attribute>`, …).
+    pub tail: String,
+    /// The value as the reader reads it (`read::xml::caex_value`): the `Value`'s direct text,
+    /// trimmed; empty for a missing, empty or self-closing `Value`.
+    pub current: String,
 }

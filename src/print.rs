@@ -15,7 +15,7 @@ use crate::plan::{Block, BranchEnd, Plan};
 pub fn language_text(
     bb: &Blackboard,
     ri: usize,
-    languages: &std::collections::HashMap<usize, crate::emit::Language>,
+    languages: &std::collections::HashMap<usize, crate::lang::Language>,
 ) -> String {
     let r = &bb.resources[ri];
     match (languages.get(&ri), &r.language) {
@@ -51,7 +51,7 @@ fn controller_text(bb: &Blackboard, ri: usize) -> Option<String> {
 
 pub fn blackboard(
     bb: &Blackboard,
-    languages: &std::collections::HashMap<usize, crate::emit::Language>,
+    languages: &std::collections::HashMap<usize, crate::lang::Language>,
 ) -> String {
     let mut o = String::new();
     for (ri, r) in bb.resources.iter().enumerate() {
@@ -548,7 +548,7 @@ pub mod json {
     /// `-pB`: resources with their skills (and the calls each maps), functions and signals.
     pub fn blackboard(
         bb: &Blackboard,
-        languages: &std::collections::HashMap<usize, crate::emit::Language>,
+        languages: &std::collections::HashMap<usize, crate::lang::Language>,
     ) -> Json {
         let resources: Vec<Json> = bb
             .resources

@@ -4,7 +4,48 @@
 
 use std::borrow::Cow;
 
-use crate::model::{Value, ValueType};
+/// The value types of SPEC.md 2.1.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ValueType {
+    Double,
+    Decimal,
+    Integer,
+    Boolean,
+    String,
+}
+
+impl ValueType {
+    pub fn parse(s: &str) -> Option<Self> {
+        let t = s.trim();
+        let local = t.rsplit(':').next().unwrap_or(t);
+        match local.to_ascii_lowercase().as_str() {
+            "double" | "float" => Some(ValueType::Double),
+            "decimal" => Some(ValueType::Decimal),
+            "integer" | "int" | "long" | "short" => Some(ValueType::Integer),
+            "boolean" => Some(ValueType::Boolean),
+            "string" | "anyuri" => Some(ValueType::String),
+            _ => None,
+        }
+    }
+
+    pub fn xs_name(self) -> &'static str {
+        match self {
+            ValueType::Double => "xs:double",
+            ValueType::Decimal => "xs:decimal",
+            ValueType::Integer => "xs:integer",
+            ValueType::Boolean => "xs:boolean",
+            ValueType::String => "xs:string",
+        }
+    }
+}
+
+/// An SFC variable's value: `(a, (b, c))` nests lists, anything else is one trimmed value.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Value {
+    Scalar(String),
+    List(Vec<Value>),
+}
+
 
 /// Lists nest at most this deep.
 pub const MAX_LIST_DEPTH: usize = 32;

@@ -35,7 +35,7 @@ impl Profile for Krl {
     }
 
     fn syntax(&self) -> Syntax {
-        Syntax::KRL
+        Language::Krl.syntax()
     }
 
     fn check_program_name(&self, name: &str) -> Result<(), String> {
@@ -95,7 +95,7 @@ impl Profile for Krl {
 }
 
 /// The `.dat` variable that holds the branch a selection without an unconditional branch chose.
-pub const BRANCH_VAR: &str = "SKP_BRANCH";
+pub use crate::lang::BRANCH_VAR;
 
 /// Writes the program tree.
 struct Writer<'a> {

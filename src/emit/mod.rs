@@ -27,47 +27,20 @@ use crate::plan::Plan;
 use crate::template::Syntax;
 use crate::value::Literal;
 
-/// A robot language skillpost writes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Language {
-    Krl,
-    Rapid,
-    UrScript,
+pub use crate::lang::Language;
+
+/// A language's profile: `language.profile()` where this trait is in scope.
+pub trait LanguageProfile {
+    fn profile(self) -> &'static dyn Profile;
 }
 
-impl Language {
-    pub const ALL: [Language; 3] = [Language::Krl, Language::Rapid, Language::UrScript];
-
-    /// `KRL`, `RAPID` or `URScript`, any case (surrounding whitespace ignored).
-    pub fn parse(s: &str) -> Option<Language> {
-        let s = s.trim();
-        Language::ALL
-            .into_iter()
-            .find(|l| l.name().eq_ignore_ascii_case(s))
-    }
-
-    /// The language's name as the blackboard and the listings write it.
-    pub fn name(self) -> &'static str {
-        match self {
-            Language::Krl => "KRL",
-            Language::Rapid => "RAPID",
-            Language::UrScript => "URScript",
-        }
-    }
-
-    /// Its profile.
-    pub fn profile(self) -> &'static dyn Profile {
+impl LanguageProfile for Language {
+    fn profile(self) -> &'static dyn Profile {
         match self {
             Language::Krl => &krl::Krl,
             Language::Rapid => &rapid::Rapid,
             Language::UrScript => &urscript::UrScript,
         }
-    }
-}
-
-impl std::fmt::Display for Language {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
     }
 }
 

@@ -163,11 +163,7 @@ impl Profile for Rapid {
     }
 
     fn syntax(&self) -> Syntax {
-        Syntax {
-            comment: b'!',
-            aggregates: false,
-            case_sensitive: false,
-        }
+        Language::Rapid.syntax()
     }
 
     fn check_program_name(&self, name: &str) -> Result<(), String> {

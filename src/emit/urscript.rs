@@ -188,11 +188,7 @@ impl Profile for UrScript {
     }
 
     fn syntax(&self) -> Syntax {
-        Syntax {
-            comment: b'#',
-            aggregates: false,
-            case_sensitive: true,
-        }
+        Language::UrScript.syntax()
     }
 
     fn check_program_name(&self, name: &str) -> Result<(), String> {

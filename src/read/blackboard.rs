@@ -447,10 +447,10 @@ impl Reader<'_> {
 
     /// The resource's `Language` (alias `Sprache`) attribute, any case; `E210` for a value
     /// that names no language skillpost writes.
-    fn language(&mut self, r: Node, name: &Name) -> Option<(crate::emit::Language, Span)> {
+    fn language(&mut self, r: Node, name: &Name) -> Option<(crate::lang::Language, Span)> {
         let attr = caex_attr(r, "Language").or_else(|| caex_attr(r, "Sprache"))?;
         let (v, span) = caex_value(self.file, attr).filter(|(v, _)| !v.trim().is_empty())?;
-        match crate::emit::Language::parse(&v) {
+        match crate::lang::Language::parse(&v) {
             Some(l) => Some((l, span)),
             None => {
                 self.diags.push(
@@ -621,7 +621,7 @@ impl Reader<'_> {
                 };
                 if !names::is_krl_name(&name.text)
                     || names::is_krl_keyword(&name.text)
-                    || names::eq(&name.text, crate::emit::krl::BRANCH_VAR)
+                    || names::eq(&name.text, crate::lang::BRANCH_VAR)
                 {
                     let span = name.span.clone();
                     bad(
@@ -1055,7 +1055,7 @@ impl Reader<'_> {
                 })
         });
         let attr = iface.and_then(|i| caex_attr(i, "refURI"));
-        match attr.and_then(|a| Some((a, crate::write::SpliceSite::of(a)?))) {
+        match attr.and_then(|a| Some((a, crate::model::SpliceSite::of(a)?))) {
             Some((a, site)) => Some(WriteBackTarget {
                 attribute: Span::new(self.file, a.range()),
                 current: caex_value(self.file, a).map(|(v, _)| v),

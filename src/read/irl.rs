@@ -8,7 +8,7 @@
 use roxmltree::Node;
 
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
-use crate::emit::Language;
+use crate::lang::Language;
 use crate::model::{Irl, IrlCall, IrlDefinition, Name};
 use crate::read::xml::{attr_span, children, parse, tag_span};
 use crate::template::{Template, dedent, params_from_brackets};
@@ -192,7 +192,7 @@ fn read_call(
         }
     }
     let names: Vec<String> = params.iter().map(|p| p.text.to_string()).collect();
-    let template = Template::compile_for(&joined, &names, language.profile().syntax());
+    let template = Template::compile_for(&joined, &names, language.syntax());
     for (_, why) in template.errors() {
         diags.push(
             Diagnostic::error(

@@ -5,6 +5,7 @@
 pub mod blackboard;
 pub mod irl;
 pub mod sfc;
+pub mod site;
 pub mod tape;
 pub mod xml;
 

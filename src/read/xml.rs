@@ -83,14 +83,7 @@ pub fn not_utf8(display: &str, file: FileId, at: Option<usize>) -> Diagnostic {
     }
 }
 
-/// Removes a leading UTF-8 byte order mark; whether there was one.
-pub fn strip_bom(bytes: &mut Vec<u8>) -> bool {
-    let bom = bytes.starts_with(b"\xEF\xBB\xBF");
-    if bom {
-        bytes.drain(..3);
-    }
-    bom
-}
+pub use crate::load::strip_bom;
 
 /// Parses a file's text as XML, without DTDs (no entity expansion attacks, no external
 /// entities). A syntax error becomes `E102` at its line and column.
