@@ -41,7 +41,7 @@ use std::time::{Duration, Instant};
 use skillpost::bind;
 use skillpost::compile::{self, Options};
 use skillpost::diag::{Diagnostics, Sources};
-use skillpost::emit::{EmitInput, Language, OutputFile, OutputTemplate};
+use skillpost::emit::{EmitInput, Language, LanguageProfile as _, OutputFile, OutputTemplate};
 use skillpost::load::FsSource;
 use skillpost::model::Irl;
 use skillpost::plan;

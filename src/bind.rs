@@ -10,8 +10,19 @@ use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
 use crate::diag::{Code, Diagnostic, Diagnostics, Span};
-use crate::emit::Profile;
 use crate::model::{Blackboard, ElementKind, Irl, Sfc, Step};
+
+/// What binding needs to know of the program's robot language, handed in as data by the
+/// caller: the language's profile implements it (`emit::Profile: Rules`), so this stage never
+/// reaches up into `emit` (ARCHITECTURE.md, the layers; `tests/layers.rs`).
+pub trait Rules: Sync {
+    fn language(&self) -> crate::lang::Language;
+    /// A value as this language writes it; `Err` says why the language cannot take it safely.
+    fn literal<'v>(&self, v: &crate::value::Literal<'v>) -> Result<Cow<'v, str>, String>;
+    /// A signal as a condition reads it: a boolean or an integer expression. `Err` says why the
+    /// language cannot read this signal (for `E209`).
+    fn signal(&self, s: &crate::model::Signal) -> Result<String, String>;
+}
 
 /// Which resource and skill each step uses.
 #[derive(Debug, Default)]
@@ -391,7 +402,7 @@ pub fn bind(
     order: &StepOrder,
     r: &Resolution,
     calls_in: &Calls,
-    profile: &dyn Profile,
+    profile: &dyn Rules,
     diags: &mut Diagnostics,
     split_from: usize,
 ) -> Bound {
@@ -463,7 +474,7 @@ struct StepCx<'a> {
     prepared: &'a HashMap<(usize, usize), Option<Prepared>>,
     irls: &'a [Irl],
     calls: &'a CallIndex<'a>,
-    profile: &'a dyn Profile,
+    profile: &'a dyn Rules,
 }
 
 /// Some steps rendered, in their order: their code, the definitions they used first (with their
@@ -899,7 +910,7 @@ fn value_of<'a>(
     skill: &crate::model::Skill,
     pi: usize,
     local_id: u64,
-    profile: &dyn Profile,
+    profile: &dyn Rules,
     lists: &mut crate::value::ItemCache<'a>,
 ) -> Result<Valued<'a>, Option<Box<Diagnostic>>> {
     use crate::value::{Lookup, lookup_in};
@@ -1000,7 +1011,7 @@ pub fn conditions(
     bb: &Blackboard,
     sfc: &Sfc,
     resource: Option<usize>,
-    profile: Option<&dyn Profile>,
+    profile: Option<&dyn Rules>,
     diags: &mut Diagnostics,
 ) -> Vec<usize> {
     use crate::cond::Ty;
@@ -1301,7 +1312,7 @@ fn prepare(
 mod tests {
     use super::*;
 
-    use crate::emit::Language;
+    use crate::emit::{Language, LanguageProfile as _};
     use crate::model::ValueType;
 
     /// A value for a parameter of type `ty`, as KRL writes it.

@@ -544,7 +544,6 @@ impl Variable {
     }
 }
 
-
 /// An IRL file.
 #[derive(Debug)]
 pub struct Irl {

@@ -46,7 +46,6 @@ pub enum Value {
     List(Vec<Value>),
 }
 
-
 /// Lists nest at most this deep.
 pub const MAX_LIST_DEPTH: usize = 32;
 

@@ -9,12 +9,16 @@ use std::path::Path;
 /// From the bottom up.
 const ORDER: &[&str] = &[
     "names", "paths", "convert", "load", "excerpt", "diag", "cond", "value", "template", "lang",
-    "model", "read", "plan", "bind", "emit", "umask", "write", "compile", "print", "daemon",
-    "cli",
+    "model", "read", "plan", "bind", "emit", "umask", "write", "compile", "print", "daemon", "cli",
 ];
 
 fn module_of(rel: &Path) -> String {
-    let first = rel.components().next().unwrap().as_os_str().to_string_lossy();
+    let first = rel
+        .components()
+        .next()
+        .unwrap()
+        .as_os_str()
+        .to_string_lossy();
     first.trim_end_matches(".rs").to_owned()
 }
 
@@ -76,7 +80,10 @@ fn each_module_imports_only_modules_before_it() {
             continue;
         }
         let Some(own) = rank(&module) else {
-            wrong.push(format!("{}: module `{module}` is not in ORDER", rel.display()));
+            wrong.push(format!(
+                "{}: module `{module}` is not in ORDER",
+                rel.display()
+            ));
             continue;
         };
         let text = std::fs::read_to_string(&f).unwrap();

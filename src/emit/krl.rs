@@ -21,31 +21,9 @@ pub const DEFAULT_TEMPLATE: &str = include_str!("../../templates/krl.toml");
 /// The KRL profile.
 pub struct Krl;
 
-impl Profile for Krl {
+impl crate::bind::Rules for Krl {
     fn language(&self) -> Language {
         Language::Krl
-    }
-
-    fn files(&self) -> &'static [&'static str] {
-        &["src", "dat"]
-    }
-
-    fn builtin_template(&self) -> &'static str {
-        DEFAULT_TEMPLATE
-    }
-
-    fn syntax(&self) -> Syntax {
-        Language::Krl.syntax()
-    }
-
-    fn check_program_name(&self, name: &str) -> Result<(), String> {
-        if !crate::names::is_krl_name(name) {
-            Err("not a KRL name: a letter or `_`, then letters, digits or `_`, at most 24 characters".to_owned())
-        } else if crate::names::is_krl_keyword(name) {
-            Err("a KRL keyword cannot name a program".to_owned())
-        } else {
-            Ok(())
-        }
     }
 
     fn literal<'v>(&self, v: &Literal<'v>) -> Result<Cow<'v, str>, String> {
@@ -75,6 +53,30 @@ impl Profile for Krl {
                 "KRL cannot read Address `{text}` (a function call): write a name or a system variable with an index (`PART_OK`, `$IN[5]`)"
             )),
             SignalKind::Address { text, .. } => Ok(text.clone()),
+        }
+    }
+}
+
+impl Profile for Krl {
+    fn files(&self) -> &'static [&'static str] {
+        &["src", "dat"]
+    }
+
+    fn builtin_template(&self) -> &'static str {
+        DEFAULT_TEMPLATE
+    }
+
+    fn syntax(&self) -> Syntax {
+        Language::Krl.syntax()
+    }
+
+    fn check_program_name(&self, name: &str) -> Result<(), String> {
+        if !crate::names::is_krl_name(name) {
+            Err("not a KRL name: a letter or `_`, then letters, digits or `_`, at most 24 characters".to_owned())
+        } else if crate::names::is_krl_keyword(name) {
+            Err("a KRL keyword cannot name a program".to_owned())
+        } else {
+            Ok(())
         }
     }
 

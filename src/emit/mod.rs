@@ -18,14 +18,11 @@ pub mod rapid;
 pub mod structured;
 pub mod urscript;
 
-use std::borrow::Cow;
-
 use crate::bind::Bound;
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
-use crate::model::{Blackboard, Irl, Sfc, Signal};
+use crate::model::{Blackboard, Irl, Sfc};
 use crate::plan::Plan;
 use crate::template::Syntax;
-use crate::value::Literal;
 
 pub use crate::lang::Language;
 
@@ -45,8 +42,7 @@ impl LanguageProfile for Language {
 }
 
 /// What one robot language decides. Implementations are stateless unit structs.
-pub trait Profile: Sync {
-    fn language(&self) -> Language;
+pub trait Profile: crate::bind::Rules {
     /// The output files' extensions, the main one (the write-back's) first. Each is also the
     /// key of that file's text in the output template.
     fn files(&self) -> &'static [&'static str];
@@ -56,11 +52,6 @@ pub trait Profile: Sync {
     fn syntax(&self) -> Syntax;
     /// `Ok` when `name` can be the program's name; else why not (for `E601`).
     fn check_program_name(&self, name: &str) -> Result<(), String>;
-    /// A value as this language writes it; `Err` says why the language cannot take it safely.
-    fn literal<'v>(&self, v: &Literal<'v>) -> Result<Cow<'v, str>, String>;
-    /// A signal as a condition reads it: a boolean or an integer expression. `Err` says why the
-    /// language cannot read this signal (for `E209`).
-    fn signal(&self, s: &Signal) -> Result<String, String>;
     /// Where an IRL definition goes among the others, by its first line: definitions are written
     /// in this order (stable, then first use). RAPID puts data declarations before routines.
     fn definition_rank(&self, _first_line: &str) -> u8 {

@@ -149,33 +149,9 @@ const DIALECT: Dialect = Dialect {
 /// The RAPID profile.
 pub struct Rapid;
 
-impl Profile for Rapid {
+impl crate::bind::Rules for Rapid {
     fn language(&self) -> Language {
         Language::Rapid
-    }
-
-    fn files(&self) -> &'static [&'static str] {
-        &["mod"]
-    }
-
-    fn builtin_template(&self) -> &'static str {
-        DEFAULT_TEMPLATE
-    }
-
-    fn syntax(&self) -> Syntax {
-        Language::Rapid.syntax()
-    }
-
-    fn check_program_name(&self, name: &str) -> Result<(), String> {
-        if !is_rapid_name(name) {
-            Err(format!(
-                "not a RAPID name: a letter, then letters, digits or `_`, at most {MAX_NAME} characters"
-            ))
-        } else if is_reserved(name) {
-            Err("a RAPID reserved word cannot name a module".to_owned())
-        } else {
-            Ok(())
-        }
     }
 
     fn literal<'v>(&self, v: &Literal<'v>) -> Result<Cow<'v, str>, String> {
@@ -228,6 +204,32 @@ impl Profile for Rapid {
             SignalKind::Bit(_) | SignalKind::Group { .. } => Err(
                 "RAPID reads a signal by the name it is configured under: give the signal an `Address` with that name (`di_Part`, `gi_Type`)".to_owned(),
             ),
+        }
+    }
+}
+
+impl Profile for Rapid {
+    fn files(&self) -> &'static [&'static str] {
+        &["mod"]
+    }
+
+    fn builtin_template(&self) -> &'static str {
+        DEFAULT_TEMPLATE
+    }
+
+    fn syntax(&self) -> Syntax {
+        Language::Rapid.syntax()
+    }
+
+    fn check_program_name(&self, name: &str) -> Result<(), String> {
+        if !is_rapid_name(name) {
+            Err(format!(
+                "not a RAPID name: a letter, then letters, digits or `_`, at most {MAX_NAME} characters"
+            ))
+        } else if is_reserved(name) {
+            Err("a RAPID reserved word cannot name a module".to_owned())
+        } else {
+            Ok(())
         }
     }
 

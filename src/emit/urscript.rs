@@ -174,33 +174,9 @@ const DIALECT: Dialect = Dialect {
 /// The URScript profile.
 pub struct UrScript;
 
-impl Profile for UrScript {
+impl crate::bind::Rules for UrScript {
     fn language(&self) -> Language {
         Language::UrScript
-    }
-
-    fn files(&self) -> &'static [&'static str] {
-        &["script"]
-    }
-
-    fn builtin_template(&self) -> &'static str {
-        DEFAULT_TEMPLATE
-    }
-
-    fn syntax(&self) -> Syntax {
-        Language::UrScript.syntax()
-    }
-
-    fn check_program_name(&self, name: &str) -> Result<(), String> {
-        if !is_ur_name(name, MAX_NAME) {
-            Err(format!(
-                "not a URScript program name: letters, digits or `_`, not starting with a digit, at most {MAX_NAME} characters"
-            ))
-        } else if is_keyword(name) {
-            Err("a URScript keyword cannot name a program".to_owned())
-        } else {
-            Ok(())
-        }
     }
 
     fn literal<'v>(&self, v: &Literal<'v>) -> Result<Cow<'v, str>, String> {
@@ -253,6 +229,32 @@ impl Profile for UrScript {
                 ))
             }
             SignalKind::Address { text, .. } => Ok(text.clone()),
+        }
+    }
+}
+
+impl Profile for UrScript {
+    fn files(&self) -> &'static [&'static str] {
+        &["script"]
+    }
+
+    fn builtin_template(&self) -> &'static str {
+        DEFAULT_TEMPLATE
+    }
+
+    fn syntax(&self) -> Syntax {
+        Language::UrScript.syntax()
+    }
+
+    fn check_program_name(&self, name: &str) -> Result<(), String> {
+        if !is_ur_name(name, MAX_NAME) {
+            Err(format!(
+                "not a URScript program name: letters, digits or `_`, not starting with a digit, at most {MAX_NAME} characters"
+            ))
+        } else if is_keyword(name) {
+            Err("a URScript keyword cannot name a program".to_owned())
+        } else {
+            Ok(())
         }
     }
 

@@ -152,4 +152,3 @@ fn end_tag_start(text: &str, e: Node) -> usize {
     let r = e.range();
     text[r.clone()].rfind('<').map_or(r.end, |p| r.start + p)
 }
-
