@@ -127,6 +127,8 @@ pub struct Blackboard {
     /// `Controller` attribute when that names a resource, else the nearest enclosing resource's
     /// controller, else itself. Empty for a blackboard built by hand (then each is its own).
     pub controllers: Vec<usize>,
+    /// The wires between controllers, in document order.
+    pub wires: Vec<Wire>,
     /// The SFC file's `refURI` value.
     pub sfc_ref: Option<RefValue>,
     /// Where the `.src` path is written back.
@@ -245,6 +247,23 @@ pub struct Signal {
     /// `IoType` `Output` (else an input).
     pub output: bool,
     pub kind: SignalKind,
+    /// The `ID` of the element the interface stands in (the resource, or its `Signals`
+    /// element): with the name, what an `InternalLink` partner names (`<ID>:<name>`).
+    pub holder: Option<String>,
+}
+
+/// A wire between two controllers (SPEC.md 9): an `InternalLink` from an `Output` signal of one
+/// controller's resources to an `Input` signal of another's.
+#[derive(Debug, Clone)]
+pub struct Wire {
+    /// `(resource, signal)` of the output that drives it.
+    pub from: (usize, usize),
+    /// `(resource, signal)` of the input it drives.
+    pub to: (usize, usize),
+    /// The link's `Name`.
+    pub name: String,
+    /// The `InternalLink` element.
+    pub span: Span,
 }
 
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -99,6 +99,21 @@ pub fn blackboard(
             let _ = writeln!(o, "        (Signal) {:<40} {}", s.name.text, signal_text(s));
         }
     }
+    for w in &bb.wires {
+        let end = |(r, si): (usize, usize)| {
+            format!(
+                "{}: {}",
+                bb.resources[r].name.text, bb.resources[r].signals[si].name.text
+            )
+        };
+        let _ = writeln!(
+            o,
+            "(Wire) {} -> {}   (InternalLink {})",
+            end(w.from),
+            end(w.to),
+            w.name
+        );
+    }
     o
 }
 
@@ -632,7 +647,21 @@ pub mod json {
                 })
             })
             .collect();
-        json!({"listing": "blackboard", "resources": resources})
+        let wires: Vec<Json> = bb
+            .wires
+            .iter()
+            .map(|w| {
+                let end = |(r, si): (usize, usize)| {
+                    json!({
+                        "resource": &*bb.resources[r].name.text,
+                        "controller": &*bb.resources[bb.controller_of(r)].name.text,
+                        "signal": &*bb.resources[r].signals[si].name.text,
+                    })
+                };
+                json!({"name": w.name, "from": end(w.from), "to": end(w.to)})
+            })
+            .collect();
+        json!({"listing": "blackboard", "resources": resources, "wires": wires})
     }
 
     fn value(v: &Value) -> Json {

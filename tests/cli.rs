@@ -1268,3 +1268,44 @@ fn a_robot_and_its_gripper_make_one_program() {
         assert_eq!(gripper["controller"], "KUKA KR15-2", "{case}");
     }
 }
+
+/// Issue 25, item 4 (the wires' reading): InternalLinks between an Output of one controller and
+/// an Input of another are wires, listed by `-pB` in text and JSON; a link to something that is
+/// no signal is none.
+#[test]
+fn wires_between_controllers_are_listed() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
+    let t = tempfile::tempdir().unwrap();
+    for e in std::fs::read_dir(root.join("base/cell")).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), t.path().join(e.file_name())).unwrap();
+    }
+    std::fs::copy(
+        root.join("ok/cell-two-robots-wired/Blackboard.aml"),
+        t.path().join("Blackboard.aml"),
+    )
+    .unwrap();
+    let o = run(&["--validate", "-pB", "Blackboard.aml"], t.path());
+    let text = stdout(&o);
+    let wires: Vec<&str> = text.lines().filter(|l| l.starts_with("(Wire)")).collect();
+    assert_eq!(
+        wires,
+        [
+            "(Wire) KUKA KR15-2: Done_A -> KUKA KR16-2: Go_B   (InternalLink A done to B)",
+            "(Wire) KUKA KR16-2: Done_B -> KUKA KR15-2: Go_A   (InternalLink B done to A)",
+        ],
+        "{text}"
+    );
+    let o = run(
+        &["--validate", "-pB", "--format", "json", "Blackboard.aml"],
+        t.path(),
+    );
+    let listing = stdout(&o)
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .find(|v| v["listing"] == "blackboard")
+        .unwrap();
+    assert_eq!(listing["wires"].as_array().unwrap().len(), 2);
+    assert_eq!(listing["wires"][0]["from"]["signal"], "Done_A");
+    assert_eq!(listing["wires"][0]["to"]["controller"], "KUKA KR16-2");
+}

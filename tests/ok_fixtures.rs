@@ -77,6 +77,7 @@ cases! {
     caex3_english => "caex3-english",
     cell_gripper_controller_attribute => "cell-gripper-controller-attribute",
     cell_robot_gripper => "cell-robot-gripper",
+    cell_two_robots_wired => "cell-two-robots-wired",
     flow_cyclic => "flow-cyclic",
     flow_guarded_sequence => "flow-guarded-sequence",
     flow_loop_early_exit => "flow-loop-early-exit",

@@ -264,12 +264,14 @@ impl Reader<'_> {
         }
 
         let controllers = self.controllers(&resources);
+        let wires = self.wires(h, &resources, &controllers);
         let sfc_ref = self.sfc_reference(h);
         let write_back = self.write_back(h);
         Blackboard {
             file: self.file,
             resources,
             controllers,
+            wires,
             sfc_ref,
             write_back,
         }
@@ -372,6 +374,83 @@ impl Reader<'_> {
             }
         }
         out
+    }
+
+    /// The wires between controllers (SPEC.md 9): every `InternalLink` in the hierarchy whose two
+    /// partners (`RefPartnerSideA`, `RefPartnerSideB`: `<element ID>:<interface name>`) are
+    /// signals of resources on two different controllers, one an `Output`, the other an `Input`.
+    /// Links between other things (or within one controller) are no wires and are left alone; a
+    /// link between two outputs or two inputs of two controllers is `E209` at the link.
+    fn wires(
+        &mut self,
+        h: Node,
+        resources: &[Resource],
+        controllers: &[usize],
+    ) -> Vec<crate::model::Wire> {
+        let mut by_partner: std::collections::HashMap<(&str, std::sync::Arc<str>), (usize, usize)> =
+            std::collections::HashMap::new();
+        for (ri, r) in resources.iter().enumerate() {
+            for (si, sig) in r.signals.iter().enumerate() {
+                if let Some(holder) = &sig.holder {
+                    by_partner
+                        .entry((holder.as_str(), sig.name.key.clone()))
+                        .or_insert((ri, si));
+                }
+            }
+        }
+        if by_partner.is_empty() {
+            return Vec::new();
+        }
+        let partner = |v: Option<&str>| {
+            let (id, name) = v?.trim().split_once(':')?;
+            let key: std::sync::Arc<str> = names::key(name).into();
+            by_partner.get(&(id.trim(), key)).copied()
+        };
+        let mut wires = Vec::new();
+        for link in h
+            .descendants()
+            .filter(|n| n.is_element() && n.tag_name().name() == "InternalLink")
+        {
+            let (Some(a), Some(b)) = (
+                partner(link.attribute("RefPartnerSideA")),
+                partner(link.attribute("RefPartnerSideB")),
+            ) else {
+                continue;
+            };
+            let controller = |(r, _): (usize, usize)| controllers.get(r).copied().unwrap_or(r);
+            if controller(a) == controller(b) {
+                continue;
+            }
+            let out = |(r, s): (usize, usize)| resources[r].signals[s].output;
+            let name = caex_name(link).unwrap_or("").to_owned();
+            let (from, to) = match (out(a), out(b)) {
+                (true, false) => (a, b),
+                (false, true) => (b, a),
+                (both_out, _) => {
+                    self.diags.push(
+                        Diagnostic::error(
+                            Code::BadSignal,
+                            format!(
+                                "InternalLink `{name}` joins two {} (`{}` and `{}`): a wire goes from an Output of one controller to an Input of another",
+                                if both_out { "outputs" } else { "inputs" },
+                                resources[a.0].signals[a.1].name.text,
+                                resources[b.0].signals[b.1].name.text
+                            ),
+                        )
+                        .at(self.span(link))
+                        .element(caex_element(link)),
+                    );
+                    continue;
+                }
+            };
+            wires.push(crate::model::Wire {
+                from,
+                to,
+                name,
+                span: self.span(link),
+            });
+        }
+        wires
     }
 
     fn check_unique<'n>(&mut self, names: impl Iterator<Item = (&'n Name, &'n str)>, what: &str) {
@@ -640,6 +719,10 @@ impl Reader<'_> {
             element,
             output,
             kind,
+            holder: ei
+                .parent_element()
+                .and_then(|p| p.attribute("ID"))
+                .map(|id| id.trim().to_owned()),
         })
     }
 
