@@ -106,6 +106,9 @@ pub struct Compilation {
     pub language: Option<Language>,
     /// Wall time per stage, in order (`read-blackboard`, `read-sfc`, `plan`, `bind`, `emit`).
     pub timings: Vec<(&'static str, std::time::Duration)>,
+    /// The program's name (as given) and the resource whose controller runs it (SPEC.md 9).
+    pub program: Option<String>,
+    pub controller: Option<String>,
     /// The blackboard's folder, held open since before the blackboard was read: [`apply`]
     /// writes through it (`None` where it could not be opened, e.g. a compile from memory).
     pub folder: Option<crate::write::Folder>,
@@ -589,6 +592,8 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         let langs = languages(&mut cx, &bb, &res, &files);
         language = Some(langs.program);
         out.languages = langs.resources.clone();
+        out.controller = res.resource.map(|r| bb.resources[r].name.text.to_string());
+        out.program = opts.program.clone();
         let mut fn_irl: HashMap<(usize, usize), usize> = HashMap::new();
         let mut by_file: HashMap<(crate::diag::FileId, Language), Option<usize>> = HashMap::new();
         for ((r, f), file) in files {

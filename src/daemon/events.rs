@@ -65,6 +65,11 @@ pub struct OutputInfo {
     pub path: String,
     /// False when the file already held these bytes.
     pub written: bool,
+    /// The program the file belongs to (SPEC.md 9: one per controller of the cell).
+    pub program: String,
+    /// The resource whose controller runs that program.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub controller: Option<String>,
 }
 
 /// The counts of a successful compile.

@@ -455,6 +455,8 @@ impl Job {
                 .map(|(p, w)| OutputInfo {
                     path: p.display().to_string(),
                     written: *w,
+                    program: c.program.clone().unwrap_or_default(),
+                    controller: c.controller.clone(),
                 })
                 .collect(),
             counts: Counts {

@@ -644,6 +644,8 @@ mod tests {
                 outputs: vec![OutputInfo {
                     path: "/p/Zelle_A/Zelle_A.src".into(),
                     written: true,
+                    program: "Zelle_A".into(),
+                    controller: Some("KUKA KR15-2".into()),
                 }],
                 counts: Counts {
                     steps: 3,
