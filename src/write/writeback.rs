@@ -407,12 +407,17 @@ pub(crate) fn write_back_with(
     // the new file, which stays at the name, once nobody else has the taken file open.
     if new_leased && let Some(taken) = out_id {
         let held = (leased && taken == old_id).then_some(&file);
-        if adopt(&new_file, &tmp, taken, held, hook)? {
+        let adopted = adopt(&new_file, &tmp, taken, held, expected, hook)?;
+        if adopted != Adopted::No {
             drop(tmp);
             drop(file);
             drop(new_file);
             sync_dir(&dir);
-            return Ok(WriteBackOutcome::SkippedChangedOnDisk);
+            return Ok(if adopted == Adopted::Ours {
+                WriteBackOutcome::Written
+            } else {
+                WriteBackOutcome::SkippedChangedOnDisk
+            });
         }
     }
     swap_back(&tmp, &target, new_id, out_id, hook)?;
@@ -453,13 +458,26 @@ const ADOPT_WAIT: std::time::Duration = std::time::Duration::from_secs(1);
 /// file the compile read (its lease is released for the wait, so a writer blocked by it goes
 /// on). `false` (nothing taken over) when it stays open, no lease can be had on it, or its
 /// owner cannot be given to the new file: the caller swaps back instead.
+/// What [`adopt`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Adopted {
+    /// Nothing: the caller swaps back.
+    No,
+    /// The taken file's bytes are now in ours, at the name.
+    Theirs,
+    /// The taken file was the one the compile read and is unchanged after its opener (a
+    /// reader) let go: our new file stays at the name as it is, and the write-back is done.
+    Ours,
+}
+
 fn adopt(
     new_file: &fs::File,
     tmp: &Path,
     taken: Id,
     held: Option<&fs::File>,
+    expected: &[u8],
     hook: &mut dyn FnMut(Point),
-) -> io::Result<bool> {
+) -> io::Result<Adopted> {
     use std::os::unix::fs::FileExt as _;
     let opened;
     let old = match held {
@@ -476,34 +494,38 @@ fn adopt(
                 .open(tmp)
             {
                 Ok(f) => f,
-                Err(_) => return Ok(false),
+                Err(_) => return Ok(Adopted::No),
             };
             &opened
         }
     };
     let meta = old.metadata()?;
     if id(&meta) != taken || !meta.is_file() || meta.nlink() != 1 {
-        return Ok(false);
+        return Ok(Adopted::No);
     }
     let until = std::time::Instant::now() + ADOPT_WAIT;
     loop {
         match lease::take(old) {
             Ok(true) => break,
-            Ok(false) => return Ok(false),
+            Ok(false) => return Ok(Adopted::No),
             Err(_) if std::time::Instant::now() < until => {
                 std::thread::sleep(std::time::Duration::from_millis(1));
             }
-            Err(_) => return Ok(false),
+            Err(_) => return Ok(Adopted::No),
         }
     }
     hook(Point::Adopt);
-    // Nobody else has it open now, and a new opener would break the lease.
+    // Nobody else has it open now, and a new opener would break the lease. The file the compile
+    // read, still as it was (its opener only read it): the write-back stands.
+    if held.is_some() && holds(old, expected)? && lease::intact(old) {
+        return Ok(Adopted::Ours);
+    }
     let meta = old.metadata()?;
     let ours = new_file.metadata()?;
     if (ours.uid(), ours.gid()) != (meta.uid(), meta.gid())
         && std::os::unix::fs::fchown(new_file, Some(meta.uid()), Some(meta.gid())).is_err()
     {
-        return Ok(false);
+        return Ok(Adopted::No);
     }
     new_file.set_permissions(meta.permissions())?;
     let mut piece = vec![0u8; 64 << 10];
@@ -522,7 +544,11 @@ fn adopt(
     new_file.sync_all()?;
     // Opened by someone meanwhile (a descriptor that looked the name up before the exchange):
     // that file must go back to the name after all; what we wrote into ours is only a copy.
-    Ok(lease::intact(old))
+    Ok(if lease::intact(old) {
+        Adopted::Theirs
+    } else {
+        Adopted::No
+    })
 }
 
 /// Renames the file at `tmp` (ours, after a swap back, with an opener) to a free name beside
@@ -1068,6 +1094,31 @@ mod tests {
             fs::read_to_string(&p).unwrap(),
             "save 2 through the descriptor"
         );
+        assert!(temp_leftovers(d.path()).is_empty());
+    }
+
+    #[test]
+    fn a_reader_of_the_old_file_after_the_exchange_leaves_the_write_back_standing() {
+        // A reader that looked the name up before the exchange opens the old file (blocked by
+        // our lease), reads it and closes it: nothing changed, so the new file stays.
+        let (d, p) = project();
+        if !leases_work(d.path()) {
+            return;
+        }
+        let mut reader = None;
+        let out = run(&p, Opts::default(), &mut |pt| {
+            if let Point::AfterExchange(old) = pt {
+                let ino = fs::metadata(old).unwrap().ino();
+                let old = old.to_owned();
+                reader = Some(std::thread::spawn(move || {
+                    fs::read_to_string(&old).unwrap()
+                }));
+                assert!(lease_breaking(ino, Duration::from_secs(10)));
+            }
+        });
+        assert_eq!(reader.unwrap().join().unwrap(), SAMPLE);
+        assert_eq!(out, WriteBackOutcome::Written);
+        assert_eq!(fs::read_to_string(&p).unwrap(), written(SAMPLE));
         assert!(temp_leftovers(d.path()).is_empty());
     }
 
