@@ -480,6 +480,7 @@ fn watch(w: WatchArgs) -> u8 {
         blackboards,
         events: w.events.clone(),
         settle_ms: w.settle,
+        runtime_dir: None,
     };
     let config = match sources.load() {
         Ok(c) => c,

@@ -356,6 +356,8 @@ fn watch_on_the_command_line_refuses_a_missing_folder_and_takes_a_blackboard() {
     fs::copy(a.join("Blackboard.aml"), a.join("Other.aml")).unwrap();
     let events = w.root.join("ev.jsonl");
     let mut child = Command::new(bin())
+        .env("XDG_RUNTIME_DIR", &w.root)
+        .env_remove("RUNTIME_DIRECTORY")
         .args(["watch", "--settle", "50", "--events"])
         .arg(&events)
         .arg(a.join("Blackboard.aml"))
@@ -392,6 +394,8 @@ fn started_names_the_configuration_by_its_absolute_path() {
     // A relative `--config`, from the workspace as the working directory.
     let mut child = Command::new(bin())
         .current_dir(&w.root)
+        .env("XDG_RUNTIME_DIR", &w.root)
+        .env_remove("RUNTIME_DIRECTORY")
         .args([
             "watch",
             "--config",

@@ -73,6 +73,9 @@ pub struct Sources {
     pub blackboards: Vec<PathBuf>,
     pub events: Option<PathBuf>,
     pub settle_ms: Option<u64>,
+    /// Where the lock notes go instead of [`lock::runtime_dir`] (tests keep them in their own
+    /// folders).
+    pub runtime_dir: Option<PathBuf>,
 }
 
 impl Sources {
@@ -124,7 +127,12 @@ pub async fn run(
     let force_poll = std::env::var_os("SKILLPOST_FORCE_POLL").is_some();
     // One daemon per folder: a second one on any of these folders stops here (exit status 2).
     lock::raise_open_file_limit();
-    let mut locks = lock::Locks::new(lock::runtime_dir());
+    let mut locks = lock::Locks::new(
+        sources
+            .runtime_dir
+            .clone()
+            .unwrap_or_else(lock::runtime_dir),
+    );
     for folder in config.projects.iter().map(|p| p.path.clone()).chain(
         config
             .roots

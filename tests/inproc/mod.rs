@@ -230,10 +230,23 @@ impl InProc {
 
     fn spawn_with(
         config: Config,
-        sources: Sources,
+        mut sources: Sources,
         paused: bool,
         state: Option<PathBuf>,
     ) -> Result<Self, String> {
+        // The lock notes in a folder of this test process, never in the real runtime folder
+        // (shared by all its daemons, so a refusal still names the holder's pid).
+        sources.runtime_dir.get_or_insert_with(|| {
+            static RUN: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+            RUN.get_or_init(|| {
+                tempfile::Builder::new()
+                    .prefix("skillpost-test-run-")
+                    .tempdir()
+                    .unwrap()
+                    .keep()
+            })
+            .clone()
+        });
         let buf = Buffer::default();
         let mut sink = EventSink::to(Box::new(buf.clone()));
         if let Some(state) = state {
