@@ -421,7 +421,8 @@ pub(crate) fn write_back_with(
         }
     }
     swap_back(&tmp, &target, new_id, out_id, hook)?;
-    if new_leased && !lease::intact(&new_file) {
+    let ours_at_tmp = fs::symlink_metadata(&tmp).is_ok_and(|m| id(&m) == new_id);
+    if new_leased && ours_at_tmp && !lease::intact(&new_file) {
         // Someone opened the name while our file stood there, and the taken file stayed open
         // in another program for all of `ADOPT_WAIT`: both files have a writer and only one can
         // have the name. Ours, with whatever its opener writes, is kept beside it.
