@@ -1124,6 +1124,52 @@ mod tests {
     }
 
     #[test]
+    fn a_double_race_keeps_both_files() {
+        // The exchange takes a save that another program keeps open (for the whole wait), and a
+        // writer opens the name while our file stands there: only one can have the name. The
+        // save goes back; ours is kept beside it, with what the writer writes, and the
+        // write-back is an error naming it: nothing is lost silently.
+        let (d, p) = project();
+        if !leases_work(d.path()) {
+            return;
+        }
+        let mut reader = None;
+        let mut writer = None;
+        let r = write_back_with(
+            &p,
+            SAMPLE.as_bytes(),
+            false,
+            &site(SAMPLE),
+            "x.src",
+            &Opts::default(),
+            &mut |pt| match pt {
+                Point::BeforeExchange => {
+                    rename_save(&p, "save 1");
+                    reader = Some(fs::File::open(&p).unwrap());
+                }
+                Point::AfterExchange(_) => {
+                    let ino = fs::metadata(&p).unwrap().ino();
+                    let w = descriptor_writer(&p, "through the descriptor");
+                    assert!(lease_breaking(ino, Duration::from_secs(10)));
+                    writer = Some(w);
+                }
+                _ => {}
+            },
+        );
+        let e = r.unwrap_err().to_string();
+        let kept = d.path().join("Blackboard.aml.skillpost-kept-1");
+        assert!(e.contains(&kept.display().to_string()), "{e}");
+        let (opened, go, t) = writer.unwrap();
+        opened.recv_timeout(Duration::from_secs(10)).unwrap();
+        go.send(()).unwrap();
+        t.join().unwrap();
+        drop(reader);
+        assert_eq!(fs::read_to_string(&p).unwrap(), "save 1");
+        assert_eq!(fs::read_to_string(&kept).unwrap(), "through the descriptor");
+        assert!(temp_leftovers(d.path()).is_empty());
+    }
+
+    #[test]
     fn a_read_only_blackboard_is_not_replaced() {
         let (d, p) = project();
         fs::set_permissions(&p, std::os::unix::fs::PermissionsExt::from_mode(0o444)).unwrap();
