@@ -135,7 +135,23 @@ impl Daemon {
     /// whose compile failed with "permission denied" (a `chmod 000` of the file or the folder
     /// meanwhile) stayed uncompiled after the permission came back, until the next edit.
     fn route_readable(&mut self, paths: &[PathBuf], now: Instant) {
-        for p in self.projects.values_mut() {
+        // Only the projects a path can concern (never a scan of them all): a project folder
+        // itself, a folder of inputs, or a file in one.
+        let mut keys: std::collections::BTreeSet<PathBuf> = Default::default();
+        for path in paths {
+            if self.projects.contains_key(path) {
+                keys.insert(path.clone());
+            }
+            for dir in [Some(path.as_path()), path.parent()].into_iter().flatten() {
+                if let Some(ks) = self.by_dir.get(dir) {
+                    keys.extend(ks.iter().cloned());
+                }
+            }
+        }
+        for k in keys {
+            let Some(p) = self.projects.get_mut(&k) else {
+                continue;
+            };
             let unreadable = p.inputs.iter().find(|(input, hash)| {
                 hash.is_none() && paths.iter().any(|changed| input.starts_with(changed))
             });
