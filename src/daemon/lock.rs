@@ -141,19 +141,26 @@ impl Locks {
             Some(None) => {}
             None => return Err(format!("{} is not kept", folder.display())),
         }
-        let Ok(dir) = std::fs::File::options()
+        let opened = std::fs::File::options()
             .read(true)
             .custom_flags(
                 (rustix::fs::OFlags::DIRECTORY | rustix::fs::OFlags::CLOEXEC).bits() as i32,
             )
-            .open(folder)
-        else {
-            // Not there (yet): locked when it appears.
-            return Ok(());
+            .open(folder);
+        let (dir, meta) = match opened {
+            Ok(dir) => {
+                let meta = dir
+                    .metadata()
+                    .map_err(|e| format!("cannot lock {}: {e}", folder.display()))?;
+                (Some(dir), meta)
+            }
+            // There, but not to be opened for reading (no read permission): the lock file.
+            Err(_) => match std::fs::metadata(folder) {
+                Ok(m) if m.is_dir() => (None, m),
+                // Not there (yet): locked when it appears.
+                _ => return Ok(()),
+            },
         };
-        let meta = dir
-            .metadata()
-            .map_err(|e| format!("cannot lock {}: {e}", folder.display()))?;
         let id = (meta.dev(), meta.ino());
         if let Some(h) = self.held.get_mut(&id) {
             // The same folder under another name: ours already.
@@ -173,13 +180,18 @@ impl Locks {
         }
         let real = std::fs::canonicalize(folder).unwrap_or_else(|_| folder.to_owned());
         let note = self.dir.join(lock_name(&real));
-        let file =
-            match rustix::fs::flock(&dir, rustix::fs::FlockOperation::NonBlockingLockExclusive) {
-                Ok(()) => dir,
-                Err(rustix::io::Errno::WOULDBLOCK) => return Err(self.refusal(&real, &note)),
-                // No flock on folders here (a network file system): the lock file instead.
-                Err(_) => self.lock_file(&real, &note)?,
-            };
+        let file = match dir.map(|d| {
+            let r = rustix::fs::flock(&d, rustix::fs::FlockOperation::NonBlockingLockExclusive);
+            (d, r)
+        }) {
+            Some((d, Ok(()))) => d,
+            Some((_, Err(rustix::io::Errno::WOULDBLOCK))) => {
+                return Err(self.refusal(&real, &note));
+            }
+            // No flock on folders here (a network file system), or the folder cannot be opened:
+            // the lock file instead.
+            _ => self.lock_file(&real, &note)?,
+        };
         let note = self.write_note(&note, &real);
         self.held.insert(
             id,
