@@ -556,16 +556,25 @@ pub(super) fn half_written(
         if read.get(&file).is_some_and(|h| *h != now_hash) {
             return Some((file, true));
         }
-        // The bytes read are still there. Saved a moment ago, a writer may still be at it (an
-        // in-place save that truncated and has not written yet): look once more after a short
-        // while. A complete file that is wrong (a DOCTYPE, not UTF-8) stays the same and fails
-        // now, not after three retries.
+        // The bytes read are still there. A writer may still be at it (an in-place save that
+        // truncated and has not written yet): a program that has the file open for writing says
+        // so; where leases cannot tell, a file saved a moment ago is looked at once more after a
+        // short while, and an empty one is taken for a save in progress. A complete file that is
+        // wrong (a DOCTYPE, not UTF-8) stays the same and fails now, not after three retries.
+        match crate::write::writeback::lease::open_for_writing(&file) {
+            Some(true) => return Some((file, true)),
+            Some(false) => return None,
+            None => {}
+        }
         let recent = meta
             .modified()
             .ok()
             .and_then(|t| t.elapsed().ok())
             .is_some_and(|age| age < Duration::from_secs(1));
         if recent {
+            if meta.len() == 0 {
+                return Some((file, false));
+            }
             std::thread::sleep(STILL_WRITING);
             if hash_file(&file) != now_hash {
                 return Some((file, true));
@@ -657,6 +666,42 @@ mod tests {
         // The file's text is not the one compiled, so the error has no line, but it still names
         // the file: the daemon tries again instead of failing the run.
         assert_eq!(half_written(&c, &read), Some((sfc, true)));
+    }
+
+    #[test]
+    fn an_sfc_truncated_by_a_writer_that_has_not_written_yet_is_still_being_written() {
+        // An in-place save opened the SFC with truncation and has not written yet (a loaded
+        // machine can hold it there for longer than any short look again): the file is empty
+        // and unchanged since the compile read it, but it is open for writing.
+        let dir = tempfile::tempdir().unwrap();
+        let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/ok/reference-sample");
+        for f in ["Blackboard.aml", "sfc.xml", "kr15-2.irl"] {
+            std::fs::copy(sample.join(f), dir.path().join(f)).unwrap();
+        }
+        let sfc = dir.path().join("sfc.xml");
+        let writer = std::fs::File::options()
+            .write(true)
+            .truncate(true)
+            .open(&sfc)
+            .unwrap();
+        let c = crate::compile::compile(
+            &FsSource::default(),
+            &dir.path().join("Blackboard.aml"),
+            &crate::compile::Options::default(),
+        );
+        assert!(c.has_errors(), "an empty SFC does not compile");
+        let read = HashMap::from([(sfc.clone(), Some(crate::load::ContentHash::new().finish()))]);
+        assert!(half_written(&c, &read).is_some(), "a save in progress");
+        // The writer closes without writing: an empty SFC, complete (the next save compiles).
+        drop(writer);
+        let aged = std::time::SystemTime::now() - Duration::from_secs(5);
+        std::fs::File::options()
+            .write(true)
+            .open(&sfc)
+            .unwrap()
+            .set_modified(aged)
+            .unwrap();
+        assert_eq!(half_written(&c, &read), None);
     }
 
     #[test]

@@ -707,6 +707,32 @@ pub(crate) mod lease {
         }
     }
 
+    /// Whether another program has the file at `path` open for writing right now (a save in
+    /// progress): a read lease is refused exactly then. `None` where leases cannot tell (not
+    /// the owner and no `CAP_LEASE`, no lease support, not a regular file). The lease, when
+    /// granted, is released at once.
+    pub fn open_for_writing(path: &std::path::Path) -> Option<bool> {
+        use std::os::unix::fs::OpenOptionsExt as _;
+        guard_sigio().ok()?;
+        let flags = rustix::fs::OFlags::NONBLOCK | rustix::fs::OFlags::NOFOLLOW;
+        let f = File::options()
+            .read(true)
+            .custom_flags(flags.bits() as i32)
+            .open(path)
+            .ok()?;
+        if !f.metadata().ok()?.is_file() {
+            return None;
+        }
+        match fdlease::set(&f, Lease::Read) {
+            Ok(()) => {
+                let _ = fdlease::set(&f, Lease::None);
+                Some(false)
+            }
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => Some(true),
+            Err(_) => None,
+        }
+    }
+
     /// Whether the write lease is still held unbroken.
     pub fn intact(file: &File) -> bool {
         matches!(fdlease::get(file), Ok(Lease::Write))
