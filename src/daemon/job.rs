@@ -556,15 +556,15 @@ pub(super) fn half_written(
         if read.get(&file).is_some_and(|h| *h != now_hash) {
             return Some((file, true));
         }
-        // The bytes read are still there. A writer may still be at it (an in-place save that
-        // truncated and has not written yet): a program that has the file open for writing says
-        // so; where leases cannot tell, a file saved a moment ago is looked at once more after a
-        // short while, and an empty one is taken for a save in progress. A complete file that is
-        // wrong (a DOCTYPE, not UTF-8) stays the same and fails now, not after three retries.
-        match crate::write::writeback::lease::open_for_writing(&file) {
-            Some(true) => return Some((file, true)),
-            Some(false) => return None,
-            None => {}
+        // The bytes read are still there. A writer may still be at it: a program that has the
+        // file open for writing (an in-place save that truncated and has not written yet) says
+        // so; a file saved a moment ago is looked at once more after a short while (the rest of
+        // a save written in two goes), and where leases cannot tell, an empty one is taken for a
+        // save in progress. A complete file that is wrong (a DOCTYPE, not UTF-8) stays the same
+        // and fails now, not after three retries.
+        let open = crate::write::writeback::lease::open_for_writing(&file);
+        if open == Some(true) {
+            return Some((file, true));
         }
         let recent = meta
             .modified()
@@ -572,7 +572,7 @@ pub(super) fn half_written(
             .and_then(|t| t.elapsed().ok())
             .is_some_and(|age| age < Duration::from_secs(1));
         if recent {
-            if meta.len() == 0 {
+            if open.is_none() && meta.len() == 0 {
                 return Some((file, false));
             }
             std::thread::sleep(STILL_WRITING);
