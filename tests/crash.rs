@@ -45,6 +45,9 @@ fn start(ws: &Path) -> Daemon {
     args.extend(PROJECTS.iter().map(|p| ws.join(p).display().to_string()));
     Daemon(
         Command::new(env!("CARGO_BIN_EXE_skillpost"))
+            // Its state and lock notes in the workspace, not in the real runtime folder.
+            .env("XDG_RUNTIME_DIR", ws)
+            .env_remove("RUNTIME_DIRECTORY")
             .args(&args)
             .stdin(Stdio::null())
             .stdout(Stdio::null())

@@ -132,6 +132,9 @@ impl Daemon {
             .args(["--settle", SETTLE_MS])
             .args(args)
             .env("RUST_LOG", "info")
+            // Its state and lock notes in the test's folder, not in the real runtime folder.
+            .env("XDG_RUNTIME_DIR", cwd)
+            .env_remove("RUNTIME_DIRECTORY")
             .envs(env.iter().copied())
             .current_dir(cwd)
             .stdin(Stdio::null())

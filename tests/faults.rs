@@ -97,6 +97,9 @@ struct Daemon(Child, PathBuf);
 impl Daemon {
     fn start(events: &Path, projects: &[&Path]) -> Self {
         let child = Command::new(env!("CARGO_BIN_EXE_skillpost"))
+            // Its state and lock notes beside the events, not in the real runtime folder.
+            .env("XDG_RUNTIME_DIR", events.parent().unwrap())
+            .env_remove("RUNTIME_DIRECTORY")
             .args(["watch", "--settle", "30", "--events"])
             .arg(events)
             .args(projects)
