@@ -35,6 +35,23 @@ fn stderr(o: &Output) -> String {
     String::from_utf8(o.stderr.clone()).unwrap()
 }
 
+/// A temporary copy of `fixtures/base/<base>` with the input files of `fixtures/ok/<case>` (those
+/// it has) laid over it.
+fn base_with_case(base: &str, case: &str) -> tempfile::TempDir {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
+    let t = tempfile::tempdir().unwrap();
+    for dir in [root.join("base").join(base), root.join("ok").join(case)] {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let e = e.unwrap();
+            let name = e.file_name();
+            if name != "case.toml" && name != "README.txt" {
+                std::fs::copy(e.path(), t.path().join(name)).unwrap();
+            }
+        }
+    }
+    t
+}
+
 #[test]
 fn compile_writes_outputs_and_reports_them() {
     let p = project();
@@ -999,17 +1016,7 @@ fn json_format_prints_listings_as_objects() {
 
 #[test]
 fn json_listings_of_a_loop_and_of_a_broken_flow() {
-    let base = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
-    let d = tempfile::tempdir().unwrap();
-    for e in std::fs::read_dir(base.join("base/flow")).unwrap() {
-        let e = e.unwrap();
-        std::fs::copy(e.path(), d.path().join(e.file_name())).unwrap();
-    }
-    std::fs::copy(
-        base.join("ok/flow-loop-exit/sfc.xml"),
-        d.path().join("sfc.xml"),
-    )
-    .unwrap();
+    let d = base_with_case("flow", "flow-loop-exit");
     let o = run(
         &[
             "--validate",
@@ -1220,7 +1227,6 @@ fn a_rapid_program_writes_one_module_and_refuses_a_krl_template() {
 /// controller runs each resource (text and JSON).
 #[test]
 fn a_robot_and_its_gripper_make_one_program() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
     for (case, how) in [
         ("cell-robot-gripper", "mounted on it"),
         (
@@ -1228,15 +1234,7 @@ fn a_robot_and_its_gripper_make_one_program() {
             "its Controller attribute",
         ),
     ] {
-        let t = tempfile::tempdir().unwrap();
-        for e in std::fs::read_dir(root.join("base/cell")).unwrap() {
-            let e = e.unwrap();
-            std::fs::copy(e.path(), t.path().join(e.file_name())).unwrap();
-        }
-        let own = root.join("ok").join(case).join("Blackboard.aml");
-        if own.exists() {
-            std::fs::copy(own, t.path().join("Blackboard.aml")).unwrap();
-        }
+        let t = base_with_case("cell", case);
         let o = run(&["Blackboard.aml", "Cell"], t.path());
         assert_eq!(o.status.code(), Some(0), "{case}: {}", stderr(&o));
         let src = std::fs::read_to_string(t.path().join("Cell.src")).unwrap();
@@ -1274,17 +1272,7 @@ fn a_robot_and_its_gripper_make_one_program() {
 /// no signal is none.
 #[test]
 fn wires_between_controllers_are_listed() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
-    let t = tempfile::tempdir().unwrap();
-    for e in std::fs::read_dir(root.join("base/cell")).unwrap() {
-        let e = e.unwrap();
-        std::fs::copy(e.path(), t.path().join(e.file_name())).unwrap();
-    }
-    std::fs::copy(
-        root.join("ok/cell-two-robots-wired/Blackboard.aml"),
-        t.path().join("Blackboard.aml"),
-    )
-    .unwrap();
+    let t = base_with_case("cell", "cell-two-robots-wired");
     let o = run(&["--validate", "-pB", "Blackboard.aml"], t.path());
     let text = stdout(&o);
     let wires: Vec<&str> = text.lines().filter(|l| l.starts_with("(Wire)")).collect();
