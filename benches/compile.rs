@@ -43,8 +43,8 @@ use skillpost::compile::{self, Options};
 use skillpost::diag::{Diagnostics, Sources};
 use skillpost::emit::{EmitInput, Language, LanguageProfile as _, OutputFile, OutputTemplate};
 use skillpost::load::FsSource;
-use skillpost::model::Irl;
 use skillpost::plan;
+use skillpost::read::irl::Irl;
 use skillpost::read::{blackboard::read_blackboard, irl::read_irl, sfc::read_sfc, xml};
 
 #[path = "common/generator.rs"]

@@ -10,7 +10,8 @@ use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
 use crate::diag::{Code, Diagnostic, Diagnostics, Span};
-use crate::model::{Blackboard, ElementKind, Irl, Sfc, Step};
+use crate::model::{Blackboard, ElementKind, Sfc, Step};
+use crate::read::irl::Irl;
 
 /// What binding needs to know of the program's robot language, handed in as data by the
 /// caller: the language's profile implements it (`emit::Profile: Rules`), so this stage never
@@ -595,7 +596,7 @@ impl<'a> StepCx<'a> {
 /// to write): names the step, the variable and the template.
 fn conversion_error(
     why: &crate::template::ConvError,
-    call: &crate::model::IrlCall,
+    call: &crate::read::irl::IrlCall,
     pc: &PreparedCall,
     skill: &crate::model::Skill,
     e: &crate::model::Element,

@@ -10,9 +10,10 @@ use crate::diag::{Code, Diagnostic, Diagnostics, Sources, Span};
 use crate::emit::{EmitInput, LanguageProfile as _, OutputFile, OutputTemplate};
 use crate::lang::Language;
 use crate::load::FileSource;
-use crate::model::{Blackboard, Irl, Sfc};
+use crate::model::{Blackboard, Sfc};
 use crate::paths;
 use crate::plan::{self, Plan};
+use crate::read::irl::Irl;
 use crate::read::{blackboard::read_blackboard, irl, sfc::read_sfc_pou, xml};
 
 /// What to compile and how.

@@ -563,37 +563,6 @@ impl Variable {
     }
 }
 
-/// An IRL file.
-#[derive(Debug)]
-pub struct Irl {
-    pub file: FileId,
-    pub info: Option<String>,
-    /// The language its templates were read in.
-    pub language: crate::lang::Language,
-    pub calls: Vec<IrlCall>,
-    pub definitions: Vec<IrlDefinition>,
-}
-
-/// A `function-call` template.
-#[derive(Debug)]
-pub struct IrlCall {
-    pub name: Name,
-    /// The declared parameters (or those taken from the first bracket group).
-    pub params: Vec<Name>,
-    pub template: crate::template::Template,
-    /// The element's start tag.
-    pub span: Span,
-}
-
-/// A `def/definition`, emitted once after the program.
-#[derive(Debug)]
-pub struct IrlDefinition {
-    pub name: Name,
-    /// The text, common indentation removed, lines without their endings.
-    pub lines: Vec<String>,
-    pub span: Span,
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -20,8 +20,9 @@ pub mod urscript;
 
 use crate::bind::Bound;
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
-use crate::model::{Blackboard, Irl, Sfc};
+use crate::model::{Blackboard, Sfc};
 use crate::plan::Plan;
+use crate::read::irl::Irl;
 use crate::template::Syntax;
 
 pub use crate::lang::Language;

@@ -9,9 +9,40 @@ use roxmltree::Node;
 
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
 use crate::lang::Language;
-use crate::model::{Irl, IrlCall, IrlDefinition, Name};
+use crate::model::Name;
 use crate::read::xml::{attr_span, children, parse, tag_span};
 use crate::template::{Template, dedent, params_from_brackets};
+
+/// An IRL file.
+#[derive(Debug)]
+pub struct Irl {
+    pub file: FileId,
+    pub info: Option<String>,
+    /// The language its templates were read in.
+    pub language: Language,
+    pub calls: Vec<IrlCall>,
+    pub definitions: Vec<IrlDefinition>,
+}
+
+/// A `function-call` template.
+#[derive(Debug)]
+pub struct IrlCall {
+    pub name: Name,
+    /// The declared parameters (or those taken from the first bracket group).
+    pub params: Vec<Name>,
+    pub template: Template,
+    /// The element's start tag.
+    pub span: Span,
+}
+
+/// A `def/definition`, emitted once after the program.
+#[derive(Debug)]
+pub struct IrlDefinition {
+    pub name: Name,
+    /// The text, common indentation removed, lines without their endings.
+    pub lines: Vec<String>,
+    pub span: Span,
+}
 
 /// Reads an IRL file already in `sources`. `None` only when the file is not well-formed XML or
 /// not an `<irl>` document; every other problem is pushed into `diags`.
