@@ -107,8 +107,7 @@ pub struct Compilation {
     pub language: Option<Language>,
     /// Wall time per stage, in order (`read-blackboard`, `read-sfc`, `plan`, `bind`, `emit`).
     pub timings: Vec<(&'static str, std::time::Duration)>,
-    /// The program's name (as given) and the resource whose controller runs it (SPEC.md 9).
-    pub program: Option<String>,
+    /// The resource whose controller runs the program (SPEC.md 9).
     pub controller: Option<String>,
     /// The blackboard's folder, held open since before the blackboard was read: [`apply`]
     /// writes through it (`None` where it could not be opened, e.g. a compile from memory).
@@ -594,7 +593,6 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         language = Some(langs.program);
         out.languages = langs.resources.clone();
         out.controller = res.resource.map(|r| bb.resources[r].name.text.to_string());
-        out.program = opts.program.clone();
         let mut fn_irl: HashMap<(usize, usize), usize> = HashMap::new();
         let mut by_file: HashMap<(crate::diag::FileId, Language), Option<usize>> = HashMap::new();
         for ((r, f), file) in files {
@@ -941,14 +939,18 @@ pub struct Applied {
 const IN_USE_TRIES: u32 = 6;
 const IN_USE_FIRST_WAIT: std::time::Duration = std::time::Duration::from_millis(40);
 
-/// The write-back, tried again a few times while another program has the blackboard open (an
-/// editor saving it holds it open for milliseconds); after that it is reported as skipped.
-fn write_back_retrying(wb: &WriteBack) -> std::io::Result<crate::write::WriteBackOutcome> {
+/// The write-back into the blackboard at `path` (`wb.blackboard`, or the same file reached
+/// through the held-open folder), tried again a few times while another program has the
+/// blackboard open (an editor saving it holds it open for milliseconds); after that it is
+/// reported as skipped.
+fn write_back_retrying(
+    wb: &WriteBack,
+    path: &Path,
+) -> std::io::Result<crate::write::WriteBackOutcome> {
     let mut wait = IN_USE_FIRST_WAIT;
     let mut tries = 1;
     loop {
-        let outcome =
-            crate::write::write_back(&wb.blackboard, &wb.expected, wb.bom, &wb.site, &wb.value)?;
+        let outcome = crate::write::write_back(path, &wb.expected, wb.bom, &wb.site, &wb.value)?;
         if outcome != crate::write::WriteBackOutcome::SkippedInUse || tries >= IN_USE_TRIES {
             return Ok(outcome);
         }
@@ -987,16 +989,12 @@ pub fn apply(c: &Compilation) -> std::io::Result<Applied> {
         .map(|(o, (p, _))| (p.clone(), o == crate::write::WriteOutcome::Written))
         .collect();
     let write_back = match &c.write_back {
-        Some(wb) => {
-            let routed = WriteBack {
-                blackboard: route(&wb.blackboard),
-                ..wb.clone()
-            };
-            Some(write_back_retrying(&routed).map_err(|e| {
+        Some(wb) => Some(
+            write_back_retrying(wb, &route(&wb.blackboard)).map_err(|e| {
                 let e = unroute(e);
                 std::io::Error::new(e.kind(), format!("{}: {e}", wb.blackboard.display()))
-            })?)
-        }
+            })?,
+        ),
         None => None,
     };
     Ok(Applied {

@@ -359,7 +359,7 @@ impl Job {
         });
         // Exactly what `skillpost [--template F] [--lf] [--pou P] BLACKBOARD PROGRAM` writes.
         let opts = Options {
-            program: Some(program.name),
+            program: Some(program.name.clone()),
             lf: self.spec.lf,
             template: self.spec.template.clone(),
             confine_to: self.confine.then(|| self.key.clone()),
@@ -455,7 +455,7 @@ impl Job {
                 .map(|(p, w)| OutputInfo {
                     path: p.display().to_string(),
                     written: *w,
-                    program: c.program.clone().unwrap_or_default(),
+                    program: program.name.clone(),
                     controller: c.controller.clone(),
                 })
                 .collect(),
