@@ -269,8 +269,9 @@ impl FileSource for FsSource {
         if max >= self.max_file_size {
             return read_limited(path, self.max_file_size);
         }
+        // `read_limited`'s only `InvalidData` is a file over the limit: here, the budget's.
         read_limited(path, max).map_err(|e| {
-            if e.kind() == std::io::ErrorKind::InvalidData && e.to_string().contains("limit") {
+            if e.kind() == std::io::ErrorKind::InvalidData {
                 over_budget(max)
             } else {
                 e
