@@ -2,7 +2,7 @@
 //! directories are watched for it, and the index from directory to projects that routes file
 //! events without scanning every project.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -702,10 +702,6 @@ impl Daemon {
 /// file anything: the command line compiles `.skillpost-plan.tmp` as it compiles any SFC).
 pub(super) fn remove_stale_temporaries(folder: &Path, inputs: &HashMap<PathBuf, Option<u64>>) {
     use std::os::unix::fs::MetadataExt as _;
-    let inputs: HashSet<PathBuf> = inputs
-        .keys()
-        .map(|p| std::fs::canonicalize(p).unwrap_or_else(|_| p.clone()))
-        .collect();
     for e in std::fs::read_dir(folder).into_iter().flatten().flatten() {
         let name = e.file_name();
         let Some(name) = name.to_str() else { continue };
@@ -715,7 +711,9 @@ pub(super) fn remove_stale_temporaries(folder: &Path, inputs: &HashMap<PathBuf, 
         let path = e.path();
         let real = std::fs::canonicalize(&path).unwrap_or_else(|_| path.clone());
         let single = std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_file() && m.nlink() == 1);
-        if !single || inputs.contains(&real) || inputs.contains(&path) {
+        // The inputs hold every file as read and, for one read through a link, the file the
+        // link resolves to (`job::add_link_targets`): the path or its real one names an input.
+        if !single || inputs.contains_key(&real) || inputs.contains_key(&path) {
             continue;
         }
         match std::fs::remove_file(&path) {
