@@ -26,19 +26,17 @@ use std::path::{Path, PathBuf};
 pub const RESERVE: u64 = 256;
 
 /// Lifts the soft limit of open files to the hard one (a service may keep thousands of folders;
-/// the soft limit is often 1,024). Returns the limit in force.
-pub fn raise_open_file_limit() -> u64 {
+/// the soft limit is often 1,024). [`Locks::new`] reads the limit in force afterwards; where it
+/// cannot be lifted, the old one stays.
+pub fn raise_open_file_limit() {
     use rustix::process::{Resource, getrlimit, setrlimit};
     let mut l = getrlimit(Resource::Nofile);
     if let (Some(cur), max) = (l.current, l.maximum)
         && max.is_none_or(|m| m > cur)
     {
         l.current = max.or(Some(1 << 20));
-        if setrlimit(Resource::Nofile, l).is_err() {
-            l = getrlimit(Resource::Nofile);
-        }
+        let _ = setrlimit(Resource::Nofile, l);
     }
-    l.current.unwrap_or(u64::MAX)
 }
 
 /// The directory of the lock files (see the module documentation).
