@@ -336,14 +336,9 @@ fn cli_leaves_a_read_only_blackboard_alone() {
 #[test]
 fn cli_does_not_take_over_another_users_blackboard() {
     use std::os::unix::fs::MetadataExt as _;
-    if !rustix::process::geteuid().is_root() {
-        common::skip("not root: cannot make a blackboard of another user");
+    let Some(mut nobody) = common::as_nobody("make a blackboard of another user") else {
         return;
-    }
-    if Command::new("setpriv").arg("--version").output().is_err() {
-        common::skip("no setpriv (util-linux)");
-        return;
-    }
+    };
     let (t, proj, _) = layout();
     // The folder is the unprivileged user's (it may rename in it), the blackboard root's.
     fs::set_permissions(t.path(), fs::Permissions::from_mode(0o755)).unwrap();
@@ -354,7 +349,7 @@ fn cli_does_not_take_over_another_users_blackboard() {
     std::os::unix::fs::chown(&proj, Some(65534), Some(65534)).unwrap();
     let bb = proj.join("Blackboard.aml");
     let (before, ino) = (fs::read(&bb).unwrap(), fs::metadata(&bb).unwrap().ino());
-    let o = common::as_nobody()
+    let o = nobody
         .arg(env!("CARGO_BIN_EXE_skillpost"))
         .args(["Blackboard.aml", "Cell"])
         .current_dir(&proj)

@@ -582,14 +582,9 @@ fn a_path_longer_than_the_kernel_takes_is_named_as_such() {
 #[test]
 fn an_edit_is_compiled_once_its_permission_comes_back() {
     use std::os::unix::fs::PermissionsExt as _;
-    if !rustix::process::geteuid().is_root() {
-        common::skip("not root: cannot run the daemon as another user");
+    let Some(mut nobody) = common::as_nobody("run the daemon as another user") else {
         return;
-    }
-    if Command::new("setpriv").arg("--version").output().is_err() {
-        common::skip("no setpriv (util-linux)");
-        return;
-    }
+    };
     let w = Workspace::new();
     fs::set_permissions(&w.root, fs::Permissions::from_mode(0o755)).unwrap();
     fs::set_permissions(w.ws(), fs::Permissions::from_mode(0o755)).unwrap();
@@ -603,7 +598,7 @@ fn an_edit_is_compiled_once_its_permission_comes_back() {
         std::os::unix::fs::chown(p.join(f), Some(65534), Some(65534)).unwrap();
     }
     let ev = run.join("events.jsonl");
-    let mut child = common::as_nobody()
+    let mut child = nobody
         .arg(env!("CARGO_BIN_EXE_skillpost"))
         .args(["watch", "--settle", "50", "--events"])
         .arg(&ev)

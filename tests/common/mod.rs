@@ -191,8 +191,22 @@ impl Drop for Watch {
 }
 
 /// `setpriv` running what follows as `nobody` (uid and gid 65534) without any capability: an
-/// unprivileged user, for the tests of what such a user may not do (run as root).
-pub fn as_nobody() -> std::process::Command {
+/// unprivileged user, for the tests of what such a user may not do. `None` (the test is skipped,
+/// saying why `what` cannot be tried, and fails under `SKILLPOST_STRICT_TESTS=1`) when this
+/// process is not root or has no `setpriv`.
+pub fn as_nobody(what: &str) -> Option<std::process::Command> {
+    if !rustix::process::geteuid().is_root() {
+        skip(&format!("not root: cannot {what}"));
+        return None;
+    }
+    if std::process::Command::new("setpriv")
+        .arg("--version")
+        .output()
+        .is_err()
+    {
+        skip("no setpriv (util-linux)");
+        return None;
+    }
     let mut c = std::process::Command::new("setpriv");
     c.args([
         "--reuid=65534",
@@ -201,5 +215,5 @@ pub fn as_nobody() -> std::process::Command {
         "--inh-caps=-all",
         "--bounding-set=-all",
     ]);
-    c
+    Some(c)
 }
