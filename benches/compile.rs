@@ -878,6 +878,7 @@ fn stages(bb_path: &Path) -> (Vec<Duration>, Vec<(&'static str, String)>) {
         step_indent: &template.step_indent,
         steps_indent: template.steps_indent(),
         profile,
+        cell: None,
     };
     let files: Vec<OutputFile> =
         skillpost::emit::emit_files(&input, &template, &mut diags).expect("emit");

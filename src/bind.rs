@@ -32,8 +32,38 @@ pub struct Resolution {
     pub step_skill: Vec<Option<(usize, usize)>>,
     /// The distinct `(resource, skill)` pairs used, in first-use order.
     pub used: Vec<(usize, usize)>,
-    /// The program's resource (the first one a step uses).
+    /// The program's resource: the controller of the first step (the first program's).
     pub resource: Option<usize>,
+}
+
+impl Resolution {
+    /// The controllers that run steps, in the order of their first step (SPEC.md 9).
+    pub fn controllers(&self, bb: &Blackboard, order: &StepOrder) -> Vec<usize> {
+        let mut out: Vec<usize> = Vec::new();
+        for &i in &order.steps {
+            if let Some((r, _)) = self.step_skill[i] {
+                let c = bb.controller_of(r);
+                if !out.contains(&c) {
+                    out.push(c);
+                }
+            }
+        }
+        out
+    }
+
+    /// This resolution narrowed to the steps of one controller: its program's.
+    pub fn of_controller(&self, bb: &Blackboard, controller: usize) -> Resolution {
+        let mine = |&(r, _): &(usize, usize)| bb.controller_of(r) == controller;
+        Resolution {
+            step_skill: self
+                .step_skill
+                .iter()
+                .map(|p| p.filter(|p| mine(p)))
+                .collect(),
+            used: self.used.iter().copied().filter(|p| mine(p)).collect(),
+            resource: Some(controller),
+        }
+    }
 }
 
 /// Which steps to bind, in which order.
@@ -81,7 +111,6 @@ pub fn resolve(
         step_skill: vec![None; sfc.elements.len()],
         ..Resolution::default()
     };
-    let mut several_reported = false;
     let mut used: HashSet<(usize, usize)> = HashSet::new();
     // Resource key → index of its first resource.
     let mut by_key: HashMap<&str, usize> = HashMap::new();
@@ -209,42 +238,13 @@ pub fn resolve(
             );
             continue;
         };
-        // The program is the controller's (SPEC.md 9): a robot and the devices on it.
-        let controller = bb.controller_of(res);
-        match r.resource {
-            None => r.resource = Some(controller),
-            Some(first) if first != controller && !several_reported => {
-                several_reported = true;
-                let runs_on = |ri: usize| {
-                    let c = bb.controller_of(ri);
-                    if c == ri {
-                        format!("`{}`", bb.resources[ri].name.text)
-                    } else {
-                        format!(
-                            "`{}` (on the controller of `{}`)",
-                            bb.resources[ri].name.text, bb.resources[c].name.text
-                        )
-                    }
-                };
-                diags.push(
-                    Diagnostic::error(
-                        Code::Unsupported,
-                        format!(
-                            "steps of several controllers are not supported yet: this step uses {}, earlier steps the controller of `{}`; a device on a robot's controller needs the attribute Controller = `{}` (or to stand inside that resource)",
-                            runs_on(res),
-                            bb.resources[first].name.text,
-                            bb.resources[first].name.text
-                        ),
-                    )
-                    .at(st.resource.as_ref().map(|n| n.span.clone()).unwrap_or(e.span.clone()))
-                    .element(label()),
-                );
-            }
-            _ => {}
+        // The program is the controller's (SPEC.md 9): a robot and the devices on it; the
+        // first controller's program is the one written back (a cell of several controllers
+        // gets one program per controller, `plan::cell`).
+        if r.resource.is_none() {
+            r.resource = Some(bb.controller_of(res));
         }
-        if let Some(rn) = &st.resource
-            && r.resource == Some(controller)
-        {
+        if let Some(rn) = &st.resource {
             recent[next_recent] = Some((&rn.key, &skill_name.key, (res, sk)));
             next_recent = (next_recent + 1) % recent.len();
         }
@@ -1006,23 +1006,28 @@ fn value_of<'a>(
     }
 }
 
-/// Resolves the names in every transition condition against the signals of the program's
+/// Resolves the names in every transition condition (or, for a program of a cell, those of
+/// `only`: the transitions it waits for or decides) against the signals of the program's
 /// resource and checks the types (SPEC.md 3.1). Returns the signals used, in first-use order.
 pub fn conditions(
     bb: &Blackboard,
     sfc: &Sfc,
     resource: Option<usize>,
     profile: Option<&dyn Rules>,
+    only: Option<&HashSet<usize>>,
     diags: &mut Diagnostics,
 ) -> Vec<usize> {
     use crate::cond::Ty;
     let mut used = Vec::new();
     let mut seen = HashSet::new();
     let res = resource.map(|r| &bb.resources[r]);
-    for e in &sfc.elements {
+    for (ei, e) in sfc.elements.iter().enumerate() {
         let ElementKind::Transition(Some(c)) = &e.kind else {
             continue;
         };
+        if only.is_some_and(|o| !o.contains(&ei)) {
+            continue;
+        }
         let lookup = |n: &str| {
             let r = res?;
             let key = crate::names::key(n);

@@ -109,6 +109,12 @@ pub struct Compilation {
     pub timings: Vec<(&'static str, std::time::Duration)>,
     /// The resource whose controller runs the program (SPEC.md 9).
     pub controller: Option<String>,
+    /// Per output (same order): its program's name and its controller's (SPEC.md 9).
+    pub output_programs: Vec<(String, String)>,
+    /// The programs' names, the written-back one first (empty without a program name).
+    pub program_names: Vec<String>,
+    /// The cell's programs and handshakes when its steps run on several controllers.
+    pub cell: Option<plan::cell::Cell>,
     /// The blackboard's folder, held open since before the blackboard was read: [`apply`]
     /// writes through it (`None` where it could not be opened, e.g. a compile from memory).
     pub folder: Option<crate::write::Folder>,
@@ -589,6 +595,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 files.push(((r, f), file));
             }
         }
+        let controllers = res.controllers(&bb, &order);
         let langs = languages(&mut cx, &bb, &res, &files);
         language = Some(langs.program);
         out.languages = langs.resources.clone();
@@ -607,73 +614,154 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 fn_irl.insert((r, f), i);
             }
         }
-        let profile = langs.program.profile();
-        check_program_name(&mut cx, opts, Some(langs.program));
-        let mut bound = bind::bind(
-            &bb,
-            sfc,
-            &order,
-            &res,
-            &bind::Calls {
-                irls: &irls,
-                fn_irl: &fn_irl,
-            },
-            profile,
-            &mut cx.diags,
-            opts.bind_split_from.unwrap_or(bind::PARALLEL_FROM),
-        );
+        // The programs: one, or one per controller of a cell (SPEC.md 9).
+        let programs = programs(&mut cx, &bb, opts, &controllers, &langs);
+        let cell = match (&plan, controllers.len() > 1) {
+            (Some(plan), true) => {
+                let index: HashMap<usize, usize> = controllers
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &c)| (c, k))
+                    .collect();
+                let of = |i: usize| res.step_skill[i].map(|(r, _)| index[&bb.controller_of(r)]);
+                let mut cell = plan::cell::split(&plan.body, controllers.clone(), &of);
+                plan::cell::assign_wires(&mut cell, &bb, sfc, &mut cx.diags);
+                Some(cell)
+            }
+            _ => None,
+        };
         // A language named wrongly (E210) makes the language a guess: its signal rules are
         // not applied then.
         let sure = !cx.diags.iter().any(|d| d.code == Code::BadLanguage);
-        bound.signals = bind::conditions(
-            &bb,
-            sfc,
-            res.resource,
-            sure.then_some(profile),
-            &mut cx.diags,
-        );
-        out.skill_steps = bound.steps.iter().filter(|s| s.is_some()).count();
+        let mut bound_programs: Vec<bind::Bound> = Vec::new();
+        for (k, prog) in programs.iter().enumerate() {
+            let profile = prog.language.profile();
+            let narrowed;
+            let (order_k, res_k) = match prog.controller.filter(|_| controllers.len() > 1) {
+                Some(c) => {
+                    narrowed = res.of_controller(&bb, c);
+                    let steps = order
+                        .steps
+                        .iter()
+                        .copied()
+                        .filter(|&i| narrowed.step_skill[i].is_some())
+                        .collect();
+                    (
+                        bind::StepOrder {
+                            steps,
+                            start_end: order.start_end,
+                        },
+                        &narrowed,
+                    )
+                }
+                None => (order.clone(), &res),
+            };
+            let mut bound = bind::bind(
+                &bb,
+                sfc,
+                &order_k,
+                res_k,
+                &bind::Calls {
+                    irls: &irls,
+                    fn_irl: &fn_irl,
+                },
+                profile,
+                &mut cx.diags,
+                opts.bind_split_from.unwrap_or(bind::PARALLEL_FROM),
+            );
+            // A program of a cell reads the conditions it waits for or decides.
+            let only = cell.as_ref().map(|c| evaluated(&c.programs[k].body));
+            bound.signals = bind::conditions(
+                &bb,
+                sfc,
+                prog.controller,
+                sure.then_some(profile),
+                only.as_ref(),
+                &mut cx.diags,
+            );
+            bound_programs.push(bound);
+        }
+        out.skill_steps = bound_programs
+            .iter()
+            .map(|b| b.steps.iter().filter(|s| s.is_some()).count())
+            .sum();
         if !opts.keep_model {
             sfc.drop_variables();
         }
         let sfc = &*sfc;
         lap(&mut out, "bind");
         // The output template: like the blackboard, one the command names, so a template
-        // that cannot be read at all is an I/O failure.
-        let template = match &opts.template {
-            None => Some(OutputTemplate::builtin(langs.program)),
-            Some(p) => cx
-                .load_top(p, &mut out)
-                .and_then(|f| OutputTemplate::parse(&cx.sources, f, langs.program, &mut cx.diags)),
-        };
-        if !cx.diags.has_errors()
-            && let (Some(template), Some(plan)) = (&template, &plan)
-        {
+        // that cannot be read at all is an I/O failure. It is the first program's language's;
+        // programs of other languages use their built-in one.
+        let user_template = opts
+            .template
+            .as_ref()
+            .and_then(|p| cx.load_top(p, &mut out));
+        let mut outputs = Vec::new();
+        let mut output_programs = Vec::new();
+        for (k, prog) in programs.iter().enumerate() {
+            let template = match user_template {
+                Some(f) if prog.language == langs.program => {
+                    OutputTemplate::parse(&cx.sources, f, prog.language, &mut cx.diags)
+                }
+                _ if opts.template.is_some() && prog.language == langs.program => None,
+                _ => Some(OutputTemplate::builtin(prog.language)),
+            };
+            if cx.diags.has_errors() {
+                continue;
+            }
+            let (Some(template), Some(plan)) = (&template, &plan) else {
+                continue;
+            };
+            let own;
+            let program_plan = match &cell {
+                Some(c) => {
+                    own = Plan {
+                        body: c.programs[k].body.clone(),
+                        start: plan.start,
+                        end: plan.end,
+                    };
+                    &own
+                }
+                None => plan,
+            };
             let input = EmitInput {
-                program: opts.program.as_deref().unwrap_or(PLACEHOLDER_PROGRAM),
+                program: prog.name.as_deref().unwrap_or(PLACEHOLDER_PROGRAM),
                 blackboard: &bb,
                 sfc,
-                plan,
-                bound: &bound,
+                plan: program_plan,
+                bound: &bound_programs[k],
                 irls: &irls,
                 newline: if opts.lf { "\n" } else { "\r\n" },
                 step_indent: &template.step_indent,
                 steps_indent: template.steps_indent(),
-                profile,
+                profile: prog.language.profile(),
+                cell: cell
+                    .as_ref()
+                    .map(|c| crate::emit::handshake::CellView { cell: c, me: k }),
             };
             if let Some(files) = crate::emit::emit_files(&input, template, &mut cx.diags)
-                && let Some(program) = &opts.program
+                && let Some(name) = &prog.name
             {
-                out.outputs = files
-                    .into_iter()
-                    .map(|f| {
-                        let name = format!("{program}.{}", f.extension);
-                        (cx.base.join(name), f)
-                    })
-                    .collect();
+                for f in files {
+                    let path = cx.base.join(format!("{name}.{}", f.extension));
+                    outputs.push((path, f));
+                    output_programs.push((
+                        name.clone(),
+                        prog.controller
+                            .map(|c| bb.resources[c].name.text.to_string())
+                            .unwrap_or_default(),
+                    ));
+                }
             }
+        }
+        if plan.is_some() && !cx.diags.has_errors() {
             lap(&mut out, "emit");
         }
+        out.outputs = outputs;
+        out.output_programs = output_programs;
+        out.program_names = programs.iter().filter_map(|p| p.name.clone()).collect();
+        out.cell = cell;
     } else {
         check_program_name(&mut cx, opts, None);
         if let Some(p) = &opts.template {
@@ -685,7 +773,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
 
     if !cx.diags.has_errors()
         && let Some(wb) = &bb.write_back
-        && let Some(program) = &opts.program
+        && let Some(program) = out.program_names.first()
     {
         let src = cx.sources.get(bb_file);
         let mut expected = Vec::with_capacity(src.text.len() + 3);
@@ -760,13 +848,128 @@ fn check_program_name(cx: &mut Ctx, opts: &Options, language: Option<Language>) 
     }
 }
 
+/// One program to write: a cell of several controllers has one per controller.
+struct ProgramSpec {
+    /// The controller's resource (`None` when no step names one).
+    controller: Option<usize>,
+    /// `None` without a program name (`--validate BLACKBOARD`: checked, not written).
+    name: Option<String>,
+    language: Language,
+}
+
+/// The programs of this compile and their names (SPEC.md 9): one program `<PROGRAM>`; or, for
+/// several controllers, each controller's `Program` attribute or `<PROGRAM>_<controller>`.
+/// `E601` for a name that is not one of its language or is used twice.
+fn programs(
+    cx: &mut Ctx,
+    bb: &Blackboard,
+    opts: &Options,
+    controllers: &[usize],
+    langs: &Languages,
+) -> Vec<ProgramSpec> {
+    if controllers.len() <= 1 {
+        check_program_name(cx, opts, Some(langs.program));
+        return vec![ProgramSpec {
+            controller: controllers.first().copied(),
+            name: opts.program.clone(),
+            language: langs.program,
+        }];
+    }
+    let mut out: Vec<ProgramSpec> = Vec::new();
+    for &c in controllers {
+        let res = &bb.resources[c];
+        let language = langs.controller(bb, c);
+        let (name, attr) = match &res.program_attr {
+            Some((v, span)) => (Some(v.trim().to_owned()), Some(span.clone())),
+            None => (
+                opts.program
+                    .as_ref()
+                    .map(|p| format!("{p}_{}", name_part(&res.name.text))),
+                None,
+            ),
+        };
+        if let (Some(n), Some(_)) = (&name, &opts.program) {
+            let why = language.profile().check_program_name(n).err().or_else(|| {
+                out.iter()
+                    .any(|o| o.name.as_deref().is_some_and(|m| m.eq_ignore_ascii_case(n)))
+                    .then(|| "the name of another controller's program too".to_owned())
+            });
+            if let Some(why) = why {
+                let mut d = Diagnostic::error(
+                    Code::BadProgramName,
+                    format!(
+                        "the program of controller `{}` would be named `{n}`, which is {why}; set the controller's `Program` attribute to another name",
+                        res.name.text
+                    ),
+                );
+                if let Some(at) = attr {
+                    d = d.at(at);
+                } else {
+                    d = d.at(res.name.span.clone()).element(res.element.clone());
+                }
+                cx.diags.push(d);
+            }
+        }
+        out.push(ProgramSpec {
+            controller: Some(c),
+            name: if opts.program.is_some() { name } else { None },
+            language,
+        });
+    }
+    if opts.program.is_none() {
+        check_program_name(cx, opts, Some(langs.program));
+    }
+    out
+}
+
+/// A controller's name as a part of a program name: letters, digits and `_` (others become
+/// `_`; non-ASCII letters transliterated).
+fn name_part(name: &str) -> String {
+    crate::names::transliterate(name)
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect()
+}
+
+/// The transitions a program of a cell waits for or decides.
+fn evaluated(body: &[plan::Block]) -> std::collections::HashSet<usize> {
+    let mut out = std::collections::HashSet::new();
+    plan::visit(body, &mut |b| match b {
+        plan::Block::Wait(t) => {
+            out.insert(*t);
+        }
+        plan::Block::Choice { branches, .. } => {
+            out.extend(branches.iter().map(|br| br.transition));
+        }
+        _ => {}
+    });
+    out
+}
+
 /// The language of each resource the program uses, and the program's.
 struct Languages {
     program: Language,
     resources: HashMap<usize, Language>,
+    /// The resources with steps, in first-use order.
+    order: Vec<usize>,
 }
 
 impl Languages {
+    /// A controller's program's language: its own, else that of its first device with steps.
+    fn controller(&self, bb: &Blackboard, c: usize) -> Language {
+        self.resources
+            .get(&c)
+            .copied()
+            .or_else(|| {
+                self.order
+                    .iter()
+                    .find(|&&r| bb.controller_of(r) == c)
+                    .map(|r| self.resources[r])
+            })
+            .or(bb.resources[c].language.as_ref().map(|l| l.0))
+            .unwrap_or(Language::Krl)
+    }
+
     fn of(&self, resource: usize) -> Language {
         self.resources
             .get(&resource)
@@ -843,29 +1046,52 @@ fn languages(
             }
         }
     }
-    let program = res
-        .resource
-        .and_then(|r| resources.get(&r).copied())
-        .unwrap_or(Language::Krl);
-    if let Some(&other) = order.iter().find(|r| resources[r] != program)
-        && let Some(first) = res.resource
-        // A device whose Language attribute differs from its controller's: reported at the
-        // attribute by the reader.
-        && !(bb.controller_of(other) == first
-            && bb.resources[other].language.is_some()
-            && bb.resources[first].language.is_some())
-    {
+    // Each controller's program is in one language (SPEC.md 9): its own, else its first
+    // device's with steps.
+    let program_of = |c: usize| {
+        resources.get(&c).copied().or_else(|| {
+            order
+                .iter()
+                .find(|&&r| bb.controller_of(r) == c)
+                .map(|r| resources[r])
+        })
+    };
+    let program = res.resource.and_then(program_of).unwrap_or(Language::Krl);
+    let mut reported_controllers = std::collections::HashSet::new();
+    for &other in &order {
+        let c = bb.controller_of(other);
+        let Some(lang) = program_of(c) else {
+            continue;
+        };
+        if resources[&other] == lang
+            // A device whose Language attribute differs from its controller's: reported at
+            // the attribute by the reader.
+            || (bb.resources[other].language.is_some() && bb.resources[c].language.is_some())
+            || !reported_controllers.insert(c)
+        {
+            continue;
+        }
+        let first = order
+            .iter()
+            .copied()
+            .find(|&r| bb.controller_of(r) == c)
+            .unwrap_or(c);
         cx.diags.push(Diagnostic::error(
             Code::TwoLanguages,
             format!(
-                "steps use resource `{}` ({program}) and resource `{}` ({}): one program is in one language",
+                "steps use resource `{}` ({lang}) and resource `{}` ({}), both on the controller of `{}`: one program is in one language",
                 bb.resources[first].name.text,
                 bb.resources[other].name.text,
-                resources[&other]
+                resources[&other],
+                bb.resources[c].name.text
             ),
         ));
     }
-    Languages { program, resources }
+    Languages {
+        program,
+        resources,
+        order,
+    }
 }
 
 /// The `#fragment` of a `refURI` (the SFC POU it names), percent-decoded.

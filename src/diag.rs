@@ -513,6 +513,9 @@ codes! {
     BadLanguage = "E210",
     /// A chain of `Controller` attributes that comes back to where it started (SPEC.md 9).
     ControllerLoop = "E211",
+    /// A cell's plan needs more wires between two controllers than the blackboard declares
+    /// (SPEC.md 9): how many are missing, from which controller to which.
+    TooFewWires = "E212",
 
     /// No `pou` with an `SFC` body (or none of the name asked for).
     NoSfcBody = "E301",

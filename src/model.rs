@@ -177,6 +177,9 @@ pub struct Resource {
     pub parent: Option<usize>,
     /// The `Controller` (`Steuerung`) attribute's value and the value's span.
     pub controller_attr: Option<(String, Span)>,
+    /// The `Program` (`Programm`) attribute's value and span: a controller's program name in a
+    /// cell of several controllers (SPEC.md 9).
+    pub program_attr: Option<(String, Span)>,
 }
 
 /// Key → index of the first skill, function and signal of that key.

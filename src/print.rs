@@ -288,6 +288,8 @@ pub fn flow(sfc: &Sfc, plan: &Plan) -> String {
         let mut t = t;
         for b in blocks {
             match b {
+                // Handshakes stand only in the programs of a cell, not in the chart's plan.
+                Block::Tell(_) | Block::Hear(_) | Block::Follow { .. } => {}
                 Block::Step(i) => {
                     let d = duration(sfc, *i);
                     let _ = writeln!(
@@ -429,6 +431,8 @@ pub fn order(sfc: &Sfc, plan: &Plan) -> String {
     fn walk(sfc: &Sfc, blocks: &[Block], indent: &str, n: &mut usize, o: &mut String) {
         for b in blocks {
             match b {
+                // Handshakes stand only in the programs of a cell, not in the chart's plan.
+                Block::Tell(_) | Block::Hear(_) | Block::Follow { .. } => {}
                 Block::Step(i) => {
                     *n += 1;
                     // Aligned with spaces (no tabs): numbers to 999, localIds to 99999.
@@ -744,6 +748,8 @@ pub mod json {
             let mut out = Vec::new();
             for b in blocks {
                 match b {
+                    // Handshakes stand only in the programs of a cell, not in the chart's plan.
+                    Block::Tell(_) | Block::Hear(_) | Block::Follow { .. } => {}
                     Block::Step(i) => {
                         let d = duration(sfc, *i);
                         out.push(json!({
@@ -863,6 +869,8 @@ pub mod json {
         fn walk(sfc: &Sfc, blocks: &[Block], n: &mut usize, out: &mut Vec<Json>) {
             for b in blocks {
                 match b {
+                    // Handshakes stand only in the programs of a cell, not in the chart's plan.
+                    Block::Tell(_) | Block::Hear(_) | Block::Follow { .. } => {}
                     Block::Step(i) => {
                         *n += 1;
                         out.push(json!({

@@ -86,9 +86,18 @@ impl Profile for Krl {
             out: Lines::new(input, flow::steps_estimate(input)),
             number: 0,
             uses_branch_var: false,
+            hand: None,
         };
+        let hand = super::handshake::Hand::new(input);
+        if let Some(h) = &hand {
+            super::handshake::write(&mut writer.out, 0, h.init());
+        }
+        writer.hand = hand;
         writer.blocks(&input.plan.body, 0);
-        let declarations = declarations(input, writer.uses_branch_var);
+        let mut declarations = declarations(input, writer.uses_branch_var);
+        if let Some(h) = &writer.hand {
+            declarations.extend(h.declarations());
+        }
         Some(Generated {
             steps: writer.out.out,
             declarations,
@@ -106,6 +115,8 @@ struct Writer<'a> {
     number: usize,
     /// Whether a selection needed [`BRANCH_VAR`].
     uses_branch_var: bool,
+    /// The handshakes of a program of a cell.
+    hand: Option<super::handshake::Hand<'a>>,
 }
 
 impl Writer<'_> {
@@ -169,6 +180,54 @@ impl Writer<'_> {
                 self.blocks(body, level + 1);
                 self.line(level, "ENDLOOP");
             }
+            Block::Tell(m) => {
+                if let Some(h) = &self.hand {
+                    let lines = h.tell(m);
+                    super::handshake::write(&mut self.out, level, lines);
+                }
+            }
+            Block::Hear(m) => {
+                if let Some(h) = &self.hand {
+                    let lines = h.hear(m);
+                    super::handshake::write(&mut self.out, level, lines);
+                }
+            }
+            Block::Follow {
+                divergence,
+                heard,
+                branches,
+            } => self.follow(*divergence, heard, branches, level),
+        }
+    }
+
+    /// A selection another controller decides: its decision is heard, then its branch runs.
+    fn follow(
+        &mut self,
+        div: usize,
+        heard: &crate::plan::cell::Message,
+        branches: &[Branch],
+        level: usize,
+    ) {
+        self.comment(
+            level,
+            &flow::selection_comment(self.input, div, branches.len()),
+        );
+        if let Some(h) = &self.hand {
+            let lines = h.hear(heard);
+            super::handshake::write(&mut self.out, level, lines);
+        }
+        let var = super::handshake::DECISION_VAR;
+        let last = branches.len().saturating_sub(1);
+        for (n, br) in branches.iter().enumerate().take(last) {
+            self.line(level + n, &format!("IF {var} == {n} THEN"));
+            self.branch(n + 1, br, level + n + 1);
+            self.line(level + n, "ELSE");
+        }
+        if let Some(br) = branches.last() {
+            self.branch(last + 1, br, level + last);
+        }
+        for n in (0..last).rev() {
+            self.line(level + n, "ENDIF");
         }
     }
 

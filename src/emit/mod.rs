@@ -13,6 +13,7 @@
 //! profile's files, and a [`Language`] variant.
 
 pub mod flow;
+pub mod handshake;
 pub mod krl;
 pub mod rapid;
 pub mod structured;
@@ -83,6 +84,8 @@ pub struct EmitInput<'a> {
     /// which the writer puts before every line of the block.
     pub steps_indent: &'a str,
     pub profile: &'static dyn Profile,
+    /// For a program of a cell of several controllers: the cell, for the handshakes.
+    pub cell: Option<handshake::CellView<'a>>,
 }
 
 /// What a profile's writer made: the text of the template's blocks, lines separated by the
@@ -339,6 +342,9 @@ pub fn emit_files(
     template: &OutputTemplate,
     diags: &mut Diagnostics,
 ) -> Option<Vec<OutputFile>> {
+    if let Some(h) = handshake::Hand::new(input) {
+        h.check(diags);
+    }
     let mut generated = input.profile.generate(input, diags)?;
     let nl = input.newline;
     let comment = header_comment(&input.sfc.header);

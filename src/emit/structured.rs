@@ -64,11 +64,19 @@ pub fn generate(input: &EmitInput, dialect: &Dialect) -> Generated {
         uses_branch_var: false,
         flags: 0,
         loops: Vec::new(),
+        hand: super::handshake::Hand::new(input),
     };
+    if let Some(h) = &w.hand {
+        super::handshake::write(&mut w.out, 0, h.init());
+    }
     w.blocks(&input.plan.body, 0);
+    let mut declarations = (dialect.declare)(w.uses_branch_var, w.flags);
+    if let Some(h) = &w.hand {
+        declarations.extend(h.declarations());
+    }
     Generated {
         steps: w.out.out,
-        declarations: (dialect.declare)(w.uses_branch_var, w.flags),
+        declarations,
     }
 }
 
@@ -76,11 +84,13 @@ pub fn generate(input: &EmitInput, dialect: &Dialect) -> Generated {
 /// loop, whose leaves are that loop's).
 fn may_leave(b: &Block) -> bool {
     match b {
-        Block::Choice { branches, .. } => branches
+        Block::Choice { branches, .. } | Block::Follow { branches, .. } => branches
             .iter()
             .any(|br| br.end == BranchEnd::Leave || br.body.iter().any(may_leave)),
         Block::Parallel { branches, .. } => branches.iter().flatten().any(may_leave),
-        Block::Step(_) | Block::Wait(_) | Block::Loop { .. } => false,
+        Block::Step(_) | Block::Wait(_) | Block::Loop { .. } | Block::Tell(_) | Block::Hear(_) => {
+            false
+        }
     }
 }
 
@@ -94,6 +104,8 @@ struct Writer<'a> {
     flags: usize,
     /// The flag of each enclosing loop (`None`: left by a statement, or endless).
     loops: Vec<Option<String>>,
+    /// The handshakes of a program of a cell.
+    hand: Option<super::handshake::Hand<'a>>,
 }
 
 impl Writer<'_> {
@@ -199,6 +211,47 @@ impl Writer<'_> {
                 self.blocks(body, level + 1);
                 self.loops.pop();
                 self.out.line(level, self.d.end_while);
+            }
+            Block::Tell(m) => {
+                if let Some(h) = &self.hand {
+                    let lines = h.tell(m);
+                    super::handshake::write(&mut self.out, level, lines);
+                }
+            }
+            Block::Hear(m) => {
+                if let Some(h) = &self.hand {
+                    let lines = h.hear(m);
+                    super::handshake::write(&mut self.out, level, lines);
+                }
+            }
+            Block::Follow {
+                divergence,
+                heard,
+                branches,
+            } => {
+                self.comment(
+                    level,
+                    &flow::selection_comment(self.input, *divergence, branches.len()),
+                );
+                if let Some(h) = &self.hand {
+                    let lines = h.hear(heard);
+                    super::handshake::write(&mut self.out, level, lines);
+                }
+                let var = super::handshake::DECISION_VAR;
+                if branches.len() == 1 {
+                    self.branch(1, &branches[0], level);
+                    return;
+                }
+                for (n, br) in branches.iter().enumerate() {
+                    if n + 1 < branches.len() {
+                        let test = format!("{var}{}{n}", self.d.equals);
+                        self.if_line(level, n == 0, &test);
+                    } else {
+                        self.out.line(level, self.d.else_);
+                    }
+                    self.branch(n + 1, br, level + 1);
+                }
+                self.out.line(level, self.d.end_if);
             }
         }
     }

@@ -9,6 +9,7 @@
 //! emission order: left to right by the x of each branch head, ties in document order; for
 //! selections that order is their priority.
 
+pub mod cell;
 mod checks;
 mod graph;
 mod walk;
@@ -53,6 +54,18 @@ pub enum Block {
         jumps: Vec<usize>,
         body: Vec<Block>,
         endless: bool,
+    },
+    /// A handshake (SPEC.md 9): this controller tells another that a step is done or which
+    /// branch it took. Only in the programs of a cell of several controllers ([`cell`]).
+    Tell(cell::Message),
+    /// A handshake: this controller waits until another tells it what it waits for.
+    Hear(cell::Message),
+    /// A selection another controller decides: this program waits for the decision
+    /// (`heard`, whose value is the branch's index) and runs that branch.
+    Follow {
+        divergence: usize,
+        heard: cell::Message,
+        branches: Vec<Branch>,
     },
 }
 
@@ -106,13 +119,13 @@ pub fn visit(blocks: &[Block], f: &mut dyn FnMut(&Block)) {
     for b in blocks {
         f(b);
         match b {
-            Block::Step(_) | Block::Wait(_) => {}
+            Block::Step(_) | Block::Wait(_) | Block::Tell(_) | Block::Hear(_) => {}
             Block::Parallel { branches, .. } => {
                 for br in branches {
                     visit(br, f);
                 }
             }
-            Block::Choice { branches, .. } => {
+            Block::Choice { branches, .. } | Block::Follow { branches, .. } => {
                 for br in branches {
                     visit(&br.body, f);
                 }
@@ -260,7 +273,9 @@ mod tests {
                     let v: Vec<String> = branches.iter().map(|b| shape(sfc, b)).collect();
                     format!("P({})", v.join("|"))
                 }
-                Block::Choice { branches, .. } => {
+                Block::Tell(m) => format!("T{}", m.channel),
+                Block::Hear(m) => format!("H{}", m.channel),
+                Block::Choice { branches, .. } | Block::Follow { branches, .. } => {
                     let v: Vec<String> = branches
                         .iter()
                         .map(|b| {
@@ -272,7 +287,8 @@ mod tests {
                             format!("{}:{}{end}", id(b.transition), shape(sfc, &b.body))
                         })
                         .collect();
-                    format!("C({})", v.join("|"))
+                    let c = if matches!(b, Block::Follow { .. }) { "F" } else { "C" };
+                    format!("{c}({})", v.join("|"))
                 }
                 Block::Loop {
                     head,

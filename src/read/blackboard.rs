@@ -508,11 +508,16 @@ impl Reader<'_> {
             .or_else(|| caex_attr(r, "Steuerung"))
             .and_then(|a| caex_value(self.file, a))
             .filter(|(v, _)| !v.is_empty());
+        let program_attr = caex_attr(r, "Program")
+            .or_else(|| caex_attr(r, "Programm"))
+            .and_then(|a| caex_value(self.file, a))
+            .filter(|(v, _)| !v.trim().is_empty());
         Resource {
             name,
             language,
             parent: None,
             controller_attr,
+            program_attr,
             element: caex_element(r),
             id: r.attribute("ID").map(str::to_owned),
             skills,

@@ -1,0 +1,635 @@
+//! The cell split (SPEC.md 9): the program tree of a chart whose steps run on several
+//! controllers → one tree per controller, with the handshakes that keep the chart's order
+//! between them.
+//!
+//! How it works, in one walk over the tree in program order:
+//!
+//! - Each controller has a clock that ticks when it finishes a step (or passes a wait or a
+//!   construct), and knows, for every other controller, up to which tick that one has come
+//!   (`know`, a vector clock). What the next block depends on is a *frontier*: points
+//!   (controller, tick) — the steps the chart puts right before it.
+//! - Before a controller runs a block it *acquires* the frontier: for each point of another
+//!   controller it does not know to be passed yet, the other controller tells it (a
+//!   [`Block::Tell`] at the other's current place) and it waits for that (a [`Block::Hear`] at
+//!   its own). Hearing merges the teller's knowledge: nothing is waited for twice, and nothing
+//!   the chart does not put before the block is waited for.
+//! - A selection is decided by the controller of the step before it (the decider); every other
+//!   controller that takes part (has a step, a wait or a decision in it; for a selection that
+//!   leaves or repeats a loop, every controller of the loop) follows it: the decider tells each
+//!   the branch's index first thing in the branch, each waits for that before the branches
+//!   ([`Block::Follow`]). A loop is run by the controllers that take part in it; they all
+//!   acquire what comes before it on entry, and at the end of a round (a branch that repeats,
+//!   or the body of an endless loop) what the next round's first step waits for.
+//! - After a selection or a loop, what follows depends on every controller that took part
+//!   having passed it (which branch ran is not known when the programs are written).
+//!
+//! Every handshake's tell and hear stand in the same place of the control flow of their two
+//! programs (both run it equally often), and the walk's own order is one run of all programs
+//! in which every message is heard right after it is told. So with one message in flight per
+//! channel (the sender waits for the acknowledgement of the last one before it tells the next),
+//! the programs never deadlock and always take the same branches, whatever their speeds: they
+//! are a Kahn network, whose result does not depend on the timing.
+
+use std::collections::{BTreeSet, HashMap};
+
+use super::{Block, Branch, BranchEnd};
+use crate::diag::{Code, Diagnostic, Diagnostics};
+use crate::model::{Blackboard, Sfc};
+
+/// What a handshake message says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    /// The step (or wait, or construct) `about` is done.
+    Done,
+    /// The selection at divergence `about` took branch `value` (from 0).
+    Decision,
+}
+
+/// One handshake message on a [`Channel`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Message {
+    /// Index into [`Cell::channels`].
+    pub channel: usize,
+    pub kind: Kind,
+    /// For a decision, the branch's index.
+    pub value: usize,
+    /// The element it is about: the step done, or the selection's divergence.
+    pub about: usize,
+}
+
+/// Messages from one controller to another: the sender's strobe (toggled once per message),
+/// the data bits of a decision, the receiver's acknowledgement (toggled when it has read one).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Channel {
+    /// Indexes into [`Cell::controllers`].
+    pub from: usize,
+    pub to: usize,
+    /// The largest decision value sent (0 when none or only `Done`).
+    pub max_value: usize,
+    /// Whether any decision is sent.
+    pub decisions: bool,
+    /// The first message's `about` (to locate a diagnostic).
+    pub first_about: usize,
+    /// The wires it uses once assigned ([`assign_wires`]): indexes into `Blackboard::wires`.
+    pub strobe: Option<usize>,
+    pub data: Vec<usize>,
+    pub ack: Option<usize>,
+}
+
+impl Channel {
+    /// The data bits a decision needs.
+    pub fn data_bits(&self) -> usize {
+        if !self.decisions {
+            return 0;
+        }
+        (usize::BITS - self.max_value.leading_zeros()).max(1) as usize
+    }
+}
+
+/// One controller's program.
+#[derive(Debug, Clone)]
+pub struct Program {
+    /// Index into [`Cell::controllers`].
+    pub controller: usize,
+    pub body: Vec<Block>,
+}
+
+/// The programs of a cell.
+#[derive(Debug, Clone, Default)]
+pub struct Cell {
+    /// The controllers' resources (indexes into the blackboard's), the first one's steps
+    /// first in the chart.
+    pub controllers: Vec<usize>,
+    /// One per controller, in the same order.
+    pub programs: Vec<Program>,
+    pub channels: Vec<Channel>,
+}
+
+type Set = BTreeSet<usize>;
+
+/// A point of a controller's program: (controller, tick, the element it is about).
+type Point = (usize, u32, usize);
+
+/// Splits the planned `body` into one program per controller. `controller(step)` is the
+/// controller index (into `controllers`) running a step, `None` for a step without code (the
+/// start and end steps may name no skill).
+pub fn split(
+    body: &[Block],
+    controllers: Vec<usize>,
+    controller: &dyn Fn(usize) -> Option<usize>,
+) -> Cell {
+    let n = controllers.len();
+    let mut scan = Scan {
+        controller,
+        deciders: HashMap::new(),
+        evaluators: HashMap::new(),
+        choice_parts: HashMap::new(),
+        loop_parts: HashMap::new(),
+    };
+    let mut all = Set::new();
+    scan.blocks(body, 0, &mut all);
+    let mut s = Splitter {
+        scan,
+        n,
+        stacks: (0..n).map(|_| vec![Vec::new()]).collect(),
+        clock: vec![0; n],
+        know: vec![vec![0; n]; n],
+        channels: Vec::new(),
+        by_pair: HashMap::new(),
+        loops: Vec::new(),
+    };
+    s.blocks(body, Vec::new());
+    let programs = s
+        .stacks
+        .into_iter()
+        .enumerate()
+        .map(|(c, mut st)| Program {
+            controller: c,
+            body: st.pop().unwrap_or_default(),
+        })
+        .collect();
+    Cell {
+        controllers,
+        programs,
+        channels: s.channels,
+    }
+}
+
+/// The first pass: who decides each selection, who evaluates each wait, who takes part in each
+/// selection and loop.
+struct Scan<'a> {
+    controller: &'a dyn Fn(usize) -> Option<usize>,
+    /// Selection divergence → its decider.
+    deciders: HashMap<usize, usize>,
+    /// Transition → the controller that waits for it.
+    evaluators: HashMap<usize, usize>,
+    /// Selection divergence → the controllers in it (its decider included).
+    choice_parts: HashMap<usize, Set>,
+    /// Loop head → the controllers in it.
+    loop_parts: HashMap<usize, Set>,
+}
+
+impl Scan<'_> {
+    /// Scans a sequence; `ctx` is the controller in charge at its start (the last step's, or
+    /// the decider's); returns the one in charge at its end. Every controller met goes into
+    /// `set`.
+    fn blocks(&mut self, blocks: &[Block], mut ctx: usize, set: &mut Set) -> usize {
+        for (k, b) in blocks.iter().enumerate() {
+            match b {
+                Block::Step(i) => {
+                    if let Some(c) = (self.controller)(*i) {
+                        ctx = c;
+                        set.insert(c);
+                    }
+                }
+                Block::Wait(t) => {
+                    // Waited for by the controller of the step after it (SPEC.md 9), else by
+                    // the one in charge.
+                    let c = match blocks.get(k + 1) {
+                        Some(Block::Step(j)) => (self.controller)(*j).unwrap_or(ctx),
+                        _ => ctx,
+                    };
+                    self.evaluators.insert(*t, c);
+                    set.insert(c);
+                }
+                Block::Parallel { branches, .. } => {
+                    let mut last = ctx;
+                    for br in branches {
+                        last = self.blocks(br, ctx, set);
+                    }
+                    ctx = last;
+                }
+                Block::Choice {
+                    divergence,
+                    branches,
+                    ..
+                } => {
+                    self.deciders.insert(*divergence, ctx);
+                    let mut own = Set::from([ctx]);
+                    for br in branches {
+                        self.blocks(&br.body, ctx, &mut own);
+                    }
+                    set.extend(own.iter().copied());
+                    self.choice_parts.insert(*divergence, own);
+                }
+                Block::Loop { head, body, .. } => {
+                    let mut own = Set::new();
+                    ctx = self.blocks(body, ctx, &mut own);
+                    set.extend(own.iter().copied());
+                    self.loop_parts.insert(*head, own);
+                }
+                Block::Tell(_) | Block::Hear(_) | Block::Follow { .. } => {}
+            }
+        }
+        ctx
+    }
+}
+
+/// Whether a selection leaves or repeats the loop it stands in (a branch of it, or of a
+/// selection inside it, not inside a nested loop, ends in a leave or a repeat).
+fn ends_rounds(branches: &[Branch]) -> bool {
+    fn inside(b: &Block) -> bool {
+        match b {
+            Block::Choice { branches, .. } => ends_rounds(branches),
+            Block::Parallel { branches, .. } => branches.iter().flatten().any(inside),
+            _ => false,
+        }
+    }
+    branches
+        .iter()
+        .any(|br| br.end != BranchEnd::Join || br.body.iter().any(inside))
+}
+
+struct Splitter<'a> {
+    scan: Scan<'a>,
+    n: usize,
+    /// Per controller: the bodies being written, innermost last.
+    stacks: Vec<Vec<Vec<Block>>>,
+    clock: Vec<u32>,
+    /// `know[c][d]`: the tick of `d` that `c` knows `d` has passed.
+    know: Vec<Vec<u32>>,
+    channels: Vec<Channel>,
+    by_pair: HashMap<(usize, usize), usize>,
+    /// The controllers of each enclosing loop, innermost last.
+    loops: Vec<Set>,
+}
+
+impl Splitter<'_> {
+    fn push(&mut self, c: usize, b: Block) {
+        if let Some(top) = self.stacks[c].last_mut() {
+            top.push(b);
+        }
+    }
+
+    fn tick(&mut self, c: usize) -> u32 {
+        self.clock[c] += 1;
+        self.know[c][c] = self.clock[c];
+        self.clock[c]
+    }
+
+    fn channel(&mut self, from: usize, to: usize, about: usize) -> usize {
+        let next = self.channels.len();
+        let ch = *self.by_pair.entry((from, to)).or_insert(next);
+        if ch == next {
+            self.channels.push(Channel {
+                from,
+                to,
+                max_value: 0,
+                decisions: false,
+                first_about: about,
+                strobe: None,
+                data: Vec::new(),
+                ack: None,
+            });
+        }
+        ch
+    }
+
+    /// `to` learns all `from` knows.
+    fn merge(&mut self, from: usize, to: usize) {
+        for d in 0..self.n {
+            let k = self.know[from][d];
+            if self.know[to][d] < k {
+                self.know[to][d] = k;
+            }
+        }
+    }
+
+    /// `c` waits until every point of the frontier has been passed.
+    fn acquire(&mut self, c: usize, frontier: &[Point]) {
+        for &(d, t, about) in frontier {
+            if d == c || self.know[c][d] >= t {
+                continue;
+            }
+            let channel = self.channel(d, c, about);
+            let m = Message {
+                channel,
+                kind: Kind::Done,
+                value: 0,
+                about,
+            };
+            self.push(d, Block::Tell(m));
+            self.push(c, Block::Hear(m));
+            self.merge(d, c);
+        }
+    }
+
+    /// Keeps the latest point of each controller (knowing it is knowing the earlier ones).
+    fn latest(points: Vec<Point>) -> Vec<Point> {
+        let mut out: Vec<Point> = Vec::new();
+        for p in points {
+            match out.iter_mut().find(|q| q.0 == p.0) {
+                Some(q) if q.1 < p.1 => *q = p,
+                Some(_) => {}
+                None => out.push(p),
+            }
+        }
+        out
+    }
+
+    fn blocks(&mut self, blocks: &[Block], mut frontier: Vec<Point>) -> Vec<Point> {
+        for b in blocks {
+            frontier = self.block(b, frontier);
+        }
+        frontier
+    }
+
+    fn block(&mut self, b: &Block, frontier: Vec<Point>) -> Vec<Point> {
+        match b {
+            Block::Step(i) => {
+                let Some(c) = (self.scan.controller)(*i) else {
+                    return frontier;
+                };
+                self.acquire(c, &frontier);
+                self.push(c, Block::Step(*i));
+                let t = self.tick(c);
+                vec![(c, t, *i)]
+            }
+            Block::Wait(t) => {
+                let c = self.scan.evaluators[t];
+                self.acquire(c, &frontier);
+                self.push(c, Block::Wait(*t));
+                let k = self.tick(c);
+                vec![(c, k, *t)]
+            }
+            Block::Parallel { branches, .. } => {
+                // On each controller its parts of the branches run one after another.
+                let mut out = Vec::new();
+                for br in branches {
+                    out.extend(self.blocks(br, frontier.clone()));
+                }
+                Self::latest(out)
+            }
+            Block::Choice {
+                divergence,
+                convergence,
+                branches,
+            } => self.choice(*divergence, *convergence, branches, frontier),
+            Block::Loop {
+                head,
+                jumps,
+                body,
+                endless,
+            } => {
+                let parts = self.scan.loop_parts[head].clone();
+                // Everything in the loop comes after what is before it: acquired on entry,
+                // it holds in every round.
+                for &p in &parts {
+                    self.acquire(p, &frontier);
+                }
+                let entry = self.know.clone();
+                for &p in &parts {
+                    self.stacks[p].push(Vec::new());
+                }
+                self.loops.push(parts.clone());
+                let end = self.blocks(body, frontier);
+                if *endless {
+                    // The next round's first step comes after this round's last.
+                    for &p in &parts {
+                        self.acquire(p, &end);
+                    }
+                }
+                self.loops.pop();
+                self.know = entry;
+                let mut out = Vec::new();
+                for &p in &parts {
+                    let body = self.stacks[p].pop().unwrap_or_default();
+                    self.push(
+                        p,
+                        Block::Loop {
+                            head: *head,
+                            jumps: jumps.clone(),
+                            body,
+                            endless: *endless,
+                        },
+                    );
+                    let t = self.tick(p);
+                    out.push((p, t, *head));
+                }
+                out
+            }
+            Block::Tell(_) | Block::Hear(_) | Block::Follow { .. } => frontier,
+        }
+    }
+
+    fn choice(
+        &mut self,
+        div: usize,
+        convergence: Option<usize>,
+        branches: &[Branch],
+        frontier: Vec<Point>,
+    ) -> Vec<Point> {
+        let d = self.scan.deciders[&div];
+        let mut parts = self.scan.choice_parts[&div].clone();
+        if ends_rounds(branches)
+            && let Some(l) = self.loops.last()
+        {
+            parts.extend(l.iter().copied());
+        }
+        // The decider decides once what comes before is done.
+        self.acquire(d, &frontier);
+        let decided = self.tick(d);
+        let followers: Vec<usize> = parts.iter().copied().filter(|&p| p != d).collect();
+        let channels: Vec<usize> = followers
+            .iter()
+            .map(|&f| {
+                let ch = self.channel(d, f, div);
+                let c = &mut self.channels[ch];
+                c.decisions = true;
+                c.max_value = c.max_value.max(branches.len().saturating_sub(1));
+                ch
+            })
+            .collect();
+        for &f in &followers {
+            self.merge(d, f);
+        }
+        let after_decision = self.know.clone();
+        let mut written: Vec<Vec<Branch>> = vec![Vec::new(); self.n];
+        for (k, br) in branches.iter().enumerate() {
+            self.know = after_decision.clone();
+            for &p in &parts {
+                self.stacks[p].push(Vec::new());
+            }
+            for &ch in &channels {
+                let m = Message {
+                    channel: ch,
+                    kind: Kind::Decision,
+                    value: k,
+                    about: div,
+                };
+                self.push(d, Block::Tell(m));
+            }
+            let end = self.blocks(&br.body, vec![(d, decided, div)]);
+            if matches!(br.end, BranchEnd::Repeat(_))
+                && let Some(l) = self.loops.last().cloned()
+            {
+                // The next round's first step comes after this branch.
+                for p in l {
+                    self.acquire(p, &end);
+                }
+            }
+            for &p in &parts {
+                let body = self.stacks[p].pop().unwrap_or_default();
+                written[p].push(Branch {
+                    transition: br.transition,
+                    body,
+                    end: br.end,
+                });
+            }
+        }
+        self.know = after_decision;
+        let mut out = Vec::new();
+        for &p in &parts {
+            let branches = std::mem::take(&mut written[p]);
+            let block = if p == d {
+                Block::Choice {
+                    divergence: div,
+                    convergence,
+                    branches,
+                }
+            } else {
+                let k = followers.iter().position(|&f| f == p).unwrap_or(0);
+                Block::Follow {
+                    divergence: div,
+                    heard: Message {
+                        channel: channels[k],
+                        kind: Kind::Decision,
+                        value: 0,
+                        about: div,
+                    },
+                    branches,
+                }
+            };
+            self.push(p, block);
+            let t = self.tick(p);
+            out.push((p, t, div));
+        }
+        out
+    }
+}
+
+/// What each ordered pair of controllers needs and has: `(from, to)` → (wires needed, wires
+/// declared).
+pub fn wire_counts(cell: &Cell, bb: &Blackboard) -> Vec<((usize, usize), usize, usize)> {
+    let mut pairs: Vec<(usize, usize)> = Vec::new();
+    for ch in &cell.channels {
+        for p in [(ch.from, ch.to), (ch.to, ch.from)] {
+            if !pairs.contains(&p) {
+                pairs.push(p);
+            }
+        }
+    }
+    pairs
+        .into_iter()
+        .map(|(a, b)| {
+            let need = needed(cell, a, b).iter().sum();
+            let have = declared(cell, bb, a, b).len();
+            ((a, b), need, have)
+        })
+        .collect()
+}
+
+/// Wires needed from `a` to `b`: (strobes, data bits, acknowledgements).
+fn needed(cell: &Cell, a: usize, b: usize) -> [usize; 3] {
+    let mut n = [0; 3];
+    for ch in &cell.channels {
+        if (ch.from, ch.to) == (a, b) {
+            n[0] += 1;
+            n[1] += ch.data_bits();
+        }
+        if (ch.from, ch.to) == (b, a) {
+            n[2] += 1;
+        }
+    }
+    n
+}
+
+/// The wires from controller `a`'s resources to `b`'s, in document order.
+fn declared(cell: &Cell, bb: &Blackboard, a: usize, b: usize) -> Vec<usize> {
+    (0..bb.wires.len())
+        .filter(|&w| {
+            let wire = &bb.wires[w];
+            bb.controller_of(wire.from.0) == cell.controllers[a]
+                && bb.controller_of(wire.to.0) == cell.controllers[b]
+        })
+        .collect()
+}
+
+/// Gives every channel its wires, from the blackboard's wires between its two controllers in
+/// document order (the strobe, then the data bits; the acknowledgements of the other way
+/// after those). Too few wires between two controllers: `E212`, saying how many are missing
+/// from which controller to which.
+pub fn assign_wires(cell: &mut Cell, bb: &Blackboard, sfc: &Sfc, diags: &mut Diagnostics) {
+    let n = cell.controllers.len();
+    for a in 0..n {
+        for b in 0..n {
+            if a == b {
+                continue;
+            }
+            let need = needed(cell, a, b);
+            let total: usize = need.iter().sum();
+            if total == 0 {
+                continue;
+            }
+            let have = declared(cell, bb, a, b);
+            let name = |c: usize| bb.resources[cell.controllers[c]].name.text.to_string();
+            if have.len() < total {
+                let mut what = Vec::new();
+                if need[0] > 0 {
+                    what.push(format!("1 to tell `{}` that a step is done", name(b)));
+                }
+                if need[1] > 0 {
+                    what.push(format!("{} for the branch `{}` decided", need[1], name(a)));
+                }
+                if need[2] > 0 {
+                    what.push(format!(
+                        "1 to acknowledge what `{}` tells `{}`",
+                        name(b),
+                        name(a)
+                    ));
+                }
+                let about = cell
+                    .channels
+                    .iter()
+                    .find(|c| (c.from, c.to) == (a, b) || (c.from, c.to) == (b, a))
+                    .map(|c| c.first_about);
+                let mut d = Diagnostic::error(
+                    Code::TooFewWires,
+                    format!(
+                        "the plan needs {total} wire{} from controller `{}` to controller `{}` ({}); the blackboard declares {}: {} missing. Add {} InternalLink{} from an Output signal of `{}` (or a device on it) to an Input signal of `{}` (SPEC.md 9)",
+                        if total == 1 { "" } else { "s" },
+                        name(a),
+                        name(b),
+                        what.join(", "),
+                        have.len(),
+                        total - have.len(),
+                        total - have.len(),
+                        if total - have.len() == 1 { "" } else { "s" },
+                        name(a),
+                        name(b)
+                    ),
+                );
+                if let Some(e) = about {
+                    d = d
+                        .at(sfc.elements[e].span.clone())
+                        .element(format!("localId {}", sfc.elements[e].local_id));
+                }
+                diags.push(d);
+                continue;
+            }
+            let mut next = have.into_iter();
+            for ch in cell.channels.iter_mut() {
+                if (ch.from, ch.to) == (a, b) {
+                    ch.strobe = next.next();
+                    let bits = ch.data_bits();
+                    ch.data = next.by_ref().take(bits).collect();
+                }
+            }
+            for ch in cell.channels.iter_mut() {
+                if (ch.from, ch.to) == (b, a) {
+                    ch.ack = next.next();
+                }
+            }
+        }
+    }
+}
