@@ -53,6 +53,8 @@ mod urscript_check;
 
 #[path = "flow_run/chart.rs"]
 mod chart;
+#[path = "flow_run/cosim.rs"]
+mod cosim;
 #[path = "flow_run/krl.rs"]
 mod krl;
 #[path = "flow_run/machine.rs"]
@@ -1256,5 +1258,100 @@ fn the_urscript_check_refuses_what_is_not_urscript() {
             Ok(()) => panic!("accepted:\n{bad}"),
             Err(e) => assert!(e.contains(why), "`{e}` does not say `{why}`:\n{bad}"),
         }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Cells: several controllers (SPEC.md 9)
+// ---------------------------------------------------------------------------------------------
+
+/// Random charts put on 2 to 4 KUKA controllers: how many, and runs per chart (each with its
+/// own step durations, speeds, start delays and input changes).
+const CELL_CHARTS: usize = 100;
+const CELL_RUNS: usize = 1_000;
+
+/// Every program of a cell passes the KRL grammar check, and all of them together, co-simulated
+/// (`flow_run/cosim.rs`), keep the chart's order whatever the timing: the same branches on every
+/// controller, no step before one the chart puts before it has ended, no output set by the
+/// advance run, no program waiting for a handshake that never comes.
+#[test]
+fn cells_keep_the_charts_order_whatever_the_timing() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut charts, mut seed, mut programs) = (0, 0u64, 0);
+    while charts < CELL_CHARTS {
+        seed += 1;
+        let Some((chart, cell, robot_of, _)) = cosim::random_cell(&dir.path().join("cell"), seed)
+        else {
+            continue;
+        };
+        for (k, p) in cell.programs.iter().enumerate() {
+            if let Some((src, dat)) = p {
+                let name = format!("Cell_R{}", k + 1);
+                if let Err(e) = krl_syntax::check_krl(src, dat, &name, true) {
+                    panic!("seed {seed}: {name}: {e}\n{src}");
+                }
+                programs += 1;
+            }
+        }
+        if let Err(e) = cosim::co_simulate(
+            &chart,
+            &cell,
+            &robot_of,
+            seed,
+            CELL_RUNS,
+            cosim::Mutation::None,
+        ) {
+            let keep = std::env::temp_dir().join(format!("skillpost-cosim-seed-{seed}"));
+            let _ = std::fs::remove_dir_all(&keep);
+            std::fs::create_dir_all(&keep).unwrap();
+            copy_dir(&dir.path().join("cell"), &keep);
+            panic!(
+                "seed {seed}: {e}\n(the project is kept in {})",
+                keep.display()
+            );
+        }
+        charts += 1;
+    }
+    assert!(programs >= 2 * CELL_CHARTS);
+}
+
+/// The co-simulation catches each way a handshake can be wrong: a dropped wait, a decision
+/// taken again by a follower, an output set by the advance run.
+#[test]
+fn the_cell_co_simulation_catches_broken_handshakes() {
+    let dir = tempfile::tempdir().unwrap();
+    for mutation in [
+        cosim::Mutation::DroppedWait,
+        cosim::Mutation::DecidesTwice,
+        cosim::Mutation::AdvanceRun,
+    ] {
+        let mut caught = 0;
+        let mut tried = 0;
+        let mut seed = 1000;
+        while tried < 20 {
+            seed += 1;
+            let Some((chart, cell, robot_of, _)) =
+                cosim::random_cell(&dir.path().join("cell"), seed)
+            else {
+                continue;
+            };
+            let applies = cell
+                .programs
+                .iter()
+                .flatten()
+                .any(|(src, _)| match mutation {
+                    cosim::Mutation::DecidesTwice => src.contains("IF skp_got == 0 THEN"),
+                    _ => src.contains("skp_rx"),
+                });
+            if !applies {
+                continue;
+            }
+            tried += 1;
+            if cosim::co_simulate(&chart, &cell, &robot_of, seed, 200, mutation).is_err() {
+                caught += 1;
+            }
+        }
+        assert!(caught > 0, "{mutation:?}: caught in none of {tried} charts");
+        eprintln!("{mutation:?}: caught in {caught} of {tried} charts");
     }
 }

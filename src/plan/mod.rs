@@ -287,7 +287,11 @@ mod tests {
                             format!("{}:{}{end}", id(b.transition), shape(sfc, &b.body))
                         })
                         .collect();
-                    let c = if matches!(b, Block::Follow { .. }) { "F" } else { "C" };
+                    let c = if matches!(b, Block::Follow { .. }) {
+                        "F"
+                    } else {
+                        "C"
+                    };
                     format!("{c}({})", v.join("|"))
                 }
                 Block::Loop {

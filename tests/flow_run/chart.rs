@@ -656,3 +656,183 @@ impl ChartGen {
         )
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Explaining what several controllers did (the cell co-simulation, `flow_run/cosim.rs`)
+// ---------------------------------------------------------------------------------------------
+
+/// One action of a run of the chart and the actions the chart puts right before it (indexes
+/// into the run): the steps of the transitions, convergences and jumps that lead to it.
+pub type Caused = (String, Vec<usize>);
+
+/// A token of the search: the element it is about to enter, and the actions right before it.
+#[derive(Clone)]
+struct Token {
+    id: u64,
+    frontier: Vec<usize>,
+}
+
+/// A state of the search: the tokens, the simultaneous convergences being waited at (how
+/// many branches arrived, their frontiers), how many actions of each controller the run has
+/// taken, and the run so far.
+#[derive(Clone)]
+struct Marking {
+    tokens: Vec<Token>,
+    waiting: BTreeMap<u64, (usize, Vec<usize>)>,
+    taken: Vec<usize>,
+    run: Vec<Caused>,
+}
+
+impl Chart {
+    /// Moves every token that has one way to go until each stands before a step with a skill
+    /// or a selection (or has ended); `false` when a token goes round without end.
+    fn settle(&self, m: &mut Marking) -> bool {
+        let mut k = 0;
+        let mut moves = 0;
+        while k < m.tokens.len() {
+            moves += 1;
+            if moves > 10_000 {
+                return false;
+            }
+            let id = m.tokens[k].id;
+            let n = &self.nodes[&id];
+            let succs = self.succs(id);
+            match n.tag.as_str() {
+                "step" if n.skill => k += 1,
+                "selectionDivergence" => k += 1,
+                "step" => match succs.as_slice() {
+                    [] => {
+                        m.tokens.remove(k);
+                    }
+                    [s] => m.tokens[k].id = *s,
+                    _ => panic!("step with several successors"),
+                },
+                "transition" | "selectionConvergence" => m.tokens[k].id = succs[0],
+                "jumpStep" => m.tokens[k].id = self.jump_target(id),
+                "simultaneousDivergence" => {
+                    let t = m.tokens.remove(k);
+                    for (j, s) in succs.iter().enumerate() {
+                        m.tokens.insert(
+                            k + j,
+                            Token {
+                                id: *s,
+                                frontier: t.frontier.clone(),
+                            },
+                        );
+                    }
+                }
+                "simultaneousConvergence" => {
+                    let t = m.tokens.remove(k);
+                    let inputs = self.nodes[&id].inputs.len();
+                    let w = m.waiting.entry(id).or_default();
+                    w.0 += 1;
+                    w.1.extend(t.frontier);
+                    if w.0 == inputs {
+                        let (_, frontier) = m.waiting.remove(&id).unwrap();
+                        m.tokens.insert(
+                            k,
+                            Token {
+                                id: succs[0],
+                                frontier,
+                            },
+                        );
+                    }
+                }
+                other => panic!("unexpected element {other}"),
+            }
+        }
+        true
+    }
+
+    /// A run of the chart by its meaning (IEC 61131-3: simultaneous branches run at the same
+    /// time; a selection takes any branch, a wait fires at any time) whose actions, taken one
+    /// controller at a time (`controller` of a step name → index), are exactly `seen` (what
+    /// each controller did, in its order); `ended`: every program ran to its end, so the run
+    /// must reach the chart's end without another action. `None` when there is none: the
+    /// controllers did not do what one run of the chart does.
+    pub fn explain(
+        &self,
+        seen: &[Vec<String>],
+        controller: &dyn Fn(&str) -> usize,
+        ended: bool,
+    ) -> Option<Vec<Caused>> {
+        let total: usize = seen.iter().map(Vec::len).sum();
+        type Key = (Vec<u64>, Vec<(u64, usize)>, Vec<usize>);
+        let mut visited: BTreeSet<Key> = BTreeSet::new();
+        let mut todo = vec![Marking {
+            tokens: vec![Token {
+                id: self.start(),
+                frontier: Vec::new(),
+            }],
+            waiting: BTreeMap::new(),
+            taken: vec![0; seen.len()],
+            run: Vec::new(),
+        }];
+        while let Some(mut m) = todo.pop() {
+            if !self.settle(&mut m) {
+                continue;
+            }
+            let mut ids: Vec<u64> = m.tokens.iter().map(|t| t.id).collect();
+            ids.sort_unstable();
+            let key = (
+                ids,
+                m.waiting.iter().map(|(k, v)| (*k, v.0)).collect(),
+                m.taken.clone(),
+            );
+            if !visited.insert(key) {
+                continue;
+            }
+            let all = m.run.len() == total;
+            if all && (!ended || m.tokens.is_empty()) {
+                return Some(m.run);
+            }
+            // A selection first: its choice does not depend on anything else that can move.
+            if let Some(k) = m
+                .tokens
+                .iter()
+                .position(|t| self.nodes[&t.id].tag == "selectionDivergence")
+            {
+                for t in self.succs(m.tokens[k].id).iter().rev() {
+                    let mut b = m.clone();
+                    b.tokens[k].id = self.succs(*t)[0];
+                    todo.push(b);
+                }
+                continue;
+            }
+            if all {
+                // Ended: another action is not allowed.
+                continue;
+            }
+            for k in (0..m.tokens.len()).rev() {
+                let name = &self.nodes[&m.tokens[k].id].name;
+                let c = controller(name);
+                if seen[c].get(m.taken[c]) != Some(name) {
+                    continue;
+                }
+                let mut b = m.clone();
+                b.taken[c] += 1;
+                let preds = std::mem::take(&mut b.tokens[k].frontier);
+                b.run.push((name.clone(), preds));
+                b.tokens[k].frontier = vec![b.run.len() - 1];
+                match self.succs(b.tokens[k].id).as_slice() {
+                    [] => {
+                        b.tokens.remove(k);
+                    }
+                    [s] => b.tokens[k].id = *s,
+                    _ => panic!("step with several successors"),
+                }
+                todo.push(b);
+            }
+        }
+        None
+    }
+
+    /// The names of the steps with a skill, in document order.
+    pub fn skill_steps(&self) -> Vec<String> {
+        self.order
+            .iter()
+            .filter(|id| self.nodes[id].tag == "step" && self.nodes[id].skill)
+            .map(|id| self.nodes[id].name.clone())
+            .collect()
+    }
+}

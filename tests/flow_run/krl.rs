@@ -6,7 +6,7 @@ use std::collections::HashMap;
 use crate::{Io, MAX_ACTIONS, Outcome, Phase, SIGNALS};
 
 /// The controller's view of a phase: every addressed bit.
-fn bits(phase: &Phase) -> HashMap<String, bool> {
+pub fn bits(phase: &Phase) -> HashMap<String, bool> {
     let mut out = HashMap::new();
     for s in SIGNALS {
         let v = phase.get(s.name).copied().unwrap_or(0);
@@ -154,7 +154,7 @@ impl KParser {
     }
 }
 
-fn kexpr(s: &str) -> KExpr {
+pub fn kexpr(s: &str) -> KExpr {
     let mut p = KParser {
         t: ktokens(s),
         i: 0,
@@ -165,7 +165,7 @@ fn kexpr(s: &str) -> KExpr {
 }
 
 /// The code of a line (without a `;` comment), upper-cased keywords kept as written.
-fn code(line: &str) -> &str {
+pub fn code(line: &str) -> &str {
     line.split(';').next().unwrap().trim()
 }
 

@@ -1,0 +1,882 @@
+//! The cell co-simulation (SPEC.md 9): every program of a cell of several KUKA controllers runs
+//! at the same time on a KRL machine of its own, with the blackboard's wires connecting one's
+//! `$OUT` to the other's `$IN`, under random step durations, speeds, start delays and inputs
+//! that change at random times. A discrete-event simulation: each controller has its own clock;
+//! the controller whose clock is earliest runs its next statement (ties broken at random), so
+//! a wire read sees every write made before it. KRL's advance run is modelled: a step's motion
+//! is queued and the program runs on until a `WAIT` (an advance-run stop); an output set while a
+//! motion before it still runs is a fault.
+//!
+//! A run passes when:
+//! - the controllers did what one run of the chart does (`Chart::explain`: one choice at every
+//!   selection for all of them, each controller's steps in its order; when all programs ended,
+//!   the chart ends there too);
+//! - no step started before a step the chart puts before it had ended (on any controller);
+//! - no output was set while a motion before it still ran;
+//! - no program waits for a handshake that can never come (a cycle of handshake waits, or one
+//!   from a program that ended) — only a wait for a chart condition may stop a run early.
+
+use std::collections::HashMap;
+
+use crate::chart::{Chart, ChartGen};
+use crate::krl::{KExpr, bits, code, kexpr};
+use crate::{Phase, Rng, repo, sequences};
+
+/// One statement of a program, flattened: blocks become jumps.
+#[derive(Debug, Clone)]
+pub enum Ins {
+    /// A step's FOLD: its motion.
+    Step(String),
+    WaitFor(KExpr),
+    WaitSec,
+    /// `$OUT[n] = e`.
+    SetOut(u32, KExpr),
+    Assign(String, KExpr),
+    JumpIfNot(KExpr, usize),
+    Jump(usize),
+    End,
+}
+
+enum Open {
+    If {
+        test: usize,
+        to_end: Vec<usize>,
+    },
+    Loop {
+        start: usize,
+        exits: Vec<usize>,
+    },
+    Repeat {
+        start: usize,
+    },
+    Switch {
+        sel: KExpr,
+        test: Option<usize>,
+        to_end: Vec<usize>,
+    },
+}
+
+/// Parses a KRL `.src` main program into flat statements.
+pub fn parse(src: &str) -> Vec<Ins> {
+    let lines: Vec<&str> = src.lines().collect();
+    let mut i = lines
+        .iter()
+        .position(|l| l.trim_start().starts_with("DEF "))
+        .expect("DEF")
+        + 1;
+    let mut out: Vec<Ins> = Vec::new();
+    let mut open: Vec<Open> = Vec::new();
+    let patch = |out: &mut Vec<Ins>, at: usize, to: usize| match &mut out[at] {
+        Ins::JumpIfNot(_, t) | Ins::Jump(t) => *t = to,
+        other => panic!("patching {other:?}"),
+    };
+    while i < lines.len() {
+        let raw = lines[i].trim();
+        i += 1;
+        if let Some(title) = raw.strip_prefix(";FOLD ") {
+            let mut depth = 1;
+            while depth > 0 {
+                let l = lines[i].trim();
+                i += 1;
+                if l.starts_with(";FOLD") {
+                    depth += 1;
+                } else if l.starts_with(";ENDFOLD") {
+                    depth -= 1;
+                }
+            }
+            let mut words = title.split_whitespace();
+            if words.next().is_some_and(|n| n.parse::<usize>().is_ok()) {
+                let name = words.next().unwrap().trim_end_matches(':');
+                out.push(Ins::Step(name.to_owned()));
+            }
+            continue;
+        }
+        let c = code(raw);
+        if c.is_empty() {
+            continue;
+        }
+        let first = c.split_whitespace().next().unwrap().to_ascii_uppercase();
+        match first.as_str() {
+            "END" => {
+                out.push(Ins::End);
+                assert!(open.is_empty(), "END inside a block");
+                return out;
+            }
+            "WAIT" => {
+                let rest = c[4..].trim_start();
+                if rest.to_ascii_uppercase().starts_with("SEC") {
+                    out.push(Ins::WaitSec);
+                } else {
+                    assert!(rest.to_ascii_uppercase().starts_with("FOR "));
+                    out.push(Ins::WaitFor(kexpr(&rest[4..])));
+                }
+            }
+            "IF" => {
+                let cond = c[2..].trim().strip_suffix("THEN").unwrap();
+                out.push(Ins::JumpIfNot(kexpr(cond), 0));
+                open.push(Open::If {
+                    test: out.len() - 1,
+                    to_end: Vec::new(),
+                });
+            }
+            "ELSE" => {
+                let Some(Open::If { test, to_end }) = open.last_mut() else {
+                    panic!("ELSE outside IF")
+                };
+                out.push(Ins::Jump(0));
+                to_end.push(out.len() - 1);
+                let t = *test;
+                let here = out.len();
+                patch(&mut out, t, here);
+                *test = usize::MAX;
+            }
+            "ENDIF" => {
+                let Some(Open::If { test, to_end }) = open.pop() else {
+                    panic!("ENDIF outside IF")
+                };
+                let here = out.len();
+                if test != usize::MAX {
+                    patch(&mut out, test, here);
+                }
+                for j in to_end {
+                    patch(&mut out, j, here);
+                }
+            }
+            "LOOP" => open.push(Open::Loop {
+                start: out.len(),
+                exits: Vec::new(),
+            }),
+            "EXIT" => {
+                out.push(Ins::Jump(0));
+                let at = out.len() - 1;
+                let exits = open
+                    .iter_mut()
+                    .rev()
+                    .find_map(|o| match o {
+                        Open::Loop { exits, .. } => Some(exits),
+                        _ => None,
+                    })
+                    .expect("EXIT outside LOOP");
+                exits.push(at);
+            }
+            "ENDLOOP" => {
+                let Some(Open::Loop { start, exits }) = open.pop() else {
+                    panic!("ENDLOOP outside LOOP")
+                };
+                out.push(Ins::Jump(start));
+                let here = out.len();
+                for j in exits {
+                    patch(&mut out, j, here);
+                }
+            }
+            "REPEAT" => open.push(Open::Repeat { start: out.len() }),
+            "UNTIL" => {
+                let Some(Open::Repeat { start }) = open.pop() else {
+                    panic!("UNTIL outside REPEAT")
+                };
+                out.push(Ins::JumpIfNot(kexpr(&c[5..]), start));
+            }
+            "SWITCH" => open.push(Open::Switch {
+                sel: kexpr(&c[6..]),
+                test: None,
+                to_end: Vec::new(),
+            }),
+            "CASE" | "DEFAULT" => {
+                let Some(Open::Switch { sel, test, to_end }) = open.last_mut() else {
+                    panic!("CASE outside SWITCH")
+                };
+                let sel = sel.clone();
+                if let Some(t) = test.take() {
+                    out.push(Ins::Jump(0));
+                    to_end.push(out.len() - 1);
+                    let here = out.len();
+                    patch(&mut out, t, here);
+                }
+                if first == "CASE" {
+                    let v: i64 = c[4..].trim().parse().unwrap();
+                    out.push(Ins::JumpIfNot(
+                        KExpr::Bin("==".into(), Box::new(sel), Box::new(KExpr::Int(v))),
+                        0,
+                    ));
+                    if let Some(Open::Switch { test, .. }) = open.last_mut() {
+                        *test = Some(out.len() - 1);
+                    }
+                }
+            }
+            "ENDSWITCH" => {
+                let Some(Open::Switch { test, to_end, .. }) = open.pop() else {
+                    panic!("ENDSWITCH outside SWITCH")
+                };
+                let here = out.len();
+                if let Some(t) = test {
+                    patch(&mut out, t, here);
+                }
+                for j in to_end {
+                    patch(&mut out, j, here);
+                }
+            }
+            _ => {
+                if let Some((lhs, rhs)) = c.split_once('=')
+                    && !rhs.starts_with('=')
+                {
+                    let lhs = lhs.trim();
+                    if let Some(n) = lhs.strip_prefix("$OUT[").and_then(|r| r.strip_suffix(']')) {
+                        out.push(Ins::SetOut(n.parse().unwrap(), kexpr(rhs)));
+                    } else if lhs
+                        .chars()
+                        .all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
+                    {
+                        let e = match rhs.split_once('+') {
+                            Some((a, b)) => {
+                                KExpr::Bin("+".into(), Box::new(kexpr(a)), Box::new(kexpr(b)))
+                            }
+                            None => kexpr(rhs),
+                        };
+                        out.push(Ins::Assign(lhs.to_ascii_uppercase(), e));
+                    }
+                }
+            }
+        }
+    }
+    panic!("no END");
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Val {
+    I(i64),
+    B(bool),
+}
+
+/// Reads the `.dat`: `SIGNAL` groups and `DECL BOOL`/`DECL INT` variables.
+fn read_dat(dat: &str) -> (HashMap<String, (u32, u32)>, HashMap<String, Val>) {
+    let mut signals = HashMap::new();
+    let mut vars = HashMap::new();
+    for l in dat.lines().map(code) {
+        let w: Vec<&str> = l.split_whitespace().collect();
+        if w.first() == Some(&"SIGNAL") {
+            let ix = |s: &str| -> u32 {
+                s.strip_prefix("$IN[")
+                    .and_then(|r| r.strip_suffix(']'))
+                    .unwrap()
+                    .parse()
+                    .unwrap()
+            };
+            signals.insert(w[1].to_ascii_uppercase(), (ix(w[2]), ix(w[4])));
+        } else if w.first() == Some(&"DECL") {
+            let (name, init) = w[2].split_once('=').unwrap_or((w[2], "0"));
+            let v = match w[1] {
+                "BOOL" => Val::B(init == "TRUE"),
+                "INT" => Val::I(init.parse().unwrap()),
+                other => panic!("DECL {other}"),
+            };
+            vars.insert(name.to_ascii_uppercase(), v);
+        }
+    }
+    (signals, vars)
+}
+
+/// One controller.
+struct Ctl {
+    ins: Vec<Ins>,
+    pc: usize,
+    vars: HashMap<String, Val>,
+    signals: HashMap<String, (u32, u32)>,
+    /// Its clock: when it runs its next statement.
+    t: f64,
+    /// When the last motion queued ends.
+    motion_end: f64,
+    /// Time a statement takes, and the factor of its motions.
+    eps: f64,
+    slow: f64,
+    outs: HashMap<u32, bool>,
+    ended: bool,
+    /// Stopped after `cap` steps (an endless chart).
+    capped: bool,
+    blocked: bool,
+    /// Steps run: name, start and end of the motion.
+    steps: Vec<(String, f64, f64)>,
+    /// Outputs set while a motion still ran: (output, the step whose motion ran).
+    advance_faults: Vec<(u32, String)>,
+}
+
+/// The world: each controller, the input phases and when each begins.
+struct World {
+    ctls: Vec<Ctl>,
+    phases: Vec<HashMap<String, bool>>,
+    /// When phase k+1 begins.
+    changes: Vec<f64>,
+}
+
+/// A wire input `$IN[200 + 10 a + j]` of controller `p` is output `$OUT[100 + 10 p + j]` of
+/// controller `a` (robots counted from 1; see [`cell_blackboard`]).
+fn wire_source(input: u32, me: usize) -> Option<(usize, u32)> {
+    (input >= 200).then(|| {
+        let a = ((input - 200) / 10) as usize;
+        let j = (input - 200) % 10;
+        (a - 1, 100 + 10 * (me as u32 + 1) + j)
+    })
+}
+
+impl World {
+    fn phase_at(&self, t: f64) -> &HashMap<String, bool> {
+        let k = self.changes.iter().filter(|&&c| c <= t).count();
+        &self.phases[k.min(self.phases.len() - 1)]
+    }
+
+    fn eval(&self, c: usize, e: &KExpr) -> Val {
+        let ctl = &self.ctls[c];
+        match e {
+            KExpr::Int(i) => Val::I(*i),
+            KExpr::Bool(b) => Val::B(*b),
+            KExpr::Sys(s) => {
+                let n =
+                    |p: &str| -> Option<u32> { s.strip_prefix(p)?.strip_suffix(']')?.parse().ok() };
+                if let Some(n) = n("$IN[")
+                    && let Some((a, out)) = wire_source(n, c)
+                {
+                    return Val::B(*self.ctls[a].outs.get(&out).unwrap_or(&false));
+                }
+                if let Some(n) = n("$OUT[")
+                    && n >= 100
+                {
+                    return Val::B(*ctl.outs.get(&n).unwrap_or(&false));
+                }
+                Val::B(
+                    *self
+                        .phase_at(ctl.t)
+                        .get(s)
+                        .unwrap_or_else(|| panic!("unknown {s}")),
+                )
+            }
+            KExpr::Name(n) => {
+                if let Some((a, b)) = ctl.signals.get(n) {
+                    let bits = self.phase_at(ctl.t);
+                    let mut v = 0;
+                    for (k, ix) in (*a..=*b).enumerate() {
+                        if bits[&format!("$IN[{ix}]")] {
+                            v |= 1 << k;
+                        }
+                    }
+                    Val::I(v)
+                } else {
+                    *ctl.vars.get(n).unwrap_or_else(|| panic!("undeclared {n}"))
+                }
+            }
+            KExpr::Not(a) => match self.eval(c, a) {
+                Val::B(b) => Val::B(!b),
+                v => panic!("NOT of {v:?}"),
+            },
+            KExpr::Neg(a) => match self.eval(c, a) {
+                Val::I(i) => Val::I(-i),
+                v => panic!("- of {v:?}"),
+            },
+            KExpr::Bin(op, a, b) => {
+                let (x, y) = (self.eval(c, a), self.eval(c, b));
+                if op == "+" {
+                    return match (x, y) {
+                        (Val::I(x), Val::I(y)) => Val::I(x + y),
+                        _ => panic!("+ of {x:?} {y:?}"),
+                    };
+                }
+                Val::B(match (op.as_str(), x, y) {
+                    ("AND", Val::B(x), Val::B(y)) => x && y,
+                    ("OR", Val::B(x), Val::B(y)) => x || y,
+                    ("EXOR", Val::B(x), Val::B(y)) => x != y,
+                    ("==", x, y) => x == y,
+                    ("<>", x, y) => x != y,
+                    ("<", Val::I(x), Val::I(y)) => x < y,
+                    (">", Val::I(x), Val::I(y)) => x > y,
+                    ("<=", Val::I(x), Val::I(y)) => x <= y,
+                    (">=", Val::I(x), Val::I(y)) => x >= y,
+                    _ => panic!("KRL type error: {x:?} {op} {y:?}"),
+                })
+            }
+        }
+    }
+
+    fn truth(&self, c: usize, e: &KExpr) -> bool {
+        match self.eval(c, e) {
+            Val::B(b) => b,
+            v => panic!("a condition evaluated to {v:?}"),
+        }
+    }
+
+    /// Runs one statement of controller `c`.
+    fn step(&mut self, c: usize, rng: &mut Rng, cap: usize) {
+        let ins = self.ctls[c].ins[self.ctls[c].pc].clone();
+        let eps = self.ctls[c].eps;
+        match ins {
+            Ins::Step(name) => {
+                let ctl = &mut self.ctls[c];
+                if ctl.steps.len() >= cap {
+                    ctl.capped = true;
+                    return;
+                }
+                let dur = ctl.slow * (1 + rng.next() % 50) as f64;
+                let start = ctl.t.max(ctl.motion_end);
+                ctl.motion_end = start + dur;
+                ctl.steps.push((name, start, start + dur));
+                ctl.pc += 1;
+                ctl.t += eps;
+            }
+            Ins::WaitSec => {
+                let ctl = &mut self.ctls[c];
+                if ctl.t < ctl.motion_end {
+                    ctl.t = ctl.motion_end;
+                } else {
+                    ctl.pc += 1;
+                    ctl.t += eps;
+                }
+            }
+            Ins::WaitFor(e) => {
+                if self.ctls[c].t < self.ctls[c].motion_end {
+                    // The advance-run stop: the motions end first.
+                    self.ctls[c].t = self.ctls[c].motion_end;
+                } else if self.truth(c, &e) {
+                    self.ctls[c].pc += 1;
+                    self.ctls[c].t += eps;
+                } else {
+                    self.ctls[c].blocked = true;
+                }
+            }
+            Ins::SetOut(n, e) => {
+                let v = self.truth(c, &e);
+                let now = self.ctls[c].t;
+                let ctl = &mut self.ctls[c];
+                if ctl.motion_end > now {
+                    let step = ctl.steps.last().map(|s| s.0.clone()).unwrap_or_default();
+                    ctl.advance_faults.push((n, step));
+                }
+                ctl.outs.insert(n, v);
+                ctl.pc += 1;
+                ctl.t += eps;
+                // Whoever waits looks again from now on.
+                for other in &mut self.ctls {
+                    if other.blocked {
+                        other.blocked = false;
+                        other.t = other.t.max(now);
+                    }
+                }
+            }
+            Ins::Assign(n, e) => {
+                let v = self.eval(c, &e);
+                let ctl = &mut self.ctls[c];
+                assert!(ctl.vars.contains_key(&n), "assignment to undeclared {n}");
+                ctl.vars.insert(n, v);
+                ctl.pc += 1;
+                ctl.t += eps;
+            }
+            Ins::JumpIfNot(e, to) => {
+                let v = self.truth(c, &e);
+                let ctl = &mut self.ctls[c];
+                ctl.pc = if v { ctl.pc + 1 } else { to };
+                ctl.t += eps;
+            }
+            Ins::Jump(to) => {
+                self.ctls[c].pc = to;
+                self.ctls[c].t += eps;
+            }
+            Ins::End => self.ctls[c].ended = true,
+        }
+    }
+
+    /// Runs every program until all have ended, stopped at `cap` steps or wait for good.
+    fn run(&mut self, rng: &mut Rng, cap: usize) {
+        let mut budget = 2_000_000usize;
+        loop {
+            budget -= 1;
+            assert!(budget > 0, "the co-simulation runs away");
+            let runnable: Vec<usize> = (0..self.ctls.len())
+                .filter(|&c| {
+                    let x = &self.ctls[c];
+                    !x.ended && !x.capped && !x.blocked
+                })
+                .collect();
+            if runnable.is_empty() {
+                // The inputs may still change: whoever waits looks again then.
+                let latest = self
+                    .ctls
+                    .iter()
+                    .filter(|x| x.blocked)
+                    .map(|x| x.t)
+                    .fold(f64::MIN, f64::max);
+                match self.changes.iter().find(|&&t| t > latest) {
+                    Some(&t) if self.ctls.iter().any(|x| x.blocked) => {
+                        for x in &mut self.ctls {
+                            if x.blocked {
+                                x.blocked = false;
+                                x.t = x.t.max(t);
+                            }
+                        }
+                        continue;
+                    }
+                    _ => return,
+                }
+            }
+            let earliest = runnable
+                .iter()
+                .map(|&c| self.ctls[c].t)
+                .fold(f64::MAX, f64::min);
+            let ties: Vec<usize> = runnable
+                .into_iter()
+                .filter(|&c| self.ctls[c].t == earliest)
+                .collect();
+            let c = ties[(rng.next() % ties.len() as u64) as usize];
+            self.step(c, rng, cap);
+        }
+    }
+
+    /// A program that waits for a handshake that never comes: a cycle of handshake waits, or
+    /// one from a program that ended or stopped.
+    fn deadlock(&self) -> Option<String> {
+        let waits_on = |c: usize| -> Option<usize> {
+            let x = &self.ctls[c];
+            if !x.blocked {
+                return None;
+            }
+            let Ins::WaitFor(e) = &x.ins[x.pc] else {
+                return None;
+            };
+            fn wire(e: &KExpr) -> Option<u32> {
+                match e {
+                    KExpr::Sys(s) => s
+                        .strip_prefix("$IN[")?
+                        .strip_suffix(']')?
+                        .parse()
+                        .ok()
+                        .filter(|&n| n >= 200),
+                    KExpr::Not(a) | KExpr::Neg(a) => wire(a),
+                    KExpr::Bin(_, a, b) => wire(a).or_else(|| wire(b)),
+                    _ => None,
+                }
+            }
+            wire(e).and_then(|n| wire_source(n, c)).map(|(a, _)| a)
+        };
+        for start in 0..self.ctls.len() {
+            let mut c = start;
+            let mut seen = vec![false; self.ctls.len()];
+            while let Some(next) = waits_on(c) {
+                if seen[c] {
+                    return Some(format!("R{} waits in a cycle of handshakes", start + 1));
+                }
+                seen[c] = true;
+                if self.ctls[next].ended {
+                    return Some(format!(
+                        "R{} waits for a handshake from R{}, which has ended",
+                        c + 1,
+                        next + 1
+                    ));
+                }
+                c = next;
+            }
+        }
+        None
+    }
+}
+
+/// The flow base's blackboard with `n` robots `R1`..`Rn` on controllers of their own, each
+/// with the base's signals and skills, and `m` wires from each to each other: robot `k`'s
+/// output `To_R<p>_<j>` (`$OUT[100 + 10 p + j]`) drives robot `p`'s input `From_R<k>_<j>`
+/// (`$IN[200 + 10 k + j]`).
+pub fn cell_blackboard(n: usize, m: usize) -> String {
+    let base = std::fs::read_to_string(repo().join("fixtures/base/flow/Blackboard.aml")).unwrap();
+    let lines: Vec<&str> = base.lines().collect();
+    let start = lines
+        .iter()
+        .position(|l| l.contains("<InternalElement Name=\"KUKA KR15-2\""))
+        .expect("the flow base changed");
+    // The robot's element ends at the first line indented as its opening line.
+    let indent = &lines[start][..lines[start].len() - lines[start].trim_start().len()];
+    let end = start
+        + lines[start..]
+            .iter()
+            .position(|l| *l == format!("{indent}</InternalElement>"))
+            .expect("the flow base changed");
+    let robot = lines[start..=end].join("\n");
+    let mut out: Vec<String> = lines[..start].iter().map(|s| s.to_string()).collect();
+    let id = |k: usize, tail: &str| format!("{{00000000-0000-0000-{k:04}-{tail}}}");
+    for k in 1..=n {
+        let mut text = robot
+            .replacen("Name=\"KUKA KR15-2\"", &format!("Name=\"R{k}\""), 1)
+            .replace(
+                "{00000000-0000-0000-0000-",
+                &format!("{{00000000-0000-0000-{k:04}-"),
+            );
+        let mut wires = String::new();
+        for p in (1..=n).filter(|&p| p != k) {
+            for j in 1..=m {
+                for (name, io, number) in [
+                    (format!("To_R{p}_{j}"), "Output", 100 + 10 * p + j),
+                    (format!("From_R{p}_{j}"), "Input", 200 + 10 * p + j),
+                ] {
+                    wires.push_str(&format!(
+                        "\n{indent}  <ExternalInterface Name=\"{name}\" ID=\"{{w-{k}-{name}}}\" RefBaseClassPath=\"AutomationMLInterfaceClassLib/AutomationMLBaseInterface/Communication/SignalInterface\"><Attribute Name=\"IoType\" AttributeDataType=\"xs:string\"><Value>{io}</Value></Attribute><Attribute Name=\"Number\" AttributeDataType=\"xs:integer\"><Value>{number}</Value></Attribute></ExternalInterface>"
+                    ));
+                }
+            }
+        }
+        let first_line_end = text.find('\n').unwrap();
+        text.insert_str(first_line_end, &wires);
+        out.push(text);
+    }
+    for a in 1..=n {
+        for b in (1..=n).filter(|&b| b != a) {
+            for j in 1..=m {
+                out.push(format!(
+                    "{indent}<InternalLink Name=\"R{a} to R{b} {j}\" RefPartnerSideA=\"{}:To_R{b}_{j}\" RefPartnerSideB=\"{}:From_R{a}_{j}\"/>",
+                    id(a, "000000000002"),
+                    id(b, "000000000002")
+                ));
+            }
+        }
+    }
+    out.extend(lines[end + 1..].iter().map(|s| s.to_string()));
+    out.join("\n")
+}
+
+/// Puts each skill step of a chart on one of `n` robots at random; returns the chart and each
+/// step's robot (from 0), by step name.
+pub fn spread(chart: &str, n: usize, rng: &mut Rng) -> (String, HashMap<String, usize>) {
+    let mut out = String::new();
+    let mut of = HashMap::new();
+    let mut rest = chart;
+    let mut step_name = String::new();
+    let marker = "<ressource name=\"KUKA KR15-2\"/>";
+    loop {
+        let next_step = rest.find("<step ");
+        let next_res = rest.find(marker);
+        match (next_step, next_res) {
+            (Some(s), r) if r.is_none_or(|r| s < r) => {
+                let name_at = rest[s..].find("name=\"").unwrap() + s + 6;
+                let name_end = rest[name_at..].find('"').unwrap() + name_at;
+                step_name = rest[name_at..name_end].to_owned();
+                out.push_str(&rest[..name_end]);
+                rest = &rest[name_end..];
+            }
+            (_, Some(r)) => {
+                let k = (rng.next() % n as u64) as usize;
+                of.insert(step_name.clone(), k);
+                out.push_str(&rest[..r]);
+                out.push_str(&format!("<ressource name=\"R{}\"/>", k + 1));
+                rest = &rest[r + marker.len()..];
+            }
+            _ => break,
+        }
+    }
+    out.push_str(rest);
+    (out, of)
+}
+
+/// A compiled cell: each robot's program (`None` for a robot without steps).
+pub struct CellPrograms {
+    pub programs: Vec<Option<(String, String)>>,
+}
+
+/// Writes the project and compiles it with the binary.
+pub fn compile_cell(
+    dir: &std::path::Path,
+    chart: &str,
+    n: usize,
+    m: usize,
+) -> Result<CellPrograms, String> {
+    // A fresh project: no program of an earlier one left.
+    let _ = std::fs::remove_dir_all(dir);
+    std::fs::create_dir_all(dir).unwrap();
+    std::fs::write(dir.join("Blackboard.aml"), cell_blackboard(n, m)).unwrap();
+    std::fs::copy(
+        repo().join("fixtures/base/flow/kr15-2.irl"),
+        dir.join("kr15-2.irl"),
+    )
+    .unwrap();
+    std::fs::write(dir.join("sfc.xml"), chart).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["--lf", "Blackboard.aml", "Cell"])
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    if !out.status.success() {
+        return Err(String::from_utf8_lossy(&out.stderr).into_owned());
+    }
+    let programs = (1..=n)
+        .map(|k| {
+            let read =
+                |ext: &str| std::fs::read_to_string(dir.join(format!("Cell_R{k}.{ext}"))).ok();
+            Some((read("src")?, read("dat")?))
+        })
+        .collect();
+    Ok(CellPrograms { programs })
+}
+
+/// How a program may be broken on purpose (the mutation checks).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Mutation {
+    None,
+    /// A handshake wait dropped: the first `WAIT FOR` on a wire of a hear.
+    DroppedWait,
+    /// A follower decides on its own: its first `IF skp_got == 0` reads the chart's input
+    /// `Part_OK` instead.
+    DecidesTwice,
+    /// The advance run sets an output: a tell's acknowledgement wait dropped.
+    AdvanceRun,
+}
+
+fn mutate(src: &str, m: Mutation) -> String {
+    let lines: Vec<&str> = src.lines().collect();
+    let pick =
+        |pred: &dyn Fn(usize, &str) -> bool| lines.iter().enumerate().position(|(i, l)| pred(i, l));
+    let drop_at = match m {
+        Mutation::None => None,
+        Mutation::DroppedWait => pick(&|i, l| {
+            l.trim_start().starts_with("WAIT FOR $IN[2") && i > 0 && lines[i - 1].contains("skp_rx")
+        }),
+        Mutation::AdvanceRun => pick(&|i, l| {
+            l.trim_start().starts_with("WAIT FOR $IN[2")
+                && i > 0
+                && lines[i - 1].starts_with(";handshake: tell")
+        }),
+        Mutation::DecidesTwice => {
+            return src.replacen("IF skp_got == 0 THEN", "IF $IN[1] THEN", 1);
+        }
+    };
+    match drop_at {
+        Some(i) => lines
+            .iter()
+            .enumerate()
+            .filter(|&(k, _)| k != i)
+            .map(|(_, l)| *l)
+            .collect::<Vec<_>>()
+            .join("\n"),
+        None => src.to_owned(),
+    }
+}
+
+/// Runs a compiled cell `runs` times with random timing and inputs; the first failure, if any.
+pub fn co_simulate(
+    chart: &Chart,
+    cell: &CellPrograms,
+    robot_of: &HashMap<String, usize>,
+    seed: u64,
+    runs: usize,
+    mutation: Mutation,
+) -> Result<(), String> {
+    let parsed: Vec<Option<(Vec<Ins>, String)>> = cell
+        .programs
+        .iter()
+        .map(|p| {
+            p.as_ref()
+                .map(|(src, dat)| (parse(&mutate(src, mutation)), dat.clone()))
+        })
+        .collect();
+    let mut rng = Rng(seed | 1);
+    let cap = 25;
+    for run in 0..runs {
+        let seq: Vec<Phase> = sequences(rng.next(), 1).remove(0);
+        let phases: Vec<HashMap<String, bool>> = seq.iter().map(bits).collect();
+        let mut t = 0.0;
+        let changes: Vec<f64> = (1..phases.len())
+            .map(|_| {
+                t += (rng.next() % 400) as f64;
+                t
+            })
+            .collect();
+        let ctls: Vec<Ctl> = parsed
+            .iter()
+            .map(|p| {
+                let (ins, dat) = p.clone().unwrap_or((vec![Ins::End], String::new()));
+                let (signals, vars) = read_dat(&dat);
+                let slow = [0.1, 1.0, 3.0, 10.0][(rng.next() % 4) as usize];
+                Ctl {
+                    ins,
+                    pc: 0,
+                    vars,
+                    signals,
+                    t: (rng.next() % 200) as f64,
+                    motion_end: 0.0,
+                    eps: [0.001, 0.1, 1.0][(rng.next() % 3) as usize],
+                    slow,
+                    outs: HashMap::new(),
+                    ended: false,
+                    capped: false,
+                    blocked: false,
+                    steps: Vec::new(),
+                    advance_faults: Vec::new(),
+                }
+            })
+            .collect();
+        let mut w = World {
+            ctls,
+            phases,
+            changes,
+        };
+        w.run(&mut rng, cap);
+        let fail = |why: String| Err(format!("run {run}: {why}"));
+        for (c, x) in w.ctls.iter().enumerate() {
+            if let Some((out, step)) = x.advance_faults.first() {
+                return fail(format!(
+                    "R{} set $OUT[{out}] while the motion of step {step} still ran (the advance run)",
+                    c + 1
+                ));
+            }
+        }
+        if let Some(why) = w.deadlock() {
+            return fail(why);
+        }
+        let seen: Vec<Vec<String>> = w
+            .ctls
+            .iter()
+            .map(|x| x.steps.iter().map(|s| s.0.clone()).collect())
+            .collect();
+        let ended = w.ctls.iter().all(|x| x.ended);
+        let Some(explained) = chart.explain(&seen, &|name| robot_of[name], ended) else {
+            return fail(format!(
+                "the controllers did not do what one run of the chart does: {seen:?} (all ended: {ended})"
+            ));
+        };
+        // Each action of the run: its robot's how-manieth step.
+        let mut counts = vec![0usize; w.ctls.len()];
+        let place: Vec<(usize, usize)> = explained
+            .iter()
+            .map(|(name, _)| {
+                let c = robot_of[name];
+                counts[c] += 1;
+                (c, counts[c] - 1)
+            })
+            .collect();
+        for (i, (name, preds)) in explained.iter().enumerate() {
+            let (c, k) = place[i];
+            let start = w.ctls[c].steps[k].1;
+            for &p in preds {
+                let (pc, pk) = place[p];
+                let end = w.ctls[pc].steps[pk].2;
+                if end > start {
+                    return fail(format!(
+                        "step {name} on R{} started at {start:.3}, before step {} on R{} ended at {end:.3}",
+                        c + 1,
+                        explained[p].0,
+                        pc + 1
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A random chart on 2 to 4 robots, compiled; `None` when it uses fewer than two robots.
+pub fn random_cell(
+    dir: &std::path::Path,
+    seed: u64,
+) -> Option<(Chart, CellPrograms, HashMap<String, usize>, usize)> {
+    let mut rng = Rng(seed.wrapping_mul(0x2545_F491_4F6C_DD1D) | 1);
+    let n = 2 + (rng.next() % 3) as usize;
+    let (chart, robot_of) = spread(&ChartGen::chart(seed), n, &mut rng);
+    let used: std::collections::BTreeSet<usize> = robot_of.values().copied().collect();
+    if used.len() < 2 {
+        return None;
+    }
+    let cell = match compile_cell(dir, &chart, n, 4) {
+        Ok(c) => c,
+        Err(e) => panic!("seed {seed}: the cell does not compile: {e}\n{chart}"),
+    };
+    Some((Chart::read(&dir.join("sfc.xml")), cell, robot_of, n))
+}
