@@ -826,13 +826,4 @@ impl Chart {
         }
         None
     }
-
-    /// The names of the steps with a skill, in document order.
-    pub fn skill_steps(&self) -> Vec<String> {
-        self.order
-            .iter()
-            .filter(|id| self.nodes[id].tag == "step" && self.nodes[id].skill)
-            .map(|id| self.nodes[id].name.clone())
-            .collect()
-    }
 }
