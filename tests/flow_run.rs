@@ -1315,6 +1315,31 @@ fn cells_keep_the_charts_order_whatever_the_timing() {
     assert!(programs >= 2 * CELL_CHARTS);
 }
 
+/// The cell fixtures, co-simulated the same way.
+#[test]
+fn cell_fixtures_keep_the_charts_order_whatever_the_timing() {
+    let dir = tempfile::tempdir().unwrap();
+    for (case, programs, controllers) in [(
+        "cell-two-robots-weld",
+        &["Cell_KUKA_KR15_2", "Cell_KUKA_KR16_2"][..],
+        &["KUKA KR15-2", "KUKA KR16-2"][..],
+    )] {
+        let (chart, cell, robot_of) =
+            cosim::fixture_cell(&dir.path().join(case), case, programs, controllers);
+        assert!(!cell.wires.from.is_empty(), "{case}: no wires read");
+        if let Err(e) = cosim::co_simulate(
+            &chart,
+            &cell,
+            &robot_of,
+            7,
+            CELL_RUNS,
+            cosim::Mutation::None,
+        ) {
+            panic!("{case}: {e}");
+        }
+    }
+}
+
 /// The co-simulation catches each way a handshake can be wrong: a dropped wait, a decision
 /// taken again by a follower, an output set by the advance run.
 #[test]

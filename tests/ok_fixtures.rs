@@ -14,6 +14,10 @@
 //! tc6_valid = ["sfc.xml"]      # optional; SFC files that must validate against tc6_xml_v201.xsd
 //! stderr_contains = ["W204"]   # optional; text the compiler's stderr must contain
 //! stdout_contains = ["wrote"]  # optional; text the compiler's stdout must contain
+//! cell = [                     # optional: a cell of several controllers (SPEC.md 9), one
+//!   { program = "P_A" },       # program each (the written-back one first), each in its
+//!   { program = "P_B", language = "URScript" },  # language; snapshots named by program
+//! ]
 //! ```
 //!
 //! For every case the test checks, through the binary only:
@@ -57,6 +61,26 @@ struct CaseToml {
     stderr_contains: Vec<String>,
     #[serde(default)]
     stdout_contains: Vec<String>,
+    #[serde(default)]
+    cell: Vec<CellProgram>,
+}
+
+/// One program of a cell case.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CellProgram {
+    program: String,
+    language: Option<String>,
+}
+
+/// A language's outputs, the main one (the write-back's) first.
+fn extensions(name: &str, language: Option<&str>) -> &'static [&'static str] {
+    match language.map(str::to_ascii_lowercase).as_deref() {
+        None | Some("krl") => &["src", "dat"],
+        Some("rapid") => &["mod"],
+        Some("urscript") => &["script"],
+        Some(other) => panic!("{name}: case.toml: unknown language `{other}`"),
+    }
 }
 
 macro_rules! cases {
@@ -77,6 +101,7 @@ cases! {
     caex3_english => "caex3-english",
     cell_gripper_controller_attribute => "cell-gripper-controller-attribute",
     cell_robot_gripper => "cell-robot-gripper",
+    cell_two_robots_weld => "cell-two-robots-weld",
     cell_two_robots_wired => "cell-two-robots-wired",
     flow_cyclic => "flow-cyclic",
     flow_guarded_sequence => "flow-guarded-sequence",
@@ -152,21 +177,22 @@ fn run_case(name: &str) {
     let bb = dir.join(&bb_name);
     let original = fs::read(&bb).unwrap();
     let lf = case.args.iter().any(|a| a == "--lf");
-    // The outputs, the main one (the write-back's) first.
-    let exts: &[&str] = match case
-        .language
-        .as_deref()
-        .map(str::to_ascii_lowercase)
-        .as_deref()
-    {
-        None | Some("krl") => &["src", "dat"],
-        Some("rapid") => &["mod"],
-        Some("urscript") => &["script"],
-        Some(other) => panic!("{name}: case.toml: unknown language `{other}`"),
+    // Each program and its outputs, the main one (the write-back's) first.
+    let programs: Vec<(String, &[&str])> = if case.cell.is_empty() {
+        vec![(case.program.clone(), extensions(name, case.language.as_deref()))]
+    } else {
+        case.cell
+            .iter()
+            .map(|c| (c.program.clone(), extensions(name, c.language.as_deref())))
+            .collect()
     };
-    let out_paths: Vec<PathBuf> = exts
+    let outputs: Vec<(String, &str)> = programs
         .iter()
-        .map(|e| dir.join(format!("{}.{e}", case.program)))
+        .flat_map(|(p, exts)| exts.iter().map(move |e| (p.clone(), *e)))
+        .collect();
+    let out_paths: Vec<PathBuf> = outputs
+        .iter()
+        .map(|(p, e)| dir.join(format!("{p}.{e}")))
         .collect();
 
     let schemas = schema_dir();
@@ -198,9 +224,9 @@ fn run_case(name: &str) {
     let after = listing(dir);
     let added: Vec<&String> = after.keys().filter(|k| !before.contains_key(*k)).collect();
     // In the BTreeMap's order (`.dat` before `.src`).
-    let mut expected_added: Vec<String> = exts
+    let mut expected_added: Vec<String> = outputs
         .iter()
-        .map(|e| format!("{}.{e}", case.program))
+        .map(|(p, e)| format!("{p}.{e}"))
         .collect();
     expected_added.sort();
     assert_eq!(
@@ -213,28 +239,32 @@ fn run_case(name: &str) {
     let bytes: Vec<Vec<u8>> = out_paths.iter().map(|p| fs::read(p).unwrap()).collect();
     let texts: Vec<String> = bytes
         .iter()
-        .zip(exts)
-        .map(|(b, e)| {
+        .zip(&outputs)
+        .map(|(b, (_, e))| {
             String::from_utf8(b.clone())
                 .unwrap_or_else(|_| panic!("{name}: the .{e} is not UTF-8 (let alone ASCII)"))
         })
         .collect();
-    match exts[0] {
-        "src" => {
-            if let Err(e) = check_krl(&texts[0], &texts[1], &case.program, lf) {
-                panic!(
-                    "{name}: KRL structure check: {e}\n--- .src ---\n{}",
-                    texts[0]
-                );
+    let mut at = 0;
+    for (program, exts) in &programs {
+        match exts[0] {
+            "src" => {
+                if let Err(e) = check_krl(&texts[at], &texts[at + 1], program, lf) {
+                    panic!(
+                        "{name}: KRL structure check: {e}\n--- .src ---\n{}",
+                        texts[at]
+                    );
+                }
             }
+            "mod" => check_rapid(name, &out_paths[at], &texts[at]),
+            _ => check_script(name, &texts[at]),
         }
-        "mod" => check_rapid(name, &out_paths[0], &texts[0]),
-        _ => check_script(name, &texts[0]),
+        at += exts.len();
     }
 
     // The write-back.
     let written = fs::read(&bb).unwrap();
-    let main_output = format!("{}.{}", case.program, exts[0]);
+    let main_output = format!("{}.{}", programs[0].0, programs[0].1[0]);
     let region = check_write_back(name, &bb_name, &original, &written, &main_output);
     if let Some(s) = &schemas {
         let xsd = caex_schema(s, &written);
@@ -242,13 +272,18 @@ fn run_case(name: &str) {
     }
 
     // Snapshots.
-    let program = &case.program;
-    for (ext, text) in exts.iter().zip(&texts) {
+    for ((program, ext), text) in outputs.iter().zip(&texts) {
+        // A cell's snapshots are named by program too.
+        let snapshot = if case.cell.is_empty() {
+            format!("{name}__{ext}")
+        } else {
+            format!("{name}__{program}.{ext}")
+        };
         insta::with_settings!({
             description => format!("fixtures/ok/{name}: {program}.{ext}"),
             omit_expression => true,
         }, {
-            insta::assert_snapshot!(format!("{name}__{ext}"), visible(text));
+            insta::assert_snapshot!(snapshot, visible(text));
         });
     }
     insta::with_settings!({

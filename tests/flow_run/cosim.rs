@@ -299,25 +299,80 @@ struct Ctl {
     advance_faults: Vec<(u32, String)>,
 }
 
-/// The world: each controller, the input phases and when each begins.
-struct World {
+/// The world: each controller, the wires, the input phases and when each begins.
+struct World<'w> {
     ctls: Vec<Ctl>,
+    wires: &'w Wires,
     phases: Vec<HashMap<String, bool>>,
     /// When phase k+1 begins.
     changes: Vec<f64>,
+    /// Decides the inputs no phase names.
+    salt: u64,
 }
 
-/// A wire input `$IN[200 + 10 a + j]` of controller `p` is output `$OUT[100 + 10 p + j]` of
-/// controller `a` (robots counted from 1; see [`cell_blackboard`]).
-fn wire_source(input: u32, me: usize) -> Option<(usize, u32)> {
-    (input >= 200).then(|| {
-        let a = ((input - 200) / 10) as usize;
-        let j = (input - 200) % 10;
-        (a - 1, 100 + 10 * (me as u32 + 1) + j)
-    })
+/// The wires of a cell: (controller, `$IN` number) → (controller, `$OUT` number) that drives
+/// it, read from the blackboard's `InternalLink`s.
+#[derive(Debug, Default)]
+pub struct Wires {
+    pub from: HashMap<(usize, u32), (usize, u32)>,
 }
 
-impl World {
+impl Wires {
+    /// Reads the wires between the controllers named `controllers` (each with the devices
+    /// inside its element) from a blackboard: signals with `IoType` and `Number`, links
+    /// `<ID>:<name>` on either side.
+    pub fn read(blackboard: &str, controllers: &[String]) -> Wires {
+        let doc = roxmltree::Document::parse(blackboard).unwrap();
+        let attr = |n: roxmltree::Node, name: &str| -> Option<String> {
+            n.children()
+                .find(|c| c.has_tag_name("Attribute") && c.attribute("Name") == Some(name))
+                .and_then(|a| a.children().find(|c| c.has_tag_name("Value")))
+                .and_then(|v| v.text())
+                .map(|t| t.trim().to_owned())
+        };
+        // `<holder ID>:<name>` → (controller, output?, number)
+        let mut signals: HashMap<String, (usize, bool, u32)> = HashMap::new();
+        for e in doc.descendants().filter(|n| n.has_tag_name("InternalElement")) {
+            let Some(c) = controllers
+                .iter()
+                .position(|c| Some(c.as_str()) == e.attribute("Name"))
+            else {
+                continue;
+            };
+            for i in e.descendants().filter(|n| n.has_tag_name("ExternalInterface")) {
+                let (Some(io), Some(num)) = (attr(i, "IoType"), attr(i, "Number")) else {
+                    continue;
+                };
+                let holder = i.parent().and_then(|p| p.attribute("ID")).unwrap_or("");
+                signals.insert(
+                    format!("{holder}:{}", i.attribute("Name").unwrap()),
+                    (c, io == "Output", num.parse().unwrap()),
+                );
+            }
+        }
+        let mut from = HashMap::new();
+        for l in doc.descendants().filter(|n| n.has_tag_name("InternalLink")) {
+            let side = |a: &str| signals.get(l.attribute(a).unwrap_or("")).copied();
+            if let (Some(a), Some(b)) = (side("RefPartnerSideA"), side("RefPartnerSideB")) {
+                let (out, inp) = if a.1 { (a, b) } else { (b, a) };
+                if out.1 && !inp.1 && out.0 != inp.0 {
+                    from.insert((inp.0, inp.2), (out.0, out.2));
+                }
+            }
+        }
+        Wires { from }
+    }
+
+    fn source(&self, me: usize, input: u32) -> Option<(usize, u32)> {
+        self.from.get(&(me, input)).copied()
+    }
+
+    fn drives(&self, me: usize, output: u32) -> bool {
+        self.from.values().any(|&v| v == (me, output))
+    }
+}
+
+impl World<'_> {
     fn phase_at(&self, t: f64) -> &HashMap<String, bool> {
         let k = self.changes.iter().filter(|&&c| c <= t).count();
         &self.phases[k.min(self.phases.len() - 1)]
@@ -332,21 +387,26 @@ impl World {
                 let n =
                     |p: &str| -> Option<u32> { s.strip_prefix(p)?.strip_suffix(']')?.parse().ok() };
                 if let Some(n) = n("$IN[")
-                    && let Some((a, out)) = wire_source(n, c)
+                    && let Some((a, out)) = self.wires.source(c, n)
                 {
                     return Val::B(*self.ctls[a].outs.get(&out).unwrap_or(&false));
                 }
                 if let Some(n) = n("$OUT[")
-                    && n >= 100
+                    && self.wires.drives(c, n)
                 {
                     return Val::B(*ctl.outs.get(&n).unwrap_or(&false));
                 }
-                Val::B(
-                    *self
-                        .phase_at(ctl.t)
-                        .get(s)
-                        .unwrap_or_else(|| panic!("unknown {s}")),
-                )
+                match self.phase_at(ctl.t).get(s) {
+                    Some(v) => Val::B(*v),
+                    // An input of a fixture's own: a bit of its own per phase.
+                    None => {
+                        let k = self.changes.iter().filter(|&&c| c <= ctl.t).count() as u64;
+                        let h = s.bytes().fold(self.salt ^ k.wrapping_mul(0x9E37), |h, b| {
+                            (h ^ b as u64).wrapping_mul(0x0100_0000_01B3)
+                        });
+                        Val::B(h >> 7 & 1 == 1)
+                    }
+                }
             }
             KExpr::Name(n) => {
                 if let Some((a, b)) = ctl.signals.get(n) {
@@ -537,20 +597,18 @@ impl World {
             let Ins::WaitFor(e) = &x.ins[x.pc] else {
                 return None;
             };
-            fn wire(e: &KExpr) -> Option<u32> {
+            fn wire(e: &KExpr, w: &Wires, c: usize) -> Option<usize> {
                 match e {
-                    KExpr::Sys(s) => s
-                        .strip_prefix("$IN[")?
-                        .strip_suffix(']')?
-                        .parse()
-                        .ok()
-                        .filter(|&n| n >= 200),
-                    KExpr::Not(a) | KExpr::Neg(a) => wire(a),
-                    KExpr::Bin(_, a, b) => wire(a).or_else(|| wire(b)),
+                    KExpr::Sys(s) => {
+                        let n = s.strip_prefix("$IN[")?.strip_suffix(']')?.parse().ok()?;
+                        w.source(c, n).map(|(a, _)| a)
+                    }
+                    KExpr::Not(a) | KExpr::Neg(a) => wire(a, w, c),
+                    KExpr::Bin(_, a, b) => wire(a, w, c).or_else(|| wire(b, w, c)),
                     _ => None,
                 }
             }
-            wire(e).and_then(|n| wire_source(n, c)).map(|(a, _)| a)
+            wire(e, self.wires, c)
         };
         for start in 0..self.ctls.len() {
             let mut c = start;
@@ -667,9 +725,10 @@ pub fn spread(chart: &str, n: usize, rng: &mut Rng) -> (String, HashMap<String, 
     (out, of)
 }
 
-/// A compiled cell: each robot's program (`None` for a robot without steps).
+/// A compiled cell: each robot's program (`None` for a robot without steps), the wires.
 pub struct CellPrograms {
     pub programs: Vec<Option<(String, String)>>,
+    pub wires: Wires,
 }
 
 /// Writes the project and compiles it with the binary.
@@ -704,7 +763,9 @@ pub fn compile_cell(
             Some((read("src")?, read("dat")?))
         })
         .collect();
-    Ok(CellPrograms { programs })
+    let names: Vec<String> = (1..=n).map(|k| format!("R{k}")).collect();
+    let wires = Wires::read(&std::fs::read_to_string(dir.join("Blackboard.aml")).unwrap(), &names);
+    Ok(CellPrograms { programs, wires })
 }
 
 /// How a program may be broken on purpose (the mutation checks).
@@ -805,8 +866,10 @@ pub fn co_simulate(
             .collect();
         let mut w = World {
             ctls,
+            wires: &cell.wires,
             phases,
             changes,
+            salt: rng.next(),
         };
         w.run(&mut rng, cap);
         let fail = |why: String| Err(format!("run {run}: {why}"));
@@ -879,4 +942,55 @@ pub fn random_cell(
         Err(e) => panic!("seed {seed}: the cell does not compile: {e}\n{chart}"),
     };
     Some((Chart::read(&dir.join("sfc.xml")), cell, robot_of, n))
+}
+
+/// A cell fixture (`fixtures/ok/<case>`) compiled with the binary: its programs in the order of
+/// `programs`, each step's program (by the step FOLDs of each), its chart.
+pub fn fixture_cell(
+    dir: &std::path::Path,
+    case: &str,
+    programs: &[&str],
+    controllers: &[&str],
+) -> (Chart, CellPrograms, HashMap<String, usize>) {
+    let _ = std::fs::remove_dir_all(dir);
+    std::fs::create_dir_all(dir).unwrap();
+    let toml = std::fs::read_to_string(repo().join("fixtures/ok").join(case).join("case.toml")).unwrap();
+    let program = toml
+        .lines()
+        .find_map(|l| l.strip_prefix("program = \""))
+        .unwrap()
+        .trim_end_matches('"')
+        .to_owned();
+    if let Some(base) = toml.lines().find_map(|l| l.strip_prefix("base = \"")) {
+        crate::copy_dir(&repo().join("fixtures/base").join(base.trim_end_matches('"')), dir);
+    }
+    crate::copy_dir(&repo().join("fixtures/ok").join(case), dir);
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["--lf", "Blackboard.aml", &program])
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{case}: {}", String::from_utf8_lossy(&out.stderr));
+    let mut robot_of = HashMap::new();
+    let programs: Vec<Option<(String, String)>> = programs
+        .iter()
+        .enumerate()
+        .map(|(k, p)| {
+            let src = std::fs::read_to_string(dir.join(format!("{p}.src"))).unwrap();
+            let dat = std::fs::read_to_string(dir.join(format!("{p}.dat"))).unwrap();
+            for i in parse(&src) {
+                if let Ins::Step(name) = i {
+                    robot_of.insert(name, k);
+                }
+            }
+            Some((src, dat))
+        })
+        .collect();
+    let names: Vec<String> = controllers.iter().map(|c| c.to_string()).collect();
+    let wires = Wires::read(&std::fs::read_to_string(dir.join("Blackboard.aml")).unwrap(), &names);
+    (
+        Chart::read(&dir.join("sfc.xml")),
+        CellPrograms { programs, wires },
+        robot_of,
+    )
 }
