@@ -285,9 +285,15 @@ fn run(a: Args) -> u8 {
             let not_updated = match &applied.write_back {
                 Some(W::Written) => {
                     if let Some(wb) = &c.write_back {
+                        let values: Vec<String> =
+                            wb.splices().iter().map(|(_, v)| format!("`{v}`")).collect();
                         say(
                             json,
-                            &format!("wrote back `{}` into {}", wb.value, wb.blackboard.display()),
+                            &format!(
+                                "wrote back {} into {}",
+                                values.join(", "),
+                                wb.blackboard.display()
+                            ),
                         );
                     }
                     None

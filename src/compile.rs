@@ -57,9 +57,18 @@ pub struct WriteBack {
     pub site: crate::write::SpliceSite,
     /// The value to write: the `.src` path relative to the blackboard, with `/`.
     pub value: String,
+    /// The other programs of a cell, each into its controller's `Code` interface (SPEC.md 9).
+    pub more: Vec<(crate::write::SpliceSite, String)>,
 }
 
 impl WriteBack {
+    /// Every value to write and where.
+    pub fn splices(&self) -> Vec<(&crate::write::SpliceSite, &str)> {
+        std::iter::once((&self.site, self.value.as_str()))
+            .chain(self.more.iter().map(|(s, v)| (s, v.as_str())))
+            .collect()
+    }
+
     /// The blackboard's bytes after this write-back (BOM included): what [`apply`] writes when
     /// it writes. `None` when the value is already right or cannot be spliced.
     pub fn new_bytes(&self) -> Option<Vec<u8>> {
@@ -69,7 +78,7 @@ impl WriteBack {
             &self.expected
         };
         let text = std::str::from_utf8(body).ok()?;
-        let new = crate::write::splice_at(text, &self.site, &self.value).ok()??;
+        let new = crate::write::splice_all(text, &self.splices()).ok()??;
         let mut out = Vec::with_capacity(new.len() + 3);
         if self.bom {
             out.extend_from_slice(b"\xEF\xBB\xBF");
@@ -579,6 +588,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
     // Bind, loading the IRL files the used skills need.
     let mut irls: Vec<Irl> = Vec::new();
     let mut language = None;
+    let mut other_write_backs: Vec<(crate::write::SpliceSite, String)> = Vec::new();
     if let Some(sfc) = &mut sfc {
         // Bind even when the flow has errors (in document order), so one run reports every
         // problem; emit only a planned flow.
@@ -758,6 +768,32 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         if plan.is_some() && !cx.diags.has_errors() {
             lap(&mut out, "emit");
         }
+        // The other programs of a cell go into their controllers' `Code` interfaces.
+        for prog in programs.iter().skip(1) {
+            let (Some(c), Some(name)) = (prog.controller, &prog.name) else {
+                continue;
+            };
+            let controller = &bb.resources[c].name.text;
+            let main = bb.write_back.as_ref().map(|w| w.attribute.range.clone());
+            match bb.code_targets.iter().find(|(n, t)| {
+                crate::names::eq(n, controller) && Some(&t.attribute.range) != main.as_ref()
+            }) {
+                Some((_, t)) => other_write_backs.push((
+                    t.site.clone(),
+                    format!("{name}.{}", prog.language.profile().files()[0]),
+                )),
+                None => cx.diags.push(
+                    Diagnostic::warning(
+                        Code::NoProgramTarget,
+                        format!(
+                            "no `Code` interface named `{controller}`: the path of its program `{name}` is not written into the blackboard (add an ExternalInterface `{controller}` with a `refURI` attribute under `Code`)"
+                        ),
+                    )
+                    .at(bb.resources[c].name.span.clone())
+                    .element(bb.resources[c].element.clone()),
+                ),
+            }
+        }
         out.outputs = outputs;
         out.output_programs = output_programs;
         out.program_names = programs.iter().filter_map(|p| p.name.clone()).collect();
@@ -791,6 +827,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 "{program}.{}",
                 language.unwrap_or(Language::Krl).profile().files()[0]
             ),
+            more: std::mem::take(&mut other_write_backs),
         });
     }
     out.language = language;
@@ -1176,7 +1213,7 @@ fn write_back_retrying(
     let mut wait = IN_USE_FIRST_WAIT;
     let mut tries = 1;
     loop {
-        let outcome = crate::write::write_back(path, &wb.expected, wb.bom, &wb.site, &wb.value)?;
+        let outcome = crate::write::write_back_all(path, &wb.expected, wb.bom, &wb.splices())?;
         if outcome != crate::write::WriteBackOutcome::SkippedInUse || tries >= IN_USE_TRIES {
             return Ok(outcome);
         }

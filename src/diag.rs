@@ -605,6 +605,9 @@ codes! {
     EqualOrder = "W203",
     /// No write-back target in the blackboard.
     NoWriteBackTarget = "W204",
+    /// A program of a cell whose controller has no `Code` interface of its name: its path is
+    /// not written back (SPEC.md 9).
+    NoProgramTarget = "W205",
     /// The start step is not marked `initialStep="true"`.
     StartNotInitial = "W301",
     /// A step's resource was inferred from its skill.

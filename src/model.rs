@@ -133,6 +133,9 @@ pub struct Blackboard {
     pub sfc_ref: Option<RefValue>,
     /// Where the `.src` path is written back.
     pub write_back: Option<WriteBackTarget>,
+    /// Every `ExternalInterface` of `Code` with a `refURI` value, by its `Name`: where the
+    /// programs of a cell's other controllers are written back (SPEC.md 9).
+    pub code_targets: Vec<(String, WriteBackTarget)>,
 }
 
 /// A `refURI` attribute's value and where it stands.

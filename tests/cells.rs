@@ -54,3 +54,118 @@ fn a_robot_and_its_gripper_compile_as_one_program_and_follow_every_input() {
         inproc::dump(&d.events())
     );
 }
+
+/// `ws/<name>`: fixtures/ok/cell-two-robots-weld over fixtures/base/cell (two KUKA robots on
+/// controllers of their own, wired).
+fn two_robots(w: &Workspace, name: &str) -> std::path::PathBuf {
+    let dir = cell(w, name);
+    let case = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/ok/cell-two-robots-weld");
+    for e in fs::read_dir(case).unwrap() {
+        let e = e.unwrap();
+        fs::copy(e.path(), dir.join(e.file_name())).unwrap();
+    }
+    dir
+}
+
+#[test]
+fn a_cell_of_two_controllers_compiles_both_programs_on_every_input_edit() {
+    let w = Workspace::new();
+    let p = two_robots(&w, "Weld");
+    let d = InProc::with_dirs(&[&p]);
+    let evs = d.wait_for("the startup compile", WAIT, |e| {
+        is_for(e, "compile-succeeded", &p)
+    });
+    let ok = evs
+        .iter()
+        .find(|e| is_for(e, "compile-succeeded", &p))
+        .unwrap();
+    // One event lists both programs, each output with its program and controller.
+    let outputs: Vec<(String, String, String)> = ok["outputs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|o| {
+            let path = o["path"].as_str().unwrap();
+            let file = Path::new(path)
+                .file_name()
+                .unwrap()
+                .to_string_lossy()
+                .into_owned();
+            (
+                file,
+                o["program"].as_str().unwrap().to_owned(),
+                o["controller"].as_str().unwrap().to_owned(),
+            )
+        })
+        .collect();
+    let want = |f: &str, prog: &str, c: &str| (f.to_owned(), prog.to_owned(), c.to_owned());
+    assert_eq!(
+        outputs,
+        vec![
+            want(
+                "Blackboard_KUKA_KR15_2.src",
+                "Blackboard_KUKA_KR15_2",
+                "KUKA KR15-2"
+            ),
+            want(
+                "Blackboard_KUKA_KR15_2.dat",
+                "Blackboard_KUKA_KR15_2",
+                "KUKA KR15-2"
+            ),
+            want(
+                "Blackboard_KUKA_KR16_2.src",
+                "Blackboard_KUKA_KR16_2",
+                "KUKA KR16-2"
+            ),
+            want(
+                "Blackboard_KUKA_KR16_2.dat",
+                "Blackboard_KUKA_KR16_2",
+                "KUKA KR16-2"
+            ),
+        ],
+        "{ok}"
+    );
+    d.startup(&[&p]);
+    // Both paths are written back, each into its Code interface.
+    let bb = fs::read_to_string(p.join("Blackboard.aml")).unwrap();
+    assert!(
+        bb.contains("<Value>Blackboard_KUKA_KR15_2.src</Value>"),
+        "{bb}"
+    );
+    assert!(
+        bb.contains("<Value>Blackboard_KUKA_KR16_2.src</Value>"),
+        "{bb}"
+    );
+    // An edit of the second robot's device's IRL file recompiles the cell: its program
+    // changes, and the first robot's stays in step (same handshakes).
+    let irl = fs::read_to_string(p.join("schweiss.irl")).unwrap();
+    fs::write(
+        p.join("schweiss.irl"),
+        irl.replace("CURRENT / 400", "CURRENT / 500"),
+    )
+    .unwrap();
+    assert!(
+        inproc::wait_until(WAIT, || inproc::read_string(
+            &p.join("Blackboard_KUKA_KR16_2.src")
+        )
+        .contains("CURRENT / 500")),
+        "the weld source's IRL edit was not compiled\n{}",
+        inproc::dump(&d.events())
+    );
+    // An edit of the chart renames a step of the first robot: its program changes, the
+    // second one's too (its handshake comments name the step).
+    let sfc = fs::read_to_string(p.join("sfc.xml")).unwrap();
+    fs::write(
+        p.join("sfc.xml"),
+        sfc.replace("name=\"Grip\"", "name=\"Grasp\""),
+    )
+    .unwrap();
+    assert!(
+        inproc::wait_until(WAIT, || {
+            inproc::read_string(&p.join("Blackboard_KUKA_KR15_2.src")).contains("Grasp")
+                && inproc::read_string(&p.join("Blackboard_KUKA_KR16_2.src")).contains("Grasp")
+        }),
+        "the chart's edit did not reach both programs\n{}",
+        inproc::dump(&d.events())
+    );
+}

@@ -71,6 +71,9 @@ struct CaseToml {
 struct CellProgram {
     program: String,
     language: Option<String>,
+    /// The `Code` interface its path is written into (the first program's: the write-back
+    /// target); none: not written back.
+    code: Option<String>,
 }
 
 /// A language's outputs, the main one (the write-back's) first.
@@ -179,7 +182,10 @@ fn run_case(name: &str) {
     let lf = case.args.iter().any(|a| a == "--lf");
     // Each program and its outputs, the main one (the write-back's) first.
     let programs: Vec<(String, &[&str])> = if case.cell.is_empty() {
-        vec![(case.program.clone(), extensions(name, case.language.as_deref()))]
+        vec![(
+            case.program.clone(),
+            extensions(name, case.language.as_deref()),
+        )]
     } else {
         case.cell
             .iter()
@@ -224,10 +230,7 @@ fn run_case(name: &str) {
     let after = listing(dir);
     let added: Vec<&String> = after.keys().filter(|k| !before.contains_key(*k)).collect();
     // In the BTreeMap's order (`.dat` before `.src`).
-    let mut expected_added: Vec<String> = outputs
-        .iter()
-        .map(|(p, e)| format!("{p}.{e}"))
-        .collect();
+    let mut expected_added: Vec<String> = outputs.iter().map(|(p, e)| format!("{p}.{e}")).collect();
     expected_added.sort();
     assert_eq!(
         added,
@@ -265,7 +268,17 @@ fn run_case(name: &str) {
     // The write-back.
     let written = fs::read(&bb).unwrap();
     let main_output = format!("{}.{}", programs[0].0, programs[0].1[0]);
-    let region = check_write_back(name, &bb_name, &original, &written, &main_output);
+    let region = if case.cell.is_empty() {
+        check_write_back(name, &bb_name, &original, &written, &main_output)
+    } else {
+        let expected: Vec<(String, String)> = case
+            .cell
+            .iter()
+            .zip(&programs)
+            .filter_map(|(c, (p, exts))| Some((c.code.clone()?, format!("{p}.{}", exts[0]))))
+            .collect();
+        check_cell_write_back(name, &original, &written, &expected)
+    };
     if let Some(s) = &schemas {
         let xsd = caex_schema(s, &written);
         xmllint(&xsd, &bb).unwrap_or_else(|e| panic!("{name}: written-back blackboard: {e}"));
@@ -404,6 +417,51 @@ fn visible(text: &str) -> String {
 /// `refURI` attribute has no `Value`; `Some(Some((element, content)))`: the byte ranges of the
 /// `Value` element and of its content.
 type ValueRanges = Option<(Range<usize>, Range<usize>)>;
+
+/// A cell's write-back (SPEC.md 9): the blackboard is the original with the `Value` of each
+/// named `Code` interface's `refURI` replaced by its program's path, and nothing else changed.
+fn check_cell_write_back(
+    case: &str,
+    original: &[u8],
+    written: &[u8],
+    expected: &[(String, String)],
+) -> String {
+    let text = std::str::from_utf8(original).unwrap();
+    let doc = roxmltree::Document::parse(text).unwrap();
+    let code = doc
+        .descendants()
+        .find(|n| n.has_tag_name("InternalElement") && n.attribute("Name") == Some("Code"))
+        .unwrap_or_else(|| panic!("{case}: no Code element"));
+    let mut sites: Vec<(std::ops::Range<usize>, &str, &str)> = Vec::new();
+    for (iface, value) in expected {
+        let i = code
+            .children()
+            .find(|n| {
+                n.has_tag_name("ExternalInterface")
+                    && n.attribute("Name")
+                        .is_some_and(|v| v.eq_ignore_ascii_case(iface))
+            })
+            .unwrap_or_else(|| panic!("{case}: no Code interface `{iface}`"));
+        let v = i
+            .descendants()
+            .find(|n| n.has_tag_name("Value"))
+            .and_then(|v| v.first_child())
+            .unwrap_or_else(|| panic!("{case}: `{iface}` has no value"));
+        sites.push((v.range(), iface, value));
+    }
+    sites.sort_by_key(|s| std::cmp::Reverse(s.0.start));
+    let mut want = original.to_vec();
+    let mut report = String::new();
+    for (r, iface, value) in &sites {
+        want.splice(r.clone(), value.bytes());
+        report.push_str(&format!("{iface}: `{}` -> `{value}`\n", &text[r.clone()]));
+    }
+    assert!(
+        want == written,
+        "{case}: the blackboard is not the original with the programs' paths in their Code interfaces"
+    );
+    report
+}
 
 fn target_value(bytes: &[u8]) -> Option<ValueRanges> {
     let (offset, text) = match bytes.strip_prefix(b"\xEF\xBB\xBF") {

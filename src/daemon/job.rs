@@ -452,11 +452,19 @@ impl Job {
             outputs: applied
                 .outputs
                 .iter()
-                .map(|(p, w)| OutputInfo {
-                    path: p.display().to_string(),
-                    written: *w,
-                    program: program.name.clone(),
-                    controller: c.controller.clone(),
+                .enumerate()
+                .map(|(k, (p, w))| {
+                    // A cell's outputs each name their program and controller (SPEC.md 9).
+                    let (prog, controller) = match c.output_programs.get(k) {
+                        Some((prog, ctl)) => (prog.clone(), Some(ctl.clone())),
+                        None => (program.name.clone(), c.controller.clone()),
+                    };
+                    OutputInfo {
+                        path: p.display().to_string(),
+                        written: *w,
+                        program: prog,
+                        controller,
+                    }
                 })
                 .collect(),
             counts: Counts {

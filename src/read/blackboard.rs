@@ -267,6 +267,7 @@ impl Reader<'_> {
         let wires = self.wires(h, &resources, &controllers);
         let sfc_ref = self.sfc_reference(h);
         let write_back = self.write_back(h);
+        let code_targets = self.code_targets(h);
         Blackboard {
             file: self.file,
             resources,
@@ -274,6 +275,7 @@ impl Reader<'_> {
             wires,
             sfc_ref,
             write_back,
+            code_targets,
         }
     }
 
@@ -1130,6 +1132,28 @@ impl Reader<'_> {
                 None
             }
         }
+    }
+
+    /// Every `ExternalInterface` of `Code` with a `refURI` attribute, by its `Name`.
+    fn code_targets(&mut self, h: Node) -> Vec<(String, WriteBackTarget)> {
+        let Some(code) = internal_element(h, &["Code"]) else {
+            return Vec::new();
+        };
+        children(code, "ExternalInterface")
+            .filter_map(|ei| {
+                let name = caex_name(ei)?.to_owned();
+                let a = caex_attr(ei, "refURI")?;
+                let site = crate::model::SpliceSite::of(a)?;
+                Some((
+                    name,
+                    WriteBackTarget {
+                        attribute: Span::new(self.file, a.range()),
+                        current: caex_value(self.file, a).map(|(v, _)| v),
+                        site,
+                    },
+                ))
+            })
+            .collect()
     }
 
     fn write_back(&mut self, h: Node) -> Option<WriteBackTarget> {

@@ -25,8 +25,8 @@ pub mod writeback;
 
 pub use atomic::{WriteOutcome, is_temporary, write_all_if_changed, write_if_changed};
 pub use folder::Folder;
-pub use splice::{SpliceSite, splice_at, splice_value};
-pub use writeback::{WriteBackOutcome, write_back};
+pub use splice::{SpliceSite, splice_all, splice_at, splice_value};
+pub use writeback::{WriteBackOutcome, write_back, write_back_all};
 
 /// Whether the open `file` holds exactly `expected`: its length by `fstat`, then its bytes read
 /// through the descriptor from offset 0 (positional reads: the descriptor's own offset is left

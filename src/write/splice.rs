@@ -46,6 +46,30 @@ pub fn splice_at(text: &str, site: &SpliceSite, value: &str) -> Result<Option<St
     Ok(Some(out))
 }
 
+/// [`splice_at`] at several sites of one text (a cell writes every program's path into its
+/// `Code` interface, SPEC.md 9), from the last to the first so each range still holds; `Ok(None)`
+/// when every value is already right. `Err` as [`splice_at`], or when two sites overlap.
+pub fn splice_all(text: &str, splices: &[(&SpliceSite, &str)]) -> Result<Option<String>, String> {
+    let mut order: Vec<&(&SpliceSite, &str)> = splices.iter().collect();
+    order.sort_by_key(|(site, _)| std::cmp::Reverse(site.replace.start));
+    for w in order.windows(2) {
+        if w[1].0.replace.end > w[0].0.replace.start {
+            return Err(format!(
+                "write-back: the sites {:?} and {:?} overlap",
+                w[1].0.replace, w[0].0.replace
+            ));
+        }
+    }
+    let mut out: Option<String> = None;
+    for (site, value) in order {
+        let cur = out.as_deref().unwrap_or(text);
+        if let Some(t) = splice_at(cur, site, value)? {
+            out = Some(t);
+        }
+    }
+    Ok(out)
+}
+
 /// [`splice_at`] for the `Attribute` element whose whole byte range in `text` is `attribute`:
 /// parses `text` as the reader does (roxmltree, no DTD) and finds the site with
 /// [`SpliceSite::of`]. `Err` when `text` is not well-formed or `attribute` is not the range of

@@ -89,7 +89,7 @@ use std::path::{Path, PathBuf};
 
 use super::atomic::{parent_dir, stage_in, sync_dir};
 use super::holds;
-use super::splice::{SpliceSite, splice_at};
+use super::splice::{SpliceSite, splice_all};
 
 /// The UTF-8 byte order mark.
 const BOM: &[u8] = b"\xEF\xBB\xBF";
@@ -155,7 +155,7 @@ impl WriteBackOutcome {
 /// `expected` is the whole file as read, a BOM included; `bom` says whether it starts with a
 /// UTF-8 BOM (as [`crate::diag::SourceFile::bom`] records it; a disagreement is an
 /// `InvalidInput` error). `site` is where the value goes in the text *after* the BOM, as the
-/// reader found it. The new text is [`splice_at`] of that text, the BOM is put back; the new
+/// reader found it. The new text is [`super::splice_at`] of that text, the BOM is put back; the new
 /// file gets the blackboard's mode and (best effort) owner. A blackboard that is a symbolic
 /// link: the file it points to is written, the link stays.
 ///
@@ -171,15 +171,18 @@ pub fn write_back(
     site: &SpliceSite,
     value: &str,
 ) -> io::Result<WriteBackOutcome> {
-    write_back_with(
-        path,
-        expected,
-        bom,
-        site,
-        value,
-        &Opts::default(),
-        &mut |_| {},
-    )
+    write_back_all(path, expected, bom, &[(site, value)])
+}
+
+/// [`write_back`] of several values at once, in one new file ([`splice_all`]): a cell's
+/// programs (SPEC.md 9).
+pub fn write_back_all(
+    path: &Path,
+    expected: &[u8],
+    bom: bool,
+    splices: &[(&SpliceSite, &str)],
+) -> io::Result<WriteBackOutcome> {
+    write_back_with(path, expected, bom, splices, &Opts::default(), &mut |_| {})
 }
 
 /// Test switches.
@@ -226,8 +229,7 @@ pub(crate) fn write_back_with(
     path: &Path,
     expected: &[u8],
     bom: bool,
-    site: &SpliceSite,
-    value: &str,
+    splices: &[(&SpliceSite, &str)],
     opts: &Opts,
     hook: &mut dyn FnMut(Point),
 ) -> io::Result<WriteBackOutcome> {
@@ -256,7 +258,7 @@ pub(crate) fn write_back_with(
             format!("write-back: the blackboard is not UTF-8: {e}"),
         )
     })?;
-    let new_text = match splice_at(text, site, value) {
+    let new_text = match splice_all(text, splices) {
         Ok(Some(t)) => t,
         Ok(None) => return Ok(WriteBackOutcome::AlreadyRight),
         Err(e) => return Err(io::Error::new(io::ErrorKind::InvalidInput, e)),
@@ -793,8 +795,7 @@ mod tests {
             p,
             SAMPLE.as_bytes(),
             false,
-            &site(SAMPLE),
-            "x.src",
+            &[(&site(SAMPLE), "x.src")],
             &opts,
             hook,
         )
@@ -1165,8 +1166,7 @@ mod tests {
             &p,
             SAMPLE.as_bytes(),
             false,
-            &site(SAMPLE),
-            "x.src",
+            &[(&site(SAMPLE), "x.src")],
             &Opts::default(),
             &mut |pt| match pt {
                 Point::BeforeExchange => {

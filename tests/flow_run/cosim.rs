@@ -332,14 +332,20 @@ impl Wires {
         };
         // `<holder ID>:<name>` → (controller, output?, number)
         let mut signals: HashMap<String, (usize, bool, u32)> = HashMap::new();
-        for e in doc.descendants().filter(|n| n.has_tag_name("InternalElement")) {
+        for e in doc
+            .descendants()
+            .filter(|n| n.has_tag_name("InternalElement"))
+        {
             let Some(c) = controllers
                 .iter()
                 .position(|c| Some(c.as_str()) == e.attribute("Name"))
             else {
                 continue;
             };
-            for i in e.descendants().filter(|n| n.has_tag_name("ExternalInterface")) {
+            for i in e
+                .descendants()
+                .filter(|n| n.has_tag_name("ExternalInterface"))
+            {
                 let (Some(io), Some(num)) = (attr(i, "IoType"), attr(i, "Number")) else {
                     continue;
                 };
@@ -764,7 +770,10 @@ pub fn compile_cell(
         })
         .collect();
     let names: Vec<String> = (1..=n).map(|k| format!("R{k}")).collect();
-    let wires = Wires::read(&std::fs::read_to_string(dir.join("Blackboard.aml")).unwrap(), &names);
+    let wires = Wires::read(
+        &std::fs::read_to_string(dir.join("Blackboard.aml")).unwrap(),
+        &names,
+    );
     Ok(CellPrograms { programs, wires })
 }
 
@@ -954,7 +963,8 @@ pub fn fixture_cell(
 ) -> (Chart, CellPrograms, HashMap<String, usize>) {
     let _ = std::fs::remove_dir_all(dir);
     std::fs::create_dir_all(dir).unwrap();
-    let toml = std::fs::read_to_string(repo().join("fixtures/ok").join(case).join("case.toml")).unwrap();
+    let toml =
+        std::fs::read_to_string(repo().join("fixtures/ok").join(case).join("case.toml")).unwrap();
     let program = toml
         .lines()
         .find_map(|l| l.strip_prefix("program = \""))
@@ -962,7 +972,12 @@ pub fn fixture_cell(
         .trim_end_matches('"')
         .to_owned();
     if let Some(base) = toml.lines().find_map(|l| l.strip_prefix("base = \"")) {
-        crate::copy_dir(&repo().join("fixtures/base").join(base.trim_end_matches('"')), dir);
+        crate::copy_dir(
+            &repo()
+                .join("fixtures/base")
+                .join(base.trim_end_matches('"')),
+            dir,
+        );
     }
     crate::copy_dir(&repo().join("fixtures/ok").join(case), dir);
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
@@ -970,7 +985,11 @@ pub fn fixture_cell(
         .current_dir(dir)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{case}: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{case}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let mut robot_of = HashMap::new();
     let programs: Vec<Option<(String, String)>> = programs
         .iter()
@@ -987,7 +1006,10 @@ pub fn fixture_cell(
         })
         .collect();
     let names: Vec<String> = controllers.iter().map(|c| c.to_string()).collect();
-    let wires = Wires::read(&std::fs::read_to_string(dir.join("Blackboard.aml")).unwrap(), &names);
+    let wires = Wires::read(
+        &std::fs::read_to_string(dir.join("Blackboard.aml")).unwrap(),
+        &names,
+    );
     (
         Chart::read(&dir.join("sfc.xml")),
         CellPrograms { programs, wires },
