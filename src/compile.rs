@@ -689,6 +689,35 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 only.as_ref(),
                 &mut cx.diags,
             );
+            // The handshakes' wires are the handshakes' (SPEC.md 9): a condition reading one
+            // would see the toggles.
+            if let (Some(cell), Some(c)) = (&cell, prog.controller) {
+                let used: Vec<usize> = cell
+                    .channels
+                    .iter()
+                    .flat_map(|ch| ch.strobe.iter().chain(&ch.data).chain(&ch.ack).copied())
+                    .collect();
+                for &si in &bound.signals {
+                    let Some(&w) = used
+                        .iter()
+                        .find(|&&w| bb.wires[w].from == (c, si) || bb.wires[w].to == (c, si))
+                    else {
+                        continue;
+                    };
+                    let sig = &bb.resources[c].signals[si];
+                    cx.diags.push(
+                        Diagnostic::error(
+                            Code::BadSignal,
+                            format!(
+                                "signal `{}` is a wire the handshakes between controllers use (InternalLink `{}`); a condition must not read it: give the condition a signal of its own, or declare more wires",
+                                sig.name.text, bb.wires[w].name
+                            ),
+                        )
+                        .at(sig.name.span.clone())
+                        .element(sig.element.clone()),
+                    );
+                }
+            }
             bound_programs.push(bound);
         }
         out.skill_steps = bound_programs

@@ -55,11 +55,11 @@ fn a_robot_and_its_gripper_compile_as_one_program_and_follow_every_input() {
     );
 }
 
-/// `ws/<name>`: fixtures/ok/cell-two-robots-weld over fixtures/base/cell (two KUKA robots on
-/// controllers of their own, wired).
+/// `ws/<name>`: fixtures/base/cell2 over fixtures/base/cell (two KUKA robots on controllers of
+/// their own, wired: the case fixtures/ok/cell-two-robots-weld).
 fn two_robots(w: &Workspace, name: &str) -> std::path::PathBuf {
     let dir = cell(w, name);
-    let case = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/ok/cell-two-robots-weld");
+    let case = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/base/cell2");
     for e in fs::read_dir(case).unwrap() {
         let e = e.unwrap();
         fs::copy(e.path(), dir.join(e.file_name())).unwrap();

@@ -6,7 +6,8 @@
 //!
 //! ```toml
 //! # What the case breaks (one line, for the reader).
-//! base = "flow"                 # optional: fixtures/base/<base>/ first, the case's files over it
+//! base = "flow"                 # optional: fixtures/base/<base>/ first (a list: each in order),
+//!                                # the case's files over it
 //! program = "output"             # the PROGRAM argument (default "output")
 //! blackboard = "Blackboard.aml"  # default: the only *.aml in the folder
 //! template = "bad.toml"          # passed as `--template` (optional)
@@ -42,7 +43,7 @@ const UNCOVERED: &[(&str, &str)] = &[(
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Expect {
-    base: Option<String>,
+    base: Option<Bases>,
     #[serde(default = "default_program")]
     program: String,
     blackboard: Option<String>,
@@ -51,6 +52,24 @@ struct Expect {
     exact: bool,
     #[serde(default)]
     error: Vec<ExpectedError>,
+}
+
+/// `base`: one folder of `fixtures/base/`, or several, copied in order (later ones over
+/// earlier ones).
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum Bases {
+    One(String),
+    Many(Vec<String>),
+}
+
+impl Bases {
+    fn list(&self) -> Vec<&str> {
+        match self {
+            Bases::One(b) => vec![b.as_str()],
+            Bases::Many(v) => v.iter().map(String::as_str).collect(),
+        }
+    }
 }
 
 fn default_program() -> String {
@@ -209,14 +228,14 @@ fn run_case(case: &Path) -> Vec<String> {
         }
     }
 
-    let mut files = match &expect.base {
-        Some(b) => snapshot(
+    let mut files: BTreeMap<PathBuf, Vec<u8>> = Default::default();
+    for b in expect.base.iter().flat_map(Bases::list) {
+        files.extend(snapshot(
             &Path::new(env!("CARGO_MANIFEST_DIR"))
                 .join("fixtures/base")
                 .join(b),
-        ),
-        None => Default::default(),
-    };
+        ));
+    }
     files.extend(snapshot(case));
     let blackboard = match &expect.blackboard {
         Some(b) => b.clone(),

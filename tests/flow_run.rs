@@ -1315,15 +1315,23 @@ fn cells_keep_the_charts_order_whatever_the_timing() {
     assert!(programs >= 2 * CELL_CHARTS);
 }
 
+/// The cell fixtures: case, its programs, their controllers.
+type CellFixture = (
+    &'static str,
+    &'static [&'static str],
+    &'static [&'static str],
+);
+const CELL_FIXTURES: &[CellFixture] = &[(
+    "cell-two-robots-weld",
+    &["Cell_KUKA_KR15_2", "Cell_KUKA_KR16_2"],
+    &["KUKA KR15-2", "KUKA KR16-2"],
+)];
+
 /// The cell fixtures, co-simulated the same way.
 #[test]
 fn cell_fixtures_keep_the_charts_order_whatever_the_timing() {
     let dir = tempfile::tempdir().unwrap();
-    for (case, programs, controllers) in [(
-        "cell-two-robots-weld",
-        &["Cell_KUKA_KR15_2", "Cell_KUKA_KR16_2"][..],
-        &["KUKA KR15-2", "KUKA KR16-2"][..],
-    )] {
+    for &(case, programs, controllers) in CELL_FIXTURES {
         let (chart, cell, robot_of) =
             cosim::fixture_cell(&dir.path().join(case), case, programs, controllers);
         assert!(!cell.wires.from.is_empty(), "{case}: no wires read");

@@ -4,7 +4,8 @@
 //! Each case folder holds the project's files and a `case.toml`:
 //!
 //! ```toml
-//! base = "flow"                # optional: fixtures/base/<base>/ is copied first, the case's
+//! base = "flow"                # optional: fixtures/base/<base>/ is copied first (a list:
+//!                              # each in order, later over earlier), the case's
 //!                              # files over it (a case keeps only what it changes)
 //! program = "Name"             # the <PROGRAM> argument
 //! language = "RAPID"           # optional: the program's language (KRL by default), which
@@ -49,7 +50,7 @@ use serde::Deserialize;
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct CaseToml {
-    base: Option<String>,
+    base: Option<Bases>,
     program: String,
     language: Option<String>,
     blackboard: Option<String>,
@@ -63,6 +64,24 @@ struct CaseToml {
     stdout_contains: Vec<String>,
     #[serde(default)]
     cell: Vec<CellProgram>,
+}
+
+/// `base`: one folder of `fixtures/base/`, or several, copied in order (later ones over
+/// earlier ones).
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum Bases {
+    One(String),
+    Many(Vec<String>),
+}
+
+impl Bases {
+    fn list(&self) -> Vec<&str> {
+        match self {
+            Bases::One(b) => vec![b.as_str()],
+            Bases::Many(v) => v.iter().map(String::as_str).collect(),
+        }
+    }
 }
 
 /// One program of a cell case.
@@ -168,7 +187,7 @@ fn run_case(name: &str) {
 
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    if let Some(base) = &case.base {
+    for base in case.base.iter().flat_map(Bases::list) {
         copy_dir(&repo().join("fixtures/base").join(base), dir);
     }
     copy_dir(&case_dir, dir);

@@ -963,21 +963,18 @@ pub fn fixture_cell(
 ) -> (Chart, CellPrograms, HashMap<String, usize>) {
     let _ = std::fs::remove_dir_all(dir);
     std::fs::create_dir_all(dir).unwrap();
-    let toml =
-        std::fs::read_to_string(repo().join("fixtures/ok").join(case).join("case.toml")).unwrap();
-    let program = toml
-        .lines()
-        .find_map(|l| l.strip_prefix("program = \""))
-        .unwrap()
-        .trim_end_matches('"')
-        .to_owned();
-    if let Some(base) = toml.lines().find_map(|l| l.strip_prefix("base = \"")) {
-        crate::copy_dir(
-            &repo()
-                .join("fixtures/base")
-                .join(base.trim_end_matches('"')),
-            dir,
-        );
+    let toml: toml::Value = toml::from_str(
+        &std::fs::read_to_string(repo().join("fixtures/ok").join(case).join("case.toml")).unwrap(),
+    )
+    .unwrap();
+    let program = toml["program"].as_str().unwrap().to_owned();
+    let bases: Vec<&str> = match toml.get("base") {
+        Some(toml::Value::String(b)) => vec![b.as_str()],
+        Some(toml::Value::Array(v)) => v.iter().map(|b| b.as_str().unwrap()).collect(),
+        _ => Vec::new(),
+    };
+    for base in bases {
+        crate::copy_dir(&repo().join("fixtures/base").join(base), dir);
     }
     crate::copy_dir(&repo().join("fixtures/ok").join(case), dir);
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
