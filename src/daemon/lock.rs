@@ -112,18 +112,21 @@ impl Locks {
     /// appears. Error: the sentence to report (another daemon keeps it, or it cannot be locked).
     pub(super) fn acquire(&mut self, folder: &Path) -> Result<(), String> {
         if self.holds(folder) {
-            return self.ensure(folder);
+            return self.ensure(folder).map(drop);
         }
         self.names.insert(folder.to_owned(), None);
         let r = self.ensure(folder);
         if r.is_err() {
             self.names.remove(folder);
         }
-        r
+        r.map(drop)
     }
 
     /// Locks `folder` (kept by [`Locks::acquire`]) if it exists now and is not locked yet.
-    pub(super) fn ensure(&mut self, folder: &Path) -> Result<(), String> {
+    /// `Ok(true)`: this daemon holds it; `Ok(false)`: it is not there (yet), so nobody may
+    /// compile it until a later call returns `true` (a folder that appears right after this
+    /// answer is not ours yet).
+    pub(super) fn ensure(&mut self, folder: &Path) -> Result<bool, String> {
         match self.names.get(folder) {
             Some(Some(id)) => {
                 // Still the folder we locked? One deleted (or moved away) and made again under
@@ -133,7 +136,7 @@ impl Locks {
                         self.release(folder);
                         self.names.insert(folder.to_owned(), None);
                     }
-                    _ => return Ok(()),
+                    _ => return Ok(true),
                 }
             }
             Some(None) => {}
@@ -156,7 +159,7 @@ impl Locks {
             Err(_) => match std::fs::metadata(folder) {
                 Ok(m) if m.is_dir() => (None, m),
                 // Not there (yet): locked when it appears.
-                _ => return Ok(()),
+                _ => return Ok(false),
             },
         };
         let id = (meta.dev(), meta.ino());
@@ -164,7 +167,7 @@ impl Locks {
             // The same folder under another name: ours already.
             h.names += 1;
             self.names.insert(folder.to_owned(), Some(id));
-            return Ok(());
+            return Ok(true);
         }
         if self.at_limit() {
             return Err(format!(
@@ -200,7 +203,7 @@ impl Locks {
             },
         );
         self.names.insert(folder.to_owned(), Some(id));
-        Ok(())
+        Ok(true)
     }
 
     /// The message when another daemon keeps `real`; with its pid when its note is ours to read.
@@ -413,8 +416,11 @@ mod tests {
             a.held.is_empty() && b.held.is_empty(),
             "no descriptor while missing"
         );
+        // Missing: kept, but not held, so its caller compiles nothing yet (a folder that
+        // appears right after this answer is not ours until a later `ensure` says so).
+        assert_eq!(a.ensure(&real), Ok(false));
         std::fs::create_dir(&real).unwrap();
-        a.ensure(&real).unwrap();
+        assert_eq!(a.ensure(&real), Ok(true));
         let e = b.ensure(&alias).unwrap_err();
         assert!(e.contains("another skillpost daemon"), "{e}");
         // The folder made again (a new inode): the lock follows it.
@@ -425,7 +431,7 @@ mod tests {
         c.acquire(&alias).unwrap();
         assert!(a.ensure(&real).is_err(), "a kept the old inode's lock only");
         drop(c);
-        a.ensure(&real).unwrap();
+        assert_eq!(a.ensure(&real), Ok(true));
     }
 
     #[test]

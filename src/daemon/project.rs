@@ -557,9 +557,22 @@ impl Daemon {
     pub(super) fn claim_folder(&mut self, p: &mut Project) -> bool {
         let key = p.spec.path.clone();
         match self.locks.ensure(&key) {
-            Ok(()) => {
+            Ok(true) => {
                 p.foreign = false;
                 true
+            }
+            // Not there at the lock: it is not ours yet, whatever appears a moment later (the
+            // folder's event, or the missing folders' check, claims it then).
+            Ok(false) => {
+                if !p.missing {
+                    p.missing = true;
+                    let why = match config::too_long(&key) {
+                        Err(why) => format!("the project folder cannot be used: {why}"),
+                        Ok(()) => "the project folder does not exist; waiting for it".into(),
+                    };
+                    self.degraded(&key, why);
+                }
+                false
             }
             Err(why) => {
                 p.missing = true;
