@@ -1278,17 +1278,26 @@ const CELL_RUNS: usize = 1_000;
 fn cells_keep_the_charts_order_whatever_the_timing() {
     let dir = tempfile::tempdir().unwrap();
     let (mut charts, mut seed, mut programs) = (0, 0u64, 0);
+    let mut rapid_sample: Vec<(String, Output)> = Vec::new();
     while charts < CELL_CHARTS {
         seed += 1;
         let Some((chart, cell, robot_of, _)) = cosim::random_cell(&dir.path().join("cell"), seed)
         else {
             continue;
         };
-        for (k, p) in cell.programs.iter().enumerate() {
-            if let Some((src, dat)) = p {
+        for (k, (p, lang)) in cell.programs.iter().zip(&cell.langs).enumerate() {
+            if let Some((main, dat)) = p {
                 let name = format!("Cell_R{}", k + 1);
-                if let Err(e) = krl_syntax::check_krl(src, dat, &name, true) {
-                    panic!("seed {seed}: {name}: {e}\n{src}");
+                let output = Output {
+                    lang: *lang,
+                    main: main.clone(),
+                    dat: dat.clone(),
+                };
+                if let Err(e) = output.syntax(&name) {
+                    panic!("seed {seed}: {name}: {e}\n{main}");
+                }
+                if *lang == Lang::Rapid && rapid_sample.len() < 12 {
+                    rapid_sample.push((format!("seed {seed} {name}"), output));
                 }
                 programs += 1;
             }
@@ -1300,6 +1309,7 @@ fn cells_keep_the_charts_order_whatever_the_timing() {
             seed,
             CELL_RUNS,
             cosim::Mutation::None,
+            None,
         ) {
             let keep = std::env::temp_dir().join(format!("skillpost-cosim-seed-{seed}"));
             let _ = std::fs::remove_dir_all(&keep);
@@ -1313,17 +1323,26 @@ fn cells_keep_the_charts_order_whatever_the_timing() {
         charts += 1;
     }
     assert!(programs >= 2 * CELL_CHARTS);
+    // A sample of the RAPID modules through rapidchecker (half a second each).
+    let mut checker = RapidChecker::new();
+    for (what, output) in &rapid_sample {
+        checker.add(what, output);
+    }
+    checker.check();
 }
 
-/// The cell fixtures: case, its programs, their controllers.
+/// The cell fixtures: case, its programs and their languages, their controllers.
 type CellFixture = (
     &'static str,
-    &'static [&'static str],
+    &'static [(&'static str, Lang)],
     &'static [&'static str],
 );
 const CELL_FIXTURES: &[CellFixture] = &[(
     "cell-two-robots-weld",
-    &["Cell_KUKA_KR15_2", "Cell_KUKA_KR16_2"],
+    &[
+        ("Cell_KUKA_KR15_2", Lang::Krl),
+        ("Cell_KUKA_KR16_2", Lang::Krl),
+    ],
     &["KUKA KR15-2", "KUKA KR16-2"],
 )];
 
@@ -1342,14 +1361,16 @@ fn cell_fixtures_keep_the_charts_order_whatever_the_timing() {
             7,
             CELL_RUNS,
             cosim::Mutation::None,
+            None,
         ) {
             panic!("{case}: {e}");
         }
     }
 }
 
-/// The co-simulation catches each way a handshake can be wrong: a dropped wait, a decision
-/// taken again by a follower, an output set by the advance run.
+/// The co-simulation catches each way a handshake can be wrong, in each language: a dropped
+/// wait, a decision taken again by a follower, an output set while the motion before it runs.
+/// Only the programs of one language are broken at a time.
 #[test]
 fn the_cell_co_simulation_catches_broken_handshakes() {
     let dir = tempfile::tempdir().unwrap();
@@ -1358,33 +1379,37 @@ fn the_cell_co_simulation_catches_broken_handshakes() {
         cosim::Mutation::DecidesTwice,
         cosim::Mutation::AdvanceRun,
     ] {
-        let mut caught = 0;
-        let mut tried = 0;
-        let mut seed = 1000;
-        while tried < 20 {
-            seed += 1;
-            let Some((chart, cell, robot_of, _)) =
-                cosim::random_cell(&dir.path().join("cell"), seed)
-            else {
-                continue;
-            };
-            let applies = cell
-                .programs
-                .iter()
-                .flatten()
-                .any(|(src, _)| match mutation {
-                    cosim::Mutation::DecidesTwice => src.contains("IF skp_got == 0 THEN"),
-                    _ => src.contains("skp_rx"),
+        for lang in [Lang::Krl, Lang::Rapid, Lang::UrScript] {
+            let (mut caught, mut tried, mut seed) = (0, 0, 1000);
+            while tried < 8 && seed < 1400 {
+                seed += 1;
+                let Some((chart, cell, robot_of, _)) =
+                    cosim::random_cell(&dir.path().join("cell"), seed)
+                else {
+                    continue;
+                };
+                let applies = cell.programs.iter().zip(&cell.langs).any(|(p, l)| {
+                    *l == lang
+                        && p.as_ref().is_some_and(|(src, _)| match mutation {
+                            cosim::Mutation::DecidesTwice => src.contains("skp_got"),
+                            _ => src.contains("skp_rx"),
+                        })
                 });
-            if !applies {
-                continue;
+                if !applies {
+                    continue;
+                }
+                tried += 1;
+                if cosim::co_simulate(&chart, &cell, &robot_of, seed, 200, mutation, Some(lang))
+                    .is_err()
+                {
+                    caught += 1;
+                }
             }
-            tried += 1;
-            if cosim::co_simulate(&chart, &cell, &robot_of, seed, 200, mutation).is_err() {
-                caught += 1;
-            }
+            eprintln!("{mutation:?} in {lang:?}: caught in {caught} of {tried} cells");
+            assert!(
+                caught > 0,
+                "{mutation:?} in the {lang:?} programs: caught in none of {tried} cells"
+            );
         }
-        assert!(caught > 0, "{mutation:?}: caught in none of {tried} charts");
-        eprintln!("{mutation:?}: caught in {caught} of {tried} charts");
     }
 }

@@ -10,8 +10,10 @@
 //!   message; this wait also ends the motion before it: KRL's `WAIT FOR` stops the advance run,
 //!   RAPID's `WaitUntil \InPos` waits for the robot to stand, URScript waits for
 //!   `is_steady()` first), set the data wires, toggle `skp_txN` and put it on the strobe;
-//! - **hear** (B): toggle `skp_rxN`, wait until the strobe equals it, read the data wires into
-//!   `skp_got`, put `skp_rxN` on the acknowledgement.
+//! - **hear** (B): toggle `skp_rxN`, wait until the strobe equals it (and, like every wait of
+//!   a handshake, until the motions before it have ended: no wire changes while a motion before
+//!   it may still run), read the data wires into `skp_got`, put `skp_rxN` on the
+//!   acknowledgement.
 //!
 //! A sender is never more than one message ahead on a channel, so no toggle is ever missed,
 //! also across loop rounds.
@@ -268,7 +270,7 @@ impl<'a> Hand<'a> {
             .signal(ch.strobe, false)
             .and_then(|s| self.read(s).ok())
             .unwrap_or_default();
-        self.wait_equal(&mut out, &strobe, &var, false);
+        self.wait_equal(&mut out, &strobe, &var, true);
         if m.kind == Kind::Decision {
             out.push((0, self.assign(DECISION_VAR, "0")));
             for (bit, &w) in ch.data.iter().enumerate() {

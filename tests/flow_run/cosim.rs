@@ -20,19 +20,49 @@ use std::collections::HashMap;
 
 use crate::chart::{Chart, ChartGen};
 use crate::krl::{KExpr, bits, code, kexpr};
-use crate::{Phase, Rng, repo, sequences};
+use crate::machine::{Expr as MExpr, Op};
+use crate::{Lang, Phase, Rng, SIGNALS, repo, sequences};
+
+/// An expression of a program: KRL's, or (RAPID, URScript) the machine's for conditions and
+/// the few forms the handshakes and the structured writer use.
+#[derive(Debug, Clone)]
+pub enum X {
+    K(KExpr),
+    /// A condition as the language's reader of `flow_run` reads it; `true`: a boolean signal
+    /// reads as the number 0 or 1 (RAPID).
+    M(MExpr, bool),
+    /// A wire input (its `Number` or `Address`) as a boolean.
+    Wire(String),
+    Num(i64),
+    Truth(bool),
+    Var(String),
+    /// `v + k`, `1 - v`, `not v`, `a == b` (booleans and 0/1 numbers compare by truth).
+    Add(String, i64),
+    OneMinus(String),
+    Not(Box<X>),
+    Same(Box<X>, Box<X>),
+}
+
+impl From<KExpr> for X {
+    fn from(k: KExpr) -> X {
+        X::K(k)
+    }
+}
 
 /// One statement of a program, flattened: blocks become jumps.
 #[derive(Debug, Clone)]
 pub enum Ins {
-    /// A step's FOLD: its motion.
+    /// A step's title: its motion.
     Step(String),
-    WaitFor(KExpr),
+    /// A wait until the condition holds; `true`: the motions before end first (KRL's `WAIT FOR`
+    /// stops the advance run, RAPID's `WaitUntil \InPos`, URScript's wait for `is_steady()`).
+    WaitFor(X, bool),
+    /// Ends the motions before (KRL's `WAIT SEC`).
     WaitSec,
-    /// `$OUT[n] = e`.
-    SetOut(u32, KExpr),
-    Assign(String, KExpr),
-    JumpIfNot(KExpr, usize),
+    /// An output (`Number` or `Address`) set.
+    SetOut(String, X),
+    Assign(String, X),
+    JumpIfNot(X, usize),
     Jump(usize),
     End,
 }
@@ -108,12 +138,12 @@ pub fn parse(src: &str) -> Vec<Ins> {
                     out.push(Ins::WaitSec);
                 } else {
                     assert!(rest.to_ascii_uppercase().starts_with("FOR "));
-                    out.push(Ins::WaitFor(kexpr(&rest[4..])));
+                    out.push(Ins::WaitFor(kexpr(&rest[4..]).into(), true));
                 }
             }
             "IF" => {
                 let cond = c[2..].trim().strip_suffix("THEN").unwrap();
-                out.push(Ins::JumpIfNot(kexpr(cond), 0));
+                out.push(Ins::JumpIfNot(kexpr(cond).into(), 0));
                 open.push(Open::If {
                     test: out.len() - 1,
                     to_end: Vec::new(),
@@ -174,7 +204,7 @@ pub fn parse(src: &str) -> Vec<Ins> {
                 let Some(Open::Repeat { start }) = open.pop() else {
                     panic!("UNTIL outside REPEAT")
                 };
-                out.push(Ins::JumpIfNot(kexpr(&c[5..]), start));
+                out.push(Ins::JumpIfNot(kexpr(&c[5..]).into(), start));
             }
             "SWITCH" => open.push(Open::Switch {
                 sel: kexpr(&c[6..]),
@@ -195,7 +225,7 @@ pub fn parse(src: &str) -> Vec<Ins> {
                 if first == "CASE" {
                     let v: i64 = c[4..].trim().parse().unwrap();
                     out.push(Ins::JumpIfNot(
-                        KExpr::Bin("==".into(), Box::new(sel), Box::new(KExpr::Int(v))),
+                        KExpr::Bin("==".into(), Box::new(sel), Box::new(KExpr::Int(v))).into(),
                         0,
                     ));
                     if let Some(Open::Switch { test, .. }) = open.last_mut() {
@@ -221,7 +251,7 @@ pub fn parse(src: &str) -> Vec<Ins> {
                 {
                     let lhs = lhs.trim();
                     if let Some(n) = lhs.strip_prefix("$OUT[").and_then(|r| r.strip_suffix(']')) {
-                        out.push(Ins::SetOut(n.parse().unwrap(), kexpr(rhs)));
+                        out.push(Ins::SetOut(n.to_owned(), kexpr(rhs).into()));
                     } else if lhs
                         .chars()
                         .all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
@@ -232,7 +262,7 @@ pub fn parse(src: &str) -> Vec<Ins> {
                             }
                             None => kexpr(rhs),
                         };
-                        out.push(Ins::Assign(lhs.to_ascii_uppercase(), e));
+                        out.push(Ins::Assign(lhs.to_ascii_uppercase(), e.into()));
                     }
                 }
             }
@@ -245,6 +275,16 @@ pub fn parse(src: &str) -> Vec<Ins> {
 enum Val {
     I(i64),
     B(bool),
+}
+
+impl Val {
+    /// A boolean, or a 0/1 number (RAPID's digital values), as a truth.
+    fn truth(self) -> bool {
+        match self {
+            Val::B(b) => b,
+            Val::I(i) => i != 0,
+        }
+    }
 }
 
 /// Reads the `.dat`: `SIGNAL` groups and `DECL BOOL`/`DECL INT` variables.
@@ -288,7 +328,8 @@ struct Ctl {
     /// Time a statement takes, and the factor of its motions.
     eps: f64,
     slow: f64,
-    outs: HashMap<u32, bool>,
+    /// The outputs it drove, by `Number` or `Address`.
+    outs: HashMap<String, bool>,
     ended: bool,
     /// Stopped after `cap` steps (an endless chart).
     capped: bool,
@@ -296,13 +337,15 @@ struct Ctl {
     /// Steps run: name, start and end of the motion.
     steps: Vec<(String, f64, f64)>,
     /// Outputs set while a motion still ran: (output, the step whose motion ran).
-    advance_faults: Vec<(u32, String)>,
+    advance_faults: Vec<(String, String)>,
 }
 
 /// The world: each controller, the wires, the input phases and when each begins.
 struct World<'w> {
     ctls: Vec<Ctl>,
     wires: &'w Wires,
+    /// The phases as each signal's value, and as KRL's bits.
+    seq: Vec<Phase>,
     phases: Vec<HashMap<String, bool>>,
     /// When phase k+1 begins.
     changes: Vec<f64>,
@@ -310,17 +353,18 @@ struct World<'w> {
     salt: u64,
 }
 
-/// The wires of a cell: (controller, `$IN` number) → (controller, `$OUT` number) that drives
-/// it, read from the blackboard's `InternalLink`s.
+/// The wires of a cell: (controller, input) → (controller, output) that drives it, each side
+/// by its signal's `Number` (as text) or else its `Address`, read from the blackboard's
+/// `InternalLink`s.
 #[derive(Debug, Default)]
 pub struct Wires {
-    pub from: HashMap<(usize, u32), (usize, u32)>,
+    pub from: HashMap<(usize, String), (usize, String)>,
 }
 
 impl Wires {
     /// Reads the wires between the controllers named `controllers` (each with the devices
-    /// inside its element) from a blackboard: signals with `IoType` and `Number`, links
-    /// `<ID>:<name>` on either side.
+    /// inside its element) from a blackboard: signals with `IoType` and `Number` or `Address`,
+    /// links `<ID>:<name>` on either side.
     pub fn read(blackboard: &str, controllers: &[String]) -> Wires {
         let doc = roxmltree::Document::parse(blackboard).unwrap();
         let attr = |n: roxmltree::Node, name: &str| -> Option<String> {
@@ -330,8 +374,8 @@ impl Wires {
                 .and_then(|v| v.text())
                 .map(|t| t.trim().to_owned())
         };
-        // `<holder ID>:<name>` → (controller, output?, number)
-        let mut signals: HashMap<String, (usize, bool, u32)> = HashMap::new();
+        // `<holder ID>:<name>` → (controller, output?, number or address)
+        let mut signals: HashMap<String, (usize, bool, String)> = HashMap::new();
         for e in doc
             .descendants()
             .filter(|n| n.has_tag_name("InternalElement"))
@@ -346,19 +390,22 @@ impl Wires {
                 .descendants()
                 .filter(|n| n.has_tag_name("ExternalInterface"))
             {
-                let (Some(io), Some(num)) = (attr(i, "IoType"), attr(i, "Number")) else {
+                let Some(io) = attr(i, "IoType") else {
+                    continue;
+                };
+                let Some(id) = attr(i, "Number").or_else(|| attr(i, "Address")) else {
                     continue;
                 };
                 let holder = i.parent().and_then(|p| p.attribute("ID")).unwrap_or("");
                 signals.insert(
                     format!("{holder}:{}", i.attribute("Name").unwrap()),
-                    (c, io == "Output", num.parse().unwrap()),
+                    (c, io == "Output", id),
                 );
             }
         }
         let mut from = HashMap::new();
         for l in doc.descendants().filter(|n| n.has_tag_name("InternalLink")) {
-            let side = |a: &str| signals.get(l.attribute(a).unwrap_or("")).copied();
+            let side = |a: &str| signals.get(l.attribute(a).unwrap_or("")).cloned();
             if let (Some(a), Some(b)) = (side("RefPartnerSideA"), side("RefPartnerSideB")) {
                 let (out, inp) = if a.1 { (a, b) } else { (b, a) };
                 if out.1 && !inp.1 && out.0 != inp.0 {
@@ -369,19 +416,110 @@ impl Wires {
         Wires { from }
     }
 
-    fn source(&self, me: usize, input: u32) -> Option<(usize, u32)> {
-        self.from.get(&(me, input)).copied()
+    fn source(&self, me: usize, input: &str) -> Option<(usize, String)> {
+        self.from.get(&(me, input.to_owned())).cloned()
     }
 
-    fn drives(&self, me: usize, output: u32) -> bool {
-        self.from.values().any(|&v| v == (me, output))
+    fn drives(&self, me: usize, output: &str) -> bool {
+        self.from.values().any(|v| v.0 == me && v.1 == output)
     }
 }
 
 impl World<'_> {
-    fn phase_at(&self, t: f64) -> &HashMap<String, bool> {
+    fn phase_index(&self, t: f64) -> usize {
         let k = self.changes.iter().filter(|&&c| c <= t).count();
-        &self.phases[k.min(self.phases.len() - 1)]
+        k.min(self.phases.len() - 1)
+    }
+
+    fn phase_at(&self, t: f64) -> &HashMap<String, bool> {
+        &self.phases[self.phase_index(t)]
+    }
+
+    /// A wire input of controller `c`: what its driver's output holds.
+    fn wire(&self, c: usize, input: &str) -> bool {
+        let (a, out) = self
+            .wires
+            .source(c, input)
+            .unwrap_or_else(|| panic!("R{}: input {input} is no wire", c + 1));
+        *self.ctls[a].outs.get(&out).unwrap_or(&false)
+    }
+
+    fn var(&self, c: usize, n: &str) -> Val {
+        *self.ctls[c]
+            .vars
+            .get(&n.to_ascii_uppercase())
+            .unwrap_or_else(|| panic!("R{}: `{n}` is read before it has a value", c + 1))
+    }
+
+    fn value(&self, c: usize, e: &X) -> Val {
+        match e {
+            X::K(k) => self.eval(c, k),
+            X::M(m, numbers) => self.eval_m(c, m, *numbers),
+            X::Wire(w) => Val::B(self.wire(c, w)),
+            X::Num(i) => Val::I(*i),
+            X::Truth(b) => Val::B(*b),
+            X::Var(v) => self.var(c, v),
+            X::Add(v, k) => match self.var(c, v) {
+                Val::I(i) => Val::I(i + k),
+                other => panic!("{other:?} + {k}"),
+            },
+            X::OneMinus(v) => match self.var(c, v) {
+                Val::I(i) => Val::I(1 - i),
+                other => panic!("1 - {other:?}"),
+            },
+            X::Not(a) => Val::B(!self.value(c, a).truth()),
+            X::Same(a, b) => Val::B(self.value(c, a).truth() == self.value(c, b).truth()),
+        }
+    }
+
+    fn holds(&self, c: usize, e: &X) -> bool {
+        match (e, self.value(c, e)) {
+            (_, Val::B(b)) => b,
+            (X::K(_), v) => panic!("a KRL condition evaluated to {v:?}"),
+            (_, v) => panic!("a condition evaluated to {v:?}"),
+        }
+    }
+
+    /// A condition of RAPID or URScript, read by the machine's parsers.
+    fn eval_m(&self, c: usize, e: &MExpr, numbers: bool) -> Val {
+        match e {
+            MExpr::Int(i) => Val::I(*i),
+            MExpr::Bool(b) => Val::B(*b),
+            MExpr::Var(n) => self.var(c, n),
+            MExpr::Signal(k) => {
+                let s = &SIGNALS[*k];
+                let phase = &self.seq[self.phase_index(self.ctls[c].t)];
+                let v = phase.get(s.name).copied().unwrap_or(0);
+                if s.integer || numbers {
+                    Val::I(v)
+                } else {
+                    Val::B(v != 0)
+                }
+            }
+            MExpr::Not(a) => match self.eval_m(c, a, numbers) {
+                Val::B(b) => Val::B(!b),
+                v => panic!("type error: NOT of {v:?}"),
+            },
+            MExpr::Neg(a) => match self.eval_m(c, a, numbers) {
+                Val::I(i) => Val::I(-i),
+                v => panic!("type error: - of {v:?}"),
+            },
+            MExpr::Bin(op, a, b) => {
+                let (x, y) = (self.eval_m(c, a, numbers), self.eval_m(c, b, numbers));
+                Val::B(match (op, x, y) {
+                    (Op::Or, Val::B(x), Val::B(y)) => x || y,
+                    (Op::Xor, Val::B(x), Val::B(y)) => x != y,
+                    (Op::And, Val::B(x), Val::B(y)) => x && y,
+                    (Op::Eq, x, y) => x == y,
+                    (Op::Ne, x, y) => x != y,
+                    (Op::Lt, Val::I(x), Val::I(y)) => x < y,
+                    (Op::Gt, Val::I(x), Val::I(y)) => x > y,
+                    (Op::Le, Val::I(x), Val::I(y)) => x <= y,
+                    (Op::Ge, Val::I(x), Val::I(y)) => x >= y,
+                    _ => panic!("type error: {x:?} {op:?} {y:?}"),
+                })
+            }
+        }
     }
 
     fn eval(&self, c: usize, e: &KExpr) -> Val {
@@ -390,15 +528,16 @@ impl World<'_> {
             KExpr::Int(i) => Val::I(*i),
             KExpr::Bool(b) => Val::B(*b),
             KExpr::Sys(s) => {
-                let n =
-                    |p: &str| -> Option<u32> { s.strip_prefix(p)?.strip_suffix(']')?.parse().ok() };
+                let n = |p: &str| -> Option<String> {
+                    Some(s.strip_prefix(p)?.strip_suffix(']')?.to_owned())
+                };
                 if let Some(n) = n("$IN[")
-                    && let Some((a, out)) = self.wires.source(c, n)
+                    && self.wires.source(c, &n).is_some()
                 {
-                    return Val::B(*self.ctls[a].outs.get(&out).unwrap_or(&false));
+                    return Val::B(self.wire(c, &n));
                 }
                 if let Some(n) = n("$OUT[")
-                    && self.wires.drives(c, n)
+                    && self.wires.drives(c, &n)
                 {
                     return Val::B(*ctl.outs.get(&n).unwrap_or(&false));
                 }
@@ -406,7 +545,7 @@ impl World<'_> {
                     Some(v) => Val::B(*v),
                     // An input of a fixture's own: a bit of its own per phase.
                     None => {
-                        let k = self.changes.iter().filter(|&&c| c <= ctl.t).count() as u64;
+                        let k = self.phase_index(ctl.t) as u64;
                         let h = s.bytes().fold(self.salt ^ k.wrapping_mul(0x9E37), |h, b| {
                             (h ^ b as u64).wrapping_mul(0x0100_0000_01B3)
                         });
@@ -425,7 +564,7 @@ impl World<'_> {
                     }
                     Val::I(v)
                 } else {
-                    *ctl.vars.get(n).unwrap_or_else(|| panic!("undeclared {n}"))
+                    self.var(c, n)
                 }
             }
             KExpr::Not(a) => match self.eval(c, a) {
@@ -460,13 +599,6 @@ impl World<'_> {
         }
     }
 
-    fn truth(&self, c: usize, e: &KExpr) -> bool {
-        match self.eval(c, e) {
-            Val::B(b) => b,
-            v => panic!("a condition evaluated to {v:?}"),
-        }
-    }
-
     /// Runs one statement of controller `c`.
     fn step(&mut self, c: usize, rng: &mut Rng, cap: usize) {
         let ins = self.ctls[c].ins[self.ctls[c].pc].clone();
@@ -494,11 +626,11 @@ impl World<'_> {
                     ctl.t += eps;
                 }
             }
-            Ins::WaitFor(e) => {
-                if self.ctls[c].t < self.ctls[c].motion_end {
-                    // The advance-run stop: the motions end first.
+            Ins::WaitFor(e, settle) => {
+                if settle && self.ctls[c].t < self.ctls[c].motion_end {
+                    // The motions end first.
                     self.ctls[c].t = self.ctls[c].motion_end;
-                } else if self.truth(c, &e) {
+                } else if self.holds(c, &e) {
                     self.ctls[c].pc += 1;
                     self.ctls[c].t += eps;
                 } else {
@@ -506,12 +638,12 @@ impl World<'_> {
                 }
             }
             Ins::SetOut(n, e) => {
-                let v = self.truth(c, &e);
+                let v = self.value(c, &e).truth();
                 let now = self.ctls[c].t;
                 let ctl = &mut self.ctls[c];
                 if ctl.motion_end > now {
                     let step = ctl.steps.last().map(|s| s.0.clone()).unwrap_or_default();
-                    ctl.advance_faults.push((n, step));
+                    ctl.advance_faults.push((n.clone(), step));
                 }
                 ctl.outs.insert(n, v);
                 ctl.pc += 1;
@@ -525,15 +657,14 @@ impl World<'_> {
                 }
             }
             Ins::Assign(n, e) => {
-                let v = self.eval(c, &e);
+                let v = self.value(c, &e);
                 let ctl = &mut self.ctls[c];
-                assert!(ctl.vars.contains_key(&n), "assignment to undeclared {n}");
                 ctl.vars.insert(n, v);
                 ctl.pc += 1;
                 ctl.t += eps;
             }
             Ins::JumpIfNot(e, to) => {
-                let v = self.truth(c, &e);
+                let v = self.holds(c, &e);
                 let ctl = &mut self.ctls[c];
                 ctl.pc = if v { ctl.pc + 1 } else { to };
                 ctl.t += eps;
@@ -593,24 +724,33 @@ impl World<'_> {
     }
 
     /// A program that waits for a handshake that never comes: a cycle of handshake waits, or
-    /// one from a program that ended or stopped.
+    /// one from a program that ended.
     fn deadlock(&self) -> Option<String> {
         let waits_on = |c: usize| -> Option<usize> {
             let x = &self.ctls[c];
             if !x.blocked {
                 return None;
             }
-            let Ins::WaitFor(e) = &x.ins[x.pc] else {
+            let Ins::WaitFor(e, _) = &x.ins[x.pc] else {
                 return None;
             };
-            fn wire(e: &KExpr, w: &Wires, c: usize) -> Option<usize> {
+            fn krl_wire(e: &KExpr, w: &Wires, c: usize) -> Option<usize> {
                 match e {
                     KExpr::Sys(s) => {
-                        let n = s.strip_prefix("$IN[")?.strip_suffix(']')?.parse().ok()?;
+                        let n = s.strip_prefix("$IN[")?.strip_suffix(']')?;
                         w.source(c, n).map(|(a, _)| a)
                     }
-                    KExpr::Not(a) | KExpr::Neg(a) => wire(a, w, c),
-                    KExpr::Bin(_, a, b) => wire(a, w, c).or_else(|| wire(b, w, c)),
+                    KExpr::Not(a) | KExpr::Neg(a) => krl_wire(a, w, c),
+                    KExpr::Bin(_, a, b) => krl_wire(a, w, c).or_else(|| krl_wire(b, w, c)),
+                    _ => None,
+                }
+            }
+            fn wire(e: &X, w: &Wires, c: usize) -> Option<usize> {
+                match e {
+                    X::K(k) => krl_wire(k, w, c),
+                    X::Wire(n) => w.source(c, n).map(|(a, _)| a),
+                    X::Not(a) => wire(a, w, c),
+                    X::Same(a, b) => wire(a, w, c).or_else(|| wire(b, w, c)),
                     _ => None,
                 }
             }
@@ -638,13 +778,287 @@ impl World<'_> {
     }
 }
 
-/// The flow base's blackboard with `n` robots `R1`..`Rn` on controllers of their own, each
-/// with the base's signals and skills, and `m` wires from each to each other: robot `k`'s
-/// output `To_R<p>_<j>` (`$OUT[100 + 10 p + j]`) drives robot `p`'s input `From_R<k>_<j>`
-/// (`$IN[200 + 10 k + j]`).
-pub fn cell_blackboard(n: usize, m: usize) -> String {
-    let base = std::fs::read_to_string(repo().join("fixtures/base/flow/Blackboard.aml")).unwrap();
-    let lines: Vec<&str> = base.lines().collect();
+/// Reads the main routine of a RAPID module (`PROC main()` … `ENDPROC`) or a URScript program
+/// (`def P():` … `end`) into flat statements. Conditions are read by `flow_run`'s own readers
+/// of the language; a wire input (`wires`: controller `me`'s) only in the handshakes' forms
+/// (RAPID `DInput(di_x) = v`, URScript `get_standard_digital_in(n) != v` in a wait, a data
+/// bit's `DInput(di_x) = 1` / `get_standard_digital_in(n)`).
+pub fn parse_structured(text: &str, lang: Lang, wires: &Wires, me: usize) -> Vec<Ins> {
+    let rapid = lang == Lang::Rapid;
+    let lines: Vec<&str> = text.lines().map(str::trim).collect();
+    let start = lines
+        .iter()
+        .position(|l| {
+            if rapid {
+                *l == "PROC main()"
+            } else {
+                l.starts_with("def ")
+            }
+        })
+        .expect("the main routine")
+        + 1;
+    let is_wire = |id: &str| wires.source(me, id).is_some();
+    // A wire read: `DInput(x)` (RAPID), `get_standard_digital_in(n)` (URScript).
+    let wire_of = |t: &str| -> Option<String> {
+        let t = t.trim();
+        let inner = if rapid {
+            t.strip_prefix("DInput(")?.strip_suffix(')')?
+        } else {
+            t.strip_prefix("get_standard_digital_in(")?
+                .strip_suffix(')')?
+        };
+        is_wire(inner).then(|| inner.to_owned())
+    };
+    let cond = |c: &str| -> X {
+        let c = c.trim();
+        // The handshakes' forms.
+        for (op, negate) in [(" != ", true), (" == ", false), (" = ", false)] {
+            if let Some((a, b)) = c.split_once(op)
+                && let Some(w) = wire_of(a)
+            {
+                let rhs = match b.trim() {
+                    "1" | "True" | "TRUE" => X::Truth(true),
+                    "0" | "False" | "FALSE" => X::Truth(false),
+                    v => X::Var(v.to_owned()),
+                };
+                let same = X::Same(Box::new(X::Wire(w)), Box::new(rhs));
+                return if negate { X::Not(Box::new(same)) } else { same };
+            }
+        }
+        if let Some(w) = wire_of(c) {
+            return X::Wire(w);
+        }
+        if rapid {
+            X::M(crate::rapid::expr(c), true)
+        } else {
+            X::M(crate::urscript::expr(c), false)
+        }
+    };
+    let value = |v: &str| -> X {
+        let v = v.trim();
+        if let Some(x) = v.strip_prefix("1 - ") {
+            return X::OneMinus(x.trim().to_owned());
+        }
+        if let Some(x) = v.strip_prefix("not ") {
+            return X::Not(Box::new(X::Var(x.trim().to_owned())));
+        }
+        if let Some((a, k)) = v.split_once(" + ")
+            && let Ok(k) = k.trim().parse()
+        {
+            return X::Add(a.trim().to_owned(), k);
+        }
+        match v {
+            "TRUE" | "True" => X::Truth(true),
+            "FALSE" | "False" => X::Truth(false),
+            _ if v.parse::<i64>().is_ok() => X::Num(v.parse().unwrap()),
+            _ if v.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') => X::Var(v.to_owned()),
+            _ => cond(v),
+        }
+    };
+    enum Block {
+        If {
+            test: usize,
+            to_end: Vec<usize>,
+        },
+        While {
+            start: usize,
+            test: usize,
+            breaks: Vec<usize>,
+        },
+    }
+    let patch = |out: &mut Vec<Ins>, at: usize, to: usize| match &mut out[at] {
+        Ins::JumpIfNot(_, t) | Ins::Jump(t) => *t = to,
+        other => panic!("patching {other:?}"),
+    };
+    let mut out: Vec<Ins> = Vec::new();
+    let mut open: Vec<Block> = Vec::new();
+    let mut i = start;
+    while i < lines.len() {
+        let l = lines[i];
+        i += 1;
+        if l.is_empty() {
+            continue;
+        }
+        let comment = if rapid { "!" } else { "#" };
+        if let Some(c) = l.strip_prefix(comment) {
+            if let Some(title) = c.trim_start().strip_prefix("step ") {
+                out.push(Ins::Step(crate::machine::step_name(title)));
+            }
+            continue;
+        }
+        // The end of the routine.
+        if (rapid && l == "ENDPROC") || (!rapid && l == "end" && open.is_empty()) {
+            out.push(Ins::End);
+            return out;
+        }
+        let head = l.split(['(', ' ', ',', ':', ';']).next().unwrap_or("");
+        if rapid {
+            if let Some(decl) = l.strip_prefix("VAR ") {
+                let (head, init) = decl
+                    .trim_end_matches(';')
+                    .split_once(" := ")
+                    .expect("an initial value");
+                let name = head.split_whitespace().nth(1).unwrap();
+                out.push(Ins::Assign(name.to_ascii_uppercase(), value(init)));
+                continue;
+            }
+            if let Some(c) = l.strip_prefix("WaitUntil ") {
+                let c = c.trim_end_matches(';');
+                match c.strip_prefix("\\InPos, ") {
+                    Some(c) => out.push(Ins::WaitFor(cond(c), true)),
+                    None => out.push(Ins::WaitFor(cond(c), false)),
+                }
+                continue;
+            }
+            if let Some(rest) = l.strip_prefix("SetDO ") {
+                let (sig, v) = rest.trim_end_matches(';').split_once(", ").unwrap();
+                out.push(Ins::SetOut(sig.to_owned(), value(v)));
+                continue;
+            }
+        } else {
+            if let Some(rest) = l.strip_prefix("set_standard_digital_out(") {
+                let (n, v) = rest.trim_end_matches(')').split_once(", ").unwrap();
+                out.push(Ins::SetOut(n.to_owned(), value(v)));
+                continue;
+            }
+            if l == "sync()" {
+                continue;
+            }
+            // A wait: `while c:` `sync()` `end`.
+            if let Some(c) = l.strip_prefix("while ").and_then(|c| c.strip_suffix(':'))
+                && lines.get(i) == Some(&"sync()")
+                && lines.get(i + 1) == Some(&"end")
+            {
+                i += 2;
+                if c == "not is_steady()" {
+                    out.push(Ins::WaitSec);
+                } else {
+                    out.push(Ins::WaitFor(X::Not(Box::new(cond(c))), false));
+                }
+                continue;
+            }
+        }
+        let upper = head.to_ascii_uppercase();
+        match (rapid, upper.as_str()) {
+            (true, "IF") | (false, "IF") => {
+                let c = if rapid {
+                    l[3..].strip_suffix(" THEN").unwrap()
+                } else {
+                    l[3..].strip_suffix(':').unwrap()
+                };
+                out.push(Ins::JumpIfNot(cond(c), 0));
+                open.push(Block::If {
+                    test: out.len() - 1,
+                    to_end: Vec::new(),
+                });
+            }
+            (true, "ELSEIF") | (false, "ELIF") => {
+                let c = if rapid {
+                    l[7..].strip_suffix(" THEN").unwrap()
+                } else {
+                    l[5..].strip_suffix(':').unwrap()
+                };
+                let Some(Block::If { test, to_end }) = open.last_mut() else {
+                    panic!("ELSEIF outside IF")
+                };
+                out.push(Ins::Jump(0));
+                to_end.push(out.len() - 1);
+                let (t, here) = (*test, out.len());
+                out.push(Ins::JumpIfNot(cond(c), 0));
+                *test = here;
+                patch(&mut out, t, here);
+            }
+            (true, "ELSE") | (false, "ELSE") => {
+                let Some(Block::If { test, to_end }) = open.last_mut() else {
+                    panic!("ELSE outside IF")
+                };
+                out.push(Ins::Jump(0));
+                to_end.push(out.len() - 1);
+                let (t, here) = (*test, out.len());
+                *test = usize::MAX;
+                patch(&mut out, t, here);
+            }
+            (true, "ENDIF") | (true, "ENDWHILE") | (false, "END") => {
+                let here_after = |out: &Vec<Ins>| out.len();
+                match open.pop().expect("an end without a block") {
+                    Block::If { test, to_end } => {
+                        let here = here_after(&out);
+                        if test != usize::MAX {
+                            patch(&mut out, test, here);
+                        }
+                        for j in to_end {
+                            patch(&mut out, j, here);
+                        }
+                    }
+                    Block::While {
+                        start,
+                        test,
+                        breaks,
+                    } => {
+                        out.push(Ins::Jump(start));
+                        let here = out.len();
+                        patch(&mut out, test, here);
+                        for j in breaks {
+                            patch(&mut out, j, here);
+                        }
+                    }
+                }
+            }
+            (true, "WHILE") | (false, "WHILE") => {
+                let c = if rapid {
+                    l[6..].strip_suffix(" DO").unwrap()
+                } else {
+                    l[6..].strip_suffix(':').unwrap()
+                };
+                let start = out.len();
+                out.push(Ins::JumpIfNot(cond(c), 0));
+                open.push(Block::While {
+                    start,
+                    test: start,
+                    breaks: Vec::new(),
+                });
+            }
+            (false, "BREAK") => {
+                out.push(Ins::Jump(0));
+                let at = out.len() - 1;
+                let breaks = open
+                    .iter_mut()
+                    .rev()
+                    .find_map(|b| match b {
+                        Block::While { breaks, .. } => Some(breaks),
+                        _ => None,
+                    })
+                    .expect("break outside while");
+                breaks.push(at);
+            }
+            _ => {
+                // `x := v;` (RAPID), `x = v` (URScript); anything else is a step's code.
+                let assign = if rapid {
+                    l.strip_suffix(';').and_then(|a| a.split_once(" := "))
+                } else {
+                    l.split_once(" = ")
+                };
+                if let Some((lhs, rhs)) = assign
+                    && lhs.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+                {
+                    out.push(Ins::Assign(lhs.to_ascii_uppercase(), value(rhs)));
+                }
+            }
+        }
+    }
+    panic!("the main routine does not end");
+}
+
+/// The flow base's blackboard with a robot `R1`, `R2`, … per language of `langs`, each on a
+/// controller of its own with the base's signals and skills (readable in its language, its IRL
+/// file `kr15-2-<language>.irl`), and `m` wires from each to each other: robot `k`'s output
+/// `To_R<p>_<j>` drives robot `p`'s input `From_R<k>_<j>`. KRL: `$OUT[100 + 10 p + j]` and
+/// `$IN[200 + 10 k + j]`; RAPID: `Address` `do_To_R<p>_<j>`, `di_From_R<k>_<j>`; URScript (one
+/// peer at most, `m` ≤ 4): standard digital output `j`, input `j + 3`.
+pub fn cell_blackboard(langs: &[Lang], m: usize) -> String {
+    let n = langs.len();
+    let raw = std::fs::read_to_string(repo().join("fixtures/base/flow/Blackboard.aml")).unwrap();
+    let lines: Vec<&str> = raw.lines().collect();
     let start = lines
         .iter()
         .position(|l| l.contains("<InternalElement Name=\"KUKA KR15-2\""))
@@ -656,25 +1070,61 @@ pub fn cell_blackboard(n: usize, m: usize) -> String {
             .iter()
             .position(|l| *l == format!("{indent}</InternalElement>"))
             .expect("the flow base changed");
-    let robot = lines[start..=end].join("\n");
     let mut out: Vec<String> = lines[..start].iter().map(|s| s.to_string()).collect();
     let id = |k: usize, tail: &str| format!("{{00000000-0000-0000-{k:04}-{tail}}}");
-    for k in 1..=n {
-        let mut text = robot
+    for (k, &lang) in (1..=n).zip(langs) {
+        // The robot in its language (`Lang::blackboard` converts the whole base).
+        let converted = lang.blackboard(&raw);
+        let cl: Vec<&str> = converted.lines().collect();
+        let s0 = cl
+            .iter()
+            .position(|l| l.contains("<InternalElement Name=\"KUKA KR15-2\""))
+            .unwrap();
+        let e0 = s0
+            + cl[s0..]
+                .iter()
+                .position(|l| *l == format!("{indent}</InternalElement>"))
+                .unwrap();
+        let mut text = cl[s0..=e0]
+            .join("\n")
             .replacen("Name=\"KUKA KR15-2\"", &format!("Name=\"R{k}\""), 1)
             .replace(
                 "{00000000-0000-0000-0000-",
                 &format!("{{00000000-0000-0000-{k:04}-"),
+            )
+            .replace(
+                "<Value>kr15-2.irl</Value>",
+                &format!("<Value>kr15-2-{}.irl</Value>", lang.ext()),
             );
         let mut wires = String::new();
         for p in (1..=n).filter(|&p| p != k) {
+            assert!(lang != Lang::UrScript || n == 2, "a UR robot has one peer");
             for j in 1..=m {
-                for (name, io, number) in [
-                    (format!("To_R{p}_{j}"), "Output", 100 + 10 * p + j),
-                    (format!("From_R{p}_{j}"), "Input", 200 + 10 * p + j),
-                ] {
+                let out_name = format!("To_R{p}_{j}");
+                let in_name = format!("From_R{p}_{j}");
+                let (o, i) = match lang {
+                    Lang::Krl => (
+                        format!(
+                            "Number\" AttributeDataType=\"xs:integer\"><Value>{}",
+                            100 + 10 * p + j
+                        ),
+                        format!(
+                            "Number\" AttributeDataType=\"xs:integer\"><Value>{}",
+                            200 + 10 * p + j
+                        ),
+                    ),
+                    Lang::Rapid => (
+                        format!("Address\" AttributeDataType=\"xs:string\"><Value>do_{out_name}"),
+                        format!("Address\" AttributeDataType=\"xs:string\"><Value>di_{in_name}"),
+                    ),
+                    Lang::UrScript => (
+                        format!("Number\" AttributeDataType=\"xs:integer\"><Value>{j}"),
+                        format!("Number\" AttributeDataType=\"xs:integer\"><Value>{}", j + 3),
+                    ),
+                };
+                for (name, io, attr) in [(out_name, "Output", o), (in_name, "Input", i)] {
                     wires.push_str(&format!(
-                        "\n{indent}  <ExternalInterface Name=\"{name}\" ID=\"{{w-{k}-{name}}}\" RefBaseClassPath=\"AutomationMLInterfaceClassLib/AutomationMLBaseInterface/Communication/SignalInterface\"><Attribute Name=\"IoType\" AttributeDataType=\"xs:string\"><Value>{io}</Value></Attribute><Attribute Name=\"Number\" AttributeDataType=\"xs:integer\"><Value>{number}</Value></Attribute></ExternalInterface>"
+                        "\n{indent}  <ExternalInterface Name=\"{name}\" ID=\"{{w-{k}-{name}}}\" RefBaseClassPath=\"AutomationMLInterfaceClassLib/AutomationMLBaseInterface/Communication/SignalInterface\"><Attribute Name=\"IoType\" AttributeDataType=\"xs:string\"><Value>{io}</Value></Attribute><Attribute Name=\"{attr}</Value></Attribute></ExternalInterface>"
                     ));
                 }
             }
@@ -731,28 +1181,33 @@ pub fn spread(chart: &str, n: usize, rng: &mut Rng) -> (String, HashMap<String, 
     (out, of)
 }
 
-/// A compiled cell: each robot's program (`None` for a robot without steps), the wires.
+/// A compiled cell: each robot's program (`None` for a robot without steps: its main file,
+/// KRL's `.dat`), its language, the wires.
 pub struct CellPrograms {
     pub programs: Vec<Option<(String, String)>>,
+    pub langs: Vec<Lang>,
     pub wires: Wires,
 }
 
-/// Writes the project and compiles it with the binary.
+/// Writes the project (robots in `langs`) and compiles it with the binary.
 pub fn compile_cell(
     dir: &std::path::Path,
     chart: &str,
-    n: usize,
+    langs: &[Lang],
     m: usize,
 ) -> Result<CellPrograms, String> {
     // A fresh project: no program of an earlier one left.
     let _ = std::fs::remove_dir_all(dir);
     std::fs::create_dir_all(dir).unwrap();
-    std::fs::write(dir.join("Blackboard.aml"), cell_blackboard(n, m)).unwrap();
-    std::fs::copy(
-        repo().join("fixtures/base/flow/kr15-2.irl"),
-        dir.join("kr15-2.irl"),
-    )
-    .unwrap();
+    std::fs::write(dir.join("Blackboard.aml"), cell_blackboard(langs, m)).unwrap();
+    let irl = std::fs::read_to_string(repo().join("fixtures/base/flow/kr15-2.irl")).unwrap();
+    for lang in langs {
+        std::fs::write(
+            dir.join(format!("kr15-2-{}.irl", lang.ext())),
+            lang.irl(&irl),
+        )
+        .unwrap();
+    }
     std::fs::write(dir.join("sfc.xml"), chart).unwrap();
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
         .args(["--lf", "Blackboard.aml", "Cell"])
@@ -762,19 +1217,30 @@ pub fn compile_cell(
     if !out.status.success() {
         return Err(String::from_utf8_lossy(&out.stderr).into_owned());
     }
-    let programs = (1..=n)
-        .map(|k| {
+    let programs = (1..=langs.len())
+        .zip(langs)
+        .map(|(k, lang)| {
             let read =
                 |ext: &str| std::fs::read_to_string(dir.join(format!("Cell_R{k}.{ext}"))).ok();
-            Some((read("src")?, read("dat")?))
+            let main = read(lang.ext())?;
+            let dat = if *lang == Lang::Krl {
+                read("dat")?
+            } else {
+                String::new()
+            };
+            Some((main, dat))
         })
         .collect();
-    let names: Vec<String> = (1..=n).map(|k| format!("R{k}")).collect();
+    let names: Vec<String> = (1..=langs.len()).map(|k| format!("R{k}")).collect();
     let wires = Wires::read(
         &std::fs::read_to_string(dir.join("Blackboard.aml")).unwrap(),
         &names,
     );
-    Ok(CellPrograms { programs, wires })
+    Ok(CellPrograms {
+        programs,
+        langs: langs.to_vec(),
+        wires,
+    })
 }
 
 /// How a program may be broken on purpose (the mutation checks).
@@ -790,34 +1256,69 @@ pub enum Mutation {
     AdvanceRun,
 }
 
-fn mutate(src: &str, m: Mutation) -> String {
+fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
     let lines: Vec<&str> = src.lines().collect();
-    let pick =
-        |pred: &dyn Fn(usize, &str) -> bool| lines.iter().enumerate().position(|(i, l)| pred(i, l));
-    let drop_at = match m {
-        Mutation::None => None,
-        Mutation::DroppedWait => pick(&|i, l| {
-            l.trim_start().starts_with("WAIT FOR $IN[2") && i > 0 && lines[i - 1].contains("skp_rx")
-        }),
-        Mutation::AdvanceRun => pick(&|i, l| {
-            l.trim_start().starts_with("WAIT FOR $IN[2")
-                && i > 0
-                && lines[i - 1].starts_with(";handshake: tell")
-        }),
-        Mutation::DecidesTwice => {
-            return src.replacen("IF skp_got == 0 THEN", "IF $IN[1] THEN", 1);
-        }
-    };
-    match drop_at {
-        Some(i) => lines
+    let pick = |pred: &dyn Fn(usize, &str) -> bool| {
+        lines
             .iter()
             .enumerate()
-            .filter(|&(k, _)| k != i)
-            .map(|(_, l)| *l)
-            .collect::<Vec<_>>()
-            .join("\n"),
-        None => src.to_owned(),
-    }
+            .position(|(i, l)| pred(i, l.trim()))
+    };
+    let hear_wait = |l: &str| match lang {
+        Lang::Krl => l.starts_with("WAIT FOR $IN["),
+        Lang::Rapid => l.starts_with("WaitUntil \\InPos, DInput("),
+        Lang::UrScript => l.starts_with("while get_standard_digital_in("),
+    };
+    // A hear toggles its `skp_rxN` right before its waits.
+    let after_toggle = |i: usize| {
+        lines[i.saturating_sub(4)..i]
+            .iter()
+            .any(|l| l.contains("skp_rx"))
+    };
+    // The lines to drop.
+    let drop: Vec<usize> = match m {
+        Mutation::None => Vec::new(),
+        Mutation::DroppedWait => pick(&|i, l| hear_wait(l) && after_toggle(i))
+            .map(|i| match lang {
+                // `while …:` `sync()` `end`
+                Lang::UrScript => vec![i, i + 1, i + 2],
+                _ => vec![i],
+            })
+            .unwrap_or_default(),
+        Mutation::AdvanceRun => match lang {
+            Lang::Krl => pick(&|i, l| {
+                l.starts_with("WAIT FOR $IN[")
+                    && i > 0
+                    && lines[i - 1].trim_start().starts_with(";handshake: tell")
+            })
+            .map(|i| vec![i])
+            .unwrap_or_default(),
+            // RAPID: the tell's wait without `\InPos`.
+            Lang::Rapid => {
+                return src.replacen("WaitUntil \\InPos, ", "WaitUntil ", 1);
+            }
+            // URScript: the tell's wait for `is_steady()` dropped.
+            Lang::UrScript => pick(&|_, l| l == "while not is_steady():")
+                .map(|i| vec![i, i + 1, i + 2])
+                .unwrap_or_default(),
+        },
+        Mutation::DecidesTwice => {
+            return match lang {
+                Lang::Krl => src.replacen("IF skp_got == 0 THEN", "IF $IN[1] THEN", 1),
+                Lang::Rapid => src.replacen("IF skp_got = 0 THEN", "IF di_Part_OK = 1 THEN", 1),
+                Lang::UrScript => {
+                    src.replacen("if skp_got == 0:", "if get_standard_digital_in(1):", 1)
+                }
+            };
+        }
+    };
+    lines
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| !drop.contains(k))
+        .map(|(_, l)| *l)
+        .collect::<Vec<_>>()
+        .join("\n")
 }
 
 /// Runs a compiled cell `runs` times with random timing and inputs; the first failure, if any.
@@ -828,13 +1329,28 @@ pub fn co_simulate(
     seed: u64,
     runs: usize,
     mutation: Mutation,
+    only: Option<Lang>,
 ) -> Result<(), String> {
     let parsed: Vec<Option<(Vec<Ins>, String)>> = cell
         .programs
         .iter()
-        .map(|p| {
-            p.as_ref()
-                .map(|(src, dat)| (parse(&mutate(src, mutation)), dat.clone()))
+        .zip(&cell.langs)
+        .enumerate()
+        .map(|(k, (p, &lang))| {
+            p.as_ref().map(|(main, dat)| {
+                // Only the programs of one language are broken, when one is named.
+                let m = match mutation {
+                    Mutation::None => Mutation::None,
+                    _ if only.is_some_and(|l| l != lang) => Mutation::None,
+                    m => m,
+                };
+                let text = mutate(main, m, lang);
+                let ins = match lang {
+                    Lang::Krl => parse(&text),
+                    _ => parse_structured(&text, lang, &cell.wires, k),
+                };
+                (ins, dat.clone())
+            })
         })
         .collect();
     let mut rng = Rng(seed | 1);
@@ -876,6 +1392,7 @@ pub fn co_simulate(
         let mut w = World {
             ctls,
             wires: &cell.wires,
+            seq,
             phases,
             changes,
             salt: rng.next(),
@@ -940,25 +1457,44 @@ pub fn random_cell(
     seed: u64,
 ) -> Option<(Chart, CellPrograms, HashMap<String, usize>, usize)> {
     let mut rng = Rng(seed.wrapping_mul(0x2545_F491_4F6C_DD1D) | 1);
-    let n = 2 + (rng.next() % 3) as usize;
+    // KUKA cells, ABB cells, KUKA and ABB mixed, a UR with a robot of any kind.
+    let any = |rng: &mut Rng| [Lang::Krl, Lang::Rapid][(rng.next() % 2) as usize];
+    let langs: Vec<Lang> = match seed % 4 {
+        0..=2 => {
+            let n = 2 + (rng.next() % 3) as usize;
+            (0..n)
+                .map(|_| match seed % 4 {
+                    0 => Lang::Krl,
+                    1 => Lang::Rapid,
+                    _ => any(&mut rng),
+                })
+                .collect()
+        }
+        _ => vec![
+            Lang::UrScript,
+            [Lang::Krl, Lang::Rapid, Lang::UrScript][(rng.next() % 3) as usize],
+        ],
+    };
+    let n = langs.len();
     let (chart, robot_of) = spread(&ChartGen::chart(seed), n, &mut rng);
     let used: std::collections::BTreeSet<usize> = robot_of.values().copied().collect();
     if used.len() < 2 {
         return None;
     }
-    let cell = match compile_cell(dir, &chart, n, 4) {
+    let cell = match compile_cell(dir, &chart, &langs, 4) {
         Ok(c) => c,
         Err(e) => panic!("seed {seed}: the cell does not compile: {e}\n{chart}"),
     };
     Some((Chart::read(&dir.join("sfc.xml")), cell, robot_of, n))
 }
 
-/// A cell fixture (`fixtures/ok/<case>`) compiled with the binary: its programs in the order of
-/// `programs`, each step's program (by the step FOLDs of each), its chart.
+/// A cell fixture (`fixtures/ok/<case>`) compiled with the binary: its programs (name and
+/// language) in the order of `controllers`, each step's program (by the step titles of each),
+/// its chart.
 pub fn fixture_cell(
     dir: &std::path::Path,
     case: &str,
-    programs: &[&str],
+    programs: &[(&str, Lang)],
     controllers: &[&str],
 ) -> (Chart, CellPrograms, HashMap<String, usize>) {
     let _ = std::fs::remove_dir_all(dir);
@@ -977,8 +1513,13 @@ pub fn fixture_cell(
         crate::copy_dir(&repo().join("fixtures/base").join(base), dir);
     }
     crate::copy_dir(&repo().join("fixtures/ok").join(case), dir);
+    let bb_name = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .find(|n| n.ends_with(".aml"))
+        .unwrap();
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
-        .args(["--lf", "Blackboard.aml", &program])
+        .args(["--lf", &bb_name, &program])
         .current_dir(dir)
         .output()
         .unwrap();
@@ -987,29 +1528,40 @@ pub fn fixture_cell(
         "{case}: {}",
         String::from_utf8_lossy(&out.stderr)
     );
+    let names: Vec<String> = controllers.iter().map(|c| c.to_string()).collect();
+    let wires = Wires::read(
+        &std::fs::read_to_string(dir.join(&bb_name)).unwrap(),
+        &names,
+    );
     let mut robot_of = HashMap::new();
-    let programs: Vec<Option<(String, String)>> = programs
+    let texts: Vec<Option<(String, String)>> = programs
         .iter()
         .enumerate()
-        .map(|(k, p)| {
-            let src = std::fs::read_to_string(dir.join(format!("{p}.src"))).unwrap();
-            let dat = std::fs::read_to_string(dir.join(format!("{p}.dat"))).unwrap();
-            for i in parse(&src) {
+        .map(|(k, (p, lang))| {
+            let main = std::fs::read_to_string(dir.join(format!("{p}.{}", lang.ext()))).unwrap();
+            let dat = match lang {
+                Lang::Krl => std::fs::read_to_string(dir.join(format!("{p}.dat"))).unwrap(),
+                _ => String::new(),
+            };
+            let ins = match lang {
+                Lang::Krl => parse(&main),
+                _ => parse_structured(&main, *lang, &wires, k),
+            };
+            for i in ins {
                 if let Ins::Step(name) = i {
                     robot_of.insert(name, k);
                 }
             }
-            Some((src, dat))
+            Some((main, dat))
         })
         .collect();
-    let names: Vec<String> = controllers.iter().map(|c| c.to_string()).collect();
-    let wires = Wires::read(
-        &std::fs::read_to_string(dir.join("Blackboard.aml")).unwrap(),
-        &names,
-    );
     (
         Chart::read(&dir.join("sfc.xml")),
-        CellPrograms { programs, wires },
+        CellPrograms {
+            programs: texts,
+            langs: programs.iter().map(|p| p.1).collect(),
+            wires,
+        },
         robot_of,
     )
 }
