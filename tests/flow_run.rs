@@ -1337,14 +1337,25 @@ type CellFixture = (
     &'static [(&'static str, Lang)],
     &'static [&'static str],
 );
-const CELL_FIXTURES: &[CellFixture] = &[(
-    "cell-two-robots-weld",
-    &[
-        ("Cell_KUKA_KR15_2", Lang::Krl),
-        ("Cell_KUKA_KR16_2", Lang::Krl),
-    ],
-    &["KUKA KR15-2", "KUKA KR16-2"],
-)];
+const CELL_FIXTURES: &[CellFixture] = &[
+    (
+        "cell-two-robots-weld",
+        &[
+            ("Cell_KUKA_KR15_2", Lang::Krl),
+            ("Cell_KUKA_KR16_2", Lang::Krl),
+        ],
+        &["KUKA KR15-2", "KUKA KR16-2"],
+    ),
+    (
+        "cell-kuka-abb-ur",
+        &[
+            ("Mix_KUKA_KR15_2", Lang::Krl),
+            ("Mix_ABB_IRB_1200", Lang::Rapid),
+            ("Mix_UR10e", Lang::UrScript),
+        ],
+        &["KUKA KR15-2", "ABB IRB 1200", "UR10e"],
+    ),
+];
 
 /// The cell fixtures, co-simulated the same way.
 #[test]

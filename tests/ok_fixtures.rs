@@ -122,6 +122,7 @@ cases! {
     abb_irb1200 => "abb-irb1200",
     caex3_english => "caex3-english",
     cell_gripper_controller_attribute => "cell-gripper-controller-attribute",
+    cell_kuka_abb_ur => "cell-kuka-abb-ur",
     cell_robot_gripper => "cell-robot-gripper",
     cell_two_robots_weld => "cell-two-robots-weld",
     cell_two_robots_wired => "cell-two-robots-wired",

@@ -435,6 +435,17 @@ impl World<'_> {
         &self.phases[self.phase_index(t)]
     }
 
+    /// An input a fixture has and the flow base has not: a bit of its own per phase.
+    fn fixture_input(&self, c: usize, name: &str) -> bool {
+        let k = self.phase_index(self.ctls[c].t) as u64;
+        let h = name
+            .bytes()
+            .fold(self.salt ^ k.wrapping_mul(0x9E37), |h, b| {
+                (h ^ b as u64).wrapping_mul(0x0100_0000_01B3)
+            });
+        h >> 7 & 1 == 1
+    }
+
     /// A wire input of controller `c`: what its driver's output holds.
     fn wire(&self, c: usize, input: &str) -> bool {
         let (a, out) = self
@@ -485,7 +496,15 @@ impl World<'_> {
         match e {
             MExpr::Int(i) => Val::I(*i),
             MExpr::Bool(b) => Val::B(*b),
-            MExpr::Var(n) => self.var(c, n),
+            MExpr::Var(n) => match self.ctls[c].vars.get(&n.to_ascii_uppercase()) {
+                Some(v) => *v,
+                // A signal of a fixture's own (RAPID reads one by its name): a bit of its own
+                // per phase.
+                None => {
+                    let b = self.fixture_input(c, n);
+                    if numbers { Val::I(b as i64) } else { Val::B(b) }
+                }
+            },
             MExpr::Signal(k) => {
                 let s = &SIGNALS[*k];
                 let phase = &self.seq[self.phase_index(self.ctls[c].t)];
@@ -544,13 +563,7 @@ impl World<'_> {
                 match self.phase_at(ctl.t).get(s) {
                     Some(v) => Val::B(*v),
                     // An input of a fixture's own: a bit of its own per phase.
-                    None => {
-                        let k = self.phase_index(ctl.t) as u64;
-                        let h = s.bytes().fold(self.salt ^ k.wrapping_mul(0x9E37), |h, b| {
-                            (h ^ b as u64).wrapping_mul(0x0100_0000_01B3)
-                        });
-                        Val::B(h >> 7 & 1 == 1)
-                    }
+                    None => Val::B(self.fixture_input(c, s)),
                 }
             }
             KExpr::Name(n) => {
@@ -912,13 +925,19 @@ pub fn parse_structured(text: &str, lang: Lang, wires: &Wires, me: usize) -> Vec
             }
             if let Some(rest) = l.strip_prefix("SetDO ") {
                 let (sig, v) = rest.trim_end_matches(';').split_once(", ").unwrap();
-                out.push(Ins::SetOut(sig.to_owned(), value(v)));
+                // A wire; any other output is a step's own code.
+                if wires.drives(me, sig) {
+                    out.push(Ins::SetOut(sig.to_owned(), value(v)));
+                }
                 continue;
             }
         } else {
             if let Some(rest) = l.strip_prefix("set_standard_digital_out(") {
                 let (n, v) = rest.trim_end_matches(')').split_once(", ").unwrap();
-                out.push(Ins::SetOut(n.to_owned(), value(v)));
+                // A wire; any other output is a step's own code.
+                if wires.drives(me, n) {
+                    out.push(Ins::SetOut(n.to_owned(), value(v)));
+                }
                 continue;
             }
             if l == "sync()" {
@@ -1513,11 +1532,14 @@ pub fn fixture_cell(
         crate::copy_dir(&repo().join("fixtures/base").join(base), dir);
     }
     crate::copy_dir(&repo().join("fixtures/ok").join(case), dir);
-    let bb_name = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .find(|n| n.ends_with(".aml"))
-        .unwrap();
+    let bb_name = match toml.get("blackboard") {
+        Some(b) => b.as_str().unwrap().to_owned(),
+        None => std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .find(|n| n.ends_with(".aml"))
+            .unwrap(),
+    };
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
         .args(["--lf", &bb_name, &program])
         .current_dir(dir)

@@ -132,9 +132,11 @@ impl P {
                 );
                 match SIGNALS.iter().position(|s| s.rapid == t) {
                     Some(k) => Expr::Signal(k),
+                    // A program variable, or a digital input a fixture has and the flow
+                    // base has not (the cell co-simulation gives it its own values).
                     None => {
                         assert!(
-                            t.starts_with("skp_"),
+                            t.starts_with("skp_") || t.starts_with("di_"),
                             "RAPID: unknown name `{t}` in `{}`",
                             self.text
                         );
