@@ -397,13 +397,32 @@ fn print_listings(
         emit(&|| crate::print::sfc(sfc), &|| json::sfc(sfc));
     }
     if let (Some(sfc), Some(plan)) = (&c.sfc, &c.plan) {
+        // A cell of several controllers: one lane and one order per program (SPEC.md 9).
+        let cell = match (&c.cell, &c.blackboard) {
+            (Some(cell), Some(bb)) => Some(crate::print::CellView {
+                cell,
+                bb,
+                names: &c.program_names,
+            }),
+            _ => None,
+        };
         if print('F') {
-            emit(&|| crate::print::flow(sfc, plan), &|| json::flow(sfc, plan));
+            match &cell {
+                Some(v) => emit(&|| crate::print::cell_flow(sfc, plan, v), &|| {
+                    json::cell_flow(sfc, plan, v)
+                }),
+                None => emit(&|| crate::print::flow(sfc, plan), &|| json::flow(sfc, plan)),
+            }
         }
         if print('O') {
-            emit(&|| crate::print::order(sfc, plan), &|| {
-                json::order(sfc, plan)
-            });
+            match &cell {
+                Some(v) => emit(&|| crate::print::cell_order(sfc, v), &|| {
+                    json::cell_order(sfc, v)
+                }),
+                None => emit(&|| crate::print::order(sfc, plan), &|| {
+                    json::order(sfc, plan)
+                }),
+            }
         }
     } else {
         for (p, what, listing) in [('F', "-pF", "flow"), ('O', "-pO", "order")] {

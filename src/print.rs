@@ -946,4 +946,496 @@ pub mod json {
     pub fn unavailable(listing: &str, reason: &str) -> Json {
         json!({"listing": listing, "available": false, "reason": reason})
     }
+
+    /// `-pO` of a cell: each program with its blocks, handshakes included (`tell`, `hear`, a
+    /// selection it `follows`).
+    pub fn cell_order(sfc: &Sfc, view: &super::CellView) -> Json {
+        fn walk(
+            sfc: &Sfc,
+            view: &super::CellView,
+            blocks: &[Block],
+            n: &mut usize,
+            out: &mut Vec<Json>,
+        ) {
+            let hand = |m: &crate::plan::cell::Message, tell: bool| {
+                let ch = &view.cell.channels[m.channel];
+                let peer = if tell { ch.to } else { ch.from };
+                json!({
+                    "kind": if tell { "tell" } else { "hear" },
+                    "controller": view.controller(peer),
+                    "about": local_id(sfc, m.about),
+                    "decision": m.kind == crate::plan::cell::Kind::Decision,
+                    "branch": (tell && m.kind == crate::plan::cell::Kind::Decision)
+                        .then_some(m.value + 1),
+                })
+            };
+            for b in blocks {
+                match b {
+                    Block::Step(i) => {
+                        *n += 1;
+                        out.push(json!({
+                            "kind": "step",
+                            "number": *n,
+                            "local_id": local_id(sfc, *i),
+                            "name": step_name(sfc, *i),
+                        }));
+                    }
+                    Block::Wait(t) => out.push(json!({
+                        "kind": "wait",
+                        "condition": condition(sfc, *t),
+                        "transition": local_id(sfc, *t),
+                    })),
+                    Block::Tell(m) => out.push(hand(m, true)),
+                    Block::Hear(m) => out.push(hand(m, false)),
+                    Block::Parallel { branches, .. } => {
+                        for br in branches {
+                            walk(sfc, view, br, n, out);
+                        }
+                    }
+                    Block::Choice {
+                        divergence,
+                        branches,
+                        ..
+                    }
+                    | Block::Follow {
+                        divergence,
+                        branches,
+                        ..
+                    } => {
+                        let bs: Vec<Json> = branches
+                            .iter()
+                            .map(|br| {
+                                let mut blocks = Vec::new();
+                                walk(sfc, view, &br.body, n, &mut blocks);
+                                json!({
+                                    "condition": condition(sfc, br.transition),
+                                    "transition": local_id(sfc, br.transition),
+                                    "blocks": blocks,
+                                    "then": match br.end {
+                                        BranchEnd::Join => "join",
+                                        BranchEnd::Repeat(_) => "repeat",
+                                        BranchEnd::Leave => "leave",
+                                    },
+                                })
+                            })
+                            .collect();
+                        let decided_by = match b {
+                            Block::Follow { heard, .. } => {
+                                Some(view.controller(view.cell.channels[heard.channel].from))
+                            }
+                            _ => None,
+                        };
+                        out.push(json!({
+                            "kind": "selection",
+                            "divergence": local_id(sfc, *divergence),
+                            "decided_by": decided_by,
+                            "branches": bs,
+                        }));
+                    }
+                    Block::Loop {
+                        head,
+                        body,
+                        endless,
+                        ..
+                    } => {
+                        let mut blocks = Vec::new();
+                        walk(sfc, view, body, n, &mut blocks);
+                        out.push(json!({
+                            "kind": "loop",
+                            "head": local_id(sfc, *head),
+                            "endless": endless,
+                            "blocks": blocks,
+                        }));
+                    }
+                }
+            }
+        }
+        let mut total = 0;
+        let programs: Vec<Json> = view
+            .cell
+            .programs
+            .iter()
+            .enumerate()
+            .map(|(k, p)| {
+                let mut blocks = Vec::new();
+                let mut n = 0;
+                walk(sfc, view, &p.body, &mut n, &mut blocks);
+                total += n;
+                json!({
+                    "program": view.names.get(k),
+                    "controller": view.controller(k),
+                    "steps": n,
+                    "blocks": blocks,
+                })
+            })
+            .collect();
+        json!({"listing": "order", "steps": total, "programs": programs})
+    }
+
+    /// `-pF` of a cell: one lane per controller with its steps and its waits for others, and
+    /// the cell's time.
+    pub fn cell_flow(sfc: &Sfc, plan: &Plan, view: &super::CellView) -> Json {
+        let (lanes, total) = super::cell_timeline(sfc, plan, view);
+        let lanes: Vec<Json> = lanes
+            .iter()
+            .enumerate()
+            .map(|(k, lane)| {
+                let items: Vec<Json> = lane
+                    .iter()
+                    .map(|it| match it.waits_for {
+                        Some(c) => json!({
+                            "kind": "wait",
+                            "start": it.start,
+                            "end": it.end,
+                            "for_controller": view.controller(c),
+                            "for_step": local_id(sfc, it.element),
+                        }),
+                        None => json!({
+                            "kind": "step",
+                            "start": it.start,
+                            "duration": it.end - it.start,
+                            "local_id": local_id(sfc, it.element),
+                            "name": step_name(sfc, it.element),
+                        }),
+                    })
+                    .collect();
+                json!({
+                    "controller": view.controller(k),
+                    "program": view.names.get(k),
+                    "items": items,
+                })
+            })
+            .collect();
+        json!({"listing": "flow", "lanes": lanes, "total": total})
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Cells (SPEC.md 9): `-pO` per program, `-pF` one lane per controller
+// ---------------------------------------------------------------------------------------------
+
+/// What the cell listings need besides the chart: the programs, the blackboard's names, the
+/// programs' names (empty without a program name).
+pub struct CellView<'a> {
+    pub cell: &'a crate::plan::cell::Cell,
+    pub bb: &'a Blackboard,
+    pub names: &'a [String],
+}
+
+impl CellView<'_> {
+    /// Controller `k`'s resource name.
+    pub fn controller(&self, k: usize) -> &str {
+        &self.bb.resources[self.cell.controllers[k]].name.text
+    }
+
+    /// Program `k`'s name (`the program of <controller>` without a program name).
+    pub fn program(&self, k: usize) -> String {
+        self.names
+            .get(k)
+            .cloned()
+            .unwrap_or_else(|| format!("the program of {}", self.controller(k)))
+    }
+
+    /// A handshake as one line, for program `me`.
+    fn handshake(&self, sfc: &Sfc, m: &crate::plan::cell::Message, tell: bool) -> String {
+        use crate::plan::cell::Kind;
+        let ch = &self.cell.channels[m.channel];
+        let about = match &sfc.elements[m.about].kind {
+            ElementKind::Step(s) => {
+                format!("step {} (id={})", s.name, sfc.elements[m.about].local_id)
+            }
+            _ => format!("id={}", sfc.elements[m.about].local_id),
+        };
+        match (tell, m.kind) {
+            (true, Kind::Done) => format!("tell {}: {about} done", self.controller(ch.to)),
+            (true, Kind::Decision) => format!(
+                "tell {}: branch {} taken at the selection {about}",
+                self.controller(ch.to),
+                m.value + 1
+            ),
+            (false, Kind::Done) => format!("wait for {}: {about} done", self.controller(ch.from)),
+            (false, Kind::Decision) => format!(
+                "wait for {}: its branch at the selection {about}",
+                self.controller(ch.from)
+            ),
+        }
+    }
+}
+
+/// `-pO` of a cell: each program's order, with its handshakes.
+pub fn cell_order(sfc: &Sfc, view: &CellView) -> String {
+    fn walk(
+        sfc: &Sfc,
+        view: &CellView,
+        blocks: &[Block],
+        indent: &str,
+        n: &mut usize,
+        o: &mut String,
+    ) {
+        for b in blocks {
+            match b {
+                Block::Step(i) => {
+                    *n += 1;
+                    let _ = writeln!(
+                        o,
+                        "{indent} {:<4} {:<10} {}",
+                        format!("#{n}"),
+                        format!("(id={})", sfc.elements[*i].local_id),
+                        step_name(sfc, *i)
+                    );
+                }
+                Block::Wait(t) => {
+                    let _ = writeln!(o, "{indent} wait for {}", condition(sfc, *t));
+                }
+                Block::Tell(m) => {
+                    let _ = writeln!(o, "{indent} {}", view.handshake(sfc, m, true));
+                }
+                Block::Hear(m) => {
+                    let _ = writeln!(o, "{indent} {}", view.handshake(sfc, m, false));
+                }
+                Block::Parallel { branches, .. } => {
+                    for br in branches {
+                        walk(sfc, view, br, indent, n, o);
+                    }
+                }
+                Block::Choice {
+                    divergence,
+                    branches,
+                    ..
+                }
+                | Block::Follow {
+                    divergence,
+                    branches,
+                    ..
+                } => {
+                    let decided = match b {
+                        Block::Follow { heard, .. } => format!(
+                            "{}: the branch it takes",
+                            view.handshake(sfc, heard, false)
+                                .split(':')
+                                .next()
+                                .unwrap_or_default()
+                        ),
+                        _ => "the first branch whose condition holds".to_owned(),
+                    };
+                    let _ = writeln!(
+                        o,
+                        "{indent} selection (id={}): {decided}",
+                        sfc.elements[*divergence].local_id
+                    );
+                    let inner = format!("{indent}    ");
+                    for (k, br) in branches.iter().enumerate() {
+                        let _ = writeln!(
+                            o,
+                            "{indent}  {}. if {}",
+                            k + 1,
+                            condition(sfc, br.transition)
+                        );
+                        walk(sfc, view, &br.body, &inner, n, o);
+                        match br.end {
+                            BranchEnd::Join => {}
+                            BranchEnd::Repeat(_) => {
+                                let _ = writeln!(o, "{inner} round again");
+                            }
+                            BranchEnd::Leave => {
+                                let _ = writeln!(o, "{inner} leave the loop");
+                            }
+                        }
+                    }
+                }
+                Block::Loop {
+                    head,
+                    body,
+                    endless,
+                    ..
+                } => {
+                    let _ = writeln!(
+                        o,
+                        "{indent} loop{} (back to id={}):",
+                        if *endless { ", endless" } else { "" },
+                        sfc.elements[*head].local_id
+                    );
+                    walk(sfc, view, body, &format!("{indent}  "), n, o);
+                }
+            }
+        }
+    }
+    let mut o = String::new();
+    for (k, p) in view.cell.programs.iter().enumerate() {
+        let _ = writeln!(
+            o,
+            "program {} (controller {}):",
+            view.program(k),
+            view.controller(k)
+        );
+        walk(sfc, view, &p.body, " ", &mut 0, &mut o);
+    }
+    o
+}
+
+/// One lane's entry of a cell's timeline: a step, or a wait for another controller.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LaneItem {
+    pub start: f64,
+    pub end: f64,
+    /// The step, or (for a wait) the step waited for.
+    pub element: usize,
+    /// For a wait: the controller waited for.
+    pub waits_for: Option<usize>,
+}
+
+/// The cell's timeline (`-pF`): each controller's steps at the earliest times the chart
+/// allows them (every step after the steps the chart puts before it, on any controller, and
+/// after its controller's step before it in its program), its waits for other controllers, and
+/// the cell's time. Simultaneous branches on different controllers overlap; a selection counts
+/// its longest branch, a loop one round.
+pub fn cell_timeline(sfc: &Sfc, plan: &Plan, view: &CellView) -> (Vec<Vec<LaneItem>>, f64) {
+    let n = view.cell.controllers.len();
+    // Each step's controller, from the programs.
+    let mut of: std::collections::HashMap<usize, usize> = Default::default();
+    for (k, p) in view.cell.programs.iter().enumerate() {
+        crate::plan::visit(&p.body, &mut |b| {
+            if let Block::Step(i) = b {
+                of.insert(*i, k);
+            }
+        });
+    }
+    struct T<'s> {
+        sfc: &'s Sfc,
+        of: std::collections::HashMap<usize, usize>,
+        lanes: Vec<Vec<LaneItem>>,
+        free: Vec<f64>,
+    }
+    // A frontier: (time the steps before end, the last step ended then and its controller).
+    type Front = (f64, Option<(usize, usize)>);
+    fn walk(t: &mut T, blocks: &[Block], mut front: Front) -> Front {
+        for b in blocks {
+            match b {
+                Block::Step(i) => {
+                    let Some(&c) = t.of.get(i) else {
+                        continue;
+                    };
+                    let d = duration(t.sfc, *i);
+                    let start = front.0.max(t.free[c]);
+                    if let Some((pc, pi)) = front.1
+                        && pc != c
+                        && front.0 > t.free[c]
+                    {
+                        t.lanes[c].push(LaneItem {
+                            start: t.free[c],
+                            end: front.0,
+                            element: pi,
+                            waits_for: Some(pc),
+                        });
+                    }
+                    t.lanes[c].push(LaneItem {
+                        start,
+                        end: start + d,
+                        element: *i,
+                        waits_for: None,
+                    });
+                    t.free[c] = start + d;
+                    front = (start + d, Some((c, *i)));
+                }
+                Block::Parallel { branches, .. } => {
+                    let mut end = front;
+                    for br in branches {
+                        let e = walk(t, br, front);
+                        if e.0 >= end.0 {
+                            end = e;
+                        }
+                    }
+                    front = end;
+                }
+                Block::Choice { branches, .. } | Block::Follow { branches, .. } => {
+                    // The longest branch counts: each tried from the same lanes.
+                    let (lanes, free) = (t.lanes.clone(), t.free.clone());
+                    let mut best: Option<(Front, Vec<Vec<LaneItem>>, Vec<f64>)> = None;
+                    for br in branches {
+                        t.lanes = lanes.clone();
+                        t.free = free.clone();
+                        let e = walk(t, &br.body, front);
+                        if best.as_ref().is_none_or(|b| e.0 > b.0.0) {
+                            best = Some((e, t.lanes.clone(), t.free.clone()));
+                        }
+                    }
+                    if let Some((e, l, f)) = best {
+                        front = e;
+                        t.lanes = l;
+                        t.free = f;
+                    }
+                }
+                Block::Loop { body, .. } => front = walk(t, body, front),
+                Block::Wait(_) | Block::Tell(_) | Block::Hear(_) => {}
+            }
+        }
+        front
+    }
+    let mut t = T {
+        sfc,
+        of,
+        lanes: vec![Vec::new(); n],
+        free: vec![0.0; n],
+    };
+    let end = walk(&mut t, &plan.body, (0.0, None));
+    let total = t.free.iter().copied().fold(end.0, f64::max);
+    (t.lanes, total)
+}
+
+/// `-pF` of a cell: one column per controller, a row per moment something starts, the waits
+/// between controllers, and the cell's time.
+pub fn cell_flow(sfc: &Sfc, plan: &Plan, view: &CellView) -> String {
+    let (lanes, total) = cell_timeline(sfc, plan, view);
+    const W: usize = 30;
+    let cut = |s: String| -> String {
+        if s.chars().count() > W {
+            s.chars().take(W - 1).collect::<String>() + "…"
+        } else {
+            s
+        }
+    };
+    let mut o = String::new();
+    let _ = write!(o, "{:<8}", "time");
+    for k in 0..lanes.len() {
+        let _ = write!(o, " | {:<W$}", cut(view.controller(k).to_owned()));
+    }
+    let _ = writeln!(o);
+    let mut rows: Vec<(f64, usize, String)> = Vec::new();
+    for (k, lane) in lanes.iter().enumerate() {
+        for it in lane {
+            let text = match it.waits_for {
+                Some(c) => format!(
+                    "waits for {} (id={})",
+                    view.controller(c),
+                    sfc.elements[it.element].local_id
+                ),
+                None => format!(
+                    "{} (id={}) + {}",
+                    step_name(sfc, it.element),
+                    sfc.elements[it.element].local_id,
+                    fmt_num(it.end - it.start)
+                ),
+            };
+            rows.push((it.start, k, text));
+        }
+    }
+    rows.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    for (time, k, text) in rows {
+        let _ = write!(o, "{:<8}", fmt_num(time));
+        for c in 0..lanes.len() {
+            let cell = if c == k {
+                cut(text.clone())
+            } else {
+                String::new()
+            };
+            let _ = write!(o, " | {cell:<W$}");
+        }
+        let _ = writeln!(o);
+    }
+    let _ = writeln!(
+        o,
+        "cell time: {} (simultaneous branches on different controllers overlap; the longest alternative counted, loops once)",
+        seconds(total)
+    );
+    o
 }

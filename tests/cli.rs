@@ -38,9 +38,18 @@ fn stderr(o: &Output) -> String {
 /// A temporary copy of `fixtures/base/<base>` with the input files of `fixtures/ok/<case>` (those
 /// it has) laid over it.
 fn base_with_case(base: &str, case: &str) -> tempfile::TempDir {
+    bases_with_case(&[base], case)
+}
+
+/// `fixtures/base/<each of bases>` in order, then `fixtures/ok/<case>` over them.
+fn bases_with_case(bases: &[&str], case: &str) -> tempfile::TempDir {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
     let t = tempfile::tempdir().unwrap();
-    for dir in [root.join("base").join(base), root.join("ok").join(case)] {
+    let dirs = bases
+        .iter()
+        .map(|b| root.join("base").join(b))
+        .chain([root.join("ok").join(case)]);
+    for dir in dirs {
         for e in std::fs::read_dir(dir).unwrap() {
             let e = e.unwrap();
             let name = e.file_name();
@@ -1296,4 +1305,85 @@ fn wires_between_controllers_are_listed() {
     assert_eq!(listing["wires"].as_array().unwrap().len(), 2);
     assert_eq!(listing["wires"][0]["from"]["signal"], "Done_A");
     assert_eq!(listing["wires"][0]["to"]["controller"], "KUKA KR16-2");
+}
+
+/// Issue 25, item 6: a cell's listings. `-pO` lists each program's order with its handshakes;
+/// `-pF` one lane per controller with the waits between them and the cell's time; both as JSON.
+#[test]
+fn a_cells_listings_show_each_program_and_the_lanes() {
+    let t = bases_with_case(&["cell", "abb", "ur"], "cell-kuka-abb-ur");
+    let o = run(&["-pO", "Blackboard.aml", "Mix"], t.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let text = stdout(&o);
+    let ur: Vec<&str> = text
+        .lines()
+        .skip_while(|l| !l.starts_with("program Mix_UR10e"))
+        .take_while(|l| !l.starts_with("unchanged") && !l.starts_with("wrote"))
+        .filter(|l| !l.trim().is_empty())
+        .collect();
+    assert_eq!(
+        ur,
+        [
+            "program Mix_UR10e (controller UR10e):",
+            "  selection (id=8): wait for ABB IRB 1200: the branch it takes",
+            "   1. if Part_Present",
+            "      #1   (id=11)    Place",
+            "      #2   (id=13)    Release",
+            "   2. if NOT Part_Present",
+        ],
+        "{text}"
+    );
+    assert!(
+        text.contains("  wait for KUKA KR15-2: step Grip (id=5) done\n  #1   (id=7)     Take"),
+        "{text}"
+    );
+    let o = run(&["-pF", "Blackboard.aml", "Mix"], t.path());
+    let text = stdout(&o);
+    let header = text.lines().next().unwrap();
+    for c in ["time", "KUKA KR15-2", "ABB IRB 1200", "UR10e"] {
+        assert!(header.contains(c), "{text}");
+    }
+    // The UR places while the KUKA retreats: both start at 4.5 s, after the ABB's Take.
+    let at = |t: &str| -> Vec<String> {
+        text.lines()
+            .filter(|l| l.starts_with(&format!("{t} ")))
+            .map(|l| l.split('|').map(str::trim).collect::<Vec<_>>().join("|"))
+            .collect()
+    };
+    assert_eq!(
+        at("4.5"),
+        ["4.5|Retreat (id=14) + 2||", "4.5|||Place (id=11) + 2",],
+        "{text}"
+    );
+    assert!(
+        at("0").contains(&"0||waits for KUKA KR15-2 (id=5)|".to_owned()),
+        "{text}"
+    );
+    assert!(text.contains("cell time: 7.5 seconds"), "{text}");
+    // JSON.
+    let o = run(
+        &["-pF", "-pO", "--format", "json", "Blackboard.aml", "Mix"],
+        t.path(),
+    );
+    let listings: Vec<serde_json::Value> = stdout(&o)
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .collect();
+    let flow = listings.iter().find(|v| v["listing"] == "flow").unwrap();
+    assert_eq!(flow["total"], 7.5, "{flow}");
+    assert_eq!(flow["lanes"].as_array().unwrap().len(), 3);
+    assert_eq!(flow["lanes"][1]["items"][0]["kind"], "wait", "{flow}");
+    assert_eq!(
+        flow["lanes"][1]["items"][0]["for_controller"],
+        "KUKA KR15-2"
+    );
+    let order = listings.iter().find(|v| v["listing"] == "order").unwrap();
+    let programs = order["programs"].as_array().unwrap();
+    assert_eq!(programs.len(), 3, "{order}");
+    assert_eq!(programs[1]["program"], "Mix_ABB_IRB_1200");
+    assert_eq!(
+        programs[2]["blocks"][0]["decided_by"], "ABB IRB 1200",
+        "{order}"
+    );
+    assert_eq!(programs[0]["blocks"][2]["kind"], "tell", "{order}");
 }
