@@ -871,7 +871,7 @@ fn stages(bb_path: &Path) -> (Vec<Duration>, Vec<(&'static str, String)>) {
         program: "p",
         blackboard: &bb,
         sfc: &sfc,
-        plan: &plan,
+        body: &plan.body,
         bound: &bound,
         irls: &irls,
         newline: "\r\n",

@@ -38,8 +38,8 @@ pub struct Options {
     /// Keep no warnings (the command line without `--warn` shows none): none is built, and the
     /// SFC is not read again to locate them. The daemon keeps them (its events count them).
     pub drop_warnings: bool,
-    /// Steps from which the binder renders on two threads (`None`: [`bind::PARALLEL_FROM`]).
-    /// For the tests, which compare the two ways.
+    /// Steps from which the binder renders on two threads, and a cell's programs are written
+    /// two at a time (`None`: [`bind::PARALLEL_FROM`]). For the tests, which compare the ways.
     #[doc(hidden)]
     pub bind_split_from: Option<usize>,
 }
@@ -738,50 +738,53 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             .and_then(|p| cx.load_top(p, &mut out));
         let mut outputs = Vec::new();
         let mut output_programs = Vec::new();
-        for (k, prog) in programs.iter().enumerate() {
-            let template = match user_template {
+        let templates: Vec<Option<OutputTemplate>> = programs
+            .iter()
+            .map(|prog| match user_template {
                 Some(f) if prog.language == langs.program => {
                     OutputTemplate::parse(&cx.sources, f, prog.language, &mut cx.diags)
                 }
                 _ if opts.template.is_some() && prog.language == langs.program => None,
                 _ => Some(OutputTemplate::builtin(prog.language)),
-            };
-            if cx.diags.has_errors() {
-                continue;
-            }
-            let (Some(template), Some(plan)) = (&template, &plan) else {
-                continue;
-            };
-            let own;
-            let program_plan = match &cell {
-                Some(c) => {
-                    own = Plan {
-                        body: c.programs[k].body.clone(),
-                        start: plan.start,
-                        end: plan.end,
+            })
+            .collect();
+        if !cx.diags.has_errors()
+            && let Some(plan) = &plan
+            && templates.iter().all(Option::is_some)
+        {
+            let inputs: Vec<(EmitInput, &OutputTemplate)> = programs
+                .iter()
+                .zip(&templates)
+                .enumerate()
+                .filter_map(|(k, (prog, template))| {
+                    let template = template.as_ref()?;
+                    let input = EmitInput {
+                        program: prog.name.as_deref().unwrap_or(PLACEHOLDER_PROGRAM),
+                        blackboard: &bb,
+                        sfc,
+                        body: match &cell {
+                            Some(c) => &c.programs[k].body,
+                            None => &plan.body,
+                        },
+                        bound: &bound_programs[k],
+                        irls: &irls,
+                        newline: if opts.lf { "\n" } else { "\r\n" },
+                        step_indent: &template.step_indent,
+                        steps_indent: template.steps_indent(),
+                        profile: prog.language.profile(),
+                        cell: cell
+                            .as_ref()
+                            .map(|c| crate::emit::handshake::CellView { cell: c, me: k }),
                     };
-                    &own
-                }
-                None => plan,
-            };
-            let input = EmitInput {
-                program: prog.name.as_deref().unwrap_or(PLACEHOLDER_PROGRAM),
-                blackboard: &bb,
-                sfc,
-                plan: program_plan,
-                bound: &bound_programs[k],
-                irls: &irls,
-                newline: if opts.lf { "\n" } else { "\r\n" },
-                step_indent: &template.step_indent,
-                steps_indent: template.steps_indent(),
-                profile: prog.language.profile(),
-                cell: cell
-                    .as_ref()
-                    .map(|c| crate::emit::handshake::CellView { cell: c, me: k }),
-            };
-            if let Some(files) = crate::emit::emit_files(&input, template, &mut cx.diags)
-                && let Some(name) = &prog.name
-            {
+                    Some((input, template))
+                })
+                .collect();
+            let split_from = opts.bind_split_from.unwrap_or(bind::PARALLEL_FROM);
+            let emitted = emit_programs(&inputs, &mut cx.diags, out.skill_steps, split_from);
+            for ((files, prog), _) in emitted.into_iter().zip(&programs).zip(&inputs) {
+                let (Some(files), Some(name)) = (files, &prog.name) else {
+                    continue;
+                };
                 for f in files {
                     let path = cx.base.join(format!("{name}.{}", f.extension));
                     outputs.push((path, f));
@@ -912,6 +915,73 @@ fn check_program_name(cx: &mut Ctx, opts: &Options, language: Option<Language>) 
             format!("program name `{program}` is {why}"),
         ));
     }
+}
+
+/// The programs' files, in order (`None` where a program has errors, reported in `diags`).
+/// A cell's programs are written two at a time when they hold `split_from` steps or more
+/// ([`bind::PARALLEL_FROM`], as the binder splits): each on its own, so the result is the same
+/// (`tests/bind_split.rs` compares them); the diagnostics kept in program order.
+fn emit_programs(
+    inputs: &[(EmitInput, &OutputTemplate)],
+    diags: &mut Diagnostics,
+    steps: usize,
+    split_from: usize,
+) -> Vec<Option<Vec<OutputFile>>> {
+    type Emitted = (Option<Vec<OutputFile>>, Diagnostics);
+    let one = |(input, template): &(EmitInput, &OutputTemplate), like: &Diagnostics| -> Emitted {
+        let mut d = like.empty_like();
+        let files = crate::emit::emit_files(input, template, &mut d);
+        (files, d)
+    };
+    let emitted: Vec<Emitted> = if inputs.len() < 2 || steps < split_from.max(2) {
+        inputs.iter().map(|i| one(i, diags)).collect()
+    } else {
+        // Odd programs on a second thread, even ones here.
+        let like = diags.empty_like();
+        let (here, there) = std::thread::scope(|s| {
+            let like = &like;
+            let started = std::thread::Builder::new()
+                .name("skillpost-emit".into())
+                .spawn_scoped(s, move || {
+                    inputs
+                        .iter()
+                        .skip(1)
+                        .step_by(2)
+                        .map(|i| one(i, like))
+                        .collect::<Vec<_>>()
+                });
+            let here: Vec<Emitted> = inputs.iter().step_by(2).map(|i| one(i, like)).collect();
+            let there: Vec<Emitted> = match started {
+                Ok(h) => h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)),
+                Err(_) => inputs
+                    .iter()
+                    .skip(1)
+                    .step_by(2)
+                    .map(|i| one(i, like))
+                    .collect(),
+            };
+            (here, there)
+        });
+        let (mut here, mut there) = (here.into_iter(), there.into_iter());
+        (0..inputs.len())
+            .filter_map(|k| {
+                if k % 2 == 0 {
+                    here.next()
+                } else {
+                    there.next()
+                }
+            })
+            .collect()
+    };
+    emitted
+        .into_iter()
+        .map(|(files, d)| {
+            for x in d.into_vec() {
+                diags.push(x);
+            }
+            files
+        })
+        .collect()
 }
 
 /// One program to write: a cell of several controllers has one per controller.

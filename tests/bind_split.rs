@@ -3,6 +3,8 @@
 //! over all steps) and definitions (in order of first use) joined after. The result must be what
 //! one thread gives: compared through `compile` over every fixture (split at every chart of two
 //! steps or more) and a generated 3,000-step project with errors and warnings in both halves.
+//! The same switch writes a cell's programs two at a time (SPEC.md 9): the cell fixtures, with
+//! their bases, are compared the same way.
 
 use std::path::{Path, PathBuf};
 
@@ -145,4 +147,44 @@ fn a_large_chart_with_problems_in_both_halves_binds_the_same_on_two_threads() {
     // And the same without the problems: the outputs themselves.
     let clean = generator::write_project(&dir.path().join("clean"), &spec).unwrap();
     same_both_ways(&clean.blackboard);
+}
+
+#[test]
+fn a_cells_programs_are_the_same_written_two_at_a_time() {
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
+    for (bases, case, blackboard) in [
+        (
+            &["cell", "cell2"][..],
+            "cell-two-robots-weld",
+            "Blackboard.aml",
+        ),
+        (
+            &["cell", "abb", "ur"][..],
+            "cell-kuka-abb-ur",
+            "Blackboard.aml",
+        ),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        for from in bases
+            .iter()
+            .map(|b| fixtures.join("base").join(b))
+            .chain([fixtures.join("ok").join(case)])
+        {
+            for e in std::fs::read_dir(from).unwrap() {
+                let e = e.unwrap();
+                std::fs::copy(e.path(), dir.path().join(e.file_name())).unwrap();
+            }
+        }
+        let bb = dir.path().join(blackboard);
+        let c = compile(
+            &FsSource::default(),
+            &bb,
+            &Options {
+                program: Some("out".into()),
+                ..Default::default()
+            },
+        );
+        assert!(c.outputs.len() >= 3, "{case}: {:?}", c.diagnostics);
+        same_both_ways(&bb);
+    }
 }

@@ -51,6 +51,8 @@ mod rapid_check;
 #[path = "common/urscript.rs"]
 mod urscript_check;
 
+#[path = "../benches/common/cell.rs"]
+mod cell;
 #[path = "flow_run/chart.rs"]
 mod chart;
 #[path = "flow_run/cosim.rs"]

@@ -93,7 +93,7 @@ impl Profile for Krl {
             super::handshake::write(&mut writer.out, 0, h.init());
         }
         writer.hand = hand;
-        writer.blocks(&input.plan.body, 0);
+        writer.blocks(input.body, 0);
         let mut declarations = declarations(input, writer.uses_branch_var);
         if let Some(h) = &writer.hand {
             declarations.extend(h.declarations());

@@ -22,7 +22,6 @@ pub mod urscript;
 use crate::bind::Bound;
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
 use crate::model::{Blackboard, Sfc};
-use crate::plan::Plan;
 use crate::read::irl::Irl;
 use crate::template::Syntax;
 
@@ -73,7 +72,8 @@ pub struct EmitInput<'a> {
     pub program: &'a str,
     pub blackboard: &'a Blackboard,
     pub sfc: &'a Sfc,
-    pub plan: &'a Plan,
+    /// The program tree: the chart's plan, or a cell's program (`plan::cell`).
+    pub body: &'a [crate::plan::Block],
     pub bound: &'a Bound,
     pub irls: &'a [Irl],
     /// `"\r\n"` or `"\n"`.

@@ -69,7 +69,7 @@ pub fn generate(input: &EmitInput, dialect: &Dialect) -> Generated {
     if let Some(h) = &w.hand {
         super::handshake::write(&mut w.out, 0, h.init());
     }
-    w.blocks(&input.plan.body, 0);
+    w.blocks(input.body, 0);
     let mut declarations = (dialect.declare)(w.uses_branch_var, w.flags);
     if let Some(h) = &w.hand {
         declarations.extend(h.declarations());

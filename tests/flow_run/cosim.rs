@@ -1070,101 +1070,41 @@ pub fn parse_structured(text: &str, lang: Lang, wires: &Wires, me: usize) -> Vec
 
 /// The flow base's blackboard with a robot `R1`, `R2`, … per language of `langs`, each on a
 /// controller of its own with the base's signals and skills (readable in its language, its IRL
-/// file `kr15-2-<language>.irl`), and `m` wires from each to each other: robot `k`'s output
-/// `To_R<p>_<j>` drives robot `p`'s input `From_R<k>_<j>`. KRL: `$OUT[100 + 10 p + j]` and
-/// `$IN[200 + 10 k + j]`; RAPID: `Address` `do_To_R<p>_<j>`, `di_From_R<k>_<j>`; URScript (one
-/// peer at most, `m` ≤ 4): standard digital output `j`, input `j + 3`.
+/// file `kr15-2-<language>.irl`), and `m` wires from each to each other
+/// (`benches/common/cell.rs`): robot `k`'s output `To_R<p>_<j>` drives robot `p`'s input
+/// `From_R<k>_<j>`. KRL: `$OUT[100 + 10 p + j]` and `$IN[200 + 10 k + j]`; RAPID: `Address`
+/// `do_To_R<p>_<j>`, `di_From_R<k>_<j>`; URScript (one peer at most, `m` ≤ 4): standard digital
+/// output `j`, input `j + 3`.
 pub fn cell_blackboard(langs: &[Lang], m: usize) -> String {
     let n = langs.len();
     let raw = std::fs::read_to_string(repo().join("fixtures/base/flow/Blackboard.aml")).unwrap();
-    let lines: Vec<&str> = raw.lines().collect();
-    let start = lines
-        .iter()
-        .position(|l| l.contains("<InternalElement Name=\"KUKA KR15-2\""))
-        .expect("the flow base changed");
-    // The robot's element ends at the first line indented as its opening line.
-    let indent = &lines[start][..lines[start].len() - lines[start].trim_start().len()];
-    let end = start
-        + lines[start..]
-            .iter()
-            .position(|l| *l == format!("{indent}</InternalElement>"))
-            .expect("the flow base changed");
-    let mut out: Vec<String> = lines[..start].iter().map(|s| s.to_string()).collect();
-    let id = |k: usize, tail: &str| format!("{{00000000-0000-0000-{k:04}-{tail}}}");
-    for (k, &lang) in (1..=n).zip(langs) {
-        // The robot in its language (`Lang::blackboard` converts the whole base).
-        let converted = lang.blackboard(&raw);
-        let cl: Vec<&str> = converted.lines().collect();
-        let s0 = cl
-            .iter()
-            .position(|l| l.contains("<InternalElement Name=\"KUKA KR15-2\""))
-            .unwrap();
-        let e0 = s0
-            + cl[s0..]
-                .iter()
-                .position(|l| *l == format!("{indent}</InternalElement>"))
-                .unwrap();
-        let mut text = cl[s0..=e0]
-            .join("\n")
-            .replacen("Name=\"KUKA KR15-2\"", &format!("Name=\"R{k}\""), 1)
-            .replace(
-                "{00000000-0000-0000-0000-",
-                &format!("{{00000000-0000-0000-{k:04}-"),
-            )
-            .replace(
+    assert!(
+        !langs.contains(&Lang::UrScript) || n == 2,
+        "a UR robot has one peer"
+    );
+    crate::cell::cell_blackboard(
+        "KUKA KR15-2",
+        n,
+        m,
+        &|k| langs[k - 1].blackboard(&raw),
+        &|k, p, j| {
+            let number = |v: usize| ("Number", v.to_string());
+            match langs[k - 1] {
+                Lang::Krl => (number(100 + 10 * p + j), number(200 + 10 * p + j)),
+                Lang::Rapid => (
+                    ("Address", format!("do_To_R{p}_{j}")),
+                    ("Address", format!("di_From_R{p}_{j}")),
+                ),
+                Lang::UrScript => (number(j), number(j + 3)),
+            }
+        },
+        &|k, text| {
+            text.replace(
                 "<Value>kr15-2.irl</Value>",
-                &format!("<Value>kr15-2-{}.irl</Value>", lang.ext()),
-            );
-        let mut wires = String::new();
-        for p in (1..=n).filter(|&p| p != k) {
-            assert!(lang != Lang::UrScript || n == 2, "a UR robot has one peer");
-            for j in 1..=m {
-                let out_name = format!("To_R{p}_{j}");
-                let in_name = format!("From_R{p}_{j}");
-                let (o, i) = match lang {
-                    Lang::Krl => (
-                        format!(
-                            "Number\" AttributeDataType=\"xs:integer\"><Value>{}",
-                            100 + 10 * p + j
-                        ),
-                        format!(
-                            "Number\" AttributeDataType=\"xs:integer\"><Value>{}",
-                            200 + 10 * p + j
-                        ),
-                    ),
-                    Lang::Rapid => (
-                        format!("Address\" AttributeDataType=\"xs:string\"><Value>do_{out_name}"),
-                        format!("Address\" AttributeDataType=\"xs:string\"><Value>di_{in_name}"),
-                    ),
-                    Lang::UrScript => (
-                        format!("Number\" AttributeDataType=\"xs:integer\"><Value>{j}"),
-                        format!("Number\" AttributeDataType=\"xs:integer\"><Value>{}", j + 3),
-                    ),
-                };
-                for (name, io, attr) in [(out_name, "Output", o), (in_name, "Input", i)] {
-                    wires.push_str(&format!(
-                        "\n{indent}  <ExternalInterface Name=\"{name}\" ID=\"{{w-{k}-{name}}}\" RefBaseClassPath=\"AutomationMLInterfaceClassLib/AutomationMLBaseInterface/Communication/SignalInterface\"><Attribute Name=\"IoType\" AttributeDataType=\"xs:string\"><Value>{io}</Value></Attribute><Attribute Name=\"{attr}</Value></Attribute></ExternalInterface>"
-                    ));
-                }
-            }
-        }
-        let first_line_end = text.find('\n').unwrap();
-        text.insert_str(first_line_end, &wires);
-        out.push(text);
-    }
-    for a in 1..=n {
-        for b in (1..=n).filter(|&b| b != a) {
-            for j in 1..=m {
-                out.push(format!(
-                    "{indent}<InternalLink Name=\"R{a} to R{b} {j}\" RefPartnerSideA=\"{}:To_R{b}_{j}\" RefPartnerSideB=\"{}:From_R{a}_{j}\"/>",
-                    id(a, "000000000002"),
-                    id(b, "000000000002")
-                ));
-            }
-        }
-    }
-    out.extend(lines[end + 1..].iter().map(|s| s.to_string()));
-    out.join("\n")
+                &format!("<Value>kr15-2-{}.irl</Value>", langs[k - 1].ext()),
+            )
+        },
+    )
 }
 
 /// Puts each skill step of a chart on one of `n` robots at random; returns the chart and each

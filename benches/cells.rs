@@ -1,0 +1,166 @@
+//! Cells (SPEC.md 9): the cost of splitting a chart over several controllers (`harness = false`).
+//!
+//! ```text
+//! cargo bench --bench cells                         # 10,000 steps, 1 and 4 controllers
+//! SKILLPOST_BENCH_ITERS=21 cargo bench --bench cells
+//! ```
+//!
+//! The same generated chart (`benches/common/generator.rs`: 10,000 skill steps with simultaneous
+//! branches, selections and a loop around the whole) is compiled on one controller and on four
+//! (`benches/common/cell.rs`: four robots wired to each other; each step on the robot of its
+//! run, runs of 1 to 20 steps taken at random with a fixed seed, so the programs hand over
+//! thousands of times). Compiles of the two alternate; the table gives the medians and the
+//! ratio, which issue 25 wants at 1.3 at most: the handshake planning is linear in the chart.
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use skillpost::compile::{self, Options};
+use skillpost::load::FsSource;
+
+#[path = "common/cell.rs"]
+mod cell;
+#[path = "common/generator.rs"]
+mod generator;
+
+const STEPS: usize = 10_000;
+const CONTROLLERS: usize = 4;
+
+/// Puts each step on one of `n` robots `R1`…, in runs of 1 to 20 steps.
+fn spread(sfc: &str, n: usize) -> String {
+    let marker = "<ressource name=\"KUKA KR15-2\"/>";
+    let mut out = String::with_capacity(sfc.len());
+    let (mut rest, mut seed, mut left, mut robot) = (sfc, 0x9E37_79B9_7F4A_7C15u64, 0u64, 0u64);
+    while let Some(at) = rest.find(marker) {
+        if left == 0 {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            left = 1 + seed % 20;
+            robot = (robot + 1 + (seed >> 8) % (n as u64 - 1)) % n as u64;
+        }
+        left -= 1;
+        out.push_str(&rest[..at]);
+        out.push_str(&format!("<ressource name=\"R{}\"/>", robot + 1));
+        rest = &rest[at + marker.len()..];
+    }
+    out.push_str(rest);
+    out
+}
+
+fn compile_once(bb: &Path) -> (Duration, skillpost::compile::Compilation) {
+    let opts = Options {
+        program: Some("P".into()),
+        drop_warnings: true,
+        ..Options::default()
+    };
+    let t = Instant::now();
+    let c = compile::compile(&FsSource::default(), bb, &opts);
+    (t.elapsed(), c)
+}
+
+fn median(mut v: Vec<Duration>) -> Duration {
+    v.sort();
+    v[v.len() / 2]
+}
+
+fn main() {
+    let iters: usize = std::env::var("SKILLPOST_BENCH_ITERS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(11);
+    let spec = generator::Spec {
+        steps: STEPS,
+        branch_every: 25,
+        branch_width: 2,
+        select_every: 10,
+        looped: true,
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let one = tmp.path().join("one");
+    let project = generator::write_project(&one, &spec).unwrap();
+    let four = tmp.path().join("four");
+    std::fs::create_dir_all(&four).unwrap();
+    let single = generator::blackboard_text(generator::SFC_FILE, generator::IRL_FILE);
+    let bb = cell::cell_blackboard(
+        "KUKA KR15-2",
+        CONTROLLERS,
+        4,
+        &|_| single.clone(),
+        &|_, p, j| {
+            let number = |v: usize| ("Number", v.to_string());
+            (number(100 + 10 * p + j), number(200 + 10 * p + j))
+        },
+        &|_, text| text.to_owned(),
+    );
+    std::fs::write(four.join(generator::BLACKBOARD_FILE), bb).unwrap();
+    std::fs::copy(&project.irl, four.join(generator::IRL_FILE)).unwrap();
+    let sfc = std::fs::read_to_string(&project.sfc).unwrap();
+    std::fs::write(four.join(generator::SFC_FILE), spread(&sfc, CONTROLLERS)).unwrap();
+
+    let (a, b) = (
+        one.join(generator::BLACKBOARD_FILE),
+        four.join(generator::BLACKBOARD_FILE),
+    );
+    // Warm up, and check that both compile.
+    let (_, c1) = compile_once(&a);
+    let (_, c4) = compile_once(&b);
+    for (what, c) in [("one controller", &c1), ("four controllers", &c4)] {
+        assert!(!c.has_errors(), "{what}: {:?}", c.diagnostics);
+    }
+    let cell = c4.cell.as_ref().expect("a cell of four programs");
+    let mut handshakes = 0;
+    for p in &cell.programs {
+        skillpost::plan::visit(&p.body, &mut |b| {
+            if matches!(b, skillpost::plan::Block::Tell(_)) {
+                handshakes += 1;
+            }
+        });
+    }
+    let bytes = |c: &skillpost::compile::Compilation| -> usize {
+        c.outputs.iter().map(|(_, f)| f.text.len()).sum()
+    };
+    let (mut t1, mut t4) = (Vec::new(), Vec::new());
+    // `SKILLPOST_BENCH_ONLY=1` or `=4`: compile only that one (for a profiler).
+    let only = std::env::var("SKILLPOST_BENCH_ONLY").ok();
+    for _ in 0..iters {
+        if only.as_deref() != Some("4") {
+            t1.push(compile_once(&a).0);
+        }
+        if only.as_deref() != Some("1") {
+            t4.push(compile_once(&b).0);
+        }
+    }
+    if only.is_some() {
+        return;
+    }
+    let (m1, m4) = (median(t1), median(t4));
+    println!("| chart | controllers | programs | messages told | output | median compile |");
+    println!("|---|---|---|---|---|---|");
+    println!(
+        "| {STEPS} steps | 1 | 1 | 0 | {:.1} MB | {:.0} ms |",
+        bytes(&c1) as f64 / 1e6,
+        m1.as_secs_f64() * 1e3
+    );
+    println!(
+        "| {STEPS} steps | {CONTROLLERS} | {} | {handshakes} | {:.1} MB | {:.0} ms |",
+        cell.programs.len(),
+        bytes(&c4) as f64 / 1e6,
+        m4.as_secs_f64() * 1e3
+    );
+    println!(
+        "\nratio four / one: {:.2} (medians of {iters} compiles each, alternating)",
+        m4.as_secs_f64() / m1.as_secs_f64()
+    );
+    if std::env::var("SKILLPOST_BENCH_STAGES").is_ok() {
+        for (what, bb) in [("one", &a), ("four", &b)] {
+            let (_, c) = compile_once(bb);
+            let stages: Vec<String> = c
+                .timings
+                .iter()
+                .map(|(s, d)| format!("{s} {:.1} ms", d.as_secs_f64() * 1e3))
+                .collect();
+            println!("{what}: {}", stages.join(", "));
+        }
+    }
+}
