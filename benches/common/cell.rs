@@ -20,6 +20,9 @@ pub fn robot_element<'t>(text: &'t str, name: &str) -> Option<(usize, usize, &'t
     Some((start, end, indent))
 }
 
+/// A signal's address attribute: `("Number", "12")` or `("Address", "do_Ready")`.
+pub type Attr = (&'static str, String);
+
 /// A cell of `n` robots with `m` wires from each to each other. `single(k)` is the one-robot
 /// blackboard for robot `k` (from 1; its resource named `robot`); robot 1's gives everything
 /// around the robots. `wire(k, p, j)` gives the attribute (`Number` or `Address`, with its
@@ -30,7 +33,7 @@ pub fn cell_blackboard(
     n: usize,
     m: usize,
     single: &dyn Fn(usize) -> String,
-    wire: &dyn Fn(usize, usize, usize) -> ((&'static str, String), (&'static str, String)),
+    wire: &dyn Fn(usize, usize, usize) -> (Attr, Attr),
     irl: &dyn Fn(usize, &str) -> String,
 ) -> String {
     let frame = single(1);
@@ -38,7 +41,7 @@ pub fn cell_blackboard(
     let lines: Vec<&str> = frame.lines().collect();
     let mut out: Vec<String> = lines[..start].iter().map(|s| s.to_string()).collect();
     let id = |k: usize| format!("{{00000000-0000-0000-{k:04}-000000000002}}");
-    let signal = |k: usize, name: &str, io: &str, (attr, value): (&str, String)| {
+    let signal = |k: usize, name: &str, io: &str, (attr, value): Attr| {
         let ty = if attr == "Number" {
             "xs:integer"
         } else {
