@@ -231,6 +231,19 @@ pub fn selection_comment(input: &EmitInput, divergence: usize, branches: usize) 
     )
 }
 
+/// The comment before a selection another controller decides (a cell, SPEC.md 9).
+pub fn follow_comment(
+    input: &EmitInput,
+    divergence: usize,
+    branches: usize,
+    decider: &str,
+) -> String {
+    format!(
+        "selection localId {}: {branches} branches, the one {decider} takes",
+        input.sfc.elements[divergence].local_id
+    )
+}
+
 #[cfg(test)]
 mod tests {
     /// The same digits as `format!`, at the ends of the range and around each power of ten.

@@ -193,6 +193,11 @@ impl<'a> Hand<'a> {
         crate::names::transliterate(&bb.resources[self.view.cell.controllers[c]].name.text)
     }
 
+    /// The controller that tells `m`.
+    pub fn teller(&self, m: &Message) -> String {
+        self.name(self.view.cell.channels[m.channel].from)
+    }
+
     /// What a message is about, for its comment.
     fn about(&self, m: &Message) -> String {
         let e = &self.input.sfc.elements[m.about];

@@ -208,9 +208,14 @@ impl Writer<'_> {
         branches: &[Branch],
         level: usize,
     ) {
+        let decider = self
+            .hand
+            .as_ref()
+            .map(|h| h.teller(heard))
+            .unwrap_or_default();
         self.comment(
             level,
-            &flow::selection_comment(self.input, div, branches.len()),
+            &flow::follow_comment(self.input, div, branches.len(), &decider),
         );
         if let Some(h) = &self.hand {
             let lines = h.hear(heard);

@@ -229,9 +229,14 @@ impl Writer<'_> {
                 heard,
                 branches,
             } => {
+                let decider = self
+                    .hand
+                    .as_ref()
+                    .map(|h| h.teller(heard))
+                    .unwrap_or_default();
                 self.comment(
                     level,
-                    &flow::selection_comment(self.input, *divergence, branches.len()),
+                    &flow::follow_comment(self.input, *divergence, branches.len(), &decider),
                 );
                 if let Some(h) = &self.hand {
                     let lines = h.hear(heard);
