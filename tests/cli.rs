@@ -1387,3 +1387,72 @@ fn a_cells_listings_show_each_program_and_the_lanes() {
     );
     assert_eq!(programs[0]["blocks"][2]["kind"], "tell", "{order}");
 }
+
+/// Issue 25, item 3: a cell's program names. `<PROGRAM>_<controller>` by default; the
+/// controller's `Program` attribute names its program; a name used twice, or too long for its
+/// language, is an error that says to set `Program`, and nothing is written. A controller without
+/// a `Code` interface of its name gets its program all the same, with `W205`.
+#[test]
+fn a_cells_program_names_come_from_program_attributes() {
+    let t = bases_with_case(&["cell", "cell2"], "cell-two-robots-weld");
+    let bb = t.path().join("Blackboard.aml");
+    let original = std::fs::read_to_string(&bb).unwrap();
+    let robot_b =
+        "<InternalElement Name=\"KUKA KR16-2\" ID=\"{00000000-0000-0000-0001-000000000002}\">";
+    assert!(original.contains(robot_b));
+    let with_program = |name: &str| {
+        original.replacen(
+            robot_b,
+            &format!("{robot_b}\n<Attribute Name=\"Program\"><Value>{name}</Value></Attribute>"),
+            1,
+        )
+    };
+    // The attribute names the program.
+    std::fs::write(&bb, with_program("Welder")).unwrap();
+    let o = run(&["Blackboard.aml", "Cell"], t.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(t.path().join("Welder.src").is_file());
+    assert!(t.path().join("Cell_KUKA_KR15_2.src").is_file());
+    assert!(
+        std::fs::read_to_string(&bb)
+            .unwrap()
+            .contains("<Value>Welder.src</Value>")
+    );
+    // The other program's name used twice.
+    let dir2 = bases_with_case(&["cell", "cell2"], "cell-two-robots-weld");
+    std::fs::write(
+        dir2.path().join("Blackboard.aml"),
+        with_program("Cell_KUKA_KR15_2"),
+    )
+    .unwrap();
+    let o = run(&["Blackboard.aml", "Cell"], dir2.path());
+    assert_eq!(o.status.code(), Some(1), "{}", stdout(&o));
+    let err = stderr(&o);
+    assert!(
+        err.contains("E601")
+            && err.contains("the name of another controller's program too")
+            && err.contains("set the controller's `Program` attribute"),
+        "{err}"
+    );
+    assert!(!dir2.path().join("Cell_KUKA_KR15_2.src").exists());
+    // Too long for KRL (24 characters) by default.
+    let dir3 = bases_with_case(&["cell", "cell2"], "cell-two-robots-weld");
+    let o = run(&["Blackboard.aml", "A_Long_Program_Name"], dir3.path());
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    assert!(
+        err.contains("E601") && err.contains("A_Long_Program_Name_KUKA_KR15_2"),
+        "{err}"
+    );
+    // No Code interface for the second controller: W205, the program written all the same.
+    let dir4 = bases_with_case(&["cell", "cell2"], "cell-two-robots-weld");
+    let no_code = original.replace(
+        "ExternalInterface Name=\"KUKA KR16-2\"",
+        "ExternalInterface Name=\"Other\"",
+    );
+    std::fs::write(dir4.path().join("Blackboard.aml"), no_code).unwrap();
+    let o = run(&["--warn", "Blackboard.aml", "Cell"], dir4.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stderr(&o).contains("W205"), "{}", stderr(&o));
+    assert!(dir4.path().join("Cell_KUKA_KR16_2.src").is_file());
+}
