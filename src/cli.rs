@@ -387,9 +387,15 @@ fn print_listings(
     if print('B')
         && let Some(bb) = &c.blackboard
     {
-        emit(&|| crate::print::blackboard(bb, &c.languages), &|| {
-            json::blackboard(bb, &c.languages)
-        });
+        // The wires a cell's handshakes use, and what for (SPEC.md 9).
+        let uses = c
+            .cell
+            .as_ref()
+            .map(|cell| crate::print::wire_uses(cell, bb));
+        emit(
+            &|| crate::print::blackboard(bb, &c.languages, uses.as_ref()),
+            &|| json::blackboard(bb, &c.languages, uses.as_ref()),
+        );
     }
     if print('S')
         && let Some(sfc) = &c.sfc

@@ -52,6 +52,7 @@ fn controller_text(bb: &Blackboard, ri: usize) -> Option<String> {
 pub fn blackboard(
     bb: &Blackboard,
     languages: &std::collections::HashMap<usize, crate::lang::Language>,
+    uses: Option<&std::collections::HashMap<usize, String>>,
 ) -> String {
     let mut o = String::new();
     for (ri, r) in bb.resources.iter().enumerate() {
@@ -99,22 +100,49 @@ pub fn blackboard(
             let _ = writeln!(o, "        (Signal) {:<40} {}", s.name.text, signal_text(s));
         }
     }
-    for w in &bb.wires {
+    for (k, w) in bb.wires.iter().enumerate() {
         let end = |(r, si): (usize, usize)| {
             format!(
                 "{}: {}",
                 bb.resources[r].name.text, bb.resources[r].signals[si].name.text
             )
         };
+        let used = uses
+            .and_then(|u| u.get(&k))
+            .map(|u| format!(", handshake: {u}"))
+            .unwrap_or_default();
         let _ = writeln!(
             o,
-            "(Wire) {} -> {}   (InternalLink {})",
+            "(Wire) {} -> {}   (InternalLink {}{used})",
             end(w.from),
             end(w.to),
             w.name
         );
     }
     o
+}
+
+/// What each wire a cell's handshakes use does (SPEC.md 9): `strobe of A -> B`, `data bit 1 of
+/// A -> B`, `acknowledgement of A -> B` (the channel from A to B), by wire index.
+pub fn wire_uses(
+    cell: &crate::plan::cell::Cell,
+    bb: &Blackboard,
+) -> std::collections::HashMap<usize, String> {
+    let name = |c: usize| bb.resources[cell.controllers[c]].name.text.to_string();
+    let mut out = std::collections::HashMap::new();
+    for ch in &cell.channels {
+        let of = format!("of {} -> {}", name(ch.from), name(ch.to));
+        if let Some(w) = ch.strobe {
+            out.insert(w, format!("strobe {of}"));
+        }
+        for (b, &w) in ch.data.iter().enumerate() {
+            out.insert(w, format!("data bit {} {of}", b + 1));
+        }
+        if let Some(w) = ch.ack {
+            out.insert(w, format!("acknowledgement {of}"));
+        }
+    }
+    out
 }
 
 /// A signal in one line: direction, type and where it is (`input bit $IN[3]`).
@@ -568,6 +596,7 @@ pub mod json {
     pub fn blackboard(
         bb: &Blackboard,
         languages: &std::collections::HashMap<usize, crate::lang::Language>,
+        uses: Option<&std::collections::HashMap<usize, String>>,
     ) -> Json {
         let resources: Vec<Json> = bb
             .resources
@@ -654,7 +683,8 @@ pub mod json {
         let wires: Vec<Json> = bb
             .wires
             .iter()
-            .map(|w| {
+            .enumerate()
+            .map(|(k, w)| {
                 let end = |(r, si): (usize, usize)| {
                     json!({
                         "resource": &*bb.resources[r].name.text,
@@ -662,7 +692,12 @@ pub mod json {
                         "signal": &*bb.resources[r].signals[si].name.text,
                     })
                 };
-                json!({"name": w.name, "from": end(w.from), "to": end(w.to)})
+                json!({
+                    "name": w.name,
+                    "from": end(w.from),
+                    "to": end(w.to),
+                    "handshake": uses.and_then(|u| u.get(&k)),
+                })
             })
             .collect();
         json!({"listing": "blackboard", "resources": resources, "wires": wires})

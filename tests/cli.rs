@@ -1312,6 +1312,19 @@ fn wires_between_controllers_are_listed() {
 #[test]
 fn a_cells_listings_show_each_program_and_the_lanes() {
     let t = bases_with_case(&["cell", "abb", "ur"], "cell-kuka-abb-ur");
+    // -pB says what each wire the handshakes use does; a spare wire is only a wire.
+    let o = run(&["-pB", "Blackboard.aml", "Mix"], t.path());
+    let text = stdout(&o);
+    assert!(
+        text.contains("(Wire) KUKA KR15-2: To_ABB_1 -> ABB IRB 1200: From_KUKA_1   (InternalLink KUKA to ABB 1, handshake: strobe of KUKA KR15-2 -> ABB IRB 1200)"),
+        "{text}"
+    );
+    assert!(
+        text.contains(
+            "(Wire) UR10e: To_ABB_2 -> ABB IRB 1200: From_UR_2   (InternalLink UR to ABB 2)\n"
+        ),
+        "{text}"
+    );
     let o = run(&["-pO", "Blackboard.aml", "Mix"], t.path());
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     let text = stdout(&o);
