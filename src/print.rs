@@ -456,80 +456,106 @@ fn fmt_num(x: f64) -> String {
 /// `-pO`: the execution order, one step per line with its number and localId; selections,
 /// their branches' conditions and loops are shown around the steps they hold.
 pub fn order(sfc: &Sfc, plan: &Plan) -> String {
-    fn walk(sfc: &Sfc, blocks: &[Block], indent: &str, n: &mut usize, o: &mut String) {
-        for b in blocks {
-            match b {
-                // Handshakes stand only in the programs of a cell, not in the chart's plan.
-                Block::Tell(_) | Block::Hear(_) | Block::Follow { .. } => {}
-                Block::Step(i) => {
-                    *n += 1;
-                    // Aligned with spaces (no tabs): numbers to 999, localIds to 99999.
+    let mut o = String::new();
+    order_lines(sfc, None, &plan.body, "", &mut 0, &mut o);
+    o
+}
+
+/// The lines of `-pO` for `blocks`; with a cell's view, a program's handshakes too.
+fn order_lines(
+    sfc: &Sfc,
+    view: Option<&CellView>,
+    blocks: &[Block],
+    indent: &str,
+    n: &mut usize,
+    o: &mut String,
+) {
+    for b in blocks {
+        match b {
+            Block::Step(i) => {
+                *n += 1;
+                // Aligned with spaces (no tabs): numbers to 999, localIds to 99999.
+                let _ = writeln!(
+                    o,
+                    "{indent} {:<4} {:<10} {}",
+                    format!("#{n}"),
+                    format!("(id={})", sfc.elements[*i].local_id),
+                    step_name(sfc, *i)
+                );
+            }
+            Block::Wait(t) => {
+                let _ = writeln!(o, "{indent} wait for {}", condition(sfc, *t));
+            }
+            // Handshakes stand only in the programs of a cell.
+            Block::Tell(m) | Block::Hear(m) => {
+                if let Some(v) = view {
+                    let tell = matches!(b, Block::Tell(_));
+                    let _ = writeln!(o, "{indent} {}", v.handshake(sfc, m, tell));
+                }
+            }
+            Block::Parallel { branches, .. } => {
+                for br in branches {
+                    order_lines(sfc, view, br, indent, n, o);
+                }
+            }
+            Block::Choice {
+                divergence,
+                branches,
+                ..
+            }
+            | Block::Follow {
+                divergence,
+                branches,
+                ..
+            } => {
+                let decided = match (b, view) {
+                    (Block::Follow { heard, .. }, Some(v)) => format!(
+                        "wait for {}: the branch it takes",
+                        v.controller(v.cell.channels[heard.channel].from)
+                    ),
+                    _ => "the first branch whose condition holds".to_owned(),
+                };
+                let _ = writeln!(
+                    o,
+                    "{indent} selection (id={}): {decided}",
+                    sfc.elements[*divergence].local_id
+                );
+                let inner = format!("{indent}    ");
+                for (k, br) in branches.iter().enumerate() {
                     let _ = writeln!(
                         o,
-                        "{indent} {:<4} {:<10} {}",
-                        format!("#{n}"),
-                        format!("(id={})", sfc.elements[*i].local_id),
-                        step_name(sfc, *i)
+                        "{indent}  {}. if {}",
+                        k + 1,
+                        condition(sfc, br.transition)
                     );
-                }
-                Block::Wait(t) => {
-                    let _ = writeln!(o, "{indent} wait for {}", condition(sfc, *t));
-                }
-                Block::Parallel { branches, .. } => {
-                    for br in branches {
-                        walk(sfc, br, indent, n, o);
-                    }
-                }
-                Block::Choice {
-                    divergence,
-                    branches,
-                    ..
-                } => {
-                    let _ = writeln!(
-                        o,
-                        "{indent} selection (id={}): the first branch whose condition holds",
-                        sfc.elements[*divergence].local_id
-                    );
-                    let inner = format!("{indent}    ");
-                    for (k, br) in branches.iter().enumerate() {
-                        let _ = writeln!(
-                            o,
-                            "{indent}  {}. if {}",
-                            k + 1,
-                            condition(sfc, br.transition)
-                        );
-                        walk(sfc, &br.body, &inner, n, o);
-                        match br.end {
-                            BranchEnd::Join => {}
-                            BranchEnd::Repeat(_) => {
-                                let _ = writeln!(o, "{inner} round again");
-                            }
-                            BranchEnd::Leave => {
-                                let _ = writeln!(o, "{inner} leave the loop");
-                            }
+                    order_lines(sfc, view, &br.body, &inner, n, o);
+                    match br.end {
+                        BranchEnd::Join => {}
+                        BranchEnd::Repeat(_) => {
+                            let _ = writeln!(o, "{inner} round again");
+                        }
+                        BranchEnd::Leave => {
+                            let _ = writeln!(o, "{inner} leave the loop");
                         }
                     }
                 }
-                Block::Loop {
-                    head,
-                    body,
-                    endless,
-                    ..
-                } => {
-                    let _ = writeln!(
-                        o,
-                        "{indent} loop{} (back to id={}):",
-                        if *endless { ", endless" } else { "" },
-                        sfc.elements[*head].local_id
-                    );
-                    walk(sfc, body, &format!("{indent}  "), n, o);
-                }
+            }
+            Block::Loop {
+                head,
+                body,
+                endless,
+                ..
+            } => {
+                let _ = writeln!(
+                    o,
+                    "{indent} loop{} (back to id={}):",
+                    if *endless { ", endless" } else { "" },
+                    sfc.elements[*head].local_id
+                );
+                order_lines(sfc, view, body, &format!("{indent}  "), n, o);
             }
         }
     }
-    let mut o = String::new();
-    walk(sfc, &plan.body, "", &mut 0, &mut o);
-    o
 }
 
 /// `--info`: version and build; with a blackboard, per resource the skills and the SFC
@@ -897,84 +923,118 @@ pub mod json {
         })
     }
 
-    /// `-pO`: the execution order as a tree: steps numbered in order, inside the selections
-    /// (each branch's condition) and loops that hold them; simultaneous branches one after
-    /// another, as emitted.
+    /// `-pO`: the execution order as a tree of blocks.
     pub fn order(sfc: &Sfc, plan: &Plan) -> Json {
-        fn walk(sfc: &Sfc, blocks: &[Block], n: &mut usize, out: &mut Vec<Json>) {
-            for b in blocks {
-                match b {
-                    // Handshakes stand only in the programs of a cell, not in the chart's plan.
-                    Block::Tell(_) | Block::Hear(_) | Block::Follow { .. } => {}
-                    Block::Step(i) => {
-                        *n += 1;
-                        out.push(json!({
-                            "kind": "step",
-                            "number": *n,
-                            "local_id": local_id(sfc, *i),
-                            "name": step_name(sfc, *i),
-                        }));
+        let mut blocks = Vec::new();
+        let mut n = 0;
+        order_blocks(sfc, None, &plan.body, &mut n, &mut blocks);
+        json!({"listing": "order", "steps": n, "blocks": blocks})
+    }
+
+    /// The blocks of `-pO`; with a cell's view, a program's handshakes too (`tell`, `hear`,
+    /// and `decided_by` of a selection it follows).
+    fn order_blocks(
+        sfc: &Sfc,
+        view: Option<&super::CellView>,
+        blocks: &[Block],
+        n: &mut usize,
+        out: &mut Vec<Json>,
+    ) {
+        for b in blocks {
+            match b {
+                Block::Step(i) => {
+                    *n += 1;
+                    out.push(json!({
+                        "kind": "step",
+                        "number": *n,
+                        "local_id": local_id(sfc, *i),
+                        "name": step_name(sfc, *i),
+                    }));
+                }
+                Block::Wait(t) => out.push(json!({
+                    "kind": "wait",
+                    "condition": condition(sfc, *t),
+                    "transition": local_id(sfc, *t),
+                })),
+                Block::Tell(m) | Block::Hear(m) => {
+                    let Some(view) = view else {
+                        continue;
+                    };
+                    let tell = matches!(b, Block::Tell(_));
+                    let ch = &view.cell.channels[m.channel];
+                    let decision = m.kind == crate::plan::cell::Kind::Decision;
+                    out.push(json!({
+                        "kind": if tell { "tell" } else { "hear" },
+                        "controller": view.controller(if tell { ch.to } else { ch.from }),
+                        "about": local_id(sfc, m.about),
+                        "decision": decision,
+                        "branch": (tell && decision).then_some(m.value + 1),
+                    }));
+                }
+                Block::Parallel { branches, .. } => {
+                    for br in branches {
+                        order_blocks(sfc, view, br, n, out);
                     }
-                    Block::Wait(t) => out.push(json!({
-                        "kind": "wait",
-                        "condition": condition(sfc, *t),
-                        "transition": local_id(sfc, *t),
-                    })),
-                    Block::Parallel { branches, .. } => {
-                        for br in branches {
-                            walk(sfc, br, n, out);
-                        }
-                    }
-                    Block::Choice {
-                        divergence,
-                        branches,
-                        ..
-                    } => {
-                        let bs: Vec<Json> = branches
-                            .iter()
-                            .map(|br| {
-                                let mut blocks = Vec::new();
-                                walk(sfc, &br.body, n, &mut blocks);
-                                json!({
-                                    "condition": condition(sfc, br.transition),
-                                    "transition": local_id(sfc, br.transition),
-                                    "blocks": blocks,
-                                    "then": match br.end {
-                                        BranchEnd::Join => "join",
-                                        BranchEnd::Repeat(_) => "repeat",
-                                        BranchEnd::Leave => "leave",
-                                    },
-                                })
+                }
+                Block::Choice {
+                    divergence,
+                    branches,
+                    ..
+                }
+                | Block::Follow {
+                    divergence,
+                    branches,
+                    ..
+                } => {
+                    let bs: Vec<Json> = branches
+                        .iter()
+                        .map(|br| {
+                            let mut blocks = Vec::new();
+                            order_blocks(sfc, view, &br.body, n, &mut blocks);
+                            json!({
+                                "condition": condition(sfc, br.transition),
+                                "transition": local_id(sfc, br.transition),
+                                "blocks": blocks,
+                                "then": match br.end {
+                                    BranchEnd::Join => "join",
+                                    BranchEnd::Repeat(_) => "repeat",
+                                    BranchEnd::Leave => "leave",
+                                },
                             })
-                            .collect();
-                        out.push(json!({
-                            "kind": "selection",
-                            "divergence": local_id(sfc, *divergence),
-                            "branches": bs,
-                        }));
+                        })
+                        .collect();
+                    let mut selection = json!({
+                        "kind": "selection",
+                        "divergence": local_id(sfc, *divergence),
+                    });
+                    if let Some(v) = view {
+                        selection["decided_by"] = match b {
+                            Block::Follow { heard, .. } => {
+                                json!(v.controller(v.cell.channels[heard.channel].from))
+                            }
+                            _ => Json::Null,
+                        };
                     }
-                    Block::Loop {
-                        head,
-                        body,
-                        endless,
-                        ..
-                    } => {
-                        let mut blocks = Vec::new();
-                        walk(sfc, body, n, &mut blocks);
-                        out.push(json!({
-                            "kind": "loop",
-                            "head": local_id(sfc, *head),
-                            "endless": endless,
-                            "blocks": blocks,
-                        }));
-                    }
+                    selection["branches"] = Json::Array(bs);
+                    out.push(selection);
+                }
+                Block::Loop {
+                    head,
+                    body,
+                    endless,
+                    ..
+                } => {
+                    let mut blocks = Vec::new();
+                    order_blocks(sfc, view, body, n, &mut blocks);
+                    out.push(json!({
+                        "kind": "loop",
+                        "head": local_id(sfc, *head),
+                        "endless": endless,
+                        "blocks": blocks,
+                    }));
                 }
             }
         }
-        let mut blocks = Vec::new();
-        let mut n = 0;
-        walk(sfc, &plan.body, &mut n, &mut blocks);
-        json!({"listing": "order", "steps": n, "blocks": blocks})
     }
 
     /// A listing that cannot be printed (`-pF`/`-pO` when the flow has errors).
@@ -983,108 +1043,8 @@ pub mod json {
     }
 
     /// `-pO` of a cell: each program with its blocks, handshakes included (`tell`, `hear`, a
-    /// selection it `follows`).
+    /// selection it follows, `decided_by` its decider).
     pub fn cell_order(sfc: &Sfc, view: &super::CellView) -> Json {
-        fn walk(
-            sfc: &Sfc,
-            view: &super::CellView,
-            blocks: &[Block],
-            n: &mut usize,
-            out: &mut Vec<Json>,
-        ) {
-            let hand = |m: &crate::plan::cell::Message, tell: bool| {
-                let ch = &view.cell.channels[m.channel];
-                let peer = if tell { ch.to } else { ch.from };
-                json!({
-                    "kind": if tell { "tell" } else { "hear" },
-                    "controller": view.controller(peer),
-                    "about": local_id(sfc, m.about),
-                    "decision": m.kind == crate::plan::cell::Kind::Decision,
-                    "branch": (tell && m.kind == crate::plan::cell::Kind::Decision)
-                        .then_some(m.value + 1),
-                })
-            };
-            for b in blocks {
-                match b {
-                    Block::Step(i) => {
-                        *n += 1;
-                        out.push(json!({
-                            "kind": "step",
-                            "number": *n,
-                            "local_id": local_id(sfc, *i),
-                            "name": step_name(sfc, *i),
-                        }));
-                    }
-                    Block::Wait(t) => out.push(json!({
-                        "kind": "wait",
-                        "condition": condition(sfc, *t),
-                        "transition": local_id(sfc, *t),
-                    })),
-                    Block::Tell(m) => out.push(hand(m, true)),
-                    Block::Hear(m) => out.push(hand(m, false)),
-                    Block::Parallel { branches, .. } => {
-                        for br in branches {
-                            walk(sfc, view, br, n, out);
-                        }
-                    }
-                    Block::Choice {
-                        divergence,
-                        branches,
-                        ..
-                    }
-                    | Block::Follow {
-                        divergence,
-                        branches,
-                        ..
-                    } => {
-                        let bs: Vec<Json> = branches
-                            .iter()
-                            .map(|br| {
-                                let mut blocks = Vec::new();
-                                walk(sfc, view, &br.body, n, &mut blocks);
-                                json!({
-                                    "condition": condition(sfc, br.transition),
-                                    "transition": local_id(sfc, br.transition),
-                                    "blocks": blocks,
-                                    "then": match br.end {
-                                        BranchEnd::Join => "join",
-                                        BranchEnd::Repeat(_) => "repeat",
-                                        BranchEnd::Leave => "leave",
-                                    },
-                                })
-                            })
-                            .collect();
-                        let decided_by = match b {
-                            Block::Follow { heard, .. } => {
-                                Some(view.controller(view.cell.channels[heard.channel].from))
-                            }
-                            _ => None,
-                        };
-                        out.push(json!({
-                            "kind": "selection",
-                            "divergence": local_id(sfc, *divergence),
-                            "decided_by": decided_by,
-                            "branches": bs,
-                        }));
-                    }
-                    Block::Loop {
-                        head,
-                        body,
-                        endless,
-                        ..
-                    } => {
-                        let mut blocks = Vec::new();
-                        walk(sfc, view, body, n, &mut blocks);
-                        out.push(json!({
-                            "kind": "loop",
-                            "head": local_id(sfc, *head),
-                            "endless": endless,
-                            "blocks": blocks,
-                        }));
-                    }
-                }
-            }
-        }
         let mut total = 0;
         let programs: Vec<Json> = view
             .cell
@@ -1094,7 +1054,7 @@ pub mod json {
             .map(|(k, p)| {
                 let mut blocks = Vec::new();
                 let mut n = 0;
-                walk(sfc, view, &p.body, &mut n, &mut blocks);
+                order_blocks(sfc, Some(view), &p.body, &mut n, &mut blocks);
                 total += n;
                 json!({
                     "program": view.names.get(k),
@@ -1199,102 +1159,6 @@ impl CellView<'_> {
 
 /// `-pO` of a cell: each program's order, with its handshakes.
 pub fn cell_order(sfc: &Sfc, view: &CellView) -> String {
-    fn walk(
-        sfc: &Sfc,
-        view: &CellView,
-        blocks: &[Block],
-        indent: &str,
-        n: &mut usize,
-        o: &mut String,
-    ) {
-        for b in blocks {
-            match b {
-                Block::Step(i) => {
-                    *n += 1;
-                    let _ = writeln!(
-                        o,
-                        "{indent} {:<4} {:<10} {}",
-                        format!("#{n}"),
-                        format!("(id={})", sfc.elements[*i].local_id),
-                        step_name(sfc, *i)
-                    );
-                }
-                Block::Wait(t) => {
-                    let _ = writeln!(o, "{indent} wait for {}", condition(sfc, *t));
-                }
-                Block::Tell(m) => {
-                    let _ = writeln!(o, "{indent} {}", view.handshake(sfc, m, true));
-                }
-                Block::Hear(m) => {
-                    let _ = writeln!(o, "{indent} {}", view.handshake(sfc, m, false));
-                }
-                Block::Parallel { branches, .. } => {
-                    for br in branches {
-                        walk(sfc, view, br, indent, n, o);
-                    }
-                }
-                Block::Choice {
-                    divergence,
-                    branches,
-                    ..
-                }
-                | Block::Follow {
-                    divergence,
-                    branches,
-                    ..
-                } => {
-                    let decided = match b {
-                        Block::Follow { heard, .. } => format!(
-                            "{}: the branch it takes",
-                            view.handshake(sfc, heard, false)
-                                .split(':')
-                                .next()
-                                .unwrap_or_default()
-                        ),
-                        _ => "the first branch whose condition holds".to_owned(),
-                    };
-                    let _ = writeln!(
-                        o,
-                        "{indent} selection (id={}): {decided}",
-                        sfc.elements[*divergence].local_id
-                    );
-                    let inner = format!("{indent}    ");
-                    for (k, br) in branches.iter().enumerate() {
-                        let _ = writeln!(
-                            o,
-                            "{indent}  {}. if {}",
-                            k + 1,
-                            condition(sfc, br.transition)
-                        );
-                        walk(sfc, view, &br.body, &inner, n, o);
-                        match br.end {
-                            BranchEnd::Join => {}
-                            BranchEnd::Repeat(_) => {
-                                let _ = writeln!(o, "{inner} round again");
-                            }
-                            BranchEnd::Leave => {
-                                let _ = writeln!(o, "{inner} leave the loop");
-                            }
-                        }
-                    }
-                }
-                Block::Loop {
-                    head,
-                    body,
-                    endless,
-                    ..
-                } => {
-                    let _ = writeln!(
-                        o,
-                        "{indent} loop{} (back to id={}):",
-                        if *endless { ", endless" } else { "" },
-                        sfc.elements[*head].local_id
-                    );
-                    walk(sfc, view, body, &format!("{indent}  "), n, o);
-                }
-            }
-        }
-    }
     let mut o = String::new();
     for (k, p) in view.cell.programs.iter().enumerate() {
         let _ = writeln!(
@@ -1303,7 +1167,7 @@ pub fn cell_order(sfc: &Sfc, view: &CellView) -> String {
             view.program(k),
             view.controller(k)
         );
-        walk(sfc, view, &p.body, " ", &mut 0, &mut o);
+        order_lines(sfc, Some(view), &p.body, " ", &mut 0, &mut o);
     }
     o
 }

@@ -13,12 +13,19 @@ use inproc::{InProc, WAIT, Workspace, is_for};
 fn cell(w: &Workspace, name: &str) -> std::path::PathBuf {
     let dir = w.ws().join(name);
     fs::create_dir_all(&dir).unwrap();
-    let base = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/base/cell");
-    for e in fs::read_dir(base).unwrap() {
+    copy_base(&dir, "cell");
+    dir
+}
+
+/// Copies `fixtures/base/<base>` into `dir`.
+fn copy_base(dir: &Path, base: &str) {
+    let from = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures/base")
+        .join(base);
+    for e in fs::read_dir(from).unwrap() {
         let e = e.unwrap();
         fs::copy(e.path(), dir.join(e.file_name())).unwrap();
     }
-    dir
 }
 
 #[test]
@@ -59,11 +66,7 @@ fn a_robot_and_its_gripper_compile_as_one_program_and_follow_every_input() {
 /// their own, wired: the case fixtures/ok/cell-two-robots-weld).
 fn two_robots(w: &Workspace, name: &str) -> std::path::PathBuf {
     let dir = cell(w, name);
-    let case = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/base/cell2");
-    for e in fs::read_dir(case).unwrap() {
-        let e = e.unwrap();
-        fs::copy(e.path(), dir.join(e.file_name())).unwrap();
-    }
+    copy_base(&dir, "cell2");
     dir
 }
 

@@ -27,6 +27,8 @@
 //! once. `fixtures/err-pending/` holds cases that fail because of known compiler bugs; they are
 //! not run here.
 
+mod common;
+
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -43,7 +45,7 @@ const UNCOVERED: &[(&str, &str)] = &[(
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Expect {
-    base: Option<Bases>,
+    base: Option<common::Bases>,
     #[serde(default = "default_program")]
     program: String,
     blackboard: Option<String>,
@@ -52,24 +54,6 @@ struct Expect {
     exact: bool,
     #[serde(default)]
     error: Vec<ExpectedError>,
-}
-
-/// `base`: one folder of `fixtures/base/`, or several, copied in order (later ones over
-/// earlier ones).
-#[derive(Debug, Deserialize)]
-#[serde(untagged)]
-enum Bases {
-    One(String),
-    Many(Vec<String>),
-}
-
-impl Bases {
-    fn list(&self) -> Vec<&str> {
-        match self {
-            Bases::One(b) => vec![b.as_str()],
-            Bases::Many(v) => v.iter().map(String::as_str).collect(),
-        }
-    }
 }
 
 fn default_program() -> String {
@@ -229,7 +213,7 @@ fn run_case(case: &Path) -> Vec<String> {
     }
 
     let mut files: BTreeMap<PathBuf, Vec<u8>> = Default::default();
-    for b in expect.base.iter().flat_map(Bases::list) {
+    for b in expect.base.iter().flat_map(common::Bases::list) {
         files.extend(snapshot(
             &Path::new(env!("CARGO_MANIFEST_DIR"))
                 .join("fixtures/base")

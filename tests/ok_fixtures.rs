@@ -50,7 +50,7 @@ use serde::Deserialize;
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct CaseToml {
-    base: Option<Bases>,
+    base: Option<common::Bases>,
     program: String,
     language: Option<String>,
     blackboard: Option<String>,
@@ -64,24 +64,6 @@ struct CaseToml {
     stdout_contains: Vec<String>,
     #[serde(default)]
     cell: Vec<CellProgram>,
-}
-
-/// `base`: one folder of `fixtures/base/`, or several, copied in order (later ones over
-/// earlier ones).
-#[derive(Debug, Deserialize)]
-#[serde(untagged)]
-enum Bases {
-    One(String),
-    Many(Vec<String>),
-}
-
-impl Bases {
-    fn list(&self) -> Vec<&str> {
-        match self {
-            Bases::One(b) => vec![b.as_str()],
-            Bases::Many(v) => v.iter().map(String::as_str).collect(),
-        }
-    }
 }
 
 /// One program of a cell case.
@@ -188,7 +170,7 @@ fn run_case(name: &str) {
 
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    for base in case.base.iter().flat_map(Bases::list) {
+    for base in case.base.iter().flat_map(common::Bases::list) {
         copy_dir(&repo().join("fixtures/base").join(base), dir);
     }
     copy_dir(&case_dir, dir);

@@ -566,11 +566,7 @@ impl Daemon {
             Ok(false) => {
                 if !p.missing {
                     p.missing = true;
-                    let why = match config::too_long(&key) {
-                        Err(why) => format!("the project folder cannot be used: {why}"),
-                        Ok(()) => "the project folder does not exist; waiting for it".into(),
-                    };
-                    self.degraded(&key, why);
+                    self.degraded(&key, missing_reason(&key));
                 }
                 false
             }
@@ -657,11 +653,7 @@ impl Daemon {
                 Err(WatchFailure::Missing) if d == &key => {
                     if !p.missing {
                         p.missing = true;
-                        let why = match config::too_long(&key) {
-                            Err(why) => format!("the project folder cannot be used: {why}"),
-                            Ok(()) => "the project folder does not exist; waiting for it".into(),
-                        };
-                        self.degraded(&key, why);
+                        self.degraded(&key, missing_reason(&key));
                     }
                 }
                 Err(WatchFailure::Missing) => {}
@@ -770,5 +762,13 @@ pub(super) fn failure_text(e: &WatchFailure) -> String {
     match e {
         WatchFailure::Missing => "missing".to_owned(),
         WatchFailure::Other(s) => s.clone(),
+    }
+}
+
+/// Why a project folder is not watched: it does not exist (yet), or its path cannot be used.
+fn missing_reason(key: &Path) -> String {
+    match config::too_long(key) {
+        Err(why) => format!("the project folder cannot be used: {why}"),
+        Ok(()) => "the project folder does not exist; waiting for it".into(),
     }
 }

@@ -447,3 +447,17 @@ pub fn write(out: &mut Lines, level: usize, lines: Vec<(usize, String)>) {
         out.line(level + extra, &l);
     }
 }
+
+/// Writes a [`Block::Tell`](crate::plan::Block::Tell) or
+/// [`Block::Hear`](crate::plan::Block::Hear) at `level`, for any writer (nothing outside a
+/// cell).
+pub fn write_block(hand: Option<&Hand>, out: &mut Lines, level: usize, b: &crate::plan::Block) {
+    let Some(h) = hand else {
+        return;
+    };
+    match b {
+        crate::plan::Block::Tell(m) => write(out, level, h.tell(m)),
+        crate::plan::Block::Hear(m) => write(out, level, h.hear(m)),
+        _ => {}
+    }
+}

@@ -180,17 +180,8 @@ impl Writer<'_> {
                 self.blocks(body, level + 1);
                 self.line(level, "ENDLOOP");
             }
-            Block::Tell(m) => {
-                if let Some(h) = &self.hand {
-                    let lines = h.tell(m);
-                    super::handshake::write(&mut self.out, level, lines);
-                }
-            }
-            Block::Hear(m) => {
-                if let Some(h) = &self.hand {
-                    let lines = h.hear(m);
-                    super::handshake::write(&mut self.out, level, lines);
-                }
+            Block::Tell(_) | Block::Hear(_) => {
+                super::handshake::write_block(self.hand.as_ref(), &mut self.out, level, b);
             }
             Block::Follow {
                 divergence,

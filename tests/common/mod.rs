@@ -28,6 +28,24 @@ use std::time::{Duration, Instant};
 use serde_json::Value;
 
 /// The reference sample project.
+/// A fixture's `base` (`case.toml`, `expect.toml`): one folder of `fixtures/base/`, or several,
+/// copied in order (later ones over earlier ones).
+#[derive(Debug, serde::Deserialize)]
+#[serde(untagged)]
+pub enum Bases {
+    One(String),
+    Many(Vec<String>),
+}
+
+impl Bases {
+    pub fn list(&self) -> Vec<&str> {
+        match self {
+            Bases::One(b) => vec![b.as_str()],
+            Bases::Many(v) => v.iter().map(String::as_str).collect(),
+        }
+    }
+}
+
 pub fn sample() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/ok/reference-sample")
 }

@@ -104,20 +104,8 @@ pub fn parse(src: &str) -> Vec<Ins> {
         let raw = lines[i].trim();
         i += 1;
         if let Some(title) = raw.strip_prefix(";FOLD ") {
-            let mut depth = 1;
-            while depth > 0 {
-                let l = lines[i].trim();
-                i += 1;
-                if l.starts_with(";FOLD") {
-                    depth += 1;
-                } else if l.starts_with(";ENDFOLD") {
-                    depth -= 1;
-                }
-            }
-            let mut words = title.split_whitespace();
-            if words.next().is_some_and(|n| n.parse::<usize>().is_ok()) {
-                let name = words.next().unwrap().trim_end_matches(':');
-                out.push(Ins::Step(name.to_owned()));
+            if let Some(name) = crate::krl::fold(&lines, &mut i, title) {
+                out.push(Ins::Step(name));
             }
             continue;
         }

@@ -182,6 +182,26 @@ pub fn parse_program(src: &str) -> Vec<Stmt> {
     body.0
 }
 
+/// After a `;FOLD <title>` line: skips to its `;ENDFOLD` (folds nest) and returns the step's
+/// name when it is a step's FOLD (`;FOLD 2 Grip: Move LIN @ …`), `None` for others (`INI`).
+pub fn fold(lines: &[&str], i: &mut usize, title: &str) -> Option<String> {
+    let mut depth = 1;
+    while depth > 0 {
+        let l = lines[*i].trim();
+        *i += 1;
+        if l.starts_with(";FOLD") {
+            depth += 1;
+        } else if l.starts_with(";ENDFOLD") {
+            depth -= 1;
+        }
+    }
+    let mut words = title.split_whitespace();
+    words
+        .next()
+        .is_some_and(|n| n.parse::<usize>().is_ok())
+        .then(|| words.next().unwrap().trim_end_matches(':').to_owned())
+}
+
 /// Parses statements until a line whose first word is one of `until`; returns them and that
 /// line's code.
 fn parse_block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, String) {
@@ -190,21 +210,8 @@ fn parse_block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, Str
         let raw = lines[*i].trim();
         *i += 1;
         if let Some(title) = raw.strip_prefix(";FOLD ") {
-            // Skip to the matching ;ENDFOLD.
-            let mut depth = 1;
-            while depth > 0 {
-                let l = lines[*i].trim();
-                *i += 1;
-                if l.starts_with(";FOLD") {
-                    depth += 1;
-                } else if l.starts_with(";ENDFOLD") {
-                    depth -= 1;
-                }
-            }
-            let mut words = title.split_whitespace();
-            if words.next().is_some_and(|n| n.parse::<usize>().is_ok()) {
-                let name = words.next().unwrap().trim_end_matches(':');
-                out.push(Stmt::Fold(name.to_owned()));
+            if let Some(name) = fold(lines, i, title) {
+                out.push(Stmt::Fold(name));
             }
             continue;
         }
