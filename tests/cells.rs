@@ -28,18 +28,22 @@ fn copy_base(dir: &Path, base: &str) {
     }
 }
 
+/// The `compile-succeeded` of the daemon's first compile of `p`.
+fn startup_compile(d: &InProc, p: &Path) -> serde_json::Value {
+    let evs = d.wait_for("the startup compile", WAIT, |e| {
+        is_for(e, "compile-succeeded", p)
+    });
+    evs.into_iter()
+        .find(|e| is_for(e, "compile-succeeded", p))
+        .unwrap()
+}
+
 #[test]
 fn a_robot_and_its_gripper_compile_as_one_program_and_follow_every_input() {
     let w = Workspace::new();
     let p = cell(&w, "Cell");
     let d = InProc::with_dirs(&[&p]);
-    let evs = d.wait_for("the startup compile", WAIT, |e| {
-        is_for(e, "compile-succeeded", &p)
-    });
-    let ok = evs
-        .iter()
-        .find(|e| is_for(e, "compile-succeeded", &p))
-        .unwrap();
+    let ok = startup_compile(&d, &p);
     let outputs = ok["outputs"].as_array().unwrap();
     assert_eq!(outputs.len(), 2, "{ok}");
     for o in outputs {
@@ -75,13 +79,7 @@ fn a_cell_of_two_controllers_compiles_both_programs_on_every_input_edit() {
     let w = Workspace::new();
     let p = two_robots(&w, "Weld");
     let d = InProc::with_dirs(&[&p]);
-    let evs = d.wait_for("the startup compile", WAIT, |e| {
-        is_for(e, "compile-succeeded", &p)
-    });
-    let ok = evs
-        .iter()
-        .find(|e| is_for(e, "compile-succeeded", &p))
-        .unwrap();
+    let ok = startup_compile(&d, &p);
     // One event lists both programs, each output with its program and controller.
     let outputs: Vec<(String, String, String)> = ok["outputs"]
         .as_array()

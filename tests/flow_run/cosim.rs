@@ -277,29 +277,18 @@ impl Val {
 
 /// Reads the `.dat`: `SIGNAL` groups and `DECL BOOL`/`DECL INT` variables.
 fn read_dat(dat: &str) -> (HashMap<String, (u32, u32)>, HashMap<String, Val>) {
-    let mut signals = HashMap::new();
-    let mut vars = HashMap::new();
-    for l in dat.lines().map(code) {
-        let w: Vec<&str> = l.split_whitespace().collect();
-        if w.first() == Some(&"SIGNAL") {
-            let ix = |s: &str| -> u32 {
-                s.strip_prefix("$IN[")
-                    .and_then(|r| r.strip_suffix(']'))
-                    .unwrap()
-                    .parse()
-                    .unwrap()
-            };
-            signals.insert(w[1].to_ascii_uppercase(), (ix(w[2]), ix(w[4])));
-        } else if w.first() == Some(&"DECL") {
-            let (name, init) = w[2].split_once('=').unwrap_or((w[2], "0"));
-            let v = match w[1] {
+    let (signals, decls) = crate::krl::dat_entries(dat);
+    let vars = decls
+        .into_iter()
+        .map(|(name, ty, init)| {
+            let v = match ty.as_str() {
                 "BOOL" => Val::B(init == "TRUE"),
                 "INT" => Val::I(init.parse().unwrap()),
                 other => panic!("DECL {other}"),
             };
-            vars.insert(name.to_ascii_uppercase(), v);
-        }
-    }
+            (name, v)
+        })
+        .collect();
     (signals, vars)
 }
 

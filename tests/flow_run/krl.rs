@@ -462,8 +462,23 @@ impl Machine<'_> {
 
 /// Reads the `.dat`: `SIGNAL` groups and `DECL INT` variables.
 fn read_dat(dat: &str) -> (HashMap<String, (u32, u32)>, HashMap<String, i64>) {
+    let (signals, decls) = dat_entries(dat);
+    let vars = decls
+        .into_iter()
+        .filter(|(_, ty, _)| ty == "INT")
+        .map(|(name, _, init)| (name, init.parse().unwrap()))
+        .collect();
+    (signals, vars)
+}
+
+/// A `.dat`'s `SIGNAL` groups (name → first and last input) and its declarations (name, type,
+/// initial value as written), names upper-cased.
+pub type Dat = (HashMap<String, (u32, u32)>, Vec<(String, String, String)>);
+
+/// Reads a `.dat` ([`Dat`]).
+pub fn dat_entries(dat: &str) -> Dat {
     let mut signals = HashMap::new();
-    let mut vars = HashMap::new();
+    let mut decls = Vec::new();
     for l in dat.lines().map(code) {
         let w: Vec<&str> = l.split_whitespace().collect();
         if w.first() == Some(&"SIGNAL") {
@@ -476,12 +491,12 @@ fn read_dat(dat: &str) -> (HashMap<String, (u32, u32)>, HashMap<String, i64>) {
             };
             assert_eq!(w[3], "TO");
             signals.insert(w[1].to_ascii_uppercase(), (ix(w[2]), ix(w[4])));
-        } else if w.first() == Some(&"DECL") && w.get(1) == Some(&"INT") {
+        } else if w.first() == Some(&"DECL") {
             let (name, init) = w[2].split_once('=').unwrap_or((w[2], "0"));
-            vars.insert(name.to_ascii_uppercase(), init.parse().unwrap());
+            decls.push((name.to_ascii_uppercase(), w[1].to_owned(), init.to_owned()));
         }
     }
-    (signals, vars)
+    (signals, decls)
 }
 
 fn krl_run(program: &[Stmt], dat: &str, seq: &[Phase]) -> (Vec<String>, Outcome) {
