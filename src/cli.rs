@@ -360,11 +360,14 @@ fn run(a: Args) -> u8 {
 /// A line of the run's outcome (what was written): on stdout, except with `--format json`,
 /// whose stdout holds JSON objects only; there it goes to stderr.
 fn say(json: bool, line: &str) {
-    if json {
-        eprintln!("{line}");
+    use std::io::Write as _;
+    // A reader that went away (`skillpost … | head`) is no reason to panic: the line is lost,
+    // the run goes on and its exit status says what happened.
+    let _ = if json {
+        writeln!(std::io::stderr(), "{line}")
     } else {
-        println!("{line}");
-    }
+        writeln!(std::io::stdout(), "{line}")
+    };
 }
 
 /// The `-p` listings on stdout: as text, or with `--format json` one JSON object per listing

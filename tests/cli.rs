@@ -1469,3 +1469,23 @@ fn a_cells_program_names_come_from_program_attributes() {
     assert!(stderr(&o).contains("W205"), "{}", stderr(&o));
     assert!(dir4.path().join("Cell_KUKA_KR16_2.src").is_file());
 }
+
+/// A reader that goes away (`skillpost … | head`) makes no panic: the listing is cut, the run
+/// ends as it would.
+#[test]
+fn a_closed_stdout_is_no_panic() {
+    let t = bases_with_case(&["cell", "abb", "ur"], "cell-kuka-abb-ur");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["--validate", "-pB", "-pO", "-pF", "Blackboard.aml"])
+        .current_dir(t.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Closed before the compile has printed anything.
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(out.status.code(), Some(0), "{err}");
+}
