@@ -541,8 +541,8 @@ codes! {
     UnknownResource = "E311",
     /// A step names a skill its resource does not offer (or none).
     UnknownSkill = "E312",
-    /// A construct that is not supported yet (macro steps, wired conditions, several resources
-    /// in one program, nesting deeper than the limit).
+    /// A construct that is not supported yet (macro steps, wired conditions, nesting deeper
+    /// than the limit).
     Unsupported = "E313",
     /// A step lacks a variable its skill needs.
     MissingVariable = "E314",
