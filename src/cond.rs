@@ -142,8 +142,10 @@ pub struct SyntaxError {
 enum Tok {
     True,
     False,
-    Int,
-    Real,
+    /// An integer literal, in decimal digits (a based or typed one converted, `_` dropped).
+    Int(Box<str>),
+    /// A decimal literal, `_` dropped.
+    Real(Box<str>),
     Name,
     Not,
     And,
@@ -161,6 +163,163 @@ struct Lexer {
 
 fn describe(text: &str, r: &Range<usize>) -> String {
     format!("`{}`", &text[r.clone()])
+}
+
+/// `end` within `text`, at a character boundary.
+fn clamp(text: &str, end: usize) -> usize {
+    let mut e = end.min(text.len());
+    while !text.is_char_boundary(e) {
+        e += 1;
+    }
+    e
+}
+
+/// Whether `rest` starts with a letter (of any script).
+fn starts_letter(rest: &str) -> bool {
+    rest.chars().next().is_some_and(char::is_alphabetic)
+}
+
+/// Digits with `_` between them (IEC 61131-3): from `*i`, in `radix`; the digits without the
+/// underscores. `None` when there is no digit, or a `_` that is not between two digits.
+fn digits(text: &str, i: &mut usize, radix: u32) -> Option<String> {
+    let b = text.as_bytes();
+    let mut out = String::new();
+    let mut last_underscore = false;
+    while *i < b.len() {
+        let c = b[*i] as char;
+        if c.is_digit(radix) {
+            out.push(c);
+            last_underscore = false;
+        } else if c == '_' && !out.is_empty() && !last_underscore {
+            last_underscore = true;
+        } else {
+            break;
+        }
+        *i += 1;
+    }
+    (!out.is_empty() && !last_underscore).then_some(out)
+}
+
+/// A number from `*i` (a digit): decimal (`1_000`), based (`2#1010`, `8#17`, `16#FF`) or decimal
+/// with a fraction (`1.5`).
+fn number(text: &str, i: &mut usize) -> Result<Tok, SyntaxError> {
+    let b = text.as_bytes();
+    let start = *i;
+    let bad = |end: usize, why: &str| {
+        let end = clamp(text, end.max(start + 1));
+        SyntaxError {
+            at: start..end,
+            message: format!("{} is not a number: {why}", describe(text, &(start..end))),
+        }
+    };
+    let Some(whole) = digits(text, i, 10) else {
+        return Err(bad(*i + 1, "`_` only stands between digits"));
+    };
+    if b.get(*i) == Some(&b'_') {
+        return Err(bad(*i + 1, "`_` only stands between digits"));
+    }
+    if b.get(*i) == Some(&b'#') {
+        let radix = match whole.as_str() {
+            "2" => 2,
+            "8" => 8,
+            "16" => 16,
+            _ => return Err(bad(*i + 1, "the base of a based literal is 2, 8 or 16")),
+        };
+        *i += 1;
+        let Some(ds) = digits(text, i, radix) else {
+            return Err(bad(
+                *i + 1,
+                "a based literal needs digits of its base after `#`",
+            ));
+        };
+        return match i64::from_str_radix(&ds, radix) {
+            Ok(v) => Ok(Tok::Int(v.to_string().into())),
+            Err(_) => Err(bad(*i, "too large")),
+        };
+    }
+    if b.get(*i) == Some(&b'.') && b.get(*i + 1).is_some_and(u8::is_ascii_digit) {
+        *i += 1;
+        let Some(frac) = digits(text, i, 10) else {
+            return Err(bad(*i + 1, "`_` only stands between digits"));
+        };
+        let w = whole.trim_start_matches('0');
+        let w = if w.is_empty() { "0" } else { w };
+        return Ok(Tok::Real(format!("{w}.{frac}").into()));
+    }
+    // Leading zeros dropped (`007` is 7), so no language reads an octal number.
+    let v = whole.trim_start_matches('0');
+    Ok(Tok::Int(if v.is_empty() { "0" } else { v }.into()))
+}
+
+/// The literal after `type#` (`*i` after the `#`): `BOOL#1`, `BOOL#TRUE`, `INT#-5`, `INT#16#FF`,
+/// `REAL#1.5`; `word` is the type.
+fn typed(text: &str, word: &str, start: usize, i: &mut usize) -> Result<Tok, SyntaxError> {
+    let b = text.as_bytes();
+    let err = |end: usize, why: String| SyntaxError {
+        at: start..clamp(text, end),
+        message: why,
+    };
+    let ty = word.to_ascii_uppercase();
+    const INTS: &[&str] = &[
+        "SINT", "INT", "DINT", "LINT", "USINT", "UINT", "UDINT", "ULINT", "BYTE", "WORD", "DWORD",
+        "LWORD",
+    ];
+    if ty == "BOOL" {
+        let from = *i;
+        while *i < b.len() && b[*i].is_ascii_alphanumeric() {
+            *i += 1;
+        }
+        return match text[from..*i].to_ascii_uppercase().as_str() {
+            "1" | "TRUE" => Ok(Tok::True),
+            "0" | "FALSE" => Ok(Tok::False),
+            _ => {
+                let end = (*i).max(from + 1).min(text.len());
+                Err(err(
+                    end,
+                    format!(
+                        "{} is not a BOOL literal (`BOOL#0`, `BOOL#1`, `BOOL#FALSE`, `BOOL#TRUE`)",
+                        describe(text, &(start..end))
+                    ),
+                ))
+            }
+        };
+    }
+    let is_int = INTS.contains(&ty.as_str());
+    if !is_int && ty != "REAL" && ty != "LREAL" {
+        return Err(err(
+            *i,
+            format!(
+                "`{word}#` literals are not part of the condition language (booleans, integers and decimals are)"
+            ),
+        ));
+    }
+    let negative = match b.get(*i) {
+        Some(b'-') => {
+            *i += 1;
+            true
+        }
+        Some(b'+') => {
+            *i += 1;
+            false
+        }
+        _ => false,
+    };
+    if !b.get(*i).is_some_and(u8::is_ascii_digit) {
+        return Err(err(
+            (*i + 1).min(text.len()),
+            format!("`{word}#` needs a number after it"),
+        ));
+    }
+    let sign = if negative { "-" } else { "" };
+    match number(text, i)? {
+        Tok::Int(v) if is_int => Ok(Tok::Int(format!("{sign}{v}").into())),
+        Tok::Int(v) => Ok(Tok::Real(format!("{sign}{v}.0").into())),
+        Tok::Real(v) if !is_int => Ok(Tok::Real(format!("{sign}{v}").into())),
+        _ => Err(err(
+            *i,
+            format!("`{word}#` is an integer type; this number has a fraction"),
+        )),
+    }
 }
 
 impl Lexer {
@@ -234,26 +393,25 @@ impl Lexer {
                         Tok::Op(BinOp::Gt)
                     }
                 },
-                b'0'..=b'9' => {
-                    while i < b.len() && b[i].is_ascii_digit() {
-                        i += 1;
-                    }
-                    if i + 1 < b.len() && b[i] == b'.' && b[i + 1].is_ascii_digit() {
-                        i += 1;
-                        while i < b.len() && b[i].is_ascii_digit() {
-                            i += 1;
+                b'0'..=b'9' => number(text, &mut i)?,
+                c if c.is_ascii_alphabetic()
+                    || c == b'_'
+                    || (c >= 0x80 && starts_letter(&text[i..])) =>
+                {
+                    // IEC identifiers, and any Unicode letter (a signal named `Störung`).
+                    while i < b.len() {
+                        let ch = text[i..].chars().next().unwrap_or(' ');
+                        if ch.is_alphanumeric() || ch == '_' {
+                            i += ch.len_utf8();
+                        } else {
+                            break;
                         }
-                        Tok::Real
-                    } else {
-                        Tok::Int
-                    }
-                }
-                c if c.is_ascii_alphabetic() || c == b'_' => {
-                    while i < b.len() && (b[i].is_ascii_alphanumeric() || b[i] == b'_') {
-                        i += 1;
                     }
                     let w = &text[start..i];
-                    if w.eq_ignore_ascii_case("TRUE") {
+                    if b.get(i) == Some(&b'#') {
+                        i += 1;
+                        typed(text, w, start, &mut i)?
+                    } else if w.eq_ignore_ascii_case("TRUE") {
                         Tok::True
                     } else if w.eq_ignore_ascii_case("FALSE") {
                         Tok::False
@@ -281,7 +439,9 @@ impl Lexer {
                         }
                         ':' if text[i..].starts_with(":=") => ": `:=` assigns; compare with `=`",
                         '+' | '*' | '/' => ": arithmetic is not part of the condition language",
-                        '#' => ": typed literals are not supported",
+                        '#' => {
+                            ": a typed or based literal needs its type or base before `#` (`INT#5`, `16#FF`)"
+                        }
                         '\'' | '"' => ": strings are not part of the condition language",
                         ';' => ": a condition is one expression",
                         _ => "",
@@ -293,24 +453,33 @@ impl Lexer {
                 }
             };
             // A letter right after a number (`3a`) is not a token boundary.
-            if matches!(tok, Tok::Int | Tok::Real)
+            if matches!(tok, Tok::Int(_) | Tok::Real(_))
                 && i < b.len()
-                && (b[i].is_ascii_alphabetic() || b[i] == b'_' || b[i] == b'#')
+                && (b[i].is_ascii_alphabetic() || b[i] == b'_' || b[i] == b'#' || b[i] >= 0x80)
             {
                 let mut j = i;
-                while j < b.len() && (b[j].is_ascii_alphanumeric() || b[j] == b'_' || b[j] == b'#')
+                while j < b.len()
+                    && (b[j].is_ascii_alphanumeric()
+                        || b[j] == b'_'
+                        || b[j] == b'#'
+                        || b[j] >= 0x80)
                 {
+                    j += 1;
+                }
+                while !text.is_char_boundary(j) {
                     j += 1;
                 }
                 return Err(SyntaxError {
                     at: start..j,
                     message: format!(
-                        "{} is not a number or a name (based and typed literals are not supported)",
+                        "{} is not a number or a name (a based literal is `2#`, `8#` or `16#` and digits, a typed one `INT#5`)",
                         describe(text, &(start..j))
                     ),
                 });
             }
-            if tok == Tok::Int && text[start..i].parse::<i32>().is_err() {
+            if let Tok::Int(v) = &tok
+                && v.parse::<i32>().is_err()
+            {
                 return Err(SyntaxError {
                     at: start..i,
                     message: format!(
@@ -357,7 +526,7 @@ pub fn parse(text: &str, map: &dyn Fn(usize) -> usize) -> Result<Expr, SyntaxErr
         pos: 0,
         map,
     };
-    let e = p.expr(0, 0)?;
+    let e = booleans(p.expr(0, 0)?, true);
     if let Some((_, r)) = p.toks.get(p.pos) {
         let r = r.clone();
         return Err(SyntaxError {
@@ -369,6 +538,48 @@ pub fn parse(text: &str, map: &dyn Fn(usize) -> usize) -> Result<Expr, SyntaxErr
         });
     }
     Ok(e)
+}
+
+/// IEC 61131-3 reads `1` and `0` as booleans where a boolean belongs: the whole condition, the
+/// operands of `NOT`, `AND`, `OR`, `XOR`, and a side of `=`/`<>` whose other side is a boolean
+/// expression.
+fn booleans(e: Expr, want: bool) -> Expr {
+    fn boolish(e: &Expr) -> bool {
+        matches!(
+            e.kind,
+            ExprKind::Bool(_) | ExprKind::Not(_) | ExprKind::Bin(..)
+        )
+    }
+    let Expr { kind, span } = e;
+    let kind = match kind {
+        ExprKind::Int(v) if want && (&*v == "0" || &*v == "1") => ExprKind::Bool(&*v == "1"),
+        ExprKind::Not(a) => ExprKind::Not(Box::new(booleans(*a, true))),
+        ExprKind::Bin(op @ (BinOp::And | BinOp::Or | BinOp::Xor), a, b) => ExprKind::Bin(
+            op,
+            Box::new(booleans(*a, true)),
+            Box::new(booleans(*b, true)),
+        ),
+        ExprKind::Bin(op @ (BinOp::Eq | BinOp::Ne), a, b) => {
+            let (a, b) = (booleans(*a, false), booleans(*b, false));
+            let (a, b) = if boolish(&a) {
+                let b = booleans(b, true);
+                (a, b)
+            } else if boolish(&b) {
+                (booleans(a, true), b)
+            } else {
+                (a, b)
+            };
+            ExprKind::Bin(op, Box::new(a), Box::new(b))
+        }
+        ExprKind::Bin(op, a, b) => ExprKind::Bin(
+            op,
+            Box::new(booleans(*a, false)),
+            Box::new(booleans(*b, false)),
+        ),
+        ExprKind::Neg(a) => ExprKind::Neg(Box::new(booleans(*a, false))),
+        k => k,
+    };
+    Expr { kind, span }
 }
 
 impl Parser<'_> {
@@ -433,8 +644,8 @@ impl Parser<'_> {
         Ok(match tok {
             Tok::True => leaf(ExprKind::Bool(true), self),
             Tok::False => leaf(ExprKind::Bool(false), self),
-            Tok::Int => leaf(ExprKind::Int(text.into()), self),
-            Tok::Real => leaf(ExprKind::Real(text.into()), self),
+            Tok::Int(v) => leaf(ExprKind::Int(v.clone()), self),
+            Tok::Real(v) => leaf(ExprKind::Real(v.clone()), self),
             Tok::Name => leaf(ExprKind::Name(text.into()), self),
             Tok::Not | Tok::Minus => {
                 let inner = self.unary(depth + 1)?;
@@ -701,6 +912,63 @@ mod tests {
         assert!(p("not FALSE").is_ok());
     }
 
+    /// IEC 61131-3 literals (SPEC 3.1): `1`/`0` as booleans where a boolean belongs, `BOOL#1`,
+    /// typed and based literals, `_` between digits; written in decimal.
+    #[test]
+    fn iec_literals_are_read() {
+        assert!(p("1").unwrap().is_true());
+        assert_eq!(st("0"), "FALSE");
+        assert_eq!(st("BOOL#1 AND BOOL#FALSE"), "TRUE AND FALSE");
+        assert_eq!(st("NOT 0"), "NOT FALSE");
+        assert_eq!(st("a AND 1"), "a AND TRUE");
+        assert_eq!(st("(n > 2) = 1"), "(n > 2) = TRUE");
+        // A number where a number belongs stays one.
+        assert_eq!(st("n = 1"), "n = 1");
+        assert_eq!(st("n >= 1"), "n >= 1");
+        assert_eq!(st("n = 16#FF"), "n = 255");
+        assert_eq!(st("n = 2#1010 OR n = 8#17"), "(n = 10) OR (n = 15)");
+        assert_eq!(st("n = INT#-5"), "n = -5");
+        assert_eq!(st("n = DINT#16#1_0"), "n = 16");
+        assert_eq!(st("n < 1_000"), "n < 1000");
+        assert_eq!(st("x > REAL#1.5"), "x > 1.5");
+        assert_eq!(st("x > LREAL#2"), "x > 2.0");
+        assert_eq!(st("n = 007"), "n = 7");
+        let e = |s: &str| p(s).unwrap_err().message;
+        assert!(e("n = 3#12").contains("base"), "{}", e("n = 3#12"));
+        assert!(e("n = 16#").contains("digits of its base"));
+        assert!(e("n = 1__0").contains("between digits"));
+        assert!(e("n = 1_").contains("between digits"));
+        assert!(e("BOOL#2").contains("not a BOOL literal"));
+        assert!(e("t > T#5s").contains("not part of the condition language"));
+        assert!(e("n = INT#1.5").contains("fraction"));
+        assert!(e("n = 16#1_0000_0000").contains("larger than a KRL integer"));
+    }
+
+    /// Short texts of the characters literals are made of never make the reader panic, and an
+    /// error's place is always within the text.
+    #[test]
+    fn literal_like_texts_never_panic() {
+        let alphabet: Vec<char> = "01279#_.-+ABFTxü€ (INT#BOOL#)".chars().collect();
+        let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
+        for _ in 0..50_000 {
+            let mut t = String::new();
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            for k in 0..(x % 9) {
+                t.push(alphabet[((x >> (k * 5)) % alphabet.len() as u64) as usize]);
+            }
+            if let Err(e) = p(&t) {
+                assert!(
+                    e.at.end <= t.len()
+                        && t.is_char_boundary(e.at.start)
+                        && t.is_char_boundary(e.at.end),
+                    "{t:?}: {e:?}"
+                );
+            }
+        }
+    }
+
     #[test]
     fn krl_keeps_the_meaning() {
         let sig = |n: &str| match n {
@@ -738,7 +1006,9 @@ mod tests {
                 .contains("larger than a KRL integer")
         );
         assert!(p("n = 2147483647").is_ok());
-        assert!(e("Grüße").message.contains("`ü`"));
+        // Unicode letters are letters of names (SPEC 3.1); other characters are not.
+        assert_eq!(st("Störung AND Grüße"), "Störung AND Grüße");
+        assert!(e("a € b").message.contains("`€`"));
         let deep = format!("{}a{}", "(".repeat(100), ")".repeat(100));
         assert!(e(&deep).message.contains("deeper"));
         let nots = format!("{}a", "NOT ".repeat(100));

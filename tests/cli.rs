@@ -1489,3 +1489,47 @@ fn a_closed_stdout_is_no_panic() {
     assert!(!err.contains("panicked"), "{err}");
     assert_eq!(out.status.code(), Some(0), "{err}");
 }
+
+/// Issue 26, item 4: IEC 61131-3 literals and Unicode names in conditions, through the binary:
+/// `1` as a condition, `BOOL#TRUE`, a based literal compared with an integer signal, `_` in a
+/// number, and a signal named `Störung` in the blackboard.
+#[test]
+fn iec_literals_and_unicode_signal_names_compile() {
+    let t = base_with_case("flow", "flow-guarded-sequence");
+    let bb = t.path().join("Blackboard.aml");
+    let text = std::fs::read_to_string(&bb).unwrap();
+    let part_ok = "<ExternalInterface Name=\"Part_OK\"";
+    assert!(text.contains(part_ok));
+    std::fs::write(
+        &bb,
+        text.replacen(
+            part_ok,
+            "<ExternalInterface Name=\"Störung\" ID=\"{s-1}\" RefBaseClassPath=\"AutomationMLInterfaceClassLib/AutomationMLBaseInterface/Communication/SignalInterface\"><Attribute Name=\"Number\" AttributeDataType=\"xs:integer\"><Value>7</Value></Attribute></ExternalInterface>\n        <ExternalInterface Name=\"Part_OK\"",
+            1,
+        ),
+    )
+    .unwrap();
+    let sfc = t.path().join("sfc.xml");
+    let chart = std::fs::read_to_string(&sfc)
+        .unwrap()
+        .replace("<xhtml:p>TRUE</xhtml:p>", "<xhtml:p>1</xhtml:p>")
+        .replace(
+            "Part_OK (* the part is there;",
+            "NOT störung AND BOOL#TRUE (* the part is there;",
+        )
+        .replace(
+            "Gripper_Closed = TRUE",
+            "Variant = 16#A OR Variant &lt; 1_0",
+        );
+    std::fs::write(&sfc, chart).unwrap();
+    let o = run(&["--lf", "Blackboard.aml", "Lit"], t.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let src = std::fs::read_to_string(t.path().join("Lit.src")).unwrap();
+    assert!(src.contains("WAIT FOR (NOT $IN[7]) AND TRUE"), "{src}");
+    assert!(
+        src.contains("WAIT FOR (Variant == 10) OR (Variant < 10)"),
+        "{src}"
+    );
+    // `1` always fires: no wait for it.
+    assert!(!src.contains("WAIT FOR 1"), "{src}");
+}
