@@ -1,7 +1,9 @@
 //! Transition conditions (SPEC.md 3.1): the ST subset `TRUE`, `FALSE`, integer and decimal
-//! literals, names, `NOT`, `AND` (`&`), `OR`, `XOR`, `=`, `<>`, `<`, `>`, `<=`, `>=`, unary `-`
-//! and parentheses, with ST's precedence (loosest first: `OR`, `XOR`, `AND`, `=`/`<>`,
-//! `<`/`>`/`<=`/`>=`, unary `-`/`NOT`). `(* comments *)` are skipped.
+//! literals (IEC 61131-3's: `1`/`0` as booleans where a boolean belongs, `BOOL#1`, typed
+//! `INT#5`/`REAL#1.5`, based `2#`/`8#`/`16#`, `_` between digits; kept in decimal), names (IEC
+//! identifiers, and any Unicode letter), `NOT`, `AND` (`&`), `OR`, `XOR`, `=`, `<>`, `<`, `>`,
+//! `<=`, `>=`, unary `-` and parentheses, with ST's precedence (loosest first: `OR`, `XOR`, `AND`,
+//! `=`/`<>`, `<`/`>`/`<=`/`>=`, unary `-`/`NOT`). `(* comments *)` are skipped.
 //!
 //! [`parse`] turns a condition's text into an [`Expr`] whose spans are byte ranges of the file
 //! the text came from (the caller maps text offsets to file offsets, since the text may have
