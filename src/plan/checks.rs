@@ -248,10 +248,44 @@ pub fn start_end(
         .filter(|&i| el[i].kind.is_step() && g.preds(i).is_empty())
         .collect();
     let untargeted: Vec<usize> = no_pred.iter().copied().filter(|&i| !targeted[i]).collect();
-    let starts = if untargeted.is_empty() {
-        no_pred
-    } else {
-        untargeted
+    // The start is the step marked initialStep="true" (SPEC.md 3): the one marked step without
+    // a predecessor (the original also marks its end step), else the one marked step (a chart
+    // drawn as a closed circle); else the one step without a predecessor that no jump leads to.
+    let initial = |i: &usize| matches!(&el[*i].kind, ElementKind::Step(st) if st.initial);
+    let marked: Vec<usize> = (0..el.len())
+        .filter(|i| el[*i].kind.is_step() && initial(i))
+        .collect();
+    let marked_free: Vec<usize> = untargeted.iter().copied().filter(initial).collect();
+    let starts = match (marked_free.as_slice(), marked.as_slice()) {
+        ([_], _) | ([], [_]) => {
+            let s = marked_free.first().or(marked.first()).copied().unwrap_or(0);
+            // Other steps nothing leads to are never run.
+            let unreached: Vec<usize> = untargeted.iter().copied().filter(|&i| i != s).collect();
+            if !unreached.is_empty() {
+                let mut d = Diagnostic::error(
+                    Code::StartStep,
+                    format!(
+                        "{} step{} without a predecessor besides the start step {}: {} (nothing leads to {}; connect {} or remove {})",
+                        unreached.len(),
+                        if unreached.len() == 1 { "" } else { "s" },
+                        label(sfc, s),
+                        list_ids(sfc, &unreached),
+                        if unreached.len() == 1 { "it" } else { "them" },
+                        if unreached.len() == 1 { "it" } else { "them" },
+                        if unreached.len() == 1 { "it" } else { "them" },
+                    ),
+                )
+                .at(el[unreached[0]].span.clone())
+                .element(label(sfc, unreached[0]));
+                d = d.related(el[s].span.clone(), "the start step (initialStep=\"true\")");
+                diags.push(d);
+                return None;
+            }
+            vec![s]
+        }
+        (many, _) if many.len() > 1 => many.to_vec(),
+        _ if untargeted.is_empty() => no_pred,
+        _ => untargeted,
     };
     let ends: Vec<usize> = (0..el.len())
         .filter(|&i| el[i].kind.is_step() && g.succs(i).is_empty())
@@ -285,13 +319,22 @@ pub fn start_end(
             *s
         }
         [first, rest @ ..] => {
+            let all_marked = starts.iter().all(initial);
             let mut d = Diagnostic::error(
                 Code::StartStep,
-                format!(
-                    "{} start steps (steps without a predecessor): {}",
-                    starts.len(),
-                    list_ids(sfc, &starts)
-                ),
+                if all_marked {
+                    format!(
+                        "{} initial steps (marked initialStep=\"true\", without a predecessor): {}; several initial steps are sequences of their own, which needs each on a controller of its own (SPEC.md 9) and is not supported yet",
+                        starts.len(),
+                        list_ids(sfc, &starts)
+                    )
+                } else {
+                    format!(
+                        "{} start steps (steps without a predecessor): {}",
+                        starts.len(),
+                        list_ids(sfc, &starts)
+                    )
+                },
             )
             .at(el[*first].span.clone())
             .element(label(sfc, *first));

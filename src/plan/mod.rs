@@ -324,6 +324,62 @@ mod tests {
         assert!(msgs[0].1.contains("no steps"));
     }
 
+    /// The start is the step marked initialStep="true" (SPEC.md 3); a step only jumps lead to is
+    /// no start; two marked steps without a predecessor are two initial steps (one per
+    /// controller, not supported yet); a step nothing leads to besides the start is an error at
+    /// it.
+    #[test]
+    fn the_start_is_the_marked_initial_step() {
+        // A jump-only target (`Emergency`) besides the marked start: fine.
+        let emergency =
+            "<step localId=\"20\" name=\"Emergency\"><position x=\"0\" y=\"0\"/></step>".to_owned();
+        let parts = [
+            st(1, "Start", &[]),
+            tr(2, &[1], "a"),
+            st(3, "S3", &[2]),
+            el("selectionDivergence", 4, &[3]),
+            tr(5, &[4], "b"),
+            jmp(6, &[5], "Emergency"),
+            tr(7, &[4], "NOT b"),
+            st(8, "End", &[7]),
+            emergency.clone(),
+            tr(21, &[20], "TRUE"),
+            jmp(22, &[21], "Start"),
+        ];
+        // (Its flow, jumping out of the sequence and back to the start, is not structured:
+        // that is reported, but never as a second start step.)
+        let (_, _, msgs) = run(&parts);
+        assert!(msgs.iter().all(|(c, _)| *c != Code::StartStep), "{msgs:?}");
+        // Two marked initial steps.
+        let (_, _, msgs) = run(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "End", &[2]),
+            st(4, "Other", &[]),
+            tr(5, &[4], "TRUE"),
+            st(6, "End2", &[5]),
+        ]);
+        assert!(
+            msgs.iter()
+                .any(|(c, m)| *c == Code::StartStep && m.contains("2 initial steps")),
+            "{msgs:?}"
+        );
+        // An unmarked step nothing leads to.
+        let lone =
+            "<step localId=\"4\" name=\"Lone\"><position x=\"0\" y=\"0\"/></step>".to_owned();
+        let (_, _, msgs) = run(&[
+            st(1, "Start", &[]),
+            tr(2, &[1], "TRUE"),
+            st(3, "End", &[2]),
+            lone,
+        ]);
+        assert!(
+            msgs.iter().any(|(c, m)| *c == Code::StartStep
+                && m.contains("besides the start step localId 1: localId 4")),
+            "{msgs:?}"
+        );
+    }
+
     #[test]
     fn node_checks() {
         // A selection branch starting with a step; a jump followed by a step.
