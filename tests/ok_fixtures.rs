@@ -108,6 +108,7 @@ cases! {
     cell_robot_gripper => "cell-robot-gripper",
     cell_two_robots_weld => "cell-two-robots-weld",
     cell_two_robots_wired => "cell-two-robots-wired",
+    codesys_addata_pou => "codesys-addata-pou",
     flow_cyclic => "flow-cyclic",
     flow_guarded_sequence => "flow-guarded-sequence",
     flow_loop_early_exit => "flow-loop-early-exit",

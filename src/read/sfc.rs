@@ -1333,7 +1333,9 @@ impl Stream {
                     all.len(),
                     list(&all)
                 ),
-                (_, None) => "the SFC file has no `pou` (types/pous/pou)".to_owned(),
+                (_, None) => {
+                    "the SFC file has no `pou` (types/pous/pou, or in an addData/data)".to_owned()
+                }
                 (None, Some((_, name))) if all.len() == 1 => {
                     format!("pou `{name}` has no SFC body (body/SFC)")
                 }
@@ -1424,27 +1426,34 @@ enum PathKind {
 impl PathKind {
     fn of(stack: &Open, tag: Tag) -> Self {
         use Tag as T;
+        let n = stack.len();
         let open = |i: usize| stack.tags[i].0;
-        match (stack.len(), tag) {
-            (1, T::FileHeader) if open(0) == T::Project => PathKind::FileHeader,
-            (3, T::Pou) if [open(0), open(1), open(2)] == [T::Project, T::Types, T::Pous] => {
-                PathKind::Pou
+        match tag {
+            T::FileHeader if n == 1 && open(0) == T::Project => PathKind::FileHeader,
+            // A POU at `n` (SPEC.md 3): in `types/pous`, or kept in an `addData/data` anywhere
+            // (CODESYS and TwinCAT exports).
+            T::Pou if PathKind::pou_at(stack, n) => PathKind::Pou,
+            T::Body if n >= 1 && open(n - 1) == T::Pou && PathKind::pou_at(stack, n - 1) => {
+                PathKind::Body
             }
-            (4, T::Body) if open(3) == T::Pou && PathKind::of_pous(stack) => PathKind::Body,
-            (5, T::Sfc) if open(3) == T::Pou && open(4) == T::Body && PathKind::of_pous(stack) => {
+            T::Sfc
+                if n >= 2
+                    && open(n - 1) == T::Body
+                    && open(n - 2) == T::Pou
+                    && PathKind::pou_at(stack, n - 2) =>
+            {
                 PathKind::Sfc
             }
             _ => PathKind::Other,
         }
     }
 
-    /// Whether the stack starts `project/types/pous`.
-    fn of_pous(stack: &Open) -> bool {
-        stack.tags.len() >= 3
-            && stack.tags[..3]
-                .iter()
-                .map(|t| t.0)
-                .eq([Tag::Project, Tag::Types, Tag::Pous])
+    /// Whether a `pou` at depth `k` of `stack` (its parents `stack.tags[..k]`) is a POU:
+    /// `project/types/pous/pou`, or a `pou` right inside an `addData/data`.
+    fn pou_at(stack: &Open, k: usize) -> bool {
+        let t = |i: usize| stack.tags[i].0;
+        (k == 3 && [t(0), t(1), t(2)] == [Tag::Project, Tag::Types, Tag::Pous])
+            || (k >= 2 && t(k - 1) == Tag::Data && t(k - 2) == Tag::AddData)
     }
 }
 
