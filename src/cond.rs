@@ -643,9 +643,23 @@ impl Parser<'_> {
             span: p.span(r.clone()),
         };
         let text = &self.text[r.clone()];
+        let is_int = matches!(tok, Tok::Int(_));
         Ok(match tok {
             Tok::True => leaf(ExprKind::Bool(true), self),
             Tok::False => leaf(ExprKind::Bool(false), self),
+            // A typed literal's sign (`INT#-5`) is a unary minus, as `-5` is.
+            Tok::Int(v) | Tok::Real(v) if v.starts_with('-') => {
+                let abs: Box<str> = v[1..].into();
+                let kind = if is_int {
+                    ExprKind::Int(abs)
+                } else {
+                    ExprKind::Real(abs)
+                };
+                Expr {
+                    kind: ExprKind::Neg(Box::new(leaf(kind, self))),
+                    span: self.span(r.clone()),
+                }
+            }
             Tok::Int(v) => leaf(ExprKind::Int(v.clone()), self),
             Tok::Real(v) => leaf(ExprKind::Real(v.clone()), self),
             Tok::Name => leaf(ExprKind::Name(text.into()), self),
@@ -929,7 +943,7 @@ mod tests {
         assert_eq!(st("n >= 1"), "n >= 1");
         assert_eq!(st("n = 16#FF"), "n = 255");
         assert_eq!(st("n = 2#1010 OR n = 8#17"), "(n = 10) OR (n = 15)");
-        assert_eq!(st("n = INT#-5"), "n = -5");
+        assert_eq!(st("n = INT#-5"), "n = (-5)");
         assert_eq!(st("n = DINT#16#1_0"), "n = 16");
         assert_eq!(st("n < 1_000"), "n < 1000");
         assert_eq!(st("x > REAL#1.5"), "x > 1.5");
@@ -960,13 +974,18 @@ mod tests {
             for k in 0..(x % 9) {
                 t.push(alphabet[((x >> (k * 5)) % alphabet.len() as u64) as usize]);
             }
-            if let Err(e) = p(&t) {
-                assert!(
+            match p(&t) {
+                Err(e) => assert!(
                     e.at.end <= t.len()
                         && t.is_char_boundary(e.at.start)
                         && t.is_char_boundary(e.at.end),
                     "{t:?}: {e:?}"
-                );
+                ),
+                // Printed back as ST, it reads the same (the fuzz target's round trip).
+                Ok(e) => {
+                    let printed = e.to_st();
+                    assert_eq!(p(&printed).map(|x| x.to_st()), Ok(printed), "{t:?}");
+                }
             }
         }
     }

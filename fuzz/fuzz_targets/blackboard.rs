@@ -17,7 +17,7 @@ fuzz_target!(|data: &[u8]| {
     let (sources, mut diags, file) = common::load("/p/Blackboard.aml", data);
     let bb = file.and_then(|f| read_blackboard(&sources, f, &mut diags));
     if let (Some(bb), Some(file)) = (&bb, file) {
-        let _ = print::blackboard(bb, &Default::default());
+        let _ = print::blackboard(bb, &Default::default(), None);
         let _ = print::info(Some(bb));
         if let Some(wb) = &bb.write_back {
             let text = &sources.get(file).text;
