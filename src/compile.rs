@@ -582,6 +582,9 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         None => (None, None),
     };
     lap(&mut out, "read-sfc");
+    if let Some(s) = &mut sfc {
+        plan::close_circles(s);
+    }
     let plan = sfc.as_ref().and_then(|s| plan::plan(s, &mut cx.diags));
     lap(&mut out, "plan");
 
@@ -1255,6 +1258,9 @@ pub fn check_sfc_pou(fs: &dyn FileSource, path: &Path, pou: Option<&str>) -> Com
     if let Some(sfc) = &out.sfc {
         // Without a blackboard the names stay unresolved: only what the literals tell.
         bind::check_conditions_unresolved(sfc, &mut cx.diags);
+    }
+    if let Some(s) = &mut out.sfc {
+        plan::close_circles(s);
     }
     out.plan = out.sfc.as_ref().and_then(|s| plan::plan(s, &mut cx.diags));
     finish(cx, out)

@@ -393,9 +393,35 @@ pub struct Sfc {
     /// memory back rather than leaving holes between the steps.
     pub variables: Vec<Variable>,
     pub values: String,
+    /// Connections back to an earlier step, made loops (`plan::close_circles`): each became a
+    /// jumpStep element appended to `elements`.
+    pub closed: Vec<Closed>,
+}
+
+/// A connection back to an earlier step (a chart drawn as a closed circle), made a jump.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Closed {
+    /// The jumpStep element added for it.
+    pub jump: usize,
+    /// The step it leads back to.
+    pub target: usize,
+    /// The element the connection comes from.
+    pub from: usize,
 }
 
 impl Sfc {
+    /// How a jump is named in listings and comments: `jump localId 57`, or for a connection
+    /// back to an earlier step, `connection back from localId 12`.
+    pub fn jump_label(&self, jump: usize) -> String {
+        match self.closed.iter().find(|c| c.jump == jump) {
+            Some(c) => format!(
+                "connection back from localId {}",
+                self.elements[c.from].local_id
+            ),
+            None => format!("jump localId {}", self.elements[jump].local_id),
+        }
+    }
+
     /// A step's variables (none once [`Sfc::drop_variables`] ran).
     pub fn variables_of(&self, step: &Step) -> &[Variable] {
         self.variables.get(step.variables.clone()).unwrap_or(&[])

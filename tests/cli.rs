@@ -1533,3 +1533,54 @@ fn iec_literals_and_unicode_signal_names_compile() {
     // `1` always fires: no wait for it.
     assert!(!src.contains("WAIT FOR 1"), "{src}");
 }
+
+/// Issue 26, item 1: a chart drawn as a closed circle (a connection back to an earlier step, as
+/// Beremiz and OpenPLC draw sequence loops) is the loop a jump to that step is: the same
+/// program, but for the loop's comment. Also when the connection leads back to the initial
+/// step, which then has a predecessor.
+#[test]
+fn a_connection_back_to_a_step_is_a_loop_like_a_jump() {
+    let t = base_with_case("flow", "flow-cyclic");
+    let compile = |sfc: &str| -> String {
+        std::fs::write(t.path().join("sfc.xml"), sfc).unwrap();
+        let o = run(&["--lf", "Blackboard.aml", "Loopy"], t.path());
+        assert_eq!(o.status.code(), Some(0), "{}\n{sfc}", stderr(&o));
+        std::fs::read_to_string(t.path().join("Loopy.src")).unwrap()
+    };
+    let with_jump = std::fs::read_to_string(t.path().join("sfc.xml")).unwrap();
+    let jump = &with_jump[with_jump.find("<jumpStep").unwrap()
+        ..with_jump.find("</jumpStep>").unwrap() + "</jumpStep>".len()];
+    assert!(jump.contains("targetName=\"Cycle\""), "{jump}");
+    // Cycle (localId 5) gets the last transition (8) as a second input instead of the jump.
+    let circle = with_jump.replace(jump, "").replacen(
+        "<connectionPointIn><connection refLocalId=\"4\"/></connectionPointIn>",
+        "<connectionPointIn><connection refLocalId=\"4\"/><connection refLocalId=\"8\"/></connectionPointIn>",
+        1,
+    );
+    let a = compile(&with_jump);
+    let b = compile(&circle);
+    let without_loop_comment = |s: &str| -> Vec<String> {
+        s.lines()
+            .filter(|l| !l.trim_start().starts_with(";loop back"))
+            .map(str::to_owned)
+            .collect()
+    };
+    assert_eq!(without_loop_comment(&a), without_loop_comment(&b));
+    assert!(
+        b.contains(";loop back to step localId 5 (connection back from localId 8), endless"),
+        "{b}"
+    );
+    // Back to the initial step: Init (localId 1, marked) gets the last transition as its input.
+    let to_init = with_jump
+        .replace(jump, "")
+        .replacen(
+            "name=\"Init\" initialStep=\"true\">",
+            "name=\"Init\" initialStep=\"true\"><connectionPointIn><connection refLocalId=\"8\"/></connectionPointIn>",
+            1,
+        );
+    let c = compile(&to_init);
+    assert!(
+        c.contains(";loop back to step localId 1 (connection back from localId 8), endless"),
+        "{c}"
+    );
+}

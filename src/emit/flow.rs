@@ -198,10 +198,15 @@ pub fn transition_comment(input: &EmitInput, t: usize) -> String {
 
 /// The comment before a loop.
 pub fn loop_comment(input: &EmitInput, head: usize, jumps: &[usize], endless: bool) -> String {
+    let how = if input.sfc.closed.is_empty() {
+        format!("jump localId {}", local_ids(input, jumps))
+    } else {
+        let v: Vec<String> = jumps.iter().map(|&j| input.sfc.jump_label(j)).collect();
+        v.join(", ")
+    };
     format!(
-        "loop back to step localId {} (jump localId {}){}",
+        "loop back to step localId {} ({how}){}",
         input.sfc.elements[head].local_id,
-        local_ids(input, jumps),
         if endless { ", endless" } else { "" }
     )
 }
@@ -217,10 +222,7 @@ pub fn branch_comment(input: &EmitInput, n: usize, transition: usize) -> String 
 
 /// The comment at the end of a branch that goes round the loop again.
 pub fn round_again_comment(input: &EmitInput, jump: usize) -> String {
-    format!(
-        "round again (jump localId {})",
-        input.sfc.elements[jump].local_id
-    )
+    format!("round again ({})", input.sfc.jump_label(jump))
 }
 
 /// The comment before a selection.

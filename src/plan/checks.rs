@@ -162,9 +162,14 @@ pub fn check_nodes(sfc: &Sfc, g: &Graph, diags: &mut Diagnostics) -> Vec<Diagnos
 pub fn resolve_jumps(sfc: &Sfc, diags: &mut Diagnostics) -> Vec<Option<usize>> {
     let el = &sfc.elements;
     let mut out = vec![None; el.len()];
+    // A connection back to an earlier step (`close_circles`) knows its step.
+    for c in &sfc.closed {
+        out[c.jump] = Some(c.target);
+    }
     if !el
         .iter()
-        .any(|e| matches!(e.kind, ElementKind::JumpStep(_)))
+        .enumerate()
+        .any(|(i, e)| matches!(e.kind, ElementKind::JumpStep(_)) && out[i].is_none())
     {
         return out;
     }
@@ -195,6 +200,9 @@ pub fn resolve_jumps(sfc: &Sfc, diags: &mut Diagnostics) -> Vec<Option<usize>> {
         let ElementKind::JumpStep(Some(target)) = &e.kind else {
             continue;
         };
+        if out[i].is_some() {
+            continue;
+        }
         match by_name.get(&*target.key).map(Vec::as_slice) {
             Some([t]) => out[i] = Some(*t),
             None | Some([]) => diags.push(

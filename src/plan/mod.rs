@@ -11,10 +11,12 @@
 
 pub mod cell;
 mod checks;
+mod circles;
 mod graph;
 mod walk;
 
 pub use checks::{check_nodes, find_cycle, resolve_jumps, start_end};
+pub use circles::close_circles;
 pub use graph::{Graph, graph};
 pub use walk::walk;
 

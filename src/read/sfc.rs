@@ -1376,6 +1376,7 @@ impl Stream {
             span: Some(pou.sfc_span),
             variables: std::mem::take(&mut self.variables),
             values: std::mem::take(&mut self.values),
+            closed: Vec::new(),
         })
     }
 }

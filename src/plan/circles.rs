@@ -1,0 +1,113 @@
+//! Charts drawn as closed circles (SPEC.md 3, 3.1): Beremiz and OpenPLC draw a sequence loop as a
+//! connection from the last transition back to an earlier step (or to the selection convergence
+//! right before it), not as a jumpStep. Such a connection is a loop like a jump to that step:
+//! before planning, [`close_circles`] takes each one out of the inputs it stands in and adds a
+//! jumpStep naming the step, connected to where the connection came from (`Sfc::closed` keeps
+//! what was changed). A cycle that passes through no step stays, for the cycle check.
+
+use std::collections::HashMap;
+
+use crate::diag::Span;
+use crate::model::{Closed, Element, ElementKind, Inputs, Name, Sfc};
+
+/// Makes every connection back to an earlier step a jump; returns how many there were.
+/// "Earlier": the connection closes a cycle of the depth-first walk from the start steps (the
+/// steps marked `initialStep="true"` and those without a predecessor), and leads into a step
+/// or into a selection convergence whose one successor is a step.
+pub fn close_circles(sfc: &mut Sfc) -> usize {
+    let n = sfc.elements.len();
+    let mut ids: HashMap<u64, usize> = HashMap::with_capacity(n);
+    for (i, e) in sfc.elements.iter().enumerate() {
+        ids.entry(e.local_id).or_insert(i);
+    }
+    // Successors, with the connection's place in the consumer's inputs.
+    let mut succ: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for (i, e) in sfc.elements.iter().enumerate() {
+        for (r, _) in &e.inputs {
+            if let Some(&p) = ids.get(r)
+                && !succ[p].contains(&i)
+            {
+                succ[p].push(i);
+            }
+        }
+    }
+    let roots: Vec<usize> = (0..n)
+        .filter(|&i| match &sfc.elements[i].kind {
+            ElementKind::Step(st) => st.initial || matches!(sfc.elements[i].inputs, Inputs::None),
+            _ => false,
+        })
+        .collect();
+    // Iterative depth-first walk: 0 not seen, 1 on the path, 2 done.
+    let mut color = vec![0u8; n];
+    let mut back: Vec<(usize, usize)> = Vec::new();
+    for &root in &roots {
+        if color[root] != 0 {
+            continue;
+        }
+        let mut stack: Vec<(usize, usize)> = vec![(root, 0)];
+        color[root] = 1;
+        while let Some(&mut (u, ref mut k)) = stack.last_mut() {
+            if let Some(&v) = succ[u].get(*k) {
+                *k += 1;
+                match color[v] {
+                    0 => {
+                        color[v] = 1;
+                        stack.push((v, 0));
+                    }
+                    1 => back.push((u, v)),
+                    _ => {}
+                }
+            } else {
+                color[u] = 2;
+                stack.pop();
+            }
+        }
+    }
+    let mut next_id = sfc.elements.iter().map(|e| e.local_id).max().unwrap_or(0);
+    let mut made = 0;
+    for (u, v) in back {
+        let target = match &sfc.elements[v].kind {
+            ElementKind::Step(_) => v,
+            ElementKind::SelectionConvergence => match succ[v].as_slice() {
+                [s] if sfc.elements[*s].kind.is_step() => *s,
+                _ => continue,
+            },
+            _ => continue,
+        };
+        let ElementKind::Step(step) = &sfc.elements[target].kind else {
+            continue;
+        };
+        let name = step.name.clone();
+        let from_id = sfc.elements[u].local_id;
+        // The connection out of `v`'s inputs.
+        let inputs: Vec<(u64, std::ops::Range<usize>)> =
+            sfc.elements[v].inputs.iter().cloned().collect();
+        let Some(pos) = inputs.iter().position(|(r, _)| *r == from_id) else {
+            continue;
+        };
+        let place = inputs[pos].1.clone();
+        let rest: Vec<(u64, std::ops::Range<usize>)> = inputs
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| *k != pos)
+            .map(|(_, x)| x.clone())
+            .collect();
+        sfc.elements[v].inputs = Inputs::from(rest.as_slice());
+        next_id += 1;
+        let span = Span::new(sfc.file, place.clone());
+        sfc.elements.push(Element {
+            local_id: next_id,
+            kind: ElementKind::JumpStep(Some(Box::new(Name::new(&name, span.clone())))),
+            span,
+            x: sfc.elements[u].x,
+            inputs: Inputs::One((from_id, place)),
+        });
+        sfc.closed.push(Closed {
+            jump: sfc.elements.len() - 1,
+            target,
+            from: u,
+        });
+        made += 1;
+    }
+    made
+}
