@@ -378,11 +378,14 @@ pub fn flow(sfc: &Sfc, plan: &Plan) -> String {
                         match br.end {
                             BranchEnd::Join => {}
                             BranchEnd::Repeat(j) => {
-                                let _ = writeln!(
-                                    o,
-                                    "{inner}-> round again (jump id={})",
-                                    sfc.elements[j].local_id
-                                );
+                                let how = match sfc.closed.iter().find(|c| c.jump == j) {
+                                    Some(c) => format!(
+                                        "connection back from id={}",
+                                        sfc.elements[c.from].local_id
+                                    ),
+                                    None => format!("jump id={}", sfc.elements[j].local_id),
+                                };
+                                let _ = writeln!(o, "{inner}-> round again ({how})");
                             }
                             BranchEnd::Leave => {
                                 let _ = writeln!(o, "{inner}-> leave the loop");
