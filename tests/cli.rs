@@ -1584,3 +1584,47 @@ fn a_connection_back_to_a_step_is_a_loop_like_a_jump() {
         "{c}"
     );
 }
+
+/// Issue 26, item 3: a condition that references a named transition of the POU (its
+/// `transitions` list) takes that transition's ST body, an expression or an assignment to its
+/// name; a body in another language is an error at the condition, naming it.
+#[test]
+fn a_named_transition_gives_its_st_body() {
+    let t = base_with_case("flow", "flow-guarded-sequence");
+    let sfc = std::fs::read_to_string(t.path().join("sfc.xml")).unwrap();
+    let transitions = r#"<transitions>
+          <transition name="PartThere"><body><ST><xhtml:p>PartThere := Part_OK AND NOT Magazine_Empty; (* both &amp; *)</xhtml:p></ST></body></transition>
+          <transition name="Ladder"><body><LD><leftPowerRail localId="90"/></LD></body></transition>
+        </transitions>
+        <body>"#;
+    let with_named = sfc.replacen("<body>", transitions, 1).replacen(
+        "<inline name=\"\"><ST><xhtml:p>Part_OK (* the part is there;\n                checked by the camera *)</xhtml:p></ST></inline>",
+        "<reference name=\"partthere\"/>",
+        1,
+    );
+    assert!(
+        with_named.contains("<reference name=\"partthere\"/>"),
+        "the fixture changed"
+    );
+    std::fs::write(t.path().join("sfc.xml"), &with_named).unwrap();
+    let o = run(&["--lf", "Blackboard.aml", "Named"], t.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let src = std::fs::read_to_string(t.path().join("Named.src")).unwrap();
+    assert!(src.contains("WAIT FOR $IN[1] AND (NOT $IN[2])"), "{src}");
+    // A named transition in LD: not yet.
+    std::fs::write(
+        t.path().join("sfc.xml"),
+        with_named.replace(
+            "<reference name=\"partthere\"/>",
+            "<reference name=\"Ladder\"/>",
+        ),
+    )
+    .unwrap();
+    let o = run(&["--lf", "Blackboard.aml", "Named"], t.path());
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    assert!(
+        err.contains("E313") && err.contains("the named transition `Ladder` has a LD body"),
+        "{err}"
+    );
+}

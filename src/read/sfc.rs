@@ -7,6 +7,7 @@
 //! all that is kept. Byte positions come from the reader's position and from where the attribute
 //! slices sit in the event's buffer. The graph rules are checked by [`crate::plan`].
 
+use std::collections::HashMap;
 use std::io::BufRead;
 use std::ops::Range;
 
@@ -93,6 +94,7 @@ pub fn read_sfc_stream_with<R: BufRead + Send>(
     let mut r = Stream {
         wanted: pou.map(|p| p.trim().to_owned()).filter(|p| !p.is_empty()),
         pous: Vec::new(),
+        named: HashMap::new(),
         len_hint: usize::try_from(len_hint).unwrap_or(usize::MAX),
         file,
         names: Interner::default(),
@@ -167,6 +169,32 @@ struct Stream {
     /// Every step's variables and their values' texts ([`Sfc::variables`], [`Sfc::values`]).
     variables: Vec<Variable>,
     values: String,
+    /// The named transitions of the POU being read, by key (SPEC.md 3.1): read before its
+    /// body (the schema puts `transitions` first).
+    named: HashMap<String, Named>,
+}
+
+/// Where the pieces of a text assembled from the file stand: (offset in the text, offset in the
+/// file, whether the piece is the file's bytes as they are).
+type PieceMap = Vec<(usize, usize, bool)>;
+
+/// A named transition's body.
+#[derive(Debug)]
+enum Named {
+    /// ST: its text, and where its pieces stand in the file (as an inline condition's).
+    St { text: String, map: PieceMap },
+    /// A body in another language (`LD`, `FBD`, `IL`, `SFC`), at the transition.
+    Other { language: String, at: Span },
+}
+
+/// A named transition being read: its name, depth and place, its ST text so far (and the depth
+/// of its `ST` element), or the language of another body.
+struct ReadingNamed {
+    name: String,
+    depth: usize,
+    at: Span,
+    st: Option<(usize, String, PieceMap)>,
+    other: Option<String>,
 }
 
 /// The local names the reader looks for; anything else is `Other`. The stack of open elements
@@ -178,6 +206,8 @@ pub(crate) enum Tag {
     Types,
     Pous,
     Pou,
+    /// A POU's list of named transitions (SPEC.md 3.1).
+    Transitions,
     Body,
     Sfc,
     Position,
@@ -215,6 +245,7 @@ impl Tag {
             "types" => Tag::Types,
             "pous" => Tag::Pous,
             "pou" => Tag::Pou,
+            "transitions" => Tag::Transitions,
             "body" => Tag::Body,
             "SFC" => Tag::Sfc,
             "position" => Tag::Position,
@@ -608,6 +639,7 @@ impl Stream {
         // The element being built, and whether one is.
         let mut b = Building::new(self.file);
         let mut building = false;
+        let mut named: Option<ReadingNamed> = None;
         let mut seen_root = false;
         let mut scratch = String::new();
         let mut batch = Batch::default();
@@ -630,6 +662,18 @@ impl Stream {
                             }
                         } else if building {
                             end_inside(&mut b, &stack);
+                        } else if named.as_ref().is_some_and(|n| n.depth == depth) {
+                            // `</transition>` of a named transition.
+                            let n = named.take().expect("checked");
+                            let body = match (n.st, n.other) {
+                                (Some((_, text, map)), _) => Named::St { text, map },
+                                (None, Some(language)) => Named::Other { language, at: n.at },
+                                (None, None) => Named::St {
+                                    text: String::new(),
+                                    map: Vec::new(),
+                                },
+                            };
+                            self.named.entry(crate::names::key(&n.name)).or_insert(body);
                         } else if let Some((_, d, _)) = &sfc
                             && depth == *d
                         {
@@ -653,23 +697,28 @@ impl Stream {
                         continue;
                     }
                     Kind::Text => {
+                        let raw = batch.text(rec);
+                        let text = || {
+                            BytesText::from_escaped(raw)
+                                .xml_content(quick_xml::XmlVersion::Implicit1_0)
+                        };
                         if building {
-                            let raw = batch.text(rec);
-                            inline_text(&mut b, &stack, at..batch.end(rec), || {
-                                BytesText::from_escaped(raw)
-                                    .xml_content(quick_xml::XmlVersion::Implicit1_0)
-                            });
+                            inline_text(&mut b, &stack, at..batch.end(rec), text);
+                        } else {
+                            named_text(&mut named, &stack, at..batch.end(rec), text);
                         }
                         continue;
                     }
                     Kind::CData => {
+                        // `<![CDATA[` … `]]>`
+                        let end = batch.end(rec).saturating_sub(3);
+                        let raw = batch.text(rec);
+                        let text =
+                            || BytesCData::new(raw).xml_content(quick_xml::XmlVersion::Implicit1_0);
                         if building {
-                            // `<![CDATA[` … `]]>`
-                            let end = batch.end(rec).saturating_sub(3);
-                            let raw = batch.text(rec);
-                            inline_text(&mut b, &stack, (at + 9).min(end)..end, || {
-                                BytesCData::new(raw).xml_content(quick_xml::XmlVersion::Implicit1_0)
-                            });
+                            inline_text(&mut b, &stack, (at + 9).min(end)..end, text);
+                        } else {
+                            named_text(&mut named, &stack, (at + 9).min(end)..end, text);
                         }
                         continue;
                     }
@@ -692,6 +741,17 @@ impl Stream {
                             },
                             Err(e) => return Ok(Err(self.syntax_error(at, e.to_string()))),
                         };
+                        if let Some(c) = ch
+                            && !building
+                            && let Some(ReadingNamed {
+                                st: Some((d, body, map)),
+                                ..
+                            }) = &mut named
+                            && stack.len() >= *d
+                        {
+                            map.push((body.len(), at, false));
+                            body.push(c);
+                        }
                         if let Some(c) = ch
                             && building
                             && b.inline.is_some()
@@ -758,6 +818,44 @@ impl Stream {
                     }
                     continue;
                 }
+                // A named transition of the POU being read (SPEC.md 3.1): its name, then its
+                // body's language; its ST text is gathered by `named_text`.
+                if let Some(n) = &mut named {
+                    if depth == n.depth + 2
+                        && stack.tags.last().map(|t| t.0) == Some(Tag::Body)
+                        && n.st.is_none()
+                        && n.other.is_none()
+                    {
+                        if name == "ST" {
+                            n.st = Some((depth, String::new(), Vec::new()));
+                        } else {
+                            n.other = Some(name.to_owned());
+                        }
+                    }
+                } else if tag == Tag::Transition
+                    && !empty
+                    && want_pou
+                    && pou.is_some()
+                    && stack.len() >= 2
+                    && stack.tags[stack.len() - 1].0 == Tag::Transitions
+                    && stack.tags[stack.len() - 2].0 == Tag::Pou
+                {
+                    let mark = scratch.len();
+                    let [n] = match self.pick(&t, ["name"], &mut scratch) {
+                        Ok(p) => p,
+                        Err(d) => return Ok(Err(d)),
+                    };
+                    if let Some(n) = n {
+                        named = Some(ReadingNamed {
+                            name: n.get(&scratch).to_owned(),
+                            depth,
+                            at: tag_span.clone(),
+                            st: None,
+                            other: None,
+                        });
+                    }
+                    scratch.truncate(mark);
+                }
                 // The element's place, relative to the document.
                 let path = PathKind::of(&stack, tag);
                 if matches!(path, PathKind::Sfc)
@@ -801,6 +899,7 @@ impl Stream {
                             first_pou = Some((tag_span.clone(), pname.clone().unwrap_or_default()));
                         }
                         self.pous.push((pname.clone().unwrap_or_default(), false));
+                        self.named.clear();
                         let have_program = self.found.iter().any(|p| p.program);
                         want_pou = match &self.wanted {
                             Some(w) => {
@@ -1133,6 +1232,60 @@ impl Stream {
         let (text, parsed, reference) = if let Some(inline) = &b.inline {
             let map = |o: usize| map_offset(&b.inline_map, o);
             (inline.trim(), crate::cond::parse(inline, &map), false)
+        } else if let Some((name, _)) = &b.reference
+            && let Some(body) = self.named.get(&crate::names::key(name.trim()))
+        {
+            // A named transition of the POU (SPEC.md 3.1): its body is the condition.
+            return match body {
+                Named::Other { language, at } => {
+                    diags.push(
+                        Diagnostic::error(
+                            Code::Unsupported,
+                            format!(
+                                "the named transition `{}` has a {language} body: only an ST body (an expression, or `{} := expression`) is supported yet",
+                                name.trim(),
+                                name.trim()
+                            ),
+                        )
+                        .at(c.clone())
+                        .element(label())
+                        .related(at.clone(), "the named transition"),
+                    );
+                    None
+                }
+                Named::St { text, map } => {
+                    let (from, to) = named_expression(text, name.trim());
+                    let map = |o: usize| map_offset(map, from + o);
+                    let expr_text = &text[from..to];
+                    let one_line = expr_text.split_whitespace().collect::<Vec<_>>().join(" ");
+                    match crate::cond::parse(expr_text, &map) {
+                        Ok(e) if e.is_true() => None,
+                        Ok(expr) => Some(Box::new(Condition {
+                            text: one_line,
+                            expr,
+                            span: c.clone(),
+                            reference: true,
+                        })),
+                        Err(err) => {
+                            let s = map(err.at.start);
+                            let e = map(err.at.end.saturating_sub(1)) + 1;
+                            diags.push(
+                                Diagnostic::error(
+                                    Code::BadCondition,
+                                    format!(
+                                        "condition `{one_line}` (the named transition `{}`): {}",
+                                        name.trim(),
+                                        err.message
+                                    ),
+                                )
+                                .at(Span::new(file, s..e.max(s + 1)))
+                                .element(label()),
+                            );
+                            None
+                        }
+                    }
+                }
+            };
         } else if let Some((name, range)) = &b.reference {
             // The name is the condition: one name, nothing else.
             let lead = name.len() - name.trim_start().len();
@@ -1485,6 +1638,56 @@ fn inline_text<'s>(
         b.inline_map
             .push((inline.len(), raw.start, t.len() == raw.len()));
         inline.push_str(&t);
+    }
+}
+
+/// The expression of a named transition's ST body: the text after `name :=` when it assigns
+/// (to its own name), without a final `;`; as byte offsets of `text`.
+fn named_expression(text: &str, name: &str) -> (usize, usize) {
+    let mut from = text.len() - text.trim_start().len();
+    let rest = &text[from..];
+    if rest.len() > name.len()
+        && rest.is_char_boundary(name.len())
+        && rest[..name.len()].eq_ignore_ascii_case(name)
+        && rest[name.len()..].trim_start().starts_with(":=")
+    {
+        let after = &rest[name.len()..];
+        from += name.len() + (after.len() - after.trim_start().len()) + 2;
+    }
+    // The statement ends at its `;` (outside a `(* comment *)`); what follows is comments.
+    let mut to = text.trim_end().len().max(from);
+    let b = text.as_bytes();
+    let mut i = from;
+    while i < to {
+        if text[i..].starts_with("(*") {
+            i = text[i + 2..].find("*)").map_or(to, |j| i + 2 + j + 2);
+            continue;
+        }
+        if b[i] == b';' {
+            to = i;
+            break;
+        }
+        i += 1;
+    }
+    (from, to)
+}
+
+/// Adds text to a named transition's ST body when the stack is inside it.
+fn named_text<'s>(
+    named: &mut Option<ReadingNamed>,
+    stack: &Open,
+    raw: Range<usize>,
+    text: impl FnOnce() -> std::borrow::Cow<'s, str>,
+) {
+    if let Some(ReadingNamed {
+        st: Some((d, body, map)),
+        ..
+    }) = named
+        && stack.len() >= *d
+    {
+        let t = text();
+        map.push((body.len(), raw.start, t.len() == raw.len()));
+        body.push_str(&t);
     }
 }
 
