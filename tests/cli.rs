@@ -1628,3 +1628,60 @@ fn a_named_transition_gives_its_st_body() {
         "{err}"
     );
 }
+
+/// Issue 26, item 7: SFC bodies of actions are charts named `POU.ACTION`: used when no POU has
+/// one, or when named (`--pou POU.ACTION`); a POU's own chart comes first.
+#[test]
+fn an_actions_sfc_body_is_a_chart_named_pou_dot_action() {
+    let t = base_with_case("flow", "flow-guarded-sequence");
+    let sfc = std::fs::read_to_string(t.path().join("sfc.xml")).unwrap();
+    let (a, b) = (
+        sfc.find("<body>").unwrap(),
+        sfc.find("</body>").unwrap() + 7,
+    );
+    let in_action = format!(
+        "{}<actions><action name=\"Idle\"><body><ST><xhtml:p>x := 1;</xhtml:p></ST></body></action><action name=\"Run\">{}</action></actions><body><ST><xhtml:p>Run();</xhtml:p></ST></body>{}",
+        &sfc[..a],
+        &sfc[a..b],
+        &sfc[b..]
+    )
+    .replace("pouType=\"program\"", "pouType=\"functionBlock\"");
+    let file = t.path().join("actions.xml");
+    std::fs::write(&file, &in_action).unwrap();
+    let o = run(&["--sfc", "-pS", "actions.xml"], t.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(
+        stdout(&o).contains("POU: GuardedSequence.Run"),
+        "{}",
+        stdout(&o)
+    );
+    let o = run(
+        &["--sfc", "--pou", "guardedsequence.run", "actions.xml"],
+        t.path(),
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let o = run(
+        &["--sfc", "--pou", "GuardedSequence.Idle", "actions.xml"],
+        t.path(),
+    );
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("the POUs with one: `GuardedSequence.Run`"),
+        "{}",
+        stderr(&o)
+    );
+    // A program's own chart besides: it is used, with a warning naming the action's.
+    let both = in_action.replacen(
+        "</pous>",
+        &format!(
+            "<pou name=\"Main\" pouType=\"program\">{}</pou></pous>",
+            &sfc[a..b]
+        ),
+        1,
+    );
+    std::fs::write(&file, both).unwrap();
+    let o = run(&["--sfc", "-pS", "--warn", "actions.xml"], t.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stdout(&o).contains("POU: Main"), "{}", stdout(&o));
+    assert!(stderr(&o).contains("W305"), "{}", stderr(&o));
+}

@@ -154,6 +154,13 @@ struct Pou {
     elements: Vec<Element>,
 }
 
+impl Pou {
+    /// An action's chart (`POU.ACTION`: a POU's name has no `.`).
+    fn is_action(&self) -> bool {
+        self.name.as_deref().is_some_and(|n| n.contains('.'))
+    }
+}
+
 struct Stream {
     file: FileId,
     /// The file's size, if known (0: unknown).
@@ -187,6 +194,17 @@ enum Named {
     Other { language: String, at: Span },
 }
 
+/// A POU's reading state, kept while one of its actions is read.
+struct Outer {
+    pou: Option<(Option<String>, bool, usize)>,
+    want_pou: bool,
+    body_seen: bool,
+    sfc_done: bool,
+    pous_at: Option<usize>,
+    /// The action element's depth.
+    depth: usize,
+}
+
 /// A named transition being read: its name, depth and place, its ST text so far (and the depth
 /// of its `ST` element), or the language of another body.
 struct ReadingNamed {
@@ -208,6 +226,9 @@ pub(crate) enum Tag {
     Pou,
     /// A POU's list of named transitions (SPEC.md 3.1).
     Transitions,
+    /// A POU's actions, whose bodies may be SFC charts (`POU.ACTION`, SPEC.md 3).
+    Actions,
+    Action,
     Body,
     Sfc,
     Position,
@@ -246,6 +267,8 @@ impl Tag {
             "pous" => Tag::Pous,
             "pou" => Tag::Pou,
             "transitions" => Tag::Transitions,
+            "actions" => Tag::Actions,
+            "action" => Tag::Action,
             "body" => Tag::Body,
             "SFC" => Tag::Sfc,
             "position" => Tag::Position,
@@ -640,6 +663,11 @@ impl Stream {
         let mut b = Building::new(self.file);
         let mut building = false;
         let mut named: Option<ReadingNamed> = None;
+        // The POU being read (its name, wanted or not), its entry in `self.pous`, and while one
+        // of its actions is read, the POU's state to go back to when the action ends.
+        let mut current_pou: Option<String> = None;
+        let mut pous_at: Option<usize> = None;
+        let mut outer: Option<Outer> = None;
         let mut seen_root = false;
         let mut scratch = String::new();
         let mut batch = Batch::default();
@@ -662,6 +690,14 @@ impl Stream {
                             }
                         } else if building {
                             end_inside(&mut b, &stack);
+                        } else if outer.as_ref().is_some_and(|o| o.depth == depth) {
+                            // `</action>`: back to its POU.
+                            let o = outer.take().expect("checked");
+                            pou = o.pou;
+                            want_pou = o.want_pou;
+                            body_seen = o.body_seen;
+                            sfc_done = o.sfc_done;
+                            pous_at = o.pous_at;
                         } else if named.as_ref().is_some_and(|n| n.depth == depth) {
                             // `</transition>` of a named transition.
                             let n = named.take().expect("checked");
@@ -859,7 +895,7 @@ impl Stream {
                 // The element's place, relative to the document.
                 let path = PathKind::of(&stack, tag);
                 if matches!(path, PathKind::Sfc)
-                    && let Some(p) = self.pous.last_mut()
+                    && let Some(p) = pous_at.and_then(|i| self.pous.get_mut(i))
                 {
                     p.1 = true;
                 }
@@ -899,17 +935,52 @@ impl Stream {
                             first_pou = Some((tag_span.clone(), pname.clone().unwrap_or_default()));
                         }
                         self.pous.push((pname.clone().unwrap_or_default(), false));
+                        pous_at = Some(self.pous.len() - 1);
+                        current_pou = pname.clone();
                         self.named.clear();
                         let have_program = self.found.iter().any(|p| p.program);
+                        // An action's chart found so far gives way to a POU's.
+                        let only_actions = self.found.iter().all(Pou::is_action);
                         want_pou = match &self.wanted {
                             Some(w) => {
                                 self.found.is_empty()
                                     && pname.as_deref().is_some_and(|n| crate::names::eq(n, w))
                             }
-                            None => !have_program && (program || self.found.is_empty()),
+                            None => !have_program && (program || only_actions),
                         };
                         if want_pou && !empty {
                             pou = Some((pname, program, depth));
+                            body_seen = false;
+                            sfc_done = false;
+                        }
+                    }
+                    PathKind::Action if !empty && outer.is_none() => {
+                        let mark = scratch.len();
+                        let [a] = match self.pick(&t, ["name"], &mut scratch) {
+                            Ok(p) => p,
+                            Err(d) => return Ok(Err(d)),
+                        };
+                        let action = a.map(|a| a.get(&scratch).to_owned()).unwrap_or_default();
+                        scratch.truncate(mark);
+                        let full = format!("{}.{action}", current_pou.as_deref().unwrap_or(""));
+                        self.pous.push((full.clone(), false));
+                        // An action's chart is used when named, or when no POU has one.
+                        let want = match &self.wanted {
+                            Some(w) => self.found.is_empty() && crate::names::eq(&full, w),
+                            None => self.found.is_empty(),
+                        };
+                        outer = Some(Outer {
+                            pou: pou.take(),
+                            want_pou,
+                            body_seen,
+                            sfc_done,
+                            pous_at,
+                            depth,
+                        });
+                        pous_at = Some(self.pous.len() - 1);
+                        want_pou = want;
+                        if want {
+                            pou = Some((Some(full), false, depth));
                             body_seen = false;
                             sfc_done = false;
                         }
@@ -1458,10 +1529,12 @@ impl Stream {
         first_pou: Option<(Span, String)>,
         diags: &mut Diagnostics,
     ) -> Option<Sfc> {
+        // A program's chart, else any POU's, else an action's (SPEC.md 3).
         let chosen = self
             .found
             .iter()
             .position(|p| p.program)
+            .or_else(|| self.found.iter().position(|p| !p.is_action()))
             .or(if self.found.is_empty() { None } else { Some(0) });
         let with_sfc: Vec<&str> = self
             .pous
@@ -1572,6 +1645,8 @@ fn report_ignored(ignored: &[(String, Span, String)], diags: &mut Diagnostics) {
 enum PathKind {
     FileHeader,
     Pou,
+    /// An action of a POU (`pou/actions/action`).
+    Action,
     Body,
     Sfc,
     Other,
@@ -1587,18 +1662,28 @@ impl PathKind {
             // A POU at `n` (SPEC.md 3): in `types/pous`, or kept in an `addData/data` anywhere
             // (CODESYS and TwinCAT exports).
             T::Pou if PathKind::pou_at(stack, n) => PathKind::Pou,
-            T::Body if n >= 1 && open(n - 1) == T::Pou && PathKind::pou_at(stack, n - 1) => {
-                PathKind::Body
-            }
-            T::Sfc
-                if n >= 2
-                    && open(n - 1) == T::Body
-                    && open(n - 2) == T::Pou
-                    && PathKind::pou_at(stack, n - 2) =>
-            {
+            T::Action if PathKind::action_at(stack, n) => PathKind::Action,
+            T::Body if n >= 1 && PathKind::owner_at(stack, n - 1) => PathKind::Body,
+            T::Sfc if n >= 2 && open(n - 1) == T::Body && PathKind::owner_at(stack, n - 2) => {
                 PathKind::Sfc
             }
             _ => PathKind::Other,
+        }
+    }
+
+    /// Whether an `action` at depth `k` is a POU's (`pou/actions/action`).
+    fn action_at(stack: &Open, k: usize) -> bool {
+        let t = |i: usize| stack.tags[i].0;
+        k >= 2 && t(k - 1) == Tag::Actions && t(k - 2) == Tag::Pou && PathKind::pou_at(stack, k - 2)
+    }
+
+    /// Whether the element at depth `k` (open) is a POU or one of its actions: what a `body`
+    /// belongs to.
+    fn owner_at(stack: &Open, k: usize) -> bool {
+        match stack.tags.get(k).map(|t| t.0) {
+            Some(Tag::Pou) => PathKind::pou_at(stack, k),
+            Some(Tag::Action) => PathKind::action_at(stack, k),
+            _ => false,
         }
     }
 
