@@ -1570,6 +1570,20 @@ fn a_connection_back_to_a_step_is_a_loop_like_a_jump() {
         b.contains(";loop back to step localId 5 (connection back from localId 8), endless"),
         "{b}"
     );
+    // Through a selection convergence before the step (as editors draw a second input).
+    let via_convergence = with_jump
+        .replace(jump, "")
+        .replacen(
+            "<connectionPointIn><connection refLocalId=\"4\"/></connectionPointIn>",
+            "<connectionPointIn><connection refLocalId=\"20\"/></connectionPointIn>",
+            1,
+        )
+        .replacen(
+            "<step localId=\"5\"",
+            "<selectionConvergence localId=\"20\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"4\"/></connectionPointIn><connectionPointIn><connection refLocalId=\"8\"/></connectionPointIn></selectionConvergence><step localId=\"5\"",
+            1,
+        );
+    assert_eq!(compile(&via_convergence), b);
     // Back to the initial step: Init (localId 1, marked) gets the last transition as its input.
     let to_init = with_jump
         .replace(jump, "")

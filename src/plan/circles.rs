@@ -92,6 +92,33 @@ pub fn close_circles(sfc: &mut Sfc) -> usize {
             .filter(|(k, _)| *k != pos)
             .map(|(_, x)| x.clone())
             .collect();
+        if v != target && rest.len() == 1 {
+            // A convergence left with one branch is no convergence: the step takes its input,
+            // and the convergence becomes the jump (no element is added).
+            let v_id = sfc.elements[v].local_id;
+            let step_inputs: Vec<(u64, std::ops::Range<usize>)> = sfc.elements[target]
+                .inputs
+                .iter()
+                .map(|(r, range)| {
+                    if *r == v_id {
+                        (rest[0].0, range.clone())
+                    } else {
+                        (*r, range.clone())
+                    }
+                })
+                .collect();
+            sfc.elements[target].inputs = Inputs::from(step_inputs.as_slice());
+            let span = sfc.elements[v].span.clone();
+            sfc.elements[v].kind = ElementKind::JumpStep(Some(Box::new(Name::new(&name, span))));
+            sfc.elements[v].inputs = Inputs::One((from_id, place));
+            sfc.closed.push(Closed {
+                jump: v,
+                target,
+                from: u,
+            });
+            made += 1;
+            continue;
+        }
         sfc.elements[v].inputs = Inputs::from(rest.as_slice());
         next_id += 1;
         let span = Span::new(sfc.file, place.clone());
