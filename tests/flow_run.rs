@@ -1426,3 +1426,90 @@ fn the_cell_co_simulation_catches_broken_handshakes() {
         }
     }
 }
+
+/// `text` with every jumpStep drawn as a connection instead (SPEC.md 3.1, "a connection back
+/// to an earlier step is the same as a jump to it"): the jump goes, and its input becomes a
+/// second connection of the target step's `connectionPointIn`. `None` without a jump.
+fn jumps_as_connections(text: &str) -> Option<String> {
+    let doc = roxmltree::Document::parse(text).unwrap();
+    let mut out = text.to_owned();
+    let mut any = false;
+    // Last first, so the earlier byte ranges stay.
+    let mut jumps: Vec<(std::ops::Range<usize>, String, String)> = doc
+        .descendants()
+        .filter(|n| n.has_tag_name("jumpStep"))
+        .map(|j| {
+            let input = j
+                .descendants()
+                .find(|n| n.has_tag_name("connection"))
+                .and_then(|c| c.attribute("refLocalId"))
+                .unwrap()
+                .to_owned();
+            (
+                j.range(),
+                j.attribute("targetName").unwrap().to_owned(),
+                input,
+            )
+        })
+        .collect();
+    jumps.sort_by_key(|j| std::cmp::Reverse(j.0.start));
+    for (range, _, _) in &jumps {
+        out.replace_range(range.clone(), "");
+    }
+    for (_, target, input) in jumps {
+        let at = out.find(&format!("name=\"{target}\"")).unwrap();
+        let end = out[at..].find("</step>").unwrap() + at;
+        let conn = format!("<connection refLocalId=\"{input}\"/>");
+        match out[at..end].find("</connectionPointIn>") {
+            Some(c) => out.insert_str(at + c, &conn),
+            None => out.insert_str(
+                end,
+                &format!("<connectionPointIn>{conn}</connectionPointIn>"),
+            ),
+        }
+        any = true;
+    }
+    any.then_some(out)
+}
+
+/// Every random chart with loops, drawn with connections back instead of jumps, compiles to
+/// the same program but for the loops' comments (the random charts' loops are run against the
+/// chart's meaning above).
+#[test]
+fn random_charts_drawn_with_connections_back_are_the_same_programs() {
+    let tmp = tempfile::tempdir().unwrap();
+    Lang::Krl.setup(tmp.path());
+    let compile = |text: &str| -> String {
+        std::fs::write(tmp.path().join("sfc.xml"), text).unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_skillpost"))
+            .args(["--lf", "Blackboard.aml", "R"])
+            .current_dir(tmp.path())
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}\n{text}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        Lang::Krl
+            .read(tmp.path(), "R")
+            .main
+            .lines()
+            .filter(|l| {
+                let l = l.trim_start();
+                !l.starts_with(";loop back") && !l.starts_with(";round again")
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
+    let mut compared = 0;
+    for seed in 1..=150u64 {
+        let text = ChartGen::chart(seed);
+        let Some(circles) = jumps_as_connections(&text) else {
+            continue;
+        };
+        assert_eq!(compile(&text), compile(&circles), "random chart {seed}");
+        compared += 1;
+    }
+    assert!(compared > 30, "{compared} charts with loops");
+}
