@@ -1699,3 +1699,74 @@ fn an_actions_sfc_body_is_a_chart_named_pou_dot_action() {
     assert!(stdout(&o).contains("POU: Main"), "{}", stdout(&o));
     assert!(stderr(&o).contains("W305"), "{}", stderr(&o));
 }
+
+/// Issue 26, item 2: conditions drawn instead of written. An LD network (power rail, a contact,
+/// a negated contact in series) and an FBD network (an OR block over two variables, into an AND
+/// block with a third) give the programs of their inline ST twins; a block outside SPEC 3.1's
+/// list (a timer) is an error at it, naming it.
+#[test]
+fn wired_conditions_are_their_inline_twins() {
+    let t = base_with_case("flow", "flow-guarded-sequence");
+    let sfc = std::fs::read_to_string(t.path().join("sfc.xml")).unwrap();
+    let cond4 = "<condition><inline name=\"\"><ST><xhtml:p>Part_OK (* the part is there;\n                checked by the camera *)</xhtml:p></ST></inline></condition>";
+    let cond6 = "<condition><inline name=\"\"><ST><xhtml:p>NOT Magazine_Empty AND (Release OR Door_Closed)</xhtml:p></ST></inline></condition>";
+    assert!(
+        sfc.contains(cond4) && sfc.contains(cond6),
+        "the fixture changed"
+    );
+    let compile = |text: &str| -> Result<Vec<String>, String> {
+        std::fs::write(t.path().join("sfc.xml"), text).unwrap();
+        let o = run(&["--lf", "Blackboard.aml", "Wired"], t.path());
+        if o.status.code() != Some(0) {
+            return Err(stderr(&o));
+        }
+        let src = std::fs::read_to_string(t.path().join("Wired.src")).unwrap();
+        Ok(src
+            .lines()
+            .filter(|l| l.starts_with("WAIT"))
+            .map(str::to_owned)
+            .collect())
+    };
+    let twin = sfc
+        .replace(cond4, "<condition><inline name=\"\"><ST>Part_OK AND NOT Magazine_Empty</ST></inline></condition>")
+        .replace(cond6, "<condition><inline name=\"\"><ST>(Release OR Door_Closed) AND NOT Magazine_Empty</ST></inline></condition>");
+    let networks = r#"
+            <leftPowerRail localId="100"><position x="0" y="0"/><connectionPointOut formalParameter=""/></leftPowerRail>
+            <contact localId="101"><position x="0" y="0"/><connectionPointIn><connection refLocalId="100"/></connectionPointIn><variable>Part_OK</variable></contact>
+            <contact localId="102" negated="true"><position x="0" y="0"/><connectionPointIn><connection refLocalId="101"/></connectionPointIn><variable>Magazine_Empty</variable></contact>
+            <inVariable localId="110"><position x="0" y="0"/><expression>Release</expression></inVariable>
+            <inVariable localId="111"><position x="0" y="0"/><expression>Door_Closed</expression></inVariable>
+            <inVariable localId="112"><position x="0" y="0"/><expression>NOT Magazine_Empty</expression></inVariable>
+            <block localId="113" typeName="OR"><position x="0" y="0"/><inputVariables>
+              <variable formalParameter="IN1"><connectionPointIn><connection refLocalId="110"/></connectionPointIn></variable>
+              <variable formalParameter="IN2"><connectionPointIn><connection refLocalId="111"/></connectionPointIn></variable>
+            </inputVariables><inOutVariables/><outputVariables><variable formalParameter="OUT"><connectionPointOut/></variable></outputVariables></block>
+            <block localId="114" typeName="AND"><position x="0" y="0"/><inputVariables>
+              <variable formalParameter="IN1"><connectionPointIn><connection refLocalId="113" formalParameter="OUT"/></connectionPointIn></variable>
+              <variable formalParameter="IN2"><connectionPointIn><connection refLocalId="112"/></connectionPointIn></variable>
+            </inputVariables><inOutVariables/><outputVariables><variable formalParameter="OUT"><connectionPointOut/></variable></outputVariables></block>
+            <block localId="115" typeName="TON"><position x="0" y="0"/><inputVariables>
+              <variable formalParameter="IN"><connectionPointIn><connection refLocalId="110"/></connectionPointIn></variable>
+            </inputVariables><inOutVariables/><outputVariables><variable formalParameter="Q"><connectionPointOut/></variable></outputVariables></block>
+          </SFC>"#;
+    let wired = sfc
+        .replace(cond4, "<condition><connectionPointIn><connection refLocalId=\"102\"/></connectionPointIn></condition>")
+        .replace(cond6, "<condition><connectionPointIn><connection refLocalId=\"114\" formalParameter=\"OUT\"/></connectionPointIn></condition>")
+        .replacen("</SFC>", networks, 1);
+    let expected = compile(&twin).unwrap();
+    assert_eq!(compile(&wired).unwrap(), expected);
+    assert!(
+        expected.iter().any(|l| l.contains("$IN[1]")),
+        "{expected:?}"
+    );
+    // A timer: an error at the block, naming it.
+    let timer = wired.replace(
+        "<connection refLocalId=\"114\" formalParameter=\"OUT\"/>",
+        "<connection refLocalId=\"115\" formalParameter=\"Q\"/>",
+    );
+    let err = compile(&timer).unwrap_err();
+    assert!(
+        err.contains("E316") && err.contains("block TON localId 115"),
+        "{err}"
+    );
+}

@@ -95,6 +95,8 @@ pub fn read_sfc_stream_with<R: BufRead + Send>(
         wanted: pou.map(|p| p.trim().to_owned()).filter(|p| !p.is_empty()),
         pous: Vec::new(),
         named: HashMap::new(),
+        wire_nodes: Vec::new(),
+        pending_wired: Vec::new(),
         len_hint: usize::try_from(len_hint).unwrap_or(usize::MAX),
         file,
         names: Interner::default(),
@@ -179,6 +181,39 @@ struct Stream {
     /// The named transitions of the POU being read, by key (SPEC.md 3.1): read before its
     /// body (the schema puts `transitions` first).
     named: HashMap<String, Named>,
+    /// The FBD/LD elements of the SFC body being read, and its transitions whose conditions
+    /// are wired from them (made expressions at the body's end).
+    wire_nodes: Vec<WireNode>,
+    pending_wired: Vec<PendingWired>,
+}
+
+/// An FBD/LD element a wired condition may be drawn from (SPEC.md 3.1).
+#[derive(Debug)]
+struct WireNode {
+    local_id: u64,
+    /// `inVariable`, `inOutVariable`, `leftPowerRail`, `contact`, `block`, or another.
+    tag: String,
+    span: Span,
+    /// An `inVariable`'s expression or a `contact`'s variable, with its pieces' places.
+    text: Option<(String, PieceMap)>,
+    negated: bool,
+    type_name: Option<String>,
+    /// Direct inputs (a `contact`'s).
+    inputs: Vec<(u64, Range<usize>)>,
+    /// A `block`'s inputs by formal parameter.
+    formal: Vec<Formal>,
+}
+
+/// A `block`'s input: its formal parameter and its connections (refLocalId, place).
+type Formal = (String, Vec<(u64, Range<usize>)>);
+
+/// A transition whose condition is wired: its localId, where its condition's connections
+/// lead, its condition element.
+#[derive(Debug)]
+struct PendingWired {
+    transition: u64,
+    refs: Vec<(u64, Range<usize>)>,
+    at: Span,
 }
 
 /// Where the pieces of a text assembled from the file stand: (offset in the text, offset in the
@@ -226,6 +261,11 @@ pub(crate) enum Tag {
     Pou,
     /// A POU's list of named transitions (SPEC.md 3.1).
     Transitions,
+    /// Parts of the FBD/LD elements a wired condition is drawn from (SPEC.md 3.1): an
+    /// `inVariable`'s `expression`, a `contact`'s `variable`, a `block`'s `inputVariables`.
+    Expression,
+    WireVariable,
+    InputVariables,
     /// A POU's actions, whose bodies may be SFC charts (`POU.ACTION`, SPEC.md 3).
     Actions,
     Action,
@@ -267,6 +307,9 @@ impl Tag {
             "pous" => Tag::Pous,
             "pou" => Tag::Pou,
             "transitions" => Tag::Transitions,
+            "expression" => Tag::Expression,
+            "variable" => Tag::WireVariable,
+            "inputVariables" => Tag::InputVariables,
             "actions" => Tag::Actions,
             "action" => Tag::Action,
             "body" => Tag::Body,
@@ -400,6 +443,15 @@ struct Building {
     reference: Option<(String, Range<usize>)>,
     /// `condition/connectionPointIn`: a condition wired from FBD/LD elements.
     wired: bool,
+    /// Where a wired condition's connections lead (refLocalId, its place).
+    wired_refs: Vec<(u64, Range<usize>)>,
+    /// An FBD/LD element's text: an `inVariable`'s `expression`, a `contact`'s `variable`.
+    wire_text: Option<(String, PieceMap)>,
+    /// A `contact`'s `negated`, a `block`'s `typeName`.
+    negated: bool,
+    type_name: Option<String>,
+    /// A `block`'s inputs: formal parameter and its connections.
+    formal: Vec<Formal>,
     /// The tags below the element (reused).
     rel: Vec<Tag>,
 }
@@ -432,6 +484,11 @@ impl Building {
             inline_map: Vec::new(),
             reference: None,
             wired: false,
+            wired_refs: Vec::new(),
+            wire_text: None,
+            negated: false,
+            type_name: None,
+            formal: Vec::new(),
             rel: Vec::new(),
         }
     }
@@ -466,6 +523,11 @@ impl Building {
         self.inline_map.clear();
         self.reference = None;
         self.wired = false;
+        self.wired_refs.clear();
+        self.wire_text = None;
+        self.negated = false;
+        self.type_name = None;
+        self.formal.clear();
     }
 
     fn val(&self, v: &Option<Val>) -> Option<&str> {
@@ -716,6 +778,7 @@ impl Stream {
                             // `</SFC>`
                             let (name, program, _) = pou.clone().unwrap_or((None, false, 0));
                             let (span, _, mut els) = sfc.take().expect("checked");
+                            self.resolve_wired(&mut els, diags);
                             els.shrink_to_fit();
                             self.found.push(Pou {
                                 name,
@@ -787,6 +850,15 @@ impl Stream {
                         {
                             map.push((body.len(), at, false));
                             body.push(c);
+                        }
+                        if let Some(c) = ch
+                            && building
+                            && b.wire_text.is_some()
+                            && in_wire_text(&b, &stack)
+                            && let Some((w, map)) = &mut b.wire_text
+                        {
+                            map.push((w.len(), at, false));
+                            w.push(c);
                         }
                         if let Some(c) = ch
                             && building
@@ -1021,16 +1093,27 @@ impl Stream {
                             let mut scratch = std::mem::take(&mut b.scratch);
                             let picked = self.pick(
                                 &t,
-                                ["localId", "name", "initialStep", "targetName"],
+                                [
+                                    "localId",
+                                    "name",
+                                    "initialStep",
+                                    "targetName",
+                                    "negated",
+                                    "typeName",
+                                ],
                                 &mut scratch,
                             );
                             b.scratch = scratch;
                             match picked {
-                                Ok([id, n, initial, target]) => {
+                                Ok([id, n, initial, target, negated, type_name]) => {
                                     b.local_id = id;
                                     b.name = n;
                                     b.initial = initial;
                                     b.target = target;
+                                    b.negated =
+                                        negated.is_some_and(|a| a.get(&b.scratch).trim() == "true");
+                                    b.type_name =
+                                        type_name.map(|a| a.get(&b.scratch).trim().to_owned());
                                 }
                                 Err(d) => return Ok(Err(d)),
                             }
@@ -1187,12 +1270,96 @@ impl Stream {
                     scratch.truncate(mark);
                 }
                 ([T::Condition], T::ConnectionPointIn) if b.condition.is_some() => b.wired = true,
+                // The wired condition's connections (`condition/connectionPointIn/connection`;
+                // older files: `condition/connection`).
+                ([T::Condition, T::ConnectionPointIn], T::Connection)
+                | ([T::Condition], T::Connection)
+                    if b.condition.is_some() && b.inline.is_none() && b.reference.is_none() =>
+                {
+                    b.wired = true;
+                    let mark = scratch.len();
+                    let [r] = self.pick(t, ["refLocalId"], &mut scratch)?;
+                    if let Some(a) = r
+                        && let Ok(id) = a.get(&scratch).trim().parse::<u64>()
+                    {
+                        b.wired_refs.push((id, a.range.clone()));
+                    }
+                    scratch.truncate(mark);
+                }
+                ([], T::Expression) | ([], T::WireVariable)
+                    if b.tag == T::Other && b.wire_text.is_none() =>
+                {
+                    b.wire_text = Some((String::new(), Vec::new()));
+                }
+                ([T::InputVariables], T::WireVariable) => {
+                    let mark = scratch.len();
+                    let [f] = self.pick(t, ["formalParameter"], &mut scratch)?;
+                    let formal = f
+                        .map(|a| a.get(&scratch).trim().to_owned())
+                        .unwrap_or_default();
+                    scratch.truncate(mark);
+                    b.formal.push((formal, Vec::new()));
+                }
+                ([T::InputVariables, T::WireVariable, T::ConnectionPointIn], T::Connection) => {
+                    let mark = scratch.len();
+                    let [r] = self.pick(t, ["refLocalId"], &mut scratch)?;
+                    if let Some(a) = r
+                        && let Ok(id) = a.get(&scratch).trim().parse::<u64>()
+                        && let Some(f) = b.formal.last_mut()
+                    {
+                        f.1.push((id, a.range.clone()));
+                    }
+                    scratch.truncate(mark);
+                }
                 _ => {}
             }
             Ok(())
         })();
         b.scratch = scratch;
         r
+    }
+
+    /// The transitions whose conditions are wired (SPEC.md 3.1) get their expressions, built
+    /// from the FBD/LD elements of the body; the body's parts are then forgotten.
+    fn resolve_wired(&mut self, els: &mut [Element], diags: &mut Diagnostics) {
+        let nodes = std::mem::take(&mut self.wire_nodes);
+        let pending = std::mem::take(&mut self.pending_wired);
+        if pending.is_empty() {
+            return;
+        }
+        let by_id: HashMap<u64, &WireNode> = nodes.iter().map(|n| (n.local_id, n)).collect();
+        let at_of: HashMap<u64, usize> = els
+            .iter()
+            .enumerate()
+            .map(|(i, e)| (e.local_id, i))
+            .collect();
+        for p in pending {
+            let w = Wiring {
+                file: self.file,
+                nodes: &by_id,
+                elements: els,
+                at_of: &at_of,
+            };
+            let mut visiting = Vec::new();
+            match w.any_of(&p.refs, &p.at, &mut visiting) {
+                Ok(expr) => {
+                    if let Some(&i) = at_of.get(&p.transition) {
+                        let cond = if expr.is_true() {
+                            None
+                        } else {
+                            Some(Box::new(Condition {
+                                text: expr.to_st(),
+                                expr,
+                                span: p.at.clone(),
+                                reference: false,
+                            }))
+                        };
+                        els[i].kind = ElementKind::Transition(cond);
+                    }
+                }
+                Err(d) => diags.push((*d).element(format!("localId {}", p.transition))),
+            }
+        }
     }
 
     /// The element is complete: check it and turn it into the model.
@@ -1229,6 +1396,26 @@ impl Stream {
                 ElementKind::JumpStep(target)
             }
             Tag::MacroStep => ElementKind::MacroStep,
+            _ if matches!(
+                b.tag_name(),
+                "inVariable" | "inOutVariable" | "leftPowerRail" | "contact" | "block"
+            ) =>
+            {
+                // A part a wired condition may be drawn from (SPEC.md 3.1): kept aside.
+                if let Some(Ok(id)) = b.val(&b.local_id).map(|v| v.trim().parse::<u64>()) {
+                    self.wire_nodes.push(WireNode {
+                        local_id: id,
+                        tag: b.tag_name().to_owned(),
+                        span: b.span.clone(),
+                        text: b.wire_text.take(),
+                        negated: b.negated,
+                        type_name: b.type_name.take(),
+                        inputs: std::mem::take(&mut b.inputs),
+                        formal: std::mem::take(&mut b.formal),
+                    });
+                }
+                return None;
+            }
             _ => {
                 // Reported once per kind and chart (see `report_ignored`).
                 let tag = b.tag_name();
@@ -1287,7 +1474,7 @@ impl Stream {
 
     /// A transition's condition: parsed, syntax errors located in the file. `None` when the
     /// transition always fires (no condition, or `TRUE`).
-    fn condition(&self, b: &Building, diags: &mut Diagnostics) -> Option<Box<Condition>> {
+    fn condition(&mut self, b: &Building, diags: &mut Diagnostics) -> Option<Box<Condition>> {
         let c = b.condition.as_ref()?;
         // Most transitions always fire: `TRUE` alone, between the spaces the condition's lexer
         // skips, is what the parser reads as the literal (no tokens, vector or string made).
@@ -1300,6 +1487,17 @@ impl Stream {
         }
         let label = || b.id_label();
         let file = self.file;
+        if b.wired && !b.wired_refs.is_empty() && (b.inline.is_some() || b.reference.is_some()) {
+            diags.push(
+                Diagnostic::error(
+                    Code::BadCondition,
+                    "the condition is both written and wired: keep one",
+                )
+                .at(c.clone())
+                .element(label()),
+            );
+            return None;
+        }
         let (text, parsed, reference) = if let Some(inline) = &b.inline {
             let map = |o: usize| map_offset(&b.inline_map, o);
             (inline.trim(), crate::cond::parse(inline, &map), false)
@@ -1382,14 +1580,25 @@ impl Stream {
             };
             (name.trim(), parsed, true)
         } else if b.wired {
-            diags.push(
-                Diagnostic::error(
-                    Code::Unsupported,
-                    "a condition wired from FBD/LD elements (condition/connectionPointIn) is not supported: write it as inline ST",
-                )
-                .at(c.clone())
-                .element(label()),
-            );
+            // Made an expression at the body's end, when all its parts are read.
+            match b.val(&b.local_id).map(|v| v.trim().parse::<u64>()) {
+                Some(Ok(id)) if !b.wired_refs.is_empty() => {
+                    self.pending_wired.push(PendingWired {
+                        transition: id,
+                        refs: b.wired_refs.clone(),
+                        at: c.clone(),
+                    });
+                }
+                Some(Ok(_)) => diags.push(
+                    Diagnostic::error(
+                        Code::BadCondition,
+                        "the wired condition has no connection: connect it to the element whose output is the condition",
+                    )
+                    .at(c.clone())
+                    .element(label()),
+                ),
+                _ => {}
+            }
             return None;
         } else {
             diags.push(
@@ -1723,7 +1932,19 @@ fn inline_text<'s>(
         b.inline_map
             .push((inline.len(), raw.start, t.len() == raw.len()));
         inline.push_str(&t);
+    } else if b.wire_text.is_some() && in_wire_text(b, stack) {
+        let t = text();
+        if let Some((w, map)) = &mut b.wire_text {
+            map.push((w.len(), raw.start, t.len() == raw.len()));
+            w.push_str(&t);
+        }
     }
+}
+
+/// Whether the stack is inside an FBD/LD element's `expression` or `variable`.
+fn in_wire_text(b: &Building, stack: &Open) -> bool {
+    let rel = &stack.tags[b.depth.min(stack.len())..];
+    matches!(rel.first(), Some((Tag::Expression | Tag::WireVariable, _)))
 }
 
 /// The expression of a named transition's ST body: the text after `name :=` when it assigns
@@ -1783,6 +2004,229 @@ fn map_offset(map: &[(usize, usize, bool)], o: usize) -> usize {
         Some((c, f, true)) => f + (o - c),
         Some((_, f, false)) => f,
         None => map.first().map_or(0, |m| m.1),
+    }
+}
+
+/// Builds a wired condition's expression (SPEC.md 3.1) from the FBD/LD elements of the body.
+struct Wiring<'a> {
+    file: FileId,
+    nodes: &'a HashMap<u64, &'a WireNode>,
+    elements: &'a [Element],
+    at_of: &'a HashMap<u64, usize>,
+}
+
+/// A diagnostic of a wired condition, located at `at`.
+fn wiring_error(at: &Span, message: String) -> Box<Diagnostic> {
+    Box::new(Diagnostic::error(Code::BadCondition, message).at(at.clone()))
+}
+
+impl Wiring<'_> {
+    fn bin(
+        op: crate::cond::BinOp,
+        a: crate::cond::Expr,
+        b: crate::cond::Expr,
+        at: &Span,
+    ) -> crate::cond::Expr {
+        crate::cond::Expr {
+            kind: crate::cond::ExprKind::Bin(op, Box::new(a), Box::new(b)),
+            span: at.range.clone(),
+        }
+    }
+
+    /// Several connections into one input are an OR (as LD draws parallel paths).
+    fn any_of(
+        &self,
+        refs: &[(u64, Range<usize>)],
+        at: &Span,
+        visiting: &mut Vec<u64>,
+    ) -> Result<crate::cond::Expr, Box<Diagnostic>> {
+        let mut out: Option<crate::cond::Expr> = None;
+        for (r, place) in refs {
+            let e = self.node(*r, &Span::new(self.file, place.clone()), visiting)?;
+            out = Some(match out {
+                None => e,
+                Some(prev) => Self::bin(crate::cond::BinOp::Or, prev, e, at),
+            });
+        }
+        out.ok_or_else(|| {
+            wiring_error(
+                at,
+                "an input of the wired condition is not connected".to_owned(),
+            )
+        })
+    }
+
+    /// The value of the element `id` (reached from `from`).
+    fn node(
+        &self,
+        id: u64,
+        from: &Span,
+        visiting: &mut Vec<u64>,
+    ) -> Result<crate::cond::Expr, Box<Diagnostic>> {
+        use crate::cond::{BinOp, Expr, ExprKind};
+        let Some(n) = self.nodes.get(&id) else {
+            return Err(match self.at_of.get(&id) {
+                Some(&i) => wiring_error(
+                    from,
+                    format!(
+                        "a wired condition is drawn from a {} (localId {id}): only inVariable, inOutVariable, leftPowerRail, contact and the blocks AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, MOVE, SEL give one",
+                        self.elements[i].kind.tag()
+                    ),
+                ),
+                None => wiring_error(
+                    from,
+                    format!(
+                        "the wired condition's connection names localId {id}, which is no element of the body"
+                    ),
+                ),
+            });
+        };
+        if visiting.contains(&id) {
+            return Err(wiring_error(
+                &n.span,
+                format!(
+                    "the wiring of the condition loops back to {} localId {id}",
+                    n.tag
+                ),
+            ));
+        }
+        visiting.push(id);
+        let at = &n.span;
+        let text = |what: &str| -> Result<Expr, Box<Diagnostic>> {
+            let Some((t, map)) = &n.text else {
+                return Err(wiring_error(
+                    at,
+                    format!("{} localId {id} has no {what}", n.tag),
+                ));
+            };
+            let file_map = |o: usize| map_offset(map, o);
+            crate::cond::parse(t, &file_map).map_err(|e| {
+                let s = map_offset(map, e.at.start);
+                let end = map_offset(map, e.at.end.saturating_sub(1)) + 1;
+                wiring_error(
+                    &Span::new(self.file, s..end.max(s + 1)),
+                    format!("{} localId {id}: `{}`: {}", n.tag, t.trim(), e.message),
+                )
+            })
+        };
+        let result = match n.tag.as_str() {
+            "leftPowerRail" => Ok(Expr {
+                kind: ExprKind::Bool(true),
+                span: at.range.clone(),
+            }),
+            "inVariable" | "inOutVariable" => text("expression"),
+            "contact" => {
+                let var = text("variable")?;
+                let var = if n.negated {
+                    Expr {
+                        kind: ExprKind::Not(Box::new(var)),
+                        span: at.range.clone(),
+                    }
+                } else {
+                    var
+                };
+                let before = self.any_of(&n.inputs, at, visiting)?;
+                // Contacts in series are an AND; after the power rail, the contact alone.
+                Ok(if before.is_true() {
+                    var
+                } else {
+                    Self::bin(BinOp::And, before, var, at)
+                })
+            }
+            "block" => {
+                let ty = n.type_name.clone().unwrap_or_default().to_ascii_uppercase();
+                let mut ins: Vec<(&str, Expr)> = Vec::new();
+                for (formal, refs) in &n.formal {
+                    // EN is the enable input, not an operand.
+                    if formal.eq_ignore_ascii_case("EN") {
+                        continue;
+                    }
+                    ins.push((formal.as_str(), self.any_of(refs, at, visiting)?));
+                }
+                let named =
+                    |ins: &mut Vec<(&str, Expr)>, f: &str| -> Result<Expr, Box<Diagnostic>> {
+                        match ins.iter().position(|(n, _)| n.eq_ignore_ascii_case(f)) {
+                            Some(k) => Ok(ins.remove(k).1),
+                            None => Err(wiring_error(
+                                at,
+                                format!("block {ty} localId {id} has no input {f}"),
+                            )),
+                        }
+                    };
+                match ty.as_str() {
+                    "AND" | "OR" | "XOR" => {
+                        let op = match ty.as_str() {
+                            "AND" => BinOp::And,
+                            "OR" => BinOp::Or,
+                            _ => BinOp::Xor,
+                        };
+                        let mut it = ins.into_iter().map(|(_, e)| e);
+                        let first = it.next().ok_or_else(|| {
+                            wiring_error(at, format!("block {ty} localId {id} has no inputs"))
+                        })?;
+                        Ok(it.fold(first, |a, b| Self::bin(op, a, b, at)))
+                    }
+                    "NOT" | "MOVE" => {
+                        let a = named(&mut ins, "IN")?;
+                        Ok(if ty == "NOT" {
+                            Expr {
+                                kind: ExprKind::Not(Box::new(a)),
+                                span: at.range.clone(),
+                            }
+                        } else {
+                            a
+                        })
+                    }
+                    "EQ" | "NE" | "GT" | "GE" | "LT" | "LE" => {
+                        let op = match ty.as_str() {
+                            "EQ" => BinOp::Eq,
+                            "NE" => BinOp::Ne,
+                            "GT" => BinOp::Gt,
+                            "GE" => BinOp::Ge,
+                            "LT" => BinOp::Lt,
+                            _ => BinOp::Le,
+                        };
+                        let a = named(&mut ins, "IN1")?;
+                        let b2 = named(&mut ins, "IN2")?;
+                        Ok(Self::bin(op, a, b2, at))
+                    }
+                    "SEL" => {
+                        let g = named(&mut ins, "G")?;
+                        let in0 = named(&mut ins, "IN0")?;
+                        let in1 = named(&mut ins, "IN1")?;
+                        let not_g = Expr {
+                            kind: ExprKind::Not(Box::new(g.clone())),
+                            span: at.range.clone(),
+                        };
+                        Ok(Self::bin(
+                            BinOp::Or,
+                            Self::bin(BinOp::And, g, in1, at),
+                            Self::bin(BinOp::And, not_g, in0, at),
+                            at,
+                        ))
+                    }
+                    other => Err(wiring_error(
+                        at,
+                        format!(
+                            "a wired condition uses block {} localId {id}: only AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, MOVE and SEL are supported (timers, edges, counters, arithmetic and user blocks are not)",
+                            if other.is_empty() {
+                                "without typeName"
+                            } else {
+                                other
+                            }
+                        ),
+                    )),
+                }
+            }
+            other => Err(wiring_error(
+                at,
+                format!(
+                    "a wired condition is drawn from {other} localId {id}, which gives no condition"
+                ),
+            )),
+        };
+        visiting.pop();
+        result
     }
 }
 
@@ -1873,11 +2317,12 @@ mod tests {
         assert_eq!(&text[c.expr.span.clone()], "Cond1");
         let (_, d) = read(&doc("<reference name=\"a b\"/>"));
         assert!(d[0].message.contains("is not one name"), "{}", d[0].message);
+        // A wired condition whose connection leads nowhere in the body.
         let (_, d) = read(&doc(
             "<connectionPointIn><connection refLocalId=\"9\"/></connectionPointIn>",
         ));
-        assert_eq!(d[0].code, Code::Unsupported);
-        assert!(d[0].message.contains("wired"), "{}", d[0].message);
+        assert_eq!(d[0].code, Code::BadCondition);
+        assert!(d[0].message.contains("localId 9"), "{}", d[0].message);
     }
 
     /// The reader's shortcut for `TRUE` gives what the parser gives: no condition exactly where
