@@ -1600,8 +1600,8 @@ fn a_connection_back_to_a_step_is_a_loop_like_a_jump() {
 }
 
 /// Issue 26, item 3: a condition that references a named transition of the POU (its
-/// `transitions` list) takes that transition's ST body, an expression or an assignment to its
-/// name; a body in another language is an error at the condition, naming it.
+/// `transitions` list) takes that transition's body: ST (an expression, or an assignment to its
+/// name), or LD/FBD (what its coil or output variable of the transition's name is wired from).
 #[test]
 fn a_named_transition_gives_its_st_body() {
     let t = base_with_case("flow", "flow-guarded-sequence");
@@ -1609,6 +1609,13 @@ fn a_named_transition_gives_its_st_body() {
     let transitions = r#"<transitions>
           <transition name="PartThere"><body><ST><xhtml:p>PartThere := Part_OK AND NOT Magazine_Empty; (* both &amp; *)</xhtml:p></ST></body></transition>
           <transition name="Ladder"><body><LD><leftPowerRail localId="90"/></LD></body></transition>
+          <transition name="Rung"><body><LD>
+            <leftPowerRail localId="91"><connectionPointOut formalParameter=""/></leftPowerRail>
+            <contact localId="92"><connectionPointIn><connection refLocalId="91"/></connectionPointIn><variable>Part_OK</variable></contact>
+            <contact localId="93" negated="true"><connectionPointIn><connection refLocalId="91"/></connectionPointIn><variable>Magazine_Empty</variable></contact>
+            <coil localId="94"><connectionPointIn><connection refLocalId="92"/><connection refLocalId="93"/></connectionPointIn><variable>Rung</variable></coil>
+            <rightPowerRail localId="95"><connectionPointIn><connection refLocalId="94"/></connectionPointIn></rightPowerRail>
+          </LD></body></transition>
         </transitions>
         <body>"#;
     let with_named = sfc.replacen("<body>", transitions, 1).replacen(
@@ -1625,20 +1632,29 @@ fn a_named_transition_gives_its_st_body() {
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     let src = std::fs::read_to_string(t.path().join("Named.src")).unwrap();
     assert!(src.contains("WAIT FOR $IN[1] AND (NOT $IN[2])"), "{src}");
-    // A named transition in LD: not yet.
-    std::fs::write(
-        t.path().join("sfc.xml"),
+    // A named transition in LD: its coil of the transition's name is wired from two contacts
+    // in parallel (an OR).
+    let named = |which: &str| {
         with_named.replace(
             "<reference name=\"partthere\"/>",
-            "<reference name=\"Ladder\"/>",
-        ),
-    )
-    .unwrap();
+            &format!("<reference name=\"{which}\"/>"),
+        )
+    };
+    std::fs::write(t.path().join("sfc.xml"), named("Rung")).unwrap();
+    let o = run(&["--lf", "Blackboard.aml", "Named"], t.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let src = std::fs::read_to_string(t.path().join("Named.src")).unwrap();
+    assert!(src.contains("WAIT FOR $IN[1] OR (NOT $IN[2])"), "{src}");
+    // One without a coil of its name: an error naming it.
+    std::fs::write(t.path().join("sfc.xml"), named("Ladder")).unwrap();
     let o = run(&["--lf", "Blackboard.aml", "Named"], t.path());
     assert_eq!(o.status.code(), Some(1));
     let err = stderr(&o);
     assert!(
-        err.contains("E313") && err.contains("the named transition `Ladder` has a LD body"),
+        err.contains("E316")
+            && err.contains(
+                "the named transition `Ladder` has no coil or output variable named `Ladder`"
+            ),
         "{err}"
     );
 }

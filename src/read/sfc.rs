@@ -225,8 +225,11 @@ type PieceMap = Vec<(usize, usize, bool)>;
 enum Named {
     /// ST: its text, and where its pieces stand in the file (as an inline condition's).
     St { text: String, map: PieceMap },
-    /// A body in another language (`LD`, `FBD`, `IL`, `SFC`), at the transition.
+    /// A body in another language (`IL`, `SFC`), at the transition.
     Other { language: String, at: Span },
+    /// An LD or FBD body: the expression of what its coil or output variable of the
+    /// transition's name is wired from, or why there is none.
+    Wired(Result<crate::cond::Expr, Box<Diagnostic>>),
 }
 
 /// A POU's reading state, kept while one of its actions is read.
@@ -763,8 +766,12 @@ impl Stream {
                         } else if named.as_ref().is_some_and(|n| n.depth == depth) {
                             // `</transition>` of a named transition.
                             let n = named.take().expect("checked");
+                            let nodes = std::mem::take(&mut self.wire_nodes);
                             let body = match (n.st, n.other) {
                                 (Some((_, text, map)), _) => Named::St { text, map },
+                                (None, Some(language)) if language == "LD" || language == "FBD" => {
+                                    Named::Wired(self.named_network(&nodes, &n.name, &n.at))
+                                }
                                 (None, Some(language)) => Named::Other { language, at: n.at },
                                 (None, None) => Named::St {
                                     text: String::new(),
@@ -939,6 +946,20 @@ impl Stream {
                         } else {
                             n.other = Some(name.to_owned());
                         }
+                    } else if depth == n.depth + 3
+                        && matches!(n.other.as_deref(), Some("LD" | "FBD"))
+                    {
+                        // An element of an LD/FBD body: read as a wired condition's parts.
+                        if let Err(d) = self.begin(&mut b, &t, tag, name, tag_span.clone(), depth) {
+                            return Ok(Err(d));
+                        }
+                        if empty {
+                            self.finish(&mut b, diags);
+                        } else {
+                            building = true;
+                            stack.push(tag, name);
+                        }
+                        continue;
                     }
                 } else if tag == Tag::Transition
                     && !empty
@@ -1089,33 +1110,8 @@ impl Stream {
                         if let Some((_, d, els)) = &mut sfc
                             && depth == *d + 1
                         {
-                            b.reset(tag, name, tag_span, depth);
-                            let mut scratch = std::mem::take(&mut b.scratch);
-                            let picked = self.pick(
-                                &t,
-                                [
-                                    "localId",
-                                    "name",
-                                    "initialStep",
-                                    "targetName",
-                                    "negated",
-                                    "typeName",
-                                ],
-                                &mut scratch,
-                            );
-                            b.scratch = scratch;
-                            match picked {
-                                Ok([id, n, initial, target, negated, type_name]) => {
-                                    b.local_id = id;
-                                    b.name = n;
-                                    b.initial = initial;
-                                    b.target = target;
-                                    b.negated =
-                                        negated.is_some_and(|a| a.get(&b.scratch).trim() == "true");
-                                    b.type_name =
-                                        type_name.map(|a| a.get(&b.scratch).trim().to_owned());
-                                }
-                                Err(d) => return Ok(Err(d)),
+                            if let Err(d) = self.begin(&mut b, &t, tag, name, tag_span, depth) {
+                                return Ok(Err(d));
                             }
                             if empty {
                                 if let Some(el) = self.finish(&mut b, diags) {
@@ -1362,6 +1358,74 @@ impl Stream {
         }
     }
 
+    /// A named transition's LD/FBD body (SPEC.md 3.1): the expression its coil or output
+    /// variable of the transition's name is wired from.
+    fn named_network(
+        &self,
+        nodes: &[WireNode],
+        name: &str,
+        at: &Span,
+    ) -> Result<crate::cond::Expr, Box<Diagnostic>> {
+        let key = crate::names::key(name);
+        let out = nodes.iter().find(|n| {
+            matches!(n.tag.as_str(), "coil" | "outVariable")
+                && n.text
+                    .as_ref()
+                    .is_some_and(|(t, _)| crate::names::key(t.trim()) == key)
+        });
+        let Some(out) = out else {
+            return Err(wiring_error(
+                at,
+                format!(
+                    "the named transition `{name}` has no coil or output variable named `{name}`"
+                ),
+            ));
+        };
+        let by_id: HashMap<u64, &WireNode> = nodes.iter().map(|n| (n.local_id, n)).collect();
+        let w = Wiring {
+            file: self.file,
+            nodes: &by_id,
+            elements: &[],
+            at_of: &HashMap::new(),
+        };
+        w.any_of(&out.inputs, &out.span, &mut vec![out.local_id])
+    }
+
+    /// Starts building the element `tag` at `depth`: its attributes.
+    fn begin(
+        &mut self,
+        b: &mut Building,
+        t: &Tagged,
+        tag: Tag,
+        name: &str,
+        tag_span: Span,
+        depth: usize,
+    ) -> Result<(), Box<Diagnostic>> {
+        b.reset(tag, name, tag_span, depth);
+        let mut scratch = std::mem::take(&mut b.scratch);
+        let picked = self.pick(
+            t,
+            [
+                "localId",
+                "name",
+                "initialStep",
+                "targetName",
+                "negated",
+                "typeName",
+            ],
+            &mut scratch,
+        );
+        b.scratch = scratch;
+        let [id, n, initial, target, negated, type_name] = picked?;
+        b.local_id = id;
+        b.name = n;
+        b.initial = initial;
+        b.target = target;
+        b.negated = negated.is_some_and(|a| a.get(&b.scratch).trim() == "true");
+        b.type_name = type_name.map(|a| a.get(&b.scratch).trim().to_owned());
+        Ok(())
+    }
+
     /// The element is complete: check it and turn it into the model.
     fn finish(&mut self, b: &mut Building, diags: &mut Diagnostics) -> Option<Element> {
         let file = self.file;
@@ -1398,7 +1462,14 @@ impl Stream {
             Tag::MacroStep => ElementKind::MacroStep,
             _ if matches!(
                 b.tag_name(),
-                "inVariable" | "inOutVariable" | "leftPowerRail" | "contact" | "block"
+                "inVariable"
+                    | "inOutVariable"
+                    | "outVariable"
+                    | "leftPowerRail"
+                    | "rightPowerRail"
+                    | "contact"
+                    | "coil"
+                    | "block"
             ) =>
             {
                 // A part a wired condition may be drawn from (SPEC.md 3.1): kept aside.
@@ -1506,12 +1577,28 @@ impl Stream {
         {
             // A named transition of the POU (SPEC.md 3.1): its body is the condition.
             return match body {
+                Named::Wired(Ok(expr)) if expr.is_true() => None,
+                Named::Wired(Ok(expr)) => Some(Box::new(Condition {
+                    text: expr.to_st(),
+                    expr: expr.clone(),
+                    span: c.clone(),
+                    reference: true,
+                })),
+                Named::Wired(Err(d)) => {
+                    diags.push(
+                        (**d)
+                            .clone()
+                            .element(label())
+                            .related(c.clone(), "the condition naming the transition"),
+                    );
+                    None
+                }
                 Named::Other { language, at } => {
                     diags.push(
                         Diagnostic::error(
                             Code::Unsupported,
                             format!(
-                                "the named transition `{}` has a {language} body: only an ST body (an expression, or `{} := expression`) is supported yet",
+                                "the named transition `{}` has a {language} body: ST (an expression, or `{} := expression`), LD and FBD are supported",
                                 name.trim(),
                                 name.trim()
                             ),
