@@ -197,6 +197,8 @@ struct WireNode {
     /// An `inVariable`'s expression or a `contact`'s variable, with its pieces' places.
     text: Option<(String, PieceMap)>,
     negated: bool,
+    /// A contact's `edge` (`rising`, `falling`).
+    edge: Option<String>,
     type_name: Option<String>,
     /// Direct inputs (a `contact`'s).
     inputs: Vec<(u64, Range<usize>)>,
@@ -450,8 +452,9 @@ struct Building {
     wired_refs: Vec<(u64, Range<usize>)>,
     /// An FBD/LD element's text: an `inVariable`'s `expression`, a `contact`'s `variable`.
     wire_text: Option<(String, PieceMap)>,
-    /// A `contact`'s `negated`, a `block`'s `typeName`.
+    /// A `contact`'s `negated` and `edge` (`rising`/`falling`), a `block`'s `typeName`.
     negated: bool,
+    edge: Option<String>,
     type_name: Option<String>,
     /// A `block`'s inputs: formal parameter and its connections.
     formal: Vec<Formal>,
@@ -490,6 +493,7 @@ impl Building {
             wired_refs: Vec::new(),
             wire_text: None,
             negated: false,
+            edge: None,
             type_name: None,
             formal: Vec::new(),
             rel: Vec::new(),
@@ -529,6 +533,7 @@ impl Building {
         self.wired_refs.clear();
         self.wire_text = None;
         self.negated = false;
+        self.edge = None;
         self.type_name = None;
         self.formal.clear();
     }
@@ -1412,17 +1417,21 @@ impl Stream {
                 "targetName",
                 "negated",
                 "typeName",
+                "edge",
             ],
             &mut scratch,
         );
         b.scratch = scratch;
-        let [id, n, initial, target, negated, type_name] = picked?;
+        let [id, n, initial, target, negated, type_name, edge] = picked?;
         b.local_id = id;
         b.name = n;
         b.initial = initial;
         b.target = target;
         b.negated = negated.is_some_and(|a| a.get(&b.scratch).trim() == "true");
         b.type_name = type_name.map(|a| a.get(&b.scratch).trim().to_owned());
+        b.edge = edge
+            .map(|a| a.get(&b.scratch).trim().to_owned())
+            .filter(|e| e != "none" && !e.is_empty());
         Ok(())
     }
 
@@ -1480,6 +1489,7 @@ impl Stream {
                         span: b.span.clone(),
                         text: b.wire_text.take(),
                         negated: b.negated,
+                        edge: b.edge.take(),
                         type_name: b.type_name.take(),
                         inputs: std::mem::take(&mut b.inputs),
                         formal: std::mem::take(&mut b.formal),
@@ -2202,6 +2212,13 @@ impl Wiring<'_> {
                 span: at.range.clone(),
             }),
             "inVariable" | "inOutVariable" => text("expression"),
+            "contact" if n.edge.is_some() => Err(wiring_error(
+                at,
+                format!(
+                    "contact localId {id} detects a {} edge: an edge is not a condition a robot program can wait for (compare the signal's level instead)",
+                    n.edge.as_deref().unwrap_or_default()
+                ),
+            )),
             "contact" => {
                 let var = text("variable")?;
                 let var = if n.negated {
