@@ -1785,4 +1785,15 @@ fn wired_conditions_are_their_inline_twins() {
         err.contains("E316") && err.contains("block TON localId 115"),
         "{err}"
     );
+    // A rising-edge contact: an error at it.
+    let edge = wired.replace(
+        "<contact localId=\"101\">",
+        "<contact localId=\"101\" edge=\"rising\">",
+    );
+    assert_ne!(edge, wired);
+    let err = compile(&edge).unwrap_err();
+    assert!(
+        err.contains("contact localId 101 detects a rising edge"),
+        "{err}"
+    );
 }
