@@ -275,7 +275,7 @@ fn typed(text: &str, word: &str, start: usize, i: &mut usize) -> Result<Tok, Syn
             "1" | "TRUE" => Ok(Tok::True),
             "0" | "FALSE" => Ok(Tok::False),
             _ => {
-                let end = (*i).max(from + 1).min(text.len());
+                let end = clamp(text, (*i).max(from + 1));
                 Err(err(
                     end,
                     format!(
@@ -965,6 +965,24 @@ mod tests {
     #[test]
     fn literal_like_texts_never_panic() {
         let alphabet: Vec<char> = "01279#_.-+ABFTxü€ (INT#BOOL#)".chars().collect();
+        // Found by the fuzzer: a typed literal followed by a letter of two bytes.
+        for t in [
+            "BOOL#ö",
+            "BOOL#öx",
+            "INT#ö",
+            "16#ö",
+            "REAL#ü",
+            "1_ö",
+            "2#ö",
+            "BOOL#\u{f6}rUng\u{0}\u{0}\u{0}\u{0}\u{0}\u{0}\u{0}\u{4}\u{4}\u{4}\u{4}\u{4}\u{4}L#F\u{6}\u{4}\u{4}\u{4}6\u{0}\u{0}\u{0}\u{0}\u{0}\u{4}\u{4}1S T",
+        ] {
+            if let Err(e) = p(t) {
+                assert!(
+                    t.is_char_boundary(e.at.start) && t.is_char_boundary(e.at.end),
+                    "{t:?}"
+                );
+            }
+        }
         let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
         for _ in 0..50_000 {
             let mut t = String::new();
