@@ -1,7 +1,7 @@
 //! Transition conditions (SPEC.md 3.1): the ST subset `TRUE`, `FALSE`, integer and decimal
 //! literals (IEC 61131-3's: `1`/`0` as booleans where a boolean belongs, `BOOL#1`, typed
 //! `INT#5`/`REAL#1.5`, based `2#`/`8#`/`16#`, `_` between digits; kept in decimal), names (IEC
-//! identifiers, and any Unicode letter), `NOT`, `AND` (`&`), `OR`, `XOR`, `=`, `<>`, `<`, `>`,
+//! identifiers, any Unicode letter, and qualified names `A.B`), `NOT`, `AND` (`&`), `OR`, `XOR`, `=`, `<>`, `<`, `>`,
 //! `<=`, `>=`, unary `-` and parentheses, with ST's precedence (loosest first: `OR`, `XOR`, `AND`,
 //! `=`/`<>`, `<`/`>`/`<=`/`>=`, unary `-`/`NOT`). `(* comments *)` are skipped.
 //!
@@ -400,11 +400,16 @@ impl Lexer {
                     || c == b'_'
                     || (c >= 0x80 && starts_letter(&text[i..])) =>
                 {
-                    // IEC identifiers, and any Unicode letter (a signal named `Störung`).
+                    // IEC identifiers, and any Unicode letter (a signal named `Störung`); a
+                    // qualified name (`GVL.PartOK`, `Gripper.Closed`, as CODESYS writes them) is
+                    // one name, matched to a signal of that name.
                     while i < b.len() {
                         let ch = text[i..].chars().next().unwrap_or(' ');
+                        let next = text[i + ch.len_utf8()..].chars().next();
                         if ch.is_alphanumeric() || ch == '_' {
                             i += ch.len_utf8();
+                        } else if ch == '.' && next.is_some_and(|c| c.is_alphabetic() || c == '_') {
+                            i += 1;
                         } else {
                             break;
                         }
@@ -434,7 +439,7 @@ impl Lexer {
                     let end = i + ch.len_utf8();
                     let hint = match ch {
                         '.' => {
-                            ": structured names and direct addresses (`%IX0.1`) are not supported; declare a signal and use its name"
+                            ": a name's part after `.` starts with a letter (`GVL.PartOK`); direct addresses (`%IX0.1`) are not supported: declare a signal and use its name"
                         }
                         '%' => {
                             ": direct addresses are not supported; declare a signal (an ExternalInterface of the resource) and use its name"
@@ -1032,7 +1037,12 @@ mod tests {
         assert_eq!(e("a b").at, 2..3);
         assert!(e("a b").message.contains("operator is missing"));
         assert_eq!(e("(a OR b").at, 0..1);
-        assert_eq!(e("Robot.Ready").at, 5..6);
+        assert_eq!(
+            st("Robot.Ready AND NOT GVL.Door_Open"),
+            "Robot.Ready AND (NOT GVL.Door_Open)"
+        );
+        assert_eq!(e("Robot.5").at, 5..6);
+        assert_eq!(e("Robot.").at, 5..6);
         assert!(e("%IX0.1").message.contains("direct addresses"));
         assert_eq!(e("a := 1").at, 2..3);
         assert_eq!(e("  ").at, 0..2);

@@ -1797,3 +1797,43 @@ fn wired_conditions_are_their_inline_twins() {
         "{err}"
     );
 }
+
+/// Issue 26: a qualified name in a condition (`GVL.Part_OK`, as CODESYS writes conditions) is
+/// one name, matched to the signal of that name; `--sfc` takes it unresolved.
+#[test]
+fn qualified_names_are_signals_of_that_name() {
+    let t = base_with_case("flow", "flow-guarded-sequence");
+    let bb = t.path().join("Blackboard.aml");
+    let text = std::fs::read_to_string(&bb).unwrap();
+    let part_ok = "<ExternalInterface Name=\"Part_OK\"";
+    std::fs::write(
+        &bb,
+        text.replacen(
+            part_ok,
+            "<ExternalInterface Name=\"GVL.Part_OK\" ID=\"{q-1}\" RefBaseClassPath=\"AutomationMLInterfaceClassLib/AutomationMLBaseInterface/Communication/SignalInterface\"><Attribute Name=\"Number\" AttributeDataType=\"xs:integer\"><Value>7</Value></Attribute></ExternalInterface>\n        <ExternalInterface Name=\"Part_OK\"",
+            1,
+        ),
+    )
+    .unwrap();
+    let sfc = t.path().join("sfc.xml");
+    let chart = std::fs::read_to_string(&sfc).unwrap().replace(
+        "Part_OK (* the part is there;",
+        "gvl.part_ok AND NOT Magazine_Empty (* the part is there;",
+    );
+    std::fs::write(&sfc, &chart).unwrap();
+    let o = run(&["--sfc", "sfc.xml"], t.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let o = run(&["--lf", "Blackboard.aml", "Qual"], t.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let src = std::fs::read_to_string(t.path().join("Qual.src")).unwrap();
+    assert!(src.contains("WAIT FOR $IN[7] AND (NOT $IN[2])"), "{src}");
+    // An unknown qualified name says where to declare it.
+    std::fs::write(&sfc, chart.replace("gvl.part_ok", "Timer.Q")).unwrap();
+    let o = run(&["--lf", "Blackboard.aml", "Qual"], t.path());
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("`Timer.Q`, which is not a signal"),
+        "{}",
+        stderr(&o)
+    );
+}
