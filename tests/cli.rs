@@ -1837,3 +1837,45 @@ fn qualified_names_are_signals_of_that_name() {
         stderr(&o)
     );
 }
+
+/// A hostile wired condition (SPEC.md 3.1) is a clear error, not a stack overflow or a run
+/// without end: a chain of 5,000 contacts in series, and 30 AND blocks each wired twice from
+/// the one before (2^30 paths through the net).
+#[test]
+fn hostile_wired_conditions_are_errors() {
+    let t = base_with_case("flow", "flow-guarded-sequence");
+    let sfc = std::fs::read_to_string(t.path().join("sfc.xml")).unwrap();
+    let cond4 = "<condition><inline name=\"\"><ST><xhtml:p>Part_OK (* the part is there;\n                checked by the camera *)</xhtml:p></ST></inline></condition>";
+    assert!(sfc.contains(cond4), "the fixture changed");
+    let check = |net: String, last: u64, want: &str| {
+        let text = sfc
+            .replace(
+                cond4,
+                &format!("<condition><connectionPointIn><connection refLocalId=\"{last}\"/></connectionPointIn></condition>"),
+            )
+            .replacen("</SFC>", &format!("{net}</SFC>"), 1);
+        std::fs::write(t.path().join("sfc.xml"), text).unwrap();
+        let o = run(&["--sfc", "sfc.xml"], t.path());
+        assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+        assert!(stderr(&o).contains(want), "{}", stderr(&o));
+    };
+    let mut chain = String::from("<leftPowerRail localId=\"1000\"/>");
+    for k in 1..=5000u64 {
+        chain.push_str(&format!(
+            "<contact localId=\"{}\"><connectionPointIn><connection refLocalId=\"{}\"/></connectionPointIn><variable>Part_OK</variable></contact>",
+            1000 + k,
+            999 + k
+        ));
+    }
+    check(chain, 6000, "drawn through more than 64 elements in a row");
+    let mut fan =
+        String::from("<inVariable localId=\"2000\"><expression>Part_OK</expression></inVariable>");
+    for k in 1..=30u64 {
+        let prev = 1999 + k;
+        fan.push_str(&format!(
+            "<block localId=\"{}\" typeName=\"AND\"><inputVariables><variable formalParameter=\"IN1\"><connectionPointIn><connection refLocalId=\"{prev}\"/></connectionPointIn></variable><variable formalParameter=\"IN2\"><connectionPointIn><connection refLocalId=\"{prev}\"/></connectionPointIn></variable></inputVariables></block>",
+            2000 + k
+        ));
+    }
+    check(fan, 2030, "drawn from more than 1024 elements");
+}

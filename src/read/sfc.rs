@@ -1340,6 +1340,7 @@ impl Stream {
                 nodes: &by_id,
                 elements: els,
                 at_of: &at_of,
+                built: std::cell::Cell::new(0),
             };
             let mut visiting = Vec::new();
             match w.any_of(&p.refs, &p.at, &mut visiting) {
@@ -1392,6 +1393,7 @@ impl Stream {
             nodes: &by_id,
             elements: &[],
             at_of: &HashMap::new(),
+            built: std::cell::Cell::new(0),
         };
         w.any_of(&out.inputs, &out.span, &mut vec![out.local_id])
     }
@@ -2110,6 +2112,10 @@ struct Wiring<'a> {
     nodes: &'a HashMap<u64, &'a WireNode>,
     elements: &'a [Element],
     at_of: &'a HashMap<u64, usize>,
+    /// Elements made part of the expression so far (an element reached twice counts twice):
+    /// at most [`crate::cond::MAX_TOKENS`], as a written condition, so a long chain or a net
+    /// that fans in again cannot build a tree the recursive passes over it cannot walk.
+    built: std::cell::Cell<usize>,
 }
 
 /// A diagnostic of a wired condition, located at `at`.
@@ -2184,6 +2190,26 @@ impl Wiring<'_> {
                 format!(
                     "the wiring of the condition loops back to {} localId {id}",
                     n.tag
+                ),
+            ));
+        }
+        if visiting.len() >= crate::cond::MAX_DEPTH {
+            return Err(wiring_error(
+                &n.span,
+                format!(
+                    "the wired condition is drawn through more than {} elements in a row (at {} localId {id})",
+                    crate::cond::MAX_DEPTH,
+                    n.tag
+                ),
+            ));
+        }
+        self.built.set(self.built.get() + 1);
+        if self.built.get() > crate::cond::MAX_TOKENS {
+            return Err(wiring_error(
+                &n.span,
+                format!(
+                    "the wired condition is drawn from more than {} elements (counting each as often as it is reached)",
+                    crate::cond::MAX_TOKENS
                 ),
             ));
         }
