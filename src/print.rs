@@ -1250,21 +1250,33 @@ pub fn cell_timeline(sfc: &Sfc, plan: &Plan, view: &CellView) -> (Vec<Vec<LaneIt
                     front = end;
                 }
                 Block::Choice { branches, .. } | Block::Follow { branches, .. } => {
-                    // The longest branch counts: each tried from the same lanes.
-                    let (lanes, free) = (t.lanes.clone(), t.free.clone());
+                    // The longest branch counts: each tried from the same lanes; what a
+                    // branch adds is taken off again (the lanes are not copied per branch).
+                    let lens: Vec<usize> = t.lanes.iter().map(Vec::len).collect();
+                    let free = t.free.clone();
                     let mut best: Option<(Front, Vec<Vec<LaneItem>>, Vec<f64>)> = None;
                     for br in branches {
-                        t.lanes = lanes.clone();
-                        t.free = free.clone();
+                        t.free.clone_from(&free);
                         let e = walk(t, &br.body, front);
+                        let added: Vec<Vec<LaneItem>> = t
+                            .lanes
+                            .iter_mut()
+                            .zip(&lens)
+                            .map(|(lane, &n)| lane.split_off(n))
+                            .collect();
                         if best.as_ref().is_none_or(|b| e.0 > b.0.0) {
-                            best = Some((e, t.lanes.clone(), t.free.clone()));
+                            best = Some((e, added, t.free.clone()));
                         }
                     }
-                    if let Some((e, l, f)) = best {
-                        front = e;
-                        t.lanes = l;
-                        t.free = f;
+                    match best {
+                        Some((e, added, f)) => {
+                            front = e;
+                            for (lane, mut more) in t.lanes.iter_mut().zip(added) {
+                                lane.append(&mut more);
+                            }
+                            t.free = f;
+                        }
+                        None => t.free = free,
                     }
                 }
                 Block::Loop { body, .. } => front = walk(t, body, front),
