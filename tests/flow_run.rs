@@ -445,6 +445,21 @@ impl RapidChecker {
 // The cases
 // ---------------------------------------------------------------------------------------------
 
+/// Compiles the project in `dir` with the binary (`--lf Blackboard.aml PROGRAM`); a failure
+/// panics with `what` and the compiler's errors.
+fn compile_project(dir: &Path, program: &str, what: &str) {
+    let out = Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["--lf", "Blackboard.aml", program])
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{what}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
@@ -470,16 +485,7 @@ fn compile(case: &str, lang: Lang) -> (String, Output, Chart) {
         .unwrap()
         .trim_end_matches('"')
         .to_owned();
-    let out = Command::new(env!("CARGO_BIN_EXE_skillpost"))
-        .args(["--lf", "Blackboard.aml", &program])
-        .current_dir(tmp.path())
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{case} ({lang:?}): {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    compile_project(tmp.path(), &program, &format!("{case} ({lang:?})"));
     let output = lang.read(tmp.path(), &program);
     if let Err(e) = output.syntax(&program) {
         panic!("{case} ({lang:?}): syntax check: {e}\n{}", output.main);
@@ -660,15 +666,10 @@ fn random_charts(lang: Lang) {
         let text = ChartGen::chart(seed);
         let sfc = tmp.path().join("sfc.xml");
         std::fs::write(&sfc, &text).unwrap();
-        let out = Command::new(env!("CARGO_BIN_EXE_skillpost"))
-            .args(["--lf", "Blackboard.aml", "R"])
-            .current_dir(tmp.path())
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "random chart {seed} does not compile in {lang:?}:\n{}\n{text}",
-            String::from_utf8_lossy(&out.stderr)
+        compile_project(
+            tmp.path(),
+            "R",
+            &format!("random chart {seed} does not compile in {lang:?}:\n{text}"),
         );
         let output = lang.read(tmp.path(), "R");
         if let Err(e) = output.syntax("R") {
@@ -1096,16 +1097,7 @@ fn conditions(lang: Lang) {
         let text = ChartGen::conditions(&conds);
         let sfc = tmp.path().join("sfc.xml");
         std::fs::write(&sfc, &text).unwrap();
-        let out = Command::new(env!("CARGO_BIN_EXE_skillpost"))
-            .args(["--lf", "Blackboard.aml", "R"])
-            .current_dir(tmp.path())
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{lang:?}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        compile_project(tmp.path(), "R", &format!("{lang:?}"));
         let output = lang.read(tmp.path(), "R");
         if let Err(e) = output.syntax("R") {
             panic!("conditions ({lang:?}): {e}\n{}", output.main);
@@ -1481,16 +1473,7 @@ fn random_charts_drawn_with_connections_back_are_the_same_programs() {
     Lang::Krl.setup(tmp.path());
     let compile = |text: &str| -> String {
         std::fs::write(tmp.path().join("sfc.xml"), text).unwrap();
-        let out = Command::new(env!("CARGO_BIN_EXE_skillpost"))
-            .args(["--lf", "Blackboard.aml", "R"])
-            .current_dir(tmp.path())
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}\n{text}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        compile_project(tmp.path(), "R", text);
         Lang::Krl
             .read(tmp.path(), "R")
             .main
