@@ -516,6 +516,8 @@ codes! {
     /// A cell's plan needs more wires between two controllers than the blackboard declares
     /// (SPEC.md 9): how many are missing, from which controller to which.
     TooFewWires = "E212",
+    /// A cell's chart whose flow goes beyond the structured forms (SPEC.md 3.1, 9).
+    CellUnstructured = "E213",
 
     /// No `pou` with an `SFC` body (or none of the name asked for).
     NoSfcBody = "E301",
@@ -620,6 +622,9 @@ codes! {
     SeveralPous = "W305",
     /// A selection branch right of an unconditional one: it is never taken.
     BranchNeverTaken = "W306",
+    /// Flow the structured forms cannot express: compiled with labels and `GOTO` (KRL) or as
+    /// a state machine (RAPID, URScript).
+    Unstructured = "W307",
 }
 
 impl std::fmt::Display for Code {

@@ -287,6 +287,20 @@ fn condition(sfc: &Sfc, t: usize) -> String {
     }
 }
 
+/// What selects a selection branch: its transition's condition, or any first condition of the
+/// selection it opens.
+fn branch_condition(sfc: &Sfc, br: &crate::plan::Branch) -> String {
+    let heads = br.heads();
+    if heads.len() == 1 {
+        return condition(sfc, heads[0]);
+    }
+    let parts: Vec<String> = heads
+        .iter()
+        .map(|&h| format!("({})", condition(sfc, h)))
+        .collect();
+    parts.join(" OR ")
+}
+
 fn one_line(s: &str) -> String {
     s.split_whitespace().collect::<Vec<_>>().join(" ")
 }
@@ -295,6 +309,8 @@ fn one_line(s: &str) -> String {
 #[derive(Default)]
 struct Totals {
     loops: bool,
+    /// Flow in states ([`Block::Machine`]): each counted once.
+    states: bool,
     endless: bool,
     choices: bool,
 }
@@ -371,7 +387,7 @@ pub fn flow(sfc: &Sfc, plan: &Plan) -> String {
                         let _ = writeln!(
                             o,
                             "{inner}? {} (transition id={})",
-                            condition(sfc, br.transition),
+                            branch_condition(sfc, br),
                             sfc.elements[br.transition].local_id
                         );
                         end = end.max(walk(sfc, &br.body, t, &inner, o, tot));
@@ -394,6 +410,27 @@ pub fn flow(sfc: &Sfc, plan: &Plan) -> String {
                     }
                     let _ = writeln!(o, "{indent}>");
                     t = end;
+                }
+                Block::Machine(states) => {
+                    tot.states = true;
+                    for (k, st) in states.iter().enumerate() {
+                        let _ = writeln!(
+                            o,
+                            "{indent}[ state {} at id={}:",
+                            k + 1,
+                            sfc.elements[st.entry].local_id
+                        );
+                        let inner = format!("{indent} : ");
+                        t = walk(sfc, &st.body, t, &inner, o, tot);
+                        let _ = writeln!(o, "{indent}]");
+                    }
+                }
+                Block::Goto { target, .. } => {
+                    let _ = writeln!(
+                        o,
+                        "{indent}-> go on at id={}",
+                        sfc.elements[*target].local_id
+                    );
                 }
                 Block::Loop {
                     head,
@@ -422,8 +459,8 @@ pub fn flow(sfc: &Sfc, plan: &Plan) -> String {
     let total = walk(sfc, &plan.body, 0.0, "", &mut o, &mut tot);
     let what = if tot.endless {
         " per round (the program repeats without end)"
-    } else if tot.loops {
-        " at least (loops counted once)"
+    } else if tot.loops || tot.states {
+        " at least (loops and states counted once)"
     } else {
         ""
     };
@@ -501,6 +538,20 @@ fn order_lines(
                     order_lines(sfc, view, br, indent, n, o);
                 }
             }
+            Block::Machine(states) => {
+                for (k, st) in states.iter().enumerate() {
+                    let _ = writeln!(
+                        o,
+                        "{indent} state {} (id={}):",
+                        k + 1,
+                        sfc.elements[st.entry].local_id
+                    );
+                    order_lines(sfc, view, &st.body, &format!("{indent}    "), n, o);
+                }
+            }
+            Block::Goto { target, .. } => {
+                let _ = writeln!(o, "{indent} go on at id={}", sfc.elements[*target].local_id);
+            }
             Block::Choice {
                 divergence,
                 branches,
@@ -525,12 +576,7 @@ fn order_lines(
                 );
                 let inner = format!("{indent}    ");
                 for (k, br) in branches.iter().enumerate() {
-                    let _ = writeln!(
-                        o,
-                        "{indent}  {}. if {}",
-                        k + 1,
-                        condition(sfc, br.transition)
-                    );
+                    let _ = writeln!(o, "{indent}  {}. if {}", k + 1, branch_condition(sfc, br));
                     order_lines(sfc, view, &br.body, &inner, n, o);
                     match br.end {
                         BranchEnd::Join => {}
@@ -830,6 +876,20 @@ pub mod json {
                         "condition": condition(sfc, *tr),
                         "transition": local_id(sfc, *tr),
                     })),
+                    Block::Machine(states) => {
+                        tot.states = true;
+                        let mut ss = Vec::new();
+                        for st in states {
+                            let (blocks, e) = walk(sfc, &st.body, t, tot);
+                            t = e;
+                            ss.push(json!({"entry": local_id(sfc, st.entry), "blocks": blocks}));
+                        }
+                        out.push(json!({"kind": "states", "states": ss}));
+                    }
+                    Block::Goto { target, .. } => out.push(json!({
+                        "kind": "goto",
+                        "target": local_id(sfc, *target),
+                    })),
                     Block::Parallel {
                         divergence,
                         branches,
@@ -865,7 +925,7 @@ pub mod json {
                             let (blocks, e) = walk(sfc, &br.body, start, tot);
                             end = end.max(e);
                             let mut o = json!({
-                                "condition": condition(sfc, br.transition),
+                                "condition": super::branch_condition(sfc, br),
                                 "transition": local_id(sfc, br.transition),
                                 "blocks": blocks,
                             });
@@ -919,7 +979,7 @@ pub mod json {
             "blocks": blocks,
             "total": {
                 "seconds": total,
-                "at_least": tot.loops && !tot.endless,
+                "at_least": (tot.loops || tot.states) && !tot.endless,
                 "per_round": tot.endless,
                 "longest_alternative": tot.choices,
             },
@@ -959,6 +1019,19 @@ pub mod json {
                     "condition": condition(sfc, *t),
                     "transition": local_id(sfc, *t),
                 })),
+                Block::Machine(states) => {
+                    let mut ss = Vec::new();
+                    for st in states {
+                        let mut blocks = Vec::new();
+                        order_blocks(sfc, view, &st.body, n, &mut blocks);
+                        ss.push(json!({"entry": local_id(sfc, st.entry), "blocks": blocks}));
+                    }
+                    out.push(json!({"kind": "states", "states": ss}));
+                }
+                Block::Goto { target, .. } => out.push(json!({
+                    "kind": "goto",
+                    "target": local_id(sfc, *target),
+                })),
                 Block::Tell(m) | Block::Hear(m) => {
                     let Some(view) = view else {
                         continue;
@@ -995,7 +1068,7 @@ pub mod json {
                             let mut blocks = Vec::new();
                             order_blocks(sfc, view, &br.body, n, &mut blocks);
                             json!({
-                                "condition": condition(sfc, br.transition),
+                                "condition": super::branch_condition(sfc, br),
                                 "transition": local_id(sfc, br.transition),
                                 "blocks": blocks,
                                 "then": match br.end {
@@ -1280,6 +1353,12 @@ pub fn cell_timeline(sfc: &Sfc, plan: &Plan, view: &CellView) -> (Vec<Vec<LaneIt
                     }
                 }
                 Block::Loop { body, .. } => front = walk(t, body, front),
+                Block::Machine(states) => {
+                    for st in states {
+                        front = walk(t, &st.body, front);
+                    }
+                }
+                Block::Goto { .. } => {}
                 Block::Wait(_) | Block::Tell(_) | Block::Hear(_) => {}
             }
         }

@@ -1632,6 +1632,15 @@ fn a_named_transition_gives_its_st_body() {
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     let src = std::fs::read_to_string(t.path().join("Named.src")).unwrap();
     assert!(src.contains("WAIT FOR $IN[1] AND (NOT $IN[2])"), "{src}");
+    // The textual form of IEC 61131-3 (`TRANSITION … := expression; END_TRANSITION`), as some
+    // tools export the body: the same.
+    let bare = with_named.replace("PartThere := Part_OK", ":= Part_OK");
+    assert_ne!(bare, with_named, "the fixture changed");
+    std::fs::write(t.path().join("sfc.xml"), &bare).unwrap();
+    let o = run(&["--lf", "Blackboard.aml", "Named"], t.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let src = std::fs::read_to_string(t.path().join("Named.src")).unwrap();
+    assert!(src.contains("WAIT FOR $IN[1] AND (NOT $IN[2])"), "{src}");
     // A named transition in LD: its coil of the transition's name is wired from two contacts
     // in parallel (an OR).
     let named = |which: &str| {

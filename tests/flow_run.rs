@@ -616,8 +616,11 @@ macro_rules! flow_cases {
 }
 
 flow_cases! {
+    flow_codesys_nested_selection => "flow-codesys-nested-selection",
     flow_cyclic => "flow-cyclic",
     flow_guarded_sequence => "flow-guarded-sequence",
+    flow_jump_forward => "flow-jump-forward",
+    flow_loop_continued => "flow-loop-continued",
     flow_loop_early_exit => "flow-loop-early-exit",
     flow_loop_exit => "flow-loop-exit",
     flow_loop_joined_exits => "flow-loop-joined-exits",
@@ -723,13 +726,18 @@ fn random_charts_do_what_they_mean_urscript() {
 }
 
 /// Charts that may not be structured: a random chart with one jump retargeted to a random step
-/// (forward, into another branch, out of a loop, ...). The compiler must never crash: it either
-/// refuses the chart with located errors (exit status 1) or compiles it into a program that does
-/// what the chart means. Returns which charts compiled and the codes of the refusals.
+/// (forward, into another branch, out of a loop, ...). Every such chart compiles into a program
+/// that does what the chart means (SPEC.md 3.1, "any other flow": labels and GOTO in KRL, a
+/// state variable in RAPID and URScript), unless the jump enters or leaves a simultaneous
+/// branch (an unsafe chart, checked here independently of the compiler): then it is refused
+/// with E317 at the jump. Returns which charts compiled and the codes of the refusals.
 fn retargeted_jumps(lang: Lang) -> (BTreeSet<u64>, BTreeMap<String, usize>) {
     let tmp = tempfile::tempdir().unwrap();
     lang.setup(tmp.path());
     let (mut refused, mut compiled) = (0, BTreeSet::new());
+    // Compiled with states (labels and GOTO, or a state variable): flow beyond the structured
+    // forms.
+    let mut in_states = 0;
     let mut rapid = RapidChecker::new();
     let mut codes = BTreeMap::new();
     for seed in 1..=300u64 {
@@ -765,6 +773,9 @@ fn retargeted_jumps(lang: Lang) -> (BTreeSet<u64>, BTreeMap<String, usize>) {
             Some(0) => {
                 compiled.insert(seed);
                 let output = lang.read(tmp.path(), "R");
+                if output.main.contains("skp_s") {
+                    in_states += 1;
+                }
                 output.syntax("R").unwrap_or_else(|e| {
                     panic!("retargeted chart {seed} ({lang:?}): {e}\n{}", output.main)
                 });
@@ -786,6 +797,16 @@ fn retargeted_jumps(lang: Lang) -> (BTreeSet<u64>, BTreeMap<String, usize>) {
             }
             Some(1) => {
                 refused += 1;
+                // Only a jump that enters or leaves a simultaneous branch is refused (IEC
+                // 61131-3: an unsafe chart); any other flow compiles (SPEC.md 3.1).
+                assert!(
+                    !Chart::read(&sfc).jumps_stay_in_their_branches(),
+                    "retargeted chart {seed} ({lang:?}) is refused, though its jumps stay in their simultaneous branches:\n{stderr}"
+                );
+                assert!(
+                    stderr.contains("error[E317]") && stderr.contains("simultaneous branch"),
+                    "retargeted chart {seed} ({lang:?}): refused for another reason than a jump across simultaneous branches:\n{stderr}"
+                );
                 for line in stderr.lines() {
                     if let Some(i) = line.find("error[E") {
                         *codes.entry(line[i + 6..i + 10].to_owned()).or_insert(0) += 1;
@@ -803,12 +824,12 @@ fn retargeted_jumps(lang: Lang) -> (BTreeSet<u64>, BTreeMap<String, usize>) {
     }
     rapid.check();
     println!(
-        "retargeted jumps ({lang:?}): {} compiled, {refused} refused: {codes:?}",
+        "retargeted jumps ({lang:?}): {} compiled ({in_states} with states), {refused} refused (each a jump across simultaneous branches): {codes:?}",
         compiled.len()
     );
     assert!(
-        compiled.len() > 10 && refused > 10,
-        "{lang:?}: {} compiled, {refused} refused",
+        compiled.len() > 50 && in_states > 30 && refused > 10,
+        "{lang:?}: {} compiled ({in_states} with states), {refused} refused",
         compiled.len()
     );
     (compiled, codes)

@@ -146,6 +146,20 @@ pub fn condition(input: &EmitInput, t: usize, ops: &Ops) -> Option<String> {
     Some(crate::cond::render(&c.expr, &signal, ops))
 }
 
+/// The condition that selects a selection branch: its transition's, or any of the nested
+/// selection's first transitions (`None`: the branch is unconditional).
+pub fn branch_condition(input: &EmitInput, br: &crate::plan::Branch, ops: &Ops) -> Option<String> {
+    let heads = br.heads();
+    if heads.len() == 1 {
+        return condition(input, heads[0], ops);
+    }
+    let mut parts = Vec::with_capacity(heads.len());
+    for h in heads {
+        parts.push(format!("({})", condition(input, h, ops)?));
+    }
+    Some(parts.join(&format!(" {} ", (ops.op)(crate::cond::BinOp::Or))))
+}
+
 /// The condition as written, for comments: on one line, without `;` (a comment inside a KRL
 /// comment, a statement end in RAPID), ASCII.
 pub fn condition_text(input: &EmitInput, t: usize) -> String {
@@ -211,12 +225,52 @@ pub fn loop_comment(input: &EmitInput, head: usize, jumps: &[usize], endless: bo
     )
 }
 
+/// The comment before flow the structured forms cannot express.
+pub fn machine_comment(input: &EmitInput, states: usize) -> String {
+    let _ = input;
+    format!("flow in {states} states: where the chart is not structured, it goes on at a state")
+}
+
+/// The comment at the beginning of state `n` (from 1).
+pub fn state_comment(input: &EmitInput, n: usize, entry: usize) -> String {
+    let e = &input.sfc.elements[entry];
+    match &e.kind {
+        ElementKind::Step(st) => format!("state {n}: step {} (localId {})", st.name, e.local_id),
+        k => format!("state {n}: {} localId {}", k.tag(), e.local_id),
+    }
+}
+
+/// The comment before a Goto.
+pub fn goto_comment(input: &EmitInput, target: usize, from: usize) -> String {
+    let el = &input.sfc.elements;
+    let to = match &el[target].kind {
+        ElementKind::Step(st) => format!("step {} (localId {})", st.name, el[target].local_id),
+        k => format!("{} localId {}", k.tag(), el[target].local_id),
+    };
+    match &el[from].kind {
+        ElementKind::JumpStep(_) => format!("go on at {to} ({})", input.sfc.jump_label(from)),
+        _ => format!("go on at {to}"),
+    }
+}
+
 /// The comment at the head of selection branch `n` (from 1).
-pub fn branch_comment(input: &EmitInput, n: usize, transition: usize) -> String {
+pub fn branch_comment(input: &EmitInput, n: usize, br: &crate::plan::Branch) -> String {
+    let heads = br.heads();
+    if heads.len() == 1 {
+        return format!(
+            "branch {n} (transition localId {}): {}",
+            input.sfc.elements[heads[0]].local_id,
+            condition_text(input, heads[0])
+        );
+    }
+    let conds: Vec<String> = heads
+        .iter()
+        .map(|&h| format!("({})", condition_text(input, h)))
+        .collect();
     format!(
-        "branch {n} (transition localId {}): {}",
-        input.sfc.elements[transition].local_id,
-        condition_text(input, transition)
+        "branch {n} (selectionDivergence localId {}): {}",
+        input.sfc.elements[br.transition].local_id,
+        conds.join(" OR ")
     )
 }
 

@@ -87,6 +87,8 @@ impl Profile for Krl {
             number: 0,
             uses_branch_var: false,
             hand: None,
+            states: std::collections::HashMap::new(),
+            labels: 0,
         };
         let hand = super::handshake::Hand::new(input);
         if let Some(h) = &hand {
@@ -117,6 +119,30 @@ struct Writer<'a> {
     uses_branch_var: bool,
     /// The handshakes of a program of a cell.
     hand: Option<super::handshake::Hand<'a>>,
+    /// The label number of each state's entry element in the [`Block::Machine`] being written.
+    states: std::collections::HashMap<usize, usize>,
+    /// Label numbers used so far (machines nest in simultaneous branches).
+    labels: usize,
+}
+
+/// The label number `n` (states of a [`Block::Machine`] and the place after each machine).
+fn label(n: usize) -> String {
+    format!("skp_s{n}")
+}
+
+/// Whether control can run past the end of `body` (it does not end in a Goto in every branch).
+fn falls_through(body: &[Block]) -> bool {
+    match body.last() {
+        Some(Block::Goto { .. }) => false,
+        Some(Block::Choice {
+            convergence: None,
+            branches,
+            ..
+        }) => branches
+            .iter()
+            .any(|br| br.end == crate::plan::BranchEnd::Join && falls_through(&br.body)),
+        _ => true,
+    }
 }
 
 impl Writer<'_> {
@@ -183,6 +209,50 @@ impl Writer<'_> {
             Block::Tell(_) | Block::Hear(_) => {
                 super::handshake::write_block(self.hand.as_ref(), &mut self.out, level, b);
             }
+            Block::Machine(states) => {
+                // A label per state, at the level of the machine (KRL jumps out of blocks,
+                // never into one); a state that ends without a Goto ends the machine.
+                self.comment(level, &flow::machine_comment(input, states.len()));
+                let first = self.labels + 1;
+                self.labels += states.len() + 1;
+                let end_label = label(self.labels);
+                let outer = std::mem::replace(
+                    &mut self.states,
+                    states
+                        .iter()
+                        .enumerate()
+                        .map(|(k, st)| (st.entry, first + k))
+                        .collect(),
+                );
+                let mut end = false;
+                for (k, st) in states.iter().enumerate() {
+                    self.line(level, &format!("{}:", label(first + k)));
+                    self.comment(level, &flow::state_comment(input, k + 1, st.entry));
+                    match st.body.split_last() {
+                        // Going on at the next state: it follows anyway.
+                        Some((Block::Goto { target, from }, rest))
+                            if self.states.get(target) == Some(&(first + k + 1)) =>
+                        {
+                            self.blocks(rest, level);
+                            self.comment(level, &flow::goto_comment(input, *target, *from));
+                        }
+                        _ => self.blocks(&st.body, level),
+                    }
+                    if k + 1 < states.len() && falls_through(&st.body) {
+                        self.line(level, &format!("GOTO {end_label}"));
+                        end = true;
+                    }
+                }
+                if end {
+                    self.line(level, &format!("{end_label}:"));
+                }
+                self.states = outer;
+            }
+            Block::Goto { target, from } => {
+                let n = self.states.get(target).copied().unwrap_or(0);
+                self.comment(level, &flow::goto_comment(input, *target, *from));
+                self.line(level, &format!("GOTO {}", label(n)));
+            }
             Block::Follow {
                 divergence,
                 heard,
@@ -229,7 +299,7 @@ impl Writer<'_> {
 
     /// A branch's body and how it ends.
     fn branch(&mut self, n: usize, br: &Branch, level: usize) {
-        self.comment(level, &flow::branch_comment(self.input, n, br.transition));
+        self.comment(level, &flow::branch_comment(self.input, n, br));
         self.blocks(&br.body, level);
         match br.end {
             BranchEnd::Join => {}
@@ -245,7 +315,7 @@ impl Writer<'_> {
     fn choice(&mut self, div: usize, branches: &[Branch], level: usize) {
         let conds: Vec<Option<String>> = branches
             .iter()
-            .map(|b| self.condition(b.transition))
+            .map(|b| flow::branch_condition(self.input, b, &Ops::KRL))
             .collect();
         self.comment(
             level,

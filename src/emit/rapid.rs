@@ -134,10 +134,13 @@ const DIALECT: Dialect = Dialect {
     wait: |out, level, c| out.line(level, &wait_until(c)),
     leave: Leave::Flag,
     empty_block: None,
-    declare: |branch, flags| {
+    declare: |branch, flags, state| {
         let mut d = Vec::new();
         if branch {
             d.push(format!("VAR num {BRANCH_VAR} := 0;"));
+        }
+        if state {
+            d.push(format!("VAR num {} := 0;", super::structured::STATE_VAR));
         }
         for n in 1..=flags {
             d.push(format!("VAR bool skp_loop{n} := TRUE;"));

@@ -11,11 +11,15 @@
 
 use super::flow::{self, Lines};
 use super::{EmitInput, Generated};
-use crate::cond::Ops;
+use crate::cond::{BinOp, Ops};
 use crate::plan::{Block, Branch, BranchEnd};
 
 /// The variable that holds the branch a selection without an unconditional branch chose.
 pub const BRANCH_VAR: &str = "skp_branch";
+
+/// The variable that holds the state a [`Block::Machine`] goes on at (0: none, the program
+/// ends).
+pub const STATE_VAR: &str = "skp_state";
 
 /// How a dialect leaves a loop.
 #[derive(Debug)]
@@ -50,8 +54,9 @@ pub struct Dialect {
     pub leave: Leave,
     /// A statement for a branch that would hold no statement (`None`: an empty block is fine).
     pub empty_block: Option<&'static str>,
-    /// The declarations of the variables used: whether `skp_branch` was, how many loop flags.
-    pub declare: fn(bool, usize) -> Vec<String>,
+    /// The declarations of the variables used: whether `skp_branch` was, how many loop flags,
+    /// whether [`STATE_VAR`] was.
+    pub declare: fn(bool, usize, bool) -> Vec<String>,
 }
 
 /// Writes the program tree in `dialect`.
@@ -65,12 +70,14 @@ pub fn generate(input: &EmitInput, dialect: &Dialect) -> Generated {
         flags: 0,
         loops: Vec::new(),
         hand: super::handshake::Hand::new(input),
+        states: None,
+        uses_state_var: false,
     };
     if let Some(h) = &w.hand {
         super::handshake::write(&mut w.out, 0, h.init());
     }
     w.blocks(input.body, 0);
-    let mut declarations = (dialect.declare)(w.uses_branch_var, w.flags);
+    let mut declarations = (dialect.declare)(w.uses_branch_var, w.flags, w.uses_state_var);
     if let Some(h) = &w.hand {
         declarations.extend(h.declarations());
     }
@@ -88,10 +95,37 @@ fn may_leave(b: &Block) -> bool {
             .iter()
             .any(|br| br.end == BranchEnd::Leave || br.body.iter().any(may_leave)),
         Block::Parallel { branches, .. } => branches.iter().flatten().any(may_leave),
-        Block::Step(_) | Block::Wait(_) | Block::Loop { .. } | Block::Tell(_) | Block::Hear(_) => {
+        Block::Step(_)
+        | Block::Wait(_)
+        | Block::Loop { .. }
+        | Block::Tell(_)
+        | Block::Hear(_)
+        | Block::Goto { .. }
+        | Block::Machine(_) => false,
+    }
+}
+
+/// Whether `b` goes to another state somewhere (a [`Block::Goto`], loops included; not one
+/// inside a nested machine, which goes to that machine's own states).
+fn may_goto(b: &Block) -> bool {
+    match b {
+        Block::Goto { .. } => true,
+        Block::Machine(_) | Block::Step(_) | Block::Wait(_) | Block::Tell(_) | Block::Hear(_) => {
             false
         }
+        Block::Parallel { branches, .. } => branches.iter().flatten().any(may_goto),
+        Block::Choice { branches, .. } | Block::Follow { branches, .. } => {
+            branches.iter().any(|br| br.body.iter().any(may_goto))
+        }
+        Block::Loop { body, .. } => body.iter().any(may_goto),
     }
+}
+
+/// The states of the [`Block::Machine`] being written: each entry's number (from 1), and how
+/// many loops were open when the state began (the loops a Goto leaves are those after).
+struct States {
+    number: std::collections::HashMap<usize, usize>,
+    base: usize,
 }
 
 struct Writer<'a> {
@@ -106,9 +140,23 @@ struct Writer<'a> {
     loops: Vec<Option<String>>,
     /// The handshakes of a program of a cell.
     hand: Option<super::handshake::Hand<'a>>,
+    /// Inside a [`Block::Machine`].
+    states: Option<States>,
+    uses_state_var: bool,
 }
 
 impl Writer<'_> {
+    /// Whether loops of the current state are open (a Goto must leave them).
+    fn in_state_loop(&self) -> bool {
+        self.states
+            .as_ref()
+            .is_some_and(|s| self.loops.len() > s.base)
+    }
+
+    /// The test that no Goto was taken in this state.
+    fn still_here(&self) -> String {
+        format!("{STATE_VAR}{}0", self.d.equals)
+    }
     fn comment(&mut self, level: usize, text: &str) {
         let line = format!("{} {}", self.d.comment, flow::comment_text(text));
         self.out.line(level, &line);
@@ -134,11 +182,33 @@ impl Writer<'_> {
             for (k, b) in part.iter().enumerate() {
                 self.block(b, level);
                 let more = k + 1 < part.len() || parts.peek().is_some();
-                if more
-                    && may_leave(b)
+                let goes = self.states.is_some() && may_goto(b);
+                let in_loop = self.in_state_loop();
+                if goes
+                    && in_loop
+                    && matches!(b, Block::Loop { .. })
+                    && let Leave::Statement(stmt) = self.d.leave
+                {
+                    // A Goto in the inner loop left only that one: leave this one too.
+                    let test = format!("{STATE_VAR} {} 0", (self.d.ops.op)(BinOp::Ne));
+                    self.if_line(level, true, &test);
+                    self.out.line(level + 1, stmt);
+                    self.out.line(level, self.d.end_if);
+                    continue;
+                }
+                if !more {
+                    continue;
+                }
+                let flagged = matches!(self.d.leave, Leave::Flag);
+                if (may_leave(b) || (goes && flagged && in_loop))
                     && let Some(Some(flag)) = self.loops.last().cloned()
                 {
                     self.if_line(level, true, &flag);
+                    level += 1;
+                    open += 1;
+                } else if goes && !in_loop {
+                    let test = self.still_here();
+                    self.if_line(level, true, &test);
                     level += 1;
                     open += 1;
                 }
@@ -194,8 +264,9 @@ impl Writer<'_> {
             } => {
                 self.comment(level, &flow::loop_comment(input, *head, jumps, *endless));
                 let (a, b) = self.d.while_;
+                let goes = self.states.is_some() && body.iter().any(may_goto);
                 let flag = match self.d.leave {
-                    Leave::Flag if !*endless => {
+                    Leave::Flag if !*endless || goes => {
                         self.flags += 1;
                         let flag = format!("skp_loop{}", self.flags);
                         self.assign(level, &flag, self.d.ops.true_);
@@ -214,6 +285,29 @@ impl Writer<'_> {
             }
             Block::Tell(_) | Block::Hear(_) => {
                 super::handshake::write_block(self.hand.as_ref(), &mut self.out, level, b);
+            }
+            Block::Machine(states) => self.machine(states, level),
+            Block::Goto { target, from } => {
+                let n = self
+                    .states
+                    .as_ref()
+                    .and_then(|s| s.number.get(target).copied())
+                    .unwrap_or(0);
+                self.comment(level, &flow::goto_comment(self.input, *target, *from));
+                self.assign(level, STATE_VAR, &n.to_string());
+                if self.in_state_loop() {
+                    match &self.d.leave {
+                        Leave::Statement(s) => self.out.line(level, s),
+                        Leave::Flag => {
+                            let base = self.states.as_ref().map_or(0, |s| s.base);
+                            let flags: Vec<String> =
+                                self.loops[base..].iter().flatten().cloned().collect();
+                            for f in flags {
+                                self.assign(level, &f, self.d.ops.false_);
+                            }
+                        }
+                    }
+                }
             }
             Block::Follow {
                 divergence,
@@ -252,8 +346,38 @@ impl Writer<'_> {
         }
     }
 
+    /// Flow beyond the structured forms: a loop over the states, each chosen by [`STATE_VAR`];
+    /// a state's Gotos set it, and it stays 0 when the program ends.
+    fn machine(&mut self, states: &[crate::plan::State], level: usize) {
+        self.uses_state_var = true;
+        let number = states
+            .iter()
+            .enumerate()
+            .map(|(k, st)| (st.entry, k + 1))
+            .collect();
+        let outer = self.states.replace(States {
+            number,
+            base: self.loops.len(),
+        });
+        self.comment(level, &flow::machine_comment(self.input, states.len()));
+        self.assign(level, STATE_VAR, "1");
+        let (a, b) = self.d.while_;
+        let ne = (self.d.ops.op)(BinOp::Ne);
+        self.out.line(level, &format!("{a}{STATE_VAR} {ne} 0{b}"));
+        for (k, st) in states.iter().enumerate() {
+            let test = format!("{STATE_VAR}{}{}", self.d.equals, k + 1);
+            self.if_line(level + 1, k == 0, &test);
+            self.comment(level + 2, &flow::state_comment(self.input, k + 1, st.entry));
+            self.assign(level + 2, STATE_VAR, "0");
+            self.blocks(&st.body, level + 2);
+        }
+        self.out.line(level + 1, self.d.end_if);
+        self.out.line(level, self.d.end_while);
+        self.states = outer;
+    }
+
     fn branch(&mut self, n: usize, br: &Branch, level: usize) {
-        self.comment(level, &flow::branch_comment(self.input, n, br.transition));
+        self.comment(level, &flow::branch_comment(self.input, n, br));
         let start = self.out.out.len();
         self.blocks(&br.body, level);
         match br.end {
@@ -284,7 +408,7 @@ impl Writer<'_> {
         let input = self.input;
         let conds: Vec<Option<String>> = branches
             .iter()
-            .map(|b| flow::condition(input, b.transition, self.d.ops))
+            .map(|b| flow::branch_condition(input, b, self.d.ops))
             .collect();
         self.comment(
             level,

@@ -168,7 +168,7 @@ const DIALECT: Dialect = Dialect {
     // A block of comments only is no block to URScript's Python-like parser: a branch without
     // steps waits one control cycle.
     empty_block: Some("sync()"),
-    declare: |_, _| Vec::new(),
+    declare: |_, _, _| Vec::new(),
 };
 
 /// The URScript profile.

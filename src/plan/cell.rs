@@ -176,6 +176,8 @@ impl Scan<'_> {
     fn blocks(&mut self, blocks: &[Block], mut ctx: usize, set: &mut Set) -> usize {
         for (k, b) in blocks.iter().enumerate() {
             match b {
+                // Refused before the split (E213).
+                Block::Machine(_) | Block::Goto { .. } => {}
                 Block::Step(i) => {
                     if let Some(c) = (self.controller)(*i) {
                         ctx = c;
@@ -336,6 +338,8 @@ impl Splitter<'_> {
 
     fn block(&mut self, b: &Block, frontier: Vec<Point>) -> Vec<Point> {
         match b {
+            // Refused before the split (E213).
+            Block::Machine(_) | Block::Goto { .. } => frontier,
             Block::Step(i) => {
                 let Some(c) = (self.scan.controller)(*i) else {
                     return frontier;

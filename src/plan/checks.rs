@@ -122,14 +122,18 @@ pub fn check_nodes(sfc: &Sfc, g: &Graph, diags: &mut Diagnostics) -> Vec<Diagnos
                         _ if !div && ns > 1 => diags.push(unbalanced(format!(
                             "{tag} has {ns} outputs; it must have one"
                         ))),
-                        _ if !div && np == 1 => diags.push(unbalanced(format!(
+                        _ if !div && np == 1 && !g.lost_jumps(i) => diags.push(unbalanced(format!(
                             "{tag} joins only one branch: {opens} opens {branches} branches and {closes} joins them"
                         ))),
                         _ => {}
                     }
                     if matches!(kind, ElementKind::SelectionDivergence) {
                         for &h in g.succs(i) {
-                            if !matches!(el[h].kind, ElementKind::Transition(_)) {
+                            // A branch may open another selection (CODESYS nests them).
+                            if !matches!(
+                                el[h].kind,
+                                ElementKind::Transition(_) | ElementKind::SelectionDivergence
+                            ) {
                                 diags.push(unbalanced(format!(
                                     "selection branch starts with {} localId {}; each selection branch starts with a transition (its condition)",
                                     el[h].kind.tag(),

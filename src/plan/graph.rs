@@ -3,7 +3,7 @@
 use std::collections::HashMap;
 
 use crate::diag::{Code, Diagnostic, Diagnostics, Span};
-use crate::model::Sfc;
+use crate::model::{ElementKind, Sfc};
 
 /// The flow graph: predecessors and successors by element index, in compact (CSR) form: one
 /// array of edges per direction and an offset per element.
@@ -13,6 +13,9 @@ pub struct Graph {
     pred: Vec<usize>,
     succ_at: Vec<usize>,
     succ: Vec<usize>,
+    /// The selectionConvergences drawn with a jumpStep among their inputs (as CODESYS exports
+    /// a branch that ends in a jump), ascending: that input is not a connection.
+    lost_jumps: Vec<usize>,
 }
 
 impl Graph {
@@ -24,6 +27,12 @@ impl Graph {
     /// The elements element `i` connects to.
     pub fn succs(&self, i: usize) -> &[usize] {
         &self.succ[self.succ_at[i]..self.succ_at[i + 1]]
+    }
+
+    /// Whether element `i` is a selectionConvergence that a jumpStep was drawn into (the jump
+    /// ends its branch; the drawn connection is not part of the flow).
+    pub fn lost_jumps(&self, i: usize) -> bool {
+        self.lost_jumps.binary_search(&i).is_ok()
     }
 
     /// The number of elements.
@@ -103,12 +112,23 @@ pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
     let mut pred = Vec::with_capacity(n);
     let mut succ_count = vec![0usize; n];
     let mut seen: std::collections::HashSet<usize> = std::collections::HashSet::new();
-    for e in sfc.elements.iter() {
+    let mut lost_jumps = Vec::new();
+    for (i, e) in sfc.elements.iter().enumerate() {
         pred_at.push(pred.len());
         let first = pred.len();
         seen.clear();
         for (r, range) in &e.inputs {
             match ids.get(*r) {
+                Some(p)
+                    if matches!(sfc.elements[p].kind, ElementKind::JumpStep(_))
+                        && matches!(e.kind, ElementKind::SelectionConvergence) =>
+                {
+                    // CODESYS draws a branch that ends in a jump into the selection's
+                    // convergence; the jump ends the branch.
+                    if lost_jumps.last() != Some(&i) {
+                        lost_jumps.push(i);
+                    }
+                }
                 Some(p) => {
                     // A scan for the usual one or two inputs; a convergence of many is
                     // deduplicated through `seen` (its width must not cost its square).
@@ -159,5 +179,6 @@ pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
         pred,
         succ_at,
         succ,
+        lost_jumps,
     }
 }

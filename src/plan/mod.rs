@@ -62,6 +62,15 @@ pub enum Block {
     Tell(cell::Message),
     /// A handshake: this controller waits until another tells it what it waits for.
     Hear(cell::Message),
+    /// Flow the structured forms cannot express (SPEC.md 3.1, "any other flow"): states, the
+    /// first begins at the start. Each state's body is structured; where the chart goes on at
+    /// another state, a branch or the state's sequence ends in [`Block::Goto`]. The program
+    /// ends when a state ends without one. KRL: a label per state and `GOTO`; RAPID and
+    /// URScript: a state variable read in a loop.
+    Machine(Vec<State>),
+    /// The flow goes on at the state that begins at element `target` (the last block of its
+    /// sequence). `from` is the jumpStep, or the element that `target` follows.
+    Goto { target: usize, from: usize },
     /// A selection another controller decides: this program waits for the decision
     /// (`heard`, whose value is the branch's index) and runs that branch.
     Follow {
@@ -69,6 +78,14 @@ pub enum Block {
         heard: cell::Message,
         branches: Vec<Branch>,
     },
+}
+
+/// One state of a [`Block::Machine`]: the element it begins at (a step, or a convergence
+/// where branches that the structured forms cannot join meet) and its structured body.
+#[derive(Debug, Clone, PartialEq)]
+pub struct State {
+    pub entry: usize,
+    pub body: Vec<Block>,
 }
 
 /// One selection branch.
@@ -79,6 +96,24 @@ pub struct Branch {
     /// What runs after the transition fired.
     pub body: Vec<Block>,
     pub end: BranchEnd,
+}
+
+impl Branch {
+    /// The transitions whose conditions select this branch: its own, or, when the branch
+    /// starts with another selectionDivergence (as CODESYS draws nested alternatives), the
+    /// first transitions of that selection's branches: any of them selects it.
+    pub fn heads(&self) -> Vec<usize> {
+        match self.body.first() {
+            Some(Block::Choice {
+                divergence,
+                branches,
+                ..
+            }) if *divergence == self.transition => {
+                branches.iter().flat_map(Branch::heads).collect()
+            }
+            _ => vec![self.transition],
+        }
+    }
 }
 
 /// How a selection branch ends.
@@ -121,7 +156,16 @@ pub fn visit(blocks: &[Block], f: &mut dyn FnMut(&Block)) {
     for b in blocks {
         f(b);
         match b {
-            Block::Step(_) | Block::Wait(_) | Block::Tell(_) | Block::Hear(_) => {}
+            Block::Step(_)
+            | Block::Wait(_)
+            | Block::Tell(_)
+            | Block::Hear(_)
+            | Block::Goto { .. } => {}
+            Block::Machine(states) => {
+                for st in states {
+                    visit(&st.body, f);
+                }
+            }
             Block::Parallel { branches, .. } => {
                 for br in branches {
                     visit(br, f);
@@ -263,7 +307,8 @@ mod tests {
     }
 
     /// The tree with localIds: `S3` step, `W4` wait, `P(..|..)`, `C(..|..)` with `^` for a
-    /// repeat and `!` for a leave, `L3[..]` (`L3*[..]` endless).
+    /// repeat and `!` for a leave, `L3[..]` (`L3*[..]` endless), `M(3=..|7=..)` states by
+    /// their entries, `>7` a Goto.
     fn shape(sfc: &Sfc, blocks: &[Block]) -> String {
         let id = |i: usize| sfc.elements[i].local_id;
         let mut out = Vec::new();
@@ -277,6 +322,14 @@ mod tests {
                 }
                 Block::Tell(m) => format!("T{}", m.channel),
                 Block::Hear(m) => format!("H{}", m.channel),
+                Block::Goto { target, .. } => format!(">{}", id(*target)),
+                Block::Machine(states) => {
+                    let v: Vec<String> = states
+                        .iter()
+                        .map(|st| format!("{}={}", id(st.entry), shape(sfc, &st.body)))
+                        .collect();
+                    format!("M({})", v.join("|"))
+                }
                 Block::Choice { branches, .. } | Block::Follow { branches, .. } => {
                     let v: Vec<String> = branches
                         .iter()
@@ -445,8 +498,8 @@ mod tests {
         ]);
         assert_eq!(p, "L1*[S1 W2 S3]");
         // A step that only a jump leads to is not a second start: here the jump is forward,
-        // which the walk reports (not E307).
-        let (_, _, msgs) = run(&[
+        // which the walk writes as states (not E307).
+        let p = planned(&[
             st(1, "Init", &[]),
             tr(2, &[1], "TRUE"),
             jmp(3, &[2], "Later"),
@@ -454,8 +507,7 @@ mod tests {
             tr(5, &[4], "TRUE"),
             st(6, "End", &[5]),
         ]);
-        assert!(msgs.iter().all(|(c, _)| *c != Code::StartStep), "{msgs:?}");
-        assert!(msgs.iter().any(|(c, _)| *c == Code::BadJump), "{msgs:?}");
+        assert_eq!(p, "M(1=S1 >4|4=S4 S6)");
         // Without jumps a missing end is still an error.
         let (_, _, msgs) = run(&[
             st(1, "A", &[]),
@@ -569,11 +621,11 @@ mod tests {
     }
 
     #[test]
-    fn walk_rejects_a_loop_continued_past_its_decision() {
+    fn a_loop_continued_past_its_decision_is_written_in_states() {
         // Branch 9 goes on in the loop body while branch 5 jumps back, and jumps back again
         // from a selection inside it: no KRL structure (EXIT leaves one loop, there is no
-        // CONTINUE).
-        let (p, _, msgs) = run(&[
+        // CONTINUE), so the loop's head begins a state that both jumps go to.
+        let p = planned(&[
             st(1, "Start", &[]),
             tr(2, &[1], "TRUE"),
             st(3, "Pick", &[2]),
@@ -588,12 +640,7 @@ mod tests {
             tr(14, &[11], "NOT c"),
             st(15, "End", &[14]),
         ]);
-        assert!(p.is_none());
-        assert!(
-            msgs.iter()
-                .any(|(c, m)| *c == Code::BadJump && m.contains("inside another branch")),
-            "{msgs:?}"
-        );
+        assert_eq!(p, "M(1=S1 >3|3=S3 C(5:>3|9:S10 C(12:>3|14:>15))|15=S15)");
     }
 
     #[test]

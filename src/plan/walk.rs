@@ -4,12 +4,19 @@
 
 use std::collections::HashMap;
 
-use super::{Block, Branch, BranchEnd, Graph, MAX_NESTING, visit};
+use super::{Block, Branch, BranchEnd, Graph, MAX_NESTING, State, visit};
 use crate::diag::{Code, Diagnostic, Diagnostics};
 use crate::model::{ElementKind, Sfc};
 
-/// Walks the checked graph from `start` and recognises its structure. `None` when a part cannot
-/// be structured (reported).
+/// Walks the checked graph from `start` and recognises its structure. `None` when the flow
+/// has errors (reported).
+///
+/// Where the structured forms cannot express the flow (a jump forward, into another branch,
+/// out of several loops; branches that do not meet again), the walk is repeated with the
+/// elements where it failed as the beginnings of states of a [`Block::Machine`]: each state is
+/// walked as a structured sequence that ends in a [`Block::Goto`] where it reaches another
+/// state. Each repetition adds at least one state, so the walk ends; every structure that does
+/// not touch a state stays as it was.
 pub fn walk(
     sfc: &Sfc,
     g: &Graph,
@@ -17,13 +24,119 @@ pub fn walk(
     start: usize,
     diags: &mut Diagnostics,
 ) -> Option<Vec<Block>> {
+    // A jump into or out of a simultaneous branch: the chart itself is wrong.
+    let contexts = branch_contexts(sfc, g, start);
+    let el = &sfc.elements;
+    let mut unsafe_jumps = 0;
+    for (j, t) in jumps.iter().enumerate() {
+        if let Some(t) = *t
+            && contexts[j] != contexts[t]
+        {
+            unsafe_jumps += 1;
+            diags.push(
+                Diagnostic::error(
+                    Code::BadJump,
+                    format!(
+                        "this jump to step localId {} enters or leaves a simultaneous branch: simultaneous branches are entered at their divergence and left at their convergence (IEC 61131-3 calls such a chart unsafe)",
+                        el[t].local_id
+                    ),
+                )
+                .at(el[j].span.clone())
+                .element(format!("localId {}", el[j].local_id))
+                .related(el[t].span.clone(), "the jump's target"),
+            );
+        }
+    }
+    if unsafe_jumps > 0 {
+        return None;
+    }
+    let mut entries = vec![false; sfc.elements.len()];
+    loop {
+        let mut local = diags.empty_like();
+        let (result, proposed) = walk_once(sfc, g, jumps, start, &entries, &mut local);
+        let mut new = false;
+        if result.is_none() {
+            for p in proposed {
+                if !entries[p] {
+                    entries[p] = true;
+                    new = true;
+                }
+            }
+        }
+        if !new {
+            for d in local.into_vec() {
+                diags.push(d);
+            }
+            if let Some(body) = &result
+                && let Some(lost) = unplaced_step(sfc, g, jumps, start, body)
+            {
+                // Never a program without a step of the chart.
+                let e = &sfc.elements[lost];
+                diags.push(
+                    Diagnostic::error(
+                        Code::Unsupported,
+                        "this step has no place in the program skillpost built for the chart (an internal error; please report it with the chart)",
+                    )
+                    .at(e.span.clone())
+                    .element(format!("localId {}", e.local_id)),
+                );
+                return None;
+            }
+            return result;
+        }
+    }
+}
+
+/// A step the chart reaches (by connections and jumps from the start) that `body` does not
+/// hold.
+fn unplaced_step(
+    sfc: &Sfc,
+    g: &Graph,
+    jumps: &[Option<usize>],
+    start: usize,
+    body: &[Block],
+) -> Option<usize> {
+    let mut placed = vec![false; sfc.elements.len()];
+    visit(body, &mut |b| {
+        if let Block::Step(i) = b {
+            placed[*i] = true;
+        }
+    });
+    let mut seen = vec![false; sfc.elements.len()];
+    let mut todo = vec![start];
+    while let Some(i) = todo.pop() {
+        if std::mem::replace(&mut seen[i], true) {
+            continue;
+        }
+        if sfc.elements[i].kind.is_step() && !placed[i] {
+            return Some(i);
+        }
+        todo.extend_from_slice(g.succs(i));
+        todo.extend(jumps[i]);
+    }
+    None
+}
+
+/// One walk with the given state entries: the body, or `None` and the elements that, made
+/// entries of states, would let the walk go further.
+fn walk_once(
+    sfc: &Sfc,
+    g: &Graph,
+    jumps: &[Option<usize>],
+    start: usize,
+    entries: &[bool],
+    diags: &mut Diagnostics,
+) -> (Option<Vec<Block>>, Vec<usize>) {
+    // A jump to a state's entry is a Goto, never a loop.
     let mut targeted = vec![false; sfc.elements.len()];
     for t in jumps.iter().flatten() {
-        targeted[*t] = true;
+        targeted[*t] = !entries[*t];
     }
     let mut jumps_to: HashMap<usize, Vec<usize>> = HashMap::new();
     for (j, t) in jumps.iter().enumerate() {
-        if let Some(t) = t {
+        if let Some(t) = t
+            && !entries[*t]
+        {
             jumps_to.entry(*t).or_default().push(j);
         }
     }
@@ -33,20 +146,24 @@ pub fn walk(
         jumps,
         targeted,
         jumps_to,
+        entries,
+        branch_of: branch_contexts(sfc, g, start),
+        proposed: Vec::new(),
         loops: Vec::new(),
         marks: vec![0; sfc.elements.len()],
         next_loop: 0,
         diags,
         failed: false,
     };
-    let (mut body, end) = w.seq(start, true, 0);
+    let (mut body, end) = w.machine(start, true, 0);
     if w.failed {
-        return None;
+        return (None, w.proposed);
     }
     match end {
-        End::Done | End::Endless => {}
+        End::Done | End::Endless | End::Left => {}
         End::Conv(c) => {
             let el = &sfc.elements;
+            w.proposed.push(c);
             w.fail(
                 c,
                 Code::UnbalancedBranch,
@@ -55,15 +172,126 @@ pub fn walk(
                     el[c].kind.tag()
                 ),
             );
+            return (None, w.proposed);
         }
-        End::Jump(j) => w.bad_jump(j, "it does not lead back to a step on every path to it"),
-        End::Decided { choice, .. } => {
-            // A selection with jumps to a loop head outside any loop cannot happen (the head
-            // would have opened the loop); keep the blocks for completeness.
+        End::Jump(j) => {
+            w.bad_jump(j, "it does not lead back to a step on every path to it");
+            return (None, w.proposed);
+        }
+        End::Decided { choice, .. } | End::Branched(choice) | End::BranchedAt(choice, _) => {
+            // (A loop's deciding selection outside any loop cannot happen: the head would
+            // have opened the loop.)
             body.push(*choice);
         }
     }
-    (!w.failed).then_some(body)
+    // Where the chart is not structured, said once per place that goes to another state.
+    if w.diags.keeps_warnings() {
+        let el = &sfc.elements;
+        visit(&body, &mut |b| {
+            if let Block::Goto { target, from } = b {
+                let how = if matches!(el[*from].kind, ElementKind::JumpStep(_)) {
+                    "this jump"
+                } else {
+                    "the flow here"
+                };
+                w.diags.push(
+                    Diagnostic::warning(
+                        Code::Unstructured,
+                        format!(
+                            "{how} to {} localId {} is not a loop or a branch the program can write structured: it goes on at a label (KRL) or a state (RAPID, URScript)",
+                            el[*target].kind.tag(),
+                            el[*target].local_id
+                        ),
+                    )
+                    .at(el[*from].span.clone())
+                    .element(format!("localId {}", el[*from].local_id)),
+                );
+            }
+        });
+    }
+    (Some(body), Vec::new())
+}
+
+/// Each element's simultaneous branches (the branch of each enclosing simultaneousDivergence),
+/// as a number per distinct list (0: none), from `start` along connections. A Goto stays
+/// among the elements of one number: a jump that enters or leaves a simultaneous branch makes
+/// a chart IEC 61131-3 calls unsafe.
+fn branch_contexts(sfc: &Sfc, g: &Graph, start: usize) -> Vec<u32> {
+    let el = &sfc.elements;
+    let mut ctx = vec![u32::MAX; el.len()];
+    // Each context: its parent and the (divergence, branch) that opened it.
+    let mut known: HashMap<(u32, usize, usize), u32> = HashMap::new();
+    let mut parent: Vec<u32> = vec![0];
+    let mut todo = vec![(start, 0u32)];
+    while let Some((i, c)) = todo.pop() {
+        if ctx[i] != u32::MAX {
+            continue;
+        }
+        ctx[i] = c;
+        match el[i].kind {
+            ElementKind::SimultaneousDivergence => {
+                for (k, &b) in g.succs(i).iter().enumerate() {
+                    let next = parent.len() as u32;
+                    let id = *known.entry((c, i, k)).or_insert(next);
+                    if id == next {
+                        parent.push(c);
+                    }
+                    todo.push((b, id));
+                }
+            }
+            ElementKind::SimultaneousConvergence => {
+                let up = parent[c as usize];
+                for &x in g.succs(i) {
+                    todo.push((x, up));
+                }
+            }
+            ElementKind::JumpStep(_) => {}
+            _ => {
+                for &x in g.succs(i) {
+                    todo.push((x, c));
+                }
+            }
+        }
+    }
+    for c in ctx.iter_mut() {
+        if *c == u32::MAX {
+            *c = 0;
+        }
+    }
+    ctx
+}
+
+/// The Gotos of `blocks` that leave them (not those inside a nested [`Block::Machine`], which
+/// go to its own states).
+fn gotos(blocks: &[Block], out: &mut Vec<usize>) {
+    for b in blocks {
+        match b {
+            Block::Goto { target, .. } => out.push(*target),
+            Block::Machine(_)
+            | Block::Step(_)
+            | Block::Wait(_)
+            | Block::Tell(_)
+            | Block::Hear(_) => {}
+            Block::Parallel { branches, .. } => {
+                for br in branches {
+                    gotos(br, out);
+                }
+            }
+            Block::Choice { branches, .. } | Block::Follow { branches, .. } => {
+                for br in branches {
+                    gotos(&br.body, out);
+                }
+            }
+            Block::Loop { body, .. } => gotos(body, out),
+        }
+    }
+}
+
+/// The first state outside its own machine a branch goes to, if any.
+fn gone_to(b: &[Block]) -> Option<usize> {
+    let mut out = Vec::new();
+    gotos(b, &mut out);
+    out.first().copied()
 }
 
 /// How a walked sequence ended.
@@ -75,6 +303,14 @@ enum End {
     Done,
     /// At a jump (the element).
     Jump(usize),
+    /// At a [`Block::Goto`] (the sequence's last block), or a selection whose branches all end
+    /// in one: nothing follows.
+    Left,
+    /// At a selection whose branches all go to other states (not yet in the sequence).
+    Branched(Box<Block>),
+    /// At a selection whose branches go to other states but one, which ends at this
+    /// simultaneousConvergence (the block is not yet in the sequence).
+    BranchedAt(Box<Block>, usize),
     /// In an endless loop: nothing follows.
     Endless,
     /// At the selection that decides the innermost loop: the selection (its last block) and
@@ -87,6 +323,8 @@ enum End {
 enum After {
     /// Nothing: every branch goes round again.
     Nothing,
+    /// Nothing: every branch goes round again or to another state.
+    Gone,
     /// The exits joined at this convergence: go on from there.
     From(usize),
     /// The one exit branch goes on from this element (`None`: it ends at its transition).
@@ -118,6 +356,12 @@ struct Walker<'a> {
     g: &'a Graph,
     jumps: &'a [Option<usize>],
     targeted: Vec<bool>,
+    /// The elements that begin states ([`Block::Machine`]): reaching one is a Goto.
+    entries: &'a [bool],
+    /// Each element's simultaneous branches ([`branch_contexts`]).
+    branch_of: Vec<u32>,
+    /// Elements that would let a failed walk go further as entries of states.
+    proposed: Vec<usize>,
     /// The jumps to each target step.
     jumps_to: HashMap<usize, Vec<usize>>,
     /// The open loops, innermost last.
@@ -140,9 +384,17 @@ impl Walker<'_> {
     fn seq(&mut self, mut cur: usize, mut entered: bool, depth: usize) -> (Vec<Block>, End) {
         let el = &self.sfc.elements;
         let mut out = Vec::new();
+        let mut prev = cur;
         loop {
             if self.failed {
                 return (out, End::Done);
+            }
+            if !entered && self.entries[cur] {
+                out.push(Block::Goto {
+                    target: cur,
+                    from: prev,
+                });
+                return (out, End::Left);
             }
             if !entered && self.g.preds(cur).len() > 1 {
                 return (out, End::Conv(cur));
@@ -155,6 +407,7 @@ impl Walker<'_> {
                 out.extend(blocks);
                 match end {
                     Some(Ok((c, ent))) => {
+                        prev = cur;
                         cur = c;
                         entered = ent;
                         continue;
@@ -168,12 +421,26 @@ impl Walker<'_> {
             match &el[cur].kind {
                 ElementKind::Step(_) => out.push(Block::Step(cur)),
                 ElementKind::Transition(Some(_)) => out.push(Block::Wait(cur)),
-                ElementKind::JumpStep(_) => return (out, End::Jump(cur)),
+                ElementKind::JumpStep(_) => {
+                    if let Some(t) = self.jumps[cur]
+                        && self.entries[t]
+                    {
+                        out.push(Block::Goto {
+                            target: t,
+                            from: cur,
+                        });
+                        return (out, End::Left);
+                    }
+                    return (out, End::Jump(cur));
+                }
                 _ => {}
             }
             match succs.len() {
                 0 => return (out, End::Done),
-                1 => cur = succs[0],
+                1 => {
+                    prev = cur;
+                    cur = succs[0];
+                }
                 _ => {
                     if depth >= MAX_NESTING {
                         self.fail(
@@ -197,6 +464,14 @@ impl Walker<'_> {
                             cur = conv;
                             entered = true;
                         }
+                        Some(Err(End::Branched(block))) => {
+                            out.push(*block);
+                            return (out, End::Left);
+                        }
+                        Some(Err(End::BranchedAt(block, c))) => {
+                            out.push(*block);
+                            return (out, End::Conv(c));
+                        }
                         Some(Err(end)) => return (out, end),
                         None => return (out, End::Done),
                     }
@@ -205,25 +480,147 @@ impl Walker<'_> {
         }
     }
 
+    /// Walks the sequence from `first` (as [`Walker::seq`]); where it goes to states, they are
+    /// walked too and the sequence is a [`Block::Machine`] of them, which ends where its states
+    /// end (in a simultaneous branch: at the branch's convergence).
+    fn machine(&mut self, first: usize, entered: bool, depth: usize) -> (Vec<Block>, End) {
+        // (A first element that begins a state is taken, not gone to.)
+        let (body, end) = self.seq(first, entered || self.entries[first], depth);
+        let mut next = Vec::new();
+        gotos(&body, &mut next);
+        if self.failed || next.is_empty() {
+            return (body, end);
+        }
+        let el = &self.sfc.elements;
+        let here = self.branch_of[first];
+        let mut states = vec![State { entry: first, body }];
+        let mut ends = vec![end];
+        let mut number: HashMap<usize, usize> = HashMap::from([(first, 0)]);
+        let mut queue: std::collections::VecDeque<usize> = next.into_iter().collect();
+        while let Some(entry) = queue.pop_front() {
+            if number.contains_key(&entry) {
+                continue;
+            }
+            if self.branch_of[entry] != here {
+                let mut from = first;
+                visit(
+                    &states
+                        .iter()
+                        .map(|s| s.body.clone())
+                        .collect::<Vec<_>>()
+                        .concat(),
+                    &mut |b| {
+                        if let Block::Goto { target, from: f } = b
+                            && *target == entry
+                        {
+                            from = *f;
+                        }
+                    },
+                );
+                self.fail(
+                    from,
+                    Code::BadJump,
+                    format!(
+                        "this goes on at {} localId {} in another simultaneous branch: simultaneous branches are entered at their divergence and left at their convergence (IEC 61131-3 calls such a chart unsafe)",
+                        el[entry].kind.tag(),
+                        el[entry].local_id
+                    ),
+                );
+                return (Vec::new(), End::Done);
+            }
+            number.insert(entry, states.len());
+            let (body, end) = self.seq(entry, true, depth);
+            if self.failed {
+                return (Vec::new(), End::Done);
+            }
+            let mut next = Vec::new();
+            gotos(&body, &mut next);
+            queue.extend(next);
+            states.push(State { entry, body });
+            ends.push(end);
+        }
+        // How the states end: the machine ends where they do.
+        let mut conv = None;
+        let mut out = End::Left;
+        for (st, end) in states.iter_mut().zip(ends) {
+            match end {
+                End::Left => {}
+                End::Done => out = End::Done,
+                End::Endless => {
+                    if !matches!(out, End::Done) {
+                        out = End::Endless;
+                    }
+                }
+                End::Conv(c) => {
+                    if conv.is_some_and(|x| x != c) {
+                        self.proposed.push(c);
+                        self.proposed.extend(conv);
+                        self.fail(
+                            c,
+                            Code::UnbalancedBranch,
+                            format!(
+                                "{} joins branches that no divergence opened",
+                                el[c].kind.tag()
+                            ),
+                        );
+                        return (Vec::new(), End::Done);
+                    }
+                    conv = Some(c);
+                }
+                End::Jump(j) => {
+                    self.bad_jump(j, "it does not lead back to a step on every path to it");
+                    return (Vec::new(), End::Done);
+                }
+                End::Decided { choice, .. }
+                | End::Branched(choice)
+                | End::BranchedAt(choice, _) => st.body.push(*choice),
+            }
+        }
+        if let Some(c) = conv {
+            out = End::Conv(c);
+        }
+        (vec![Block::Machine(states)], out)
+    }
+
     /// Simultaneous branches from `div`: the block and the convergence to go on from.
     fn parallel(&mut self, div: usize, heads: Vec<usize>, depth: usize) -> Branches {
         let el = &self.sfc.elements;
         let mut branches = Vec::with_capacity(heads.len());
         let mut joins = Vec::with_capacity(heads.len());
+        let mut endless = false;
         for h in heads {
-            let (b, end) = self.seq(h, false, depth + 1);
+            let (b, end) = self.machine(h, false, depth + 1);
             if self.failed {
                 return None;
             }
             match end {
-                End::Conv(c) => joins.push(c),
                 End::Jump(j) => {
                     self.bad_jump(
                         j,
                         "it leaves a simultaneous branch, which must end in its convergence",
                     );
+                    // Not a state: the chart itself is wrong.
+                    self.proposed.clear();
                     return None;
                 }
+                _ if gone_to(&b).is_some() => {
+                    // (Within a branch, its own states are a machine: this goes elsewhere.)
+                    let t = gone_to(&b).unwrap_or(div);
+                    self.fail(
+                        div,
+                        Code::BadJump,
+                        format!(
+                            "a jump enters or leaves a branch of this simultaneousDivergence at {} localId {}: simultaneous branches are entered at their divergence and left at their convergence (IEC 61131-3 calls such a chart unsafe)",
+                            el[t].kind.tag(),
+                            el[t].local_id
+                        ),
+                    );
+                    return None;
+                }
+                End::Conv(c) => joins.push(c),
+                // A branch that repeats without end (a jump back within it): the branches
+                // never join, and nothing after them runs.
+                End::Endless | End::Left => endless = true,
                 _ => {
                     self.fail(
                         div,
@@ -238,7 +635,22 @@ impl Walker<'_> {
             }
             branches.push(b);
         }
-        let conv = joins[0];
+        if endless && joins.iter().all(|j| Some(j) == joins.first()) {
+            return Some(Err(End::Branched(Box::new(Block::Parallel {
+                divergence: div,
+                convergence: joins.first().copied().unwrap_or(div),
+                branches,
+            }))));
+        }
+        let Some(&conv) = joins.first() else {
+            // (Unreachable: a branch that does not join is endless or failed.)
+            self.fail(
+                div,
+                Code::UnbalancedBranch,
+                format!("{} opens branches that never join", el[div].kind.tag()),
+            );
+            return None;
+        };
         if joins.iter().any(|j| *j != conv) {
             self.fail(
                 div,
@@ -323,7 +735,7 @@ impl Walker<'_> {
         let mut walked: Vec<(usize, Vec<Block>, End, bool)> = Vec::with_capacity(heads.len());
         for (h, inside) in heads.into_iter().zip(inside_of) {
             let (b, end) = if inside && single_inside {
-                match self.g.succs(h).first().copied() {
+                match self.after_head(h) {
                     Some(f) => self.seq(f, false, depth),
                     None => (Vec::new(), End::Done),
                 }
@@ -389,17 +801,62 @@ impl Walker<'_> {
             }
         }
         if !repeats.iter().any(|r| *r) {
-            // An ordinary selection: every branch ends in one convergence.
-            let conv = match walked.first().map(|w| &w.2) {
+            // An ordinary selection: every branch ends in one convergence (or goes to another
+            // state).
+            let joining: Vec<&End> = walked
+                .iter()
+                .map(|w| &w.2)
+                // (A branch that goes to another state or repeats without end joins nothing.)
+                .filter(|e| !matches!(e, End::Left | End::Endless))
+                .collect();
+            if joining.is_empty() {
+                let branches = walked
+                    .into_iter()
+                    .map(|(t, body, _, _)| Branch {
+                        transition: t,
+                        body,
+                        end: BranchEnd::Join,
+                    })
+                    .collect();
+                return Some(Err(End::Branched(Box::new(Block::Choice {
+                    divergence: div,
+                    convergence: None,
+                    branches,
+                }))));
+            }
+            let conv = match joining.first() {
                 Some(End::Conv(c)) => Some(*c),
                 _ => None,
             };
+            if let (Some(c), 1) = (conv, joining.len())
+                && matches!(el[c].kind, ElementKind::SimultaneousConvergence)
+            {
+                // The one branch that does not go to another state ends its simultaneous
+                // branch.
+                let branches = walked
+                    .into_iter()
+                    .map(|(t, body, _, _)| Branch {
+                        transition: t,
+                        body,
+                        end: BranchEnd::Join,
+                    })
+                    .collect();
+                return Some(Err(End::BranchedAt(
+                    Box::new(Block::Choice {
+                        divergence: div,
+                        convergence: None,
+                        branches,
+                    }),
+                    c,
+                )));
+            }
             let joined = conv.is_some_and(|c| {
-                walked.iter().all(|w| matches!(w.2, End::Conv(x) if x == c))
+                joining.iter().all(|e| matches!(e, End::Conv(x) if *x == c))
                     && matches!(el[c].kind, ElementKind::SelectionConvergence)
-                    && self.g.preds(c).len() == walked.len()
+                    && self.g.preds(c).len() == joining.len()
             });
             let Some(conv) = conv.filter(|_| joined) else {
+                self.propose_meetings(&walked);
                 self.fail(
                     div,
                     Code::UnbalancedBranch,
@@ -445,6 +902,7 @@ impl Walker<'_> {
             return None;
         }
         if let Some(k) = (0..walked.len()).find(|&k| !repeats[k] && walked[k].3) {
+            self.propose_loop();
             self.fail(
                 walked[k].0,
                 Code::BadJump,
@@ -455,11 +913,15 @@ impl Walker<'_> {
             );
             return None;
         }
-        let exits: Vec<usize> = (0..walked.len()).filter(|&k| !repeats[k]).collect();
+        let exits: Vec<usize> = (0..walked.len())
+            .filter(|&k| !repeats[k] && !matches!(walked[k].2, End::Left))
+            .collect();
+        let gone = (0..walked.len()).any(|k| matches!(walked[k].2, End::Left));
         let after = match exits.as_slice() {
+            [] if gone && mids == 0 => After::Gone,
             [] => After::Nothing,
             // The one exit is walked as what follows the loop (unless earlier exits join it).
-            [one] if mids == 0 => After::Continue(self.g.succs(walked[*one].0).first().copied()),
+            [one] if mids == 0 => After::Continue(self.after_head(walked[*one].0)),
             several => {
                 let conv = match &walked[several[0]].2 {
                     End::Conv(c) => Some(*c),
@@ -472,6 +934,8 @@ impl Walker<'_> {
                         && self.g.preds(c).len() == several.len() + mids
                 });
                 let Some(conv) = conv.filter(|_| joined) else {
+                    self.propose_meetings(&walked);
+                    self.propose_loop();
                     self.fail(
                         div,
                         Code::UnbalancedBranch,
@@ -493,6 +957,7 @@ impl Walker<'_> {
                 body,
                 end: match end {
                     End::Jump(j) if repeats[k] => BranchEnd::Repeat(j),
+                    End::Left => BranchEnd::Join,
                     _ => BranchEnd::Leave,
                 },
             })
@@ -536,6 +1001,15 @@ impl Walker<'_> {
                 );
                 return None;
             }
+            if let End::Left = end {
+                self.propose_loop();
+                self.fail(
+                    w.0,
+                    Code::BadJump,
+                    "this branch leaves the loop before the selection that decides it, to another state".to_owned(),
+                );
+                return None;
+            }
             w.1 = b;
             w.2 = end;
         }
@@ -552,10 +1026,12 @@ impl Walker<'_> {
                     After::From(a) => *a == c,
                     // The deciding selection has no exits of its own: every exit is early.
                     After::Nothing => self.g.preds(c).len() == total,
-                    After::Continue(_) => false,
+                    After::Continue(_) | After::Gone => false,
                 }
         });
         let Some(conv) = conv.filter(|_| joined) else {
+            self.propose_meetings(&walked);
+            self.propose_loop();
             self.fail(
                 div,
                 Code::UnbalancedBranch,
@@ -597,9 +1073,19 @@ impl Walker<'_> {
     /// Walks a selection branch from its transition `h` (whose condition selects it; it is not
     /// waited for).
     fn branch_walk(&mut self, h: usize, depth: usize) -> (Vec<Block>, End) {
-        match self.g.succs(h).first().copied() {
+        match self.after_head(h) {
             Some(f) => self.seq(f, false, depth + 1),
             None => (Vec::new(), End::Done),
+        }
+    }
+
+    /// Where a selection branch's walk starts: after its transition `h`, or at `h` itself when
+    /// the branch opens another selection (whose transitions select it).
+    fn after_head(&self, h: usize) -> Option<usize> {
+        if matches!(self.sfc.elements[h].kind, ElementKind::SelectionDivergence) {
+            Some(h)
+        } else {
+            self.g.succs(h).first().copied()
         }
     }
 
@@ -668,6 +1154,7 @@ impl Walker<'_> {
                 body.push(*choice);
                 collect(&body, &mut jumps, self.jumps);
                 let endless = matches!(after, After::Nothing);
+                // (`After::Gone`: left only to other states.)
                 let block = Block::Loop {
                     head,
                     jumps,
@@ -676,6 +1163,7 @@ impl Walker<'_> {
                 };
                 let next = match after {
                     After::Nothing => Err(End::Endless),
+                    After::Gone => Err(End::Left),
                     After::From(c) => Ok((c, true)),
                     After::Continue(Some(e)) => Ok((e, false)),
                     After::Continue(None) => Err(End::Done),
@@ -688,7 +1176,41 @@ impl Walker<'_> {
         }
     }
 
+    /// Where the branches of a selection that do not join end (a convergence, the end step):
+    /// as states, they need not join.
+    fn propose_meetings(&mut self, walked: &[(usize, Vec<Block>, End, bool)]) {
+        for (_, body, end, _) in walked {
+            match end {
+                // (Branches meet at a simultaneousConvergence only at the end of theirs.)
+                End::Conv(c)
+                    if !matches!(
+                        self.sfc.elements[*c].kind,
+                        ElementKind::SimultaneousConvergence
+                    ) =>
+                {
+                    self.proposed.push(*c)
+                }
+                End::Done => {
+                    if let Some(Block::Step(s)) = body.last() {
+                        self.proposed.push(*s);
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+
+    /// The innermost loop cannot be structured: as a state, its head is gone to.
+    fn propose_loop(&mut self) {
+        if let Some(l) = self.loops.last() {
+            self.proposed.push(l.head);
+        }
+    }
+
     fn bad_jump(&mut self, j: usize, why: &str) {
+        if let Some(t) = self.jumps[j] {
+            self.proposed.push(t);
+        }
         let el = &self.sfc.elements;
         let target = match &el[j].kind {
             ElementKind::JumpStep(Some(t)) => format!("`{}`", t.text),

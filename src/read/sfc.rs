@@ -2047,7 +2047,7 @@ fn in_wire_text(b: &Building, stack: &Open) -> bool {
 }
 
 /// The expression of a named transition's ST body: the text after `name :=` when it assigns
-/// (to its own name), without a final `;`; as byte offsets of `text`.
+/// (to its own name) or after a bare `:=`, without a final `;`; as byte offsets of `text`.
 fn named_expression(text: &str, name: &str) -> (usize, usize) {
     let mut from = text.len() - text.trim_start().len();
     let rest = &text[from..];
@@ -2058,6 +2058,10 @@ fn named_expression(text: &str, name: &str) -> (usize, usize) {
     {
         let after = &rest[name.len()..];
         from += name.len() + (after.len() - after.trim_start().len()) + 2;
+    } else if rest.starts_with(":=") {
+        // IEC 61131-3's textual form `TRANSITION … := expression; END_TRANSITION`, as some
+        // tools export the body.
+        from += 2;
     }
     // The statement ends at its `;` (outside a `(* comment *)`); what follows is comments.
     let mut to = text.trim_end().len().max(from);

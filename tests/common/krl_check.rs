@@ -113,6 +113,11 @@ pub fn check_krl(src: &str, dat: &str, program: &str, lf: bool) -> Result<(), St
     let mut defs: Vec<String> = Vec::new();
     let mut blocks: Vec<(&str, usize)> = Vec::new();
     let mut folds: Vec<usize> = Vec::new();
+    // The labels of the open DEF and the GOTOs to them, each with the blocks open there (by
+    // their first line): a GOTO stays in its DEF and never enters a block, so the blocks open
+    // at its label are open at the GOTO too.
+    let mut labels: Vec<(String, Vec<usize>)> = Vec::new();
+    let mut gotos: Vec<(String, usize, Vec<usize>)> = Vec::new();
     for (i, raw) in lines.iter().enumerate() {
         let n = i + 1;
         let err = |m: String| format!(".src line {n}: {m}: `{raw}`");
@@ -178,6 +183,20 @@ pub fn check_krl(src: &str, dat: &str, program: &str, lf: bool) -> Result<(), St
                 if words.len() != 1 {
                     return Err(err("END followed by more".into()));
                 }
+                for (l, at, open) in &gotos {
+                    let Some((_, where_)) = labels.iter().find(|(x, _)| x == l) else {
+                        return Err(format!(
+                            ".src line {at}: GOTO {l}: no such label in this DEF"
+                        ));
+                    };
+                    if !open.starts_with(where_) {
+                        return Err(format!(
+                            ".src line {at}: GOTO {l} enters a block its label stands in"
+                        ));
+                    }
+                }
+                labels.clear();
+                gotos.clear();
                 open_def = None;
             }
             _ => {
@@ -191,7 +210,24 @@ pub fn check_krl(src: &str, dat: &str, program: &str, lf: bool) -> Result<(), St
                     ))),
                     None => Err(err(format!("{first} without {opener}"))),
                 };
+                if words.len() == 1 && code.trim_end().ends_with(':') {
+                    let name = first;
+                    if !is_krl_name(name) {
+                        return Err(err(format!("label `{name}` is not a valid KRL name")));
+                    }
+                    if labels.iter().any(|(l, _)| l == name) {
+                        return Err(err(format!("label `{name}` defined twice")));
+                    }
+                    labels.push((name.to_owned(), blocks.iter().map(|b| b.1).collect()));
+                    continue;
+                }
                 match first {
+                    "GOTO" => {
+                        if words.len() != 2 || !is_krl_name(&words[1]) {
+                            return Err(err("GOTO needs one label".into()));
+                        }
+                        gotos.push((words[1].clone(), n, blocks.iter().map(|b| b.1).collect()));
+                    }
                     "IF" => {
                         if words.last().map(String::as_str) != Some("THEN") {
                             return Err(err("IF without THEN".into()));

@@ -113,6 +113,16 @@ impl Chart {
         self.succ.get(&id).cloned().unwrap_or_default()
     }
 
+    /// Whether a selection branch that starts with `head` is selected: its transition holds,
+    /// or, when it opens another selection, one of that selection's branches is selected.
+    fn selects(&self, head: u64, phase: &Phase) -> bool {
+        if self.nodes[&head].tag == "selectionDivergence" {
+            self.succs(head).into_iter().any(|h| self.selects(h, phase))
+        } else {
+            self.holds(head, phase)
+        }
+    }
+
     fn holds(&self, transition: u64, phase: &Phase) -> bool {
         match self.conds.get(&transition) {
             None => true,
@@ -200,11 +210,16 @@ impl Player<'_> {
                     id = succs[0];
                 }
                 "selectionDivergence" => {
-                    let t = match succs.iter().find(|t| c.holds(**t, self.phase())) {
+                    let t = match succs.iter().find(|t| c.selects(**t, self.phase())) {
                         Some(t) => *t,
                         None => return Stop::Stuck,
                     };
-                    id = c.succs(t)[0];
+                    // A branch that opens another selection (CODESYS) goes on there.
+                    id = if c.nodes[&t].tag == "selectionDivergence" {
+                        t
+                    } else {
+                        c.succs(t)[0]
+                    };
                 }
                 "selectionConvergence" => id = succs[0],
                 "simultaneousDivergence" => {
@@ -241,6 +256,48 @@ impl Chart {
             .iter()
             .find(|s| self.nodes[s].tag == "step" && &self.nodes[s].name == target)
             .unwrap()
+    }
+
+    /// Whether every jump stays in its simultaneous branch: its target lies in the same
+    /// simultaneous branches (the same branch of each enclosing divergence) as the jump. A jump
+    /// that enters or leaves a simultaneous branch makes a chart IEC 61131-3 calls unsafe.
+    pub fn jumps_stay_in_their_branches(&self) -> bool {
+        // Each element's simultaneous branches, from the start along connections.
+        let mut ctx: BTreeMap<u64, Vec<(u64, usize)>> = BTreeMap::new();
+        let mut todo = vec![(self.start(), Vec::new())];
+        while let Some((id, stack)) = todo.pop() {
+            if ctx.contains_key(&id) {
+                continue;
+            }
+            ctx.insert(id, stack.clone());
+            let n = &self.nodes[&id];
+            match n.tag.as_str() {
+                "simultaneousDivergence" => {
+                    for (k, b) in self.succs(id).into_iter().enumerate() {
+                        let mut s = stack.clone();
+                        s.push((id, k));
+                        todo.push((b, s));
+                    }
+                }
+                "simultaneousConvergence" => {
+                    let mut s = stack.clone();
+                    s.pop();
+                    for x in self.succs(id) {
+                        todo.push((x, s.clone()));
+                    }
+                }
+                "jumpStep" => {}
+                _ => {
+                    for x in self.succs(id) {
+                        todo.push((x, stack.clone()));
+                    }
+                }
+            }
+        }
+        self.order
+            .iter()
+            .filter(|id| self.nodes[id].tag == "jumpStep")
+            .all(|j| ctx.get(j) == ctx.get(&self.jump_target(*j)))
     }
 
     /// The chart's paths whatever the conditions (every transition may fire, a selection may
@@ -289,7 +346,12 @@ impl Chart {
                 "transition" | "selectionConvergence" => go(succs[0], stack, last),
                 "selectionDivergence" => {
                     for t in succs {
-                        go(self.succs(t)[0], stack.clone(), last.clone());
+                        let to = if self.nodes[&t].tag == "selectionDivergence" {
+                            t
+                        } else {
+                            self.succs(t)[0]
+                        };
+                        go(to, stack.clone(), last.clone());
                     }
                 }
                 "simultaneousDivergence" => {

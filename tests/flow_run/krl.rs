@@ -49,6 +49,9 @@ pub enum Stmt {
     /// `SWITCH e`, cases (`None` = `DEFAULT`).
     Switch(KExpr, Vec<(Option<i64>, Vec<Stmt>)>),
     Assign(String, KExpr),
+    /// `NAME:` (upper-cased).
+    Label(String),
+    Goto(String),
 }
 
 /// Tokens of a KRL expression.
@@ -240,6 +243,10 @@ fn parse_block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, Str
                 out.push(Stmt::If(kexpr(cond), then, otherwise));
             }
             "LOOP" => out.push(Stmt::Loop(parse_block(lines, i, &["ENDLOOP"]).0)),
+            "GOTO" => out.push(Stmt::Goto(c[4..].trim().to_ascii_uppercase())),
+            _ if c.ends_with(':') && !c.contains(char::is_whitespace) => {
+                out.push(Stmt::Label(c.trim_end_matches(':').to_ascii_uppercase()));
+            }
             "EXIT" => out.push(Stmt::Exit),
             "REPEAT" => {
                 let (body, end) = parse_block(lines, i, &["UNTIL"]);
@@ -300,11 +307,15 @@ struct Machine<'a> {
     /// `SIGNAL` name → (first input, last input).
     signals: HashMap<String, (u32, u32)>,
     steps: usize,
+    /// The actions done when each label was last gone to.
+    visits: HashMap<String, usize>,
 }
 
 enum Flow {
     Next,
     Exit,
+    /// A GOTO to the label: out of every block, to the DEF's level.
+    Goto(String),
     Stuck,
     Running,
 }
@@ -372,7 +383,32 @@ impl Machine<'_> {
         }
     }
 
+    /// Runs `stmts`; a GOTO to a label among them goes on there (one to a label elsewhere
+    /// leaves them: KRL jumps out of blocks, never into one).
     fn run(&mut self, stmts: &[Stmt]) -> Flow {
+        let mut pc = 0;
+        while pc < stmts.len() {
+            match self.run_plain(&stmts[pc..]) {
+                Flow::Goto(l) => {
+                    let Some(at) = stmts
+                        .iter()
+                        .position(|s| matches!(s, Stmt::Label(x) if *x == l))
+                    else {
+                        return Flow::Goto(l);
+                    };
+                    // Back at a label without an action in between: it never ends.
+                    if self.visits.insert(l, self.actions.len()) == Some(self.actions.len()) {
+                        return Flow::Stuck;
+                    }
+                    pc = at;
+                }
+                f => return f,
+            }
+        }
+        Flow::Next
+    }
+
+    fn run_plain(&mut self, stmts: &[Stmt]) -> Flow {
         for s in stmts {
             self.steps += 1;
             assert!(self.steps < 1_000_000, "the interpreter runs away");
@@ -412,6 +448,8 @@ impl Machine<'_> {
                     }
                 },
                 Stmt::Exit => Flow::Exit,
+                Stmt::Label(_) => Flow::Next,
+                Stmt::Goto(l) => Flow::Goto(l.clone()),
                 Stmt::Repeat(body, until) => {
                     let mut rounds = 0;
                     loop {
@@ -519,12 +557,14 @@ pub fn krl_run_with(
         vars,
         signals,
         steps: 0,
+        visits: HashMap::new(),
     };
     let outcome = match m.run(program) {
         Flow::Next => Outcome::Done,
         Flow::Exit => panic!("EXIT outside a loop"),
         Flow::Stuck => Outcome::Stuck,
         Flow::Running => Outcome::Running,
+        Flow::Goto(l) => panic!("GOTO {l}: no label it may go to"),
     };
     (m.actions, outcome)
 }
@@ -546,6 +586,7 @@ fn the_interpreter_uses_krl_precedence() {
         vars: HashMap::new(),
         signals: [("V".to_owned(), (9, 12))].into_iter().collect(),
         steps: 0,
+        visits: HashMap::new(),
     };
     // `$IN[1] OR $IN[3] == FALSE` is `($IN[1] OR $IN[3]) == FALSE` in KRL.
     assert!(!m.truth(&kexpr("$IN[1] OR $IN[3] == FALSE")));
