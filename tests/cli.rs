@@ -1888,3 +1888,40 @@ fn hostile_wired_conditions_are_errors() {
     }
     check(fan, 2030, "drawn from more than 1024 elements");
 }
+
+/// Issue 26, item 5: flow the structured forms cannot express (here a jump forward into the
+/// other branch of a selection) compiles: KRL goes on at a label, `--warn` says where (W307),
+/// and the listings show the states.
+#[test]
+fn a_forward_jump_compiles_with_a_label_and_says_where() {
+    let t = base_with_case("flow", "flow-jump-forward");
+    let o = run(
+        &["--warn", "--format", "short", "-pO", "-pF", "Blackboard.aml", "JumpForward"],
+        t.path(),
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(
+        err.contains("sfc.xml:49:13: warning[W307]: this jump to step localId 10")
+            && err.contains("[localId 6]"),
+        "{err}"
+    );
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains(" state 2 (id=10):"), "{out}");
+    assert!(out.contains("go on at id=10"), "{out}");
+    assert!(out.contains("[ state 2 at id=10:"), "{out}");
+    assert!(out.contains("at least (loops and states counted once)"), "{out}");
+    let src = std::fs::read_to_string(t.path().join("JumpForward.src")).unwrap();
+    let lines: Vec<&str> = src.lines().map(str::trim).collect();
+    let label = lines.iter().position(|l| *l == "skp_s2:").expect("a label");
+    let gotos: Vec<usize> = (0..lines.len())
+        .filter(|&k| lines[k] == "GOTO skp_s2")
+        .collect();
+    // Both branches go on at Place: the jump and the branch through Mid.
+    assert_eq!(gotos.len(), 2, "{src}");
+    assert!(gotos.iter().all(|&g| g < label), "{src}");
+    // Without --warn: no warning.
+    let o = run(&["--format", "short", "Blackboard.aml", "JumpForward"], t.path());
+    assert_eq!(o.status.code(), Some(0));
+    assert!(!stderr(&o).contains("W307"), "{}", stderr(&o));
+}

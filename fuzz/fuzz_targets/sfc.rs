@@ -56,24 +56,48 @@ fuzz_target!(|data: &[u8]| {
                 assert!(!seen[i], "plan step {i} twice");
                 seen[i] = true;
             }
+            let (mut gotos, mut machines) = (Vec::new(), Vec::new());
             plan::visit(&p.body, &mut |b| match b {
                 plan::Block::Wait(t) => assert!(matches!(
                     sfc.elements[*t].kind,
                     ElementKind::Transition(Some(_))
                 )),
                 plan::Block::Choice { branches, .. } => {
+                    // A branch starts with its transition, or opens another selection.
                     for br in branches {
                         assert!(matches!(
                             sfc.elements[br.transition].kind,
-                            ElementKind::Transition(_)
+                            ElementKind::Transition(_) | ElementKind::SelectionDivergence
                         ));
+                        for h in br.heads() {
+                            assert!(matches!(
+                                sfc.elements[h].kind,
+                                ElementKind::Transition(_)
+                            ));
+                        }
                     }
+                }
+                // Each state begins where a Goto of its machine goes, and every Goto goes to a
+                // state.
+                plan::Block::Machine(states) => {
+                    let entries: Vec<usize> = states.iter().map(|s| s.entry).collect();
+                    for st in states {
+                        plan::visit(&st.body, &mut |x| {
+                            if let plan::Block::Goto { target, .. } = x {
+                                gotos.push(*target);
+                            }
+                        });
+                    }
+                    machines.extend(entries);
                 }
                 plan::Block::Loop { head, body, .. } => {
                     assert_eq!(body.first(), Some(&plan::Block::Step(*head)));
                 }
                 _ => {}
             });
+            for g in &gotos {
+                assert!(machines.contains(g), "a Goto to {g}, which begins no state");
+            }
             let _ = print::flow(sfc, &p);
             let _ = print::order(sfc, &p);
         }
