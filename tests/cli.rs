@@ -1896,7 +1896,15 @@ fn hostile_wired_conditions_are_errors() {
 fn a_forward_jump_compiles_with_a_label_and_says_where() {
     let t = base_with_case("flow", "flow-jump-forward");
     let o = run(
-        &["--warn", "--format", "short", "-pO", "-pF", "Blackboard.aml", "JumpForward"],
+        &[
+            "--warn",
+            "--format",
+            "short",
+            "-pO",
+            "-pF",
+            "Blackboard.aml",
+            "JumpForward",
+        ],
         t.path(),
     );
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
@@ -1910,7 +1918,10 @@ fn a_forward_jump_compiles_with_a_label_and_says_where() {
     assert!(out.contains(" state 2 (id=10):"), "{out}");
     assert!(out.contains("go on at id=10"), "{out}");
     assert!(out.contains("[ state 2 at id=10:"), "{out}");
-    assert!(out.contains("at least (loops and states counted once)"), "{out}");
+    assert!(
+        out.contains("at least (loops and states counted once)"),
+        "{out}"
+    );
     let src = std::fs::read_to_string(t.path().join("JumpForward.src")).unwrap();
     let lines: Vec<&str> = src.lines().map(str::trim).collect();
     let label = lines.iter().position(|l| *l == "skp_s2:").expect("a label");
@@ -1921,7 +1932,10 @@ fn a_forward_jump_compiles_with_a_label_and_says_where() {
     assert_eq!(gotos.len(), 2, "{src}");
     assert!(gotos.iter().all(|&g| g < label), "{src}");
     // Without --warn: no warning.
-    let o = run(&["--format", "short", "Blackboard.aml", "JumpForward"], t.path());
+    let o = run(
+        &["--format", "short", "Blackboard.aml", "JumpForward"],
+        t.path(),
+    );
     assert_eq!(o.status.code(), Some(0));
     assert!(!stderr(&o).contains("W307"), "{}", stderr(&o));
 }

@@ -140,6 +140,31 @@ fn loops() {
 }
 
 #[test]
+fn forward_jumps() {
+    // Each jump's target begins a state (found before the walk: it does not dominate the jump).
+    check("jumps", 150, 2400);
+}
+
+/// Jumps back into the previous loop's body, 600 loops each overlapping the next: beyond the
+/// nesting limit (128), the walk makes the open loops' heads states and walks again, 128 heads
+/// per walk, so this shape costs about n²/128 and is not timed here (docs/PERFORMANCE.md); it
+/// must compile, with the labels of its states.
+#[test]
+fn overlapping_loops_deeper_than_the_nesting_limit_compile() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let tmp = tempfile::tempdir().unwrap();
+    generator::write_shape(tmp.path(), "overlap", 600)
+        .expect("a known dimension")
+        .unwrap();
+    compile(tmp.path());
+    let src = std::fs::read_to_string(tmp.path().join("out.src")).unwrap();
+    assert!(
+        src.contains("GOTO skp_s") && src.contains("\nskp_s2:"),
+        "no states"
+    );
+}
+
+#[test]
 fn loop_nesting() {
     // Loops inside loops, bounded like branches (plan::MAX_NESTING = 128): 1× = 7, 16× = 112.
     check("loopnest", 7, 112);

@@ -927,7 +927,7 @@ pub fn write_shape(dir: &Path, dim: &str, n: usize) -> Option<io::Result<Project
             }
             cond = Some(c);
         }
-        "width" | "depth" | "loops" | "loopnest" => {}
+        "width" | "depth" | "loops" | "loopnest" | "jumps" | "overlap" => {}
         _ => return None,
     }
     Some((|| {
@@ -965,6 +965,26 @@ pub fn write_shape(dir: &Path, dim: &str, n: usize) -> Option<io::Result<Project
                     let t2 = g.transition(head);
                     let body = g.skill_step(Pred::Plain(t2), 0);
                     t = g.loop_end_named(body, &name);
+                }
+                g.special_step("End", Some(t));
+            }
+            "jumps" | "overlap" => {
+                // Flow beyond the structured forms (SPEC.md 3.1): blocks of a head step `Jk`, a
+                // body step `Bk` and a selection that jumps away or goes on. `jumps`: forward,
+                // over the next block (to `Jk+2`); `overlap`: back into the previous block's
+                // body (`Bk-1`), so each loop overlaps the next. Both compile into states.
+                let start = g.special_step("Start", None);
+                let mut t = g.transition(start);
+                for k in 0..n {
+                    let head = g.loop_head_named(t, &format!("J{k}"));
+                    let t2 = g.transition(head);
+                    let body = g.loop_head_named(t2, &format!("B{k}"));
+                    let target = match dim {
+                        "jumps" if k + 2 < n => format!("J{}", k + 2),
+                        "jumps" => format!("J{k}"),
+                        _ => format!("B{}", k.saturating_sub(1)),
+                    };
+                    t = g.loop_end_named(body, &target);
                 }
                 g.special_step("End", Some(t));
             }

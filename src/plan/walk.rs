@@ -51,6 +51,18 @@ pub fn walk(
         return None;
     }
     let mut entries = vec![false; sfc.elements.len()];
+    // A jump to a step that does not lie on every path to it is never a loop: its target
+    // begins a state from the start, so a chart of many such jumps is walked once, not once per
+    // jump, and the branches they leave do not nest. (Jumps that leave several loops are found
+    // by the walk.)
+    let dom = Dominators::new(g, start);
+    for (j, t) in jumps.iter().enumerate() {
+        if let Some(t) = *t
+            && !dom.dominates(t, j)
+        {
+            entries[t] = true;
+        }
+    }
     loop {
         let mut local = diags.empty_like();
         let (result, proposed) = walk_once(sfc, g, jumps, start, &entries, &mut local);
@@ -85,6 +97,109 @@ pub fn walk(
             return result;
         }
     }
+}
+
+/// The dominator tree of the connections from the start (which have no cycle: `find_cycle`),
+/// numbered for constant-time questions.
+struct Dominators {
+    /// Entry and exit numbers of each element in a walk of the tree (`usize::MAX`: not reached
+    /// from the start by connections).
+    enter: Vec<usize>,
+    exit: Vec<usize>,
+}
+
+impl Dominators {
+    fn new(g: &Graph, start: usize) -> Self {
+        let n = g.len();
+        let order = connection_order(g);
+        let mut by_order: Vec<usize> = (0..n).collect();
+        by_order.sort_unstable_by_key(|&i| order[i]);
+        const NONE: usize = usize::MAX;
+        let mut idom = vec![NONE; n];
+        idom[start] = start;
+        for &v in &by_order {
+            if v == start {
+                continue;
+            }
+            let mut new = NONE;
+            for &p in g.preds(v) {
+                if idom[p] == NONE {
+                    continue;
+                }
+                new = if new == NONE {
+                    p
+                } else {
+                    // The nearest common dominator: each idom comes earlier in the order.
+                    let (mut a, mut b) = (p, new);
+                    while a != b {
+                        while order[a] > order[b] {
+                            a = idom[a];
+                        }
+                        while order[b] > order[a] {
+                            b = idom[b];
+                        }
+                    }
+                    a
+                };
+            }
+            idom[v] = new;
+        }
+        let mut children: Vec<Vec<usize>> = vec![Vec::new(); n];
+        for v in 0..n {
+            if idom[v] != NONE && v != start {
+                children[idom[v]].push(v);
+            }
+        }
+        let (mut enter, mut exit) = (vec![NONE; n], vec![NONE; n]);
+        let mut clock = 0;
+        let mut stack = vec![(start, 0usize)];
+        enter[start] = 0;
+        while let Some((v, k)) = stack.pop() {
+            if k < children[v].len() {
+                stack.push((v, k + 1));
+                let c = children[v][k];
+                clock += 1;
+                enter[c] = clock;
+                stack.push((c, 0));
+            } else {
+                clock += 1;
+                exit[v] = clock;
+            }
+        }
+        Dominators { enter, exit }
+    }
+
+    /// Whether every path of connections from the start to `b` passes `a`.
+    fn dominates(&self, a: usize, b: usize) -> bool {
+        self.enter[a] != usize::MAX
+            && self.enter[b] != usize::MAX
+            && self.enter[a] <= self.enter[b]
+            && self.exit[b] <= self.exit[a]
+    }
+}
+
+/// Each element's place in a topological order of the connections (jumps are not connections;
+/// `find_cycle` found no cycle of connections).
+fn connection_order(g: &Graph) -> Vec<usize> {
+    let n = g.len();
+    let mut missing: Vec<usize> = (0..n).map(|i| g.preds(i).len()).collect();
+    // First in, first out: the elements of a short branch (a jump) come before those of a
+    // long one, so more forward jumps are seen as such.
+    let mut ready: std::collections::VecDeque<usize> =
+        (0..n).filter(|&i| missing[i] == 0).collect();
+    let mut order = vec![usize::MAX; n];
+    let mut next = 0;
+    while let Some(i) = ready.pop_front() {
+        order[i] = next;
+        next += 1;
+        for &s in g.succs(i) {
+            missing[s] -= 1;
+            if missing[s] == 0 {
+                ready.push_back(s);
+            }
+        }
+    }
+    order
 }
 
 /// A step the chart reaches (by connections and jumps from the start) that `body` does not
@@ -443,6 +558,8 @@ impl Walker<'_> {
                 }
                 _ => {
                     if depth >= MAX_NESTING {
+                        // Loops that nest this deep are left to states, where flow allows it.
+                        self.propose_open_loops();
                         self.fail(
                             cur,
                             Code::Unsupported,
@@ -1093,6 +1210,8 @@ impl Walker<'_> {
     /// or `Err(end)` when the sequence ends; `None` on failure.
     fn open_loop(&mut self, head: usize, depth: usize) -> (Vec<Block>, Option<GoOn>) {
         if depth >= MAX_NESTING {
+            // Loops that nest this deep are left to states, where flow allows it.
+            self.propose_open_loops();
             self.fail(
                 head,
                 Code::Unsupported,
@@ -1198,6 +1317,12 @@ impl Walker<'_> {
                 _ => {}
             }
         }
+    }
+
+    /// The loops nest too deep: as states, their heads are gone to.
+    fn propose_open_loops(&mut self) {
+        let heads: Vec<usize> = self.loops.iter().map(|l| l.head).collect();
+        self.proposed.extend(heads);
     }
 
     /// The innermost loop cannot be structured: as a state, its head is gone to.
