@@ -926,7 +926,9 @@ impl Walker<'_> {
                 // (A branch that goes to another state or repeats without end joins nothing.)
                 .filter(|e| !matches!(e, End::Left | End::Endless))
                 .collect();
-            if joining.is_empty() {
+            // The branches as a selection that does not join: those that do not go to another
+            // state end in what follows it.
+            let unjoined = |walked: Vec<(usize, Vec<Block>, End, bool)>| {
                 let branches = walked
                     .into_iter()
                     .map(|(t, body, _, _)| Branch {
@@ -935,11 +937,14 @@ impl Walker<'_> {
                         end: BranchEnd::Join,
                     })
                     .collect();
-                return Some(Err(End::Branched(Box::new(Block::Choice {
+                Box::new(Block::Choice {
                     divergence: div,
                     convergence: None,
                     branches,
-                }))));
+                })
+            };
+            if joining.is_empty() {
+                return Some(Err(End::Branched(unjoined(walked))));
             }
             let conv = match joining.first() {
                 Some(End::Conv(c)) => Some(*c),
@@ -950,22 +955,7 @@ impl Walker<'_> {
             {
                 // The one branch that does not go to another state ends its simultaneous
                 // branch.
-                let branches = walked
-                    .into_iter()
-                    .map(|(t, body, _, _)| Branch {
-                        transition: t,
-                        body,
-                        end: BranchEnd::Join,
-                    })
-                    .collect();
-                return Some(Err(End::BranchedAt(
-                    Box::new(Block::Choice {
-                        divergence: div,
-                        convergence: None,
-                        branches,
-                    }),
-                    c,
-                )));
+                return Some(Err(End::BranchedAt(unjoined(walked), c)));
             }
             let joined = conv.is_some_and(|c| {
                 joining.iter().all(|e| matches!(e, End::Conv(x) if *x == c))
@@ -1319,10 +1309,13 @@ impl Walker<'_> {
         }
     }
 
-    /// The loops nest too deep: as states, their heads are gone to.
+    /// Loops nest too deep: every jump's target begins a state (the chart loses its loops, but
+    /// one more walk suffices; a chart this deep is not written by hand).
     fn propose_open_loops(&mut self) {
-        let heads: Vec<usize> = self.loops.iter().map(|l| l.head).collect();
-        self.proposed.extend(heads);
+        if !self.loops.is_empty() {
+            let targets: Vec<usize> = self.jumps.iter().flatten().copied().collect();
+            self.proposed.extend(targets);
+        }
     }
 
     /// The innermost loop cannot be structured: as a state, its head is gone to.
