@@ -559,7 +559,7 @@ impl Walker<'_> {
                 _ => {
                     if depth >= MAX_NESTING {
                         // Loops that nest this deep are left to states, where flow allows it.
-                        self.propose_open_loops();
+                        self.propose_deep(cur);
                         self.fail(
                             cur,
                             Code::Unsupported,
@@ -1201,7 +1201,7 @@ impl Walker<'_> {
     fn open_loop(&mut self, head: usize, depth: usize) -> (Vec<Block>, Option<GoOn>) {
         if depth >= MAX_NESTING {
             // Loops that nest this deep are left to states, where flow allows it.
-            self.propose_open_loops();
+            self.propose_deep(head);
             self.fail(
                 head,
                 Code::Unsupported,
@@ -1309,9 +1309,11 @@ impl Walker<'_> {
         }
     }
 
-    /// Loops nest too deep: every jump's target begins a state (the chart loses its loops, but
-    /// one more walk suffices; a chart this deep is not written by hand).
-    fn propose_open_loops(&mut self) {
+    /// The flow nests too deep at `at`: it begins a state (walked from depth 0), and when loops
+    /// are open, every jump's target does too (the chart loses its loops, but one more walk
+    /// suffices; a chart this deep is not written by hand).
+    fn propose_deep(&mut self, at: usize) {
+        self.proposed.push(at);
         if !self.loops.is_empty() {
             let targets: Vec<usize> = self.jumps.iter().flatten().copied().collect();
             self.proposed.extend(targets);
