@@ -459,8 +459,10 @@ pub fn flow(sfc: &Sfc, plan: &Plan) -> String {
     let total = walk(sfc, &plan.body, 0.0, "", &mut o, &mut tot);
     let what = if tot.endless {
         " per round (the program repeats without end)"
-    } else if tot.loops || tot.states {
+    } else if tot.states {
         " at least (loops and states counted once)"
+    } else if tot.loops {
+        " at least (loops counted once)"
     } else {
         ""
     };
