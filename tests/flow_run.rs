@@ -1005,6 +1005,64 @@ fn a_wrong_krl_program_fails() {
     assert!(run(drop_line(&out.main, "EXIT")));
 }
 
+/// Programs with states (flow beyond the structured forms) are checked as closely: a Goto to
+/// the wrong state is noticed in every language, so is a state never set (RAPID, URScript) or
+/// a label dropped (KRL); a label inside a block a GOTO is outside of is refused by the KRL
+/// check.
+#[test]
+fn a_wrong_program_with_states_fails() {
+    let case = "flow-jump-forward";
+    // KRL: labels and GOTO.
+    let (program, out, chart) = compile(case, Lang::Krl);
+    let run = |main: String| {
+        let output = Output {
+            lang: Lang::Krl,
+            main,
+            dat: out.dat.clone(),
+        };
+        output.syntax(&program).is_err()
+            || fails(|| {
+                check_compiled(case, &output, &program, &chart, 7, 100);
+            })
+    };
+    assert!(!run(out.main.clone()));
+    assert!(out.main.contains("GOTO skp_s2"), "{}", out.main);
+    assert!(run(out.main.replacen("GOTO skp_s2", "GOTO skp_s1", 1)));
+    // (A dropped `GOTO skp_s2` before `skp_s2:` changes nothing; a dropped label does.)
+    assert!(run(drop_line(&out.main, "skp_s2:")));
+    // A label moved into the block before it: a GOTO would enter the block.
+    let lines: Vec<&str> = out.main.lines().collect();
+    let k = lines.iter().position(|l| l.trim() == "skp_s2:").unwrap();
+    let mut inside: Vec<&str> = lines.clone();
+    inside.insert(k, "IF TRUE THEN");
+    inside.push("");
+    let end = inside.iter().rposition(|l| l.trim() == "END").unwrap();
+    inside.insert(end, "ENDIF");
+    let inside = inside.join("\n");
+    assert!(
+        krl_syntax::check_krl(&inside, &out.dat, &program, true).is_err(),
+        "{inside}"
+    );
+    // RAPID and URScript: a state variable.
+    for (lang, set, wrong) in [
+        (Lang::Rapid, "skp_state := 2;", "skp_state := 1;"),
+        (Lang::UrScript, "skp_state = 2", "skp_state = 1"),
+    ] {
+        let (program, out, chart) = compile(case, lang);
+        let text = out.main.clone();
+        assert!(!noticed(case, &program, &chart, lang, text.clone()));
+        assert!(text.contains(set), "{text}");
+        assert!(noticed(
+            case,
+            &program,
+            &chart,
+            lang,
+            text.replacen(set, wrong, 1)
+        ));
+        assert!(noticed(case, &program, &chart, lang, drop_line(&text, set)));
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Conditions of every form
 // ---------------------------------------------------------------------------------------------
