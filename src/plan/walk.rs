@@ -620,20 +620,15 @@ impl Walker<'_> {
             }
             if self.branch_of[entry] != here {
                 let mut from = first;
-                visit(
-                    &states
-                        .iter()
-                        .map(|s| s.body.clone())
-                        .collect::<Vec<_>>()
-                        .concat(),
-                    &mut |b| {
+                for st in &states {
+                    visit(&st.body, &mut |b| {
                         if let Block::Goto { target, from: f } = b
                             && *target == entry
                         {
                             from = *f;
                         }
-                    },
-                );
+                    });
+                }
                 self.fail(
                     from,
                     Code::BadJump,
