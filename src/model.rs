@@ -396,6 +396,16 @@ pub struct Sfc {
     /// Connections back to an earlier step, made loops (`plan::close_circles`): each became a
     /// jumpStep element appended to `elements`.
     pub closed: Vec<Closed>,
+    /// The macro steps with a body (SPEC.md 3): the body's elements follow the macroStep in
+    /// `elements`, ascending.
+    pub macros: Vec<MacroBody>,
+}
+
+/// A macroStep and its body's chart: the elements `body` (which run in the macro step's place).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MacroBody {
+    pub step: usize,
+    pub body: std::ops::Range<usize>,
 }
 
 /// A connection back to an earlier step (a chart drawn as a closed circle), made a jump.
@@ -410,6 +420,11 @@ pub struct Closed {
 }
 
 impl Sfc {
+    /// Whether element `i` belongs to a macro step's body.
+    pub fn in_macro_body(&self, i: usize) -> bool {
+        self.macros.iter().any(|m| m.body.contains(&i))
+    }
+
     /// How a jump is named in listings and comments: `jump localId 57`, or for a connection
     /// back to an earlier step, `connection back from localId 12`.
     pub fn jump_label(&self, jump: usize) -> String {

@@ -624,6 +624,7 @@ flow_cases! {
     flow_loop_early_exit => "flow-loop-early-exit",
     flow_loop_exit => "flow-loop-exit",
     flow_loop_joined_exits => "flow-loop-joined-exits",
+    flow_macro_step => "flow-macro-step",
     flow_nested_loops => "flow-nested-loops",
     flow_parallel_in_selection => "flow-parallel-in-selection",
     flow_reference_condition => "flow-reference-condition",

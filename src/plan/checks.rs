@@ -23,10 +23,20 @@ pub fn check_nodes(sfc: &Sfc, g: &Graph, diags: &mut Diagnostics) -> Vec<Diagnos
         };
         match &e.kind {
             ElementKind::MacroStep => {
-                diags.push(err(
-                    Code::Unsupported,
-                    "macroStep is not supported yet".to_owned(),
-                ));
+                if !sfc.macros.iter().any(|m| m.step == i) {
+                    diags.push(err(
+                        Code::Unsupported,
+                        "macroStep without a body (`body/SFC`): there is nothing to run in its place".to_owned(),
+                    ));
+                } else if np != 1 || ns != 1 {
+                    // (Also the consequence of a body without one end step: secondary.)
+                    secondary.push(err(
+                        Code::StepFanInOut,
+                        format!(
+                            "macroStep has {np} inputs and is followed by {ns}; like a step, it has one of each"
+                        ),
+                    ));
+                }
             }
             ElementKind::JumpStep(_) => {
                 if np != 1 {
@@ -263,7 +273,10 @@ pub fn start_end(
     // The start is the step marked initialStep="true" (SPEC.md 3): the one marked step without
     // a predecessor (the original also marks its end step), else the one marked step (a chart
     // drawn as a closed circle); else the one step without a predecessor that no jump leads to.
-    let initial = |i: &usize| matches!(&el[*i].kind, ElementKind::Step(st) if st.initial);
+    // (A macro step's body marks its own initial step.)
+    let initial = |i: &usize| {
+        matches!(&el[*i].kind, ElementKind::Step(st) if st.initial) && !sfc.in_macro_body(*i)
+    };
     let marked: Vec<usize> = (0..el.len())
         .filter(|i| el[*i].kind.is_step() && initial(i))
         .collect();

@@ -107,6 +107,61 @@ pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
             ids.insert(e.local_id, i);
         }
     }
+    // Macro steps (SPEC.md 3): the body's chart runs in the step's place. What follows the
+    // macro step follows the body's end step; the body's initial step follows the macro step.
+    let mut after_macro: HashMap<usize, (usize, std::ops::Range<usize>)> = HashMap::new();
+    let mut into_body: HashMap<usize, usize> = HashMap::new();
+    for m in &sfc.macros {
+        let body = m.body.clone();
+        let el = &sfc.elements;
+        let steps: Vec<usize> = body.clone().filter(|&i| el[i].kind.is_step()).collect();
+        let used: std::collections::HashSet<usize> = body
+            .clone()
+            .flat_map(|i| el[i].inputs.iter().filter_map(|(r, _)| ids.get(*r)))
+            .collect();
+        let first: Vec<usize> = steps
+            .iter()
+            .copied()
+            .filter(|&i| matches!(&el[i].kind, ElementKind::Step(st) if st.initial))
+            .collect();
+        let first = if first.len() == 1 {
+            first
+        } else {
+            steps
+                .iter()
+                .copied()
+                .filter(|&i| el[i].inputs.is_empty())
+                .collect()
+        };
+        let last: Vec<usize> = steps
+            .iter()
+            .copied()
+            .filter(|i| !used.contains(i))
+            .collect();
+        if let [i] = first.as_slice() {
+            into_body.insert(*i, m.step);
+        }
+        match (first.as_slice(), last.as_slice()) {
+            ([_], [e]) => {
+                after_macro.insert(m.step, (*e, body));
+            }
+            _ => diags.push(
+                Diagnostic::error(
+                    Code::StartStep,
+                    format!(
+                        "the body of macroStep localId {} has {} initial step{} and {} end step{}; it needs one of each",
+                        el[m.step].local_id,
+                        first.len(),
+                        if first.len() == 1 { "" } else { "s" },
+                        last.len(),
+                        if last.len() == 1 { "" } else { "s" },
+                    ),
+                )
+                .at(el[m.step].span.clone())
+                .element(format!("localId {}", el[m.step].local_id)),
+            ),
+        }
+    }
     // Edges (producer, consumer), predecessors in document order of the connections.
     let mut pred_at = Vec::with_capacity(n + 1);
     let mut pred = Vec::with_capacity(n);
@@ -130,6 +185,11 @@ pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
                     }
                 }
                 Some(p) => {
+                    // Out of a macro step (from outside its body): out of its body's end.
+                    let p = match after_macro.get(&p) {
+                        Some((end, body)) if !body.contains(&i) => *end,
+                        _ => p,
+                    };
                     // A scan for the usual one or two inputs; a convergence of many is
                     // deduplicated through `seen` (its width must not cost its square).
                     let dup = if pred.len() - first < 8 {
@@ -155,6 +215,10 @@ pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
                     .element(format!("localId {}", e.local_id)),
                 ),
             }
+        }
+        if let Some(&m) = into_body.get(&i) {
+            pred.push(m);
+            succ_count[m] += 1;
         }
     }
     pred_at.push(pred.len());

@@ -154,6 +154,16 @@ struct Pou {
     program: bool,
     sfc_span: Span,
     elements: Vec<Element>,
+    macros: Vec<crate::model::MacroBody>,
+}
+
+/// A macroStep whose body is being read: the depths of its `body` and of the body's `SFC`, the
+/// macroStep's element and the body's first.
+struct OpenMacro {
+    body_depth: usize,
+    sfc_depth: Option<usize>,
+    step: usize,
+    first: usize,
 }
 
 impl Pou {
@@ -729,6 +739,9 @@ impl Stream {
         let mut body_seen = false;
         let mut sfc: Option<(Span, usize, Vec<Element>)> = None;
         let mut sfc_done = false;
+        // Macro steps whose bodies are open (they nest), and those read.
+        let mut open_macros: Vec<OpenMacro> = Vec::new();
+        let mut macros: Vec<crate::model::MacroBody> = Vec::new();
         // The element being built, and whether one is.
         let mut b = Building::new(self.file);
         let mut building = false;
@@ -760,6 +773,14 @@ impl Stream {
                             }
                         } else if building {
                             end_inside(&mut b, &stack);
+                        } else if open_macros.last().is_some_and(|m| m.body_depth == depth) {
+                            // A macro step's `</body>`: its elements are complete.
+                            let m = open_macros.pop().expect("checked");
+                            let end = sfc.as_ref().map_or(m.first, |s| s.2.len());
+                            macros.push(crate::model::MacroBody {
+                                step: m.step,
+                                body: m.first..end,
+                            });
                         } else if outer.as_ref().is_some_and(|o| o.depth == depth) {
                             // `</action>`: back to its POU.
                             let o = outer.take().expect("checked");
@@ -797,6 +818,7 @@ impl Stream {
                                 program,
                                 sfc_span: span,
                                 elements: els,
+                                macros: std::mem::take(&mut macros),
                             });
                             sfc_done = true;
                         } else if let Some((_, _, d)) = &pou
@@ -927,6 +949,29 @@ impl Stream {
                     }
                 }
                 let depth = stack.len() + 1;
+                if building
+                    && b.tag == Tag::MacroStep
+                    && tag == Tag::Body
+                    && depth == b.depth + 1
+                    && !empty
+                {
+                    // A macro step's body (SPEC.md 3): the step is complete, and its body's
+                    // chart is read as elements of this one.
+                    building = false;
+                    if let Some(el) = self.finish(&mut b, diags)
+                        && let Some((_, _, els)) = &mut sfc
+                    {
+                        els.push(el);
+                        open_macros.push(OpenMacro {
+                            body_depth: depth,
+                            sfc_depth: None,
+                            step: els.len() - 1,
+                            first: els.len(),
+                        });
+                    }
+                    stack.push(tag, name);
+                    continue;
+                }
                 if building {
                     if let Err(d) = self.inside(&mut b, &stack, tag, tag_span, &t) {
                         return Ok(Err(d));
@@ -1098,6 +1143,7 @@ impl Stream {
                                 program,
                                 sfc_span: tag_span,
                                 elements: Vec::new(),
+                                macros: Vec::new(),
                             });
                             sfc_done = true;
                         } else {
@@ -1112,8 +1158,19 @@ impl Stream {
                         }
                     }
                     _ => {
+                        if tag == Tag::Sfc
+                            && let Some(m) = open_macros.last_mut()
+                            && m.body_depth + 1 == depth
+                            && m.sfc_depth.is_none()
+                        {
+                            m.sfc_depth = Some(depth);
+                        }
+                        let in_macro = open_macros
+                            .last()
+                            .and_then(|m| m.sfc_depth)
+                            .is_some_and(|s| depth == s + 1);
                         if let Some((_, d, els)) = &mut sfc
-                            && depth == *d + 1
+                            && (depth == *d + 1 || in_macro)
                         {
                             if let Err(d) = self.begin(&mut b, &t, tag, name, tag_span, depth) {
                                 return Ok(Err(d));
@@ -1911,6 +1968,7 @@ impl Stream {
             variables: std::mem::take(&mut self.variables),
             values: std::mem::take(&mut self.values),
             closed: Vec::new(),
+            macros: pou.macros,
         })
     }
 }

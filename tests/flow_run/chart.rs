@@ -39,13 +39,48 @@ impl Chart {
             .expect("an SFC body");
         let mut nodes = BTreeMap::new();
         let mut order = Vec::new();
-        for e in sfc.children().filter(|n| n.is_element()) {
+        // The chart's elements and, in a macro step's place, its body's (SPEC.md 3): each macro
+        // step with its body's elements.
+        let mut all = Vec::new();
+        let mut macros: Vec<(u64, Vec<u64>)> = Vec::new();
+        fn gather<'a, 'i>(
+            sfc: roxmltree::Node<'a, 'i>,
+            all: &mut Vec<roxmltree::Node<'a, 'i>>,
+            macros: &mut Vec<(u64, Vec<u64>)>,
+        ) {
+            for e in sfc.children().filter(|n| n.is_element()) {
+                all.push(e);
+                if e.tag_name().name() == "macroStep" {
+                    let body = e
+                        .children()
+                        .find(|n| n.tag_name().name() == "body")
+                        .and_then(|b| b.children().find(|n| n.tag_name().name() == "SFC"))
+                        .expect("a macro step's body");
+                    let from = all.len();
+                    gather(body, all, macros);
+                    let ids = all[from..]
+                        .iter()
+                        .filter_map(|n| n.attribute("localId"))
+                        .map(|i| i.parse().unwrap())
+                        .collect();
+                    macros.push((e.attribute("localId").unwrap().parse().unwrap(), ids));
+                }
+            }
+        }
+        gather(sfc, &mut all, &mut macros);
+        for e in all {
             let id: u64 = e.attribute("localId").unwrap().parse().unwrap();
             let d = |tag: &'static str| {
                 e.descendants()
                     .filter(move |n| n.is_element() && n.tag_name().name() == tag)
             };
+            // (A macro step's own connections, not its body's.)
             let inputs = d("connection")
+                .filter(|c| {
+                    !c.ancestors()
+                        .take_while(|a| *a != e)
+                        .any(|a| a.tag_name().name() == "body")
+                })
                 .map(|c| c.attribute("refLocalId").unwrap().parse().unwrap())
                 .collect();
             let x = d("position")
@@ -78,6 +113,29 @@ impl Chart {
                 },
             );
             order.push(id);
+        }
+        // A macro step leads to its body's first step; what follows it follows the body's last.
+        for (m, body) in &macros {
+            let first = *body
+                .iter()
+                .find(|i| nodes[*i].tag == "step" && nodes[*i].inputs.is_empty())
+                .expect("a macro body's first step");
+            let last = *body
+                .iter()
+                .find(|i| {
+                    nodes[*i].tag == "step" && !body.iter().any(|j| nodes[j].inputs.contains(i))
+                })
+                .expect("a macro body's last step");
+            for (id, n) in nodes.iter_mut() {
+                if !body.contains(id) {
+                    for i in n.inputs.iter_mut() {
+                        if *i == *m {
+                            *i = last;
+                        }
+                    }
+                }
+            }
+            nodes.get_mut(&first).unwrap().inputs.push(*m);
         }
         let mut succ: BTreeMap<u64, Vec<(usize, u64)>> = BTreeMap::new();
         for (pos, id) in order.iter().enumerate() {
@@ -221,7 +279,7 @@ impl Player<'_> {
                         c.succs(t)[0]
                     };
                 }
-                "selectionConvergence" => id = succs[0],
+                "selectionConvergence" | "macroStep" => id = succs[0],
                 "simultaneousDivergence" => {
                     let mut conv = None;
                     for b in succs {
@@ -343,7 +401,7 @@ impl Chart {
                         _ => panic!("step with several successors"),
                     }
                 }
-                "transition" | "selectionConvergence" => go(succs[0], stack, last),
+                "transition" | "selectionConvergence" | "macroStep" => go(succs[0], stack, last),
                 "selectionDivergence" => {
                     for t in succs {
                         let to = if self.nodes[&t].tag == "selectionDivergence" {
