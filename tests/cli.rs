@@ -1939,3 +1939,63 @@ fn a_forward_jump_compiles_with_a_label_and_says_where() {
     assert_eq!(o.status.code(), Some(0));
     assert!(!stderr(&o).contains("W307"), "{}", stderr(&o));
 }
+
+/// Issue 26, item 6: a macro step's body runs in its place, also when the body holds another
+/// macro step (nested bodies keep their own initial and end steps).
+#[test]
+fn a_macro_step_nested_in_a_macro_step_runs_in_its_place() {
+    let t = base_with_case("flow", "flow-macro-step");
+    let sfc = std::fs::read_to_string(t.path().join("sfc.xml")).unwrap();
+    let start = sfc
+        .find("<step localId=\"103\"")
+        .expect("the fixture's Grip");
+    let end = start + sfc[start..].find("</step>").unwrap() + "</step>".len();
+    let step = |id: u32, name: &str, input: Option<u32>| {
+        let input = input
+            .map(|i| {
+                format!("<connectionPointIn><connection refLocalId=\"{i}\"/></connectionPointIn>")
+            })
+            .unwrap_or_default();
+        let initial = if input.is_empty() {
+            " initialStep=\"true\""
+        } else {
+            ""
+        };
+        format!(
+            "<step localId=\"{id}\" name=\"{name}\"{initial}><position x=\"0\" y=\"0\"/>{input}<connectionPointOut formalParameter=\"\"/><addData><data name=\"iwb\" handleUnknown=\"preserve\"><iwb><time duration=\"1\"/><ressources><ressource name=\"KUKA KR15-2\"/></ressources><skill name=\"Move LIN\"/><Variable name=\"Frame\" Value=\"({id}, 0, 0, 0, 0, 0)\"/></iwb></data></addData></step>"
+        )
+    };
+    let inner = format!(
+        "<macroStep localId=\"103\" name=\"GripMacro\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"102\"/></connectionPointIn><connectionPointOut/><body><SFC>{}<transition localId=\"202\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"201\"/></connectionPointIn><connectionPointOut/><condition><inline name=\"\"><ST><xhtml:p>Door_Closed</xhtml:p></ST></inline></condition></transition>{}</SFC></body></macroStep>",
+        step(201, "Close", None),
+        step(203, "Check", Some(202))
+    );
+    let nested = format!("{}{inner}{}", &sfc[..start], &sfc[end..]);
+    std::fs::write(t.path().join("sfc.xml"), &nested).unwrap();
+    let o = run(
+        &["--format", "short", "-pO", "Blackboard.aml", "Macro"],
+        t.path(),
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    let order: Vec<&str> = out
+        .lines()
+        .filter(|l| l.trim_start().starts_with('#'))
+        .filter_map(|l| l.split_whitespace().nth(2))
+        .collect();
+    assert_eq!(
+        order,
+        [
+            "Start", "Pick", "Approach", "Close", "Check", "Lift", "Place", "End"
+        ],
+        "{out}"
+    );
+    let src = std::fs::read_to_string(t.path().join("Macro.src")).unwrap();
+    let wait = src
+        .find("WAIT FOR $CYCFLAG[3]")
+        .expect("Door_Closed's wait");
+    assert!(
+        src.find("Close").unwrap() < wait && wait < src.find("Check").unwrap(),
+        "{src}"
+    );
+}

@@ -114,7 +114,16 @@ pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
     for m in &sfc.macros {
         let body = m.body.clone();
         let el = &sfc.elements;
-        let steps: Vec<usize> = body.clone().filter(|&i| el[i].kind.is_step()).collect();
+        // (Not the steps of a macro step's body nested in this one.)
+        let nested = |i: usize| {
+            sfc.macros
+                .iter()
+                .any(|o| m.body.contains(&o.step) && o.body.contains(&i))
+        };
+        let steps: Vec<usize> = body
+            .clone()
+            .filter(|&i| el[i].kind.is_step() && !nested(i))
+            .collect();
         let used: std::collections::HashSet<usize> = body
             .clone()
             .flat_map(|i| el[i].inputs.iter().filter_map(|(r, _)| ids.get(*r)))
