@@ -988,20 +988,25 @@ fn a_wrong_rapid_program_fails() {
     ));
 }
 
+/// Runs a KRL `.src` of the fixture (with its `.dat`) against its chart; `true` when the
+/// suite notices (the KRL check or a run fails).
+fn krl_noticed(case: &str, program: &str, chart: &Chart, out: &Output, main: String) -> bool {
+    let output = Output {
+        lang: Lang::Krl,
+        main,
+        dat: out.dat.clone(),
+    };
+    output.syntax(program).is_err()
+        || fails(|| {
+            check_compiled(case, &output, program, chart, 7, 100);
+        })
+}
+
 #[test]
 fn a_wrong_krl_program_fails() {
     let case = "flow-loop-early-exit";
     let (program, out, chart) = compile(case, Lang::Krl);
-    let run = |main: String| {
-        let output = Output {
-            lang: Lang::Krl,
-            main,
-            dat: out.dat.clone(),
-        };
-        fails(|| {
-            check_compiled(case, &output, &program, &chart, 7, 100);
-        })
-    };
+    let run = |main: String| krl_noticed(case, &program, &chart, &out, main);
     assert!(!run(out.main.clone()));
     assert!(run(drop_line(&out.main, "EXIT")));
 }
@@ -1015,17 +1020,7 @@ fn a_wrong_program_with_states_fails() {
     let case = "flow-jump-forward";
     // KRL: labels and GOTO.
     let (program, out, chart) = compile(case, Lang::Krl);
-    let run = |main: String| {
-        let output = Output {
-            lang: Lang::Krl,
-            main,
-            dat: out.dat.clone(),
-        };
-        output.syntax(&program).is_err()
-            || fails(|| {
-                check_compiled(case, &output, &program, &chart, 7, 100);
-            })
-    };
+    let run = |main: String| krl_noticed(case, &program, &chart, &out, main);
     assert!(!run(out.main.clone()));
     assert!(out.main.contains("GOTO skp_s2"), "{}", out.main);
     assert!(run(out.main.replacen("GOTO skp_s2", "GOTO skp_s1", 1)));

@@ -921,8 +921,8 @@ impl Walker<'_> {
                 // (A branch that goes to another state or repeats without end joins nothing.)
                 .filter(|e| !matches!(e, End::Left | End::Endless))
                 .collect();
-            // The branches as a selection that does not join: those that do not go to another
-            // state end in what follows it.
+            // The branches as a selection (without its convergence: those that do not go to
+            // another state end in what follows it).
             let unjoined = |walked: Vec<(usize, Vec<Block>, End, bool)>| {
                 let branches = walked
                     .into_iter()
@@ -969,22 +969,11 @@ impl Walker<'_> {
                 );
                 return None;
             };
-            let branches = walked
-                .into_iter()
-                .map(|(t, body, _, _)| Branch {
-                    transition: t,
-                    body,
-                    end: BranchEnd::Join,
-                })
-                .collect();
-            return Some(Ok((
-                Block::Choice {
-                    divergence: div,
-                    convergence: Some(conv),
-                    branches,
-                },
-                conv,
-            )));
+            let mut choice = unjoined(walked);
+            if let Block::Choice { convergence, .. } = choice.as_mut() {
+                *convergence = Some(conv);
+            }
+            return Some(Ok((*choice, conv)));
         }
         // The selection that decides the innermost loop: it must stand in the loop's own
         // sequence, not inside another branch of it, and its other branches must leave the loop.
