@@ -420,11 +420,6 @@ pub struct Closed {
 }
 
 impl Sfc {
-    /// Whether element `i` belongs to a macro step's body.
-    pub fn in_macro_body(&self, i: usize) -> bool {
-        self.macros.iter().any(|m| m.body.contains(&i))
-    }
-
     /// How a jump is named in listings and comments: `jump localId 57`, or for a connection
     /// back to an earlier step, `connection back from localId 12`.
     pub fn jump_label(&self, jump: usize) -> String {

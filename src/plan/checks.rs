@@ -23,7 +23,7 @@ pub fn check_nodes(sfc: &Sfc, g: &Graph, diags: &mut Diagnostics) -> Vec<Diagnos
         };
         match &e.kind {
             ElementKind::MacroStep => {
-                if !sfc.macros.iter().any(|m| m.step == i) {
+                if !g.has_macro_body(i) {
                     diags.push(err(
                         Code::Unsupported,
                         "macroStep without a body (`body/SFC`): there is nothing to run in its place".to_owned(),
@@ -275,7 +275,7 @@ pub fn start_end(
     // drawn as a closed circle); else the one step without a predecessor that no jump leads to.
     // (A macro step's body marks its own initial step.)
     let initial = |i: &usize| {
-        matches!(&el[*i].kind, ElementKind::Step(st) if st.initial) && !sfc.in_macro_body(*i)
+        matches!(&el[*i].kind, ElementKind::Step(st) if st.initial) && !g.in_macro_body(*i)
     };
     let marked: Vec<usize> = (0..el.len())
         .filter(|i| el[*i].kind.is_step() && initial(i))

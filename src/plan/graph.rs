@@ -16,6 +16,10 @@ pub struct Graph {
     /// The selectionConvergences drawn with a jumpStep among their inputs (as CODESYS exports
     /// a branch that ends in a jump), ascending: that input is not a connection.
     lost_jumps: Vec<usize>,
+    /// Per element, whether it belongs to a macro step's body (empty without macro steps).
+    in_macro_body: Vec<bool>,
+    /// The macro steps with a body, ascending.
+    macro_steps: Vec<usize>,
 }
 
 impl Graph {
@@ -33,6 +37,16 @@ impl Graph {
     /// ends its branch; the drawn connection is not part of the flow).
     pub fn lost_jumps(&self, i: usize) -> bool {
         self.lost_jumps.binary_search(&i).is_ok()
+    }
+
+    /// Whether element `i` belongs to a macro step's body.
+    pub fn in_macro_body(&self, i: usize) -> bool {
+        self.in_macro_body.get(i).copied().unwrap_or(false)
+    }
+
+    /// Whether element `i` is a macro step with a body.
+    pub fn has_macro_body(&self, i: usize) -> bool {
+        self.macro_steps.binary_search(&i).is_ok()
     }
 
     /// The number of elements.
@@ -111,18 +125,24 @@ pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
     // macro step follows the body's end step; the body's initial step follows the macro step.
     let mut after_macro: HashMap<usize, (usize, std::ops::Range<usize>)> = HashMap::new();
     let mut into_body: HashMap<usize, usize> = HashMap::new();
-    for m in &sfc.macros {
+    // Each body element's innermost macro step: the reader lists a nested macro before the
+    // one around it, so the first to claim an element is its innermost.
+    const NONE: usize = usize::MAX;
+    let mut owner = vec![NONE; if sfc.macros.is_empty() { 0 } else { n }];
+    for (k, m) in sfc.macros.iter().enumerate() {
+        for i in m.body.clone() {
+            if owner[i] == NONE {
+                owner[i] = k;
+            }
+        }
+    }
+    for (k, m) in sfc.macros.iter().enumerate() {
         let body = m.body.clone();
         let el = &sfc.elements;
         // (Not the steps of a macro step's body nested in this one.)
-        let nested = |i: usize| {
-            sfc.macros
-                .iter()
-                .any(|o| m.body.contains(&o.step) && o.body.contains(&i))
-        };
         let steps: Vec<usize> = body
             .clone()
-            .filter(|&i| el[i].kind.is_step() && !nested(i))
+            .filter(|&i| el[i].kind.is_step() && owner[i] == k)
             .collect();
         let used: std::collections::HashSet<usize> = body
             .clone()
@@ -253,5 +273,11 @@ pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
         succ_at,
         succ,
         lost_jumps,
+        in_macro_body: owner.iter().map(|&o| o != NONE).collect(),
+        macro_steps: {
+            let mut v: Vec<usize> = sfc.macros.iter().map(|m| m.step).collect();
+            v.sort_unstable();
+            v
+        },
     }
 }
