@@ -65,7 +65,7 @@ pub fn walk(
     }
     loop {
         let mut local = diags.empty_like();
-        let (result, proposed) = walk_once(sfc, g, jumps, start, &entries, &mut local);
+        let (result, proposed) = walk_once(sfc, g, jumps, start, &entries, &contexts, &mut local);
         let mut new = false;
         if result.is_none() {
             for p in proposed {
@@ -240,6 +240,7 @@ fn walk_once(
     jumps: &[Option<usize>],
     start: usize,
     entries: &[bool],
+    branch_of: &[u32],
     diags: &mut Diagnostics,
 ) -> (Option<Vec<Block>>, Vec<usize>) {
     // A jump to a state's entry is a Goto, never a loop.
@@ -262,7 +263,7 @@ fn walk_once(
         targeted,
         jumps_to,
         entries,
-        branch_of: branch_contexts(sfc, g, start),
+        branch_of,
         proposed: Vec::new(),
         loops: Vec::new(),
         marks: vec![0; sfc.elements.len()],
@@ -274,30 +275,15 @@ fn walk_once(
     if w.failed {
         return (None, w.proposed);
     }
-    match end {
-        End::Done | End::Endless | End::Left => {}
-        End::Conv(c) => {
-            let el = &sfc.elements;
-            w.proposed.push(c);
-            w.fail(
-                c,
-                Code::UnbalancedBranch,
-                format!(
-                    "{} joins branches that no divergence opened",
-                    el[c].kind.tag()
-                ),
-            );
+    // (A loop's deciding selection outside any loop cannot happen: the head would have opened
+    // the loop.)
+    match w.state_end(&mut body, end) {
+        None => return (None, w.proposed),
+        Some(End::Conv(c)) => {
+            w.stray_convergence(c);
             return (None, w.proposed);
         }
-        End::Jump(j) => {
-            w.bad_jump(j, "it does not lead back to a step on every path to it");
-            return (None, w.proposed);
-        }
-        End::Decided { choice, .. } | End::Branched(choice) | End::BranchedAt(choice, _) => {
-            // (A loop's deciding selection outside any loop cannot happen: the head would
-            // have opened the loop.)
-            body.push(*choice);
-        }
+        Some(_) => {}
     }
     // Where the chart is not structured, said once per place that goes to another state.
     if w.diags.keeps_warnings() {
@@ -474,7 +460,7 @@ struct Walker<'a> {
     /// The elements that begin states ([`Block::Machine`]): reaching one is a Goto.
     entries: &'a [bool],
     /// Each element's simultaneous branches ([`branch_contexts`]).
-    branch_of: Vec<u32>,
+    branch_of: &'a [u32],
     /// Elements that would let a failed walk go further as entries of states.
     proposed: Vec<usize>,
     /// The jumps to each target step.
@@ -558,13 +544,7 @@ impl Walker<'_> {
                 }
                 _ => {
                     if depth >= MAX_NESTING {
-                        // Loops that nest this deep are left to states, where flow allows it.
-                        self.propose_deep(cur);
-                        self.fail(
-                            cur,
-                            Code::Unsupported,
-                            format!("branches and loops nested deeper than {MAX_NESTING} levels"),
-                        );
+                        self.too_deep(cur);
                         return (out, End::Done);
                     }
                     let mut heads = succs.to_vec();
@@ -655,37 +635,23 @@ impl Walker<'_> {
         let mut conv = None;
         let mut out = End::Left;
         for (st, end) in states.iter_mut().zip(ends) {
-            match end {
-                End::Left => {}
-                End::Done => out = End::Done,
-                End::Endless => {
+            match self.state_end(&mut st.body, end) {
+                None => return (Vec::new(), End::Done),
+                Some(End::Done) => out = End::Done,
+                Some(End::Endless) => {
                     if !matches!(out, End::Done) {
                         out = End::Endless;
                     }
                 }
-                End::Conv(c) => {
-                    if conv.is_some_and(|x| x != c) {
-                        self.proposed.push(c);
-                        self.proposed.extend(conv);
-                        self.fail(
-                            c,
-                            Code::UnbalancedBranch,
-                            format!(
-                                "{} joins branches that no divergence opened",
-                                el[c].kind.tag()
-                            ),
-                        );
+                Some(End::Conv(c)) => {
+                    if let Some(x) = conv.filter(|&x| x != c) {
+                        self.proposed.push(x);
+                        self.stray_convergence(c);
                         return (Vec::new(), End::Done);
                     }
                     conv = Some(c);
                 }
-                End::Jump(j) => {
-                    self.bad_jump(j, "it does not lead back to a step on every path to it");
-                    return (Vec::new(), End::Done);
-                }
-                End::Decided { choice, .. }
-                | End::Branched(choice)
-                | End::BranchedAt(choice, _) => st.body.push(*choice),
+                Some(_) => {}
             }
         }
         if let Some(c) = conv {
@@ -715,9 +681,8 @@ impl Walker<'_> {
                     self.proposed.clear();
                     return None;
                 }
-                _ if gone_to(&b).is_some() => {
+                _ if let Some(t) = gone_to(&b) => {
                     // (Within a branch, its own states are a machine: this goes elsewhere.)
-                    let t = gone_to(&b).unwrap_or(div);
                     self.fail(
                         div,
                         Code::BadJump,
@@ -1184,13 +1149,7 @@ impl Walker<'_> {
     /// or `Err(end)` when the sequence ends; `None` on failure.
     fn open_loop(&mut self, head: usize, depth: usize) -> (Vec<Block>, Option<GoOn>) {
         if depth >= MAX_NESTING {
-            // Loops that nest this deep are left to states, where flow allows it.
-            self.propose_deep(head);
-            self.fail(
-                head,
-                Code::Unsupported,
-                format!("branches and loops nested deeper than {MAX_NESTING} levels"),
-            );
+            self.too_deep(head);
             return (Vec::new(), None);
         }
         // The body: what can reach a jump back without passing the head.
@@ -1293,14 +1252,51 @@ impl Walker<'_> {
         }
     }
 
-    /// The flow nests too deep at `at`: it begins a state (walked from depth 0), and when loops
-    /// are open, every jump's target does too (the chart loses its loops, but one more walk
-    /// suffices; a chart this deep is not written by hand).
-    fn propose_deep(&mut self, at: usize) {
+    /// The flow nests too deep at `at` (reported). Where flow allows it, this is left to
+    /// states: `at` begins one (walked from depth 0), and when loops are open, every jump's
+    /// target does too (the chart loses its loops, but one more walk suffices; a chart this
+    /// deep is not written by hand).
+    fn too_deep(&mut self, at: usize) {
         self.proposed.push(at);
         if !self.loops.is_empty() {
             let targets: Vec<usize> = self.jumps.iter().flatten().copied().collect();
             self.proposed.extend(targets);
+        }
+        self.fail(
+            at,
+            Code::Unsupported,
+            format!("branches and loops nested deeper than {MAX_NESTING} levels"),
+        );
+    }
+
+    /// A convergence where branches meet that no divergence opened here (reported): as a
+    /// state, it need not close a divergence.
+    fn stray_convergence(&mut self, c: usize) {
+        self.proposed.push(c);
+        self.fail(
+            c,
+            Code::UnbalancedBranch,
+            format!(
+                "{} joins branches that no divergence opened",
+                self.sfc.elements[c].kind.tag()
+            ),
+        );
+    }
+
+    /// How a state's sequence ended, its last block added: `Some(Conv(c))` (it ends its
+    /// simultaneous branch there) or another end after which nothing follows; `None` for a jump
+    /// that leads nowhere structured (reported).
+    fn state_end(&mut self, body: &mut Vec<Block>, end: End) -> Option<End> {
+        match end {
+            End::Jump(j) => {
+                self.bad_jump(j, "it does not lead back to a step on every path to it");
+                None
+            }
+            End::Decided { choice, .. } | End::Branched(choice) | End::BranchedAt(choice, _) => {
+                body.push(*choice);
+                Some(End::Left)
+            }
+            other => Some(other),
         }
     }
 
