@@ -226,28 +226,28 @@ pub fn loop_comment(input: &EmitInput, head: usize, jumps: &[usize], endless: bo
 }
 
 /// The comment before flow the structured forms cannot express.
-pub fn machine_comment(input: &EmitInput, states: usize) -> String {
-    let _ = input;
+pub fn machine_comment(states: usize) -> String {
     format!("flow in {states} states: where the chart is not structured, it goes on at a state")
+}
+
+/// A state's entry in comments: `step Name (localId 3)`, or the element's tag and localId.
+fn entry_text(input: &EmitInput, entry: usize) -> String {
+    let e = &input.sfc.elements[entry];
+    match &e.kind {
+        ElementKind::Step(st) => format!("step {} (localId {})", st.name, e.local_id),
+        k => format!("{} localId {}", k.tag(), e.local_id),
+    }
 }
 
 /// The comment at the beginning of state `n` (from 1).
 pub fn state_comment(input: &EmitInput, n: usize, entry: usize) -> String {
-    let e = &input.sfc.elements[entry];
-    match &e.kind {
-        ElementKind::Step(st) => format!("state {n}: step {} (localId {})", st.name, e.local_id),
-        k => format!("state {n}: {} localId {}", k.tag(), e.local_id),
-    }
+    format!("state {n}: {}", entry_text(input, entry))
 }
 
 /// The comment before a Goto.
 pub fn goto_comment(input: &EmitInput, target: usize, from: usize) -> String {
-    let el = &input.sfc.elements;
-    let to = match &el[target].kind {
-        ElementKind::Step(st) => format!("step {} (localId {})", st.name, el[target].local_id),
-        k => format!("{} localId {}", k.tag(), el[target].local_id),
-    };
-    match &el[from].kind {
+    let to = entry_text(input, target);
+    match &input.sfc.elements[from].kind {
         ElementKind::JumpStep(_) => format!("go on at {to} ({})", input.sfc.jump_label(from)),
         _ => format!("go on at {to}"),
     }

@@ -212,18 +212,12 @@ impl Writer<'_> {
             Block::Machine(states) => {
                 // A label per state, at the level of the machine (KRL jumps out of blocks,
                 // never into one); a state that ends without a Goto ends the machine.
-                self.comment(level, &flow::machine_comment(input, states.len()));
+                self.comment(level, &flow::machine_comment(states.len()));
                 let first = self.labels + 1;
                 self.labels += states.len() + 1;
                 let end_label = label(self.labels);
-                let outer = std::mem::replace(
-                    &mut self.states,
-                    states
-                        .iter()
-                        .enumerate()
-                        .map(|(k, st)| (st.entry, first + k))
-                        .collect(),
-                );
+                let outer =
+                    std::mem::replace(&mut self.states, crate::plan::State::numbers(states, first));
                 let mut end = false;
                 for (k, st) in states.iter().enumerate() {
                     self.line(level, &format!("{}:", label(first + k)));

@@ -108,17 +108,9 @@ fn may_leave(b: &Block) -> bool {
 /// Whether `b` goes to another state somewhere (a [`Block::Goto`], loops included; not one
 /// inside a nested machine, which goes to that machine's own states).
 fn may_goto(b: &Block) -> bool {
-    match b {
-        Block::Goto { .. } => true,
-        Block::Machine(_) | Block::Step(_) | Block::Wait(_) | Block::Tell(_) | Block::Hear(_) => {
-            false
-        }
-        Block::Parallel { branches, .. } => branches.iter().flatten().any(may_goto),
-        Block::Choice { branches, .. } | Block::Follow { branches, .. } => {
-            branches.iter().any(|br| br.body.iter().any(may_goto))
-        }
-        Block::Loop { body, .. } => body.iter().any(may_goto),
-    }
+    let mut targets = Vec::new();
+    crate::plan::gotos(std::slice::from_ref(b), &mut targets);
+    !targets.is_empty()
 }
 
 /// The states of the [`Block::Machine`] being written: each entry's number (from 1), and how
@@ -350,16 +342,12 @@ impl Writer<'_> {
     /// a state's Gotos set it, and it stays 0 when the program ends.
     fn machine(&mut self, states: &[crate::plan::State], level: usize) {
         self.uses_state_var = true;
-        let number = states
-            .iter()
-            .enumerate()
-            .map(|(k, st)| (st.entry, k + 1))
-            .collect();
+        let number = crate::plan::State::numbers(states, 1);
         let outer = self.states.replace(States {
             number,
             base: self.loops.len(),
         });
-        self.comment(level, &flow::machine_comment(self.input, states.len()));
+        self.comment(level, &flow::machine_comment(states.len()));
         self.assign(level, STATE_VAR, "1");
         let (a, b) = self.d.while_;
         let ne = (self.d.ops.op)(BinOp::Ne);

@@ -98,6 +98,18 @@ pub struct Branch {
     pub end: BranchEnd,
 }
 
+impl State {
+    /// Each state's entry element and its number, counting from `first`: what a Goto to that
+    /// element goes to.
+    pub fn numbers(states: &[State], first: usize) -> std::collections::HashMap<usize, usize> {
+        states
+            .iter()
+            .enumerate()
+            .map(|(k, st)| (st.entry, first + k))
+            .collect()
+    }
+}
+
 impl Branch {
     /// The transitions whose conditions select this branch: its own, or, when the branch
     /// starts with another selectionDivergence (as CODESYS draws nested alternatives), the
@@ -177,6 +189,32 @@ pub fn visit(blocks: &[Block], f: &mut dyn FnMut(&Block)) {
                 }
             }
             Block::Loop { body, .. } => visit(body, f),
+        }
+    }
+}
+
+/// The Gotos of `blocks` that leave them (not those inside a nested [`Block::Machine`], which
+/// go to its own states).
+pub fn gotos(blocks: &[Block], out: &mut Vec<usize>) {
+    for b in blocks {
+        match b {
+            Block::Goto { target, .. } => out.push(*target),
+            Block::Machine(_)
+            | Block::Step(_)
+            | Block::Wait(_)
+            | Block::Tell(_)
+            | Block::Hear(_) => {}
+            Block::Parallel { branches, .. } => {
+                for br in branches {
+                    gotos(br, out);
+                }
+            }
+            Block::Choice { branches, .. } | Block::Follow { branches, .. } => {
+                for br in branches {
+                    gotos(&br.body, out);
+                }
+            }
+            Block::Loop { body, .. } => gotos(body, out),
         }
     }
 }

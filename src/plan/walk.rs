@@ -4,7 +4,7 @@
 
 use std::collections::HashMap;
 
-use super::{Block, Branch, BranchEnd, Graph, MAX_NESTING, State, visit};
+use super::{Block, Branch, BranchEnd, Graph, MAX_NESTING, State, gotos, visit};
 use crate::diag::{Code, Diagnostic, Diagnostics};
 use crate::model::{ElementKind, Sfc};
 
@@ -360,32 +360,6 @@ fn branch_contexts(sfc: &Sfc, g: &Graph, start: usize) -> Vec<u32> {
         }
     }
     ctx
-}
-
-/// The Gotos of `blocks` that leave them (not those inside a nested [`Block::Machine`], which
-/// go to its own states).
-fn gotos(blocks: &[Block], out: &mut Vec<usize>) {
-    for b in blocks {
-        match b {
-            Block::Goto { target, .. } => out.push(*target),
-            Block::Machine(_)
-            | Block::Step(_)
-            | Block::Wait(_)
-            | Block::Tell(_)
-            | Block::Hear(_) => {}
-            Block::Parallel { branches, .. } => {
-                for br in branches {
-                    gotos(br, out);
-                }
-            }
-            Block::Choice { branches, .. } | Block::Follow { branches, .. } => {
-                for br in branches {
-                    gotos(&br.body, out);
-                }
-            }
-            Block::Loop { body, .. } => gotos(body, out),
-        }
-    }
 }
 
 /// The first state outside its own machine a branch goes to, if any.
