@@ -1999,3 +1999,66 @@ fn a_macro_step_nested_in_a_macro_step_runs_in_its_place() {
         "{src}"
     );
 }
+
+/// Macro steps nest up to the limit branches have (SPEC.md 3): 100 deep compile, 140 deep are
+/// one E313 at the first macro step too deep.
+#[test]
+fn macro_steps_nest_up_to_the_limit() {
+    fn macro_chart(depth: u32, i: u32) -> String {
+        let step = |id: u32, name: &str, input: Option<u32>| {
+            let input = input
+                .map(|r| {
+                    format!(
+                        "<connectionPointIn><connection refLocalId=\"{r}\"/></connectionPointIn>"
+                    )
+                })
+                .unwrap_or_default();
+            let initial = if input.is_empty() {
+                " initialStep=\"true\""
+            } else {
+                ""
+            };
+            format!(
+                "<step localId=\"{id}\" name=\"{name}{id}\"{initial}><position x=\"0\" y=\"0\"/>{input}<connectionPointOut formalParameter=\"\"/></step>"
+            )
+        };
+        let tr = |id: u32, input: u32| {
+            format!(
+                "<transition localId=\"{id}\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"{input}\"/></connectionPointIn><condition><inline name=\"\"><ST>TRUE</ST></inline></condition></transition>"
+            )
+        };
+        if depth == 0 {
+            return step(i, "S", None);
+        }
+        format!(
+            "{}{}<macroStep localId=\"{}\" name=\"M\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"{}\"/></connectionPointIn><body><SFC>{}</SFC></body></macroStep>{}{}",
+            step(i, "B", None),
+            tr(i + 1, i),
+            i + 2,
+            i + 1,
+            macro_chart(depth - 1, i + 10),
+            tr(i + 3, i + 2),
+            step(i + 4, "E", Some(i + 3))
+        )
+    }
+    let t = tempfile::tempdir().unwrap();
+    for (depth, ok) in [(100, true), (140, false)] {
+        let text = format!(
+            "<project xmlns=\"http://www.plcopen.org/xml/tc6_0201\"><types><pous><pou name=\"P\" pouType=\"program\"><body><SFC>{}</SFC></body></pou></pous></types></project>",
+            macro_chart(depth, 10)
+        );
+        std::fs::write(t.path().join("deep.xml"), text).unwrap();
+        let o = run(&["--sfc", "--format", "short", "deep.xml"], t.path());
+        let err = stderr(&o);
+        if ok {
+            assert_eq!(o.status.code(), Some(0), "{err}");
+        } else {
+            assert_eq!(o.status.code(), Some(1), "{err}");
+            assert_eq!(err.matches("error[").count(), 1, "{err}");
+            assert!(
+                err.contains("error[E313]: macro steps nested deeper than 128 levels"),
+                "{err}"
+            );
+        }
+    }
+}

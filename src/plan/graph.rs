@@ -125,14 +125,47 @@ pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
     // macro step follows the body's end step; the body's initial step follows the macro step.
     let mut after_macro: HashMap<usize, (usize, std::ops::Range<usize>)> = HashMap::new();
     let mut into_body: HashMap<usize, usize> = HashMap::new();
-    // Each body element's innermost macro step: the reader lists a nested macro before the
-    // one around it, so the first to claim an element is its innermost.
+    // Each body element's innermost macro step, in one sweep over the elements with the bodies
+    // open at each (bodies nest or are apart); a macro step in more bodies than branches may
+    // nest in each other is E313 (SPEC.md 3).
     const NONE: usize = usize::MAX;
     let mut owner = vec![NONE; if sfc.macros.is_empty() { 0 } else { n }];
-    for (k, m) in sfc.macros.iter().enumerate() {
-        for i in m.body.clone() {
-            if owner[i] == NONE {
-                owner[i] = k;
+    if !sfc.macros.is_empty() {
+        let mut by_start: Vec<usize> = (0..sfc.macros.len()).collect();
+        by_start.sort_unstable_by_key(|&k| sfc.macros[k].body.start);
+        let mut next = by_start.iter().peekable();
+        let mut open: Vec<usize> = Vec::new();
+        let mut too_deep = false;
+        for (i, o) in owner.iter_mut().enumerate() {
+            while open.last().is_some_and(|&k| sfc.macros[k].body.end <= i) {
+                open.pop();
+            }
+            while let Some(&&k) = next.peek()
+                && sfc.macros[k].body.start <= i
+            {
+                next.next();
+                if sfc.macros[k].body.is_empty() {
+                    continue;
+                }
+                if open.len() == super::MAX_NESTING && !too_deep {
+                    too_deep = true;
+                    let e = &sfc.elements[sfc.macros[k].step];
+                    diags.push(
+                        Diagnostic::error(
+                            Code::Unsupported,
+                            format!(
+                                "macro steps nested deeper than {} levels",
+                                super::MAX_NESTING
+                            ),
+                        )
+                        .at(e.span.clone())
+                        .element(format!("localId {}", e.local_id)),
+                    );
+                }
+                open.push(k);
+            }
+            if let Some(&k) = open.last() {
+                *o = k;
             }
         }
     }
