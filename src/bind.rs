@@ -324,6 +324,148 @@ pub struct Bound {
     pub resource: Option<usize>,
     /// The signals the conditions use (indexes into the resource's), in first-use order.
     pub signals: Vec<usize>,
+    /// The steps whose time a condition reads (`S.t`, SPEC.md 3.1), in first-use order, each
+    /// with its KRL timer number (`$TIMER[n]`); the k-th is RAPID's `skp_clock<k+1>` and
+    /// URScript's `skp_time<k+1>`.
+    pub timers: Vec<(usize, u32)>,
+    /// The step time names the conditions use (keys: `wait.t`) and their step.
+    pub timer_names: HashMap<String, usize>,
+}
+
+impl Bound {
+    /// The timer of step `i` when a condition reads its time: its position `k` in
+    /// [`Bound::timers`] and its KRL number.
+    pub fn timer_of(&self, i: usize) -> Option<(usize, u32)> {
+        // A scan: a chart reads the times of few steps (a KRL program has at most 64 timers).
+        let k = self.timers.iter().position(|&(s, _)| s == i)?;
+        Some((k, self.timers[k].1))
+    }
+
+    /// The timer a condition's name `S.t` reads.
+    pub fn timer_named(&self, name: &str) -> Option<(usize, u32)> {
+        if self.timer_names.is_empty() {
+            return None;
+        }
+        self.timer_of(*self.timer_names.get(&crate::names::key(name))?)
+    }
+}
+
+/// The KRL timers step times use when the resource has no `Timers` attribute: the upper half
+/// of the 16 every KUKA controller has.
+pub const DEFAULT_TIMERS: (u32, u32) = (9, 16);
+
+/// The highest KRL timer number (KSS 8: `$TIMER[1]` … `$TIMER[64]`).
+pub const MAX_TIMER: u32 = 64;
+
+/// The steps of a chart by name (key), for step times: the first step of each name and how many
+/// steps have it.
+pub struct StepNames(HashMap<String, (usize, usize)>);
+
+impl StepNames {
+    pub fn new(sfc: &Sfc) -> Self {
+        let mut m: HashMap<String, (usize, usize)> = HashMap::new();
+        for (i, e) in sfc.elements.iter().enumerate() {
+            if let ElementKind::Step(st) = &e.kind {
+                m.entry(crate::names::key(&st.name))
+                    .and_modify(|v| v.1 += 1)
+                    .or_insert((i, 1));
+            }
+        }
+        StepNames(m)
+    }
+
+    /// The step whose time `name` reads (`S.t` or `S.T`, IEC 61131-3's step time) and how many
+    /// steps have that name; `None` when `name` is not a step's time.
+    pub fn step_time(&self, name: &str) -> Option<(usize, usize)> {
+        let (step, t) = name.rsplit_once('.')?;
+        if !t.eq_ignore_ascii_case("t") {
+            return None;
+        }
+        self.0.get(&crate::names::key(step)).copied()
+    }
+}
+
+/// The steps a transition leaves: the steps before it, through selection divergences and
+/// simultaneous convergences.
+fn steps_before(sfc: &Sfc, by_id: &HashMap<u64, usize>, t: usize) -> Vec<usize> {
+    let mut out = Vec::new();
+    let mut seen = HashSet::new();
+    let mut stack: Vec<usize> = sfc.elements[t]
+        .inputs
+        .iter()
+        .filter_map(|(id, _)| by_id.get(id).copied())
+        .collect();
+    while let Some(i) = stack.pop() {
+        if !seen.insert(i) {
+            continue;
+        }
+        let e = &sfc.elements[i];
+        match e.kind {
+            ElementKind::Step(_) | ElementKind::MacroStep => out.push(i),
+            ElementKind::SelectionDivergence | ElementKind::SimultaneousConvergence => {
+                stack.extend(e.inputs.iter().filter_map(|(id, _)| by_id.get(id).copied()))
+            }
+            _ => {}
+        }
+    }
+    out
+}
+
+/// Every element by `localId`.
+fn local_ids(sfc: &Sfc) -> HashMap<u64, usize> {
+    sfc.elements
+        .iter()
+        .enumerate()
+        .map(|(i, e)| (e.local_id, i))
+        .collect()
+}
+
+/// Why transition `t` cannot read `name`, the time of `step` (`count` steps have its name), if
+/// it cannot: the name is not unique, the program is one of a cell, or the transition does not
+/// follow the step.
+fn step_time_problem(
+    sfc: &Sfc,
+    by_id: &HashMap<u64, usize>,
+    t: usize,
+    name: &str,
+    step: usize,
+    count: usize,
+    in_cell: bool,
+) -> Option<String> {
+    let step_name = &name[..name.len() - 2];
+    if count > 1 {
+        Some(format!(
+            "`{name}` reads a step's time, but {count} steps are named `{step_name}`: give the step a name of its own"
+        ))
+    } else if in_cell {
+        Some(format!(
+            "`{name}` reads a step's time; the chart's steps run on several controllers, and step times are not shared between them: wait for a signal instead"
+        ))
+    } else if !steps_before(sfc, by_id, t).contains(&step) {
+        Some(format!(
+            "`{name}` reads the time of step `{step_name}` (localId {}), but this transition does not follow that step: the program knows a step's time while the step is active, so read it in a transition after the step",
+            sfc.elements[step].local_id
+        ))
+    } else {
+        None
+    }
+}
+
+/// The KRL timers `(first, last)` of a resource's `Timers` attribute (`A-B` or `N`).
+fn timer_range(attr: &str) -> Result<(u32, u32), String> {
+    let t = attr.trim();
+    let (a, b) = match t.split_once('-') {
+        Some((a, b)) => (a.trim(), b.trim()),
+        None => (t, t),
+    };
+    match (a.parse::<u32>(), b.parse::<u32>()) {
+        (Ok(a), Ok(b)) if (1..=MAX_TIMER).contains(&a) && (a..=MAX_TIMER).contains(&b) => {
+            Ok((a, b))
+        }
+        _ => Err(format!(
+            "`Timers` is `{t}`: it names the KRL timers step times may use, `A-B` or `N`, between 1 and {MAX_TIMER} (`9-16`)"
+        )),
+    }
 }
 
 #[derive(Debug)]
@@ -459,6 +601,8 @@ pub fn bind(
         definitions: first.definitions.into_iter().map(|(d, _)| d).collect(),
         resource: r.resource,
         signals: Vec::new(),
+        timers: Vec::new(),
+        timer_names: HashMap::new(),
     };
     for (i, step) in first.steps {
         bound.steps[i] = Some(step);
@@ -1006,9 +1150,20 @@ fn value_of<'a>(
     }
 }
 
+/// What the conditions read: signals of the program's resource (indexes into its signals) and
+/// step times, each in first-use order.
+#[derive(Debug, Default)]
+pub struct Reads {
+    pub signals: Vec<usize>,
+    /// See [`Bound::timers`].
+    pub timers: Vec<(usize, u32)>,
+    /// See [`Bound::timer_names`].
+    pub timer_names: HashMap<String, usize>,
+}
+
 /// Resolves the names in every transition condition (or, for a program of a cell, those of
 /// `only`: the transitions it waits for or decides) against the signals of the program's
-/// resource and checks the types (SPEC.md 3.1). Returns the signals used, in first-use order.
+/// resource and the chart's steps (a step's time `S.t`), and checks the types (SPEC.md 3.1).
 pub fn conditions(
     bb: &Blackboard,
     sfc: &Sfc,
@@ -1016,11 +1171,18 @@ pub fn conditions(
     profile: Option<&dyn Rules>,
     only: Option<&HashSet<usize>>,
     diags: &mut Diagnostics,
-) -> Vec<usize> {
+) -> Reads {
     use crate::cond::Ty;
     let mut used = Vec::new();
     let mut seen = HashSet::new();
+    let mut timed: Vec<usize> = Vec::new();
+    let mut timer_names = HashMap::new();
+    // The first condition that reads a step's time, for a diagnostic about timers.
+    let mut first_timed: Option<usize> = None;
     let res = resource.map(|r| &bb.resources[r]);
+    // Built at the first dotted name: most charts read no step time.
+    let mut steps: Option<StepNames> = None;
+    let mut by_id: Option<HashMap<u64, usize>> = None;
     for (ei, e) in sfc.elements.iter().enumerate() {
         let ElementKind::Transition(Some(c)) = &e.kind else {
             continue;
@@ -1028,7 +1190,14 @@ pub fn conditions(
         if only.is_some_and(|o| !o.contains(&ei)) {
             continue;
         }
+        if steps.is_none() && c.expr.names().iter().any(|(n, _)| n.contains('.')) {
+            steps = Some(StepNames::new(sfc));
+        }
+        let step_names = steps.as_ref();
         let lookup = |n: &str| {
+            if step_names.is_some_and(|s| s.step_time(n).is_some()) {
+                return Some(Ty::Time);
+            }
             let r = res?;
             let key = crate::names::key(n);
             let s = &r.signals[r.signal(&key)?];
@@ -1074,16 +1243,39 @@ pub fn conditions(
             };
             diags.push(d.at(at).element(label));
         }
-        if let Some(r) = res {
-            for (n, _) in c.expr.names() {
-                if let Some(si) = r.signal(&crate::names::key(n))
-                    && seen.insert(si)
-                {
-                    used.push(si);
+        for (n, at) in c.expr.names() {
+            if let Some((step, count)) = steps.as_ref().and_then(|s| s.step_time(n)) {
+                let at = Span::new(sfc.file, at);
+                let label = format!("localId {}", e.local_id);
+                let ids = by_id.get_or_insert_with(|| local_ids(sfc));
+                let problem = step_time_problem(sfc, ids, ei, n, step, count, only.is_some());
+                if let Some(why) = problem {
+                    diags.push(
+                        Diagnostic::error(
+                            Code::BadCondition,
+                            format!("condition `{}`: {why}", c.text),
+                        )
+                        .at(at)
+                        .element(label),
+                    );
+                    continue;
                 }
+                if !timed.contains(&step) {
+                    timed.push(step);
+                }
+                timer_names.insert(crate::names::key(n), step);
+                first_timed.get_or_insert(ei);
+                continue;
+            }
+            if let Some(r) = res
+                && let Some(si) = r.signal(&crate::names::key(n))
+                && seen.insert(si)
+            {
+                used.push(si);
             }
         }
     }
+    let timers = number_timers(sfc, res, profile, &timed, first_timed, diags);
     // Whether the program's language can read each signal the conditions use (not asked when
     // the language is not known for sure).
     if let (Some(r), Some(profile)) = (res, profile) {
@@ -1105,17 +1297,106 @@ pub fn conditions(
             }
         }
     }
-    used
+    Reads {
+        signals: used,
+        timers,
+        timer_names,
+    }
+}
+
+/// Numbers the timers of the steps in `timed` (KRL's `$TIMER[n]`, from the resource's `Timers`
+/// attribute or [`DEFAULT_TIMERS`]); a KRL program needing more timers than the range holds is
+/// an error at the attribute (or, without one, at the first condition that reads a step time).
+fn number_timers(
+    sfc: &Sfc,
+    res: Option<&crate::model::Resource>,
+    profile: Option<&dyn Rules>,
+    timed: &[usize],
+    first_timed: Option<usize>,
+    diags: &mut Diagnostics,
+) -> Vec<(usize, u32)> {
+    if timed.is_empty() {
+        return Vec::new();
+    }
+    let attr = res.and_then(|r| r.timers_attr.as_ref());
+    let (first, last) = match attr.map(|(v, _)| timer_range(v)) {
+        None => DEFAULT_TIMERS,
+        Some(Ok(range)) => range,
+        Some(Err(why)) => {
+            let (_, span) = attr.expect("an attribute");
+            diags.push(
+                Diagnostic::error(Code::BadTimers, why)
+                    .at(span.clone())
+                    .element(res.map(|r| r.element.clone()).unwrap_or_default()),
+            );
+            DEFAULT_TIMERS
+        }
+    };
+    let room = (last - first + 1) as usize;
+    if timed.len() > room && profile.is_some_and(|p| p.language() == crate::lang::Language::Krl) {
+        let msg = format!(
+            "the conditions read the times of {} steps, and each needs a KRL timer; `Timers` {} holds {room} (`$TIMER[{first}]` to `$TIMER[{last}]`): set the resource's attribute `Timers` to a larger range (`A-B`, up to {MAX_TIMER})",
+            timed.len(),
+            if attr.is_some() {
+                ""
+            } else {
+                "(not set, so 9-16)"
+            },
+        );
+        let d = Diagnostic::error(Code::BadTimers, msg);
+        let d = match (attr, first_timed) {
+            (Some((_, span)), _) => d
+                .at(span.clone())
+                .element(res.map(|r| r.element.clone()).unwrap_or_default()),
+            (None, Some(t)) => d
+                .at(sfc.elements[t].span.clone())
+                .element(format!("localId {}", sfc.elements[t].local_id)),
+            (None, None) => d,
+        };
+        diags.push(d);
+    }
+    timed
+        .iter()
+        .enumerate()
+        .map(|(k, &st)| (st, first.saturating_add(k as u32).min(MAX_TIMER)))
+        .collect()
 }
 
 /// Checks the conditions' types as far as they do not depend on names (`--sfc`: no
 /// blackboard, no signals): `3 AND TRUE` is an error, `a AND 3` too, `a AND b` is not.
 pub fn check_conditions_unresolved(sfc: &Sfc, diags: &mut Diagnostics) {
-    for e in &sfc.elements {
+    let mut steps: Option<StepNames> = None;
+    let mut by_id: Option<HashMap<u64, usize>> = None;
+    for (ei, e) in sfc.elements.iter().enumerate() {
         let ElementKind::Transition(Some(c)) = &e.kind else {
             continue;
         };
-        for err in crate::cond::check(&c.expr, &|_| None) {
+        let names = c.expr.names();
+        if steps.is_none() && names.iter().any(|(n, _)| n.contains('.')) {
+            steps = Some(StepNames::new(sfc));
+        }
+        for (n, at) in &names {
+            if let Some((step, count)) = steps.as_ref().and_then(|s| s.step_time(n)) {
+                let ids = by_id.get_or_insert_with(|| local_ids(sfc));
+                if let Some(why) = step_time_problem(sfc, ids, ei, n, step, count, false) {
+                    diags.push(
+                        Diagnostic::error(
+                            Code::BadCondition,
+                            format!("condition `{}`: {why}", c.text),
+                        )
+                        .at(Span::new(sfc.file, at.clone()))
+                        .element(format!("localId {}", e.local_id)),
+                    );
+                }
+            }
+        }
+        let step_names = steps.as_ref();
+        let lookup = |n: &str| {
+            step_names
+                .and_then(|s| s.step_time(n))
+                .map(|_| crate::cond::Ty::Time)
+        };
+        for err in crate::cond::check(&c.expr, &lookup) {
             if err.unknown {
                 continue;
             }
@@ -1317,6 +1598,16 @@ fn prepare(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn timer_ranges() {
+        assert_eq!(timer_range("9-16"), Ok((9, 16)));
+        assert_eq!(timer_range(" 3 "), Ok((3, 3)));
+        assert_eq!(timer_range("1 - 64"), Ok((1, 64)));
+        for bad in ["0-4", "5-4", "1-65", "x", "", "-3", "3-"] {
+            assert!(timer_range(bad).is_err(), "{bad}");
+        }
+    }
 
     use crate::emit::{Language, LanguageProfile as _};
     use crate::model::ValueType;

@@ -712,7 +712,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             );
             // A program of a cell reads the conditions it waits for or decides.
             let only = cell.as_ref().map(|c| evaluated(&c.programs[k].body));
-            bound.signals = bind::conditions(
+            let reads = bind::conditions(
                 &bb,
                 sfc,
                 prog.controller,
@@ -720,6 +720,9 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 only.as_ref(),
                 &mut cx.diags,
             );
+            bound.signals = reads.signals;
+            bound.timers = reads.timers;
+            bound.timer_names = reads.timer_names;
             // The handshakes' wires are the handshakes' (SPEC.md 9): a condition reading one
             // would see the toggles.
             if let (Some(cell), Some(c)) = (&cell, prog.controller) {

@@ -34,7 +34,9 @@ pub enum ExprKind {
     Int(Box<str>),
     /// A decimal literal, as written (`1.5`).
     Real(Box<str>),
-    /// A name (a signal), as written.
+    /// A duration (a `T#` / `TIME#` literal), in nanoseconds.
+    Time(u64),
+    /// A name (a signal, or a step's time `S.t`), as written.
     Name(Box<str>),
     Not(Box<Expr>),
     Neg(Box<Expr>),
@@ -148,6 +150,8 @@ enum Tok {
     Int(Box<str>),
     /// A decimal literal, `_` dropped.
     Real(Box<str>),
+    /// A duration in nanoseconds.
+    Time(u64),
     Name,
     Not,
     And,
@@ -157,6 +161,7 @@ enum Tok {
     Minus,
     Open,
     Close,
+    Comma,
 }
 
 struct Lexer {
@@ -174,6 +179,18 @@ fn clamp(text: &str, end: usize) -> usize {
         e += 1;
     }
     e
+}
+
+/// Whether `rest` holds only white space and `(* comments *)`.
+fn blank(rest: &str) -> bool {
+    let mut r = rest.trim_start();
+    while let Some(after) = r.strip_prefix("(*") {
+        match after.find("*)") {
+            Some(j) => r = after[j + 2..].trim_start(),
+            None => return false,
+        }
+    }
+    r.is_empty()
 }
 
 /// Whether `rest` starts with a letter (of any script).
@@ -286,6 +303,9 @@ fn typed(text: &str, word: &str, start: usize, i: &mut usize) -> Result<Tok, Syn
             }
         };
     }
+    if matches!(ty.as_str(), "T" | "TIME" | "LT" | "LTIME") {
+        return duration(text, word, start, i);
+    }
     let is_int = INTS.contains(&ty.as_str());
     if !is_int && ty != "REAL" && ty != "LREAL" {
         return Err(err(
@@ -324,6 +344,138 @@ fn typed(text: &str, word: &str, start: usize, i: &mut usize) -> Result<Tok, Syn
     }
 }
 
+/// The duration after `T#` (`*i` after the `#`): components `<number><unit>` from days down to
+/// nanoseconds (`d`, `h`, `m`, `s`, `ms`, `us`, `ns`, any case), each unit at most once and in
+/// that order, `_` between components, a fraction only on the last (`T#1.5s`); IEC 61131-3's
+/// TIME literal. A negative duration is not a step's time and is refused.
+fn duration(text: &str, word: &str, start: usize, i: &mut usize) -> Result<Tok, SyntaxError> {
+    const UNITS: &[(&str, u128)] = &[
+        ("d", 86_400_000_000_000),
+        ("h", 3_600_000_000_000),
+        ("m", 60_000_000_000),
+        ("s", 1_000_000_000),
+        ("ms", 1_000_000),
+        ("us", 1_000),
+        ("ns", 1),
+    ];
+    let b = text.as_bytes();
+    let end_of_literal = |from: usize| {
+        let mut j = from;
+        while j < b.len() && (b[j].is_ascii_alphanumeric() || b[j] == b'_' || b[j] == b'.') {
+            j += 1;
+        }
+        j
+    };
+    let bad = |why: &str, i: usize| {
+        let end = clamp(text, end_of_literal(i).max(start + 1));
+        SyntaxError {
+            at: start..end,
+            message: format!(
+                "{} is not a TIME literal: {why} (`T#350ms`, `T#1m30s`, `TIME#1.5s`)",
+                describe(text, &(start..end))
+            ),
+        }
+    };
+    if b.get(*i) == Some(&b'-') {
+        return Err(bad("a step's time is never negative", *i));
+    }
+    if b.get(*i) == Some(&b'+') {
+        *i += 1;
+    }
+    let mut total: u128 = 0;
+    let mut last_unit = None::<usize>;
+    let mut fraction_seen = false;
+    loop {
+        if !b.get(*i).is_some_and(u8::is_ascii_digit) {
+            return Err(bad(
+                &format!("`{word}#` needs a number and a unit (d, h, m, s, ms, us, ns)"),
+                *i,
+            ));
+        }
+        if fraction_seen {
+            return Err(bad("only the last unit may have a fraction", *i));
+        }
+        let Some(whole) = digits(text, i, 10) else {
+            return Err(bad("`_` only stands between digits", *i));
+        };
+        let mut frac = String::new();
+        if b.get(*i) == Some(&b'.') {
+            *i += 1;
+            match digits(text, i, 10) {
+                Some(f) => frac = f,
+                None => return Err(bad("a digit must follow `.`", *i)),
+            }
+            fraction_seen = true;
+        }
+        let from = *i;
+        while *i < b.len() && b[*i].is_ascii_alphabetic() {
+            *i += 1;
+        }
+        let unit = text[from..*i].to_ascii_lowercase();
+        let Some(k) = UNITS.iter().position(|(u, _)| *u == unit) else {
+            return Err(bad(
+                &format!(
+                    "{} is not a unit (d, h, m, s, ms, us, ns)",
+                    if unit.is_empty() {
+                        "nothing".to_owned()
+                    } else {
+                        format!("`{unit}`")
+                    }
+                ),
+                *i,
+            ));
+        };
+        if last_unit.is_some_and(|l| l >= k) {
+            return Err(bad("units go from days down to nanoseconds, each once", *i));
+        }
+        last_unit = Some(k);
+        let scale = UNITS[k].1;
+        let w: u128 = whole.parse().unwrap_or(u128::MAX);
+        let mut part = w.saturating_mul(scale);
+        if !frac.is_empty() {
+            // Digits beyond the nanosecond are dropped.
+            let mut f: u128 = 0;
+            let mut s = scale;
+            for d in frac.bytes() {
+                s /= 10;
+                f = f.saturating_add(u128::from(d - b'0') * s);
+            }
+            part = part.saturating_add(f);
+        }
+        total = total.saturating_add(part);
+        if total > u128::from(u64::MAX) {
+            return Err(bad("too long", *i));
+        }
+        // `_` between components, then the next number.
+        if b.get(*i) == Some(&b'_') && b.get(*i + 1).is_some_and(u8::is_ascii_digit) {
+            *i += 1;
+            continue;
+        }
+        if b.get(*i).is_some_and(u8::is_ascii_digit) {
+            continue;
+        }
+        if b.get(*i)
+            .is_some_and(|c| c.is_ascii_alphanumeric() || *c == b'_' || *c == b'.')
+        {
+            return Err(bad("unexpected character", *i));
+        }
+        return Ok(Tok::Time(total as u64));
+    }
+}
+
+/// A duration in nanoseconds as a decimal number of `unit` nanoseconds (`1_000_000`: ms),
+/// without trailing zeros (`350`, `0.35`).
+pub fn decimal(ns: u64, unit: u64) -> String {
+    let whole = ns / unit;
+    let frac = ns % unit;
+    if frac == 0 {
+        return whole.to_string();
+    }
+    let width = unit.ilog10() as usize;
+    let f = format!("{frac:0width$}");
+    format!("{whole}.{}", f.trim_end_matches('0'))
+}
+
 impl Lexer {
     fn run(text: &str) -> Result<Vec<(Tok, Range<usize>)>, SyntaxError> {
         let mut l = Lexer { toks: Vec::new() };
@@ -358,6 +510,10 @@ impl Lexer {
                 b')' => {
                     i += 1;
                     Tok::Close
+                }
+                b',' => {
+                    i += 1;
+                    Tok::Comma
                 }
                 b'&' => {
                     i += 1;
@@ -450,6 +606,8 @@ impl Lexer {
                             ": a typed or based literal needs its type or base before `#` (`INT#5`, `16#FF`)"
                         }
                         '\'' | '"' => ": strings are not part of the condition language",
+                        // `expr;` as ST writes a statement: one `;` at the end is fine.
+                        ';' if blank(&text[i + 1..]) => break,
                         ';' => ": a condition is one expression",
                         _ => "",
                     };
@@ -632,6 +790,124 @@ impl Parser<'_> {
         Ok(lhs)
     }
 
+    /// A call of a standard function, `F(a, b, …)` (the `(` is next): `AND`, `OR`, `XOR` of two
+    /// or more operands, `NOT` of one, the comparisons `EQ`, `NE`, `GT`, `GE`, `LT`, `LE` of two
+    /// or more (IEC's chain: `GT(a, b, c)` is `a > b AND b > c`), `SEL(G, IN0, IN1)` and
+    /// `MOVE(x)`, as the blocks of a wired condition.
+    fn call(&mut self, name: &str, r: Range<usize>, depth: usize) -> Result<Expr, SyntaxError> {
+        let f = name.to_ascii_uppercase();
+        let arity: (usize, usize) = match f.as_str() {
+            "AND" | "OR" | "XOR" => (2, usize::MAX),
+            "EQ" | "NE" | "GT" | "GE" | "LT" | "LE" => (2, usize::MAX),
+            "NOT" | "MOVE" => (1, 1),
+            "SEL" => (3, 3),
+            _ => {
+                return Err(SyntaxError {
+                    at: r,
+                    message: format!(
+                        "function `{name}` is not part of the condition language (AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, SEL and MOVE are)"
+                    ),
+                });
+            }
+        };
+        let open = self.toks[self.pos].1.clone();
+        self.pos += 1;
+        let mut args = Vec::new();
+        loop {
+            args.push(self.expr(0, depth + 1)?);
+            match self.toks.get(self.pos) {
+                Some((Tok::Comma, _)) => self.pos += 1,
+                Some((Tok::Close, _)) => {
+                    self.pos += 1;
+                    break;
+                }
+                Some((_, r2)) => {
+                    return Err(SyntaxError {
+                        message: format!(
+                            "{} where `,` or `)` is expected (in the call of `{name}`)",
+                            describe(self.text, r2)
+                        ),
+                        at: r2.clone(),
+                    });
+                }
+                None => {
+                    return Err(SyntaxError {
+                        at: open,
+                        message: format!("`(` of the call of `{name}` without its `)`"),
+                    });
+                }
+            }
+        }
+        let close = self.toks[self.pos - 1].1.clone();
+        if args.len() < arity.0 || args.len() > arity.1 {
+            let wanted = match arity {
+                (a, b) if a == b => format!("{a}"),
+                (a, _) => format!("at least {a}"),
+            };
+            return Err(SyntaxError {
+                at: r.start..close.end,
+                message: format!(
+                    "`{name}` takes {wanted} operand(s), this call has {}",
+                    args.len()
+                ),
+            });
+        }
+        let span = self.span(r.start..close.end);
+        let bin = |op, a: Expr, b: Expr| Expr {
+            kind: ExprKind::Bin(op, Box::new(a), Box::new(b)),
+            span: span.clone(),
+        };
+        let cmp = |op: BinOp, args: Vec<Expr>| {
+            let mut parts = args.windows(2).map(|w| bin(op, w[0].clone(), w[1].clone()));
+            let first = parts.next().expect("two operands at least");
+            parts.fold(first, |acc, p| bin(BinOp::And, acc, p))
+        };
+        let mut it = args.into_iter();
+        Ok(match f.as_str() {
+            "AND" | "OR" | "XOR" => {
+                let op = match f.as_str() {
+                    "AND" => BinOp::And,
+                    "OR" => BinOp::Or,
+                    _ => BinOp::Xor,
+                };
+                let first = it.next().expect("two operands at least");
+                it.fold(first, |acc, a| bin(op, acc, a))
+            }
+            "NOT" => Expr {
+                kind: ExprKind::Not(Box::new(it.next().expect("one operand"))),
+                span: span.clone(),
+            },
+            "MOVE" => it.next().expect("one operand"),
+            "SEL" => {
+                let (g, in0, in1) = (
+                    it.next().expect("G"),
+                    it.next().expect("IN0"),
+                    it.next().expect("IN1"),
+                );
+                let not_g = Expr {
+                    kind: ExprKind::Not(Box::new(g.clone())),
+                    span: span.clone(),
+                };
+                bin(
+                    BinOp::Or,
+                    bin(BinOp::And, g, in1),
+                    bin(BinOp::And, not_g, in0),
+                )
+            }
+            _ => {
+                let op = match f.as_str() {
+                    "EQ" => BinOp::Eq,
+                    "NE" => BinOp::Ne,
+                    "GT" => BinOp::Gt,
+                    "GE" => BinOp::Ge,
+                    "LT" => BinOp::Lt,
+                    _ => BinOp::Le,
+                };
+                cmp(op, it.collect())
+            }
+        })
+    }
+
     fn unary(&mut self, depth: usize) -> Result<Expr, SyntaxError> {
         let Some((tok, r)) = self.toks.get(self.pos).cloned() else {
             return Err(self.end_error("an operand"));
@@ -667,6 +943,12 @@ impl Parser<'_> {
             }
             Tok::Int(v) => leaf(ExprKind::Int(v.clone()), self),
             Tok::Real(v) => leaf(ExprKind::Real(v.clone()), self),
+            Tok::Time(ns) => leaf(ExprKind::Time(ns), self),
+            Tok::Name | Tok::And | Tok::Or | Tok::Xor
+                if matches!(self.toks.get(self.pos), Some((Tok::Open, _))) =>
+            {
+                self.call(text, r.clone(), depth)?
+            }
             Tok::Name => leaf(ExprKind::Name(text.into()), self),
             Tok::Not | Tok::Minus => {
                 let inner = self.unary(depth + 1)?;
@@ -718,6 +1000,8 @@ impl Parser<'_> {
 pub enum Ty {
     Bool,
     Number,
+    /// A duration: a `T#` literal or a step's time.
+    Time,
 }
 
 impl Ty {
@@ -725,6 +1009,7 @@ impl Ty {
         match self {
             Ty::Bool => "boolean",
             Ty::Number => "number",
+            Ty::Time => "time",
         }
     }
 }
@@ -758,9 +1043,18 @@ fn ty(e: &Expr, lookup: &dyn Fn(&str) -> Option<Ty>, errs: &mut Vec<CheckError>)
         if let Some(t) = t
             && t != wanted
         {
+            let hint = if matches!(e.kind, ExprKind::Not(_)) && wanted != Ty::Bool {
+                " (`NOT` binds tighter than a comparison in ST: `NOT (a >= b)` negates the comparison; `NOT` of a number, bitwise in ST, is not part of the condition language)"
+            } else {
+                ""
+            };
             errs.push(CheckError {
                 at: e.span.clone(),
-                message: format!("{what} needs a {}, this is a {}", wanted.name(), t.name()),
+                message: format!(
+                    "{what} needs a {}, this is a {}{hint}",
+                    wanted.name(),
+                    t.name()
+                ),
                 unknown: false,
             });
         }
@@ -768,6 +1062,7 @@ fn ty(e: &Expr, lookup: &dyn Fn(&str) -> Option<Ty>, errs: &mut Vec<CheckError>)
     match &e.kind {
         ExprKind::Bool(_) => Some(Ty::Bool),
         ExprKind::Int(_) | ExprKind::Real(_) => Some(Ty::Number),
+        ExprKind::Time(_) => Some(Ty::Time),
         ExprKind::Name(n) => {
             let t = lookup(n);
             if t.is_none() {
@@ -801,13 +1096,25 @@ fn ty(e: &Expr, lookup: &dyn Fn(&str) -> Option<Ty>, errs: &mut Vec<CheckError>)
                 {
                     errs.push(CheckError {
                         at: e.span.clone(),
-                        message: format!("{what} compares a {} with a {}", x.name(), y.name()),
+                        message: format!(
+                            "{what} compares a {} with a {}{}",
+                            x.name(),
+                            y.name(),
+                            if [a, b].iter().any(|o| matches!(o.kind, ExprKind::Not(_))) {
+                                " (`NOT` binds tighter than `=` in ST: `NOT (a = b)` negates the comparison; `NOT` of a number, bitwise in ST, is not part of the condition language)"
+                            } else {
+                                ""
+                            }
+                        ),
                         unknown: false,
                     });
                 }
             } else {
-                want(a, ta, Ty::Number, &what, errs);
-                want(b, tb, Ty::Number, &what, errs);
+                // Numbers with numbers, times with times.
+                let other = |t: Option<Ty>| t.filter(|t| *t != Ty::Bool);
+                let wanted = other(ta).or(other(tb)).unwrap_or(Ty::Number);
+                want(a, ta, wanted, &what, errs);
+                want(b, tb, wanted, &what, errs);
             }
             Some(Ty::Bool)
         }
@@ -825,6 +1132,8 @@ pub fn render_krl(e: &Expr, signal: &dyn Fn(&str) -> String) -> String {
 #[derive(Debug)]
 pub struct Ops {
     pub op: fn(BinOp) -> &'static str,
+    /// A duration (nanoseconds) in the unit the language's step times count in.
+    pub time: fn(u64) -> String,
     /// The negation with its space (`NOT `, `not `).
     pub not: &'static str,
     pub true_: &'static str,
@@ -832,14 +1141,26 @@ pub struct Ops {
 }
 
 impl Ops {
+    /// A duration in milliseconds (KRL's `$TIMER`).
+    pub fn milliseconds(ns: u64) -> String {
+        decimal(ns, 1_000_000)
+    }
+
+    /// A duration in seconds (RAPID's `ClkRead`, URScript's counters).
+    pub fn seconds(ns: u64) -> String {
+        decimal(ns, 1_000_000_000)
+    }
+
     pub const KRL: Ops = Ops {
         op: BinOp::krl,
+        time: Ops::milliseconds,
         not: "NOT ",
         true_: "TRUE",
         false_: "FALSE",
     };
     const ST: Ops = Ops {
         op: BinOp::st,
+        time: |ns| format!("T#{}ms", decimal(ns, 1_000_000)),
         not: "NOT ",
         true_: "TRUE",
         false_: "FALSE",
@@ -885,6 +1206,7 @@ fn write(e: &Expr, out: &mut String, name: &dyn Fn(&str) -> String, ops: &Ops) {
         ExprKind::Bool(true) => out.push_str(ops.true_),
         ExprKind::Bool(false) => out.push_str(ops.false_),
         ExprKind::Int(s) | ExprKind::Real(s) => out.push_str(s),
+        ExprKind::Time(ns) => out.push_str(&(ops.time)(*ns)),
         ExprKind::Name(n) => out.push_str(&name(n)),
         ExprKind::Not(a) => {
             out.push_str(ops.not);
@@ -933,6 +1255,62 @@ mod tests {
         assert!(p("not FALSE").is_ok());
     }
 
+    /// TIME literals (IEC 61131-3): units from days to nanoseconds, `_` between components, a
+    /// fraction on the last; rendered in milliseconds for listings.
+    #[test]
+    fn time_literals_are_read() {
+        assert_eq!(st("S.t > T#350ms"), "S.t > T#350ms");
+        assert_eq!(st("S.t > t#1h1m"), "S.t > T#3660000ms");
+        assert_eq!(st("S.t >= TIME#1s_500ms"), "S.t >= T#1500ms");
+        assert_eq!(st("S.t > T#0.35S"), "S.t > T#350ms");
+        assert_eq!(st("S.t > LT#1d"), "S.t > T#86400000ms");
+        assert_eq!(st("S.t > T#1us"), "S.t > T#0.001ms");
+        assert_eq!(st("S.t > T#+2s"), "S.t > T#2000ms");
+        let e = |s: &str| p(s).unwrap_err().message;
+        assert!(e("S.t > T#5").contains("not a unit"), "{}", e("S.t > T#5"));
+        assert!(e("S.t > T#5x").contains("not a unit"));
+        assert!(e("S.t > T#-5s").contains("never negative"));
+        assert!(e("S.t > T#1s1m").contains("days down to"));
+        assert!(e("S.t > T#1.5s2ms").contains("last unit"));
+        assert!(e("S.t > T#s").contains("a number and a unit"));
+        assert!(e("S.t > T#99999999999d").contains("too long"));
+        // Times compare with times only.
+        let ty = |s: &str| {
+            check(&p(s).unwrap(), &|n| (n == "S.t").then_some(Ty::Time))
+                .into_iter()
+                .map(|e| e.message)
+                .collect::<Vec<_>>()
+        };
+        assert!(ty("S.t > T#1s").is_empty());
+        assert!(ty("T#1s < S.t AND S.t <> T#2s").is_empty());
+        assert!(!ty("S.t > 5").is_empty());
+        assert!(!ty("S.t AND TRUE").is_empty());
+        assert!(!ty("-S.t < T#1s").is_empty());
+    }
+
+    /// Standard functions called in ST, as the blocks of a wired condition; `expr;` as a
+    /// statement.
+    #[test]
+    fn function_calls_are_read() {
+        assert_eq!(st("AND(a, b, c)"), "(a AND b) AND c");
+        assert_eq!(st("OR(a, NOT b)"), "a OR (NOT b)");
+        assert_eq!(st("xor(a, b)"), "a XOR b");
+        assert_eq!(st("GT(n, 2)"), "n > 2");
+        assert_eq!(st("GE(a, b, c)"), "(a >= b) AND (b >= c)");
+        assert_eq!(st("SEL(g, a, b)"), "(g AND b) OR ((NOT g) AND a)");
+        assert_eq!(st("MOVE(a) AND NOT(b)"), "a AND (NOT b)");
+        assert_eq!(st("AND(EQ(n, 1), b)"), "(n = 1) AND b");
+        assert_eq!(st("a = b;"), "a = b");
+        assert_eq!(st("a ; (* done *)"), "a");
+        let e = |s: &str| p(s).unwrap_err().message;
+        assert!(e("TON(a, b)").contains("not part of the condition language"));
+        assert!(e("AND(a)").contains("at least 2"));
+        assert!(e("SEL(a, b)").contains("takes 3"));
+        assert!(e("AND(a, b").contains("without its `)`"));
+        assert!(e("AND(a b)").contains("`,` or `)`"));
+        assert!(e("a; b").contains("one expression"));
+    }
+
     /// IEC 61131-3 literals (SPEC 3.1): `1`/`0` as booleans where a boolean belongs, `BOOL#1`,
     /// typed and based literals, `_` between digits; written in decimal.
     #[test]
@@ -960,7 +1338,7 @@ mod tests {
         assert!(e("n = 1__0").contains("between digits"));
         assert!(e("n = 1_").contains("between digits"));
         assert!(e("BOOL#2").contains("not a BOOL literal"));
-        assert!(e("t > T#5s").contains("not part of the condition language"));
+        assert!(e("t > STRING#5").contains("not part of the condition language"));
         assert!(e("n = INT#1.5").contains("fraction"));
         assert!(e("n = 16#1_0000_0000").contains("larger than a KRL integer"));
     }

@@ -518,6 +518,9 @@ codes! {
     TooFewWires = "E212",
     /// A cell's chart whose flow goes beyond the structured forms (SPEC.md 3.1, 9).
     CellUnstructured = "E213",
+    /// A resource's `Timers` attribute that names no KRL timers, or fewer than the step times
+    /// the conditions read (SPEC.md 3.1).
+    BadTimers = "E214",
 
     /// No `pou` with an `SFC` body (or none of the name asked for).
     NoSfcBody = "E301",

@@ -183,6 +183,9 @@ pub struct Resource {
     /// The `Program` (`Programm`) attribute's value and span: a controller's program name in a
     /// cell of several controllers (SPEC.md 9).
     pub program_attr: Option<(String, Span)>,
+    /// The `Timers` attribute's value and span: the KRL timers (`$TIMER[n]`) the program may
+    /// use for step times (SPEC.md 3.1), `A-B` or `N`.
+    pub timers_attr: Option<(String, Span)>,
 }
 
 /// Key → index of the first skill, function and signal of that key.

@@ -124,6 +124,7 @@ cases! {
     flow_selection_in_parallel => "flow-selection-in-parallel",
     flow_selection_three_way => "flow-selection-three-way",
     flow_selection_two_way => "flow-selection-two-way",
+    flow_step_time => "flow-step-time",
     lf_output => "lf-output",
     mappings_overloads => "mappings-overloads",
     no_writeback_target => "no-writeback-target",

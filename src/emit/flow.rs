@@ -4,6 +4,7 @@
 
 use crate::bind::BoundStep;
 use crate::cond::Ops;
+use crate::lang::Language;
 use crate::model::ElementKind;
 use crate::names::transliterate;
 
@@ -136,7 +137,11 @@ pub fn condition(input: &EmitInput, t: usize, ops: &Ops) -> Option<String> {
         return None;
     };
     let res = input.bound.resource.map(|r| &input.blackboard.resources[r]);
+    let lang = input.profile.language();
     let signal = |n: &str| -> String {
+        if let Some((k, number)) = input.bound.timer_named(n) {
+            return timer_read(lang, k, number);
+        }
         res.and_then(|r| {
             let si = r.signal(&crate::names::key(n))?;
             input.profile.signal(&r.signals[si]).ok()
@@ -144,6 +149,52 @@ pub fn condition(input: &EmitInput, t: usize, ops: &Ops) -> Option<String> {
         .unwrap_or_else(|| n.to_owned())
     };
     Some(crate::cond::render(&c.expr, &signal, ops))
+}
+
+/// How `lang` reads the `k`-th step timer (KRL: `$TIMER[number]`, milliseconds; RAPID: the
+/// clock `skp_clock<k+1>`, seconds; URScript: the counter `skp_time<k+1>`, seconds).
+pub fn timer_read(lang: Language, k: usize, number: u32) -> String {
+    match lang {
+        Language::Krl => format!("$TIMER[{number}]"),
+        Language::Rapid => format!("ClkRead(skp_clock{})", k + 1),
+        Language::UrScript => format!("skp_time{}", k + 1),
+    }
+}
+
+/// Where step `i`'s time starts, when a condition reads it: the comment's text and the
+/// statements, in `lang`. The step is active from here, after the motion before it has ended
+/// (KRL's advance run would start the timer early: `WAIT SEC 0` stops it; RAPID waits for the
+/// robot to stand still).
+pub fn timer_start(input: &EmitInput, i: usize) -> Option<(String, Vec<String>)> {
+    let (k, number) = input.bound.timer_of(i)?;
+    let el = &input.sfc.elements[i];
+    let name = match &el.kind {
+        ElementKind::Step(st) => transliterate(&st.name),
+        _ => String::new(),
+    };
+    let what = format!("step time of {name} (localId {})", el.local_id);
+    Some(match input.profile.language() {
+        Language::Krl => (
+            format!("{what} starts when the motion before it has ended"),
+            vec![
+                "WAIT SEC 0".to_owned(),
+                format!("$TIMER[{number}] = 0"),
+                format!("$TIMER_STOP[{number}] = FALSE"),
+            ],
+        ),
+        Language::Rapid => (
+            format!("{what} starts when the robot stands still"),
+            vec![
+                "WaitTime \\InPos, 0;".to_owned(),
+                format!("ClkReset skp_clock{};", k + 1),
+                format!("ClkStart skp_clock{};", k + 1),
+            ],
+        ),
+        Language::UrScript => (
+            format!("{what} starts"),
+            vec![format!("skp_time{} = 0.0", k + 1)],
+        ),
+    })
 }
 
 /// The condition that selects a selection branch: its transition's, or any of the nested

@@ -170,6 +170,12 @@ impl Writer<'_> {
         let input = self.input;
         match b {
             Block::Step(i) => {
+                if let Some((comment, lines)) = flow::timer_start(input, *i) {
+                    self.comment(level, &comment);
+                    for l in &lines {
+                        self.line(level, l);
+                    }
+                }
                 let Some(bs) = &input.bound.steps[*i] else {
                     return;
                 };

@@ -99,6 +99,7 @@ fn is_rapid_name(w: &str) -> bool {
 }
 
 const OPS: Ops = Ops {
+    time: Ops::seconds,
     op: rapid_op,
     not: "NOT ",
     true_: "TRUE",
@@ -146,6 +147,13 @@ const DIALECT: Dialect = Dialect {
             d.push(format!("VAR bool skp_loop{n} := TRUE;"));
         }
         d
+    },
+    // A clock per step time (`ClkRead` counts seconds).
+    timers: |n| {
+        let d = (1..=n)
+            .map(|k| format!("VAR clock skp_clock{k};"))
+            .collect();
+        (d, Vec::new())
     },
 };
 

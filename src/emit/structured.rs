@@ -32,6 +32,10 @@ pub enum Leave {
     Flag,
 }
 
+/// A dialect's step timers: their declarations, and the lines (with their levels) before the
+/// first step.
+pub type TimerLines = (Vec<String>, Vec<(usize, String)>);
+
 /// One language's words for the structure.
 #[derive(Debug)]
 pub struct Dialect {
@@ -57,6 +61,9 @@ pub struct Dialect {
     /// The declarations of the variables used: whether `skp_branch` was, how many loop flags,
     /// whether [`STATE_VAR`] was.
     pub declare: fn(bool, usize, bool) -> Vec<String>,
+    /// For `n` step timers: their declarations, and the lines (with their levels) that start
+    /// the program before its first step.
+    pub timers: fn(usize) -> TimerLines,
 }
 
 /// Writes the program tree in `dialect`.
@@ -73,11 +80,19 @@ pub fn generate(input: &EmitInput, dialect: &Dialect) -> Generated {
         states: None,
         uses_state_var: false,
     };
+    let (timer_declarations, prologue) = match input.bound.timers.len() {
+        0 => (Vec::new(), Vec::new()),
+        n => (dialect.timers)(n),
+    };
+    for (level, line) in &prologue {
+        w.out.line(*level, line);
+    }
     if let Some(h) = &w.hand {
         super::handshake::write(&mut w.out, 0, h.init());
     }
     w.blocks(input.body, 0);
     let mut declarations = (dialect.declare)(w.uses_branch_var, w.flags, w.uses_state_var);
+    declarations.extend(timer_declarations);
     if let Some(h) = &w.hand {
         declarations.extend(h.declarations());
     }
@@ -220,6 +235,12 @@ impl Writer<'_> {
         let input = self.input;
         match b {
             Block::Step(i) => {
+                if let Some((comment, lines)) = flow::timer_start(input, *i) {
+                    self.comment(level, &comment);
+                    for l in &lines {
+                        self.out.line(level, l);
+                    }
+                }
                 let Some(bs) = &input.bound.steps[*i] else {
                     return;
                 };

@@ -69,6 +69,7 @@ fn is_ur_name(w: &str, max: usize) -> bool {
 }
 
 const OPS: Ops = Ops {
+    time: Ops::seconds,
     op: ur_op,
     not: "not ",
     true_: "True",
@@ -169,6 +170,31 @@ const DIALECT: Dialect = Dialect {
     // steps waits one control cycle.
     empty_block: Some("sync()"),
     declare: |_, _, _| Vec::new(),
+    // URScript has no clock to read: a thread adds each control cycle's time to every step's
+    // counter (as PolyScope's timers do); a step's start sets its counter to 0.
+    timers: |n| {
+        let names: Vec<String> = (1..=n).map(|k| format!("skp_time{k}")).collect();
+        let mut lines = vec![(
+            0,
+            format!(
+                "# step times: {} count the seconds since their step started",
+                names.join(", ")
+            ),
+        )];
+        for v in &names {
+            lines.push((0, format!("global {v} = 0.0")));
+        }
+        lines.push((0, "thread skp_clock():".to_owned()));
+        lines.push((1, "while True:".to_owned()));
+        for v in &names {
+            lines.push((2, format!("{v} = {v} + get_steptime()")));
+        }
+        lines.push((2, "sync()".to_owned()));
+        lines.push((1, "end".to_owned()));
+        lines.push((0, "end".to_owned()));
+        lines.push((0, "skp_clock_thread = run skp_clock()".to_owned()));
+        (Vec::new(), lines)
+    },
 };
 
 /// The URScript profile.

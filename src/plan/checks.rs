@@ -153,13 +153,15 @@ pub fn check_nodes(sfc: &Sfc, g: &Graph, diags: &mut Diagnostics) -> Vec<Diagnos
                         }
                     }
                 }
-                if np == 0 {
+                if g.only_jumps(i) {
+                    // Gathers only jumps: not part of the flow (CODESYS).
+                } else if np == 0 {
                     diags.push(err(
                         Code::StartStep,
                         format!("{tag} has no input: the flow must start at a step"),
                     ));
                 }
-                if ns == 0 {
+                if ns == 0 && !g.only_jumps(i) {
                     diags.push(err(
                         Code::EndStep,
                         format!("{tag} has no output: the flow must end at a step or a jump"),

@@ -16,6 +16,9 @@ pub struct Graph {
     /// The selectionConvergences drawn with a jumpStep among their inputs (as CODESYS exports
     /// a branch that ends in a jump), ascending: that input is not a connection.
     lost_jumps: Vec<usize>,
+    /// The selectionConvergences that gather only jumps (and such convergences), ascending:
+    /// CODESYS closes a drawing so; they are not part of the flow.
+    only_jumps: Vec<usize>,
     /// Per element, whether it belongs to a macro step's body (empty without macro steps).
     in_macro_body: Vec<bool>,
     /// The macro steps with a body, ascending.
@@ -37,6 +40,12 @@ impl Graph {
     /// ends its branch; the drawn connection is not part of the flow).
     pub fn lost_jumps(&self, i: usize) -> bool {
         self.lost_jumps.binary_search(&i).is_ok()
+    }
+
+    /// Whether element `i` is a selectionConvergence whose inputs are all jumps (or such
+    /// convergences): it is not part of the flow.
+    pub fn only_jumps(&self, i: usize) -> bool {
+        self.only_jumps.binary_search(&i).is_ok()
     }
 
     /// Whether element `i` belongs to a macro step's body.
@@ -230,6 +239,35 @@ pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
     let mut succ_count = vec![0usize; n];
     let mut seen: std::collections::HashSet<usize> = std::collections::HashSet::new();
     let mut lost_jumps = Vec::new();
+    // Convergences that gather only jumps, found to a fixed point (one gathers another's).
+    let mut only_jumps = vec![false; n];
+    let gathers = |e: &crate::model::Element, only_jumps: &[bool]| {
+        matches!(e.kind, ElementKind::SelectionConvergence)
+            && !e.inputs.is_empty()
+            && e.inputs.iter().all(|(r, _)| {
+                ids.get(*r).is_some_and(|p| {
+                    matches!(sfc.elements[p].kind, ElementKind::JumpStep(_)) || only_jumps[p]
+                })
+            })
+    };
+    if sfc
+        .elements
+        .iter()
+        .any(|e| matches!(e.kind, ElementKind::JumpStep(_)))
+    {
+        loop {
+            let mut changed = false;
+            for (i, e) in sfc.elements.iter().enumerate() {
+                if !only_jumps[i] && gathers(e, &only_jumps) {
+                    only_jumps[i] = true;
+                    changed = true;
+                }
+            }
+            if !changed {
+                break;
+            }
+        }
+    }
     for (i, e) in sfc.elements.iter().enumerate() {
         pred_at.push(pred.len());
         let first = pred.len();
@@ -237,7 +275,8 @@ pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
         for (r, range) in &e.inputs {
             match ids.get(*r) {
                 Some(p)
-                    if matches!(sfc.elements[p].kind, ElementKind::JumpStep(_))
+                    if (matches!(sfc.elements[p].kind, ElementKind::JumpStep(_))
+                        || only_jumps[p])
                         && matches!(e.kind, ElementKind::SelectionConvergence) =>
                 {
                     // CODESYS draws a branch that ends in a jump into the selection's
@@ -306,6 +345,11 @@ pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
         succ_at,
         succ,
         lost_jumps,
+        only_jumps: only_jumps
+            .iter()
+            .enumerate()
+            .filter_map(|(i, &o)| o.then_some(i))
+            .collect(),
         in_macro_body: owner.iter().map(|&o| o != NONE).collect(),
         macro_steps: {
             let mut v: Vec<usize> = sfc.macros.iter().map(|m| m.step).collect();

@@ -514,12 +514,16 @@ impl Reader<'_> {
             .or_else(|| caex_attr(r, "Programm"))
             .and_then(|a| caex_value(self.file, a))
             .filter(|(v, _)| !v.trim().is_empty());
+        let timers_attr = caex_attr(r, "Timers")
+            .and_then(|a| caex_value(self.file, a))
+            .filter(|(v, _)| !v.trim().is_empty());
         Resource {
             name,
             language,
             parent: None,
             controller_attr,
             program_attr,
+            timers_attr,
             element: caex_element(r),
             id: r.attribute("ID").map(str::to_owned),
             skills,
