@@ -2062,3 +2062,89 @@ fn macro_steps_nest_up_to_the_limit() {
         }
     }
 }
+
+/// A chart of `elements` (SFC element XML) in a POU `P`.
+fn chart(elements: &str) -> String {
+    format!(
+        "<project><types><pous><pou name=\"P\" pouType=\"program\"><body><SFC>{elements}</SFC></body></pou></pous></types></project>"
+    )
+}
+
+#[test]
+fn step_times_are_checked_without_a_blackboard() {
+    // `Work.t` after Work: fine; `Start.t` after Work: the program would not know it.
+    let els = |cond: &str| {
+        format!(
+            "<step localId=\"1\" name=\"Start\" initialStep=\"true\"><position x=\"0\" y=\"0\"/></step>\
+            <transition localId=\"2\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"1\"/></connectionPointIn><condition><inline name=\"\"><ST>TRUE</ST></inline></condition></transition>\
+            <step localId=\"3\" name=\"Work\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"2\"/></connectionPointIn></step>\
+            <transition localId=\"4\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"3\"/></connectionPointIn><condition><inline name=\"\"><ST>{cond}</ST></inline></condition></transition>\
+            <step localId=\"5\" name=\"End\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"4\"/></connectionPointIn></step>"
+        )
+    };
+    let p = project();
+    for (cond, ok, expect) in [
+        ("Work.t &gt; T#1s500ms OR Part_OK", true, "wait for Work.t > T#1s500ms"),
+        ("AND(Work.T &gt;= t#0.25s, GT(n, 2))", true, "wait for AND(Work.T >= t#0.25s"),
+        ("Start.t &gt; T#1s", false, "does not follow that step"),
+        ("Work.t &gt; 5", false, "needs a time, this is a number"),
+        ("Work.t AND Part_OK", false, "needs a boolean, this is a time"),
+        ("Work.t &gt; T#5", false, "is not a unit"),
+    ] {
+        std::fs::write(p.path().join("t.xml"), chart(&els(cond))).unwrap();
+        let o = run(&["--sfc", "-pO", "--format", "short", "t.xml"], p.path());
+        let all = format!("{}{}", stdout(&o), stderr(&o));
+        assert_eq!(o.status.code(), Some(if ok { 0 } else { 1 }), "{cond}: {all}");
+        assert!(all.contains(expect), "{cond}: {all}");
+    }
+}
+
+#[test]
+fn step_times_in_a_cell_of_several_controllers_are_refused() {
+    let p = bases_with_case(&["cell", "cell2"], "cell-two-robots-weld");
+    let sfc = std::fs::read_to_string(p.path().join("sfc.xml")).unwrap();
+    // The transition after Pick (KR15-2) is waited for by the gripper's controller, the same;
+    // the one after Weld (KR16-2) by PlaceA's (KR15-2): a step time of another controller.
+    let at = sfc.find("<transition localId=\"8\">").unwrap();
+    let cond = sfc[at..].find("<xhtml:p>TRUE</xhtml:p>").unwrap() + at;
+    let sfc = format!(
+        "{}<xhtml:p>Weld.t &gt; T#2s</xhtml:p>{}",
+        &sfc[..cond],
+        &sfc[cond + "<xhtml:p>TRUE</xhtml:p>".len()..]
+    );
+    std::fs::write(p.path().join("sfc.xml"), sfc).unwrap();
+    let before = std::fs::read(p.path().join("Blackboard.aml")).unwrap();
+    let o = run(&["--format", "short", "Blackboard.aml", "Cell"], p.path());
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(e.contains("E316") && e.contains("several controllers"), "{e}");
+    assert_eq!(std::fs::read(p.path().join("Blackboard.aml")).unwrap(), before);
+    assert!(!p.path().join("Cell_KUKA_KR15_2.src").exists());
+}
+
+#[test]
+fn convergences_that_gather_only_jumps_are_not_part_of_the_flow() {
+    // As CODESYS exports them: both branches end in jumps drawn into a selectionConvergence,
+    // which is drawn into another one with nothing after it.
+    let els = "<step localId=\"1\" name=\"Init\" initialStep=\"true\"><position x=\"0\" y=\"0\"/></step>\
+        <transition localId=\"2\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"1\"/></connectionPointIn><condition><inline name=\"\"><ST>go</ST></inline></condition></transition>\
+        <step localId=\"3\" name=\"Work\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"2\"/></connectionPointIn></step>\
+        <selectionDivergence localId=\"4\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"3\"/></connectionPointIn></selectionDivergence>\
+        <transition localId=\"5\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"4\"/></connectionPointIn><condition><inline name=\"\"><ST>again</ST></inline></condition></transition>\
+        <jumpStep localId=\"6\" targetName=\"Init\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"5\"/></connectionPointIn></jumpStep>\
+        <transition localId=\"7\"><position x=\"10\" y=\"0\"/><connectionPointIn><connection refLocalId=\"4\"/></connectionPointIn><condition><inline name=\"\"><ST>NOT again</ST></inline></condition></transition>\
+        <jumpStep localId=\"8\" targetName=\"Done\"><position x=\"10\" y=\"0\"/><connectionPointIn><connection refLocalId=\"7\"/></connectionPointIn></jumpStep>\
+        <selectionConvergence localId=\"9\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"6\"/></connectionPointIn><connectionPointIn><connection refLocalId=\"8\"/></connectionPointIn></selectionConvergence>\
+        <selectionConvergence localId=\"10\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"9\"/></connectionPointIn></selectionConvergence>\
+        <step localId=\"11\" name=\"Done\"><position x=\"0\" y=\"0\"/></step>\
+        <transition localId=\"12\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"11\"/></connectionPointIn><condition><inline name=\"\"><ST>reset</ST></inline></condition></transition>\
+        <jumpStep localId=\"13\" targetName=\"Init\"><position x=\"0\" y=\"0\"/><connectionPointIn><connection refLocalId=\"12\"/></connectionPointIn></jumpStep>";
+    let p = project();
+    std::fs::write(p.path().join("j.xml"), chart(els)).unwrap();
+    let o = run(&["--sfc", "-pO", "--format", "short", "j.xml"], p.path());
+    let out = stdout(&o);
+    assert_eq!(o.status.code(), Some(0), "{}{out}", stderr(&o));
+    for step in ["Init", "Work", "Done"] {
+        assert!(out.contains(step), "{out}");
+    }
+}
