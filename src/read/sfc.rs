@@ -2180,6 +2180,33 @@ struct Wiring<'a> {
     built: std::cell::Cell<usize>,
 }
 
+/// The blocks a wired condition may use, as messages list them (SPEC.md 3.1 lists `ADD`, `SUB`
+/// and `MUL` too, but the condition language has no arithmetic yet: see [`refused_block`]).
+const WIRED_BLOCKS: &str = "AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, SEL and MOVE";
+
+/// Why a wired condition cannot use a block of type `ty` (upper case) that is not one of
+/// [`WIRED_BLOCKS`]: what the block is and what to do instead, said after the block's name.
+fn refused_block(ty: &str) -> String {
+    let (what, hint) = match ty {
+        "TON" | "TOF" | "TP" | "TONR" => (
+            " (a timer)",
+            "; to wait a time after a step, write the step's time in the condition instead (`Step.t >= T#8s`)",
+        ),
+        "R_TRIG" | "F_TRIG" => (
+            " (an edge detector)",
+            "; an edge is not a condition a robot program can wait for (compare the signal's level instead)",
+        ),
+        "SR" | "RS" => (" (a bistable, which keeps a state)", ""),
+        "CTU" | "CTD" | "CTUD" => (" (a counter)", ""),
+        "ADD" | "SUB" | "MUL" | "DIV" | "MOD" | "EXPT" => (
+            " (arithmetic)",
+            "; arithmetic is not supported yet, neither drawn nor written",
+        ),
+        _ => ("", ""),
+    };
+    format!("{what}: a wired condition may use only the blocks {WIRED_BLOCKS}{hint}")
+}
+
 /// A diagnostic of a wired condition, located at `at`.
 fn wiring_error(at: &Span, message: String) -> Box<Diagnostic> {
     Box::new(Diagnostic::error(Code::BadCondition, message).at(at.clone()))
@@ -2234,7 +2261,7 @@ impl Wiring<'_> {
                 Some(&i) => wiring_error(
                     from,
                     format!(
-                        "a wired condition is drawn from a {} (localId {id}): only inVariable, inOutVariable, leftPowerRail, contact and the blocks AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, MOVE, SEL give one",
+                        "a wired condition is drawn from a {} (localId {id}): only inVariable, inOutVariable, leftPowerRail, contact and the blocks {WIRED_BLOCKS} give one",
                         self.elements[i].kind.tag()
                     ),
                 ),
@@ -2246,22 +2273,27 @@ impl Wiring<'_> {
                 ),
             });
         };
+        // How messages name the element: a block with its type (`block AND localId 5`).
+        let named = match (n.tag.as_str(), n.type_name.as_deref().map(str::trim)) {
+            ("block", Some(ty)) if !ty.is_empty() => format!("block {ty} localId {id}"),
+            ("block", _) => format!("block without typeName localId {id}"),
+            (tag, _) => format!("{tag} localId {id}"),
+        };
+        // Every element on the path being built passed its check below (a block outside the
+        // list is refused before its inputs are read), so a loop found here runs through
+        // supported elements only.
         if visiting.contains(&id) {
             return Err(wiring_error(
                 &n.span,
-                format!(
-                    "the wiring of the condition loops back to {} localId {id}",
-                    n.tag
-                ),
+                format!("the wiring of the condition loops back to {named}"),
             ));
         }
         if visiting.len() >= crate::cond::MAX_DEPTH {
             return Err(wiring_error(
                 &n.span,
                 format!(
-                    "the wired condition is drawn through more than {} elements in a row (at {} localId {id})",
+                    "the wired condition is drawn through more than {} elements in a row (at {named})",
                     crate::cond::MAX_DEPTH,
-                    n.tag
                 ),
             ));
         }
@@ -2317,6 +2349,12 @@ impl Wiring<'_> {
                 } else {
                     var
                 };
+                if n.inputs.is_empty() {
+                    return Err(wiring_error(
+                        at,
+                        format!("the input of {named} is not connected"),
+                    ));
+                }
                 let before = self.any_of(&n.inputs, at, visiting)?;
                 // Contacts in series are an AND; after the power rail, the contact alone.
                 Ok(if before.is_true() {
@@ -2326,66 +2364,87 @@ impl Wiring<'_> {
                 })
             }
             "block" => {
-                let ty = n.type_name.clone().unwrap_or_default().to_ascii_uppercase();
+                let ty = n
+                    .type_name
+                    .as_deref()
+                    .unwrap_or_default()
+                    .trim()
+                    .to_ascii_uppercase();
+                /// What a block of the list computes.
+                enum Block {
+                    /// AND, OR, XOR over all its inputs.
+                    Fold(BinOp),
+                    Not,
+                    Move,
+                    /// EQ, NE, GT, GE, LT, LE over IN1 and IN2.
+                    Compare(BinOp),
+                    Sel,
+                }
+                // The block's type first: a block outside the list is the error, whatever its
+                // inputs are (a TON's `PT`, an SR fed back from the TON's output).
+                let block = match ty.as_str() {
+                    "AND" => Block::Fold(BinOp::And),
+                    "OR" => Block::Fold(BinOp::Or),
+                    "XOR" => Block::Fold(BinOp::Xor),
+                    "NOT" => Block::Not,
+                    "MOVE" => Block::Move,
+                    "EQ" => Block::Compare(BinOp::Eq),
+                    "NE" => Block::Compare(BinOp::Ne),
+                    "GT" => Block::Compare(BinOp::Gt),
+                    "GE" => Block::Compare(BinOp::Ge),
+                    "LT" => Block::Compare(BinOp::Lt),
+                    "LE" => Block::Compare(BinOp::Le),
+                    "SEL" => Block::Sel,
+                    _ => {
+                        return Err(wiring_error(
+                            at,
+                            format!("a wired condition uses {named}{}", refused_block(&ty)),
+                        ));
+                    }
+                };
                 let mut ins: Vec<(&str, Expr)> = Vec::new();
                 for (formal, refs) in &n.formal {
                     // EN is the enable input, not an operand.
                     if formal.eq_ignore_ascii_case("EN") {
                         continue;
                     }
+                    if refs.is_empty() {
+                        return Err(wiring_error(
+                            at,
+                            format!("input {formal} of {named} is not connected"),
+                        ));
+                    }
                     ins.push((formal.as_str(), self.any_of(refs, at, visiting)?));
                 }
-                let named =
+                let input =
                     |ins: &mut Vec<(&str, Expr)>, f: &str| -> Result<Expr, Box<Diagnostic>> {
                         match ins.iter().position(|(n, _)| n.eq_ignore_ascii_case(f)) {
                             Some(k) => Ok(ins.remove(k).1),
-                            None => Err(wiring_error(
-                                at,
-                                format!("block {ty} localId {id} has no input {f}"),
-                            )),
+                            None => Err(wiring_error(at, format!("{named} has no input {f}"))),
                         }
                     };
-                match ty.as_str() {
-                    "AND" | "OR" | "XOR" => {
-                        let op = match ty.as_str() {
-                            "AND" => BinOp::And,
-                            "OR" => BinOp::Or,
-                            _ => BinOp::Xor,
-                        };
+                match block {
+                    Block::Fold(op) => {
                         let mut it = ins.into_iter().map(|(_, e)| e);
-                        let first = it.next().ok_or_else(|| {
-                            wiring_error(at, format!("block {ty} localId {id} has no inputs"))
-                        })?;
+                        let first = it
+                            .next()
+                            .ok_or_else(|| wiring_error(at, format!("{named} has no inputs")))?;
                         Ok(it.fold(first, |a, b| Self::bin(op, a, b, at)))
                     }
-                    "NOT" | "MOVE" => {
-                        let a = named(&mut ins, "IN")?;
-                        Ok(if ty == "NOT" {
-                            Expr {
-                                kind: ExprKind::Not(Box::new(a)),
-                                span: at.range.clone(),
-                            }
-                        } else {
-                            a
-                        })
-                    }
-                    "EQ" | "NE" | "GT" | "GE" | "LT" | "LE" => {
-                        let op = match ty.as_str() {
-                            "EQ" => BinOp::Eq,
-                            "NE" => BinOp::Ne,
-                            "GT" => BinOp::Gt,
-                            "GE" => BinOp::Ge,
-                            "LT" => BinOp::Lt,
-                            _ => BinOp::Le,
-                        };
-                        let a = named(&mut ins, "IN1")?;
-                        let b2 = named(&mut ins, "IN2")?;
+                    Block::Not => Ok(Expr {
+                        kind: ExprKind::Not(Box::new(input(&mut ins, "IN")?)),
+                        span: at.range.clone(),
+                    }),
+                    Block::Move => input(&mut ins, "IN"),
+                    Block::Compare(op) => {
+                        let a = input(&mut ins, "IN1")?;
+                        let b2 = input(&mut ins, "IN2")?;
                         Ok(Self::bin(op, a, b2, at))
                     }
-                    "SEL" => {
-                        let g = named(&mut ins, "G")?;
-                        let in0 = named(&mut ins, "IN0")?;
-                        let in1 = named(&mut ins, "IN1")?;
+                    Block::Sel => {
+                        let g = input(&mut ins, "G")?;
+                        let in0 = input(&mut ins, "IN0")?;
+                        let in1 = input(&mut ins, "IN1")?;
                         let not_g = Expr {
                             kind: ExprKind::Not(Box::new(g.clone())),
                             span: at.range.clone(),
@@ -2397,17 +2456,6 @@ impl Wiring<'_> {
                             at,
                         ))
                     }
-                    other => Err(wiring_error(
-                        at,
-                        format!(
-                            "a wired condition uses block {} localId {id}: only AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, MOVE and SEL are supported (timers, edges, counters, arithmetic and user blocks are not)",
-                            if other.is_empty() {
-                                "without typeName"
-                            } else {
-                                other
-                            }
-                        ),
-                    )),
                 }
             }
             other => Err(wiring_error(
