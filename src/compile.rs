@@ -629,36 +629,8 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         }
         // The programs: one, or one per controller of a cell (SPEC.md 9).
         let programs = programs(&mut cx, &bb, opts, &controllers, &langs);
-        // A cell's programs keep in step at the chart's structure: flow beyond it is not split.
-        let unstructured = plan.as_ref().and_then(|plan| {
-            let mut at = None;
-            plan::visit(&plan.body, &mut |b| {
-                if let plan::Block::Goto { from, .. } = b {
-                    at.get_or_insert(*from);
-                }
-            });
-            at
-        });
-        if let Some(from) = unstructured
-            && controllers.len() > 1
-        {
-            let el = &sfc.elements;
-            cx.diags.push(
-                Diagnostic::error(
-                    Code::CellUnstructured,
-                    format!(
-                        "the chart's steps run on {} controllers, and this flow is not a sequence, branch or loop: a cell's programs keep in step only where the chart is structured",
-                        controllers.len()
-                    ),
-                )
-                .at(el[from].span.clone())
-                .element(format!("localId {}", el[from].local_id)),
-            );
-            // (Binding one program for the whole cell would only report its consequences.)
-            return finish(cx, out);
-        }
         let cell = match (&plan, controllers.len() > 1) {
-            (Some(plan), true) if unstructured.is_none() => {
+            (Some(plan), true) => {
                 let index: HashMap<usize, usize> = controllers
                     .iter()
                     .enumerate()

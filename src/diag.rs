@@ -516,8 +516,6 @@ codes! {
     /// A cell's plan needs more wires between two controllers than the blackboard declares
     /// (SPEC.md 9): how many are missing, from which controller to which.
     TooFewWires = "E212",
-    /// A cell's chart whose flow goes beyond the structured forms (SPEC.md 3.1, 9).
-    CellUnstructured = "E213",
     /// A resource's `Timers` attribute that names no KRL timers, or fewer than the step times
     /// the conditions read (SPEC.md 3.1).
     BadTimers = "E214",

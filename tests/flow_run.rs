@@ -631,6 +631,7 @@ flow_cases! {
     flow_selection_in_parallel => "flow-selection-in-parallel",
     flow_selection_three_way => "flow-selection-three-way",
     flow_selection_two_way => "flow-selection-two-way",
+    flow_step_time => "flow-step-time",
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -726,6 +727,30 @@ fn random_charts_do_what_they_mean_urscript() {
     random_charts(Lang::UrScript);
 }
 
+/// The random chart `text` of `seed` with one of its jumps sent to a step chosen at random
+/// (`None` without a jump).
+fn retarget(text: &str, seed: u64) -> Option<String> {
+    let steps: Vec<&str> = text
+        .match_indices("name=\"S")
+        .map(|(i, _)| {
+            let rest = &text[i + 6..];
+            &rest[..rest.find('"').unwrap()]
+        })
+        .collect();
+    let jumps: Vec<usize> = text
+        .match_indices("targetName=\"")
+        .map(|(i, _)| i + 12)
+        .collect();
+    if jumps.is_empty() || steps.is_empty() {
+        return None;
+    }
+    let mut rng = Rng(seed * 7919 + 1);
+    let at = jumps[(rng.next() % jumps.len() as u64) as usize];
+    let end = at + text[at..].find('"').unwrap();
+    let target = steps[(rng.next() % steps.len() as u64) as usize];
+    Some(format!("{}{target}{}", &text[..at], &text[end..]))
+}
+
 /// Charts that may not be structured: a random chart with one jump retargeted to a random step
 /// (forward, into another branch, out of a loop, ...). Every such chart compiles into a program
 /// that does what the chart means (SPEC.md 3.1, "any other flow": labels and GOTO in KRL, a
@@ -757,11 +782,7 @@ fn retargeted_jumps(lang: Lang) -> (BTreeSet<u64>, BTreeMap<String, usize>) {
         if jumps.is_empty() || steps.is_empty() {
             continue;
         }
-        let mut rng = Rng(seed * 7919 + 1);
-        let at = jumps[(rng.next() % jumps.len() as u64) as usize];
-        let end = at + text[at..].find('"').unwrap();
-        let target = steps[(rng.next() % steps.len() as u64) as usize];
-        let mutated = format!("{}{target}{}", &text[..at], &text[end..]);
+        let mutated = retarget(&text, seed).unwrap();
         let sfc = tmp.path().join("sfc.xml");
         std::fs::write(&sfc, &mutated).unwrap();
         let out = Command::new(env!("CARGO_BIN_EXE_skillpost"))
@@ -1400,6 +1421,76 @@ fn cells_keep_the_charts_order_whatever_the_timing() {
     checker.check();
 }
 
+/// Cells whose chart has a retargeted jump (flow beyond the structured forms, SPEC.md 3.1):
+/// every program goes through the same states, and the co-simulation finds the chart's order
+/// kept whatever the timing. A chart the compiler refuses must be unsafe (E317: a jump into
+/// or out of a simultaneous branch).
+#[test]
+fn cells_with_states_keep_the_charts_order_whatever_the_timing() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut charts, mut with_states, mut seed) = (0, 0, 0u64);
+    while charts < CELL_CHARTS / 2 && seed < 2_000 {
+        seed += 1;
+        let Some(text) = retarget(&ChartGen::chart(seed), seed) else {
+            continue;
+        };
+        let (chart, cell, robot_of, _) =
+            match cosim::random_cell_of(&dir.path().join("cell"), seed, &text) {
+                Ok(Some(c)) => c,
+                Ok(None) => continue,
+                Err(e) => {
+                    assert!(e.contains("E317"), "seed {seed}: refused: {e}\n{text}");
+                    continue;
+                }
+            };
+        for (k, (p, lang)) in cell.programs.iter().zip(&cell.langs).enumerate() {
+            if let Some((main, dat)) = p {
+                let name = format!("Cell_R{}", k + 1);
+                let output = Output {
+                    lang: *lang,
+                    main: main.clone(),
+                    dat: dat.clone(),
+                };
+                if let Err(e) = output.syntax(&name) {
+                    panic!("seed {seed}: {name}: {e}\n{main}");
+                }
+            }
+        }
+        if cell
+            .programs
+            .iter()
+            .flatten()
+            .any(|(main, _)| main.contains("skp_s") || main.contains("skp_state"))
+        {
+            with_states += 1;
+        }
+        if let Err(e) = cosim::co_simulate(
+            &chart,
+            &cell,
+            &robot_of,
+            seed,
+            CELL_RUNS / 2,
+            cosim::Mutation::None,
+            None,
+        ) {
+            let keep = std::env::temp_dir().join(format!("skillpost-cosim-states-seed-{seed}"));
+            let _ = std::fs::remove_dir_all(&keep);
+            std::fs::create_dir_all(&keep).unwrap();
+            copy_dir(&dir.path().join("cell"), &keep);
+            panic!(
+                "seed {seed}: {e}\n(the project is kept in {})",
+                keep.display()
+            );
+        }
+        charts += 1;
+    }
+    eprintln!("{charts} cells with a retargeted jump co-simulated, {with_states} with states");
+    assert!(
+        charts >= CELL_CHARTS / 2 && with_states >= 10,
+        "{charts} cells, {with_states} with states"
+    );
+}
+
 /// The cell fixtures: case, its programs and their languages, their controllers.
 type CellFixture = (
     &'static str,
@@ -1423,6 +1514,14 @@ const CELL_FIXTURES: &[CellFixture] = &[
             ("Mix_UR10e", Lang::UrScript),
         ],
         &["KUKA KR15-2", "ABB IRB 1200", "UR10e"],
+    ),
+    (
+        "cell-flow-states",
+        &[
+            ("Cell_KUKA_KR15_2", Lang::Krl),
+            ("Cell_KUKA_KR16_2", Lang::Krl),
+        ],
+        &["KUKA KR15-2", "KUKA KR16-2"],
     ),
 ];
 

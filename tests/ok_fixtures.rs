@@ -103,6 +103,7 @@ macro_rules! cases {
 cases! {
     abb_irb1200 => "abb-irb1200",
     caex3_english => "caex3-english",
+    cell_flow_states => "cell-flow-states",
     cell_gripper_controller_attribute => "cell-gripper-controller-attribute",
     cell_kuka_abb_ur => "cell-kuka-abb-ur",
     cell_robot_gripper => "cell-robot-gripper",

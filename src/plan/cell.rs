@@ -125,6 +125,7 @@ pub fn split(
         evaluators: HashMap::new(),
         choice_parts: HashMap::new(),
         loop_parts: HashMap::new(),
+        machine_parts: HashMap::new(),
     };
     let mut all = Set::new();
     scan.blocks(body, 0, &mut all);
@@ -137,6 +138,8 @@ pub fn split(
         channels: Vec::new(),
         by_pair: HashMap::new(),
         loops: Vec::new(),
+        machines: Vec::new(),
+        last: vec![0; n],
     };
     s.blocks(body, Vec::new());
     let programs = s
@@ -167,6 +170,8 @@ struct Scan<'a> {
     choice_parts: HashMap<usize, Set>,
     /// Loop head → the controllers in it.
     loop_parts: HashMap<usize, Set>,
+    /// A machine's first state's entry → the controllers in it.
+    machine_parts: HashMap<usize, Set>,
 }
 
 impl Scan<'_> {
@@ -176,8 +181,22 @@ impl Scan<'_> {
     fn blocks(&mut self, blocks: &[Block], mut ctx: usize, set: &mut Set) -> usize {
         for (k, b) in blocks.iter().enumerate() {
             match b {
-                // Refused before the split (E213).
-                Block::Machine(_) | Block::Goto { .. } => {}
+                Block::Machine(states) => {
+                    // Each state starts with the controller in charge where the machine
+                    // starts (which state went there is not known when writing).
+                    let mut own = Set::from([ctx]);
+                    for st in states {
+                        self.blocks(&st.body, ctx, &mut own);
+                    }
+                    // Every controller of the machine goes to the same states: it takes part
+                    // in each selection and loop that goes to another state.
+                    self.share_gotos(states, &own);
+                    set.extend(own.iter().copied());
+                    if let Some(first) = states.first() {
+                        self.machine_parts.insert(first.entry, own);
+                    }
+                }
+                Block::Goto { .. } => {}
                 Block::Step(i) => {
                     if let Some(c) = (self.controller)(*i) {
                         ctx = c;
@@ -227,6 +246,51 @@ impl Scan<'_> {
     }
 }
 
+impl Scan<'_> {
+    /// Adds `parts` to every selection and loop of `states` (not of a nested machine) that
+    /// holds a Goto.
+    fn share_gotos(&mut self, states: &[super::State], parts: &Set) {
+        fn walk(scan: &mut Scan, blocks: &[Block], parts: &Set) {
+            for b in blocks {
+                let mut targets = Vec::new();
+                super::gotos(std::slice::from_ref(b), &mut targets);
+                if targets.is_empty() {
+                    continue;
+                }
+                match b {
+                    Block::Choice {
+                        divergence,
+                        branches,
+                        ..
+                    } => {
+                        if let Some(p) = scan.choice_parts.get_mut(divergence) {
+                            p.extend(parts.iter().copied());
+                        }
+                        for br in branches {
+                            walk(scan, &br.body, parts);
+                        }
+                    }
+                    Block::Loop { head, body, .. } => {
+                        if let Some(p) = scan.loop_parts.get_mut(head) {
+                            p.extend(parts.iter().copied());
+                        }
+                        walk(scan, body, parts);
+                    }
+                    Block::Parallel { branches, .. } => {
+                        for br in branches {
+                            walk(scan, br, parts);
+                        }
+                    }
+                    _ => {}
+                }
+            }
+        }
+        for st in states {
+            walk(self, &st.body, parts);
+        }
+    }
+}
+
 /// Whether a selection leaves or repeats the loop it stands in (a branch of it, or of a
 /// selection inside it, not inside a nested loop, ends in a leave or a repeat).
 fn ends_rounds(branches: &[Branch]) -> bool {
@@ -254,6 +318,10 @@ struct Splitter<'a> {
     by_pair: HashMap<(usize, usize), usize>,
     /// The controllers of each enclosing loop, innermost last.
     loops: Vec<Set>,
+    /// The controllers of each enclosing [`Block::Machine`], innermost last.
+    machines: Vec<Set>,
+    /// Per controller, what its latest tick is about.
+    last: Vec<usize>,
 }
 
 impl Splitter<'_> {
@@ -263,7 +331,8 @@ impl Splitter<'_> {
         }
     }
 
-    fn tick(&mut self, c: usize) -> u32 {
+    fn tick(&mut self, c: usize, about: usize) -> u32 {
+        self.last[c] = about;
         self.clock[c] += 1;
         self.know[c][c] = self.clock[c];
         self.clock[c]
@@ -338,22 +407,38 @@ impl Splitter<'_> {
 
     fn block(&mut self, b: &Block, frontier: Vec<Point>) -> Vec<Point> {
         match b {
-            // Refused before the split (E213).
-            Block::Machine(_) | Block::Goto { .. } => frontier,
+            Block::Machine(states) => self.machine(states, frontier),
+            Block::Goto { target, from } => {
+                // Every controller of the machine has come here before any goes on at the
+                // target: a state starts with everything before it done.
+                self.barrier();
+                if let Some(parts) = self.machines.last().cloned() {
+                    for p in parts {
+                        self.push(
+                            p,
+                            Block::Goto {
+                                target: *target,
+                                from: *from,
+                            },
+                        );
+                    }
+                }
+                Vec::new()
+            }
             Block::Step(i) => {
                 let Some(c) = (self.scan.controller)(*i) else {
                     return frontier;
                 };
                 self.acquire(c, &frontier);
                 self.push(c, Block::Step(*i));
-                let t = self.tick(c);
+                let t = self.tick(c, *i);
                 vec![(c, t, *i)]
             }
             Block::Wait(t) => {
                 let c = self.scan.evaluators[t];
                 self.acquire(c, &frontier);
                 self.push(c, Block::Wait(*t));
-                let k = self.tick(c);
+                let k = self.tick(c, *t);
                 vec![(c, k, *t)]
             }
             Block::Parallel { branches, .. } => {
@@ -407,13 +492,80 @@ impl Splitter<'_> {
                             endless: *endless,
                         },
                     );
-                    let t = self.tick(p);
+                    let t = self.tick(p, *head);
                     out.push((p, t, *head));
                 }
                 out
             }
             Block::Tell(_) | Block::Hear(_) | Block::Follow { .. } => frontier,
         }
+    }
+
+    /// Each controller of the innermost machine waits until every other has come as far as the
+    /// walk has.
+    fn barrier(&mut self) {
+        let Some(parts) = self.machines.last().cloned() else {
+            return;
+        };
+        let points: Vec<Point> = parts
+            .iter()
+            .map(|&d| (d, self.clock[d], self.last[d]))
+            .collect();
+        for &c in &parts {
+            self.acquire(c, &points);
+        }
+    }
+
+    /// A machine (states and Gotos): its controllers enter it together; each state starts
+    /// with everything before it done on every controller of the machine (a barrier where the
+    /// machine starts and at every Goto), since which state came before is not known when the
+    /// programs are written; every controller follows each decision that goes to another
+    /// state, so all go to the same states. What follows depends on every controller of the
+    /// machine having left it.
+    fn machine(&mut self, states: &[super::State], frontier: Vec<Point>) -> Vec<Point> {
+        let Some(first) = states.first() else {
+            return frontier;
+        };
+        let parts = self.scan.machine_parts[&first.entry].clone();
+        for &p in &parts {
+            self.acquire(p, &frontier);
+        }
+        self.machines.push(parts.clone());
+        self.barrier();
+        let entry = self.know.clone();
+        let mut written: Vec<Vec<super::State>> = vec![Vec::new(); self.n];
+        for st in states {
+            // Everything before the state is done (the barriers): nothing before it is waited
+            // for in it.
+            for &c in &parts {
+                for &d in &parts {
+                    self.know[c][d] = self.clock[d];
+                }
+            }
+            for &p in &parts {
+                self.stacks[p].push(Vec::new());
+            }
+            self.blocks(&st.body, Vec::new());
+            for &p in &parts {
+                let body = self.stacks[p].pop().unwrap_or_default();
+                written[p].push(super::State {
+                    entry: st.entry,
+                    body,
+                });
+            }
+        }
+        self.machines.pop();
+        self.know = entry;
+        // A state that ends without a Goto ends the machine; what follows waits for each
+        // controller of the machine (as after a loop).
+        let mut out = Vec::new();
+        for &p in &parts {
+            let states = std::mem::take(&mut written[p]);
+            self.push(p, Block::Machine(states));
+            let t = self.tick(p, first.entry);
+            out.push((p, t, first.entry));
+        }
+        out
     }
 
     fn choice(
@@ -432,7 +584,7 @@ impl Splitter<'_> {
         }
         // The decider decides once what comes before is done.
         self.acquire(d, &frontier);
-        let decided = self.tick(d);
+        let decided = self.tick(d, div);
         let followers: Vec<usize> = parts.iter().copied().filter(|&p| p != d).collect();
         let channels: Vec<usize> = followers
             .iter()
@@ -505,7 +657,7 @@ impl Splitter<'_> {
                 }
             };
             self.push(p, block);
-            let t = self.tick(p);
+            let t = self.tick(p, div);
             out.push((p, t, div));
         }
         out

@@ -195,6 +195,7 @@ pub fn st_eval(e: &StExpr, phase: &Phase) -> i64 {
         ExprKind::Bool(b) => *b as i64,
         ExprKind::Int(s) => s.parse().unwrap(),
         ExprKind::Real(_) => panic!("no decimals in the fixtures"),
+        ExprKind::Time(_) => panic!("step times are not played yet"),
         ExprKind::Name(n) => {
             *phase
                 .iter()

@@ -100,6 +100,9 @@ pub fn parse(src: &str) -> Vec<Ins> {
         Ins::JumpIfNot(_, t) | Ins::Jump(t) => *t = to,
         other => panic!("patching {other:?}"),
     };
+    // Labels (`skp_s1:`) and the GOTOs to them, patched at the END.
+    let mut labels: HashMap<String, usize> = HashMap::new();
+    let mut gotos: Vec<(usize, String)> = Vec::new();
     while i < lines.len() {
         let raw = lines[i].trim();
         i += 1;
@@ -118,7 +121,21 @@ pub fn parse(src: &str) -> Vec<Ins> {
             "END" => {
                 out.push(Ins::End);
                 assert!(open.is_empty(), "END inside a block");
+                for (at, l) in gotos {
+                    let to = *labels
+                        .get(&l)
+                        .unwrap_or_else(|| panic!("GOTO {l}: no such label"));
+                    patch(&mut out, at, to);
+                }
                 return out;
+            }
+            "GOTO" => {
+                out.push(Ins::Jump(0));
+                gotos.push((out.len() - 1, c[4..].trim().to_ascii_uppercase()));
+            }
+            _ if c.ends_with(':') && !c.contains(' ') => {
+                // (The KRL check of the tests refuses a GOTO into a block.)
+                labels.insert(c.trim_end_matches(':').to_ascii_uppercase(), out.len());
             }
             "WAIT" => {
                 let rest = c[4..].trim_start();
@@ -1392,6 +1409,23 @@ pub fn random_cell(
     dir: &std::path::Path,
     seed: u64,
 ) -> Option<(Chart, CellPrograms, HashMap<String, usize>, usize)> {
+    match random_cell_of(dir, seed, &ChartGen::chart(seed)) {
+        Ok(cell) => cell,
+        Err(e) => panic!(
+            "seed {seed}: the cell does not compile: {e}\n{}",
+            ChartGen::chart(seed)
+        ),
+    }
+}
+
+/// [`random_cell`] of the chart `text` (the random chart of `seed`, changed): `Err` when the
+/// cell does not compile.
+pub type RandomCell = (Chart, CellPrograms, HashMap<String, usize>, usize);
+pub fn random_cell_of(
+    dir: &std::path::Path,
+    seed: u64,
+    text: &str,
+) -> Result<Option<RandomCell>, String> {
     let mut rng = Rng(seed.wrapping_mul(0x2545_F491_4F6C_DD1D) | 1);
     // KUKA cells, ABB cells, KUKA and ABB mixed, a UR with a robot of any kind.
     let any = |rng: &mut Rng| [Lang::Krl, Lang::Rapid][(rng.next() % 2) as usize];
@@ -1412,16 +1446,13 @@ pub fn random_cell(
         ],
     };
     let n = langs.len();
-    let (chart, robot_of) = spread(&ChartGen::chart(seed), n, &mut rng);
+    let (chart, robot_of) = spread(text, n, &mut rng);
     let used: std::collections::BTreeSet<usize> = robot_of.values().copied().collect();
     if used.len() < 2 {
-        return None;
+        return Ok(None);
     }
-    let cell = match compile_cell(dir, &chart, &langs, 4) {
-        Ok(c) => c,
-        Err(e) => panic!("seed {seed}: the cell does not compile: {e}\n{chart}"),
-    };
-    Some((Chart::read(&dir.join("sfc.xml")), cell, robot_of, n))
+    let cell = compile_cell(dir, &chart, &langs, 4)?;
+    Ok(Some((Chart::read(&dir.join("sfc.xml")), cell, robot_of, n)))
 }
 
 /// A cell fixture (`fixtures/ok/<case>`) compiled with the binary: its programs (name and
