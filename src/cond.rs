@@ -54,6 +54,11 @@ pub enum BinOp {
     Gt,
     Le,
     Ge,
+    /// Arithmetic, from the standard functions `ADD`, `SUB`, `MUL` (wired blocks or calls in
+    /// ST; SPEC 3.1's ST has no infix arithmetic).
+    Add,
+    Sub,
+    Mul,
 }
 
 impl BinOp {
@@ -65,6 +70,23 @@ impl BinOp {
             BinOp::And => 3,
             BinOp::Eq | BinOp::Ne => 4,
             BinOp::Lt | BinOp::Gt | BinOp::Le | BinOp::Ge => 5,
+            BinOp::Add | BinOp::Sub => 6,
+            BinOp::Mul => 7,
+        }
+    }
+
+    /// Whether the operator is arithmetic (numbers to a number).
+    pub fn arithmetic(self) -> bool {
+        matches!(self, BinOp::Add | BinOp::Sub | BinOp::Mul)
+    }
+
+    /// The standard function of an arithmetic operator, as ST calls it.
+    fn function(self) -> Option<&'static str> {
+        match self {
+            BinOp::Add => Some("ADD"),
+            BinOp::Sub => Some("SUB"),
+            BinOp::Mul => Some("MUL"),
+            _ => None,
         }
     }
 
@@ -80,6 +102,9 @@ impl BinOp {
             BinOp::Gt => ">",
             BinOp::Le => "<=",
             BinOp::Ge => ">=",
+            BinOp::Add => "+",
+            BinOp::Sub => "-",
+            BinOp::Mul => "*",
         }
     }
 
@@ -95,6 +120,9 @@ impl BinOp {
             BinOp::Gt => ">",
             BinOp::Le => "<=",
             BinOp::Ge => ">=",
+            BinOp::Add => "+",
+            BinOp::Sub => "-",
+            BinOp::Mul => "*",
         }
     }
 
@@ -710,10 +738,11 @@ pub fn parse(text: &str, map: &dyn Fn(usize) -> usize) -> Result<Expr, SyntaxErr
 /// expression.
 fn booleans(e: Expr, want: bool) -> Expr {
     fn boolish(e: &Expr) -> bool {
-        matches!(
-            e.kind,
-            ExprKind::Bool(_) | ExprKind::Not(_) | ExprKind::Bin(..)
-        )
+        match &e.kind {
+            ExprKind::Bin(op, ..) => !op.arithmetic(),
+            ExprKind::Bool(_) | ExprKind::Not(_) => true,
+            _ => false,
+        }
     }
     let Expr { kind, span } = e;
     let kind = match kind {
@@ -801,11 +830,13 @@ impl Parser<'_> {
             "EQ" | "NE" | "GT" | "GE" | "LT" | "LE" => (2, usize::MAX),
             "NOT" | "MOVE" => (1, 1),
             "SEL" => (3, 3),
+            "ADD" | "MUL" => (2, usize::MAX),
+            "SUB" => (2, 2),
             _ => {
                 return Err(SyntaxError {
                     at: r,
                     message: format!(
-                        "function `{name}` is not part of the condition language (AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, SEL and MOVE are)"
+                        "function `{name}` is not part of the condition language (AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, ADD, SUB, MUL, SEL and MOVE are)"
                     ),
                 });
             }
@@ -864,11 +895,14 @@ impl Parser<'_> {
         };
         let mut it = args.into_iter();
         Ok(match f.as_str() {
-            "AND" | "OR" | "XOR" => {
+            "AND" | "OR" | "XOR" | "ADD" | "MUL" | "SUB" => {
                 let op = match f.as_str() {
                     "AND" => BinOp::And,
                     "OR" => BinOp::Or,
-                    _ => BinOp::Xor,
+                    "XOR" => BinOp::Xor,
+                    "ADD" => BinOp::Add,
+                    "MUL" => BinOp::Mul,
+                    _ => BinOp::Sub,
                 };
                 let first = it.next().expect("two operands at least");
                 it.fold(first, |acc, a| bin(op, acc, a))
@@ -1090,6 +1124,10 @@ fn ty(e: &Expr, lookup: &dyn Fn(&str) -> Option<Ty>, errs: &mut Vec<CheckError>)
             if op.logical() {
                 want(a, ta, Ty::Bool, &what, errs);
                 want(b, tb, Ty::Bool, &what, errs);
+            } else if op.arithmetic() {
+                want(a, ta, Ty::Number, &what, errs);
+                want(b, tb, Ty::Number, &what, errs);
+                return Some(Ty::Number);
             } else if matches!(op, BinOp::Eq | BinOp::Ne) {
                 if let (Some(x), Some(y)) = (ta, tb)
                     && x != y
@@ -1136,6 +1174,9 @@ pub struct Ops {
     pub time: fn(u64) -> String,
     /// The negation with its space (`NOT `, `not `).
     pub not: &'static str,
+    /// Whether arithmetic is written as the standard functions' calls (`ADD(a, b)`: ST, whose
+    /// condition language has no infix arithmetic), else infix.
+    pub calls: bool,
     pub true_: &'static str,
     pub false_: &'static str,
 }
@@ -1154,6 +1195,7 @@ impl Ops {
     pub const KRL: Ops = Ops {
         op: BinOp::krl,
         time: Ops::milliseconds,
+        calls: false,
         not: "NOT ",
         true_: "TRUE",
         false_: "FALSE",
@@ -1161,6 +1203,7 @@ impl Ops {
     const ST: Ops = Ops {
         op: BinOp::st,
         time: |ns| format!("T#{}ms", decimal(ns, 1_000_000)),
+        calls: true,
         not: "NOT ",
         true_: "TRUE",
         false_: "FALSE",
@@ -1180,7 +1223,9 @@ fn write(e: &Expr, out: &mut String, name: &dyn Fn(&str) -> String, ops: &Ops) {
     let sub = |x: &Expr, out: &mut String| {
         let text;
         let paren = match &x.kind {
-            ExprKind::Bin(..) | ExprKind::Neg(_) | ExprKind::Not(_) => true,
+            // A call (`ADD(a, b)` in ST) needs no parentheses.
+            ExprKind::Bin(o, ..) => !(ops.calls && o.arithmetic()),
+            ExprKind::Neg(_) | ExprKind::Not(_) => true,
             ExprKind::Name(n) => {
                 text = name(n);
                 if text.contains(' ') {
@@ -1215,6 +1260,14 @@ fn write(e: &Expr, out: &mut String, name: &dyn Fn(&str) -> String, ops: &Ops) {
         ExprKind::Neg(a) => {
             out.push('-');
             sub(a, out);
+        }
+        ExprKind::Bin(o, a, b) if ops.calls && o.arithmetic() => {
+            out.push_str(o.function().unwrap_or_default());
+            out.push('(');
+            write(a, out, name, ops);
+            out.push_str(", ");
+            write(b, out, name, ops);
+            out.push(')');
         }
         ExprKind::Bin(o, a, b) => {
             sub(a, out);
@@ -1300,6 +1353,21 @@ mod tests {
         assert_eq!(st("SEL(g, a, b)"), "(g AND b) OR ((NOT g) AND a)");
         assert_eq!(st("MOVE(a) AND NOT(b)"), "a AND (NOT b)");
         assert_eq!(st("AND(EQ(n, 1), b)"), "(n = 1) AND b");
+        assert_eq!(
+            st("GT(ADD(n, 2, m), MUL(n, 3))"),
+            "ADD(ADD(n, 2), m) > MUL(n, 3)"
+        );
+        assert_eq!(st("SUB(n, 1) = 0"), "SUB(n, 1) = 0");
+        assert_eq!(
+            render_krl(&p("GT(SUB(n, 1), 2)").unwrap(), &|n| n.to_owned()),
+            "(n - 1) > 2"
+        );
+        assert!(
+            !check(&p("ADD(a, 1) AND b").unwrap(), &|_| Some(Ty::Bool)).is_empty(),
+            "arithmetic of booleans"
+        );
+        assert!(check(&p("ADD(a, 1) > b").unwrap(), &|_| Some(Ty::Number)).is_empty());
+        assert!(p("SUB(a, b, c)").unwrap_err().message.contains("takes 2"));
         assert_eq!(st("a = b;"), "a = b");
         assert_eq!(st("a ; (* done *)"), "a");
         let e = |s: &str| p(s).unwrap_err().message;

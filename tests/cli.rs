@@ -1850,7 +1850,8 @@ fn qualified_names_are_signals_of_that_name() {
 /// Issue 26: a wired condition through a block outside SPEC 3.1's list is one error at that
 /// block, naming its type and localId, whatever is wired around it: a TON in a feedback loop
 /// through an SR (the Beremiz traffic light), a TON whose `PT` is not a condition's text (the
-/// andisama chart), an edge detector, arithmetic (`ADD`: the condition language has none yet).
+/// andisama chart), an edge detector, arithmetic other than `ADD`, `SUB`, `MUL` (which are
+/// read).
 /// A loop through listed blocks only, and an unconnected input, name the block too.
 #[test]
 fn wired_conditions_name_the_block_that_is_refused() {
@@ -1917,7 +1918,7 @@ fn wired_conditions_name_the_block_that_is_refused() {
     let e = one(
         feedback.clone(),
         300,
-        "a wired condition uses block TON localId 301 (a timer): a wired condition may use only the blocks AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, SEL and MOVE; to wait a time after a step, write the step's time in the condition instead (`Step.t >= T#8s`)",
+        "a wired condition uses block TON localId 301 (a timer): a wired condition may use only the blocks AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, ADD, SUB, MUL, SEL and MOVE; to wait a time after a step, write the step's time in the condition instead (`Step.t >= T#8s`)",
     );
     assert!(!e.contains("loops back"), "{e}");
     // Reached at the SR first (the condition wired from the SR): the SR is named.
@@ -1946,7 +1947,7 @@ fn wired_conditions_name_the_block_that_is_refused() {
         ]
         .concat(),
         320,
-        "block R_TRIG localId 320 (an edge detector): a wired condition may use only the blocks AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, SEL and MOVE; an edge is not a condition",
+        "block R_TRIG localId 320 (an edge detector): a wired condition may use only the blocks AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, ADD, SUB, MUL, SEL and MOVE; an edge is not a condition",
     );
     one(
         [
@@ -1957,22 +1958,41 @@ fn wired_conditions_name_the_block_that_is_refused() {
         325,
         "a wired condition uses block comparison localId 325: a wired condition may use only the blocks",
     );
-    // ADD, SUB, MUL: not yet (the condition language has no arithmetic), and the message says so.
-    for ty in ["ADD", "SUB", "MUL"] {
-        one(
-            [
-                block(330, "GT", &[("IN1", Some(331)), ("IN2", Some(333))]),
-                block(331, ty, &[("IN1", Some(332)), ("IN2", Some(333))]),
-                var(332, "Variant"),
-                var(333, "2"),
-            ]
-            .concat(),
-            330,
-            &format!(
-                "a wired condition uses block {ty} localId 331 (arithmetic): a wired condition may use only the blocks AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, SEL and MOVE; arithmetic is not supported yet, neither drawn nor written"
-            ),
-        );
+    // ADD, SUB, MUL are read (SPEC 3.1); DIV is not.
+    for (ty, want) in [
+        ("ADD", "wait for ADD(Variant, 2) > 2"),
+        ("SUB", "wait for SUB(Variant, 2) > 2"),
+        ("MUL", "wait for MUL(Variant, 2) > 2"),
+    ] {
+        let net = [
+            block(330, "GT", &[("IN1", Some(331)), ("IN2", Some(333))]),
+            block(331, ty, &[("IN1", Some(332)), ("IN2", Some(333))]),
+            var(332, "Variant"),
+            var(333, "2"),
+        ]
+        .concat();
+        let text = sfc
+            .replace(
+                cond4,
+                "<condition><connectionPointIn><connection refLocalId=\"330\"/></connectionPointIn></condition>",
+            )
+            .replacen("</SFC>", &format!("{net}</SFC>"), 1);
+        std::fs::write(t.path().join("sfc.xml"), text).unwrap();
+        let o = run(&["--sfc", "-pO", "sfc.xml"], t.path());
+        assert_eq!(o.status.code(), Some(0), "{ty}: {}", stderr(&o));
+        assert!(stdout(&o).contains(want), "{ty}: {}", stdout(&o));
     }
+    one(
+        [
+            block(330, "GT", &[("IN1", Some(331)), ("IN2", Some(333))]),
+            block(331, "DIV", &[("IN1", Some(332)), ("IN2", Some(333))]),
+            var(332, "Variant"),
+            var(333, "2"),
+        ]
+        .concat(),
+        330,
+        "a wired condition uses block DIV localId 331 (arithmetic): a wired condition may use only the blocks AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, ADD, SUB, MUL, SEL and MOVE; of arithmetic",
+    );
     // A loop through listed blocks only: the loop, at the block it comes back to, named.
     one(
         [

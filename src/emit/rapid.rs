@@ -99,6 +99,7 @@ fn is_rapid_name(w: &str) -> bool {
 }
 
 const OPS: Ops = Ops {
+    calls: false,
     time: Ops::seconds,
     op: rapid_op,
     not: "NOT ",
@@ -117,6 +118,9 @@ fn rapid_op(op: BinOp) -> &'static str {
         BinOp::Gt => ">",
         BinOp::Le => "<=",
         BinOp::Ge => ">=",
+        BinOp::Add => "+",
+        BinOp::Sub => "-",
+        BinOp::Mul => "*",
     }
 }
 

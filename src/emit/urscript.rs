@@ -69,6 +69,7 @@ fn is_ur_name(w: &str, max: usize) -> bool {
 }
 
 const OPS: Ops = Ops {
+    calls: false,
     time: Ops::seconds,
     op: ur_op,
     not: "not ",
@@ -87,6 +88,9 @@ fn ur_op(op: BinOp) -> &'static str {
         BinOp::Gt => ">",
         BinOp::Le => "<=",
         BinOp::Ge => ">=",
+        BinOp::Add => "+",
+        BinOp::Sub => "-",
+        BinOp::Mul => "*",
     }
 }
 

@@ -2180,9 +2180,8 @@ struct Wiring<'a> {
     built: std::cell::Cell<usize>,
 }
 
-/// The blocks a wired condition may use, as messages list them (SPEC.md 3.1 lists `ADD`, `SUB`
-/// and `MUL` too, but the condition language has no arithmetic yet: see [`refused_block`]).
-const WIRED_BLOCKS: &str = "AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, SEL and MOVE";
+/// The blocks a wired condition may use (SPEC.md 3.1), as messages list them.
+const WIRED_BLOCKS: &str = "AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, ADD, SUB, MUL, SEL and MOVE";
 
 /// Why a wired condition cannot use a block of type `ty` (upper case) that is not one of
 /// [`WIRED_BLOCKS`]: what the block is and what to do instead, said after the block's name.
@@ -2198,9 +2197,9 @@ fn refused_block(ty: &str) -> String {
         ),
         "SR" | "RS" => (" (a bistable, which keeps a state)", ""),
         "CTU" | "CTD" | "CTUD" => (" (a counter)", ""),
-        "ADD" | "SUB" | "MUL" | "DIV" | "MOD" | "EXPT" => (
+        "DIV" | "MOD" | "EXPT" => (
             " (arithmetic)",
-            "; arithmetic is not supported yet, neither drawn nor written",
+            "; of arithmetic, ADD, SUB and MUL are (a robot controller's integer division and power differ)",
         ),
         _ => ("", ""),
     };
@@ -2372,11 +2371,11 @@ impl Wiring<'_> {
                     .to_ascii_uppercase();
                 /// What a block of the list computes.
                 enum Block {
-                    /// AND, OR, XOR over all its inputs.
+                    /// AND, OR, XOR, ADD, MUL over all its inputs.
                     Fold(BinOp),
                     Not,
                     Move,
-                    /// EQ, NE, GT, GE, LT, LE over IN1 and IN2.
+                    /// EQ, NE, GT, GE, LT, LE, SUB over IN1 and IN2.
                     Compare(BinOp),
                     Sel,
                 }
@@ -2386,6 +2385,9 @@ impl Wiring<'_> {
                     "AND" => Block::Fold(BinOp::And),
                     "OR" => Block::Fold(BinOp::Or),
                     "XOR" => Block::Fold(BinOp::Xor),
+                    "ADD" => Block::Fold(BinOp::Add),
+                    "MUL" => Block::Fold(BinOp::Mul),
+                    "SUB" => Block::Compare(BinOp::Sub),
                     "NOT" => Block::Not,
                     "MOVE" => Block::Move,
                     "EQ" => Block::Compare(BinOp::Eq),
