@@ -1784,6 +1784,39 @@ fn wired_conditions_are_their_inline_twins() {
         expected.iter().any(|l| l.contains("$IN[1]")),
         "{expected:?}"
     );
+    // Arithmetic (SPEC 3.1's ADD, SUB, MUL): the wired net and its ST call twin.
+    let arith_net = r#"
+            <inVariable localId="120"><position x="0" y="0"/><expression>Variant</expression></inVariable>
+            <inVariable localId="121"><position x="0" y="0"/><expression>3</expression></inVariable>
+            <block localId="122" typeName="MUL"><position x="0" y="0"/><inputVariables>
+              <variable formalParameter="IN1"><connectionPointIn><connection refLocalId="120"/></connectionPointIn></variable>
+              <variable formalParameter="IN2"><connectionPointIn><connection refLocalId="121"/></connectionPointIn></variable>
+            </inputVariables><inOutVariables/><outputVariables><variable formalParameter="OUT"><connectionPointOut/></variable></outputVariables></block>
+            <block localId="123" typeName="SUB"><position x="0" y="0"/><inputVariables>
+              <variable formalParameter="IN1"><connectionPointIn><connection refLocalId="122"/></connectionPointIn></variable>
+              <variable formalParameter="IN2"><connectionPointIn><connection refLocalId="120"/></connectionPointIn></variable>
+            </inputVariables><inOutVariables/><outputVariables><variable formalParameter="OUT"><connectionPointOut/></variable></outputVariables></block>
+            <block localId="124" typeName="GE"><position x="0" y="0"/><inputVariables>
+              <variable formalParameter="IN1"><connectionPointIn><connection refLocalId="123"/></connectionPointIn></variable>
+              <variable formalParameter="IN2"><connectionPointIn><connection refLocalId="121"/></connectionPointIn></variable>
+            </inputVariables><inOutVariables/><outputVariables><variable formalParameter="OUT"><connectionPointOut/></variable></outputVariables></block>
+          </SFC>"#;
+    let arith_wired = sfc
+        .replace(cond4, "<condition><connectionPointIn><connection refLocalId=\"124\"/></connectionPointIn></condition>")
+        .replacen("</SFC>", arith_net, 1);
+    let arith_twin = sfc.replace(
+        cond4,
+        "<condition><inline name=\"\"><ST>GE(SUB(MUL(Variant, 3), Variant), 3)</ST></inline></condition>",
+    );
+    let expected = compile(&arith_twin).unwrap();
+    assert_eq!(compile(&arith_wired).unwrap(), expected);
+    assert!(
+        expected
+            .iter()
+            .any(|l| l == "WAIT FOR ((VARIANT * 3) - VARIANT) >= 3"
+                || l == "WAIT FOR ((Variant * 3) - Variant) >= 3"),
+        "{expected:?}"
+    );
     // A timer: an error at the block, naming it.
     let timer = wired.replace(
         "<connection refLocalId=\"114\" formalParameter=\"OUT\"/>",
