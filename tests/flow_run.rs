@@ -8,12 +8,15 @@
 //! another, left to right; a jump continues at its target step).
 //!
 //! - KRL (`flow_run/krl.rs`): statements, `IF`, `LOOP`/`EXIT`, `REPEAT`/`UNTIL`, `SWITCH`,
-//!   `WAIT FOR`, `$IN`/`$OUT`, `SIGNAL` groups, KRL's own operator precedence.
-//! - RAPID (`flow_run/rapid.rs`): `WaitUntil`, `IF`/`ELSEIF`/`ELSE`, `WHILE` with flags,
-//!   `VAR` declarations, the RAPID kernel's expression grammar and priorities (strictly: `NOT`
-//!   only at the start of an expression, no chained comparisons, a `signaldi` is a number).
+//!   `WAIT FOR`, `WAIT SEC`, `$IN`/`$OUT`, `SIGNAL` groups, the timers `$TIMER`/`$TIMER_STOP`,
+//!   KRL's own operator precedence.
+//! - RAPID (`flow_run/rapid.rs`): `WaitUntil`, `WaitTime`, `IF`/`ELSEIF`/`ELSE`, `WHILE` with
+//!   flags, `VAR` declarations, clocks (`ClkReset`/`ClkStart`/`ClkRead`), the RAPID kernel's
+//!   expression grammar and priorities (strictly: `NOT` only at the start of an expression, no
+//!   chained comparisons, a `signaldi` is a number).
 //! - URScript (`flow_run/urscript.rs`): `def`/`end`, `if`/`elif`/`else`, `while`/`break`,
-//!   `sync()`, Python-like precedence; and every generated script passes the block-structure
+//!   `sync()`, the step-time counters a thread advances, Python-like precedence; and every
+//!   generated script passes the block-structure
 //!   check of `common/urscript.rs`. Every generated RAPID module passes `rapidchecker` when it
 //!   is installed (random and retargeted charts: a sample).
 //!
@@ -29,15 +32,24 @@
 //! Besides the fixtures, 150 random structured charts (guarded sequences, selections with empty
 //! and unconditional branches, simultaneous branches, loops left by one branch or two that join,
 //! loops left early by a selection before the deciding one, endless loops, nested in each
-//! other), 300 charts with a retargeted jump, and charts holding every form of condition (whose
-//! meaning is also written out in Rust, independent of the project's ST parser) are compiled
-//! and run the same way, in each language. Tests with mutated programs show that each check can
-//! fail.
+//! other), 120 of them with step times (`S.t`) in transitions after a step, 300 charts with a
+//! retargeted jump, and charts holding every form of condition are compiled and run the same
+//! way, in each language. The chart player reads the conditions with a reader of its own
+//! (independent of the project's ST parser), checked against their meaning written out in
+//! Rust. Tests with mutated programs show that each check can fail.
 //!
 //! Inputs change only when the robot acts: phase `k` of an input sequence holds while `k`
 //! actions have run (the last phase holds after). A wait whose condition is false with inputs
 //! that cannot change any more is "stuck"; both sides must get stuck at the same place. Endless
 //! programs are compared over their first actions.
+//!
+//! Time is virtual and the same on both sides: an action takes [`ACTION_MS`] and nothing but
+//! waiting takes time; a wait (a transition's, or a selection's for any branch) whose condition
+//! is false advances the clock by [`TICK_MS`] and reads it again, and is stuck when it has not
+//! held after [`STUCK_MS`] (at once when it reads no time: the inputs cannot change). A step's
+//! time `S.t` is the time since the step last became active (when the transition before it
+//! fired, before its action); the interpreters run KRL's `$TIMER`s, RAPID's clocks and
+//! URScript's step-time counters on that clock.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -70,6 +82,13 @@ use chart::{Chart, ChartGen, Paths, chart_meaning};
 
 /// How many actions are compared at most (endless programs).
 const MAX_ACTIONS: usize = 40;
+
+/// Virtual time, in milliseconds (the same for the chart player and every interpreter): what
+/// an action takes, a wait's tick (a false condition is read again every tick), and how long a
+/// wait waits before it is stuck.
+const ACTION_MS: i64 = 100;
+const TICK_MS: i64 = 10;
+const STUCK_MS: i64 = 10_000;
 
 // ---------------------------------------------------------------------------------------------
 // The world: signal values per phase
@@ -727,6 +746,82 @@ fn random_charts_do_what_they_mean_urscript() {
     random_charts(Lang::UrScript);
 }
 
+/// How `lang` reads a step's time (the timers of SPEC.md 3.1's step times).
+fn step_timer(lang: Lang) -> &'static str {
+    match lang {
+        Lang::Krl => "$TIMER[",
+        Lang::Rapid => "ClkRead(skp_clock",
+        Lang::UrScript => "skp_time",
+    }
+}
+
+/// 120 random charts with step times ([`ChartGen::with_step_times`]: the random charts with
+/// `S.t` in some transitions after a step), each compiled by the binary in `lang` and run
+/// under 60 input sequences against the chart's meaning, the player and the interpreter keeping
+/// the same virtual time (waits advance it, a wait that does not come true in 10 s is stuck).
+fn random_charts_with_step_times(lang: Lang) {
+    let tmp = tempfile::tempdir().unwrap();
+    lang.setup(tmp.path());
+    let mut seen = BTreeMap::new();
+    let mut rapid = RapidChecker::new();
+    let mut timed = 0;
+    for seed in 1..=120u64 {
+        let text = ChartGen::with_step_times(seed);
+        let sfc = tmp.path().join("sfc.xml");
+        std::fs::write(&sfc, &text).unwrap();
+        compile_project(
+            tmp.path(),
+            "R",
+            &format!("random chart {seed} with step times does not compile in {lang:?}:\n{text}"),
+        );
+        let output = lang.read(tmp.path(), "R");
+        if let Err(e) = output.syntax("R") {
+            panic!(
+                "random chart {seed} with step times: {lang:?} structure check: {e}\n{}",
+                output.main
+            );
+        }
+        if output.main.contains(step_timer(lang)) {
+            timed += 1;
+        }
+        rapid.add_sampled(
+            &format!("random chart {seed} with step times"),
+            &output,
+            seed as usize,
+            10,
+        );
+        let chart = Chart::read(&sfc);
+        for (k, v) in check_compiled(
+            &format!("random chart {seed} with step times"),
+            &output,
+            "R",
+            &chart,
+            seed,
+            60,
+        ) {
+            *seen.entry(k).or_insert(0) += v;
+        }
+    }
+    rapid.check();
+    println!("random charts with step times ({lang:?}): {timed} read a timer, runs {seen:?}");
+    assert!(timed > 100, "{lang:?}: {timed} charts read a timer");
+}
+
+#[test]
+fn random_charts_with_step_times_do_what_they_mean_krl() {
+    random_charts_with_step_times(Lang::Krl);
+}
+
+#[test]
+fn random_charts_with_step_times_do_what_they_mean_rapid() {
+    random_charts_with_step_times(Lang::Rapid);
+}
+
+#[test]
+fn random_charts_with_step_times_do_what_they_mean_urscript() {
+    random_charts_with_step_times(Lang::UrScript);
+}
+
 /// The random chart `text` of `seed` with one of its jumps sent to a step chosen at random
 /// (`None` without a jump).
 fn retarget(text: &str, seed: u64) -> Option<String> {
@@ -1080,6 +1175,157 @@ fn a_wrong_program_with_states_fails() {
     }
 }
 
+/// Compiles the chart `text` in `lang` (program `R`); returns its files and the chart.
+fn compile_chart(text: &str, lang: Lang) -> (Output, Chart) {
+    let tmp = tempfile::tempdir().unwrap();
+    lang.setup(tmp.path());
+    std::fs::write(tmp.path().join("sfc.xml"), text).unwrap();
+    compile_project(tmp.path(), "R", &format!("{lang:?}:\n{text}"));
+    (
+        lang.read(tmp.path(), "R"),
+        Chart::read(&tmp.path().join("sfc.xml")),
+    )
+}
+
+/// `main` with the start of step `step`'s time (the comment `step time of <step> (` and the
+/// lines up to the step's title) changed by `how`: moved after the step's code (`None`), or
+/// without its line that starts with `drop` (`Some`).
+fn step_time_moved(main: &str, lang: Lang, step: &str, drop: Option<&str>) -> String {
+    let comment = match lang {
+        Lang::Krl => ";",
+        Lang::Rapid => "!",
+        Lang::UrScript => "#",
+    };
+    let lines: Vec<&str> = main.lines().collect();
+    let from = lines
+        .iter()
+        .position(|l| {
+            l.trim()
+                .starts_with(&format!("{comment}step time of {step} ("))
+        })
+        .or_else(|| {
+            lines.iter().position(|l| {
+                l.trim()
+                    .starts_with(&format!("{comment} step time of {step} ("))
+            })
+        })
+        .unwrap_or_else(|| panic!("no start of {step}'s time in\n{main}"));
+    let title = from
+        + lines[from..]
+            .iter()
+            .position(|l| {
+                let l = l.trim();
+                match lang {
+                    Lang::Krl => l.starts_with(";FOLD ") && l.contains(&format!(" {step}: ")),
+                    _ => {
+                        l.starts_with(&format!("{comment} step "))
+                            && l.contains(&format!(" {step}: "))
+                    }
+                }
+            })
+            .unwrap();
+    let block: Vec<&str> = lines[from..title].to_vec();
+    let mut out: Vec<&str> = lines[..from].to_vec();
+    match drop {
+        Some(d) => {
+            let kept: Vec<&str> = block
+                .iter()
+                .copied()
+                .filter(|l| !l.trim().starts_with(d))
+                .collect();
+            assert_eq!(kept.len() + 1, block.len(), "one line `{d}…` in {block:?}");
+            out.extend(kept);
+            out.extend(&lines[title..]);
+        }
+        None => {
+            // The step's code: its FOLD (KRL), its motion lines (RAPID, URScript).
+            let mut end = title + 1;
+            match lang {
+                Lang::Krl => {
+                    while !lines[end].trim().starts_with(";ENDFOLD") {
+                        end += 1;
+                    }
+                    end += 1;
+                }
+                _ => {
+                    while ["MoveL", "MoveJ", "movel(", "movej("]
+                        .iter()
+                        .any(|m| lines[end].trim().starts_with(m))
+                    {
+                        end += 1;
+                    }
+                    assert!(end > title + 1, "no motion after {}", lines[title]);
+                }
+            }
+            out.extend(&lines[title..end]);
+            out.extend(block);
+            out.extend(&lines[end..]);
+        }
+    }
+    out.join("\n") + "\n"
+}
+
+/// A step's time must start right before its action, and anew each time the step becomes
+/// active: a program whose timer starts after the step's code, or whose reset is dropped, or
+/// its whole start, is noticed by the comparison with the chart, in every language
+/// ([`ChartGen::step_time_loop`]: a loop whose selection holds only right after the action).
+#[test]
+fn a_wrong_step_time_fails() {
+    let text = ChartGen::step_time_loop();
+    for (lang, reset, whole) in [
+        (
+            Lang::Krl,
+            "$TIMER[",
+            &["WAIT SEC", "$TIMER[", "$TIMER_STOP["][..],
+        ),
+        (
+            Lang::Rapid,
+            "ClkReset",
+            &["WaitTime", "ClkReset", "ClkStart"][..],
+        ),
+        (Lang::UrScript, "skp_time", &["skp_time"][..]),
+    ] {
+        let (out, chart) = compile_chart(&text, lang);
+        if lang == Lang::Krl {
+            // The KRL check knows the timers' numbers.
+            let at = out.main.find("$TIMER[").unwrap() + 7;
+            let end = at + out.main[at..].find(']').unwrap();
+            for k in ["0", "65", "x"] {
+                let bad = format!("{}{k}{}", &out.main[..at], &out.main[end..]);
+                assert!(
+                    krl_syntax::check_krl(&bad, &out.dat, "R", true).is_err(),
+                    "$TIMER[{k}]"
+                );
+            }
+        }
+        let run = |main: String| {
+            if lang == Lang::Krl {
+                krl_noticed("step time loop", "R", &chart, &out, main)
+            } else {
+                noticed("step time loop", "R", &chart, lang, main)
+            }
+        };
+        assert!(!run(out.main.clone()), "{lang:?}:\n{}", out.main);
+        // The first branch taken, round after round.
+        let (actions, outcome) = chart_meaning(&chart, &sequences(7, 1)[0]);
+        assert_eq!(&actions[..4], ["S3", "S5", "S8", "S5"], "{lang:?}");
+        assert_eq!(outcome, Outcome::Running);
+        let moved = step_time_moved(&out.main, lang, "S5", None);
+        assert_ne!(moved, out.main);
+        assert!(
+            run(moved.clone()),
+            "{lang:?}: the timer starts after the action:\n{moved}"
+        );
+        let dropped = step_time_moved(&out.main, lang, "S5", Some(reset));
+        assert!(run(dropped.clone()), "{lang:?}: no reset:\n{dropped}");
+        let mut none = out.main.clone();
+        for w in whole {
+            none = step_time_moved(&none, lang, "S5", Some(w));
+        }
+        assert!(run(none.clone()), "{lang:?}: no start:\n{none}");
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Conditions of every form
 // ---------------------------------------------------------------------------------------------
@@ -1166,15 +1412,23 @@ fn unescape(s: &str) -> String {
         .replace("&amp;", "&")
 }
 
-/// The chart player reads the conditions as their meaning written out.
+/// The chart player reads the conditions (with a reader of its own) as their meaning written
+/// out.
 #[test]
 fn the_chart_player_reads_st_with_st_precedence() {
     let forms = condition_forms();
+    let started = BTreeMap::new();
     for seq in sequences(11, 60) {
         for p in &seq {
             for (c, f) in &forms {
-                let e = skillpost::cond::parse(&unescape(c), &|o| o).unwrap();
-                assert_eq!(chart::st_eval(&e, p) != 0, f(p), "`{c}` under {p:?}");
+                let e = chart::Cond::parse(&unescape(c));
+                let at = chart::At {
+                    phase: p,
+                    now: 0,
+                    started: &started,
+                    timed: Default::default(),
+                };
+                assert_eq!(e.truth(&at), f(p), "`{c}` under {p:?}");
             }
         }
     }
@@ -1309,6 +1563,9 @@ fn the_urscript_reader_uses_urscript_precedence() {
 fn the_urscript_check_refuses_what_is_not_urscript() {
     let ok = "def P():\n  # c\n  skp_branch = 0\n  while skp_branch == 0:\n    while not ((get_standard_digital_in(1)) or (read_input_integer_register(9) >= -2)):\n      sync()\n    end\n    if get_standard_digital_in(1):\n      skp_branch = 1\n    elif True:\n      skp_branch = 2\n    else:\n      break\n    end\n  end\n  movel(p[0.5, 10, 0, 0, 0, 0], a=1.2, v=0.25)\n  textmsg(\"a # b\")\nend\nP()\n";
     urscript_check::check_urscript(ok).unwrap();
+    // Step times: a global counter, a thread that advances it, the thread started.
+    let clock = "def P():\n  global skp_time1 = 0.0\n  thread skp_clock():\n    while True:\n      skp_time1 = skp_time1 + get_steptime()\n      sync()\n    end\n  end\n  skp_clock_thread = run skp_clock()\n  skp_time1 = 0.0\n  while not (skp_time1 > 0.35):\n    sync()\n  end\nend\nP()\n";
+    urscript_check::check_urscript(clock).unwrap();
     let check = |s: &str| urscript_check::check_urscript(s);
     for (bad, why) in [
         ("def P():\n  elif True:\n  end\nend\n", "elif"),
@@ -1343,6 +1600,20 @@ fn the_urscript_check_refuses_what_is_not_urscript() {
         ("def P():\n  if (True:\n  end\nend\n", "expected"),
         ("def P():\n  x = $IN[3]\nend\n", "unexpected character"),
         ("def P():\n  LIN {1, 2}\nend\n", "unexpected character"),
+        ("def P():\n  t = run f()\nend\n", "thread defined before"),
+        (
+            "def P():\n  thread f():\n    sync()\n  end\n  t = run f(1)\nend\n",
+            "thread defined before",
+        ),
+        (
+            "def P():\n  thread f():\n    sync()\n  end\n  t = 1 + run f()\nend\n",
+            "keyword `run`",
+        ),
+        (
+            "def P():\n  if True:\n    thread f():\n    end\n  end\nend\n",
+            "inside a block",
+        ),
+        ("def P():\n  global x\nend\n", "without an assignment"),
     ] {
         match check(bad) {
             Ok(()) => panic!("accepted:\n{bad}"),

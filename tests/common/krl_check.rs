@@ -95,10 +95,33 @@ fn def_name(rest: &str) -> Result<&str, String> {
     Ok(name)
 }
 
+/// Checks the timers a code line names: `$TIMER[k]`, `$TIMER_STOP[k]`, `$TIMER_FLAG[k]` with
+/// `k` a number from 1 to 64.
+fn timers_of(code: &str) -> Result<(), String> {
+    let upper = code.to_ascii_uppercase();
+    for (at, _) in upper.match_indices("$TIMER") {
+        let rest = &upper[at + 6..];
+        let rest = rest
+            .strip_prefix("_STOP")
+            .or_else(|| rest.strip_prefix("_FLAG"))
+            .unwrap_or(rest);
+        let k = rest
+            .strip_prefix('[')
+            .and_then(|r| r.split_once(']'))
+            .map(|(k, _)| k.trim());
+        match k.and_then(|k| k.parse::<u32>().ok()) {
+            Some(1..=64) => {}
+            _ => return Err("a timer is `$TIMER[k]` with k from 1 to 64".to_owned()),
+        }
+    }
+    Ok(())
+}
+
 /// Checks the structure of a generated `.src`/`.dat` pair for `program`: ASCII; CRLF (or LF)
 /// line endings on every line; header lines (`&...`) only before the first `DEF`; `DEF name( )`
 /// / `END` balanced and not nested, every statement inside one, the first `DEF` named like the
-/// program; `IF`/`ENDIF` (with `THEN`, `ELSE` only inside), `FOR`/`ENDFOR`, `WHILE`/`ENDWHILE`,
+/// program; the timers `$TIMER[k]`, `$TIMER_STOP[k]`, `$TIMER_FLAG[k]` numbered 1 to 64 (KSS 8);
+/// `IF`/`ENDIF` (with `THEN`, `ELSE` only inside), `FOR`/`ENDFOR`, `WHILE`/`ENDWHILE`,
 /// `LOOP`/`ENDLOOP`, `SWITCH`/`ENDSWITCH`, `REPEAT`/`UNTIL` balanced inside each `DEF` (comments
 /// and string contents ignored); `;FOLD`/`;ENDFOLD` balanced and closed before `DEF`/`END`; every
 /// name a valid KRL name; the `.dat` one `DEFDAT <program>` ... `ENDDAT`.
@@ -203,6 +226,7 @@ pub fn check_krl(src: &str, dat: &str, program: &str, lf: bool) -> Result<(), St
                 if open_def.is_none() {
                     return Err(err("statement outside a DEF".into()));
                 }
+                timers_of(&code).map_err(&err)?;
                 let close = |blocks: &mut Vec<(&str, usize)>, opener: &str| match blocks.pop() {
                     Some((kw, _)) if kw == opener => Ok(()),
                     Some((kw, at)) => Err(err(format!(

@@ -14,7 +14,9 @@
 //!   is refused;
 //! - statements: `[global|local] name = expression`, an expression (a call), or a keyword
 //!   statement; expressions are well formed (operands and operators alternate, parentheses and
-//!   brackets balance, keywords such as `end` or `if` are no operands).
+//!   brackets balance, keywords such as `end` or `if` are no operands); a thread is started by
+//!   `name = run thread()` (or `run thread()`), of a `thread` defined before, without
+//!   arguments.
 
 #![allow(dead_code)]
 
@@ -261,6 +263,8 @@ enum Block {
 /// Checks `text` (a whole `.script`); `Err` names the first bad line.
 pub fn check_urscript(text: &str) -> Result<(), String> {
     let mut stack: Vec<Block> = Vec::new();
+    // The threads defined so far.
+    let mut threads: Vec<String> = Vec::new();
     for (n, raw) in text.lines().enumerate() {
         let at = |msg: String| format!("line {}: {msg}: `{}`", n + 1, raw.trim_end());
         let code = strip_comment(raw.trim_end_matches('\r')).trim();
@@ -302,6 +306,9 @@ pub fn check_urscript(text: &str) -> Result<(), String> {
                 }
                 if stack.iter().any(|b| *b != Block::Def) {
                     return Err(at(format!("`{first}` inside a block")));
+                }
+                if let (Tok::Name(name), "thread") = (&head[0], first) {
+                    threads.push(name.clone());
                 }
                 stack.push(Block::Def);
             }
@@ -374,7 +381,28 @@ pub fn check_urscript(text: &str) -> Result<(), String> {
                     "global" | "local" => &t[1..],
                     _ => &t[..],
                 };
+                // `run thread()`: the start of a thread defined before.
+                let run = |value: &[Tok]| -> Result<(), String> {
+                    match value {
+                        [
+                            Tok::Name(_),
+                            Tok::Name(thread),
+                            Tok::Punct("("),
+                            Tok::Punct(")"),
+                        ] if threads.contains(thread) => Ok(()),
+                        _ => Err("`run` needs a thread defined before, `run name()`".to_owned()),
+                    }
+                };
                 match rest {
+                    [Tok::Name(r), ..] if r == "run" && rest.len() == t.len() => {
+                        run(rest).map_err(at)?;
+                    }
+                    [Tok::Name(name), Tok::Punct("="), Tok::Name(r), ..]
+                        if r == "run" && first != "global" && first != "local" =>
+                    {
+                        check_name(name).map_err(at)?;
+                        run(&rest[2..]).map_err(at)?;
+                    }
                     [Tok::Name(name), Tok::Punct("="), value @ ..] => {
                         check_name(name).map_err(at)?;
                         whole_expr(value).map_err(at)?;

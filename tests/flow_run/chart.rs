@@ -4,9 +4,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-use skillpost::cond::{BinOp, Expr as StExpr, ExprKind};
-
-use crate::{MAX_ACTIONS, Outcome, Phase, Rng};
+use crate::{ACTION_MS, MAX_ACTIONS, Outcome, Phase, Rng, STUCK_MS, TICK_MS};
 
 #[derive(Debug)]
 struct Node {
@@ -25,14 +23,18 @@ pub struct Chart {
     order: Vec<u64>,
     /// Successors, left to right by x, ties in document order.
     succ: BTreeMap<u64, Vec<u64>>,
-    /// Parsed conditions.
-    conds: BTreeMap<u64, StExpr>,
+    /// Conditions, as the player reads them ([`Cond`]).
+    conds: BTreeMap<u64, Cond>,
 }
 
 impl Chart {
     pub fn read(path: &Path) -> Chart {
-        let text = std::fs::read_to_string(path).unwrap();
-        let doc = roxmltree::Document::parse(&text).unwrap();
+        Chart::parse(&std::fs::read_to_string(path).unwrap())
+    }
+
+    /// The chart of a PLCopen XML text.
+    pub fn parse(text: &str) -> Chart {
+        let doc = roxmltree::Document::parse(text).unwrap();
         let sfc = doc
             .descendants()
             .find(|n| n.is_element() && n.tag_name().name() == "SFC")
@@ -154,8 +156,7 @@ impl Chart {
             .iter()
             .filter_map(|(id, n)| {
                 let text = n.condition.as_ref()?;
-                let e = skillpost::cond::parse(text, &|o| o).expect("the chart's condition");
-                Some((*id, e))
+                Some((*id, Cond::parse(text)))
             })
             .collect();
         Chart {
@@ -173,51 +174,394 @@ impl Chart {
 
     /// Whether a selection branch that starts with `head` is selected: its transition holds,
     /// or, when it opens another selection, one of that selection's branches is selected.
-    fn selects(&self, head: u64, phase: &Phase) -> bool {
+    fn selects(&self, head: u64, at: &At) -> bool {
         if self.nodes[&head].tag == "selectionDivergence" {
-            self.succs(head).into_iter().any(|h| self.selects(h, phase))
+            self.succs(head).into_iter().any(|h| self.selects(h, at))
         } else {
-            self.holds(head, phase)
+            self.holds(head, at)
         }
     }
 
-    fn holds(&self, transition: u64, phase: &Phase) -> bool {
+    fn holds(&self, transition: u64, at: &At) -> bool {
         match self.conds.get(&transition) {
             None => true,
-            Some(e) => st_eval(e, phase) != 0,
+            Some(e) => e.truth(at),
         }
     }
 }
 
-/// Evaluates a condition with ST's meaning (the parser's tree already has ST's precedence).
-pub fn st_eval(e: &StExpr, phase: &Phase) -> i64 {
-    match &e.kind {
-        ExprKind::Bool(b) => *b as i64,
-        ExprKind::Int(s) => s.parse().unwrap(),
-        ExprKind::Real(_) => panic!("no decimals in the fixtures"),
-        ExprKind::Time(_) => panic!("step times are not played yet"),
-        ExprKind::Name(n) => {
-            *phase
+// ---------------------------------------------------------------------------------------------
+// The player's own reading of ST conditions
+// ---------------------------------------------------------------------------------------------
+
+/// A condition as the chart player reads it: IEC 61131-3 ST, by a reader of its own
+/// (independent of the project's parser, `src/cond.rs`). Booleans and integers are numbers
+/// (`TRUE` is 1); durations are nanoseconds of their own type.
+#[derive(Debug, Clone)]
+pub enum Cond {
+    Int(i64),
+    /// A TIME literal (`T#350ms`, `TIME#1s_500ms`, `t#0.35S`), in nanoseconds.
+    Time(i64),
+    /// A signal, by its name as written.
+    Signal(String),
+    /// A step's elapsed time `S.t` (also `S.T`): the step's name, lower-cased.
+    StepTime(String),
+    Not(Box<Cond>),
+    Neg(Box<Cond>),
+    Bin(CondOp, Box<Cond>, Box<Cond>),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CondOp {
+    Or,
+    Xor,
+    And,
+    Eq,
+    Ne,
+    Lt,
+    Gt,
+    Le,
+    Ge,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Tok {
+    /// A name or a keyword, as written.
+    Word(String),
+    Int(i64),
+    /// A TIME literal, in nanoseconds.
+    Time(i64),
+    Op(&'static str),
+}
+
+/// The duration of a TIME literal's text after its `#` (`1s_500ms`, `0.35S`, `+2s`), in
+/// nanoseconds: components `<number><unit>` (d, h, m, s, ms, us, ns; any case) from the largest
+/// unit down, `_` between digits and between components, a fraction only on the last.
+pub fn time_literal(text: &str) -> i64 {
+    const UNITS: &[(&str, i128)] = &[
+        ("ms", 1_000_000),
+        ("us", 1_000),
+        ("ns", 1),
+        ("d", 86_400_000_000_000),
+        ("h", 3_600_000_000_000),
+        ("m", 60_000_000_000),
+        ("s", 1_000_000_000),
+    ];
+    let lower = text.to_ascii_lowercase();
+    let mut rest = lower.strip_prefix('+').unwrap_or(&lower);
+    let mut total: i128 = 0;
+    let mut fraction = false;
+    let mut last = i128::MAX;
+    while !rest.is_empty() {
+        assert!(!fraction, "T#{text}: a fraction only on the last unit");
+        rest = rest.trim_start_matches('_');
+        let digits = rest
+            .find(|c: char| !(c.is_ascii_digit() || c == '_' || c == '.'))
+            .unwrap_or_else(|| panic!("T#{text}: a number without a unit"));
+        let number = rest[..digits].replace('_', "");
+        rest = &rest[digits..];
+        let (unit, factor) = *UNITS
+            .iter()
+            .find(|(u, _)| rest.starts_with(u))
+            .unwrap_or_else(|| panic!("T#{text}: no unit at `{rest}`"));
+        rest = &rest[unit.len()..];
+        assert!(factor < last, "T#{text}: units from days down");
+        last = factor;
+        let (whole, part) = number.split_once('.').unwrap_or((&number, ""));
+        fraction = !part.is_empty();
+        let whole: i128 = whole
+            .parse()
+            .unwrap_or_else(|_| panic!("T#{text}: `{number}`"));
+        let scale = 10i128.pow(part.len() as u32);
+        let part: i128 = if part.is_empty() {
+            0
+        } else {
+            part.parse().unwrap()
+        };
+        assert_eq!(
+            part * factor % scale,
+            0,
+            "T#{text}: finer than a nanosecond"
+        );
+        total += whole * factor + part * factor / scale;
+    }
+    i64::try_from(total).expect("a duration that fits")
+}
+
+fn st_tokens(s: &str) -> Vec<Tok> {
+    let c: Vec<char> = s.chars().collect();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < c.len() {
+        let ch = c[i];
+        if ch.is_whitespace() {
+            i += 1;
+        } else if ch == '(' && c.get(i + 1) == Some(&'*') {
+            // A comment.
+            let rest: String = c[i + 2..].iter().collect();
+            let end = rest
+                .find("*)")
+                .unwrap_or_else(|| panic!("unclosed comment in `{s}`"));
+            i += 2 + rest[..end].chars().count() + 2;
+        } else if ch.is_ascii_alphabetic() || ch == '_' {
+            let st = i;
+            while i < c.len() && (c[i].is_ascii_alphanumeric() || c[i] == '_') {
+                i += 1;
+            }
+            let word: String = c[st..i].iter().collect();
+            let is_time = ["T", "TIME", "LT", "LTIME"]
                 .iter()
-                .find(|(k, _)| k.eq_ignore_ascii_case(n))
-                .unwrap_or_else(|| panic!("unknown signal {n}"))
-                .1
+                .any(|t| t.eq_ignore_ascii_case(&word));
+            if is_time && c.get(i) == Some(&'#') {
+                i += 1;
+                let st = i;
+                while i < c.len() && (c[i].is_ascii_alphanumeric() || "_.+".contains(c[i])) {
+                    i += 1;
+                }
+                let lit: String = c[st..i].iter().collect();
+                out.push(Tok::Time(time_literal(&lit)));
+            } else {
+                out.push(Tok::Word(word));
+            }
+        } else if ch.is_ascii_digit() {
+            let st = i;
+            while i < c.len() && (c[i].is_ascii_digit() || c[i] == '_') {
+                i += 1;
+            }
+            assert!(
+                c.get(i) != Some(&'.') && c.get(i) != Some(&'#'),
+                "only plain integers in the charts: `{s}`"
+            );
+            let n: String = c[st..i].iter().filter(|d| **d != '_').collect();
+            out.push(Tok::Int(n.parse().unwrap()));
+        } else {
+            let two: String = c[i..(i + 2).min(c.len())].iter().collect();
+            let op = ["<>", "<=", ">="]
+                .into_iter()
+                .find(|o| *o == two)
+                .or_else(|| {
+                    ["(", ")", "=", "<", ">", "-", "&", ".", ";"]
+                        .into_iter()
+                        .find(|o| o.starts_with(ch))
+                })
+                .unwrap_or_else(|| panic!("unexpected `{ch}` in the condition `{s}`"));
+            i += op.chars().count();
+            out.push(Tok::Op(op));
         }
-        ExprKind::Not(a) => (st_eval(a, phase) == 0) as i64,
-        ExprKind::Neg(a) => -st_eval(a, phase),
-        ExprKind::Bin(op, a, b) => {
-            let (x, y) = (st_eval(a, phase), st_eval(b, phase));
-            (match op {
-                BinOp::Or => x != 0 || y != 0,
-                BinOp::Xor => (x != 0) != (y != 0),
-                BinOp::And => x != 0 && y != 0,
-                BinOp::Eq => x == y,
-                BinOp::Ne => x != y,
-                BinOp::Lt => x < y,
-                BinOp::Gt => x > y,
-                BinOp::Le => x <= y,
-                BinOp::Ge => x >= y,
-            }) as i64
+    }
+    // One `;` may end a condition.
+    if out.last() == Some(&Tok::Op(";")) {
+        out.pop();
+    }
+    out
+}
+
+/// ST's precedence, loosest first: `OR`, `XOR`, `AND`/`&`, `=`/`<>`, `<`/`>`/`<=`/`>=`, then
+/// `NOT` and unary `-` (IEC 61131-3, table 71: so `NOT a = b` is `(NOT a) = b`).
+struct Reader {
+    t: Vec<Tok>,
+    i: usize,
+    text: String,
+}
+
+impl Reader {
+    fn word(&self, w: &str) -> bool {
+        matches!(self.t.get(self.i), Some(Tok::Word(x)) if x.eq_ignore_ascii_case(w))
+    }
+
+    fn op(&self, o: &str) -> bool {
+        matches!(self.t.get(self.i), Some(Tok::Op(x)) if *x == o)
+    }
+
+    /// Operators of one level, each with the text that writes it.
+    fn level(&mut self, ops: &[(&str, bool, CondOp)], next: fn(&mut Self) -> Cond) -> Cond {
+        let mut l = next(self);
+        while let Some((_, _, op)) = ops
+            .iter()
+            .find(|(t, is_word, _)| if *is_word { self.word(t) } else { self.op(t) })
+        {
+            self.i += 1;
+            let r = next(self);
+            l = Cond::Bin(*op, Box::new(l), Box::new(r));
+        }
+        l
+    }
+
+    fn or(&mut self) -> Cond {
+        self.level(&[("OR", true, CondOp::Or)], Self::xor)
+    }
+
+    fn xor(&mut self) -> Cond {
+        self.level(&[("XOR", true, CondOp::Xor)], Self::and)
+    }
+
+    fn and(&mut self) -> Cond {
+        self.level(
+            &[("AND", true, CondOp::And), ("&", false, CondOp::And)],
+            Self::equality,
+        )
+    }
+
+    fn equality(&mut self) -> Cond {
+        self.level(
+            &[("=", false, CondOp::Eq), ("<>", false, CondOp::Ne)],
+            Self::comparison,
+        )
+    }
+
+    fn comparison(&mut self) -> Cond {
+        self.level(
+            &[
+                ("<=", false, CondOp::Le),
+                (">=", false, CondOp::Ge),
+                ("<", false, CondOp::Lt),
+                (">", false, CondOp::Gt),
+            ],
+            Self::unary,
+        )
+    }
+
+    fn unary(&mut self) -> Cond {
+        if self.word("NOT") {
+            self.i += 1;
+            return Cond::Not(Box::new(self.unary()));
+        }
+        if self.t.get(self.i) == Some(&Tok::Op("-")) {
+            self.i += 1;
+            return Cond::Neg(Box::new(self.unary()));
+        }
+        self.primary()
+    }
+
+    fn primary(&mut self) -> Cond {
+        let t = self
+            .t
+            .get(self.i)
+            .cloned()
+            .unwrap_or_else(|| panic!("the condition `{}` ends early", self.text));
+        self.i += 1;
+        match t {
+            Tok::Op("(") => {
+                let e = self.or();
+                assert!(self.op(")"), "unclosed `(` in `{}`", self.text);
+                self.i += 1;
+                e
+            }
+            Tok::Int(n) => Cond::Int(n),
+            Tok::Time(ns) => Cond::Time(ns),
+            Tok::Word(w) if w.eq_ignore_ascii_case("TRUE") => Cond::Int(1),
+            Tok::Word(w) if w.eq_ignore_ascii_case("FALSE") => Cond::Int(0),
+            Tok::Word(w) => {
+                assert!(
+                    !["NOT", "AND", "OR", "XOR"]
+                        .iter()
+                        .any(|k| k.eq_ignore_ascii_case(&w)),
+                    "`{w}` where an operand belongs in `{}`",
+                    self.text
+                );
+                if self.op(".") {
+                    self.i += 1;
+                    match self.t.get(self.i) {
+                        Some(Tok::Word(t)) if t.eq_ignore_ascii_case("t") => {
+                            self.i += 1;
+                            Cond::StepTime(w.to_ascii_lowercase())
+                        }
+                        other => panic!("`{w}.{other:?}` in `{}`", self.text),
+                    }
+                } else {
+                    Cond::Signal(w)
+                }
+            }
+            other => panic!("{other:?} where an operand belongs in `{}`", self.text),
+        }
+    }
+}
+
+/// What a condition is evaluated under: the inputs of the phase, the clock (milliseconds) and
+/// when each step (lower-cased name) last became active; `timed` records whether a step's time
+/// was read (else a false condition stays false while the inputs do not change).
+pub struct At<'a> {
+    pub phase: &'a Phase,
+    pub now: i64,
+    pub started: &'a BTreeMap<String, i64>,
+    pub timed: std::cell::Cell<bool>,
+}
+
+/// A value: a number (booleans are 0 and 1) or a duration (nanoseconds).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum V {
+    N(i64),
+    T(i64),
+}
+
+impl Cond {
+    /// Reads a condition's text (ST).
+    pub fn parse(text: &str) -> Cond {
+        let mut r = Reader {
+            t: st_tokens(text),
+            i: 0,
+            text: text.to_owned(),
+        };
+        let e = r.or();
+        assert_eq!(r.i, r.t.len(), "trailing text in the condition `{text}`");
+        e
+    }
+
+    /// Whether the condition holds under `at`.
+    pub fn truth(&self, at: &At) -> bool {
+        match self.eval(at) {
+            V::N(n) => n != 0,
+            V::T(_) => panic!("a duration as a condition: {self:?}"),
+        }
+    }
+
+    fn eval(&self, at: &At) -> V {
+        let n = |v: V| match v {
+            V::N(n) => n,
+            V::T(_) => panic!("a duration where a boolean belongs: {self:?}"),
+        };
+        match self {
+            Cond::Int(i) => V::N(*i),
+            Cond::Time(ns) => V::T(*ns),
+            Cond::Signal(s) => V::N(
+                *at.phase
+                    .iter()
+                    .find(|(k, _)| k.eq_ignore_ascii_case(s))
+                    .unwrap_or_else(|| panic!("unknown signal {s}"))
+                    .1,
+            ),
+            Cond::StepTime(s) => {
+                at.timed.set(true);
+                let since = at
+                    .started
+                    .get(s)
+                    .unwrap_or_else(|| panic!("the time of step {s}, which was never active"));
+                V::T((at.now - since) * 1_000_000)
+            }
+            Cond::Not(a) => V::N((n(a.eval(at)) == 0) as i64),
+            Cond::Neg(a) => match a.eval(at) {
+                V::N(x) => V::N(-x),
+                V::T(_) => panic!("a negative duration: {self:?}"),
+            },
+            Cond::Bin(op, a, b) => {
+                let (x, y) = (a.eval(at), b.eval(at));
+                let (x, y) = match (op, x, y) {
+                    (CondOp::Or | CondOp::Xor | CondOp::And, x, y) => (n(x), n(y)),
+                    (_, V::N(x), V::N(y)) | (_, V::T(x), V::T(y)) => (x, y),
+                    _ => panic!("a duration compared with a number: {self:?}"),
+                };
+                V::N(match op {
+                    CondOp::Or => x != 0 || y != 0,
+                    CondOp::Xor => (x != 0) != (y != 0),
+                    CondOp::And => x != 0 && y != 0,
+                    CondOp::Eq => x == y,
+                    CondOp::Ne => x != y,
+                    CondOp::Lt => x < y,
+                    CondOp::Gt => x > y,
+                    CondOp::Le => x <= y,
+                    CondOp::Ge => x >= y,
+                } as i64)
+            }
         }
     }
 }
@@ -226,6 +570,9 @@ struct Player<'a> {
     chart: &'a Chart,
     seq: &'a [Phase],
     actions: Vec<String>,
+    /// The clock (milliseconds) and when each step last became active.
+    now: i64,
+    started: BTreeMap<String, i64>,
 }
 
 enum Stop {
@@ -238,6 +585,28 @@ enum Stop {
 impl Player<'_> {
     fn phase(&self) -> &Phase {
         &self.seq[self.actions.len().min(self.seq.len() - 1)]
+    }
+
+    /// Waits until `what` holds (the time model of `flow_run.rs`): while it is false the
+    /// clock advances by ticks, and it is read again; `false`: stuck (false after waiting
+    /// [`STUCK_MS`], or false without reading a step's time, so it stays false).
+    fn wait(&mut self, what: impl Fn(&Chart, &At) -> bool) -> bool {
+        let since = self.now;
+        loop {
+            let at = At {
+                phase: self.phase(),
+                now: self.now,
+                started: &self.started,
+                timed: std::cell::Cell::new(false),
+            };
+            if what(self.chart, &at) {
+                return true;
+            }
+            if !at.timed.get() || self.now - since >= STUCK_MS {
+                return false;
+            }
+            self.now += TICK_MS;
+        }
     }
 
     /// Runs from `id` until the flow ends or reaches a simultaneous convergence (returned).
@@ -253,8 +622,11 @@ impl Player<'_> {
             let succs = c.succs(id);
             match n.tag.as_str() {
                 "step" => {
+                    // Active from now; its action takes time.
+                    self.started.insert(n.name.to_ascii_lowercase(), self.now);
                     if n.skill {
                         self.actions.push(n.name.clone());
+                        self.now += ACTION_MS;
                     }
                     match succs.as_slice() {
                         [] => return Stop::Done,
@@ -263,16 +635,23 @@ impl Player<'_> {
                     }
                 }
                 "transition" => {
-                    if !c.holds(id, self.phase()) {
+                    if !self.wait(|c, at| c.holds(id, at)) {
                         return Stop::Stuck;
                     }
                     id = succs[0];
                 }
                 "selectionDivergence" => {
-                    let t = match succs.iter().find(|t| c.selects(**t, self.phase())) {
-                        Some(t) => *t,
-                        None => return Stop::Stuck,
+                    // Waits for any branch, then takes the first that holds.
+                    if !self.wait(|c, at| succs.iter().any(|t| c.selects(*t, at))) {
+                        return Stop::Stuck;
+                    }
+                    let at = At {
+                        phase: self.phase(),
+                        now: self.now,
+                        started: &self.started,
+                        timed: std::cell::Cell::new(false),
                     };
+                    let t = *succs.iter().find(|t| c.selects(**t, &at)).unwrap();
                     // A branch that opens another selection (CODESYS) goes on there.
                     id = if c.nodes[&t].tag == "selectionDivergence" {
                         t
@@ -446,10 +825,18 @@ pub struct Paths {
 }
 
 pub fn chart_meaning(chart: &Chart, seq: &[Phase]) -> (Vec<String>, Outcome) {
+    let (actions, outcome, _) = play(chart, seq);
+    (actions, outcome)
+}
+
+/// [`chart_meaning`], and the player's clock at the end (milliseconds).
+fn play(chart: &Chart, seq: &[Phase]) -> (Vec<String>, Outcome, i64) {
     let mut p = Player {
         chart,
         seq,
         actions: Vec::new(),
+        now: 0,
+        started: BTreeMap::new(),
     };
     let outcome = match p.run(chart.start()) {
         Stop::Done => Outcome::Done,
@@ -457,7 +844,7 @@ pub fn chart_meaning(chart: &Chart, seq: &[Phase]) -> (Vec<String>, Outcome) {
         Stop::Running => Outcome::Running,
         Stop::Conv(_) => panic!("a convergence without divergence"),
     };
-    (p.actions, outcome)
+    (p.actions, outcome, p.now)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -467,11 +854,22 @@ pub fn chart_meaning(chart: &Chart, seq: &[Phase]) -> (Vec<String>, Outcome) {
 /// Writes random structured charts: sequences with guarded transitions, selections (2 or 3
 /// branches, sometimes an empty or unconditional one), simultaneous branches, loops closed by a
 /// jump back (left by one branch or by two that join), nested in each other; sometimes the
-/// whole chart ends in an endless loop.
+/// whole chart ends in an endless loop. [`ChartGen::with_step_times`]: the same charts, some
+/// of whose transitions also read a step's time.
 pub struct ChartGen {
     rng: Rng,
     parts: Vec<String>,
     next: u64,
+    /// Each element's tag, inputs, x and part (for the step times, written afterwards).
+    elements: BTreeMap<u64, Element>,
+}
+
+struct Element {
+    tag: &'static str,
+    inputs: Vec<u64>,
+    x: u64,
+    part: usize,
+    cond: Option<String>,
 }
 
 pub const CONDITIONS: &[&str] = &[
@@ -486,6 +884,29 @@ pub const CONDITIONS: &[&str] = &[
 ];
 
 impl ChartGen {
+    fn new(rng: Rng) -> ChartGen {
+        ChartGen {
+            rng,
+            parts: Vec::new(),
+            next: 0,
+            elements: BTreeMap::new(),
+        }
+    }
+
+    /// Records element `id` (its part is the last one written).
+    fn record(&mut self, id: u64, tag: &'static str, inputs: &[u64], x: u64, cond: Option<&str>) {
+        self.elements.insert(
+            id,
+            Element {
+                tag,
+                inputs: inputs.to_vec(),
+                x,
+                part: self.parts.len() - 1,
+                cond: cond.map(str::to_owned),
+            },
+        );
+    }
+
     fn id(&mut self) -> u64 {
         self.next += 1;
         self.next
@@ -535,27 +956,34 @@ impl ChartGen {
         }
         s.push_str("</step>");
         self.parts.push(s);
+        self.record(id, "step", input.as_slice(), x, None);
         id
+    }
+
+    fn trans_part(id: u64, input: u64, cond: Option<&str>, x: u64) -> String {
+        let c = cond
+            .map(|c| format!("<condition><inline name=\"\"><ST>{c}</ST></inline></condition>"))
+            .unwrap_or_default();
+        format!(
+            "<transition localId=\"{id}\"><position x=\"{x}\" y=\"{id}\"/>{}{c}</transition>",
+            Self::conn(&[input])
+        )
     }
 
     fn trans(&mut self, input: u64, cond: Option<&str>, x: u64) -> u64 {
         let id = self.id();
-        let c = cond
-            .map(|c| format!("<condition><inline name=\"\"><ST>{c}</ST></inline></condition>"))
-            .unwrap_or_default();
-        self.parts.push(format!(
-            "<transition localId=\"{id}\"><position x=\"{x}\" y=\"{id}\"/>{}{c}</transition>",
-            Self::conn(&[input])
-        ));
+        self.parts.push(Self::trans_part(id, input, cond, x));
+        self.record(id, "transition", &[input], x, cond);
         id
     }
 
-    fn node(&mut self, tag: &str, inputs: &[u64], x: u64) -> u64 {
+    fn node(&mut self, tag: &'static str, inputs: &[u64], x: u64) -> u64 {
         let id = self.id();
         self.parts.push(format!(
             "<{tag} localId=\"{id}\"><position x=\"{x}\" y=\"{id}\"/>{}</{tag}>",
             Self::conn(inputs)
         ));
+        self.record(id, tag, inputs, x, None);
         id
     }
 
@@ -710,20 +1138,149 @@ impl ChartGen {
         }
     }
 
-    pub fn chart(seed: u64) -> String {
-        let mut g = ChartGen {
-            rng: Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1),
-            parts: Vec::new(),
-            next: 0,
-        };
+    /// The random chart of `seed`, not yet written out.
+    fn random(seed: u64) -> ChartGen {
+        let mut g = ChartGen::new(Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1));
         let start = g.step(None, false, 0);
         let last = g.items(start, 0);
         if g.pick(5) == 0 {
             g.looped(last, 0, true);
-            g.document()
         } else {
             let t = g.trans(last, None, 0);
-            g.end(t)
+            g.end_step(t);
+        }
+        g
+    }
+
+    pub fn chart(seed: u64) -> String {
+        ChartGen::random(seed).document()
+    }
+
+    /// The random chart of `seed` ([`ChartGen::chart`]: the same elements) with step times
+    /// (IEC 61131-3 `S.t`) in some of its conditions: only in a transition right after a step
+    /// (its input, or the divergence of the selection the transition begins a branch of),
+    /// reading that step's time; alone or with the signals by `AND`/`OR`, the TIME literals in
+    /// their many spellings. The forms: `S.t >= T#100ms` (true once the step's action has run:
+    /// the timer must start before the action), `S.t < T#150ms` (true only right after the
+    /// action) and `S.t < T#100ms` (false by then) in a selection's first branch, a timeout
+    /// `S.t > T#350ms` or `c OR S.t > T#1s` (waits). At most 6 steps' times per chart (KRL's
+    /// timers: 8 by default).
+    pub fn with_step_times(seed: u64) -> String {
+        let mut g = ChartGen::random(seed);
+        let mut rng = Rng(seed.wrapping_mul(0xD1B5_4A32_D192_ED03) | 1);
+        g.step_times(&mut rng);
+        g.document()
+    }
+
+    /// Adds step times to the transitions after a step ([`ChartGen::with_step_times`]).
+    fn step_times(&mut self, rng: &mut Rng) {
+        let rng = std::cell::RefCell::new(rng);
+        let pick = |n: u64| rng.borrow_mut().next() % n;
+        let name = |e: &BTreeMap<u64, Element>, s: u64| {
+            if e[&s].inputs.is_empty() {
+                "Start".to_owned()
+            } else {
+                format!("S{s}")
+            }
+        };
+        let mut timed: BTreeSet<u64> = BTreeSet::new();
+        let ids: Vec<u64> = self.elements.keys().copied().collect();
+        for t in ids {
+            let e = &self.elements[&t];
+            if e.tag != "transition" {
+                continue;
+            }
+            let input = e.inputs[0];
+            // The step it follows, and its place among the selection's branches (by priority:
+            // left to right, ties in document order), with how many there are.
+            let (step, branch) = match self.elements[&input].tag {
+                "step" => (input, None),
+                "selectionDivergence" => {
+                    let s = self.elements[&input].inputs[0];
+                    if self.elements[&s].tag != "step" {
+                        continue;
+                    }
+                    let mut heads: Vec<(u64, u64)> = self
+                        .elements
+                        .iter()
+                        .filter(|(_, b)| b.tag == "transition" && b.inputs == [input])
+                        .map(|(id, b)| (b.x, *id))
+                        .collect();
+                    heads.sort_unstable();
+                    let rank = heads.iter().position(|h| h.1 == t).unwrap();
+                    (s, Some((rank, heads.len())))
+                }
+                _ => continue,
+            };
+            if pick(5) >= 2 || (!timed.contains(&step) && timed.len() >= 6) {
+                continue;
+            }
+            let st = format!(
+                "{}.{}",
+                name(&self.elements, step),
+                ["t", "T"][pick(2) as usize]
+            );
+            // A comparison with a TIME literal (of `ms`) in one of its spellings, either way
+            // round.
+            let cmp = |op: &str, ms: u64| -> String {
+                let spellings: &[&str] = match ms {
+                    50 => &["T#50ms", "t#0.05s", "TIME#50MS"],
+                    100 => &["T#100ms", "t#100MS", "TIME#0.1s", "T#0s_100ms"],
+                    150 => &["T#150ms", "T#0.15s", "time#150ms"],
+                    350 => &["T#350ms", "t#0.35S", "TIME#350ms"],
+                    1000 => &["T#1s", "TIME#1000ms", "t#1S"],
+                    1500 => &["T#1s500ms", "T#1.5s", "TIME#1s_500ms"],
+                    _ => unreachable!(),
+                };
+                let lit = spellings[pick(spellings.len() as u64) as usize];
+                if pick(4) == 0 {
+                    let flipped = match op {
+                        "&lt;" => "&gt;",
+                        "&gt;" => "&lt;",
+                        "&lt;=" => "&gt;=",
+                        "&gt;=" => "&lt;=",
+                        o => o,
+                    };
+                    format!("{lit} {flipped} {st}")
+                } else {
+                    format!("{st} {op} {lit}")
+                }
+            };
+            let c = self.elements[&t].cond.clone();
+            let with = |time: String, op: &str| match &c {
+                None => time,
+                Some(c) if pick(2) == 0 => format!("({c}) {op} {time}"),
+                Some(c) => format!("{time} {op} ({c})"),
+            };
+            let cond = match branch {
+                // A selection's first branch (of several).
+                Some((0, n)) if n > 1 => match pick(4) {
+                    0 => with(cmp("&gt;=", 100), "AND"),
+                    1 => with(cmp("&lt;", 150), "AND"),
+                    2 => with(cmp("&lt;", 100), "AND"),
+                    _ => cmp("&gt;=", 100),
+                },
+                // A later branch: a timeout.
+                Some(_) => match pick(3) {
+                    0 => cmp("&gt;", 350),
+                    1 => with(cmp("&gt;", 1000), "OR"),
+                    _ => with(cmp("&gt;=", 100), "AND"),
+                },
+                // A wait.
+                None => match pick(5) {
+                    0 => with(cmp("&gt;=", 100), "AND"),
+                    1 => with(cmp("&gt;", 350), "AND"),
+                    2 => with(cmp("&gt;", 1500), "OR"),
+                    3 => with(cmp("&lt;", 150), "AND"),
+                    _ => cmp("&lt;&gt;", 50),
+                },
+            };
+            timed.insert(step);
+            let e = &self.elements[&t];
+            let part = ChartGen::trans_part(t, input, Some(&cond), e.x);
+            let k = e.part;
+            self.parts[k] = part;
+            self.elements.get_mut(&t).unwrap().cond = Some(cond);
         }
     }
 
@@ -732,11 +1289,7 @@ impl ChartGen {
     /// unconditional branch: the program waits for either); then, after all of those, a wait
     /// for each.
     pub fn conditions(conditions: &[&str]) -> String {
-        let mut g = ChartGen {
-            rng: Rng(1),
-            parts: Vec::new(),
-            next: 0,
-        };
+        let mut g = ChartGen::new(Rng(1));
         let mut tail = g.step(None, false, 0);
         for c in conditions {
             let negated = format!("NOT ({c})");
@@ -757,17 +1310,44 @@ impl ChartGen {
             tail = g.step(Some(t), true, 0);
         }
         let t = g.trans(tail, None, 0);
-        g.end(t)
+        g.end_step(t);
+        g.document()
     }
 
-    /// The end step after transition `t`, and the whole document.
-    fn end(mut self, t: u64) -> String {
+    /// A chart whose step `S5` must be timed exactly: `Start`, `S3`, then a loop: `S5`, a
+    /// selection whose first branch, `S5.t >= T#100ms AND S5.t < T#150ms`, holds only right
+    /// after `S5`'s action (so only when `S5`'s time starts right before its action, anew in
+    /// each round), `S8` and round again; else (`TRUE`) `S12`, a wait `S12.t > T#350ms`, the
+    /// end.
+    pub fn step_time_loop() -> String {
+        let mut g = ChartGen::new(Rng(1));
+        let start = g.step(None, false, 0);
+        let t = g.trans(start, None, 0);
+        let a = g.step(Some(t), true, 0);
+        let t = g.trans(a, None, 0);
+        let l = g.step(Some(t), true, 0);
+        let div = g.node("selectionDivergence", &[l], 0);
+        let c = format!("S{l}.t &gt;= T#100ms AND S{l}.t &lt; T#150ms");
+        let t1 = g.trans(div, Some(&c), 0);
+        let x = g.step(Some(t1), true, 0);
+        let tx = g.trans(x, None, 0);
+        g.jump(tx, l);
+        let t2 = g.trans(div, None, 10);
+        let y = g.step(Some(t2), true, 10);
+        let ty = g.trans(y, Some(&format!("S{y}.t &gt; T#350ms")), 10);
+        g.end_step(ty);
+        assert_eq!((a, l, x, y), (3, 5, 8, 12));
+        g.document()
+    }
+
+    /// The end step after transition `t`.
+    fn end_step(&mut self, t: u64) {
         let id = self.id();
         self.parts.push(format!(
             "<step localId=\"{id}\" name=\"End\"><position x=\"0\" y=\"{id}\"/>{}</step>",
             ChartGen::conn(&[t])
         ));
-        self.document()
+        self.record(id, "end", &[t], 0, None);
     }
 
     fn document(&self) -> String {
@@ -947,4 +1527,158 @@ impl Chart {
         }
         None
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The player's time
+// ---------------------------------------------------------------------------------------------
+
+/// TIME literals in their spellings: components from days down to nanoseconds, any case, `_`
+/// between them, a fraction on the last; malformed ones are refused.
+#[test]
+fn the_player_reads_time_literals() {
+    const MS: i64 = 1_000_000;
+    for (lit, ns) in [
+        ("350ms", 350 * MS),
+        ("2s", 2_000 * MS),
+        ("1s500ms", 1_500 * MS),
+        ("1s_500ms", 1_500 * MS),
+        ("100MS", 100 * MS),
+        ("1.5s", 1_500 * MS),
+        ("0.35S", 350 * MS),
+        ("1m30s", 90_000 * MS),
+        ("1h", 3_600_000 * MS),
+        ("1d2h", 93_600_000 * MS),
+        ("+2s", 2_000 * MS),
+        ("1_000ms", 1_000 * MS),
+        ("350.5ms", 350_500_000),
+        ("1us", 1_000),
+        ("7ns", 7),
+    ] {
+        assert_eq!(time_literal(lit), ns, "T#{lit}");
+    }
+    let started = BTreeMap::new();
+    let phase = Phase::new();
+    for (text, holds) in [
+        ("T#350ms = TIME#0.35s", true),
+        ("t#100MS < T#1s", true),
+        ("TIME#4s >= LT#4000ms", true),
+        ("T#1s500ms <> T#1.5s", false),
+        ("LTIME#1m > T#59s999ms", true),
+    ] {
+        let at = At {
+            phase: &phase,
+            now: 0,
+            started: &started,
+            timed: Default::default(),
+        };
+        assert_eq!(Cond::parse(text).truth(&at), holds, "{text}");
+        assert!(!at.timed.get(), "{text} reads no step's time");
+    }
+    for bad in ["5", "5x", "1.5s2ms", "s", "1s1m", "ms5"] {
+        let r = std::panic::catch_unwind(|| time_literal(bad));
+        assert!(r.is_err(), "T#{bad} is no TIME literal");
+    }
+}
+
+/// A step's time `S.t` (also `S.T`, the step's name in any case) is the time since the step
+/// last became active, compared with a TIME literal on either side; a duration is no number.
+#[test]
+fn the_player_reads_step_times() {
+    let phase: Phase = [("Part_OK", 1), ("Release", 0)].into_iter().collect();
+    let started: BTreeMap<String, i64> = [("grip".to_owned(), 1_000)].into_iter().collect();
+    let at = || At {
+        phase: &phase,
+        now: 1_350,
+        started: &started,
+        timed: Default::default(),
+    };
+    for (text, holds) in [
+        ("Grip.t > T#350ms", false),
+        ("Grip.t >= T#350ms", true),
+        ("grip.T = T#0.35s", true),
+        ("T#350ms <> GRIP.t", false),
+        ("T#349ms < Grip.t AND Part_OK", true),
+        ("Grip.t < T#350ms OR Release", false),
+        ("NOT (Grip.t <= T#349ms) AND NOT Release", true),
+        ("T#1s < Grip.t OR Part_OK (* a comment *);", true),
+    ] {
+        let a = at();
+        assert_eq!(Cond::parse(text).truth(&a), holds, "{text}");
+        assert!(a.timed.get(), "{text} reads a step's time");
+    }
+    for bad in [
+        "Grip.t > 350",
+        "Grip.t AND Part_OK",
+        "Grip.t",
+        "Lift.t > T#1s",
+    ] {
+        let r = std::panic::catch_unwind(|| Cond::parse(bad).truth(&at()));
+        assert!(r.is_err(), "`{bad}` is no condition the player accepts");
+    }
+}
+
+/// The player keeps the time: a step becomes active before its action, which takes
+/// [`ACTION_MS`]; a wait reads its condition every [`TICK_MS`] until it holds; a selection waits
+/// for any branch, then takes the first that holds; a wait on a step's time that cannot come
+/// true is stuck after [`STUCK_MS`], one on the inputs alone at once.
+#[test]
+fn the_player_keeps_time() {
+    let mut g = ChartGen::new(Rng(1));
+    let start = g.step(None, false, 0);
+    let t = g.trans(start, None, 0);
+    let a = g.step(Some(t), true, 0);
+    let t = g.trans(a, Some(&format!("S{a}.t &gt; T#350ms")), 0);
+    let b = g.step(Some(t), true, 0);
+    let div = g.node("selectionDivergence", &[b], 0);
+    let t1 = g.trans(div, Some(&format!("S{b}.t &lt; T#150ms AND Part_OK")), 0);
+    let c = g.step(Some(t1), true, 0);
+    let c_end = g.trans(c, None, 0);
+    let t2 = g.trans(div, Some(&format!("T#1s &lt; S{b}.T OR Release")), 10);
+    let d = g.step(Some(t2), true, 10);
+    let d_end = g.trans(d, None, 10);
+    let conv = g.node("selectionConvergence", &[c_end, d_end], 0);
+    let e = g.step(Some(conv), true, 0);
+    let t = g.trans(e, Some(&format!("S{e}.t &lt; T#50ms")), 0);
+    g.end_step(t);
+    let chart = Chart::parse(&g.document());
+    let names = |v: &[u64]| -> Vec<String> { v.iter().map(|s| format!("S{s}")).collect() };
+    let phase = |part: i64, release: i64| -> Vec<Phase> {
+        vec![
+            [("Part_OK", part), ("Release", release)]
+                .into_iter()
+                .collect(),
+        ]
+    };
+    // A: 0-100, the wait until A.t > 350 ms: 360; B: 360-460; neither branch: the timeout at
+    // B.t = 1010 ms, 1370; D: 1370-1470, E: 1470-1570; E.t < 50 ms never: stuck 10 s later.
+    assert_eq!(
+        play(&chart, &phase(0, 0)),
+        (names(&[a, b, d, e]), Outcome::Stuck, 11_570)
+    );
+    // Part_OK right after B's action (B.t = 100 ms < 150 ms): the first branch.
+    assert_eq!(
+        play(&chart, &phase(1, 0)),
+        (names(&[a, b, c, e]), Outcome::Stuck, 10_660)
+    );
+    assert_eq!(
+        play(&chart, &phase(0, 1)),
+        (names(&[a, b, d, e]), Outcome::Stuck, 10_660)
+    );
+    // A wait on the inputs alone: stuck at once.
+    let mut g = ChartGen::new(Rng(1));
+    let start = g.step(None, false, 0);
+    let t = g.trans(start, None, 0);
+    let a = g.step(Some(t), true, 0);
+    let t = g.trans(a, Some("Part_OK"), 0);
+    g.end_step(t);
+    let chart = Chart::parse(&g.document());
+    assert_eq!(
+        play(&chart, &phase(0, 0)),
+        (names(&[a]), Outcome::Stuck, ACTION_MS)
+    );
+    assert_eq!(
+        play(&chart, &phase(1, 0)),
+        (names(&[a]), Outcome::Done, ACTION_MS)
+    );
 }

@@ -490,6 +490,8 @@ impl World<'_> {
         match e {
             MExpr::Int(i) => Val::I(*i),
             MExpr::Bool(b) => Val::B(*b),
+            // No step times in a cell of several controllers (E316).
+            MExpr::Real(_) | MExpr::ClkRead(_) => panic!("a step time in a cell: {e:?}"),
             MExpr::Var(n) => match self.ctls[c].vars.get(&n.to_ascii_uppercase()) {
                 Some(v) => *v,
                 // A signal of a fixture's own (RAPID reads one by its name): a bit of its own
@@ -540,6 +542,7 @@ impl World<'_> {
         match e {
             KExpr::Int(i) => Val::I(*i),
             KExpr::Bool(b) => Val::B(*b),
+            KExpr::Real(_) => panic!("a step time in a cell: {e:?}"),
             KExpr::Sys(s) => {
                 let n = |p: &str| -> Option<String> {
                     Some(s.strip_prefix(p)?.strip_suffix(']')?.to_owned())

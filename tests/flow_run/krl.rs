@@ -1,9 +1,15 @@
 //! The KRL interpreter: statements, `IF`, `LOOP`/`EXIT`, `REPEAT`/`UNTIL`, `SWITCH`, `WAIT FOR`,
-//! `$IN`/`$OUT`, `SIGNAL` groups, KRL's own operator precedence.
+//! `WAIT SEC`, `$IN`/`$OUT`, `SIGNAL` groups, KRL's own operator precedence, and the timers
+//! `$TIMER[k]` (milliseconds of the virtual clock of `flow_run.rs`), `$TIMER_STOP[k]`.
 
 use std::collections::HashMap;
 
-use crate::{Io, MAX_ACTIONS, Outcome, Phase, SIGNALS};
+use crate::machine::{Timer, decimal};
+use crate::{ACTION_MS, Io, MAX_ACTIONS, Outcome, Phase, SIGNALS, STUCK_MS, TICK_MS};
+
+/// What a KRL timer holds when the program starts: `$TIMER` keeps its value from before (here a
+/// stopped 1000 s), so a timer read without its reset is noticed.
+pub const TIMER_BEFORE_MS: i64 = 1_000_000;
 
 /// The controller's view of a phase: every addressed bit.
 pub fn bits(phase: &Phase) -> HashMap<String, bool> {
@@ -27,6 +33,8 @@ pub fn bits(phase: &Phase) -> HashMap<String, bool> {
 #[derive(Debug, Clone)]
 pub enum KExpr {
     Int(i64),
+    /// A decimal (`350.5`), in billionths.
+    Real(i64),
     Bool(bool),
     /// A variable or a `SIGNAL` name.
     Name(String),
@@ -52,6 +60,21 @@ pub enum Stmt {
     /// `NAME:` (upper-cased).
     Label(String),
     Goto(String),
+    /// `WAIT SEC t` (milliseconds; `WAIT SEC 0` stops the advance run, no time).
+    Sleep(i64),
+    /// `$TIMER[k] = e`, `$TIMER_STOP[k] = e`.
+    TimerSet(usize, KExpr),
+    TimerStop(usize, KExpr),
+}
+
+/// `k` of `$TIMER[k]`-like text after the `[` (a KRL timer: 1 to 64).
+fn timer_index(rest: &str) -> usize {
+    let k: usize = rest
+        .strip_suffix(']')
+        .and_then(|k| k.trim().parse().ok())
+        .unwrap_or_else(|| panic!("KRL: a timer `[{rest}`"));
+    assert!((1..=64).contains(&k), "KRL: there is no $TIMER[{k}]");
+    k
 }
 
 /// Tokens of a KRL expression.
@@ -68,6 +91,16 @@ fn ktokens(s: &str) -> Vec<String> {
             i += 1;
             while i < c.len() && (c[i].is_ascii_alphanumeric() || c[i] == '_') {
                 i += 1;
+            }
+            // A decimal (`350.5`).
+            if c[st..i].iter().all(char::is_ascii_digit)
+                && c.get(i) == Some(&'.')
+                && c.get(i + 1).is_some_and(char::is_ascii_digit)
+            {
+                i += 1;
+                while i < c.len() && c[i].is_ascii_digit() {
+                    i += 1;
+                }
             }
             if i < c.len() && c[i] == '[' {
                 while c[i] != ']' {
@@ -152,6 +185,7 @@ impl KParser {
             "FALSE" => KExpr::Bool(false),
             _ if t.starts_with('$') => KExpr::Sys(t),
             _ if t.chars().all(|c| c.is_ascii_digit()) => KExpr::Int(t.parse().unwrap()),
+            _ if t.starts_with(|c: char| c.is_ascii_digit()) => KExpr::Real(decimal(&t)),
             _ => KExpr::Name(t),
         }
     }
@@ -229,8 +263,13 @@ fn parse_block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, Str
         match first.as_str() {
             "WAIT" => {
                 let rest = c[4..].trim_start();
-                assert!(rest.to_ascii_uppercase().starts_with("FOR "), "WAIT SEC?");
-                out.push(Stmt::Wait(kexpr(&rest[4..])));
+                let upper = rest.to_ascii_uppercase();
+                if upper.starts_with("SEC ") {
+                    out.push(Stmt::Sleep(decimal(rest[4..].trim()) / 1_000_000));
+                } else {
+                    assert!(upper.starts_with("FOR "), "KRL: `{c}`");
+                    out.push(Stmt::Wait(kexpr(&rest[4..])));
+                }
             }
             "IF" => {
                 let cond = c[2..].trim().strip_suffix("THEN").unwrap();
@@ -269,6 +308,17 @@ fn parse_block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, Str
                 }
                 out.push(Stmt::Switch(sel, cases));
             }
+            _ if c.to_ascii_uppercase().starts_with("$TIMER") => {
+                let (lhs, rhs) = c.split_once('=').unwrap_or_else(|| panic!("KRL: `{c}`"));
+                let lhs = lhs.trim().to_ascii_uppercase();
+                if let Some(k) = lhs.strip_prefix("$TIMER[") {
+                    out.push(Stmt::TimerSet(timer_index(k), kexpr(rhs)));
+                } else if let Some(k) = lhs.strip_prefix("$TIMER_STOP[") {
+                    out.push(Stmt::TimerStop(timer_index(k), kexpr(rhs)));
+                } else {
+                    panic!("KRL: `{c}`");
+                }
+            }
             _ => {
                 // `NAME = expr` for a program variable; anything else (INI, BAS, PTP HOME,
                 // system variables) does not concern the control flow.
@@ -291,7 +341,18 @@ fn parse_block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, Str
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum KVal {
     I(i64),
+    /// A REAL, in billionths.
+    R(i64),
     B(bool),
+}
+
+/// A number in billionths (an INT compared with a REAL).
+fn billionths(v: KVal) -> Option<i128> {
+    match v {
+        KVal::I(i) => Some(i as i128 * 1_000_000_000),
+        KVal::R(r) => Some(r as i128),
+        KVal::B(_) => None,
+    }
 }
 
 struct Machine<'a> {
@@ -309,6 +370,11 @@ struct Machine<'a> {
     steps: usize,
     /// The actions done when each label was last gone to.
     visits: HashMap<String, usize>,
+    /// The clock (milliseconds), the timers used so far, and how many times a timer was read
+    /// (a condition that read none cannot change while the inputs do not).
+    now: i64,
+    timers: HashMap<usize, Timer>,
+    time_reads: std::cell::Cell<usize>,
 }
 
 enum Flow {
@@ -330,10 +396,27 @@ impl Machine<'_> {
         &self.bits[self.actions.len().min(self.seq.len() - 1)]
     }
 
+    fn timer(&mut self, k: usize) -> &mut Timer {
+        self.timers
+            .entry(k)
+            .or_insert(Timer::stopped(TIMER_BEFORE_MS))
+    }
+
     fn eval(&self, e: &KExpr) -> KVal {
         match e {
             KExpr::Int(i) => KVal::I(*i),
+            KExpr::Real(r) => KVal::R(*r),
             KExpr::Bool(b) => KVal::B(*b),
+            KExpr::Sys(s) if s.starts_with("$TIMER[") => {
+                self.time_reads.set(self.time_reads.get() + 1);
+                let k = timer_index(&s[7..]);
+                let t = self
+                    .timers
+                    .get(&k)
+                    .copied()
+                    .unwrap_or(Timer::stopped(TIMER_BEFORE_MS));
+                KVal::I(t.read(self.now))
+            }
             KExpr::Sys(s) => KVal::B(*self.bits().get(s).unwrap_or_else(|| panic!("unknown {s}"))),
             KExpr::Name(n) => {
                 if let Some((a, b)) = self.signals.get(n) {
@@ -355,10 +438,25 @@ impl Machine<'_> {
             },
             KExpr::Neg(a) => match self.eval(a) {
                 KVal::I(i) => KVal::I(-i),
+                KVal::R(r) => KVal::R(-r),
                 v => panic!("- of {v:?}"),
             },
             KExpr::Bin(op, a, b) => {
                 let (x, y) = (self.eval(a), self.eval(b));
+                if matches!(x, KVal::R(_)) || matches!(y, KVal::R(_)) {
+                    let (Some(x), Some(y)) = (billionths(x), billionths(y)) else {
+                        panic!("KRL type error: {x:?} {op} {y:?}");
+                    };
+                    return KVal::B(match op.as_str() {
+                        "==" => x == y,
+                        "<>" => x != y,
+                        "<" => x < y,
+                        ">" => x > y,
+                        "<=" => x <= y,
+                        ">=" => x >= y,
+                        _ => panic!("KRL type error: {x:?} {op} {y:?}"),
+                    });
+                }
                 KVal::B(match (op.as_str(), x, y) {
                     ("AND", KVal::B(x), KVal::B(y)) => x && y,
                     ("OR", KVal::B(x), KVal::B(y)) => x || y,
@@ -418,15 +516,46 @@ impl Machine<'_> {
                         return Flow::Running;
                     }
                     self.actions.push(name.clone());
+                    self.now += ACTION_MS;
                     Flow::Next
                 }
                 Stmt::Wait(c) => {
-                    // Inputs change only when the robot acts: a false condition stays false.
-                    if self.truth(c) {
-                        Flow::Next
-                    } else {
-                        Flow::Stuck
+                    // Inputs change only when the robot acts: a false condition that read no
+                    // timer stays false; one that read a timer is read again every tick, until
+                    // it has waited STUCK_MS.
+                    let since = self.now;
+                    loop {
+                        let reads = self.time_reads.get();
+                        if self.truth(c) {
+                            break Flow::Next;
+                        }
+                        if self.time_reads.get() == reads || self.now - since >= STUCK_MS {
+                            break Flow::Stuck;
+                        }
+                        self.now += TICK_MS;
                     }
+                }
+                Stmt::Sleep(ms) => {
+                    self.now += ms;
+                    Flow::Next
+                }
+                Stmt::TimerSet(k, e) => {
+                    let v = match self.eval(e) {
+                        KVal::I(i) => i,
+                        v => panic!("KRL: $TIMER[{k}] = {v:?}"),
+                    };
+                    let now = self.now;
+                    self.timer(*k).set(v, now);
+                    Flow::Next
+                }
+                Stmt::TimerStop(k, e) => {
+                    let now = self.now;
+                    match self.eval(e) {
+                        KVal::B(true) => self.timer(*k).stop(now),
+                        KVal::B(false) => self.timer(*k).start(now),
+                        v => panic!("KRL: $TIMER_STOP[{k}] = {v:?}"),
+                    }
+                    Flow::Next
                 }
                 Stmt::If(c, then, otherwise) => {
                     if self.truth(c) {
@@ -483,6 +612,7 @@ impl Machine<'_> {
                     let v = match self.eval(e) {
                         KVal::I(i) => i,
                         KVal::B(b) => b as i64,
+                        KVal::R(_) => panic!("KRL: a REAL into the INT {n}"),
                     };
                     assert!(self.vars.contains_key(n), "assignment to undeclared {n}");
                     self.vars.insert(n.clone(), v);
@@ -547,6 +677,17 @@ pub fn krl_run_with(
     seq: &[Phase],
     flicker: bool,
 ) -> (Vec<String>, Outcome) {
+    let (actions, outcome, _) = krl_run_clocked(program, dat, seq, flicker);
+    (actions, outcome)
+}
+
+/// [`krl_run_with`], and the clock at the end (milliseconds).
+fn krl_run_clocked(
+    program: &[Stmt],
+    dat: &str,
+    seq: &[Phase],
+    flicker: bool,
+) -> (Vec<String>, Outcome, i64) {
     let (signals, vars) = read_dat(dat);
     let mut m = Machine {
         seq,
@@ -558,6 +699,9 @@ pub fn krl_run_with(
         signals,
         steps: 0,
         visits: HashMap::new(),
+        now: 0,
+        timers: HashMap::new(),
+        time_reads: std::cell::Cell::new(0),
     };
     let outcome = match m.run(program) {
         Flow::Next => Outcome::Done,
@@ -566,7 +710,7 @@ pub fn krl_run_with(
         Flow::Running => Outcome::Running,
         Flow::Goto(l) => panic!("GOTO {l}: no label it may go to"),
     };
-    (m.actions, outcome)
+    (m.actions, outcome, m.now)
 }
 
 /// The interpreter itself: KRL's precedence is not ST's, so a condition without the emitted
@@ -587,6 +731,9 @@ fn the_interpreter_uses_krl_precedence() {
         signals: [("V".to_owned(), (9, 12))].into_iter().collect(),
         steps: 0,
         visits: HashMap::new(),
+        now: 0,
+        timers: HashMap::new(),
+        time_reads: std::cell::Cell::new(0),
     };
     // `$IN[1] OR $IN[3] == FALSE` is `($IN[1] OR $IN[3]) == FALSE` in KRL.
     assert!(!m.truth(&kexpr("$IN[1] OR $IN[3] == FALSE")));
@@ -613,4 +760,36 @@ fn the_interpreter_runs_loops_and_switches() {
     let (actions, outcome) = krl_run(&program, "DECL INT X=0\n", &[off]);
     assert_eq!(actions, ["A"]);
     assert_eq!(outcome, Outcome::Stuck);
+}
+
+/// Time: an action takes `ACTION_MS`; `WAIT SEC 0` none; `$TIMER[k] = 0` sets a timer's start
+/// to now and `$TIMER_STOP[k] = FALSE` starts it (`TRUE` stops it); a `WAIT FOR` (also the
+/// selection's, in its `REPEAT`) that reads a timer is read again every tick until it holds, or
+/// is stuck after `STUCK_MS`; one that reads no timer is stuck at once. The same chart as the
+/// player's test (`chart::the_player_keeps_time`), the same times.
+#[test]
+fn the_interpreter_keeps_time() {
+    let src = "DEF t( )\n;step time of A\nWAIT SEC 0\n$TIMER[16] = 0\n$TIMER_STOP[16] = FALSE\n;FOLD 1 A: x\n;ENDFOLD\nWAIT FOR ($TIMER[16] > 350)\nWAIT SEC 0\n$TIMER[15] = 0\n$TIMER_STOP[15] = FALSE\n;FOLD 2 B: x\n;ENDFOLD\nX = 0\nREPEAT\n  WAIT FOR (($TIMER[15] < 150) AND $IN[1]) OR (($TIMER[15] > 1000.5) OR $IN[3])\n  IF ($TIMER[15] < 150) AND $IN[1] THEN\n    X = 1\n  ELSE\n    IF ($TIMER[15] > 1000.5) OR $IN[3] THEN\n      X = 2\n    ENDIF\n  ENDIF\nUNTIL X <> 0\nSWITCH X\nCASE 1\n;FOLD 3 C: x\n;ENDFOLD\nDEFAULT\n;FOLD 4 D: x\n;ENDFOLD\nENDSWITCH\nWAIT SEC 0\n$TIMER[1] = 0\n$TIMER_STOP[1] = FALSE\n;FOLD 5 E: x\n;ENDFOLD\nWAIT FOR $TIMER[1] < 50\nEND\n";
+    let program = parse_program(src);
+    let run = |part: i64, release: i64| {
+        let p: Phase = [("Part_OK", part), ("Release", release)]
+            .into_iter()
+            .collect();
+        krl_run_clocked(&program, "DECL INT X=0\n", &[p], false)
+    };
+    let out = |a: &[&str], t| (a.iter().map(|s| s.to_string()).collect(), Outcome::Stuck, t);
+    assert_eq!(run(0, 0), out(&["A", "B", "D", "E"], 11_570));
+    assert_eq!(run(1, 0), out(&["A", "B", "C", "E"], 10_660));
+    assert_eq!(run(0, 1), out(&["A", "B", "D", "E"], 10_660));
+    // A stopped timer keeps its value; one never set holds what it held before the program; a
+    // wait on the inputs alone is stuck at once.
+    let src = "DEF t( )\n$TIMER[5] = 0\n$TIMER_STOP[5] = FALSE\n;FOLD 1 A: x\n;ENDFOLD\n$TIMER_STOP[5] = TRUE\n;FOLD 2 B: x\n;ENDFOLD\nWAIT FOR $TIMER[5] == 100\nWAIT FOR $TIMER[64] == 1000000\nWAIT FOR $IN[1]\nEND\n";
+    let program = parse_program(src);
+    let p: Phase = [("Part_OK", 0)].into_iter().collect();
+    assert_eq!(
+        krl_run_clocked(&program, "", &[p], false),
+        (vec!["A".to_owned(), "B".to_owned()], Outcome::Stuck, 200)
+    );
+    let bad = std::panic::catch_unwind(|| parse_program("DEF t( )\n$TIMER[65] = 0\nEND\n"));
+    assert!(bad.is_err(), "there is no $TIMER[65]");
 }

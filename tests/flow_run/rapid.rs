@@ -1,5 +1,7 @@
-//! A RAPID reader for the machine: `MODULE`, `PROC main()`, `VAR num`/`VAR bool` declarations,
-//! `! step` comments, `WaitUntil`, `IF`/`ELSEIF`/`ELSE`/`ENDIF`, `WHILE`/`ENDWHILE`, `:=`.
+//! A RAPID reader for the machine: `MODULE`, `PROC main()`, `VAR num`/`VAR bool`/`VAR clock`
+//! declarations, `! step` comments, `WaitUntil`, `WaitTime`, `IF`/`ELSEIF`/`ELSE`/`ENDIF`,
+//! `WHILE`/`ENDWHILE`, `:=`, the clock instructions `ClkReset`/`ClkStart`/`ClkStop` and
+//! `ClkRead(c)` (seconds, a decimal `num`).
 //!
 //! Expressions follow the RAPID kernel manual's grammar and priorities, strictly:
 //!
@@ -19,7 +21,7 @@
 
 use std::collections::HashMap;
 
-use super::machine::{Expr, Op, Program, Stmt, Val, step_name, tokens};
+use super::machine::{Expr, Op, Program, Stmt, Val, decimal, step_name, tokens};
 use crate::SIGNALS;
 
 const OPS: &[&str] = &["<>", "<=", ">=", ":=", "=", "<", ">", "-", ";"];
@@ -124,6 +126,19 @@ impl P {
             "TRUE" => Expr::Bool(true),
             "FALSE" => Expr::Bool(false),
             _ if t.bytes().all(|c| c.is_ascii_digit()) => Expr::Int(t.parse().unwrap()),
+            _ if t.as_bytes()[0].is_ascii_digit() => Expr::Real(decimal(&t)),
+            // A clock's seconds.
+            "ClkRead" => {
+                assert_eq!(self.bump(), "(", "RAPID: `ClkRead` without `(`");
+                let c = self.bump();
+                assert!(
+                    c.starts_with("skp_clock"),
+                    "RAPID: `ClkRead({c})` of no clock in `{}`",
+                    self.text
+                );
+                assert_eq!(self.bump(), ")", "RAPID: `ClkRead({c}` without `)`");
+                Expr::ClkRead(c)
+            }
             _ if t.as_bytes()[0].is_ascii_alphabetic() => {
                 assert!(
                     !["NOT", "AND", "OR", "XOR", "THEN", "DO"].contains(&t.as_str()),
@@ -177,6 +192,7 @@ pub fn parse(text: &str, name: &str) -> Program {
     assert_eq!(next(&mut i), "PROC main()");
     // Declarations.
     let mut declared = HashMap::new();
+    let mut clocks = Vec::new();
     loop {
         let save = i;
         let l = next(&mut i);
@@ -187,6 +203,14 @@ pub fn parse(text: &str, name: &str) -> Program {
         let decl = decl
             .strip_suffix(';')
             .expect("RAPID: `;` after a declaration");
+        if let Some(clock) = decl.strip_prefix("clock ") {
+            assert!(
+                !clocks.contains(&clock.to_owned()) && !clock.contains(' '),
+                "RAPID: `{l}`"
+            );
+            clocks.push(clock.to_owned());
+            continue;
+        }
         let (head, init) = decl.split_once(" := ").expect("RAPID: an initial value");
         let (ty, var) = head.split_once(' ').unwrap();
         let v = match (ty, init) {
@@ -213,6 +237,8 @@ pub fn parse(text: &str, name: &str) -> Program {
         body,
         declared: Some(declared),
         bits_are_numbers: true,
+        clocks,
+        counters: Vec::new(),
     }
 }
 
@@ -228,7 +254,12 @@ fn block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, String) {
             continue;
         }
         if let Some(c) = l.strip_prefix('!') {
-            match c.trim_start().strip_prefix("step ") {
+            // (Not `step time of …` and `step times: …`, the step-time comments.)
+            match c
+                .trim_start()
+                .strip_prefix("step ")
+                .filter(|t| !t.starts_with("time"))
+            {
                 Some(title) => {
                     out.push(Stmt::Step(step_name(title)));
                     in_step = true;
@@ -276,6 +307,27 @@ fn block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, String) {
                 assert_eq!(end, "ENDWHILE");
                 Some(Stmt::While(c, body))
             }
+            // `WaitTime \InPos, 0;`: the robot stands still (no time); `WaitTime t;`.
+            "WaitTime" => {
+                let t = l[8..]
+                    .strip_suffix(';')
+                    .unwrap_or_else(|| panic!("RAPID: `{l}` without `;`"))
+                    .trim();
+                let t = t.strip_prefix("\\InPos,").unwrap_or(t).trim();
+                Some(Stmt::Sleep(decimal(t) / 1_000_000))
+            }
+            "ClkReset" | "ClkStart" | "ClkStop" => {
+                let c = l[8..]
+                    .strip_suffix(';')
+                    .unwrap_or_else(|| panic!("RAPID: `{l}` without `;`"))
+                    .trim()
+                    .to_owned();
+                Some(match first {
+                    "ClkReset" => Stmt::ClkReset(c),
+                    "ClkStart" => Stmt::ClkStart(c),
+                    _ => Stmt::ClkStop(c),
+                })
+            }
             "WaitUntil" => {
                 let c = l[9..]
                     .strip_suffix(';')
@@ -301,4 +353,47 @@ fn block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, String) {
         }
     }
     panic!("RAPID: the module ends inside a block (expected {until:?})");
+}
+
+/// Time: a step's action takes `ACTION_MS`, `WaitTime \InPos, 0` none; `ClkReset` sets a clock
+/// to 0, `ClkStart` starts it, `ClkStop` stops it, `ClkRead` reads its seconds (a decimal); a
+/// `WaitUntil` that reads a clock is read again every tick until it holds, or is stuck after
+/// `STUCK_MS`. The same chart and times as the player's test (`chart::the_player_keeps_time`).
+#[test]
+fn the_reader_keeps_time() {
+    let text = "MODULE t\n  PROC main()\n    VAR num skp_branch := 0;\n    VAR clock skp_clock1;\n    VAR clock skp_clock2;\n    VAR clock skp_clock3;\n    ! step time of A (localId 3) starts when the robot stands still\n    WaitTime \\InPos, 0;\n    ClkReset skp_clock1;\n    ClkStart skp_clock1;\n    ! step 1 A: x\n    MoveL p10, v100, fine, tool0;\n    WaitUntil ClkRead(skp_clock1) > 0.35;\n    WaitTime \\InPos, 0;\n    ClkReset skp_clock2;\n    ClkStart skp_clock2;\n    ! step 2 B: x\n    skp_branch := 0;\n    WHILE skp_branch = 0 DO\n      WaitUntil ((ClkRead(skp_clock2) < 0.15) AND (di_Part_OK = 1)) OR ((ClkRead(skp_clock2) > 1.0005) OR (di_Release = 1));\n      IF (ClkRead(skp_clock2) < 0.15) AND (di_Part_OK = 1) THEN\n        skp_branch := 1;\n      ELSEIF (ClkRead(skp_clock2) > 1.0005) OR (di_Release = 1) THEN\n        skp_branch := 2;\n      ENDIF\n    ENDWHILE\n    IF skp_branch = 1 THEN\n      ! step 3 C: x\n    ELSE\n      ! step 4 D: x\n    ENDIF\n    WaitTime \\InPos, 0;\n    ClkReset skp_clock3;\n    ClkStart skp_clock3;\n    ! step 5 E: x\n    WaitUntil ClkRead(skp_clock3) < 0.05;\n  ENDPROC\nENDMODULE\n";
+    let program = parse(text, "t");
+    let run = |part: i64, release: i64| {
+        let p: crate::Phase = [("Part_OK", part), ("Release", release)]
+            .into_iter()
+            .collect();
+        crate::machine::run_clocked(&program, &[p], false)
+    };
+    let out = |a: &[&str], t| {
+        (
+            a.iter().map(|s| s.to_string()).collect(),
+            crate::Outcome::Stuck,
+            t,
+        )
+    };
+    assert_eq!(run(0, 0), out(&["A", "B", "D", "E"], 11_570));
+    assert_eq!(run(1, 0), out(&["A", "B", "C", "E"], 10_660));
+    assert_eq!(run(0, 1), out(&["A", "B", "D", "E"], 10_660));
+    // A stopped clock keeps its value; a wait on the inputs alone is stuck at once; a clock
+    // not declared is an error.
+    let text = "MODULE t\n  PROC main()\n    VAR clock skp_clock1;\n    ClkReset skp_clock1;\n    ClkStart skp_clock1;\n    ! step 1 A: x\n    ClkStop skp_clock1;\n    ! step 2 B: x\n    WaitUntil ClkRead(skp_clock1) = 0.1;\n    WaitUntil di_Part_OK = 1;\n  ENDPROC\nENDMODULE\n";
+    let p: crate::Phase = [("Part_OK", 0)].into_iter().collect();
+    assert_eq!(
+        crate::machine::run_clocked(&parse(text, "t"), std::slice::from_ref(&p), false),
+        (
+            vec!["A".to_owned(), "B".to_owned()],
+            crate::Outcome::Stuck,
+            200
+        )
+    );
+    let undeclared = text.replace("    VAR clock skp_clock1;\n", "");
+    let r = std::panic::catch_unwind(|| {
+        crate::machine::run_clocked(&parse(&undeclared, "t"), std::slice::from_ref(&p), false)
+    });
+    assert!(r.is_err(), "a clock must be declared");
 }

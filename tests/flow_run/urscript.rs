@@ -1,5 +1,9 @@
 //! A URScript reader for the machine: `def P():` … `end` and the call `P()`, `# step` comments,
-//! `if`/`elif`/`else`/`end`, `while c:` … `end`, `break`, `sync()`, `name = value`.
+//! `if`/`elif`/`else`/`end`, `while c:` … `end`, `break`, `sync()`, `[global] name = value`; a
+//! wait `while not (c): sync() end`. Step times: the thread that advances the step-time
+//! counters (`thread skp_clock():` with lines `x = x + get_steptime()`, started by
+//! `t = run skp_clock()`) is not run line by line: the machine advances its counters with the
+//! clock (seconds, decimals).
 //!
 //! Expressions with URScript's (Python-like) precedence, loosest first: `or` and `xor`, `and`,
 //! `not`, comparisons, unary `-`. So `not a == b` is `not (a == b)`. Where the meaning is not
@@ -8,7 +12,7 @@
 //! Signals are read by calls (`get_standard_digital_in(1)`, `read_input_integer_register(9)`);
 //! a boolean signal is a boolean, not a number.
 
-use super::machine::{Expr, Op, Program, Stmt, step_name, tokens};
+use super::machine::{Expr, Op, Program, Stmt, decimal, step_name, tokens};
 use crate::SIGNALS;
 
 const OPS: &[&str] = &["==", "!=", "<=", ">=", "<", ">", "-", "="];
@@ -130,6 +134,13 @@ impl P {
             }
             "True" => Expr::Bool(true),
             "False" => Expr::Bool(false),
+            _ if t.as_bytes()[0].is_ascii_digit() && t.contains('.') => {
+                assert!(
+                    t.starts_with("0.") || !t.starts_with('0'),
+                    "URScript: leading zero in `{t}`"
+                );
+                Expr::Real(decimal(&t))
+            }
             _ if t.bytes().all(|c| c.is_ascii_digit()) => {
                 assert!(
                     t == "0" || !t.starts_with('0'),
@@ -197,7 +208,8 @@ pub fn parse(text: &str, name: &str) -> Program {
         .expect("URScript: an empty file");
     assert_eq!(lines[i], format!("def {name}():"));
     i += 1;
-    let (body, end) = block(&lines, &mut i, &["end"]);
+    let mut threads = Threads::default();
+    let (body, end) = block(&lines, &mut i, &["end"], &mut threads);
     assert_eq!(end, "end");
     let rest: Vec<&str> = lines[i..].iter().copied().filter(code).collect();
     assert_eq!(
@@ -209,7 +221,53 @@ pub fn parse(text: &str, name: &str) -> Program {
         body,
         declared: None,
         bits_are_numbers: false,
+        clocks: Vec::new(),
+        counters: threads.counters,
     }
+}
+
+/// The threads defined (names), and the step-time counters the clock thread advances.
+#[derive(Default)]
+struct Threads {
+    names: Vec<String>,
+    counters: Vec<String>,
+}
+
+/// After `thread skp_clock():`: reads the clock thread (`while True:`, a line
+/// `x = x + get_steptime()` per counter, `sync()`, `end`, `end`), its counters into `threads`.
+fn clock_thread(lines: &[&str], i: &mut usize, threads: &mut Threads) {
+    let mut next = || {
+        let l = lines[*i];
+        *i += 1;
+        l
+    };
+    assert_eq!(next(), "while True:", "URScript: the clock thread's loop");
+    loop {
+        let l = next();
+        if l == "sync()" {
+            break;
+        }
+        let (var, rhs) = l
+            .split_once(" = ")
+            .unwrap_or_else(|| panic!("URScript: `{l}` in the clock thread"));
+        assert_eq!(
+            rhs,
+            format!("{var} + get_steptime()"),
+            "URScript: the clock thread adds each cycle's time"
+        );
+        assert!(var.starts_with("skp_time"), "URScript: counter `{var}`");
+        threads.counters.push(var.to_owned());
+    }
+    assert_eq!(
+        next(),
+        "end",
+        "URScript: the clock thread's loop ends after sync()"
+    );
+    assert_eq!(
+        next(),
+        "end",
+        "URScript: the clock thread ends after its loop"
+    );
 }
 
 /// `head` without the `keyword ` before and the `:` after.
@@ -220,7 +278,12 @@ fn condition<'a>(head: &'a str, keyword: &str) -> &'a str {
 }
 
 /// Statements up to a line whose first word is in `until`; returns them and that line.
-fn block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, String) {
+fn block(
+    lines: &[&str],
+    i: &mut usize,
+    until: &[&str],
+    threads: &mut Threads,
+) -> (Vec<Stmt>, String) {
     let mut out = Vec::new();
     // After a step title, lines that are no statement of the control flow are the step's code.
     let mut in_step = false;
@@ -231,7 +294,12 @@ fn block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, String) {
             continue;
         }
         if let Some(c) = l.strip_prefix('#') {
-            match c.trim_start().strip_prefix("step ") {
+            // (Not `step time of …` and `step times: …`, the step-time comments.)
+            match c
+                .trim_start()
+                .strip_prefix("step ")
+                .filter(|t| !t.starts_with("time"))
+            {
                 Some(title) => {
                     out.push(Stmt::Step(step_name(title)));
                     in_step = true;
@@ -258,12 +326,12 @@ fn block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, String) {
                         "elif "
                     };
                     let c = expr(condition(&head, kw));
-                    let (body, end) = block(lines, i, &["elif", "else", "end"]);
+                    let (body, end) = block(lines, i, &["elif", "else", "end"], threads);
                     arms.push((c, body));
                     match end.as_str() {
                         "end" => break Vec::new(),
                         "else:" => {
-                            let (body, end) = block(lines, i, &["end"]);
+                            let (body, end) = block(lines, i, &["end"], threads);
                             assert_eq!(end, "end");
                             break body;
                         }
@@ -275,12 +343,42 @@ fn block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, String) {
             }
             "while" => {
                 let c = expr(condition(l, "while "));
-                let (body, end) = block(lines, i, &["end"]);
+                let (body, end) = block(lines, i, &["end"], threads);
                 assert_eq!(end, "end");
-                Some(Stmt::While(c, body))
+                // A wait: one control cycle at a time until the condition holds.
+                match c {
+                    Expr::Not(c) if matches!(body.as_slice(), [Stmt::Sync]) => Some(Stmt::Wait(*c)),
+                    c => Some(Stmt::While(c, body)),
+                }
             }
             "break" if l == "break" => Some(Stmt::Break),
             "sync" if l == "sync()" => Some(Stmt::Sync),
+            "thread" => {
+                let name = condition(l, "thread ")
+                    .strip_suffix("()")
+                    .unwrap_or_else(|| panic!("URScript: `{l}`"));
+                assert_eq!(
+                    name, "skp_clock",
+                    "URScript: a thread other than the clock's"
+                );
+                assert!(threads.names.is_empty(), "URScript: a second clock thread");
+                clock_thread(lines, i, threads);
+                threads.names.push(name.to_owned());
+                Some(Stmt::Sync)
+            }
+            _ if l.ends_with(" run skp_clock()") => {
+                assert!(
+                    threads.names.iter().any(|t| t == "skp_clock"),
+                    "URScript: `{l}` before the thread is defined"
+                );
+                Some(Stmt::RunCounters)
+            }
+            "global" => match l[7..].split_once(" = ") {
+                Some((var, e)) if var.bytes().all(|c| c.is_ascii_alphanumeric() || c == b'_') => {
+                    Some(Stmt::Assign(var.to_owned(), expr(e)))
+                }
+                _ => panic!("URScript: `{l}`"),
+            },
             _ => match l.split_once(" = ") {
                 Some((var, e)) if var.bytes().all(|c| c.is_ascii_alphanumeric() || c == b'_') => {
                     Some(Stmt::Assign(var.to_owned(), expr(e)))
@@ -297,4 +395,38 @@ fn block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, String) {
         }
     }
     panic!("URScript: the script ends inside a block (expected {until:?})");
+}
+
+/// Time: a step's action takes `ACTION_MS`; the counters the clock thread advances (once it
+/// runs) grow by the seconds that pass; a wait `while not (c): sync() end` that reads one is
+/// read again every tick until it holds, or is stuck after `STUCK_MS`; `sync()` elsewhere
+/// takes no time. The same chart and times as the player's test
+/// (`chart::the_player_keeps_time`).
+#[test]
+fn the_reader_keeps_time() {
+    let text = "def t():\n  # step times: skp_time1, skp_time2, skp_time3 count the seconds since their step started\n  global skp_time1 = 0.0\n  global skp_time2 = 0.0\n  global skp_time3 = 0.0\n  thread skp_clock():\n    while True:\n      skp_time1 = skp_time1 + get_steptime()\n      skp_time2 = skp_time2 + get_steptime()\n      skp_time3 = skp_time3 + get_steptime()\n      sync()\n    end\n  end\n  skp_clock_thread = run skp_clock()\n  # step time of A (localId 3) starts\n  skp_time1 = 0.0\n  # step 1 A: x\n  movel(p[10, 3, 0, 0, 0, 0])\n  while not (skp_time1 > 0.35):\n    sync()\n  end\n  # step time of B (localId 5) starts\n  skp_time2 = 0.0\n  # step 2 B: x\n  skp_branch = 0\n  while skp_branch == 0:\n    while not (((skp_time2 < 0.15) and get_standard_digital_in(1)) or ((skp_time2 > 1.0005) or get_standard_digital_in(3))):\n      sync()\n    end\n    if (skp_time2 < 0.15) and get_standard_digital_in(1):\n      skp_branch = 1\n    elif (skp_time2 > 1.0005) or get_standard_digital_in(3):\n      skp_branch = 2\n    end\n  end\n  if skp_branch == 1:\n    # step 3 C: x\n    sync()\n  else:\n    # step 4 D: x\n    sync()\n  end\n  skp_time3 = 0.0\n  # step 5 E: x\n  while not (skp_time3 < 0.05):\n    sync()\n  end\nend\nt()\n";
+    crate::urscript_check::check_urscript(text).unwrap();
+    let program = parse(text, "t");
+    let run = |program: &Program, part: i64, release: i64| {
+        let p: crate::Phase = [("Part_OK", part), ("Release", release)]
+            .into_iter()
+            .collect();
+        crate::machine::run_clocked(program, &[p], false)
+    };
+    let out = |a: &[&str], t| {
+        (
+            a.iter().map(|s| s.to_string()).collect(),
+            crate::Outcome::Stuck,
+            t,
+        )
+    };
+    assert_eq!(run(&program, 0, 0), out(&["A", "B", "D", "E"], 11_570));
+    assert_eq!(run(&program, 1, 0), out(&["A", "B", "C", "E"], 10_660));
+    assert_eq!(run(&program, 0, 1), out(&["A", "B", "D", "E"], 10_660));
+    // Without the thread started the counters stay: the first wait is stuck.
+    let stopped = text.replace("  skp_clock_thread = run skp_clock()\n", "");
+    assert_eq!(
+        run(&parse(&stopped, "t"), 0, 0),
+        out(&["A"], crate::ACTION_MS + crate::STUCK_MS)
+    );
 }
