@@ -851,8 +851,9 @@ fn retarget(text: &str, seed: u64) -> Option<String> {
 /// that does what the chart means (SPEC.md 3.1, "any other flow": labels and GOTO in KRL, a
 /// state variable in RAPID and URScript), unless the jump enters or leaves a simultaneous
 /// branch (an unsafe chart, checked here independently of the compiler): then it is refused
-/// with E317 at the jump. Returns which charts compiled and the codes of the refusals.
-fn retargeted_jumps(lang: Lang) -> (BTreeSet<u64>, BTreeMap<String, usize>) {
+/// with E317 at the jump. Returns which charts compiled and the codes of the refusals. `timed`:
+/// the random charts with step times ([`ChartGen::with_step_times`]).
+fn retargeted_jumps(lang: Lang, timed: bool) -> (BTreeSet<u64>, BTreeMap<String, usize>) {
     let tmp = tempfile::tempdir().unwrap();
     lang.setup(tmp.path());
     let (mut refused, mut compiled) = (0, BTreeSet::new());
@@ -862,7 +863,11 @@ fn retargeted_jumps(lang: Lang) -> (BTreeSet<u64>, BTreeMap<String, usize>) {
     let mut rapid = RapidChecker::new();
     let mut codes = BTreeMap::new();
     for seed in 1..=300u64 {
-        let text = ChartGen::chart(seed);
+        let text = if timed {
+            ChartGen::with_step_times(seed)
+        } else {
+            ChartGen::chart(seed)
+        };
         let steps: Vec<&str> = text
             .match_indices("name=\"S")
             .map(|(i, _)| {
@@ -954,17 +959,34 @@ fn retargeted_jumps(lang: Lang) -> (BTreeSet<u64>, BTreeMap<String, usize>) {
 
 #[test]
 fn retargeted_jumps_are_refused_or_right_krl() {
-    retargeted_jumps(Lang::Krl);
+    retargeted_jumps(Lang::Krl, false);
 }
 
 #[test]
 fn retargeted_jumps_are_refused_or_right_rapid() {
-    retargeted_jumps(Lang::Rapid);
+    retargeted_jumps(Lang::Rapid, false);
 }
 
 #[test]
 fn retargeted_jumps_are_refused_or_right_urscript() {
-    retargeted_jumps(Lang::UrScript);
+    retargeted_jumps(Lang::UrScript, false);
+}
+
+/// The same with step times: a step's timer starts right before its action also where the
+/// flow goes by states (labels and GOTO, a state variable).
+#[test]
+fn retargeted_jumps_with_step_times_are_refused_or_right_krl() {
+    retargeted_jumps(Lang::Krl, true);
+}
+
+#[test]
+fn retargeted_jumps_with_step_times_are_refused_or_right_rapid() {
+    retargeted_jumps(Lang::Rapid, true);
+}
+
+#[test]
+fn retargeted_jumps_with_step_times_are_refused_or_right_urscript() {
+    retargeted_jumps(Lang::UrScript, true);
 }
 
 // ---------------------------------------------------------------------------------------------
