@@ -189,10 +189,21 @@ pub fn parse(text: &str, name: &str) -> Program {
         lines[*i - 1]
     };
     assert_eq!(next(&mut i), format!("MODULE {name}"));
-    assert_eq!(next(&mut i), "PROC main()");
+    // Clocks may be module data too.
+    let mut clocks = Vec::new();
+    loop {
+        let l = next(&mut i);
+        if l == "PROC main()" {
+            break;
+        }
+        let clock = l
+            .strip_prefix("VAR clock ")
+            .and_then(|c| c.strip_suffix(';'))
+            .unwrap_or_else(|| panic!("RAPID: `{l}` where `PROC main()` belongs"));
+        clocks.push(clock.to_owned());
+    }
     // Declarations.
     let mut declared = HashMap::new();
-    let mut clocks = Vec::new();
     loop {
         let save = i;
         let l = next(&mut i);
@@ -390,6 +401,16 @@ fn the_reader_keeps_time() {
             crate::Outcome::Stuck,
             200
         )
+    );
+    // A clock of the module.
+    let module = text.replace(
+        "  PROC main()\n    VAR clock skp_clock1;\n",
+        "  VAR clock skp_clock1;\n  PROC main()\n",
+    );
+    assert_ne!(module, text);
+    assert_eq!(
+        crate::machine::run_clocked(&parse(&module, "t"), std::slice::from_ref(&p), false).2,
+        200
     );
     let undeclared = text.replace("    VAR clock skp_clock1;\n", "");
     let r = std::panic::catch_unwind(|| {
