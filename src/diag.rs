@@ -225,6 +225,65 @@ impl Sources {
     }
 }
 
+/// The innermost start tag still open at byte `upto` of an XML text (`<` and the name), read
+/// without a parser: comments, CDATA sections, processing instructions and declarations are
+/// skipped, quoted attribute values may hold `>`. For the text before a syntax error, which
+/// the parser found well-formed.
+fn unclosed_start_tag(text: &str, upto: usize) -> Option<Range<usize>> {
+    let b = text.as_bytes();
+    let upto = upto.min(b.len());
+    let find =
+        |from: usize, pat: &str| text.get(from..).and_then(|t| t.find(pat)).map(|i| from + i);
+    let mut open: Vec<Range<usize>> = Vec::new();
+    let mut i = 0;
+    while i < upto {
+        if b[i] != b'<' {
+            i += 1;
+            continue;
+        }
+        let rest = &text[i..];
+        let skip = |pat: &str| find(i, pat).map(|e| e + pat.len());
+        i = if rest.starts_with("<!--") {
+            skip("-->")?
+        } else if rest.starts_with("<![CDATA[") {
+            skip("]]>")?
+        } else if rest.starts_with("<?") {
+            skip("?>")?
+        } else if rest.starts_with("<!") {
+            skip(">")?
+        } else if rest.starts_with("</") {
+            open.pop();
+            skip(">")?
+        } else {
+            let name_end = i
+                + 1
+                + rest[1..]
+                    .find(|c: char| c.is_whitespace() || c == '/' || c == '>')
+                    .unwrap_or(rest.len() - 1);
+            // The end of the tag: the first `>` outside quotes.
+            let mut j = name_end;
+            let mut quote = None;
+            while j < b.len() {
+                match (quote, b[j]) {
+                    (None, q @ (b'"' | b'\'')) => quote = Some(q),
+                    (Some(q), c) if c == q => quote = None,
+                    (None, b'>') => break,
+                    _ => {}
+                }
+                j += 1;
+            }
+            if j >= b.len() {
+                return None;
+            }
+            if b[j - 1] != b'/' {
+                open.push(i..name_end);
+            }
+            j + 1
+        };
+    }
+    open.pop()
+}
+
 fn memchr_iter(needle: u8, hay: &[u8]) -> impl Iterator<Item = usize> + '_ {
     hay.iter()
         .enumerate()
@@ -381,6 +440,7 @@ impl Diagnostics {
     /// inside a multi-byte character, or at the end of the file); this runs once the texts are
     /// back, before anything renders them.
     pub fn snap(&mut self, sources: &Sources) {
+        self.explain_xml_errors(sources);
         let snap = |s: &mut Span| {
             let f = &sources.files[s.file];
             // The text the span must lie in, and its file offset.
@@ -410,6 +470,58 @@ impl Diagnostics {
             }
             for (s, _) in d.related.iter_mut() {
                 snap(s);
+            }
+        }
+    }
+
+    /// Says more about an XML syntax error (`E102`) than the parser does, once the texts are
+    /// back: an empty file (or one of white space only) says it is empty, and an end tag that
+    /// does not match gets a label at the start tag it should have closed (the parser names
+    /// only the end tag, often far below the misspelled start tag).
+    fn explain_xml_errors(&mut self, sources: &Sources) {
+        for d in self.list.iter_mut() {
+            if d.code != Code::XmlSyntax {
+                continue;
+            }
+            let Some(s) = &d.span else { continue };
+            let f = &sources.files[s.file];
+            let text = match f.dropped {
+                None => f.text.as_str(),
+                // A streamed file (the SFC) of no bytes keeps no text to put back.
+                Some((0, _)) => "",
+                Some(_) => continue,
+            };
+            if text.trim().is_empty() {
+                d.message = if text.is_empty() {
+                    format!("`{}` is empty: it holds no XML document", f.display)
+                } else {
+                    format!(
+                        "`{}` is empty (white space only): it holds no XML document",
+                        f.display
+                    )
+                };
+                d.notes.push(
+                    "was it saved completely? (a save may have failed, or is still going on)"
+                        .to_owned(),
+                );
+                continue;
+            }
+            let at = s.range.start;
+            let Some(close) = text.get(at..).and_then(|t| t.strip_prefix("</")) else {
+                continue;
+            };
+            let close = &close[..close
+                .find(|c: char| c.is_whitespace() || c == '>')
+                .unwrap_or(close.len())];
+            if let Some(open) = unclosed_start_tag(text, at)
+                && &text[open.start + 1..open.end] != close
+            {
+                let (line, _) = sources.line_col(s.file, open.start);
+                let name = &text[open.start + 1..open.end];
+                d.related.push((
+                    Span::new(s.file, open.clone()),
+                    format!("the start tag `<{name}>` on line {line} does not match `</{close}>`"),
+                ));
             }
         }
     }
@@ -611,6 +723,9 @@ codes! {
     /// A program of a cell whose controller has no `Code` interface of its name: its path is
     /// not written back (SPEC.md 9).
     NoProgramTarget = "W205",
+    /// A blackboard element whose name is no CAEX element (a misspelling: it and what it holds
+    /// are ignored); names the CAEX element closest to it.
+    UnknownElement = "W206",
     /// The start step is not marked `initialStep="true"`.
     StartNotInitial = "W301",
     /// A step's resource was inferred from its skill.

@@ -2372,3 +2372,151 @@ fn convergences_that_gather_only_jumps_are_not_part_of_the_flow() {
         assert!(out.contains(step), "{out}");
     }
 }
+
+#[test]
+fn a_misspelled_start_tag_is_pointed_at() {
+    let p = project();
+    let path = p.path().join("Blackboard.aml");
+    let bb = std::fs::read_to_string(&path).unwrap();
+    let line7 = bb.lines().nth(6).unwrap();
+    assert!(
+        line7.contains("<InternalElement Name=\"Skills\""),
+        "{line7}"
+    );
+    let bb = bb.replacen(
+        "<InternalElement Name=\"Skills\"",
+        "<InternalElment Name=\"Skills\"",
+        1,
+    );
+    std::fs::write(&path, bb).unwrap();
+    let o = run(&["Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    // The parser finds the mismatch at the end tag; the start tag is shown too.
+    assert!(e.contains("Blackboard.aml:70:9"), "{e}");
+    assert!(
+        e.contains(
+            "the start tag `<InternalElment>` on line 7 does not match `</InternalElement>`"
+        ),
+        "{e}"
+    );
+    assert!(
+        e.contains(" 7 │         <InternalElment Name=\"Skills\""),
+        "{e}"
+    );
+    let o = run(&["--format", "json", "Blackboard.aml", "out"], p.path());
+    let d = &json_lines(&o)[0];
+    assert_eq!(d["code"], "E102");
+    assert!(
+        d["notes"][0]
+            .as_str()
+            .unwrap()
+            .starts_with("Blackboard.aml:7:9: the start tag `<InternalElment>`"),
+        "{d}"
+    );
+
+    // The same in an IRL file.
+    let p = project();
+    let irl = p.path().join("kr15-2.irl");
+    let text = std::fs::read_to_string(&irl).unwrap();
+    std::fs::write(&irl, text.replacen("<def>", "<deff>", 1)).unwrap();
+    let e = stderr(&run(&["Blackboard.aml", "out"], p.path()));
+    assert!(
+        e.contains("the start tag `<deff>` on line 3 does not match `</def>`"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_misspelled_instance_hierarchy_is_named() {
+    let p = project();
+    let path = p.path().join("Blackboard.aml");
+    let bb = std::fs::read_to_string(&path).unwrap();
+    std::fs::write(&path, bb.replace("InstanceHierarchy", "InstanceHierachy")).unwrap();
+    let o = run(&["--format", "short", "Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).starts_with(
+            "Blackboard.aml:4:3: error[E201]: the blackboard has no InstanceHierarchy: found \
+             `InstanceHierachy` at 4:3: did you mean `InstanceHierarchy`?"
+        ),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn unknown_caex_elements_are_warned_about_with_the_closest_name() {
+    let p = project();
+    let path = p.path().join("Blackboard.aml");
+    let bb = std::fs::read_to_string(&path).unwrap();
+    // Both `Order` attributes of one skill misspelled; any content of AdditionalInformation and
+    // elements of another namespace are no CAEX elements to check.
+    let bb = bb
+        .replace(
+            "<Attribute Name=\"Order\"><Description>Execution order of function</Description><Value>0</Value></Attribute>",
+            "<Atribute Name=\"Order\"><Description>Execution order of function</Description><Value>0</Value></Atribute>",
+        )
+        .replace(
+            "<Attribute Name=\"Order\"><Value>1</Value></Attribute>",
+            "<Atribute Name=\"Order\"><Value>1</Value></Atribute>",
+        )
+        .replacen(
+            "<InstanceHierarchy",
+            "<AdditionalInformation><Writer><Atribute/></Writer></AdditionalInformation>\
+             <x:Extra xmlns:x=\"urn:x\"><x:Atribute/></x:Extra><InstanceHierarchy",
+            1,
+        );
+    std::fs::write(&path, bb).unwrap();
+    // Without --warn the run goes on as before.
+    let o = run(&["Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("W206"));
+    let o = run(&["--validate", "Blackboard.aml"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert_eq!(e.matches("warning[W206]").count(), 1, "{e}");
+    assert!(
+        e.contains(
+            "warning[W206]: `Atribute` is no CAEX element: it is ignored, with what it holds; \
+             did you mean `Attribute`?"
+        ),
+        "{e}"
+    );
+    assert!(e.contains("┌─ Blackboard.aml:25:15"), "{e}");
+    assert!(
+        e.contains("`Atribute` stands 2 times in the blackboard; this is the first"),
+        "{e}"
+    );
+    // The unmodified sample has none.
+    let q = project();
+    let e = stderr(&run(&["--validate", "Blackboard.aml"], q.path()));
+    assert!(!e.contains("W206"), "{e}");
+}
+
+#[test]
+fn empty_inputs_say_they_are_empty() {
+    for file in ["Blackboard.aml", "sfc.xml", "kr15-2.irl"] {
+        let p = project();
+        std::fs::write(p.path().join(file), "").unwrap();
+        let o = run(&["--format", "short", "Blackboard.aml", "out"], p.path());
+        assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+        assert!(
+            stderr(&o).starts_with(&format!(
+                "{file}:1:1: error[E102]: `{file}` is empty: it holds no XML document\n"
+            )),
+            "{}",
+            stderr(&o)
+        );
+    }
+    let p = project();
+    std::fs::write(p.path().join("Blackboard.aml"), " \n\t\n").unwrap();
+    let e = stderr(&run(&["Blackboard.aml", "out"], p.path()));
+    assert!(
+        e.contains("`Blackboard.aml` is empty (white space only)"),
+        "{e}"
+    );
+    std::fs::write(p.path().join("sfc.xml"), "").unwrap();
+    let e = stderr(&run(&["--sfc", "sfc.xml"], p.path()));
+    assert!(e.contains("`sfc.xml` is empty"), "{e}");
+}
