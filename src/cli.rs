@@ -203,7 +203,11 @@ fn run(a: Args) -> u8 {
         let model =
             file.and_then(|f| crate::read::blackboard::read_blackboard(&sources, f, &mut diags));
         let _ = write!(stdout, "{}", crate::print::info(model.as_ref()));
-        let list = diags.into_vec();
+        diags.snap(&sources);
+        let mut list = diags.into_vec();
+        if file.is_none() {
+            hint_for_a_folder(&mut list, bb, Input::Blackboard);
+        }
         report(&list, &sources, a.format, warnings);
         // `--info` reports what it can: only a blackboard it cannot read at all fails it.
         return if file.is_none() && sources.find(bb).is_none() {
@@ -219,7 +223,10 @@ fn run(a: Args) -> u8 {
         let [path] = inputs.as_slice() else {
             return usage("--sfc takes one argument, the SFC file");
         };
-        let c = compile::check_sfc_pou(&fs, path, a.pou.as_deref());
+        let mut c = compile::check_sfc_pou(&fs, path, a.pou.as_deref());
+        if c.io_failure {
+            hint_for_a_folder(&mut c.diagnostics, path, Input::Sfc);
+        }
         print_listings(&c, &print, a.format, &mut stdout);
         report(&c.diagnostics, &c.sources, a.format, warnings);
         return status(&c, "SFC validation successful!", a.format);
@@ -248,7 +255,10 @@ fn run(a: Args) -> u8 {
     };
     // The process ends after this run: the (possibly very large) compilation is left to the
     // OS instead of being freed piece by piece (100,000 warnings: ~5 % of the run).
-    let c = std::mem::ManuallyDrop::new(compile::compile(&fs, blackboard, &opts));
+    let mut c = std::mem::ManuallyDrop::new(compile::compile(&fs, blackboard, &opts));
+    if c.io_failure {
+        hint_for_a_folder(&mut c.diagnostics, blackboard, Input::Blackboard);
+    }
     if std::env::var_os("SKILLPOST_TIMINGS").is_some() {
         for (stage, d) in &c.timings {
             eprintln!("timing: {stage:<16} {:>8.1} ms", d.as_secs_f64() * 1000.0);
@@ -257,6 +267,7 @@ fn run(a: Args) -> u8 {
     print_listings(&c, &print, a.format, &mut stdout);
     report(&c.diagnostics, &c.sources, a.format, warnings);
     if c.io_failure {
+        summary(&c.diagnostics, a.format, "nothing was written");
         return 2;
     }
     if c.has_errors() {
@@ -351,9 +362,116 @@ fn run(a: Args) -> u8 {
             0
         }
         Err(e) => {
-            eprintln!("error: cannot write: {e}");
+            // As the daemon reports it (`compile-failed` with E604), and with `--format json`
+            // a diagnostic object on stdout like every other.
+            let d = diag::Diagnostic::error(diag::Code::CannotWrite, format!("cannot write: {e}"));
+            let list = [d];
+            report(&list, &c.sources, a.format, warnings);
+            // The `.src` and `.dat` are replaced together or not at all, before the write-back:
+            // a failure with every output on disk as compiled is the write-back's.
+            let outputs_written = !c.outputs.is_empty()
+                && c.outputs
+                    .iter()
+                    .all(|(p, f)| std::fs::read(p).is_ok_and(|bytes| bytes == f.text.as_bytes()));
+            summary(
+                &list,
+                a.format,
+                if outputs_written {
+                    "the outputs were written, the blackboard was not updated"
+                } else {
+                    "nothing was written"
+                },
+            );
             2
         }
+    }
+}
+
+/// Which input a path on the command line is.
+#[derive(Clone, Copy)]
+enum Input {
+    Blackboard,
+    Sfc,
+}
+
+/// A folder given where a file is expected (`skillpost DIR prog`): the `E101` that says so gets
+/// a note naming the file to give instead (the folder's only `.aml`, or `.xml` for `--sfc`), or
+/// saying to name one, and for a blackboard's folder that `skillpost watch DIR` keeps a folder
+/// compiled.
+fn hint_for_a_folder(list: &mut [diag::Diagnostic], path: &std::path::Path, input: Input) {
+    if !path.is_dir() {
+        return;
+    }
+    let Some(d) = list.iter_mut().find(|d| {
+        d.code == diag::Code::FileUnreadable && d.span.is_none() && d.path.as_deref() == Some(path)
+    }) else {
+        return;
+    };
+    let (ext, what) = match input {
+        Input::Blackboard => ("aml", "the blackboard"),
+        Input::Sfc => ("xml", "the SFC file"),
+    };
+    let mut found: Vec<PathBuf> = std::fs::read_dir(path)
+        .map(|entries| {
+            entries
+                .filter_map(|e| e.ok())
+                .map(|e| e.path())
+                .filter(|p| {
+                    p.is_file()
+                        && p.extension()
+                            .is_some_and(|x| x.to_string_lossy().eq_ignore_ascii_case(ext))
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    found.sort();
+    let dir = path.display();
+    // As the user would type it: `Blackboard.aml` for `.`, not `./Blackboard.aml`.
+    let shown = |p: &PathBuf| {
+        let p = if path == std::path::Path::new(".") {
+            p.strip_prefix(".").unwrap_or(p)
+        } else {
+            p
+        };
+        format!("`{}`", p.display())
+    };
+    const LISTED: usize = 5;
+    d.notes.push(match found.as_slice() {
+        [one] => format!("a folder, not {what}: did you mean {}?", shown(one)),
+        [] => format!("a folder, not {what}: it holds no `.{ext}` file; name {what} (`.{ext}`)"),
+        several => {
+            let mut names: Vec<String> = several.iter().take(LISTED).map(shown).collect();
+            if several.len() > LISTED {
+                names.push(format!("and {} more", several.len() - LISTED));
+            }
+            format!(
+                "a folder, not {what}: name {what} (`.{ext}`); it holds {}",
+                names.join(", ")
+            )
+        }
+    });
+    if let Input::Blackboard = input {
+        d.notes.push(format!(
+            "to keep a folder compiled whenever its files change: `skillpost watch {dir}`"
+        ));
+    }
+}
+
+/// The last line of a failing run in the text formats, after its diagnostics: how many errors,
+/// and what was written (`--format json` prints none: count the objects).
+fn summary(list: &[diag::Diagnostic], format: Format, written: &str) {
+    if format == Format::Json {
+        return;
+    }
+    let errors = list
+        .iter()
+        .filter(|d| d.severity == diag::Severity::Error)
+        .count();
+    if errors > 0 {
+        eprintln!(
+            "error: {errors} error{} found; {written}",
+            if errors == 1 { "" } else { "s" }
+        );
     }
 }
 
@@ -465,20 +583,11 @@ fn report(list: &[diag::Diagnostic], sources: &diag::Sources, format: Format, wa
 
 fn status(c: &Compilation, ok_message: &str, format: Format) -> u8 {
     if c.io_failure {
+        summary(&c.diagnostics, format, "nothing was written");
         return 2;
     }
-    let errors = c
-        .diagnostics
-        .iter()
-        .filter(|d| d.severity == diag::Severity::Error)
-        .count();
-    if errors > 0 {
-        if format != Format::Json {
-            eprintln!(
-                "error: {errors} error{} found; nothing was written",
-                if errors == 1 { "" } else { "s" }
-            );
-        }
+    if c.has_errors() {
+        summary(&c.diagnostics, format, "nothing was written");
         1
     } else {
         if !ok_message.is_empty() {

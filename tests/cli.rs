@@ -2520,3 +2520,99 @@ fn empty_inputs_say_they_are_empty() {
     let e = stderr(&run(&["--sfc", "sfc.xml"], p.path()));
     assert!(e.contains("`sfc.xml` is empty"), "{e}");
 }
+
+/// The last line a failing run prints on stderr.
+fn last_line(o: &Output) -> String {
+    stderr(o).lines().last().unwrap_or_default().to_owned()
+}
+
+#[test]
+fn a_folder_given_as_the_blackboard_gets_a_hint() {
+    let p = project();
+    let parent = p.path().parent().unwrap();
+    let name = p.path().file_name().unwrap().to_str().unwrap();
+    let o = run(&[name, "prog"], parent);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(
+        e.contains(&format!("cannot read `{name}`: is a directory")),
+        "{e}"
+    );
+    // Its only blackboard is named, and the daemon that keeps a folder compiled.
+    assert!(
+        e.contains(&format!("did you mean `{name}/Blackboard.aml`?")),
+        "{e}"
+    );
+    assert!(e.contains(&format!("`skillpost watch {name}`")), "{e}");
+    assert_eq!(last_line(&o), "error: 1 error found; nothing was written");
+    assert!(!p.path().join("prog.src").exists());
+
+    // A folder of several blackboards, or none: name one.
+    std::fs::copy(p.path().join("Blackboard.aml"), p.path().join("Other.aml")).unwrap();
+    let e = stderr(&run(&[name, "prog"], parent));
+    assert!(e.contains("name the blackboard (`.aml`); it holds"), "{e}");
+    assert!(e.contains("Other.aml"), "{e}");
+    let empty = tempfile::tempdir_in(p.path()).unwrap();
+    let o = run(&[empty.path().to_str().unwrap(), "prog"], p.path());
+    assert!(
+        stderr(&o).contains("it holds no `.aml` file; name the blackboard (`.aml`)"),
+        "{}",
+        stderr(&o)
+    );
+    // The same hint with --validate, in JSON as notes.
+    let o = run(&["--validate", "--format", "json", name], parent);
+    assert_eq!(o.status.code(), Some(2));
+    let lines = json_lines(&o);
+    let notes = lines[0]["notes"].to_string();
+    assert_eq!(lines[0]["code"], "E101");
+    assert!(notes.contains("skillpost watch"), "{notes}");
+}
+
+#[test]
+fn a_missing_file_ends_with_the_error_count_like_other_failures() {
+    let d = tempfile::tempdir().unwrap();
+    for format in ["human", "short"] {
+        let o = run(&["--format", format, "missing.aml", "out"], d.path());
+        assert_eq!(o.status.code(), Some(2));
+        assert!(stderr(&o).contains("E101"), "{}", stderr(&o));
+        assert_eq!(last_line(&o), "error: 1 error found; nothing was written");
+    }
+    let o = run(&["--sfc", "missing.xml"], d.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert_eq!(last_line(&o), "error: 1 error found; nothing was written");
+    // JSON counts no errors: stdout holds the diagnostic only.
+    let o = run(&["--format", "json", "missing.aml", "out"], d.path());
+    assert_eq!(json_lines(&o)[0]["code"], "E101");
+    assert!(!stderr(&o).contains("errors found"), "{}", stderr(&o));
+}
+
+#[test]
+fn an_unwritable_output_is_an_e604_diagnostic() {
+    let p = project();
+    std::fs::create_dir(p.path().join("out.src")).unwrap();
+    let o = run(&["--format", "json", "Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(2));
+    // On stdout as a JSON object like every diagnostic, nothing on stderr.
+    let lines = json_lines(&o);
+    assert_eq!(lines.len(), 1, "{}", stdout(&o));
+    assert_eq!(lines[0]["severity"], "error");
+    assert_eq!(lines[0]["code"], "E604");
+    let m = lines[0]["message"].as_str().unwrap();
+    assert!(m.contains("cannot write") && m.contains("out.src"), "{m}");
+    assert_eq!(stderr(&o), "");
+    // The text formats: the code, and the count last.
+    let o = run(&["Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("error[E604]: cannot write"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(last_line(&o), "error: 1 error found; nothing was written");
+    let o = run(&["--format", "short", "Blackboard.aml", "out"], p.path());
+    assert!(
+        stderr(&o).starts_with("error[E604]: cannot write"),
+        "{}",
+        stderr(&o)
+    );
+}
