@@ -52,7 +52,8 @@ struct Args {
     #[arg(long)]
     sfc: bool,
     /// Print: B the blackboard, S the SFC objects, F the flow with times, O (or 0) the execution
-    /// order; repeatable (-pB -pS -pF -pO)
+    /// order; repeatable (-pB -pS -pF -pO). Printing does not stop the compile: it still writes
+    /// the outputs and the write-back; `--validate -pB` (any -p with --validate) only prints
     #[arg(short = 'p', value_name = "B|S|F|O", action = clap::ArgAction::Append,
           value_parser = ["B", "S", "F", "O", "0", "b", "s", "f", "o"])]
     print: Vec<String>,

@@ -2616,3 +2616,24 @@ fn an_unwritable_output_is_an_e604_diagnostic() {
         stderr(&o)
     );
 }
+
+#[test]
+fn print_options_compile_and_write_unless_validating() {
+    let p = project();
+    let o = run(&["-pB", "Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stdout(&o).contains("wrote"), "{}", stdout(&o));
+    assert!(p.path().join("out.src").exists());
+    let o = run(&["--validate", "-pB", "Blackboard.aml", "other"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(!p.path().join("other.src").exists());
+    let help = stdout(&run(&["--help"], p.path()));
+    assert!(
+        help.contains("Printing does not stop the compile: it still writes the outputs"),
+        "{help}"
+    );
+    assert!(
+        help.contains("`--validate -pB` (any -p with --validate) only prints"),
+        "{help}"
+    );
+}
