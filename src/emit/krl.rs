@@ -308,8 +308,9 @@ impl Writer<'_> {
         }
     }
 
-    /// Selection branches in priority order. With an unconditional branch: an `IF` chain whose
-    /// last `ELSE` is that branch. Without: the program waits for any condition, records the
+    /// Selection branches in priority order. With an unconditional branch: `WAIT SEC 0` (the
+    /// advance run would test the conditions while the motion before still runs), then an `IF`
+    /// chain whose last `ELSE` is that branch. Without: the program waits for any condition, records the
     /// first that holds in [`BRANCH_VAR`] (testing again if none holds any more) and then runs
     /// that branch, so it never passes the selection without taking a branch.
     fn choice(&mut self, div: usize, branches: &[Branch], level: usize) {
@@ -322,6 +323,15 @@ impl Writer<'_> {
             &flow::selection_comment(self.input, div, branches.len()),
         );
         if let Some(k) = conds.iter().position(Option::is_none) {
+            if k > 0 {
+                // An IF reads its condition in the advance run, while the motion before it may
+                // still run: the chart decides after the step before it has ended.
+                self.comment(
+                    level,
+                    "decided when the motion before it has ended (WAIT SEC 0 stops the advance run)",
+                );
+                self.line(level, "WAIT SEC 0");
+            }
             // Branches after an unconditional one are never taken.
             for (n, br) in branches.iter().enumerate().take(k) {
                 let c = conds[n].as_deref().unwrap_or("TRUE");

@@ -309,6 +309,17 @@ fn read_dat(dat: &str) -> (HashMap<String, (u32, u32)>, HashMap<String, Val>) {
     (signals, vars)
 }
 
+/// Whether a KRL expression reads an input: `$IN`, `$CYCFLAG`, `$TIMER`, or a `SIGNAL` group.
+fn reads_inputs(e: &KExpr, signals: &HashMap<String, (u32, u32)>) -> bool {
+    match e {
+        KExpr::Sys(s) => !s.starts_with("$OUT["),
+        KExpr::Name(n) => signals.contains_key(n) || signals.contains_key(&n.to_ascii_uppercase()),
+        KExpr::Not(a) | KExpr::Neg(a) => reads_inputs(a, signals),
+        KExpr::Bin(_, a, b) => reads_inputs(a, signals) || reads_inputs(b, signals),
+        KExpr::Int(_) | KExpr::Real(_) | KExpr::Bool(_) => false,
+    }
+}
+
 /// One controller.
 struct Ctl {
     ins: Vec<Ins>,
@@ -330,7 +341,8 @@ struct Ctl {
     blocked: bool,
     /// Steps run: name, start and end of the motion.
     steps: Vec<(String, f64, f64)>,
-    /// Outputs set while a motion still ran: (output, the step whose motion ran).
+    /// What the advance run did while a motion still ran (an output set, an input tested):
+    /// (what, the step whose motion ran).
     advance_faults: Vec<(String, String)>,
 }
 
@@ -653,7 +665,7 @@ impl World<'_> {
                 let ctl = &mut self.ctls[c];
                 if ctl.motion_end > now {
                     let step = ctl.steps.last().map(|s| s.0.clone()).unwrap_or_default();
-                    ctl.advance_faults.push((n.clone(), step));
+                    ctl.advance_faults.push((format!("set $OUT[{n}]"), step));
                 }
                 ctl.outs.insert(n, v);
                 ctl.pc += 1;
@@ -675,7 +687,18 @@ impl World<'_> {
             }
             Ins::JumpIfNot(e, to) => {
                 let v = self.holds(c, &e);
+                let now = self.ctls[c].t;
                 let ctl = &mut self.ctls[c];
+                // KRL's advance run tests an IF early: a decision on inputs while a motion
+                // before it still runs is taken too soon.
+                if ctl.motion_end > now
+                    && let X::K(k) = &e
+                    && reads_inputs(k, &ctl.signals)
+                {
+                    let step = ctl.steps.last().map(|s| s.0.clone()).unwrap_or_default();
+                    ctl.advance_faults
+                        .push((format!("tested `{k:?}` in an IF"), step));
+                }
                 ctl.pc = if v { ctl.pc + 1 } else { to };
                 ctl.t += eps;
             }
@@ -1358,7 +1381,7 @@ pub fn co_simulate(
         for (c, x) in w.ctls.iter().enumerate() {
             if let Some((out, step)) = x.advance_faults.first() {
                 return fail(format!(
-                    "R{} set $OUT[{out}] while the motion of step {step} still ran (the advance run)",
+                    "R{} {out} while the motion of step {step} still ran (the advance run)",
                     c + 1
                 ));
             }
