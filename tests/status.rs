@@ -214,7 +214,8 @@ fn status_and_journal_after_a_success_a_failure_and_a_failed_reload() {
 
 /// A fresh host: the service configuration names a project folder that does not exist yet.
 /// The daemon must still say READY=1 (systemd waits for it), and the state file says `running`
-/// with the project `pending`.
+/// with the project `waiting` for its folder (issue 27, item 12: not "pending", "not compiled
+/// yet", as if a compile were coming); once the folder is there, it is compiled.
 #[test]
 fn ready_with_only_a_missing_project() {
     use std::os::unix::net::UnixDatagram;
@@ -262,7 +263,45 @@ fn ready_with_only_a_missing_project() {
     wait_for("the running state", || {
         status(&state, "json").1.contains("\"running\"")
     });
+    let (code, json, _) = status(&state, "json");
+    assert_eq!(code, 0);
+    let snap: Value = serde_json::from_str(&json).unwrap();
+    let p = &snap["projects"][0];
+    assert_eq!(p["project"], root.join("not-yet").display().to_string());
+    assert_eq!(p["result"], "waiting", "{json}");
+    assert_eq!(
+        p["waiting"], "the project folder does not exist; waiting for it",
+        "{json}"
+    );
+    assert!(
+        snap["summary"]
+            .as_str()
+            .unwrap()
+            .starts_with("1 project, 1 waiting for its folder;"),
+        "{json}"
+    );
+    assert!(
+        !json.contains("pending") && !json.contains("not compiled yet"),
+        "{json}"
+    );
+    let (code, table, _) = status(&state, "table");
+    assert_eq!(code, 0);
+    let row = table
+        .lines()
+        .find(|l| l.contains("not-yet"))
+        .unwrap_or_else(|| panic!("{table}"));
+    assert!(
+        row.contains(" waiting ")
+            && row.ends_with("the project folder does not exist; waiting for it"),
+        "{table}"
+    );
+    assert!(table.contains("1 waiting for its folder"), "{table}");
+
+    // The folder appears: it is compiled, and waits no more.
+    copy_sample(&root.join("not-yet"));
+    wait_for("the compile of the new folder", || {
+        status(&state, "json").1.contains("\"ok\"")
+    });
     let (_, json, _) = status(&state, "json");
-    assert!(json.contains("\"pending\""), "{json}");
-    assert!(json.contains("1 project, 1 not compiled yet"), "{json}");
+    assert!(!json.contains("waiting"), "{json}");
 }

@@ -56,8 +56,13 @@ pub struct Snapshot {
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 pub struct ProjectState {
     pub project: String,
-    /// `ok`, `failed`, or `pending` (not compiled yet).
+    /// `ok`, `failed`, `pending` (not compiled yet), or `waiting` (not compiled yet because its
+    /// folder does not exist yet, or another daemon keeps it: [`ProjectState::waiting`] says).
     pub result: String,
+    /// Why the project is not watched now (`watch-degraded`'s reason, e.g. "the project folder
+    /// does not exist; waiting for it"): while it waits for its folder, also after compiles.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub waiting: Option<String>,
     /// When the last compile ended (RFC 3339, UTC).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub time: Option<String>,
@@ -82,19 +87,23 @@ pub struct Tally {
     pub projects: usize,
     pub failing: usize,
     pub compiling: usize,
-    /// Not compiled yet (at startup, or a project folder that does not exist yet).
+    /// Not compiled yet (at startup), other than those waiting for their folder.
     pub pending: usize,
+    /// Not compiled yet because their folder does not exist yet (or another daemon keeps it).
+    pub waiting: usize,
     pub directories: usize,
 }
 
 /// systemd's `STATUS=` line: "4 projects, 1 failing", "1 project, all compiled", with the
-/// running compiles, the projects not compiled yet and the watched directories.
+/// running compiles, the projects not compiled yet, those waiting for their folder and the
+/// watched directories.
 pub fn sentence(c: Tally) -> String {
     let Tally {
         projects,
         failing,
         compiling,
         pending,
+        waiting,
         directories,
     } = c;
     let mut s = format!("{projects} project{}", plural(projects));
@@ -108,7 +117,17 @@ pub fn sentence(c: Tally) -> String {
         if pending > 0 {
             s.push_str(&format!(", {pending} not compiled yet"));
         }
-        if failing == 0 && compiling == 0 && pending == 0 {
+        if waiting > 0 {
+            s.push_str(&format!(
+                ", {waiting} waiting for {}",
+                if waiting == 1 {
+                    "its folder"
+                } else {
+                    "their folders"
+                }
+            ));
+        }
+        if failing == 0 && compiling == 0 && pending == 0 && waiting == 0 {
             s.push_str(", all compiled");
         }
     }
@@ -164,7 +183,20 @@ struct Inner {
     shape: Option<(usize, usize, usize, bool)>,
     /// How many of `results` failed.
     failing: usize,
+    /// Projects not watched now (`watch-degraded` with backend `none`: the folder is missing,
+    /// or another daemon keeps it) → the reason; until their `watching`.
+    waiting: BTreeMap<String, String>,
     warned: bool,
+}
+
+impl Inner {
+    /// The projects waiting for their folder that were never compiled.
+    fn waiting_uncompiled(&self) -> usize {
+        self.waiting
+            .keys()
+            .filter(|p| !self.results.contains_key(*p))
+            .count()
+    }
 }
 
 /// The file is written at most this often (a startup of 1,000 projects would otherwise write
@@ -192,6 +224,7 @@ impl Tracker {
                 dirty: false,
                 shape: None,
                 failing: 0,
+                waiting: BTreeMap::new(),
                 warned: false,
             }),
         }
@@ -228,6 +261,7 @@ impl Tracker {
                 errors: 0,
                 warnings: counts.warnings,
                 first_error: None,
+                waiting: None,
             },
             (
                 Some(p),
@@ -250,7 +284,30 @@ impl Tracker {
                     .find(|d| d.get("severity").and_then(Value::as_str) == Some("error"))
                     .or(diagnostics.first())
                     .map(describe),
+                waiting: None,
             },
+            // A project folder that is not watched (missing, or kept by another daemon) is
+            // waited for; `watching` ends the wait.
+            (
+                Some(p),
+                Event::WatchDegraded {
+                    root: None,
+                    reason,
+                    backend: Some("none"),
+                },
+            ) => {
+                let mut st = self.lock();
+                st.waiting.insert(p.to_owned(), reason.clone());
+                st.dirty = true;
+                return;
+            }
+            (Some(p), Event::Watching { .. }) => {
+                let mut st = self.lock();
+                if st.waiting.remove(p).is_some() {
+                    st.dirty = true;
+                }
+                return;
+            }
             (_, Event::Stopped { .. }) => {
                 let mut st = self.lock();
                 if let Some(mut snap) = st.last.clone() {
@@ -258,6 +315,10 @@ impl Tracker {
                     for p in &mut snap.projects {
                         if let Some(r) = st.results.get(&p.project) {
                             *p = r.clone();
+                        }
+                        p.waiting = st.waiting.get(&p.project).cloned();
+                        if p.result == "waiting" && p.waiting.is_none() {
+                            p.result = "pending".into();
                         }
                     }
                     snap.daemon = "stopped".into();
@@ -298,11 +359,14 @@ impl Tracker {
         let mut st = self.lock();
         let n = projects.len();
         // Between writes the results may still hold a project removed since the last one.
+        // Waiting projects are few (missing folders): counting them is no pass over all.
+        let waiting = st.waiting_uncompiled().min(n);
         let mut summary = sentence(Tally {
             projects: n,
             failing: st.failing.min(n),
             compiling,
-            pending: n.saturating_sub(st.results.len()),
+            pending: n.saturating_sub(st.results.len() + waiting),
+            waiting,
             directories,
         });
         let shape = (n, compiling, directories, ready);
@@ -315,29 +379,43 @@ impl Tracker {
             return summary;
         }
         let mut kept = BTreeMap::new();
+        let mut kept_waiting = BTreeMap::new();
         let list: Vec<ProjectState> = projects
             .map(|p| {
                 let key = p.display().to_string();
+                let waiting = st.waiting.remove(&key);
+                if let Some(w) = &waiting {
+                    kept_waiting.insert(key.clone(), w.clone());
+                }
                 match st.results.remove(&key) {
                     Some(r) => {
                         kept.insert(key, r.clone());
-                        r
+                        ProjectState { waiting, ..r }
                     }
                     None => ProjectState {
                         project: key,
-                        result: "pending".into(),
+                        result: if waiting.is_some() {
+                            "waiting"
+                        } else {
+                            "pending"
+                        }
+                        .into(),
+                        waiting,
                         ..ProjectState::default()
                     },
                 }
             })
             .collect();
         st.results = kept;
+        st.waiting = kept_waiting;
         st.failing = st.results.values().filter(|r| r.result == "failed").count();
+        let waiting = st.waiting_uncompiled();
         summary = sentence(Tally {
             projects: n,
             failing: st.failing,
             compiling,
-            pending: n - st.results.len(),
+            pending: n - st.results.len() - waiting,
+            waiting,
             directories,
         });
         let snap = Snapshot {
@@ -511,7 +589,10 @@ pub fn table(s: &Snapshot) -> String {
         .projects
         .iter()
         .map(|p| {
-            let outputs = if p.result == "failed" {
+            // A project waiting for its folder: why (its outputs may be gone with the folder).
+            let outputs = if let Some(w) = &p.waiting {
+                w.clone()
+            } else if p.result == "failed" {
                 p.first_error.clone().unwrap_or_default()
             } else {
                 p.outputs
@@ -575,6 +656,7 @@ mod tests {
                 failing,
                 compiling,
                 pending,
+                waiting: 0,
                 directories,
             })
         };
@@ -599,6 +681,73 @@ mod tests {
             "2 projects, 1 not compiled yet; watching 3 directories"
         );
         assert_eq!(s(0, 0, 0, 0, 0), "0 projects; watching 0 directories");
+        let w = |projects, pending, waiting| {
+            sentence(Tally {
+                projects,
+                pending,
+                waiting,
+                directories: 2,
+                ..Tally::default()
+            })
+        };
+        assert_eq!(
+            w(1, 0, 1),
+            "1 project, 1 waiting for its folder; watching 2 directories"
+        );
+        assert_eq!(
+            w(3, 1, 2),
+            "3 projects, 1 not compiled yet, 2 waiting for their folders; watching 2 directories"
+        );
+    }
+
+    #[test]
+    fn a_project_whose_folder_does_not_exist_yet_is_waiting_for_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("status.json");
+        let t = Tracker::new(Some(path.clone()));
+        let why = "the project folder does not exist; waiting for it";
+        t.observe(
+            Some("/p/not-yet"),
+            &Event::WatchDegraded {
+                root: None,
+                reason: why.into(),
+                backend: Some("none"),
+            },
+        );
+        let projects = [Path::new("/p/not-yet"), Path::new("/p/other")];
+        let s = t.sync(projects.iter().copied(), 0, 2, true);
+        assert_eq!(
+            s,
+            "2 projects, 1 not compiled yet, 1 waiting for its folder; watching 2 directories"
+        );
+        let snap = read(&path).unwrap();
+        assert_eq!(snap.projects[0].result, "waiting");
+        assert_eq!(snap.projects[0].waiting.as_deref(), Some(why));
+        assert_eq!(snap.projects[1].result, "pending");
+        assert_eq!(snap.projects[1].waiting, None);
+        let text = table(&snap);
+        assert!(
+            text.lines()
+                .any(|l| l.contains("/p/not-yet") && l.contains("waiting") && l.contains(why)),
+            "{text}"
+        );
+        // The folder appears: watched, then compiled; no longer waiting.
+        t.observe(
+            Some("/p/not-yet"),
+            &Event::Watching {
+                root: None,
+                blackboard: None,
+                backend: "inotify",
+                reason: Some("the project folder is back".into()),
+                program: None,
+            },
+        );
+        std::thread::sleep(MIN_WRITE_INTERVAL);
+        let s = t.sync(projects.iter().copied(), 0, 2, true);
+        assert_eq!(s, "2 projects, 2 not compiled yet; watching 2 directories");
+        let snap = read(&path).unwrap();
+        assert_eq!(snap.projects[0].result, "pending");
+        assert_eq!(snap.projects[0].waiting, None);
     }
 
     #[test]
