@@ -127,7 +127,7 @@ struct WatchArgs {
     #[arg(long, value_name = "FILE")]
     state: Option<PathBuf>,
     /// Project folders (each holding one blackboard), or blackboards (their folder, with that
-    /// blackboard); each must exist
+    /// blackboard); each must exist. Without any, --config is needed (`.` for this folder)
     #[arg(value_name = "DIR|BLACKBOARD")]
     dirs: Vec<PathBuf>,
 }
@@ -601,6 +601,10 @@ fn status(c: &Compilation, ok_message: &str, format: Format) -> u8 {
 /// `skillpost watch`: logs to stderr, events to stdout or a file, signals to the daemon.
 fn watch(w: WatchArgs) -> u8 {
     use crate::daemon::{self, Control, events::EventSink};
+    if let Some(usage) = daemon::config::nothing_to_watch(w.config.as_deref(), &w.dirs) {
+        eprintln!("{usage}");
+        return 2;
+    }
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     let builder = tracing_subscriber::fmt()

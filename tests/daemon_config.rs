@@ -321,6 +321,69 @@ fn an_invalid_program_name_in_the_configuration_says_how_to_fix_it() {
     );
 }
 
+/// `skillpost watch` with neither a folder nor `--config` (issue 27, item 8): a `SIGHUP` could
+/// add nothing, so it does not wait for one; it exits at once with status 2 and says what to
+/// pass, writing nothing (SPEC.md 7 takes projects from the command line and the configuration
+/// only, so the current folder is not watched on its own). With `--config` it does start.
+#[test]
+fn watch_without_folders_or_configuration_exits_with_a_usage_hint() {
+    let w = Workspace::new();
+    // The current folder is a project: still not watched without being named.
+    let cwd = w.project("here");
+    for extra in [
+        &[][..],
+        &["--settle", "50"][..],
+        &["--events", "ev.jsonl"][..],
+    ] {
+        let t = Instant::now();
+        let out = Command::new(bin())
+            .arg("watch")
+            .args(extra)
+            .current_dir(&cwd)
+            .env("XDG_RUNTIME_DIR", &w.root)
+            .env_remove("RUNTIME_DIRECTORY")
+            .stdin(Stdio::null())
+            .output()
+            .unwrap();
+        assert!(t.elapsed() < Duration::from_secs(5), "exits at once");
+        assert_eq!(out.status.code(), Some(2), "{extra:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("nothing to watch"), "{err}");
+        assert!(
+            err.contains("--config FILE") && err.contains("skillpost watch .  "),
+            "names what to pass: {err}"
+        );
+        assert!(out.stdout.is_empty(), "no events: {:?}", out.stdout);
+        assert!(!cwd.join("ev.jsonl").exists(), "no events file");
+        assert!(!src_of(&cwd).exists(), "the current folder is not compiled");
+    }
+    assert!(
+        !w.root.join("skillpost").exists(),
+        "no state file, no lock note"
+    );
+
+    // A configuration file without projects starts the daemon: a reload may add some.
+    let cfg = w.config("");
+    let mut child = Command::new(bin())
+        .args(["watch", "--events"])
+        .arg(w.root.join("ev.jsonl"))
+        .arg("--config")
+        .arg(&cfg)
+        .env("XDG_RUNTIME_DIR", &w.root)
+        .env_remove("RUNTIME_DIRECTORY")
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let started = wait_until(WAIT, || {
+        read_string(&w.root.join("ev.jsonl")).contains("\"started\"")
+    });
+    let _ = child.kill();
+    let _ = child.wait();
+    assert!(started, "{}", read_string(&w.root.join("ev.jsonl")));
+}
+
 #[test]
 fn watch_on_the_command_line_refuses_a_missing_folder_and_takes_a_blackboard() {
     let w = Workspace::new();

@@ -628,6 +628,30 @@ pub fn merge(
     config
 }
 
+/// `skillpost watch` with neither a folder nor a configuration file has nothing to watch, and a
+/// `SIGHUP` could add nothing (there is no file to read again): the usage hint to print before
+/// exit status 2. A configuration file without projects is waited on (a reload may add some).
+pub fn nothing_to_watch(config: Option<&Path>, args: &[PathBuf]) -> Option<String> {
+    if config.is_some() || !args.is_empty() {
+        return None;
+    }
+    Some(
+        [
+            "error: nothing to watch: name project folders or blackboards, or a configuration file",
+            "",
+            "Usage: skillpost watch [OPTIONS] [DIR|BLACKBOARD]...",
+            "       skillpost watch --config FILE [OPTIONS]",
+            "",
+            "e.g.   skillpost watch .                         the current folder",
+            "       skillpost watch cells/A cells/B           two project folders",
+            "       skillpost watch --config skillpost.toml   the projects of a configuration file",
+            "",
+            "See `skillpost watch --help`.",
+        ]
+        .join("\n"),
+    )
+}
+
 /// Sorts the arguments of `skillpost watch` into project folders and blackboards (a blackboard
 /// stands for its folder, with that blackboard). Unlike folders of the configuration file, which
 /// are waited for, an argument must exist: a typo fails at once, saying what was expected.
