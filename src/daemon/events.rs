@@ -1,6 +1,9 @@
 //! The event stream (SPEC.md section 7, "Events"): one JSON object per line, flushed per line,
 //! on stdout or appended to a file. Every event carries the envelope `schema`, `ts` (RFC 3339,
-//! UTC), `seq` (per-process counter), `event`, `level`, and `project` where one applies.
+//! UTC), `seq` (per-process counter), `instance` (this daemon run's identity: the same in
+//! every event of one sink, another in the next run, so runs appended to one file can be told
+//! apart although each one's `seq` starts at 1), `event`, `level`, and `project` where one
+//! applies.
 //!
 //! Every event the daemon can emit is a variant of [`Event`]; [`EventSink::emit`] is the one
 //! place that turns one into a line. docs/DAEMON.md's event table lists the same names and
@@ -317,6 +320,8 @@ struct Shared {
     /// From the writer: the queue is empty and nothing is being written.
     idle: Condvar,
     capacity: usize,
+    /// This run's identity (see [`new_instance`]), after `seq` in every line.
+    instance: String,
 }
 
 impl Shared {
@@ -371,6 +376,7 @@ impl EventSink {
             work: Condvar::new(),
             idle: Condvar::new(),
             capacity: capacity.max(2),
+            instance: new_instance(),
         });
         let writer = Writer {
             shared: shared.clone(),
@@ -411,6 +417,11 @@ impl EventSink {
         v
     }
 
+    /// This run's identity, the `instance` of every event it emits (see [`new_instance`]).
+    pub fn instance(&self) -> &str {
+        &self.shared.instance
+    }
+
     /// The projects' results as the events told them.
     pub fn state(&self) -> &super::state::Tracker {
         &self.state
@@ -435,7 +446,7 @@ impl EventSink {
             st.dropped_full += 1;
             return;
         }
-        let line = with_seq(head, st.seq, &tail);
+        let line = with_seq(head, st.seq, &self.shared.instance, &tail);
         st.bytes += line.len();
         st.queue.push_back(Pending { line, report: None });
         drop(st);
@@ -621,7 +632,7 @@ impl Writer {
                     None,
                     &Event::EventsDropped { count, reason },
                 );
-                let line = with_seq(head, st.seq, &tail);
+                let line = with_seq(head, st.seq, &self.shared.instance, &tail);
                 st.bytes += line.len();
                 st.queue.push_back(Pending {
                     line,
@@ -745,13 +756,31 @@ fn render(ts: SystemTime, project: Option<&str>, event: &Event) -> (Vec<u8>, Vec
     (head, tail)
 }
 
-/// The whole line: `head`, `,"seq":N,`, `tail`, newline.
-fn with_seq(mut head: Vec<u8>, seq: u64, tail: &[u8]) -> Vec<u8> {
-    head.reserve(tail.len() + 32);
-    head.extend_from_slice(format!(",\"seq\":{seq},").as_bytes());
+/// The whole line: `head`, `,"seq":N,"instance":"…",`, `tail`, newline.
+fn with_seq(mut head: Vec<u8>, seq: u64, instance: &str, tail: &[u8]) -> Vec<u8> {
+    head.reserve(tail.len() + 64);
+    head.extend_from_slice(format!(",\"seq\":{seq},\"instance\":\"{instance}\",").as_bytes());
     head.extend_from_slice(tail);
     head.push(b'\n');
     head
+}
+
+/// A daemon run's identity, for the `instance` of its events: the start time (milliseconds since
+/// 1970, hexadecimal), the pid and 32 random bits, e.g. `19ac35e2f01-1a2b-9f3c0d1e`. Runs of one
+/// machine differ by time and pid; the random part separates runs of several machines (or
+/// containers with the same pid) appending to one file in the same millisecond. Only letters,
+/// digits and `-`: written into the line as it is, without escaping.
+fn new_instance() -> String {
+    use std::hash::{BuildHasher, Hasher};
+    let ms = SystemTime::now()
+        .duration_since(SystemTime::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis());
+    // std's hasher keys are random per process (and per `RandomState` after the first).
+    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+    h.write_u128(ms);
+    h.write_u32(std::process::id());
+    let random = h.finish() as u32;
+    format!("{ms:x}-{:x}-{random:08x}", std::process::id())
 }
 
 /// An event output in memory, for the unit tests of the daemon's modules.
@@ -801,6 +830,11 @@ mod tests {
         assert_eq!(lines[0]["schema"], SCHEMA);
         assert_eq!(lines[0]["seq"], 1);
         assert_eq!(lines[1]["seq"], 2);
+        // One run, one instance; another sink (the next run) has another.
+        assert_eq!(lines[0]["instance"], sink.instance());
+        assert_eq!(lines[1]["instance"], sink.instance());
+        let next = EventSink::to(Box::new(Buf::default()));
+        assert_ne!(next.instance(), sink.instance());
         assert_eq!(lines[0]["event"], "started");
         assert_eq!(lines[0]["version"], "x");
         assert_eq!(lines[1]["event"], "compile-failed");
@@ -825,6 +859,7 @@ mod tests {
                 "schema",
                 "ts",
                 "seq",
+                "instance",
                 "event",
                 "level",
                 "project",
