@@ -1,8 +1,10 @@
 //! The daemon in this process (`skillpost::daemon::run` with its control channel, events into a
 //! buffer; harness in tests/inproc/mod.rs): files that must never block it, roots and aliases
 //! that must never stop being watched, editor-like input names, a blackboard shared by two
-//! projects, one daemon per folder.
+//! projects, one daemon per folder; the run's `instance` in its events; nothing left outside
+//! temporary folders.
 
+mod common;
 mod inproc;
 
 use std::fs;
@@ -537,4 +539,87 @@ fn rapid_and_urscript_projects_are_compiled_watched_and_reported_like_krl_ones()
         );
     }
     d.stop(WAIT);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The run's identity; nothing left behind
+// ---------------------------------------------------------------------------------------------
+
+/// Issue 27, item 11: `seq` starts at 1 in every run, so two runs appended to one events file
+/// (`--events`, a restart) are told apart by `instance`: the same in every event of a run,
+/// across a reload (which reopens the file), and another in the next run.
+#[test]
+fn runs_appended_to_one_events_file_have_their_own_instance() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let events = w.root.join("events.jsonl");
+    for x in [701, 702] {
+        let sources = skillpost::daemon::Sources {
+            dirs: vec![a.clone()],
+            events: Some(events.clone()),
+            settle_ms: Some(SETTLE_MS),
+            ..Default::default()
+        };
+        let d = InProc::start_appending(sources.load().unwrap(), sources);
+        d.startup(&[&a]);
+        d.reload();
+        d.wait_for("the reload", WAIT, |e| is(e, "reloaded"));
+        edit_and_expect(&d, &a, x);
+        d.stop(WAIT);
+    }
+    let all: Vec<serde_json::Value> = read_string(&events)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    // The runs in the order they appended, each one's events together.
+    let mut runs: Vec<(String, Vec<&serde_json::Value>)> = Vec::new();
+    for e in &all {
+        let instance = e["instance"]
+            .as_str()
+            .unwrap_or_else(|| panic!("no instance: {e}"));
+        assert!(!instance.is_empty(), "{e}");
+        match runs.last_mut() {
+            Some((i, evs)) if i == instance => evs.push(e),
+            _ => runs.push((instance.to_owned(), vec![e])),
+        }
+    }
+    assert_eq!(
+        runs.len(),
+        2,
+        "two runs, one instance each:\n{}",
+        dump(&all)
+    );
+    assert_ne!(runs[0].0, runs[1].0, "the second run has another instance");
+    for (instance, evs) in &runs {
+        let seqs: Vec<u64> = evs.iter().map(|e| e["seq"].as_u64().unwrap()).collect();
+        assert_eq!(
+            seqs,
+            (1..=evs.len() as u64).collect::<Vec<_>>(),
+            "{instance}: seq from 1 without gaps, as in every run"
+        );
+        assert!(is(evs[0], "started"), "{instance} starts with started");
+        assert!(
+            is(evs[evs.len() - 1], "stopped"),
+            "{instance} ends with stopped"
+        );
+        assert!(evs.iter().any(|e| is(e, "reloaded")), "{instance}");
+        assert!(evs.iter().any(|e| is(e, "compile-succeeded")), "{instance}");
+    }
+}
+
+/// Issue 27, item 4: the daemon tests keep everything in temporary folders — nothing in the
+/// real runtime folder (`/tmp/skillpost-<uid>`, `$XDG_RUNTIME_DIR/skillpost`), nothing kept in
+/// `/tmp`. Two in-process daemons (the second refused, naming the first's pid from its lock
+/// note) run again with `TMPDIR`, `HOME` and `XDG_RUNTIME_DIR` in a sandbox that must be empty
+/// afterwards. The harness used to keep a `skillpost-test-run-*` folder in the temporary
+/// directory for good, one per test binary run.
+#[test]
+fn daemon_tests_leave_nothing_outside_their_temporary_folders() {
+    for test in [
+        "a_second_daemon_on_the_same_folder_is_refused_and_touches_nothing",
+        "runs_appended_to_one_events_file_have_their_own_instance",
+    ] {
+        let left = common::leftovers_of(test);
+        assert!(left.is_empty(), "{test} left {left:#?}");
+    }
 }

@@ -796,3 +796,14 @@ fn systemd_timeouts_exceed_the_daemons_own_bounds() {
         "WatchdogSec={watchdog}s must exceed the stop's bounds ({own:?})"
     );
 }
+
+/// Issue 27, item 4: the binary daemons of these tests keep their state file and lock notes in
+/// the test's folder (`XDG_RUNTIME_DIR`), never in the real runtime folder
+/// (`/tmp/skillpost-<uid>`): run again with `TMPDIR`, `HOME` and `XDG_RUNTIME_DIR` in a sandbox,
+/// a test that starts, signals and stops one leaves the sandbox empty.
+#[test]
+fn binary_daemon_tests_leave_nothing_outside_their_temporary_folders() {
+    let test = "sighup_after_mv_or_rm_writes_a_new_events_file";
+    let left = common::leftovers_of(test);
+    assert!(left.is_empty(), "{test} left {left:#?}");
+}

@@ -235,3 +235,47 @@ pub fn as_nobody(what: &str) -> Option<std::process::Command> {
     ]);
     Some(c)
 }
+
+/// Runs the test `name` of this test binary again, alone, in a sandbox: `TMPDIR`, `HOME` and
+/// `XDG_RUNTIME_DIR` are empty folders of a temporary directory and `RUNTIME_DIRECTORY` is
+/// unset, so whatever the test and the daemons it starts leave behind — in the default runtime
+/// folder (`$TMPDIR/skillpost-<uid>`, `$XDG_RUNTIME_DIR/skillpost`: lock notes, the state
+/// file) or anywhere else there — is found. Panics when the test fails; returns the paths left
+/// in the sandbox (empty: everything went into temporary folders that were removed).
+pub fn leftovers_of(name: &str) -> Vec<PathBuf> {
+    use std::os::unix::fs::PermissionsExt;
+    let sandbox = tempfile::tempdir().unwrap();
+    let dirs = ["tmp", "home", "xdg"].map(|d| sandbox.path().join(d));
+    for d in &dirs {
+        fs::create_dir(d).unwrap();
+        fs::set_permissions(d, fs::Permissions::from_mode(0o700)).unwrap();
+    }
+    let out = Command::new(std::env::current_exe().unwrap())
+        .args(["--exact", name, "--test-threads", "1"])
+        .env("TMPDIR", &dirs[0])
+        .env("HOME", &dirs[1])
+        .env("XDG_RUNTIME_DIR", &dirs[2])
+        .env_remove("RUNTIME_DIRECTORY")
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && stdout.contains("1 passed"),
+        "{name} in the sandbox:\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    fn walk(dir: &Path, found: &mut Vec<PathBuf>) {
+        for e in fs::read_dir(dir).into_iter().flatten().flatten() {
+            found.push(e.path());
+            if e.file_type().is_ok_and(|t| t.is_dir()) {
+                walk(&e.path(), found);
+            }
+        }
+    }
+    let mut found = Vec::new();
+    for d in &dirs {
+        walk(d, &mut found);
+    }
+    found
+}

@@ -196,9 +196,30 @@ impl Write for Buffer {
 // The daemon
 // ---------------------------------------------------------------------------------------------
 
+/// The folder of the lock notes of this process's daemons: a temporary folder shared by those
+/// running at the same time, removed when the last one has ended (each daemon's thread holds
+/// it), so a test run leaves nothing behind, in the real runtime folder or elsewhere.
+fn shared_runtime_dir() -> Arc<tempfile::TempDir> {
+    static RUN: Mutex<std::sync::Weak<tempfile::TempDir>> = Mutex::new(std::sync::Weak::new());
+    let mut run = RUN.lock().unwrap_or_else(|p| p.into_inner());
+    if let Some(d) = run.upgrade() {
+        return d;
+    }
+    let d = Arc::new(
+        tempfile::Builder::new()
+            .prefix("skillpost-test-run-")
+            .tempdir()
+            .unwrap(),
+    );
+    *run = Arc::downgrade(&d);
+    d
+}
+
 /// A daemon running in this process; stopped (and waited for, boundedly) when dropped.
 pub struct InProc {
     buf: Buffer,
+    /// With [`InProc::start_appending`]: the events file and this run's `instance`.
+    file: Option<(PathBuf, String)>,
     tx: tokio::sync::mpsc::UnboundedSender<Control>,
     thread: Option<std::thread::JoinHandle<Result<(), String>>>,
 }
@@ -220,12 +241,24 @@ impl InProc {
 
     /// Like [`InProc::start`], with the state file at `state` (as `--state`).
     pub fn start_with_state(config: Config, sources: Sources, state: &Path) -> Self {
-        Self::spawn_with(config, sources, false, Some(state.to_owned()))
+        Self::spawn_with(config, sources, false, Some(state.to_owned()), None)
+            .unwrap_or_else(|e| panic!("the daemon stopped: {e}"))
+    }
+
+    /// Like [`InProc::start`], with the events appended to the configuration's events file
+    /// (`Sources::events`, as `--events FILE`; reopened by a reload), where other runs may have
+    /// written before; [`InProc::events`] reads this run's lines.
+    pub fn start_appending(config: Config, sources: Sources) -> Self {
+        let events = config
+            .events
+            .clone()
+            .expect("an events file (Sources::events)");
+        Self::spawn_with(config, sources, false, None, Some(events))
             .unwrap_or_else(|e| panic!("the daemon stopped: {e}"))
     }
 
     fn spawn(config: Config, sources: Sources, paused: bool) -> Result<Self, String> {
-        Self::spawn_with(config, sources, paused, None)
+        Self::spawn_with(config, sources, paused, None, None)
     }
 
     fn spawn_with(
@@ -233,28 +266,34 @@ impl InProc {
         mut sources: Sources,
         paused: bool,
         state: Option<PathBuf>,
+        events_file: Option<PathBuf>,
     ) -> Result<Self, String> {
-        // The lock notes in a folder of this test process, never in the real runtime folder
-        // (shared by all its daemons, so a refusal still names the holder's pid).
-        sources.runtime_dir.get_or_insert_with(|| {
-            static RUN: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
-            RUN.get_or_init(|| {
-                tempfile::Builder::new()
-                    .prefix("skillpost-test-run-")
-                    .tempdir()
-                    .unwrap()
-                    .keep()
-            })
-            .clone()
-        });
+        // The lock notes in a temporary folder, never in the real runtime folder: one shared by
+        // the daemons running at the same time (so a refusal still names the holder's pid),
+        // removed when the last of them has ended (issue 27, item 4).
+        let run = sources.runtime_dir.is_none().then(shared_runtime_dir);
+        if let Some(run) = &run {
+            sources.runtime_dir = Some(run.path().to_owned());
+        }
         let buf = Buffer::default();
-        let mut sink = EventSink::to(Box::new(buf.clone()));
+        let (mut sink, file) = match events_file {
+            // As `--events FILE`: appended to the file; this run's lines are those of its
+            // `instance`.
+            Some(path) => {
+                let sink = EventSink::append(&path).map_err(|e| e.to_string())?;
+                let instance = sink.instance().to_owned();
+                (sink, Some((path, instance)))
+            }
+            None => (EventSink::to(Box::new(buf.clone())), None),
+        };
         if let Some(state) = state {
             sink = sink.with_state_file(state);
         }
         let sink = Arc::new(sink);
         let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
         let thread = std::thread::spawn(move || {
+            // The runtime folder lives as long as the daemon does.
+            let _run = run;
             let rt = if paused {
                 tokio::runtime::Builder::new_current_thread()
                     .enable_all()
@@ -271,6 +310,7 @@ impl InProc {
         });
         let d = InProc {
             buf,
+            file,
             tx,
             thread: Some(thread),
         };
@@ -319,10 +359,17 @@ impl InProc {
 
     /// Every event so far.
     pub fn events(&self) -> Vec<Value> {
-        let bytes = self.buf.0.lock().unwrap().clone();
+        let bytes = match &self.file {
+            Some((path, _)) => fs::read(path).unwrap_or_default(),
+            None => self.buf.0.lock().unwrap().clone(),
+        };
         let text = String::from_utf8(bytes).expect("the event stream is UTF-8");
         text.lines()
             .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("not JSON ({e}): {l}")))
+            .filter(|e: &Value| match &self.file {
+                Some((_, instance)) => e["instance"] == instance.as_str(),
+                None => true,
+            })
             .collect()
     }
 
