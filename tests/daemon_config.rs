@@ -310,6 +310,9 @@ fn an_invalid_program_name_in_the_configuration_says_how_to_fix_it() {
     let out = Command::new(bin())
         .args(["watch", "--config"])
         .arg(&cfg)
+        // Were it to start after all: its state and lock notes in the workspace.
+        .env("XDG_RUNTIME_DIR", &w.root)
+        .env_remove("RUNTIME_DIRECTORY")
         .stdin(Stdio::null())
         .output()
         .unwrap();
@@ -401,6 +404,8 @@ fn watch_on_the_command_line_refuses_a_missing_folder_and_takes_a_blackboard() {
             .arg("watch")
             .arg(&a)
             .arg(&arg)
+            .env("XDG_RUNTIME_DIR", &w.root)
+            .env_remove("RUNTIME_DIRECTORY")
             .stdin(Stdio::null())
             .output()
             .unwrap();

@@ -4,6 +4,7 @@
 //! again, a root project forgotten and found again — every invariant a consumer relies on holds:
 //!
 //! - `seq` from 1 without gaps (nothing was dropped here);
+//! - one `instance` (the run's identity) in every event;
 //! - `started.config` is absolute;
 //! - every `compile-started` gets exactly one outcome (`compile-succeeded`, `compile-failed`,
 //!   `compile-retrying`) before the project's next `compile-started`, and every outcome has its
@@ -67,6 +68,15 @@ fn check_invariants(evs: &[Value]) -> Seen {
     for (i, e) in evs.iter().enumerate() {
         if seq(e) != i as u64 + 1 {
             fail(i, format!("seq {} at position {}", seq(e), i + 1));
+        }
+        if !e["instance"].is_string() || e["instance"] != evs[0]["instance"] {
+            fail(
+                i,
+                format!(
+                    "instance {} in a run of {}",
+                    e["instance"], evs[0]["instance"]
+                ),
+            );
         }
         let name = e["event"].as_str().unwrap();
         let project = e["project"].as_str().map(str::to_owned);
