@@ -1908,3 +1908,52 @@ fn churn_of_root_projects_keeps_memory_flat() {
     );
     assert!(end < 40 * 1024, "RSS {end} kB");
 }
+
+/// Issue 27, item 2: a daemon started by hand (runtime folder `$XDG_RUNTIME_DIR/skillpost`, as
+/// the install guide's check as the service user) and one with another runtime folder (the
+/// service's `$RUNTIME_DIRECTORY`) on the same folder: the second is refused (exit 2, nothing
+/// written), naming the first's pid though its note is in the other runtime folder; the first
+/// goes on compiling.
+#[test]
+fn a_second_daemon_with_another_runtime_folder_is_refused_too() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let mut d = w.watch(&[a.to_str().unwrap()]);
+    d.startup(&[&a]);
+    let (run_b, log) = (w.root.join("run-b"), w.root.join("stderr-b.log"));
+    let mut second = Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .current_dir(&w.root)
+        .args(["watch", "--events", "ev-b.jsonl", a.to_str().unwrap()])
+        .env("RUNTIME_DIRECTORY", &run_b)
+        .env_remove("XDG_RUNTIME_DIR")
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(fs::File::create(&log).unwrap())
+        .spawn()
+        .unwrap();
+    let mut status = None;
+    wait_until(WAIT, || {
+        status = second.try_wait().unwrap();
+        status.is_some()
+    });
+    if status.is_none() {
+        let _ = second.kill();
+        let _ = second.wait();
+    }
+    let stderr = read_string(&log);
+    assert_eq!(status.and_then(|s| s.code()), Some(2), "{stderr}");
+    assert!(stderr.contains("another skillpost daemon"), "{stderr}");
+    if Path::new("/proc/locks").exists() {
+        assert!(stderr.contains(&format!("(pid {})", d.pid())), "{stderr}");
+    }
+    assert!(read_string(&w.root.join("ev-b.jsonl")).is_empty());
+    assert!(
+        !run_b.join("status.json").exists(),
+        "the refused daemon wrote a state"
+    );
+    let m = d.mark();
+    fs::write(a.join("sfc.xml"), sfc_with_x(703)).unwrap();
+    d.wait_for("the first daemon goes on", WAIT, |e| {
+        is_after(e, "compile-succeeded", &a, m)
+    });
+}

@@ -8,8 +8,11 @@
 //!   has no `flock` on folders (some network file systems), a lock file in the runtime
 //!   directory stands in, as before: `$RUNTIME_DIRECTORY` (systemd's `RuntimeDirectory=`), else
 //!   `$XDG_RUNTIME_DIR/skillpost`, else `<temp dir>/skillpost-<uid>`.
-//! - A note in the runtime directory names the holder's pid for the refusal's message (a hint
-//!   only: a daemon with another runtime directory is refused all the same, without its pid).
+//! - The refusal names the holder's pid: the kernel's list of locks (`/proc/locks`) says it
+//!   whatever the holder's user or runtime directory; where it does not (no `/proc`, another pid
+//!   namespace), a note in the runtime directory naming the holder's pid does, for a daemon of
+//!   the same runtime directory. Without either, the daemon is refused all the same, without
+//!   its pid.
 //! - A folder that does not exist holds no lock and no descriptor: it is locked when it
 //!   appears ([`Locks::ensure`]); if another daemon keeps it by then, the project waits.
 //! - One descriptor per locked folder, never more than the process may open less
@@ -187,7 +190,7 @@ impl Locks {
         }) {
             Some((d, Ok(()))) => d,
             Some((_, Err(rustix::io::Errno::WOULDBLOCK))) => {
-                return Err(self.refusal(&real, &note));
+                return Err(self.refusal(&real, &note, Some(id)));
             }
             // No flock on folders here (a network file system), or the folder cannot be opened:
             // the lock file instead.
@@ -206,15 +209,23 @@ impl Locks {
         Ok(true)
     }
 
-    /// The message when another daemon keeps `real`; with its pid when its note is ours to read.
-    fn refusal(&self, real: &Path, note: &Path) -> String {
-        let holder = crate::load::read_limited(note, 4096)
-            .ok()
-            .and_then(|b| String::from_utf8(b).ok())
-            .and_then(|t| t.lines().next().map(str::to_owned))
-            .unwrap_or_default();
-        let pid = holder
-            .strip_prefix("pid ")
+    /// The message when another daemon keeps `real` (whose locked file is `id`); with its pid
+    /// when the kernel's list of locks or its note says it.
+    fn refusal(&self, real: &Path, note: &Path, id: Option<Id>) -> String {
+        let from_note = || {
+            crate::load::read_limited(note, 4096)
+                .ok()
+                .and_then(|b| String::from_utf8(b).ok())
+                .and_then(|t| {
+                    t.lines()
+                        .next()
+                        .and_then(|l| l.strip_prefix("pid "))
+                        .and_then(|p| p.parse::<u32>().ok())
+                })
+        };
+        let pid = id
+            .and_then(holder_pid)
+            .or_else(from_note)
             .map(|p| format!(" (pid {p})"))
             .unwrap_or_default();
         format!(
@@ -282,7 +293,10 @@ impl Locks {
                 .map_err(|e| format!("cannot open the lock file {}: {e}", file.display()))?;
             match rustix::fs::flock(&f, rustix::fs::FlockOperation::NonBlockingLockExclusive) {
                 Ok(()) => {}
-                Err(rustix::io::Errno::WOULDBLOCK) => return Err(self.refusal(real, file)),
+                Err(rustix::io::Errno::WOULDBLOCK) => {
+                    let id = f.metadata().ok().map(|m| (m.dev(), m.ino()));
+                    return Err(self.refusal(real, file, id));
+                }
                 Err(e) => return Err(format!("cannot lock {}: {e}", file.display())),
             }
             // The holder before us may have removed the file between our open and our lock.
@@ -325,6 +339,25 @@ impl Drop for Locks {
             }
         }
     }
+}
+
+/// The pid holding an `flock` on the file `id`, as the kernel's list of locks says
+/// (`/proc/locks`, readable by every user: `1: FLOCK  ADVISORY  WRITE 4242 fe:00:1234 0 EOF`,
+/// the device's major and minor number in hexadecimal, the inode in decimal).
+fn holder_pid((dev, ino): Id) -> Option<u32> {
+    let text = std::fs::read_to_string("/proc/locks").ok()?;
+    let at = format!(
+        "{:02x}:{:02x}:{ino}",
+        rustix::fs::major(dev),
+        rustix::fs::minor(dev)
+    );
+    text.lines().find_map(|l| {
+        let f: Vec<&str> = l.split_whitespace().collect();
+        // A waiter's line reads `1: -> FLOCK ...`: only the holder's has FLOCK second.
+        (f.get(1) == Some(&"FLOCK") && f.get(5) == Some(&at.as_str()))
+            .then(|| f.get(4)?.parse::<u32>().ok().filter(|p| *p > 0))
+            .flatten()
+    })
 }
 
 /// The lock file name of a canonical folder path: FNV-1a of its bytes (stable across versions
@@ -396,6 +429,10 @@ mod tests {
         a.acquire(&folder).unwrap();
         let e = b.acquire(&folder).unwrap_err();
         assert!(e.contains("another skillpost daemon"), "{e}");
+        // Its pid, though its note is in another runtime directory: the kernel's list of locks.
+        if Path::new("/proc/locks").exists() {
+            assert!(e.contains(&format!("(pid {})", std::process::id())), "{e}");
+        }
         drop(a);
         b.acquire(&folder).unwrap();
     }
