@@ -85,17 +85,22 @@ enum Command {
     /// The daemon: keep project folders compiled, emit JSON events (see DAEMON.md, installed in
     /// /usr/local/share/doc/skillpost)
     Watch(WatchArgs),
-    /// Each project's last result, as the running daemon's state file tells it
+    /// Each project's last result, as the running daemons' state files tell it (exit status 0
+    /// a daemon runs, 3 only a stopped daemon's state, 1 no state, 2 a state that cannot be read)
     Status(StatusArgs),
 }
 
 #[derive(Debug, clap::Args)]
 struct StatusArgs {
-    /// The daemon's state file (default: the first that exists of
-    /// $RUNTIME_DIRECTORY/status.json, /run/skillpost/status.json, and
-    /// $XDG_RUNTIME_DIR/skillpost/status.json or /tmp/skillpost-<uid>/status.json)
+    /// The daemon's state file (default: every state file in $RUNTIME_DIRECTORY,
+    /// /run/skillpost, and $XDG_RUNTIME_DIR/skillpost or /tmp/skillpost-<uid>: the daemons
+    /// that run, else the one that stopped last)
     #[arg(long, value_name = "FILE")]
     state: Option<PathBuf>,
+    /// Only the daemon(s) watching this folder (a project, a folder in one, or a root), and
+    /// only its projects
+    #[arg(value_name = "FOLDER")]
+    folder: Option<PathBuf>,
     /// Output: an aligned table, or the state file's JSON
     #[arg(long, value_enum, default_value_t = StatusFormat::Table)]
     format: StatusFormat,
@@ -718,61 +723,101 @@ fn watch(w: WatchArgs) -> u8 {
     }
 }
 
-/// `skillpost status`: prints the daemon's state file. 0 printed, 1 no daemon state found, 2 a
-/// state file that cannot be read.
+/// `skillpost status`: prints the state of the daemons that run (of those watching FOLDER, if
+/// given), else of the one that stopped last. 0 a daemon runs, 3 only a stopped daemon's state
+/// (as `systemctl status`), 1 no daemon state found, 2 a state file that cannot be read.
 fn status_command(s: StatusArgs) -> u8 {
     use crate::daemon::state;
-    let path = match s.state {
-        Some(p) => p,
-        None => {
-            let candidates = state::candidates();
-            match candidates.iter().find(|p| p.exists()) {
-                Some(p) => {
-                    if let Some(why) = p.parent().and_then(state::untrusted_folder) {
-                        eprintln!("error: {why}");
-                        return 2;
-                    }
-                    p.clone()
-                }
-                None => {
-                    let list: Vec<String> =
-                        candidates.iter().map(|p| p.display().to_string()).collect();
-                    eprintln!(
-                        "no daemon state: neither {} exists. Is `skillpost watch` running? Under \
-                         systemd: `systemctl status skillpost`; a daemon started with --state FILE: \
-                         `skillpost status --state FILE`.",
-                        list.join(" nor ")
-                    );
-                    return 1;
+    let (found, problems) = match &s.state {
+        Some(path) => {
+            if !path.exists() {
+                eprintln!(
+                    "no daemon state: {} does not exist. Is `skillpost watch --state {}` running?",
+                    path.display(),
+                    path.display()
+                );
+                return 1;
+            }
+            match state::read(path) {
+                Ok(snap) => (vec![(path.clone(), snap)], Vec::new()),
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    return 2;
                 }
             }
         }
+        None => state::discover(),
     };
-    if !path.exists() {
+    if found.is_empty() {
+        if !problems.is_empty() {
+            for p in &problems {
+                eprintln!("error: {p}");
+            }
+            return 2;
+        }
+        let list: Vec<String> = state::candidate_dirs()
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect();
         eprintln!(
-            "no daemon state: {} does not exist. Is `skillpost watch --state {}` running?",
-            path.display(),
-            path.display()
+            "no daemon state: no state file in {}. Is `skillpost watch` running? Under \
+             systemd: `systemctl status skillpost`; a daemon started with --state FILE: \
+             `skillpost status --state FILE`.",
+            list.join(", ")
         );
         return 1;
     }
-    let snap = match state::read(&path) {
-        Ok(s) => s,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return 2;
-        }
-    };
-    let text = match s.format {
-        StatusFormat::Table => state::table(&snap),
-        StatusFormat::Json => match serde_json::to_string_pretty(&snap) {
-            Ok(t) => t + "\n",
-            Err(e) => {
-                eprintln!("error: {e}");
-                return 2;
+    for p in &problems {
+        eprintln!("warning: {p}");
+    }
+    let found: Vec<state::Snapshot> = match &s.folder {
+        Some(folder) => {
+            let of: Vec<_> = found
+                .iter()
+                .filter_map(|(_, snap)| state::watching(snap, folder))
+                .collect();
+            if of.is_empty() {
+                eprintln!(
+                    "no daemon state for {}: no daemon watches it (the daemons' states: \
+                     `skillpost status`)",
+                    folder.display()
+                );
+                return 1;
             }
-        },
+            of
+        }
+        None => found.into_iter().map(|(_, snap)| snap).collect(),
     };
+    let (running, mut stopped): (Vec<_>, Vec<_>) = found.into_iter().partition(state::running);
+    let (shown, code) = if running.is_empty() {
+        // No daemon runs: the last one that stopped (RFC 3339 times sort as text).
+        stopped.sort_by(|a, b| a.updated.cmp(&b.updated));
+        (stopped.pop().into_iter().collect::<Vec<_>>(), 3)
+    } else {
+        (running, 0)
+    };
+    let mut text = String::new();
+    for (i, snap) in shown.iter().enumerate() {
+        match s.format {
+            StatusFormat::Table => {
+                if i > 0 {
+                    text.push('\n');
+                }
+                text.push_str(&state::table(snap));
+            }
+            // One object per daemon (several in a row when several run: `jq -s` makes a list).
+            StatusFormat::Json => match serde_json::to_string_pretty(snap) {
+                Ok(t) => {
+                    text.push_str(&t);
+                    text.push('\n');
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    return 2;
+                }
+            },
+        }
+    }
     let _ = std::io::stdout().lock().write_all(text.as_bytes());
-    0
+    code
 }

@@ -305,3 +305,137 @@ fn ready_with_only_a_missing_project() {
     let (_, json, _) = status(&state, "json");
     assert!(!json.contains("waiting"), "{json}");
 }
+
+/// `skillpost status [FOLDER]` as a daemon started by hand runs it: no `--state`, the runtime
+/// folder `$XDG_RUNTIME_DIR/skillpost` (made in the test's folder).
+fn status_by_hand(xdg: &Path, args: &[&str]) -> (i32, String, String) {
+    let o = Command::new(BIN)
+        .arg("status")
+        .args(args)
+        .env_remove("RUNTIME_DIRECTORY")
+        .env("XDG_RUNTIME_DIR", xdg)
+        .output()
+        .unwrap();
+    (
+        o.status.code().unwrap_or(-1),
+        String::from_utf8(o.stdout).unwrap(),
+        String::from_utf8(o.stderr).unwrap(),
+    )
+}
+
+/// Issue 27, item 1: two daemons started by hand by one user (one runtime folder) each keep
+/// their own state. After one stops, `status` shows the other, running (exit 0); the stopped
+/// one's state shows only for its folder, as stopped, with exit status 3 (as `systemctl
+/// status`); once none runs, exit 3 too; a daemon killed without a word is not taken for a
+/// running one. The next daemon started removes the states of those that ended.
+#[test]
+fn status_shows_the_daemons_that_run_and_a_stopped_one_as_stopped() {
+    use std::os::unix::fs::PermissionsExt as _;
+    let tmp = tempfile::tempdir().unwrap();
+    let root: PathBuf = tmp.path().canonicalize().unwrap();
+    let (p, q) = (root.join("P"), root.join("Q"));
+    copy_sample(&p);
+    copy_sample(&q);
+    let xdg = root.join("xdg");
+    fs::create_dir(&xdg).unwrap();
+    fs::set_permissions(&xdg, fs::Permissions::from_mode(0o700)).unwrap();
+    let start = |folder: &Path, events: &str| {
+        Kill(
+            Command::new(BIN)
+                .arg("watch")
+                .arg("--events")
+                .arg(root.join(events))
+                .arg(folder)
+                .env_remove("RUNTIME_DIRECTORY")
+                .env("XDG_RUNTIME_DIR", &xdg)
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .unwrap(),
+        )
+    };
+    let st = |args: &[&str]| status_by_hand(&xdg, args);
+    let (ps, qs, other) = (
+        p.to_str().unwrap(),
+        q.to_str().unwrap(),
+        root.join("xdg").display().to_string(),
+    );
+    let running = |pid: u32| format!("(pid {pid}) running since");
+    let mut a = start(&p, "a.jsonl");
+    let mut b = start(&q, "b.jsonl");
+    let (pa, pb) = (a.0.id(), b.0.id());
+    wait_for("both daemons running", || {
+        let (code, out, _) = st(&[]);
+        code == 0 && out.contains(&running(pa)) && out.contains(&running(pb))
+    });
+    // JSON: one object per daemon.
+    let (code, json, _) = st(&["--format", "json"]);
+    assert_eq!(code, 0);
+    let objects: Vec<Value> = serde_json::Deserializer::from_str(&json)
+        .into_iter()
+        .collect::<Result<_, _>>()
+        .unwrap();
+    assert_eq!(objects.len(), 2, "{json}");
+    // A folder: the daemon watching it, and its projects only.
+    let (code, out, _) = st(&[ps]);
+    assert_eq!(code, 0, "{out}");
+    assert!(
+        out.contains(&running(pa)) && !out.contains(&format!("pid {pb}")),
+        "{out}"
+    );
+    assert!(out.contains(ps) && !out.contains(qs), "{out}");
+    let (code, _, err) = st(&[&other]);
+    assert_eq!(code, 1, "no daemon watches it: {err}");
+
+    // A stops: `status` shows B, running; A only for its folder, stopped, exit 3.
+    Command::new("kill")
+        .args(["-TERM", &pa.to_string()])
+        .status()
+        .unwrap();
+    a.0.wait().unwrap();
+    let (code, out, err) = st(&[]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(out.contains(&running(pb)), "{out}");
+    assert!(
+        !out.contains("stopped") && !out.contains(&format!("pid {pa}")),
+        "{out}"
+    );
+    let (code, out, _) = st(&[ps]);
+    assert_eq!(code, 3, "{out}");
+    assert!(out.contains(&format!("(pid {pa}) stopped")), "{out}");
+    assert_eq!(st(&[qs]).0, 0);
+
+    // None runs: the last one stopped, exit 3.
+    Command::new("kill")
+        .args(["-TERM", &pb.to_string()])
+        .status()
+        .unwrap();
+    b.0.wait().unwrap();
+    let (code, out, _) = st(&[]);
+    assert_eq!(code, 3, "{out}");
+    assert!(out.contains(&format!("(pid {pb}) stopped")), "{out}");
+
+    // The next daemon removes the states of those that ended, and is shown alone.
+    let mut c = start(&p, "c.jsonl");
+    let pc = c.0.id();
+    let states = || -> Vec<String> {
+        fs::read_dir(xdg.join("skillpost"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .filter(|n| n.starts_with("status"))
+            .collect()
+    };
+    wait_for("the stopped daemons' states removed", || {
+        states() == [format!("status-{pc}.json")]
+    });
+    wait_for("C running", || st(&[]).1.contains(&running(pc)));
+    // Killed without a word: its state says `running`, but it is not taken for it.
+    c.0.kill().unwrap();
+    c.0.wait().unwrap();
+    let (code, out, _) = st(&[]);
+    assert_eq!(code, 3, "{out}");
+    assert!(
+        out.contains(&format!("warning: pid {pc} is not running")),
+        "{out}"
+    );
+}

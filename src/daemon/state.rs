@@ -6,9 +6,16 @@
 //! temporary file in the same folder, then a rename), so a reader never sees half of it.
 //!
 //! Where: `watch --state FILE`, else `$RUNTIME_DIRECTORY/status.json` (`/run/skillpost` under the
-//! shipped unit), else `status.json` in the folder of the lock files ([`super::lock::runtime_dir`]:
-//! `$XDG_RUNTIME_DIR/skillpost`, else `/tmp/skillpost-<uid>`). `skillpost status` looks in the
-//! same places, and also in `/run/skillpost` (the service's, for an administrator's shell).
+//! shipped unit: systemd gives each service its own runtime folder), else `status-<pid>.json` in
+//! the folder of the lock files ([`super::lock::runtime_dir`]: `$XDG_RUNTIME_DIR/skillpost`, else
+//! `/tmp/skillpost-<uid>`): one file per daemon, so daemons started by hand never overwrite each
+//! other's state. A daemon's file stays after it stops (saying `stopped`); the next daemon
+//! started in that folder removes the files of daemons that no longer run.
+//!
+//! `skillpost status` reads every state file in those folders and in `/run/skillpost` (the
+//! service's, for an administrator's shell) ([`discover`]): the daemons that run ([`running`]:
+//! not `stopped`, and the writer is the same process still — its pid alive with the start time
+//! the file records), or else the last one that stopped.
 //!
 //! The same numbers make systemd's `STATUS=` line ([`sentence`]).
 
@@ -38,6 +45,10 @@ pub struct Snapshot {
     pub schema: String,
     pub version: String,
     pub pid: u32,
+    /// The writer's start time (clock ticks after boot, `/proc/<pid>/stat`), so a pid used again
+    /// by another process is not taken for the daemon (absent in files of older versions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pid_start: Option<u64>,
     /// When the daemon started (RFC 3339, UTC).
     pub started: String,
     /// When this file was written.
@@ -187,6 +198,8 @@ struct Inner {
     /// or another daemon keeps it) → the reason; until their `watching`.
     waiting: BTreeMap<String, String>,
     warned: bool,
+    /// Whether the state files of daemons that no longer run were removed (at the first write).
+    swept: bool,
 }
 
 impl Inner {
@@ -226,6 +239,7 @@ impl Tracker {
                 failing: 0,
                 waiting: BTreeMap::new(),
                 warned: false,
+                swept: false,
             }),
         }
     }
@@ -422,6 +436,7 @@ impl Tracker {
             schema: SCHEMA.into(),
             version: crate::VERSION.into(),
             pid: std::process::id(),
+            pid_start: process_start(std::process::id()),
             started: self.started.clone(),
             updated: now(),
             daemon: if ready { "running" } else { "starting" }.into(),
@@ -440,6 +455,10 @@ impl Tracker {
         let Some(path) = &self.path else {
             return;
         };
+        if !st.swept {
+            st.swept = true;
+            sweep_stopped(path);
+        }
         if let Err(e) = write_atomically(path, snap) {
             if !st.warned {
                 st.warned = true;
@@ -484,39 +503,160 @@ pub fn write_atomically(path: &Path, snap: &Snapshot) -> std::io::Result<()> {
     Ok(())
 }
 
-/// The state file the daemon writes by default: `$RUNTIME_DIRECTORY/status.json`, else beside
-/// the lock files.
+/// The state file the daemon writes by default: `$RUNTIME_DIRECTORY/status.json` (a service's own
+/// runtime folder), else `status-<pid>.json` beside the lock files (a daemon started by hand: one
+/// file per daemon).
 pub fn default_path() -> PathBuf {
-    super::lock::runtime_dir().join(FILE_NAME)
+    if std::env::var_os("RUNTIME_DIRECTORY").is_some_and(|d| !d.is_empty()) {
+        super::lock::runtime_dir().join(FILE_NAME)
+    } else {
+        super::lock::runtime_dir().join(own_name(std::process::id()))
+    }
 }
 
-/// Where `skillpost status` looks without `--state`, in order: `$RUNTIME_DIRECTORY/status.json`
-/// (when set), the service's `/run/skillpost/status.json`, then the default of a daemon started
-/// by hand (`$XDG_RUNTIME_DIR/skillpost/status.json`, else `/tmp/skillpost-<uid>/status.json`).
-pub fn candidates() -> Vec<PathBuf> {
+/// The state file name of the daemon with this pid, started by hand.
+fn own_name(pid: u32) -> String {
+    format!("status-{pid}.json")
+}
+
+/// Whether `name` is a daemon's state file: `status.json` or `status-<pid>.json`.
+pub fn is_state_name(name: &str) -> bool {
+    name == FILE_NAME
+        || name
+            .strip_prefix("status-")
+            .and_then(|n| n.strip_suffix(".json"))
+            .is_some_and(|pid| !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// The folders `skillpost status` looks in without `--state`, in order: `$RUNTIME_DIRECTORY`
+/// (when set), the service's `/run/skillpost`, then the folder of daemons started by hand
+/// (`$XDG_RUNTIME_DIR/skillpost`, else `/tmp/skillpost-<uid>`).
+pub fn candidate_dirs() -> Vec<PathBuf> {
     let mut v = Vec::new();
     if std::env::var_os("RUNTIME_DIRECTORY").is_some_and(|d| !d.is_empty()) {
-        v.push(default_path());
+        v.push(super::lock::runtime_dir());
     }
-    v.push(PathBuf::from(SERVICE_STATE));
+    if let Some(service) = Path::new(SERVICE_STATE).parent() {
+        v.push(service.to_owned());
+    }
     let by_hand = match std::env::var_os("XDG_RUNTIME_DIR").filter(|d| !d.is_empty()) {
         Some(d) => PathBuf::from(d).join("skillpost"),
         None => {
             std::env::temp_dir().join(format!("skillpost-{}", rustix::process::getuid().as_raw()))
         }
-    }
-    .join(FILE_NAME);
+    };
     if !v.contains(&by_hand) {
         v.push(by_hand);
     }
     v
 }
 
-/// Whether the process that wrote the state still runs (`/proc/<pid>`; true where that cannot
-/// be told).
+/// Every state file in [`candidate_dirs`] that can be read, with its path; and the problems
+/// (a folder not to be trusted, a file that is no state file) as sentences. A file removed
+/// between the listing and the read is left out silently.
+pub fn discover() -> (Vec<(PathBuf, Snapshot)>, Vec<String>) {
+    let (mut found, mut problems) = (Vec::new(), Vec::new());
+    for dir in candidate_dirs() {
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        let mut names: Vec<PathBuf> = entries
+            .flatten()
+            .filter(|e| e.file_name().to_str().is_some_and(is_state_name))
+            .map(|e| e.path())
+            .collect();
+        if names.is_empty() {
+            continue;
+        }
+        if let Some(why) = untrusted_folder(&dir) {
+            problems.push(why);
+            continue;
+        }
+        names.sort();
+        for path in names {
+            match read(&path) {
+                Ok(s) => found.push((path, s)),
+                Err(_) if !path.exists() => {}
+                Err(e) => problems.push(e),
+            }
+        }
+    }
+    (found, problems)
+}
+
+/// The start time of process `pid` (field 22 of `/proc/<pid>/stat`: clock ticks after boot).
+pub fn process_start(pid: u32) -> Option<u64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // The command name (field 2, in parentheses) may hold spaces and parentheses itself.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    rest.split_whitespace().nth(19)?.parse().ok()
+}
+
+/// Whether the process that wrote the state still runs: its pid is alive and, where the file
+/// records it, started when the writer did (a pid used again is another process). True where
+/// that cannot be told (no `/proc`).
 pub fn writer_alive(s: &Snapshot) -> bool {
     let proc = Path::new("/proc");
-    !proc.join("self").exists() || proc.join(s.pid.to_string()).exists()
+    if !proc.join("self").exists() {
+        return true;
+    }
+    match s.pid_start {
+        Some(t) => process_start(s.pid) == Some(t),
+        None => proc.join(s.pid.to_string()).exists(),
+    }
+}
+
+/// Whether the daemon of this state runs: not `stopped`, and its writer alive.
+pub fn running(s: &Snapshot) -> bool {
+    s.daemon != "stopped" && writer_alive(s)
+}
+
+/// The state restricted to the projects that concern `folder` (the project itself, a folder in
+/// it, or a folder it is in, such as a root); `None` when none does.
+pub fn watching(s: &Snapshot, folder: &Path) -> Option<Snapshot> {
+    let canon = |p: &Path| {
+        std::fs::canonicalize(p).unwrap_or_else(|_| {
+            std::env::current_dir()
+                .map(|d| d.join(p))
+                .unwrap_or_else(|_| p.to_owned())
+        })
+    };
+    let folder = canon(folder);
+    let projects: Vec<ProjectState> = s
+        .projects
+        .iter()
+        .filter(|p| {
+            let p = canon(Path::new(&p.project));
+            p.starts_with(&folder) || folder.starts_with(&p)
+        })
+        .cloned()
+        .collect();
+    (!projects.is_empty()).then(|| Snapshot {
+        projects,
+        ..s.clone()
+    })
+}
+
+/// Before a daemon's first write to `path` (a `status-<pid>.json` of a daemon started by hand):
+/// removes the state files beside it of daemons that no longer run, so stopped daemons' files
+/// do not pile up (the last ones stay until the next start, for `skillpost status`).
+fn sweep_stopped(path: &Path) {
+    let own = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+    if own == FILE_NAME || !is_state_name(own) {
+        return;
+    }
+    let Some(Ok(entries)) = path.parent().map(std::fs::read_dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name();
+        if name.to_str().is_none_or(|n| n == own || !is_state_name(n)) {
+            continue;
+        }
+        if read(&e.path()).is_ok_and(|s| !running(&s)) {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
 }
 
 /// Reads a state file.
@@ -756,6 +896,7 @@ mod tests {
             schema: SCHEMA.into(),
             version: "0".into(),
             pid: std::process::id(),
+            pid_start: None,
             started: now(),
             updated: now(),
             daemon: "running".into(),
