@@ -131,6 +131,11 @@ struct WatchArgs {
     /// $RUNTIME_DIRECTORY/status.json, else beside the lock files)
     #[arg(long, value_name = "FILE")]
     state: Option<PathBuf>,
+    /// Check the configuration and exit (as `nginx -t`): resolve every project and root, check
+    /// that this user could read the inputs, write the outputs and keep the blackboard's owner;
+    /// print a table; exit status 0 when all is well, 1 otherwise. Writes nothing
+    #[arg(long)]
+    check_config: bool,
     /// Project folders (each holding one blackboard), or blackboards (their folder, with that
     /// blackboard); each must exist. Without any, --config is needed (`.` for this folder)
     #[arg(value_name = "DIR|BLACKBOARD")]
@@ -609,6 +614,10 @@ fn watch(w: WatchArgs) -> u8 {
     if let Some(usage) = daemon::config::nothing_to_watch(w.config.as_deref(), &w.dirs) {
         eprintln!("{usage}");
         return 2;
+    }
+    if w.check_config {
+        let (events, state) = (w.events.clone(), w.state.as_deref());
+        return daemon::check::main(w.config.as_deref(), &w.dirs, events, w.settle, state);
     }
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));

@@ -1,8 +1,11 @@
 //! The daemon's configuration as a team uses it (issue 10, "Configuration"): `template` and
 //! `line_endings` write exactly what the command line writes, and follow edits and reloads;
 //! root projects whose folder or blackboard name is not a KRL name get a derived program name;
-//! `skillpost watch FILE` and `skillpost watch /typo` on the command line.
+//! `skillpost watch FILE` and `skillpost watch /typo` on the command line;
+//! `skillpost watch --check-config` (issue 27, item 3) and a missing template located at its line
+//! (item 7).
 
+mod common;
 mod inproc;
 
 use std::fs;
@@ -530,4 +533,204 @@ fn pou_is_passed_like_the_command_lines() {
         .unwrap();
     assert!(out.status.success());
     assert_same_outputs(&a, &copy, "Blackboard");
+}
+
+/// Every file and folder under `dir` with its size, mode and modification time.
+fn listing(dir: &Path) -> Vec<(PathBuf, u64, u32, std::time::SystemTime)> {
+    use std::os::unix::fs::PermissionsExt;
+    let mut out = Vec::new();
+    let mut todo = vec![dir.to_owned()];
+    while let Some(d) = todo.pop() {
+        for e in fs::read_dir(&d).unwrap().flatten() {
+            let m = e.path().symlink_metadata().unwrap();
+            if m.is_dir() {
+                todo.push(e.path());
+            }
+            out.push((
+                e.path(),
+                if m.is_dir() { 0 } else { m.len() },
+                m.permissions().mode(),
+                m.modified().unwrap(),
+            ));
+        }
+    }
+    out.sort();
+    out
+}
+
+/// `skillpost watch --check-config ARGS` through the binary, its runtime folder in `w`.
+fn check_config(w: &Workspace, mut cmd: Command, args: &[&Path]) -> (Option<i32>, String) {
+    cmd.args(["watch", "--check-config", "--config"])
+        .args(args)
+        .env("XDG_RUNTIME_DIR", w.root.join("run"))
+        .env_remove("RUNTIME_DIRECTORY")
+        .stdin(Stdio::null());
+    let out = cmd.output().unwrap();
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    println!("{text}");
+    (out.status.code(), text)
+}
+
+/// Issue 27, item 3: `--check-config` reads the configuration, resolves every project and
+/// root, prints a table and exits 0, writing nothing anywhere (no events, no state, no lock,
+/// no outputs, no write-back: the listing of the whole workspace is the same after).
+#[test]
+fn check_config_checks_everything_and_writes_nothing() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let b = w.ws().join("root").join("B");
+    copy_project(&b);
+    let cfg = w.config(
+        "events = \"ev.jsonl\"\n[[project]]\npath = \"ws/A\"\n[[project]]\npath = \"ws/Later\"\n\
+         [[root]]\npath = \"ws/root\"\n",
+    );
+    let before = listing(&w.root);
+    let (code, out) = check_config(&w, Command::new(bin()), &[&cfg]);
+    assert_eq!(code, Some(0), "{out}");
+    assert_eq!(listing(&w.root), before, "nothing written: {out}");
+    assert!(!w.root.join("run").exists());
+    assert!(out.contains("PROJECT") && out.contains("FOLDER") && out.contains("RESULT"));
+    let line = |folder: &Path| {
+        let f = format!("  {}  ", folder.display());
+        out.lines()
+            .find(|l| l.contains(&f))
+            .unwrap_or_else(|| panic!("a line for {f}: {out}"))
+            .to_owned()
+    };
+    for p in [&a, &b] {
+        let l = line(p);
+        assert!(
+            l.starts_with("Blackboard ") && l.contains("ok: reads 3 inputs"),
+            "{l}"
+        );
+    }
+    assert!(line(&w.ws().join("Later")).contains("waiting: "), "{out}");
+    assert!(
+        line(&w.ws().join("root")).contains("ok: lists the root: 1 project"),
+        "{out}"
+    );
+    assert!(line(&w.root.join("ev.jsonl")).contains("ok: creates the events file"));
+    assert!(out.ends_with("configuration OK\n"), "{out}");
+
+    // An invalid configuration: the error with file, line and column, exit status 1.
+    fs::write(&cfg, "[[project]]\npath = \"ws/A\"\nsettle = 5\n").unwrap();
+    let before = listing(&w.root);
+    let (code, out) = check_config(&w, Command::new(bin()), &[&cfg]);
+    assert_eq!(code, Some(1), "{out}");
+    assert!(
+        out.contains(&format!("{}:3:1: unknown field `settle`", cfg.display())),
+        "{out}"
+    );
+    assert_eq!(listing(&w.root), before);
+}
+
+/// Issue 27, item 3: as an unprivileged user (`nobody` when the tests run as root), an SFC the
+/// user cannot read and a project folder it cannot write to are problems: named, exit status 1,
+/// nothing written.
+#[test]
+fn check_config_names_an_unreadable_sfc_and_an_unwritable_folder() {
+    use std::os::unix::fs::PermissionsExt;
+    let w = Workspace::new();
+    let a = w.project("A");
+    let log = w.root.join("log");
+    fs::create_dir(&log).unwrap();
+    let root = rustix::process::geteuid().is_root();
+    let runner = || {
+        if root {
+            let mut c = common::as_nobody("check as an unprivileged user")?;
+            c.arg("--").arg(bin());
+            Some(c)
+        } else {
+            Some(Command::new(bin()))
+        }
+    };
+    if runner().is_none() {
+        return;
+    }
+    if root {
+        // The user's own project and events folder; the workspace readable for it.
+        fs::set_permissions(&w.root, fs::Permissions::from_mode(0o755)).unwrap();
+        for p in [&a, &log] {
+            std::os::unix::fs::chown(p, Some(65534), Some(65534)).unwrap();
+        }
+        for f in fs::read_dir(&a).unwrap().flatten() {
+            std::os::unix::fs::chown(f.path(), Some(65534), Some(65534)).unwrap();
+        }
+    }
+    let cfg = w.config("events = \"log/ev.jsonl\"\n[[project]]\npath = \"ws/A\"\n");
+    let (code, out) = check_config(&w, runner().unwrap(), &[&cfg]);
+    assert_eq!(code, Some(0), "all is well for the project's owner: {out}");
+
+    let sfc = a.join("sfc.xml");
+    fs::set_permissions(&sfc, fs::Permissions::from_mode(0o000)).unwrap();
+    let before = listing(&w.root);
+    let (code, out) = check_config(&w, runner().unwrap(), &[&cfg]);
+    assert_eq!(code, Some(1), "{out}");
+    assert!(
+        out.contains(&format!(
+            "PROBLEM: cannot read {}: Permission denied",
+            sfc.display()
+        )),
+        "{out}"
+    );
+    assert!(
+        out.ends_with("configuration check failed: 1 problem\n"),
+        "{out}"
+    );
+    assert_eq!(listing(&w.root), before, "nothing written");
+    fs::set_permissions(&sfc, fs::Permissions::from_mode(0o644)).unwrap();
+
+    fs::set_permissions(&a, fs::Permissions::from_mode(0o555)).unwrap();
+    let before = listing(&w.root);
+    let (code, out) = check_config(&w, runner().unwrap(), &[&cfg]);
+    assert_eq!(listing(&w.root), before, "nothing written");
+    fs::set_permissions(&a, fs::Permissions::from_mode(0o755)).unwrap();
+    assert_eq!(code, Some(1), "{out}");
+    assert!(
+        out.contains("PROBLEM: cannot create files in the folder (the outputs, the write-back): Permission denied"),
+        "{out}"
+    );
+    assert!(
+        out.ends_with("configuration check failed: 1 problem\n"),
+        "{out}"
+    );
+}
+
+/// Issue 27, item 7: a `template` that does not exist is an error of the configuration at its
+/// line (`watch` exits 2 at startup, `--check-config` 1), not only a compile naming the file.
+#[test]
+fn a_missing_template_is_located_in_the_configuration() {
+    let w = Workspace::new();
+    w.project("A");
+    let cfg = w.config("[[project]]\npath = \"ws/A\"\ntemplate = \"../templates/krl.toml\"\n");
+    let wanted = format!(
+        "{}:3:12: `template`: {} does not exist",
+        cfg.display(),
+        w.root
+            .parent()
+            .unwrap()
+            .join("templates/krl.toml")
+            .display()
+    );
+    let out = Command::new(bin())
+        .args(["watch", "--events"])
+        .arg(w.root.join("ev.jsonl"))
+        .arg("--config")
+        .arg(&cfg)
+        .env("XDG_RUNTIME_DIR", w.root.join("run"))
+        .env_remove("RUNTIME_DIRECTORY")
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains(&wanted), "{err}");
+    assert!(!w.root.join("ev.jsonl").exists());
+    let (code, out) = check_config(&w, Command::new(bin()), &[&cfg]);
+    assert_eq!(code, Some(1), "{out}");
+    assert!(out.contains(&wanted), "{out}");
 }

@@ -336,11 +336,18 @@ pub fn load(path: &Path) -> Result<Config, ConfigError> {
         .map_err(|e| error(format!("cannot read the configuration: {e}")))?;
     let text = String::from_utf8(bytes)
         .map_err(|e| error(format!("the configuration is not UTF-8: {e}")))?;
-    parse(&text, &file)
+    parse_with(&text, &file, true)
 }
 
-/// Parses configuration text as if read from `file`.
+/// Parses configuration text as if read from `file` (the files it names are not looked at).
 pub fn parse(text: &str, file: &Path) -> Result<Config, ConfigError> {
+    parse_with(text, file, false)
+}
+
+/// [`parse`]; with `files`, a `template` that does not exist is an error at its line, as
+/// [`load`] (startup, reload, `--check-config`) reports it: a compile could only name the
+/// template file, not the line of the configuration that named it.
+fn parse_with(text: &str, file: &Path, files: bool) -> Result<Config, ConfigError> {
     let file = absolute(file);
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let base = file.parent().map(Path::to_path_buf).unwrap_or_default();
@@ -379,6 +386,19 @@ pub fn parse(text: &str, file: &Path) -> Result<Config, ConfigError> {
         }
         let full = normalize(&base.join(s));
         too_long(&full).map_err(|m| at(Some(value.span()), format!("`{key}`: {m}")))?;
+        if files
+            && key == "template"
+            && std::fs::metadata(&full).is_err_and(|e| e.kind() == std::io::ErrorKind::NotFound)
+        {
+            return Err(at(
+                Some(value.span()),
+                format!(
+                    "`template`: {} does not exist (a relative path is relative to this file's \
+                     folder; the templates are installed in /usr/local/share/skillpost/templates)",
+                    full.display()
+                ),
+            ));
+        }
         Ok(full)
     };
 
@@ -1031,6 +1051,26 @@ path = "."
         assert_eq!(e.file, Some(dir.path().join("nope.toml")));
         assert_eq!(e.line, None);
         assert!(e.message.contains("cannot read"), "{e}");
+    }
+
+    #[test]
+    fn load_locates_a_template_that_does_not_exist() {
+        let dir = tempfile::tempdir().unwrap();
+        let cfg = dir.path().join("skillpost.toml");
+        let text = "settle_ms = 100\n[[project]]\npath = \"p\"\ntemplate = \"missing/krl.toml\"\n";
+        std::fs::write(&cfg, text).unwrap();
+        let e = load(&cfg).unwrap_err();
+        assert_eq!(
+            (e.file.as_ref(), e.line, e.column),
+            (Some(&cfg), Some(4), Some(12))
+        );
+        assert!(e.message.contains("missing/krl.toml does not exist"), "{e}");
+        // Text alone is not checked against the disk; an existing template loads.
+        assert!(parse(text, &cfg).is_ok());
+        std::fs::create_dir(dir.path().join("t")).unwrap();
+        std::fs::write(dir.path().join("t/krl.toml"), "").unwrap();
+        std::fs::write(&cfg, "template = \"t/krl.toml\"\n").unwrap();
+        assert!(load(&cfg).is_ok());
     }
 
     #[test]

@@ -27,6 +27,7 @@
 //!   deleted and created again), the folders of every file the last compile read, and each root
 //!   and its direct subfolders.
 
+pub mod check;
 pub mod config;
 pub mod events;
 mod job;

@@ -173,7 +173,21 @@ impl Daemon {
             return;
         }
         self.roots.insert(root.to_owned(), Root::default());
-        self.attach_root(root, None);
+        // A root that exists is watched now: `watching` says so (docs/DAEMON.md, "Watching"); a
+        // missing one got `watch-degraded` and says `watching` when it appears.
+        if self.attach_root(root, None) {
+            let backend = self.watchers.backend_of(root).unwrap_or(Backend::Native);
+            self.sink.emit(
+                None,
+                Event::Watching {
+                    root: Some(root.display().to_string()),
+                    blackboard: None,
+                    backend: backend.as_str(),
+                    reason: None,
+                    program: None,
+                },
+            );
+        }
     }
 
     /// Watches a root and its subfolders; when it does not exist, its nearest existing ancestor
