@@ -330,15 +330,24 @@ pub struct Bound {
     pub timers: Vec<(usize, u32)>,
     /// The step time names the conditions use (keys: `wait.t`) and their step.
     pub timer_names: HashMap<String, usize>,
+    /// Step → its position in [`Bound::timers`] (built by [`Bound::index_timers`]).
+    pub timer_index: HashMap<usize, usize>,
 }
 
 impl Bound {
     /// The timer of step `i` when a condition reads its time: its position `k` in
     /// [`Bound::timers`] and its KRL number.
     pub fn timer_of(&self, i: usize) -> Option<(usize, u32)> {
-        // A scan: a chart reads the times of few steps (a KRL program has at most 64 timers).
-        let k = self.timers.iter().position(|&(s, _)| s == i)?;
+        let &k = self.timer_index.get(&i)?;
         Some((k, self.timers[k].1))
+    }
+
+    /// Sets [`Bound::timers`] and [`Bound::timer_names`] from what the conditions read, and
+    /// indexes the timers by step.
+    pub fn set_timers(&mut self, timers: Vec<(usize, u32)>, names: HashMap<String, usize>) {
+        self.timer_index = timers.iter().enumerate().map(|(k, &(s, _))| (s, k)).collect();
+        self.timers = timers;
+        self.timer_names = names;
     }
 
     /// The timer a condition's name `S.t` reads.
@@ -603,6 +612,7 @@ pub fn bind(
         signals: Vec::new(),
         timers: Vec::new(),
         timer_names: HashMap::new(),
+        timer_index: HashMap::new(),
     };
     for (i, step) in first.steps {
         bound.steps[i] = Some(step);
@@ -1176,6 +1186,7 @@ pub fn conditions(
     let mut used = Vec::new();
     let mut seen = HashSet::new();
     let mut timed: Vec<usize> = Vec::new();
+    let mut timed_set: HashSet<usize> = HashSet::new();
     let mut timer_names = HashMap::new();
     // The first condition that reads a step's time, for a diagnostic about timers.
     let mut first_timed: Option<usize> = None;
@@ -1260,7 +1271,7 @@ pub fn conditions(
                     );
                     continue;
                 }
-                if !timed.contains(&step) {
+                if timed_set.insert(step) {
                     timed.push(step);
                 }
                 timer_names.insert(crate::names::key(n), step);

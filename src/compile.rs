@@ -693,8 +693,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 &mut cx.diags,
             );
             bound.signals = reads.signals;
-            bound.timers = reads.timers;
-            bound.timer_names = reads.timer_names;
+            bound.set_timers(reads.timers, reads.timer_names);
             // The handshakes' wires are the handshakes' (SPEC.md 9): a condition reading one
             // would see the toggles.
             if let (Some(cell), Some(c)) = (&cell, prog.controller) {
