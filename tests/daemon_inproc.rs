@@ -634,3 +634,168 @@ fn daemon_tests_leave_nothing_outside_their_temporary_folders() {
         assert!(left.is_empty(), "{test} left {left:#?}");
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Issue 27, item 10: a blackboard another program holds open
+// ---------------------------------------------------------------------------------------------
+
+/// A planner's save of `p`'s blackboard that sets the write-back value wrong (so the compile
+/// must write it back), with `comment` in it; returns the program holding it open read-only
+/// (a viewer), opened before the save so that it holds the compile's write-back.
+fn save_with_a_viewer(p: &Path, comment: &str) -> fs::File {
+    let bb = p.join("Blackboard.aml");
+    let viewer = fs::File::open(&bb).unwrap();
+    let text = read_string(&bb)
+        .replace("<Value>Blackboard.src</Value>", "<Value>wrong</Value>")
+        .replacen("?>", &format!("?><!-- {comment} -->"), 1);
+    fs::write(&bb, text).unwrap();
+    viewer
+}
+
+/// Whether this file system refused the write-back's lease while the viewer had the file open
+/// (else nothing can wait for it: the write-back wrote at once).
+fn leases_here(wb: &serde_json::Value) -> bool {
+    !(wb["written"] == true && wb.get("waited_ms").is_none())
+}
+
+/// A viewer holding the blackboard open read-only for 3 s across a save: one compile (it was
+/// one compile plus a `write-back-skipped` compile every ~1.3 s), whose write-back waits for
+/// the viewer and then writes; `duration_ms` is the compile's own time, the wait is the
+/// write-back's `waited_ms`.
+#[test]
+fn a_blackboard_held_open_gives_one_compile_whose_write_back_waits() {
+    let w = Workspace::new();
+    let p = w.project("P");
+    let bb = p.join("Blackboard.aml");
+    let d = InProc::with_dirs(&[&p]);
+    d.startup(&[&p]);
+    let mark = d.mark();
+    let viewer = save_with_a_viewer(&p, "saved");
+    let held = Instant::now();
+    let closer = std::thread::spawn(move || {
+        sleep(Duration::from_secs(3));
+        drop(viewer);
+    });
+    let evs = d.wait_for("the write-back", Duration::from_secs(20), |e| {
+        is_after(e, "write-back", &p, mark)
+    });
+    closer.join().unwrap();
+    let wb = evs
+        .iter()
+        .find(|e| is_after(e, "write-back", &p, mark))
+        .unwrap();
+    if !leases_here(wb) {
+        common::skip("no file lease here: the write-back cannot see the open file");
+        return;
+    }
+    assert_eq!(wb["written"], true, "written once the viewer closed: {wb}");
+    assert!(
+        held.elapsed() >= Duration::from_millis(2900),
+        "not before the viewer closed it"
+    );
+    let waited = wb["waited_ms"].as_u64().expect("waited_ms");
+    assert!(waited >= 2000, "the wait is the write-back's: {wb}");
+    let done = evs
+        .iter()
+        .find(|e| is_after(e, "compile-succeeded", &p, mark))
+        .unwrap();
+    let compile_ms = done["duration_ms"].as_u64().unwrap();
+    assert!(
+        compile_ms < 1000,
+        "duration_ms is the compile's, without the wait: {done}"
+    );
+    assert!(
+        seq(done) < seq(wb),
+        "compile-succeeded comes before the write-back"
+    );
+    assert_eq!(done["run_id"], wb["run_id"]);
+    // Nothing more: no compile of the daemon's own write, no round after a skipped write-back.
+    sleep(Duration::from_millis(SETTLE_MS * 10));
+    let evs = d.events();
+    assert_eq!(
+        count_after(&evs, "compile-started", &p, mark),
+        1,
+        "one save, one compile:\n{}",
+        dump(&evs)
+    );
+    let after = read_string(&bb);
+    assert!(after.contains("<!-- saved -->") && after.contains("<Value>Blackboard.src</Value>"));
+}
+
+/// A save during the write-back's wait is never overwritten: the wait ends at once (the
+/// write-back is skipped), the save is compiled, and its write-back waits for the viewer.
+#[test]
+fn a_save_while_the_write_back_waits_is_kept_and_compiled() {
+    let w = Workspace::new();
+    let p = w.project("P");
+    let bb = p.join("Blackboard.aml");
+    let d = InProc::with_dirs(&[&p]);
+    d.startup(&[&p]);
+    let mark = d.mark();
+    let viewer = save_with_a_viewer(&p, "first");
+    d.wait_for("the first compile", WAIT, |e| {
+        is_after(e, "compile-succeeded", &p, mark)
+    });
+    sleep(Duration::from_millis(300));
+    if d.events()
+        .iter()
+        .any(|e| is_after(e, "write-back", &p, mark) && e["written"] == true)
+    {
+        common::skip("no file lease here: the write-back cannot see the open file");
+        return;
+    }
+    // The planner saves again (in place) while the write-back waits for the viewer.
+    let text = read_string(&bb).replace("<!-- first -->", "<!-- second -->");
+    fs::write(&bb, text).unwrap();
+    let evs = d.wait_for("the skipped write-back", WAIT, |e| {
+        is_after(e, "write-back", &p, mark)
+    });
+    let wb = evs
+        .iter()
+        .find(|e| is_after(e, "write-back", &p, mark))
+        .unwrap();
+    assert_eq!(wb["written"], false, "{wb}");
+    assert!(
+        wb["reason"].as_str().unwrap().contains("changed on disk"),
+        "{wb}"
+    );
+    assert!(
+        read_string(&bb).contains("<!-- second -->"),
+        "the save is kept"
+    );
+    // Its compile's write-back waits for the viewer too, and writes once it is closed.
+    sleep(Duration::from_millis(500));
+    drop(viewer);
+    d.wait_for("the value written", Duration::from_secs(20), |e| {
+        is_after(e, "write-back", &p, mark) && e["written"] == true
+    });
+    let after = read_string(&bb);
+    assert!(after.contains("<!-- second -->") && after.contains("<Value>Blackboard.src</Value>"));
+    let evs = d.events();
+    assert_eq!(
+        count_after(&evs, "compile-started", &p, mark),
+        2,
+        "the first save and the save meanwhile:\n{}",
+        dump(&evs)
+    );
+}
+
+/// A stop does not wait for the viewer: the waiting write-back gives up at once (skipped,
+/// another program has the blackboard open), the daemon stops cleanly (it waited out its
+/// ~1.3 s of tries).
+#[test]
+fn a_stop_ends_the_write_backs_wait() {
+    let w = Workspace::new();
+    let p = w.project("P");
+    let d = InProc::with_dirs(&[&p]);
+    d.startup(&[&p]);
+    let mark = d.mark();
+    let viewer = save_with_a_viewer(&p, "saved");
+    d.wait_for("the compile", WAIT, |e| {
+        is_after(e, "compile-started", &p, mark)
+    });
+    sleep(Duration::from_millis(400));
+    let took = d.stop(Duration::from_secs(5));
+    drop(viewer);
+    assert!(took < Duration::from_millis(500), "the stop took {took:?}");
+}

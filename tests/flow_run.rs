@@ -679,6 +679,35 @@ fn constructs(lang: Lang) -> &'static [&'static str] {
     }
 }
 
+/// One random chart `text` (`what` names it in messages), compiled by the binary in `lang` in
+/// the project `dir`, checked by the language's structure check (RAPID: `rapid` samples it)
+/// and run under 60 input sequences against the chart's meaning: the program and how its runs
+/// ended, by kind.
+fn run_random(
+    dir: &Path,
+    lang: Lang,
+    what: &str,
+    text: &str,
+    seed: u64,
+    rapid: &mut RapidChecker,
+) -> (Output, BTreeMap<String, usize>) {
+    let sfc = dir.join("sfc.xml");
+    std::fs::write(&sfc, text).unwrap();
+    compile_project(
+        dir,
+        "R",
+        &format!("{what} does not compile in {lang:?}:\n{text}"),
+    );
+    let output = lang.read(dir, "R");
+    if let Err(e) = output.syntax("R") {
+        panic!("{what}: {lang:?} structure check: {e}\n{}", output.main);
+    }
+    rapid.add_sampled(what, &output, seed as usize, 10);
+    let chart = Chart::read(&sfc);
+    let seen = check_compiled(what, &output, "R", &chart, seed, 60);
+    (output, seen)
+}
+
 /// 150 random charts, each compiled by the binary in `lang` and run under 60 input sequences
 /// (and again with flickering inputs) against the chart's meaning.
 fn random_charts(lang: Lang) {
@@ -687,33 +716,17 @@ fn random_charts(lang: Lang) {
     let mut shapes = BTreeMap::new();
     let mut rapid = RapidChecker::new();
     for seed in 1..=150u64 {
-        let text = ChartGen::chart(seed);
-        let sfc = tmp.path().join("sfc.xml");
-        std::fs::write(&sfc, &text).unwrap();
-        compile_project(
+        let what = format!("random chart {seed}");
+        let (output, seen) = run_random(
             tmp.path(),
-            "R",
-            &format!("random chart {seed} does not compile in {lang:?}:\n{text}"),
-        );
-        let output = lang.read(tmp.path(), "R");
-        if let Err(e) = output.syntax("R") {
-            panic!(
-                "random chart {seed}: {lang:?} structure check: {e}\n{}",
-                output.main
-            );
-        }
-        rapid.add_sampled(&format!("random chart {seed}"), &output, seed as usize, 10);
-        let chart = Chart::read(&sfc);
-        let seen = check_compiled(
-            &format!("random chart {seed}"),
-            &output,
-            "R",
-            &chart,
+            lang,
+            &what,
+            &ChartGen::chart(seed),
             seed,
-            60,
+            &mut rapid,
         );
         for (k, v) in seen {
-            *shapes.entry(k.to_owned()).or_insert(0) += v;
+            *shapes.entry(k).or_insert(0) += v;
         }
         for kw in constructs(lang) {
             if output.main.contains(kw) {
@@ -766,39 +779,13 @@ fn random_charts_with_step_times(lang: Lang) {
     let mut rapid = RapidChecker::new();
     let mut timed = 0;
     for seed in 1..=120u64 {
+        let what = format!("random chart {seed} with step times");
         let text = ChartGen::with_step_times(seed);
-        let sfc = tmp.path().join("sfc.xml");
-        std::fs::write(&sfc, &text).unwrap();
-        compile_project(
-            tmp.path(),
-            "R",
-            &format!("random chart {seed} with step times does not compile in {lang:?}:\n{text}"),
-        );
-        let output = lang.read(tmp.path(), "R");
-        if let Err(e) = output.syntax("R") {
-            panic!(
-                "random chart {seed} with step times: {lang:?} structure check: {e}\n{}",
-                output.main
-            );
-        }
+        let (output, runs) = run_random(tmp.path(), lang, &what, &text, seed, &mut rapid);
         if output.main.contains(step_timer(lang)) {
             timed += 1;
         }
-        rapid.add_sampled(
-            &format!("random chart {seed} with step times"),
-            &output,
-            seed as usize,
-            10,
-        );
-        let chart = Chart::read(&sfc);
-        for (k, v) in check_compiled(
-            &format!("random chart {seed} with step times"),
-            &output,
-            "R",
-            &chart,
-            seed,
-            60,
-        ) {
+        for (k, v) in runs {
             *seen.entry(k).or_insert(0) += v;
         }
     }

@@ -149,6 +149,9 @@ pub enum Event {
         value: String,
         written: bool,
         reason: Option<String>,
+        /// How long the write-back waited for another program to close the blackboard (left
+        /// out when it did not wait); not part of the compile's `duration_ms`.
+        waited_ms: Option<u64>,
         /// The write-back did not happen although the value was wrong (a `warn` event).
         #[serde(skip)]
         skipped: bool,
@@ -336,6 +339,9 @@ pub struct EventSink {
     /// Sees every event as it is emitted: the projects' results (`skillpost status`, systemd's
     /// status line); failures also go to the log ([`super::journal`]).
     state: Arc<super::state::Tracker>,
+    /// Set when the daemon stops: a write-back waiting for another program to close the
+    /// blackboard gives up at once instead of holding the stop (`job`).
+    stopping: std::sync::atomic::AtomicBool,
 }
 
 impl EventSink {
@@ -396,6 +402,7 @@ impl EventSink {
         EventSink {
             shared,
             state: Arc::new(super::state::Tracker::new(None)),
+            stopping: Default::default(),
         }
     }
 
@@ -420,6 +427,17 @@ impl EventSink {
     /// This run's identity, the `instance` of every event it emits (see [`new_instance`]).
     pub fn instance(&self) -> &str {
         &self.shared.instance
+    }
+
+    /// The daemon stops: running write-backs stop waiting (see [`EventSink::stopping`]).
+    pub fn set_stopping(&self) {
+        self.stopping
+            .store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// Whether the daemon is stopping.
+    pub fn stopping(&self) -> bool {
+        self.stopping.load(std::sync::atomic::Ordering::Relaxed)
     }
 
     /// The projects' results as the events told them.
@@ -1218,6 +1236,7 @@ mod tests {
                 value: "x".into(),
                 written: true,
                 reason: s(),
+                waited_ms: Some(1),
                 skipped: false,
             },
             Event::Reloaded {

@@ -48,6 +48,11 @@ pub(super) enum Outcome {
 
 use crate::load::hash_bytes;
 
+/// How long a write-back waits for another program (a viewer, an editor) to close the
+/// blackboard before it is reported skipped (docs/DAEMON.md); the event loop then compiles
+/// again a few times ([`super::MAX_IN_USE_ROUNDS`]).
+pub(super) const WRITE_BACK_WAIT: Duration = Duration::from_secs(10);
+
 /// The hash of a file's bytes; `None` for anything but a readable regular file. Through
 /// [`crate::load::hash_file`]: a FIFO or device among the inputs is refused at once (a blocking
 /// read hung the project's compile for good), the file is read in pieces, and nothing past the
@@ -293,6 +298,80 @@ impl Job {
         self.progress.set(FINISHED);
     }
 
+    /// One attempt of the write-back, through the folder the blackboard was read from.
+    fn write_back_once(
+        &self,
+        c: &Compilation,
+        wb: &compile::WriteBack,
+    ) -> std::io::Result<crate::write::WriteBackOutcome> {
+        let path = match &c.folder {
+            Some(f) => f.route(&wb.blackboard),
+            None => wb.blackboard.clone(),
+        };
+        crate::write::write_back_all(&path, &wb.expected, wb.bom, &wb.splices()).map_err(|e| {
+            let e = match &c.folder {
+                Some(f) => std::io::Error::new(e.kind(), f.unroute(&e.to_string())),
+                None => e,
+            };
+            std::io::Error::new(e.kind(), format!("{}: {e}", wb.blackboard.display()))
+        })
+    }
+
+    /// The write-back while another program has the blackboard open (its write lease is
+    /// refused): tried again, 40 ms apart at first and doubling up to 500 ms, until the other
+    /// program closes it, for at most [`WRITE_BACK_WAIT`]. It stops waiting at once when the
+    /// blackboard's bytes change (a save: skipped, compiled again; the save is never
+    /// overwritten, `write_back_all` checks that) and, within 20 ms, when the daemon stops.
+    /// Returns the last
+    /// outcome, how long it waited, and the error that ended it (as the reason).
+    fn wait_for_blackboard(
+        &self,
+        c: &Compilation,
+        wb: &compile::WriteBack,
+    ) -> (
+        crate::write::WriteBackOutcome,
+        Option<Duration>,
+        Option<String>,
+    ) {
+        use crate::write::WriteBackOutcome as W;
+        let start = std::time::Instant::now();
+        let read = hash_bytes(&wb.expected);
+        let mut step = Duration::from_millis(40);
+        let mut outcome = W::SkippedInUse;
+        let mut error = None;
+        while outcome == W::SkippedInUse && !self.sink.stopping() {
+            let left = WRITE_BACK_WAIT.saturating_sub(start.elapsed());
+            if left.is_zero() {
+                break;
+            }
+            // In slices, so that a stop ends the wait within one.
+            let until = std::time::Instant::now() + step.min(left);
+            while !self.sink.stopping() {
+                let now = std::time::Instant::now();
+                if now >= until {
+                    break;
+                }
+                std::thread::sleep((until - now).min(Duration::from_millis(20)));
+            }
+            if self.sink.stopping() {
+                break;
+            }
+            step = (step * 2).min(Duration::from_millis(500));
+            if hash_file(&wb.blackboard) != Some(read) {
+                outcome = W::SkippedChangedOnDisk;
+                break;
+            }
+            match self.write_back_once(c, wb) {
+                Ok(o) => outcome = o,
+                Err(e) => {
+                    error = Some(format!("cannot write: {e}"));
+                    break;
+                }
+            }
+        }
+        (outcome, Some(start.elapsed()), error)
+    }
+
     pub(super) fn run(self) -> Outcome {
         let project = self.project();
         // Only when an input's bytes changed (or a new blackboard appeared): reads, `touch`,
@@ -368,7 +447,7 @@ impl Job {
             drop_warnings: false,
             bind_split_from: None,
         };
-        let c = compile::compile(&fs, &blackboard, &opts);
+        let mut c = compile::compile(&fs, &blackboard, &opts);
         let mut inputs = fs.seen.into_inner().unwrap_or_else(|p| p.into_inner());
         add_link_targets(&mut inputs);
         let ms = || started.elapsed().as_millis() as u64;
@@ -420,7 +499,20 @@ impl Job {
             });
             return Outcome::Retry { counted: true };
         }
-        let applied = match compile::apply(&c) {
+        // The outputs first; the write-back is tried here, so that a wait for another program
+        // to close the blackboard is neither part of the compile's `duration_ms` nor of a new
+        // compile (it was: 6 compiles of ~1.3 s each for a viewer open 8 s).
+        let write_back = c.write_back.take();
+        let applied = compile::apply(&c).and_then(|a| {
+            let Some(wb) = &write_back else {
+                return Ok((a, None));
+            };
+            match self.write_back_once(&c, wb) {
+                Ok(o) => Ok((a, Some(o))),
+                Err(e) => Err(e),
+            }
+        });
+        let (applied, first) = match applied {
             Ok(a) => a,
             Err(e) => {
                 self.outcome(Event::failed_with(
@@ -446,6 +538,7 @@ impl Job {
                     .map(|d| serde_json::json!(d.locate(&c.sources))),
             )
             .collect();
+        // The compile itself: reading, compiling, writing the outputs, one write-back attempt.
         self.outcome(Event::CompileSucceeded {
             run_id: self.run_id,
             duration_ms: ms(),
@@ -477,9 +570,16 @@ impl Job {
         // so they need no known state.)
         let mut again = false;
         let mut in_use = false;
-        if let (Some(wb), Some(outcome)) = (&c.write_back, &applied.write_back) {
+        if let (Some(wb), Some(first)) = (&write_back, first) {
             use crate::write::WriteBackOutcome as W;
-            let (written, reason) = (*outcome == W::Written, outcome.reason());
+            // Another program has the blackboard open (a viewer, an editor): wait for it to
+            // close it, in this run (see `wait_for_blackboard`).
+            let (outcome, waited, error) = if first == W::SkippedInUse {
+                self.wait_for_blackboard(&c, wb)
+            } else {
+                (first, None, None)
+            };
+            let (written, reason) = (outcome == W::Written, outcome.reason());
             if written {
                 // Our own write: the bytes *we* wrote are the known state, so the event of our
                 // write starts nothing. Not the bytes on disk now: a planner's save may already
@@ -495,8 +595,8 @@ impl Job {
                 // A save that raced our write: compile again.
                 again = hash_file(&wb.blackboard) != ours;
             }
-            again |= *outcome == W::SkippedChangedOnDisk;
-            in_use = *outcome == W::SkippedInUse;
+            again |= outcome == W::SkippedChangedOnDisk;
+            in_use = outcome == W::SkippedInUse && error.is_none();
             self.sink.emit(
                 Some(&project),
                 Event::WriteBack {
@@ -504,7 +604,8 @@ impl Job {
                     file: wb.blackboard.display().to_string(),
                     value: wb.value.clone(),
                     written,
-                    reason: reason.map(str::to_owned),
+                    reason: error.or(reason.map(str::to_owned)),
+                    waited_ms: waited.map(|d| d.as_millis() as u64),
                     skipped: !matches!(outcome, W::Written | W::AlreadyRight),
                 },
             );

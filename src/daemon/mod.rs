@@ -237,6 +237,8 @@ pub async fn run(
             }
         }
     }
+    // A write-back waiting for another program to close the blackboard gives up now.
+    d.sink.set_stopping();
     d.stop(stop_reason, drx, control).await
 }
 
