@@ -913,6 +913,55 @@ mod tests {
     }
 
     #[test]
+    fn state_files_are_told_by_name_and_rows_by_folder() {
+        for n in ["status.json", "status-42.json"] {
+            assert!(is_state_name(n), "{n}");
+        }
+        for n in [
+            "status-.json",
+            "status-4a.json",
+            ".status-x.tmp",
+            "status-42.json.tmp",
+        ] {
+            assert!(!is_state_name(n), "{n}");
+        }
+        let row = |p: &str| ProjectState {
+            project: p.into(),
+            result: "ok".into(),
+            ..ProjectState::default()
+        };
+        let snap = Snapshot {
+            schema: SCHEMA.into(),
+            version: "0".into(),
+            pid: 1,
+            pid_start: None,
+            started: now(),
+            updated: now(),
+            daemon: "running".into(),
+            compiling: 0,
+            summary: String::new(),
+            projects: vec![
+                row("/srv/cells/A"),
+                row("/srv/cells/AB"),
+                row("/srv/other/C"),
+            ],
+        };
+        let of = |f: &str| {
+            watching(&snap, Path::new(f)).map(|s| {
+                s.projects
+                    .into_iter()
+                    .map(|p| p.project)
+                    .collect::<Vec<_>>()
+            })
+        };
+        // The project, a folder in it, a root holding it; never a sibling with a longer name.
+        assert_eq!(of("/srv/cells/A").unwrap(), ["/srv/cells/A"]);
+        assert_eq!(of("/srv/cells/A/sub").unwrap(), ["/srv/cells/A"]);
+        assert_eq!(of("/srv/cells").unwrap(), ["/srv/cells/A", "/srv/cells/AB"]);
+        assert_eq!(of("/srv/nothing"), None);
+    }
+
+    #[test]
     fn describes_a_diagnostic_on_one_line() {
         let d = serde_json::json!({"severity": "error", "code": "E604", "message": "cannot write",
             "file": "a/P.src", "line": 3, "column": 7});
