@@ -124,7 +124,8 @@ struct WatchArgs {
     /// Quiet period after the last change before compiling, in milliseconds (default 100)
     #[arg(long, value_name = "MS", value_parser = clap::value_parser!(u64).range(1..=60000))]
     settle: Option<u64>,
-    /// Format of the logs on stderr
+    /// Format of the log on stderr: one line per compile and per problem (`human`), or JSON
+    /// lines (`json`); the event stream stays on stdout (or in --events FILE)
     #[arg(long, value_enum, default_value_t = LogFormat::Human)]
     log_format: LogFormat,
     /// Keep each project's last result in FILE for `skillpost status` (default:
@@ -144,7 +145,10 @@ struct WatchArgs {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum LogFormat {
+    /// One line per event for people: time, level, message (docs/DAEMON.md, "Where output goes")
+    #[value(alias = "text")]
     Human,
+    /// One JSON object per line, with the fields (`project`, `run_id`, `code`, `duration_ms`)
     Json,
 }
 
@@ -626,7 +630,9 @@ fn watch(w: WatchArgs) -> u8 {
         .with_writer(std::io::stderr)
         .with_ansi(std::io::stderr().is_terminal());
     match w.log_format {
-        LogFormat::Human => builder.init(),
+        LogFormat::Human => builder
+            .event_format(daemon::journal::Human::for_stderr())
+            .init(),
         LogFormat::Json => builder.json().init(),
     }
     let (dirs, blackboards) = match daemon::config::command_line_targets(&w.dirs) {

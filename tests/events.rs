@@ -807,3 +807,142 @@ fn binary_daemon_tests_leave_nothing_outside_their_temporary_folders() {
     let left = common::leftovers_of(test);
     assert!(left.is_empty(), "{test} left {left:#?}");
 }
+
+// ---------------------------------------------------------------------------------------------
+// Issue 27, item 9: what goes where (docs/DAEMON.md, "Where output goes")
+// ---------------------------------------------------------------------------------------------
+
+/// The daemon's stdout after it exited (it was piped and not read: these few events fit).
+fn stdout_of(d: &mut Daemon) -> String {
+    let mut out = String::new();
+    if let Some(mut s) = d.child.stdout.take() {
+        s.read_to_string(&mut out).unwrap();
+    }
+    out
+}
+
+/// The startup compile, a broken edit and a fixed one, then `SIGTERM`; returns the log (stderr).
+fn three_compiles(d: &mut Daemon, a: &Path, compiles: impl Fn(&Daemon) -> usize) -> String {
+    assert!(
+        wait_until(WAIT, || compiles(d) >= 1),
+        "the startup compile\n{}",
+        d.log()
+    );
+    sleep(Duration::from_millis(300));
+    let orig = fs::read_to_string(sample().join("sfc.xml")).unwrap();
+    fs::write(
+        a.join("sfc.xml"),
+        orig.replace("(100, 200, 300,", "(100, 200, 300"),
+    )
+    .unwrap();
+    assert!(
+        wait_until(WAIT, || compiles(d) >= 2),
+        "the broken edit\n{}",
+        d.log()
+    );
+    sleep(Duration::from_millis(300));
+    edit(a, 7);
+    assert!(
+        wait_until(WAIT, || compiles(d) >= 3),
+        "the fixed edit\n{}",
+        d.log()
+    );
+    d.signal("TERM");
+    assert!(d.wait_exit(WAIT).success());
+    d.log()
+}
+
+/// With `--events FILE` stdout stays empty, and the log (stderr, the default `human` format)
+/// has one line per compile: `<project> compiled in N ms: <outputs>` and `<project> failed:
+/// <code> <file>:<line>:<col>: <message>`, with the file named inside the project, no span,
+/// no module path, no colour when stderr is not a terminal.
+#[test]
+fn the_log_says_each_compile_in_one_line_and_stdout_stays_empty_with_an_events_file() {
+    let (_tmp, root) = workspace();
+    let a = root.join("ws/A");
+    copy_project(&a);
+    let ev = root.join("ev.jsonl");
+    let mut d = Daemon::start(
+        &root,
+        &["--events", ev.to_str().unwrap(), a.to_str().unwrap()],
+        &[],
+        true,
+    );
+    let outcomes = |_: &Daemon| {
+        let text = fs::read_to_string(&ev).unwrap_or_default();
+        text.lines()
+            .filter(|l| l.contains("\"compile-succeeded\"") || l.contains("\"compile-failed\""))
+            .count()
+    };
+    let log = three_compiles(&mut d, &a, outcomes);
+    assert_eq!(stdout_of(&mut d), "", "nothing on stdout with --events");
+    assert!(!log.contains('\x1b'), "no colours in a file:\n{log}");
+    let project = a.display().to_string();
+    let compiled: Vec<&str> = log
+        .lines()
+        .filter(|l| l.contains(" compiled in "))
+        .collect();
+    let failed: Vec<&str> = log.lines().filter(|l| l.contains(" failed: ")).collect();
+    assert_eq!(compiled.len(), 2, "one line per successful compile:\n{log}");
+    assert_eq!(failed.len(), 1, "one line per failed compile:\n{log}");
+    for l in &compiled {
+        let (_, rest) = l
+            .split_once(&format!(" INFO {project} compiled in "))
+            .unwrap_or_else(|| panic!("`<time> INFO <project> compiled in`: {l}"));
+        let (ms, files) = rest.split_once(" ms: ").expect("N ms: outputs");
+        ms.parse::<u64>().expect("milliseconds");
+        assert!(files.starts_with("Blackboard.src"), "{l}");
+        assert!(files.contains("Blackboard.dat"), "{l}");
+        assert!(!l.contains("compile{") && !l.contains("skillpost::"), "{l}");
+    }
+    assert!(
+        failed[0].contains(&format!(" WARN {project} failed: E502 sfc.xml:")),
+        "{}",
+        failed[0]
+    );
+    assert_eq!(
+        log.lines().filter(|l| l.contains(" WARN ")).count(),
+        1,
+        "nothing else to warn about:\n{log}"
+    );
+}
+
+/// Without `--events` the events are on stdout and nothing else is (every line an event);
+/// `--log-format json` makes every log line a JSON object, the compile lines with the
+/// project, `run_id` and `duration_ms`.
+#[test]
+fn events_on_stdout_and_json_log_lines_on_stderr() {
+    let (_tmp, root) = workspace();
+    let a = root.join("ws/A");
+    copy_project(&a);
+    let mut d = Daemon::start(
+        &root,
+        &["--log-format", "json", a.to_str().unwrap()],
+        &[],
+        true,
+    );
+    let outcomes = |d: &Daemon| {
+        d.log()
+            .lines()
+            .filter(|l| l.contains(" compiled in ") || l.contains(" failed: "))
+            .count()
+    };
+    let log = three_compiles(&mut d, &a, outcomes);
+    let out = stdout_of(&mut d);
+    let evs = parse_lines(&out, "stdout");
+    assert!(evs.iter().all(|e| e["schema"] == "skillpost.event/1"));
+    assert_eq!(evs.iter().filter(|e| is(e, "compile-started")).count(), 3);
+    let lines = parse_lines(&log, "stderr");
+    let compiles: Vec<&Value> = lines
+        .iter()
+        .filter(|l| l["fields"]["duration_ms"].is_u64())
+        .collect();
+    assert_eq!(compiles.len(), 3, "{log}");
+    for (n, l) in compiles.iter().enumerate() {
+        assert_eq!(l["fields"]["project"], a.display().to_string(), "{l}");
+        assert_eq!(l["fields"]["run_id"], n as u64 + 1, "{l}");
+        assert_eq!(l["span"]["run_id"], n as u64 + 1, "{l}");
+    }
+    assert_eq!(compiles[1]["level"], "WARN");
+    assert_eq!(compiles[1]["fields"]["code"], "E502");
+}

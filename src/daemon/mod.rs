@@ -31,7 +31,7 @@ pub mod check;
 pub mod config;
 pub mod events;
 mod job;
-mod journal;
+pub mod journal;
 pub mod lock;
 mod poll;
 mod project;
