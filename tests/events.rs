@@ -853,8 +853,8 @@ fn three_compiles(d: &mut Daemon, a: &Path, compiles: impl Fn(&Daemon) -> usize)
 }
 
 /// With `--events FILE` stdout stays empty, and the log (stderr, the default `human` format)
-/// has one line per compile: `<project> compiled in N ms: <outputs>` and `<project> failed:
-/// <code> <file>:<line>:<col>: <message>`, with the file named inside the project, no span,
+/// has one line per compile: `<project> compiled in N ms: <outputs>` and `compile failed:
+/// <project>: <code> <file>:<line>:<col>: <message>`, with the file named inside the project, no span,
 /// no module path, no colour when stderr is not a terminal.
 #[test]
 fn the_log_says_each_compile_in_one_line_and_stdout_stays_empty_with_an_events_file() {
@@ -882,7 +882,10 @@ fn the_log_says_each_compile_in_one_line_and_stdout_stays_empty_with_an_events_f
         .lines()
         .filter(|l| l.contains(" compiled in "))
         .collect();
-    let failed: Vec<&str> = log.lines().filter(|l| l.contains(" failed: ")).collect();
+    let failed: Vec<&str> = log
+        .lines()
+        .filter(|l| l.contains(" compile failed: "))
+        .collect();
     assert_eq!(compiled.len(), 2, "one line per successful compile:\n{log}");
     assert_eq!(failed.len(), 1, "one line per failed compile:\n{log}");
     for l in &compiled {
@@ -896,7 +899,7 @@ fn the_log_says_each_compile_in_one_line_and_stdout_stays_empty_with_an_events_f
         assert!(!l.contains("compile{") && !l.contains("skillpost::"), "{l}");
     }
     assert!(
-        failed[0].contains(&format!(" WARN {project} failed: E502 sfc.xml:")),
+        failed[0].contains(&format!(" WARN compile failed: {project}: E502 sfc.xml:")),
         "{}",
         failed[0]
     );
@@ -924,7 +927,7 @@ fn events_on_stdout_and_json_log_lines_on_stderr() {
     let outcomes = |d: &Daemon| {
         d.log()
             .lines()
-            .filter(|l| l.contains(" compiled in ") || l.contains(" failed: "))
+            .filter(|l| l.contains(" compiled in ") || l.contains("compile failed: "))
             .count()
     };
     let log = three_compiles(&mut d, &a, outcomes);

@@ -4,8 +4,9 @@
 //!
 //! - `compile-succeeded`: `info`, `<project> compiled in 3 ms: P.src, P.dat` (the outputs'
 //!   file names; `(unchanged)` after those whose bytes were already right; `, 2 warnings`);
-//! - `compile-failed`: `warn`, `<project> failed: E311 sfc.xml:74:66: <message>` (the first
-//!   error; a file inside the project folder by its relative name) and `(and N more errors)`;
+//! - `compile-failed`: `warn`, `compile failed: <project>: E311 sfc.xml:74:66: <message>` (the
+//!   first error; a file inside the project folder by its relative name) and `(and N more
+//!   errors)`: the form DAEMON-INSTALL.md documents (and scripts may grep), kept;
 //! - `write-back` that was skipped: `warn`, `<project>: write-back into <file> skipped: <why>`;
 //!   one that waited for another program to close the blackboard: `info`, with how long;
 //! - `reload-failed`: `error`, `reload failed, keeping the previous configuration: ...`.
@@ -110,7 +111,7 @@ pub fn log(project: Option<&str>, event: &Event) {
                 run_id,
                 code,
                 duration_ms,
-                "{name} failed: {what}{more}"
+                "compile failed: {name}: {what}{more}"
             );
         }
         Event::WriteBack {
@@ -320,7 +321,7 @@ mod tests {
         assert_eq!(
             l,
             [
-                "<4>WARN /p/P failed: E311 sfc.xml:74:66: unknown resource `Gripper`",
+                "<4>WARN compile failed: /p/P: E311 sfc.xml:74:66: unknown resource `Gripper`",
                 "<6>INFO stopped reason=\"SIGTERM\"",
             ]
         );
@@ -332,7 +333,7 @@ mod tests {
         assert_eq!(l.len(), 1);
         assert!(
             l[0].ends_with(
-                " \x1b[33m WARN\x1b[0m /p/P failed: E311 sfc.xml:74:66: unknown resource `Gripper`"
+                " \x1b[33m WARN\x1b[0m compile failed: /p/P: E311 sfc.xml:74:66: unknown resource `Gripper`"
             ),
             "{:?}",
             l[0]
