@@ -9,6 +9,10 @@
 //! Real users and groups are made (`skillpost`, `planning`, a planner) when missing and removed
 //! afterwards. Skipped with `skipped: <why>` when not root or a tool is missing (the test fails
 //! instead under `SKILLPOST_STRICT_TESTS=1`).
+//!
+//! Also checked (issue 27, items 3, 6, 7): step 4's `--check-config` passes and writes nothing;
+//! the service's first events are those step 6 lists; step 1 installs a stripped binary, pages
+//! whose links all lead to installed pages, and the templates the installed example names.
 
 use std::fs;
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
@@ -183,10 +187,11 @@ fn the_install_guide_works_as_written_and_planners_keep_working() {
         "pkill",
         "getent",
         "systemd-analyze",
+        "strip",
     ] {
         if !have(tool) {
             skip(&format!(
-                "`{tool}` is not installed (Debian: passwd, util-linux, acl, coreutils, procps, systemd)"
+                "`{tool}` is not installed (Debian: passwd, util-linux, acl, coreutils, procps, systemd, binutils)"
             ));
             return;
         }
@@ -232,18 +237,28 @@ fn the_install_guide_works_as_written_and_planners_keep_working() {
     // A copy of the checkout: the files the guide installs, the host paths in them moved.
     let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
     let checkout = base.join("checkout");
-    for f in [
+    let mut files: Vec<String> = [
         "README.md",
-        "docs/DAEMON.md",
-        "docs/DAEMON-INSTALL.md",
+        "ARCHITECTURE.md",
         "config/skillpost.toml",
         "config/skillpost.service.toml",
         "systemd/skillpost.service",
-    ] {
+    ]
+    .map(String::from)
+    .to_vec();
+    for (dir, ext) in [("docs", "md"), ("templates", "toml")] {
+        for e in fs::read_dir(repo.join(dir)).unwrap().flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if name.ends_with(&format!(".{ext}")) {
+                files.push(format!("{dir}/{name}"));
+            }
+        }
+    }
+    for f in &files {
         let to = checkout.join(f);
         fs::create_dir_all(to.parent().unwrap()).unwrap();
         let text = fs::read_to_string(repo.join(f)).unwrap();
-        let text = if f.ends_with(".md") {
+        let text = if f.ends_with(".md") || f.starts_with("templates/") {
             text
         } else {
             moved(&text, &root_s)
@@ -295,13 +310,46 @@ fn the_install_guide_works_as_written_and_planners_keep_working() {
         out.status.success(),
         "a step of docs/DAEMON-INSTALL.md failed:\n{log}"
     );
-    assert!(log.contains("foreground check: ran and stopped"), "{log}");
-    assert!(log.contains("Status: \""), "{log}");
+    // Step 4: the check passed and wrote nothing (tests/install/emulate.sh compares listings).
     assert!(
-        root.join("usr/local/share/doc/skillpost/DAEMON-INSTALL.md")
-            .exists(),
-        "the Documentation= file is installed"
+        log.contains("(test) check-config: exit status 0, nothing written"),
+        "{log}"
     );
+    assert!(log.contains("\nconfiguration OK\n"), "{log}");
+    let projects_root = root.join("srv/planning/projects");
+    let zelle_a = root.join("srv/planning/cells/Zelle_A");
+    for (folder, says) in [
+        (&projects_root, "ok: lists the root: 0 projects now"),
+        (&zelle_a, "waiting: the project folder does not exist yet"),
+    ] {
+        let f = format!(" {}  ", folder.display());
+        assert!(
+            log.lines().any(|l| l.contains(&f) && l.contains(says)),
+            "{f} {says}: {log}"
+        );
+    }
+    assert!(log.contains("Status: \""), "{log}");
+    check_installed(&root, &binary);
+
+    // Step 6: the first events of the service are what the guide says.
+    let events_file = root.join("var/log/skillpost/events.jsonl");
+    let first: Vec<Value> = events(&events_file).into_iter().take(4).collect();
+    let names: Vec<&str> = first.iter().map(|e| e["event"].as_str().unwrap()).collect();
+    assert_eq!(
+        names,
+        ["started", "watching", "watch-degraded", "rescan"],
+        "{first:#?}"
+    );
+    assert_eq!(first[1]["root"], projects_root.to_str().unwrap());
+    assert_eq!(first[1]["backend"], "inotify");
+    assert_eq!(first[2]["project"], zelle_a.to_str().unwrap());
+    assert_eq!(first[2]["backend"], "none");
+    assert_eq!(
+        first[2]["reason"],
+        "the project folder does not exist; waiting for it"
+    );
+    assert_eq!(first[3]["reason"], "startup");
+    assert_eq!(first[3]["projects"], 1);
 
     // The first day: a planner in the group, umask 022.
     let ok = Command::new("useradd")
@@ -326,7 +374,6 @@ fn the_install_guide_works_as_written_and_planners_keep_working() {
         .unwrap();
         fs::set_permissions(sample.join(f), fs::Permissions::from_mode(0o644)).unwrap();
     }
-    let events_file = root.join("var/log/skillpost/events.jsonl");
     let project = root.join("srv/planning/projects/NewCell");
     let o = as_planner(
         "umask 022 && mkdir \"$2\" && cp \"$1\"/* \"$2\"/",
@@ -442,7 +489,8 @@ fn the_install_guide_works_as_written_and_planners_keep_working() {
         fs::read_to_string(root.join("journal.log"))
             .unwrap_or_default()
             .lines()
-            .any(|l| l.contains("WARN") && l.contains("compile failed") && l.contains("E604"))
+            // `compile failed: <project>: E604 ...`, or (issue 27, item 9) `<project> failed: E604 ...`
+            .any(|l| l.contains("WARN") && l.contains("failed: ") && l.contains("E604"))
     });
     fs::remove_dir_all(&bare).unwrap();
 
@@ -458,6 +506,88 @@ fn the_install_guide_works_as_written_and_planners_keep_working() {
     assert!(
         !journal.contains("NewCell: E604") && !journal.contains("Zelle_A: E604"),
         "{journal}"
+    );
+}
+
+/// Step 1 installed a stripped binary, documentation whose links all lead to installed pages,
+/// and the templates, which the installed example configuration names.
+fn check_installed(root: &Path, built: &Path) {
+    let bin = root.join("usr/local/bin/skillpost");
+    let (size, unstripped) = (
+        fs::metadata(&bin).unwrap().len(),
+        fs::metadata(built).unwrap().len(),
+    );
+    println!("installed binary: {size} bytes (built: {unstripped})");
+    assert!(size < unstripped, "install -s strips the binary");
+    let doc = root.join("usr/local/share/doc/skillpost");
+    for page in [
+        "DAEMON-INSTALL.md",
+        "DAEMON.md",
+        "README.md",
+        "skillpost.toml",
+    ] {
+        assert!(doc.join(page).exists(), "{page} is installed");
+    }
+    let mut links = 0;
+    for e in fs::read_dir(&doc).unwrap().flatten() {
+        let page = e.path();
+        if page.extension().is_none_or(|x| x != "md") {
+            continue;
+        }
+        // The prose: no code blocks, no `code`.
+        let mut text = String::new();
+        let mut code = false;
+        for line in fs::read_to_string(&page).unwrap().lines() {
+            if line.trim_start().starts_with("```") {
+                code = !code;
+            } else if !code {
+                text.extend(line.split('`').step_by(2));
+                text.push('\n');
+            }
+        }
+        for (i, _) in text.match_indices("](") {
+            let rest = &text[i + 2..];
+            let target = &rest[..rest.find(')').unwrap_or(0)];
+            let file = target.split('#').next().unwrap();
+            if file.is_empty() || file.contains("://") || file.starts_with("mailto:") {
+                continue;
+            }
+            links += 1;
+            assert!(
+                doc.join(file).exists(),
+                "{} links to {target}, which is not installed",
+                page.display()
+            );
+        }
+    }
+    assert!(
+        links > 10,
+        "the installed pages link to each other ({links})"
+    );
+    // The installed example names the installed templates: it loads outside the checkout.
+    let example = doc.join("skillpost.toml");
+    let text = fs::read_to_string(&example).unwrap();
+    assert!(!text.contains("\"../templates/"), "{text}");
+    let templates = root.join("usr/local/share/skillpost/templates");
+    assert!(text.contains(&format!("template = \"{}/krl.toml\"", templates.display())));
+    for t in ["krl.toml", "rapid.toml", "urscript.toml"] {
+        assert!(templates.join(t).exists(), "{t} is installed");
+    }
+    let out = Command::new(&bin)
+        .args(["watch", "--check-config", "--config"])
+        .arg(&example)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        !doc.join("events.jsonl").exists(),
+        "the check wrote nothing"
     );
 }
 

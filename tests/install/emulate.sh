@@ -1,8 +1,9 @@
 # Sourced before the steps of docs/DAEMON-INSTALL.md by tests/install.rs. The steps run as
 # written, with the host's paths moved under $ROOT; this file plays what a temporary root cannot
-# have: systemd (`systemctl`), the Ctrl-C of the foreground check, and `cargo build` (the test's
-# binary is already in target/release/skillpost). Everything else (useradd, groupadd, usermod,
-# install, chgrp, chmod, find, setfacl, runuser, systemd-analyze) is the real command.
+# have: systemd (`systemctl`) and `cargo build` (the test's binary is already in
+# target/release/skillpost), and checks that step 4's `--check-config` writes nothing.
+# Everything else (useradd, groupadd, usermod, install, strip, sed, chgrp, chmod, find, setfacl,
+# setpriv, runuser, systemd-analyze) is the real command.
 #
 # Needs: ROOT (the temporary root), RECORD (a file: what the test must clean up).
 
@@ -25,21 +26,31 @@ useradd() {
     fi
 }
 
-# The foreground check: "Ctrl-C stops it". The test presses Ctrl-C (SIGINT) after 3 s; the
-# check passes when the daemon ran and stopped cleanly (exit status 0).
-runuser() {
+# Step 4's `skillpost watch --check-config` (run by the real setpriv) writes nothing anywhere:
+# the listing of the whole temporary root (names, sizes, modes, times) is the same after it,
+# and it does not leave /tmp/skillpost-<uid> behind.
+setpriv() {
     case " $* " in
-    *" watch "*)
-        local rc=0
-        timeout --preserve-status -s INT -k 10 3 runuser "$@" 2>"$ROOT/foreground.err" || rc=$?
-        cat "$ROOT/foreground.err" >&2
-        if [ "$rc" -ne 0 ]; then
-            echo "(test) the foreground check failed: exit status $rc" >&2
+    *" --check-config "*)
+        local before after rc=0 tmpd had=no
+        tmpd="/tmp/skillpost-$(id -u skillpost)"
+        [ ! -e "$tmpd" ] || had=yes
+        before=$(ls -laR --time-style=full-iso "$ROOT" 2>&1)
+        command setpriv "$@" || rc=$?
+        after=$(ls -laR --time-style=full-iso "$ROOT" 2>&1)
+        if [ "$had" = no ] && [ -e "$tmpd" ]; then
+            echo "(test) the check made $tmpd" >&2
             return 1
         fi
-        echo "(test) foreground check: ran and stopped on Ctrl-C (exit status 0)"
+        if [ "$before" != "$after" ]; then
+            echo "(test) the check wrote something:" >&2
+            diff <(printf '%s\n' "$before") <(printf '%s\n' "$after") >&2 || true
+            return 1
+        fi
+        echo "(test) check-config: exit status $rc, nothing written under \$ROOT"
+        return "$rc"
         ;;
-    *) command runuser "$@" ;;
+    *) command setpriv "$@" ;;
     esac
 }
 
