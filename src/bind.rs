@@ -345,7 +345,11 @@ impl Bound {
     /// Sets [`Bound::timers`] and [`Bound::timer_names`] from what the conditions read, and
     /// indexes the timers by step.
     pub fn set_timers(&mut self, timers: Vec<(usize, u32)>, names: HashMap<String, usize>) {
-        self.timer_index = timers.iter().enumerate().map(|(k, &(s, _))| (s, k)).collect();
+        self.timer_index = timers
+            .iter()
+            .enumerate()
+            .map(|(k, &(s, _))| (s, k))
+            .collect();
         self.timers = timers;
         self.timer_names = names;
     }
