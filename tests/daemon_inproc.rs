@@ -799,3 +799,108 @@ fn a_stop_ends_the_write_backs_wait() {
     drop(viewer);
     assert!(took < Duration::from_millis(500), "the stop took {took:?}");
 }
+
+// ---------------------------------------------------------------------------------------------
+// A folder the outputs cannot be written to, fixed by a permission change (issue 27, item 5)
+// ---------------------------------------------------------------------------------------------
+
+/// A daemon of an unprivileged user (the binary, as `nobody`: root may write anywhere) and a
+/// project folder it may read but not write (what `cp -r` of a `0755` folder gives the service):
+/// the first compile fails with E604. Its inputs were all read, so the hash check found nothing
+/// to do afterwards; now the permission fix of the folder (`chmod`) compiles it without an edit,
+/// and so does a `touch` of the folder. A `touch` of an input still starts nothing.
+#[test]
+fn a_project_whose_outputs_could_not_be_written_compiles_after_its_folder_is_fixed() {
+    use std::os::unix::fs::PermissionsExt as _;
+    let Some(mut nobody) = common::as_nobody("run the daemon as a user a folder can refuse") else {
+        return;
+    };
+    let w = Workspace::new();
+    fs::set_permissions(&w.root, fs::Permissions::from_mode(0o755)).unwrap();
+    fs::set_permissions(w.ws(), fs::Permissions::from_mode(0o755)).unwrap();
+    let p = w.project("P");
+    let run = w.root.join("run");
+    fs::create_dir(&run).unwrap();
+    for d in [&p, &run] {
+        std::os::unix::fs::chown(d, Some(65534), Some(65534)).unwrap();
+    }
+    for f in FILES {
+        std::os::unix::fs::chown(p.join(f), Some(65534), Some(65534)).unwrap();
+    }
+    fs::set_permissions(&p, fs::Permissions::from_mode(0o555)).unwrap();
+    let ev = run.join("events.jsonl");
+    let mut child = nobody
+        .arg(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["watch", "--settle", "50", "--events"])
+        .arg(&ev)
+        .arg(&p)
+        .env("XDG_RUNTIME_DIR", &run)
+        .env_remove("RUNTIME_DIRECTORY")
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let events = || -> Vec<serde_json::Value> {
+        read_string(&ev)
+            .lines()
+            .filter_map(|l| serde_json::from_str(l).ok())
+            .collect()
+    };
+    let count = |what: &str| events().iter().filter(|e| is(e, what)).count();
+    let result = (|| -> Result<(), String> {
+        if !wait_until(Duration::from_secs(20), || count("compile-failed") >= 1) {
+            return Err("no compile-failed in the unwritable folder".into());
+        }
+        let failed = events()
+            .into_iter()
+            .find(|e| is(e, "compile-failed"))
+            .unwrap();
+        if codes(&failed) != ["E604"] || !failed.to_string().contains("Permission denied") {
+            return Err(format!("not E604 Permission denied: {failed}"));
+        }
+        // Nothing else happens by itself.
+        sleep(Duration::from_millis(300));
+        if count("compile-started") != 1 {
+            return Err("a compile without a change".into());
+        }
+        // The fix: the folder made writable.
+        fs::set_permissions(&p, fs::Permissions::from_mode(0o755)).unwrap();
+        if !wait_until(Duration::from_secs(10), || {
+            count("compile-succeeded") == 1 && count("write-back") == 1
+        }) {
+            return Err("not compiled after the folder's permission was fixed".into());
+        }
+        if !read_string(&src_of(&p)).contains("PTP") {
+            return Err("no program written".into());
+        }
+        // `touch` of an input: nothing; `touch` of the folder: one compile.
+        let touch = |path: &Path| {
+            let ok = std::process::Command::new("touch")
+                .arg(path)
+                .status()
+                .unwrap()
+                .success();
+            assert!(ok);
+        };
+        touch(&p.join("sfc.xml"));
+        sleep(Duration::from_millis(500));
+        if count("compile-started") != 2 {
+            return Err("a touch of an input started a compile".into());
+        }
+        touch(&p);
+        if !wait_until(Duration::from_secs(10), || count("compile-succeeded") == 2) {
+            return Err("a touch of the project folder did not compile it".into());
+        }
+        sleep(Duration::from_millis(300));
+        if count("compile-started") != 3 {
+            return Err("more than one compile for a touch of the folder".into());
+        }
+        Ok(())
+    })();
+    let _ = child.kill();
+    let _ = child.wait();
+    if let Err(e) = result {
+        panic!("{e}:\n{}", read_string(&ev));
+    }
+}

@@ -4,7 +4,9 @@
 //! configuration and unit name the same moved paths. Then what planners do on the first day:
 //! a planner in the shared group with umask 022 makes a new project folder (it must compile:
 //! no E604), the outputs are group-writable, and the planner saves the blackboard in place
-//! after the daemon's write-back.
+//! after the daemon's write-back. A project copied in whole with `cp -r` fails with E604 as the
+//! troubleshooting section says, and its fix there (its `sh` block, run as written) makes it
+//! compile without an edit; no file ends up executable.
 //!
 //! Real users and groups are made (`skillpost`, `planning`, a planner) when missing and removed
 //! afterwards. Skipped with `skipped: <why>` when not root or a tool is missing (the test fails
@@ -50,8 +52,21 @@ fn have(tool: &str) -> bool {
         .is_ok_and(|s| s.success())
 }
 
-/// The `sh` blocks of the guide, in order.
+/// The `sh` blocks of the guide's steps (before its troubleshooting section), in order.
 fn steps(guide: &str) -> Vec<String> {
+    sh_blocks(guide.split("\n## Troubleshooting").next().unwrap())
+}
+
+/// The `sh` blocks of the guide's troubleshooting section: fixes, run by the test where their
+/// problem is made.
+fn fixes(guide: &str) -> Vec<String> {
+    guide
+        .split_once("\n## Troubleshooting")
+        .map(|(_, t)| sh_blocks(t))
+        .unwrap_or_default()
+}
+
+fn sh_blocks(guide: &str) -> Vec<String> {
     let mut out = Vec::new();
     let mut cur: Option<String> = None;
     for line in guide.lines() {
@@ -494,14 +509,115 @@ fn the_install_guide_works_as_written_and_planners_keep_working() {
     });
     fs::remove_dir_all(&bare).unwrap();
 
-    let status = Command::new(root.join("usr/local/bin/skillpost"))
-        .args(["status"])
-        .env("RUNTIME_DIRECTORY", root.join("run/skillpost"))
+    // Issue 27, item 5: a planner copies a whole project in with `cp -r` (umask 022, the
+    // source folder 0755). The copy keeps the source's mode, so the folder's ACL mask is `r-x`
+    // and the first compile fails with E604, as the troubleshooting table says; its fix (the
+    // `sh` block of the troubleshooting section, run as written on this folder) makes the
+    // project compile without any edit.
+    fs::set_permissions(&sample, fs::Permissions::from_mode(0o755)).unwrap();
+    let copied = root.join("srv/planning/projects/Line 2");
+    let o = as_planner("umask 022 && cp -r \"$1\" \"$2\"", &[&sample, &copied]);
+    assert!(o.status.success(), "{o:?}");
+    let copied_key = copied.display().to_string();
+    let failed_e604 = || {
+        events(&events_file).iter().any(|e| {
+            e["event"] == "compile-failed"
+                && e["project"] == copied_key.as_str()
+                && e["diagnostics"][0]["code"] == "E604"
+                && e["diagnostics"][0]["message"]
+                    .as_str()
+                    .is_some_and(|m| m.contains("Permission denied"))
+        })
+    };
+    wait_for("E604 in the project copied with cp -r", failed_e604);
+    let mode = fs::metadata(&copied).unwrap().mode() & 0o7777;
+    println!("copied project folder: mode {mode:o} (the ACL mask r-x)");
+    assert_eq!(
+        mode & 0o070,
+        0o050,
+        "cp -r kept the source's 0755: {mode:o}"
+    );
+    assert_eq!(succeeded(&copied_key), 0);
+    let fix = fixes(GUIDE);
+    assert_eq!(
+        fix.len(),
+        1,
+        "one fix in the troubleshooting section: {fix:#?}"
+    );
+    let example = root.join("srv/planning/projects/Line 2");
+    let fix = moved(&fix[0], &root_s);
+    assert!(
+        fix.contains(&format!("\"{}\"", example.display())),
+        "the fix names the example folder: {fix}"
+    );
+    let o = Command::new("bash")
+        .args(["-c", &format!("set -euo pipefail\n{fix}")])
         .output()
         .unwrap();
-    let table = String::from_utf8_lossy(&status.stdout);
+    assert!(o.status.success(), "the troubleshooting fix: {o:?}");
+    wait_for(
+        "the copied project to compile after the fix, without an edit",
+        || succeeded(&copied_key) > 0,
+    );
+    wait_for("the copied project's write-back", || {
+        events(&events_file).iter().any(|e| {
+            e["event"] == "write-back"
+                && e["project"] == copied_key.as_str()
+                && e["written"] == true
+        })
+    });
+    for out in ["Blackboard.src", "Blackboard.dat"] {
+        assert!(copied.join(out).is_file(), "{out} written");
+    }
+    // Nothing of the first day is group-executable (step 3's ACLs, the daemon's files, the fix).
+    let mut files = Vec::new();
+    let mut dirs = vec![root.join("srv/planning")];
+    while let Some(d) = dirs.pop() {
+        for e in fs::read_dir(&d).unwrap().flatten() {
+            let t = e.file_type().unwrap();
+            if t.is_dir() {
+                dirs.push(e.path());
+            } else if t.is_file() {
+                files.push(e.path());
+            }
+        }
+    }
+    assert!(files.len() >= 15, "{files:?}");
+    for f in &files {
+        let m = fs::metadata(f).unwrap().mode();
+        assert_eq!(
+            m & 0o111,
+            0,
+            "{} is executable: {:o}",
+            f.display(),
+            m & 0o7777
+        );
+    }
+
+    // (The state file follows within 2 s: its writes are rate-limited.)
+    let status = || {
+        let o = Command::new(root.join("usr/local/bin/skillpost"))
+            .args(["status"])
+            .env("RUNTIME_DIRECTORY", root.join("run/skillpost"))
+            .output()
+            .unwrap();
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    // (NoAcl, removed above, is listed until the daemon forgets it.)
+    let all_ok = |table: &str| {
+        [&key, &cell_key, &copied_key].iter().all(|k| {
+            table
+                .lines()
+                .any(|l| l.starts_with(&format!("{k} ")) && l.contains(" ok "))
+        })
+    };
+    let end = Instant::now() + Duration::from_secs(5);
+    while !all_ok(&status()) && Instant::now() < end {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let table = status();
     println!("{table}");
-    assert!(table.contains("2 projects, all compiled"), "{table}");
+    assert!(all_ok(&table), "{table}");
     let journal = fs::read_to_string(root.join("journal.log")).unwrap_or_default();
     assert!(
         !journal.contains("NewCell: E604") && !journal.contains("Zelle_A: E604"),

@@ -22,7 +22,8 @@
 //!   [`Daemon::parallel`] at once; projects never wait for each other's events.
 //! - A change starts a compile only if an input's bytes changed: every input's content hash is
 //!   kept from the last compile (our own write-back updates it), so reads, `touch`, saves of the
-//!   same bytes and our own writes start nothing.
+//!   same bytes and our own writes start nothing. (An attribute change of the project folder
+//!   itself compiles without the check: `route`.)
 //! - The watched directories are exactly: each project folder and its parent (to see the folder
 //!   deleted and created again), the folders of every file the last compile read, and each root
 //!   and its direct subfolders.

@@ -157,6 +157,14 @@ impl Daemon {
             });
             // The folder itself: a compile that could not list it knows no inputs.
             let folder = paths.iter().any(|changed| p.spec.path.starts_with(changed));
+            // The project folder's own permissions, group, ACL or times (`chmod -R g+rwX`,
+            // `setfacl`, `touch` of the folder; never one of the daemon's writes): compiled
+            // without the hash check. A compile whose outputs or write-back could not be
+            // written (E604: a folder copied in with `cp -r` under umask 022) read every input
+            // fine, so the hash check found nothing to do after the fix, until a content edit.
+            if paths.contains(&p.spec.path) {
+                p.force = true;
+            }
             if let Some((input, _)) = unreadable {
                 let input = input.clone();
                 p.changed.insert(input);

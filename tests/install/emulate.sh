@@ -1,7 +1,8 @@
 # Sourced before the steps of docs/DAEMON-INSTALL.md by tests/install.rs. The steps run as
 # written, with the host's paths moved under $ROOT; this file plays what a temporary root cannot
-# have: systemd (`systemctl`) and `cargo build` (the test's binary is already in
-# target/release/skillpost), and checks that step 4's `--check-config` writes nothing.
+# have: systemd (`systemctl`), `apt-get install` (a package must be there already) and
+# `cargo build` (the test's binary is already in target/release/skillpost), and checks that
+# step 4's `--check-config` writes nothing.
 # Everything else (useradd, groupadd, usermod, install, strip, sed, chgrp, chmod, find, setfacl,
 # setpriv, runuser, systemd-analyze) is the real command.
 #
@@ -14,6 +15,27 @@ JOURNAL="$ROOT/journal.log"
 step() { printf '\n$ %s\n' "$*" >&2; }
 
 cargo() { echo "(test) not run: cargo $* (target/release/skillpost is the test's binary)"; }
+
+# The test does not install packages on the machine: each package named must be installed
+# already (the test checked for its tools before it started), else the step fails, as it would
+# on a host without the package and without network access.
+apt-get() {
+    local a pkg missing=0
+    [ "$1" = install ] || { echo "(test) apt-get $* is not played" >&2; return 1; }
+    for a in "${@:2}"; do
+        case "$a" in -*) continue ;; esac
+        pkg="$a"
+        if dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q 'install ok installed'; then
+            echo "(test) not run: apt-get install $pkg (installed)"
+        elif [ "$pkg" = acl ] && command -v setfacl >/dev/null; then
+            echo "(test) not run: apt-get install $pkg (setfacl is there)"
+        else
+            echo "(test) $pkg is not installed and the test installs nothing" >&2
+            missing=1
+        fi
+    done
+    return "$missing"
+}
 
 # A fresh host has no `skillpost` user; a host where it exists keeps it (and the test does not
 # remove it).
