@@ -904,3 +904,36 @@ fn a_project_whose_outputs_could_not_be_written_compiles_after_its_folder_is_fix
         panic!("{e}:\n{}", read_string(&ev));
     }
 }
+
+/// Issue 27, item 5: a reload retries a project whose last compile could not write its outputs
+/// (E604), as an administrator does after fixing the cause. Here the cause is a folder named
+/// like the program's `.src`; removing it is no input change, so nothing else compiles again.
+#[test]
+fn a_reload_retries_a_project_whose_outputs_could_not_be_written() {
+    let w = Workspace::new();
+    let p = w.project("P");
+    let src = src_of(&p);
+    let _ = fs::remove_file(&src);
+    fs::create_dir(&src).unwrap();
+    let config = w.config(&format!("[[project]]\npath = \"{}\"\n", p.display()));
+    let d = InProc::with_config(&config);
+    d.wait_for("E604 for the folder named like the output", WAIT, |e| {
+        is_for(e, "compile-failed", &p) && codes(e).first().map(String::as_str) == Some("E604")
+    });
+    let fixed = d.mark();
+    fs::remove_dir(&src).unwrap();
+    sleep(Duration::from_millis(SETTLE_MS * 6));
+    assert_eq!(
+        count_after(&d.events(), "compile-started", &p, fixed),
+        0,
+        "the fix alone started a compile: {}",
+        dump(&d.events())
+    );
+    let mark = d.mark();
+    d.reload();
+    d.wait_for("the retry after the reload", WAIT, |e| {
+        is_after(e, "compile-succeeded", &p, mark)
+    });
+    assert!(src.is_file());
+    d.stop(WAIT);
+}

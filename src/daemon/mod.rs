@@ -519,9 +519,31 @@ impl Daemon {
         match loaded {
             Ok(c) => {
                 let (added, removed) = self.apply_config(c, now);
+                // New projects, and those whose last compile could not write (E604: an
+                // administrator fixed the folder's permissions and reloads), compile now.
+                let retry: Vec<PathBuf> = self
+                    .projects
+                    .keys()
+                    .filter(|k| {
+                        !added.contains(*k)
+                            && self
+                                .sink
+                                .state()
+                                .failed_with(&k.display().to_string(), "E604")
+                    })
+                    .cloned()
+                    .collect();
                 for k in &added {
                     if let Some(p) = self.projects.get_mut(k) {
                         p.trigger = Some("reload");
+                        p.sched.immediately(now);
+                    }
+                }
+                for k in &retry {
+                    if let Some(p) = self.projects.get_mut(k) {
+                        // Its inputs are as they were: the compile must not be skipped for it.
+                        p.trigger = Some("reload");
+                        p.force = true;
                         p.sched.immediately(now);
                     }
                 }

@@ -248,6 +248,17 @@ impl Tracker {
         self.path.as_deref()
     }
 
+    /// Whether `project`'s last compile failed with the error `code` first (`E604`: its
+    /// outputs or write-back could not be written).
+    pub fn failed_with(&self, project: &str, code: &str) -> bool {
+        self.lock().results.get(project).is_some_and(|r| {
+            r.result == "failed"
+                && r.first_error
+                    .as_deref()
+                    .is_some_and(|e| e.split([' ', ':']).next() == Some(code))
+        })
+    }
+
     fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
         self.inner.lock().unwrap_or_else(|p| p.into_inner())
     }
