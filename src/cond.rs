@@ -688,6 +688,117 @@ impl Lexer {
     }
 }
 
+/// The standard functions a condition may use, as a wired block or called in ST (SPEC 3.1),
+/// as messages list them.
+pub const STANDARD_FUNCTIONS: &str =
+    "AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, ADD, SUB, MUL, SEL and MOVE";
+
+/// What a standard function computes, made operators of the expression.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Function {
+    /// `AND`, `OR`, `XOR`, `ADD`, `MUL`: over all its operands.
+    Fold(BinOp),
+    /// `SUB`: over exactly two.
+    Two(BinOp),
+    /// `EQ`, `NE`, `GT`, `GE`, `LT`, `LE`: IEC's chain, `GT(a, b, c)` is `a > b AND b > c`.
+    Chain(BinOp),
+    Not,
+    Move,
+    /// `SEL(G, IN0, IN1)`: `IN1` when `G`, else `IN0`.
+    Sel,
+}
+
+impl Function {
+    /// The standard function of this name (any case), if it is one of
+    /// [`STANDARD_FUNCTIONS`].
+    pub fn named(name: &str) -> Option<Function> {
+        Some(match name.trim().to_ascii_uppercase().as_str() {
+            "AND" => Function::Fold(BinOp::And),
+            "OR" => Function::Fold(BinOp::Or),
+            "XOR" => Function::Fold(BinOp::Xor),
+            "ADD" => Function::Fold(BinOp::Add),
+            "MUL" => Function::Fold(BinOp::Mul),
+            "SUB" => Function::Two(BinOp::Sub),
+            "EQ" => Function::Chain(BinOp::Eq),
+            "NE" => Function::Chain(BinOp::Ne),
+            "GT" => Function::Chain(BinOp::Gt),
+            "GE" => Function::Chain(BinOp::Ge),
+            "LT" => Function::Chain(BinOp::Lt),
+            "LE" => Function::Chain(BinOp::Le),
+            "NOT" => Function::Not,
+            "MOVE" => Function::Move,
+            "SEL" => Function::Sel,
+            _ => return None,
+        })
+    }
+
+    /// The formal parameters of its block, in operand order; `None`: all of the block's inputs,
+    /// in order.
+    pub fn formals(self) -> Option<&'static [&'static str]> {
+        match self {
+            Function::Fold(_) => None,
+            Function::Two(_) | Function::Chain(_) => Some(&["IN1", "IN2"]),
+            Function::Not | Function::Move => Some(&["IN"]),
+            Function::Sel => Some(&["G", "IN0", "IN1"]),
+        }
+    }
+
+    /// How many operands a call takes: at least, at most.
+    fn arity(self) -> (usize, usize) {
+        match self {
+            Function::Fold(_) | Function::Chain(_) => (2, usize::MAX),
+            Function::Two(_) => (2, 2),
+            Function::Not | Function::Move => (1, 1),
+            Function::Sel => (3, 3),
+        }
+    }
+
+    /// The expression of the function over `args` (at least one; as many as
+    /// [`Function::formals`] names where it names them), every new node spanning `span`.
+    pub fn apply(self, args: Vec<Expr>, span: Range<usize>) -> Expr {
+        let bin = |op, a: Expr, b: Expr| Expr {
+            kind: ExprKind::Bin(op, Box::new(a), Box::new(b)),
+            span: span.clone(),
+        };
+        let mut it = args.into_iter();
+        let first = it.next().expect("an operand at least");
+        match self {
+            Function::Fold(op) | Function::Two(op) => it.fold(first, |acc, a| bin(op, acc, a)),
+            Function::Chain(op) => {
+                let mut prev = first;
+                let mut out: Option<Expr> = None;
+                for next in it {
+                    let part = bin(op, prev, next.clone());
+                    out = Some(match out {
+                        None => part,
+                        Some(acc) => bin(BinOp::And, acc, part),
+                    });
+                    prev = next;
+                }
+                out.unwrap_or(prev)
+            }
+            Function::Not => Expr {
+                kind: ExprKind::Not(Box::new(first)),
+                span: span.clone(),
+            },
+            Function::Move => first,
+            Function::Sel => {
+                let g = first;
+                let (in0, in1) = (it.next().expect("IN0"), it.next().expect("IN1"));
+                let not_g = Expr {
+                    kind: ExprKind::Not(Box::new(g.clone())),
+                    span: span.clone(),
+                };
+                bin(
+                    BinOp::Or,
+                    bin(BinOp::And, g, in1),
+                    bin(BinOp::And, not_g, in0),
+                )
+            }
+        }
+    }
+}
+
 struct Parser<'t> {
     text: &'t str,
     toks: Vec<(Tok, Range<usize>)>,
@@ -824,22 +935,13 @@ impl Parser<'_> {
     /// or more (IEC's chain: `GT(a, b, c)` is `a > b AND b > c`), `SEL(G, IN0, IN1)` and
     /// `MOVE(x)`, as the blocks of a wired condition.
     fn call(&mut self, name: &str, r: Range<usize>, depth: usize) -> Result<Expr, SyntaxError> {
-        let f = name.to_ascii_uppercase();
-        let arity: (usize, usize) = match f.as_str() {
-            "AND" | "OR" | "XOR" => (2, usize::MAX),
-            "EQ" | "NE" | "GT" | "GE" | "LT" | "LE" => (2, usize::MAX),
-            "NOT" | "MOVE" => (1, 1),
-            "SEL" => (3, 3),
-            "ADD" | "MUL" => (2, usize::MAX),
-            "SUB" => (2, 2),
-            _ => {
-                return Err(SyntaxError {
-                    at: r,
-                    message: format!(
-                        "function `{name}` is not part of the condition language (AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, ADD, SUB, MUL, SEL and MOVE are)"
-                    ),
-                });
-            }
+        let Some(f) = Function::named(name) else {
+            return Err(SyntaxError {
+                at: r,
+                message: format!(
+                    "function `{name}` is not part of the condition language ({STANDARD_FUNCTIONS} are)"
+                ),
+            });
         };
         let open = self.toks[self.pos].1.clone();
         self.pos += 1;
@@ -870,10 +972,12 @@ impl Parser<'_> {
             }
         }
         let close = self.toks[self.pos - 1].1.clone();
-        if args.len() < arity.0 || args.len() > arity.1 {
-            let wanted = match arity {
-                (a, b) if a == b => format!("{a}"),
-                (a, _) => format!("at least {a}"),
+        let (least, most) = f.arity();
+        if args.len() < least || args.len() > most {
+            let wanted = if least == most {
+                format!("{least}")
+            } else {
+                format!("at least {least}")
             };
             return Err(SyntaxError {
                 at: r.start..close.end,
@@ -883,63 +987,7 @@ impl Parser<'_> {
                 ),
             });
         }
-        let span = self.span(r.start..close.end);
-        let bin = |op, a: Expr, b: Expr| Expr {
-            kind: ExprKind::Bin(op, Box::new(a), Box::new(b)),
-            span: span.clone(),
-        };
-        let cmp = |op: BinOp, args: Vec<Expr>| {
-            let mut parts = args.windows(2).map(|w| bin(op, w[0].clone(), w[1].clone()));
-            let first = parts.next().expect("two operands at least");
-            parts.fold(first, |acc, p| bin(BinOp::And, acc, p))
-        };
-        let mut it = args.into_iter();
-        Ok(match f.as_str() {
-            "AND" | "OR" | "XOR" | "ADD" | "MUL" | "SUB" => {
-                let op = match f.as_str() {
-                    "AND" => BinOp::And,
-                    "OR" => BinOp::Or,
-                    "XOR" => BinOp::Xor,
-                    "ADD" => BinOp::Add,
-                    "MUL" => BinOp::Mul,
-                    _ => BinOp::Sub,
-                };
-                let first = it.next().expect("two operands at least");
-                it.fold(first, |acc, a| bin(op, acc, a))
-            }
-            "NOT" => Expr {
-                kind: ExprKind::Not(Box::new(it.next().expect("one operand"))),
-                span: span.clone(),
-            },
-            "MOVE" => it.next().expect("one operand"),
-            "SEL" => {
-                let (g, in0, in1) = (
-                    it.next().expect("G"),
-                    it.next().expect("IN0"),
-                    it.next().expect("IN1"),
-                );
-                let not_g = Expr {
-                    kind: ExprKind::Not(Box::new(g.clone())),
-                    span: span.clone(),
-                };
-                bin(
-                    BinOp::Or,
-                    bin(BinOp::And, g, in1),
-                    bin(BinOp::And, not_g, in0),
-                )
-            }
-            _ => {
-                let op = match f.as_str() {
-                    "EQ" => BinOp::Eq,
-                    "NE" => BinOp::Ne,
-                    "GT" => BinOp::Gt,
-                    "GE" => BinOp::Ge,
-                    "LT" => BinOp::Lt,
-                    _ => BinOp::Le,
-                };
-                cmp(op, it.collect())
-            }
-        })
+        Ok(f.apply(args, self.span(r.start..close.end)))
     }
 
     fn unary(&mut self, depth: usize) -> Result<Expr, SyntaxError> {

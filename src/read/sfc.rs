@@ -2181,7 +2181,7 @@ struct Wiring<'a> {
 }
 
 /// The blocks a wired condition may use (SPEC.md 3.1), as messages list them.
-const WIRED_BLOCKS: &str = "AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, ADD, SUB, MUL, SEL and MOVE";
+const WIRED_BLOCKS: &str = crate::cond::STANDARD_FUNCTIONS;
 
 /// Why a wired condition cannot use a block of type `ty` (upper case) that is not one of
 /// [`WIRED_BLOCKS`]: what the block is and what to do instead, said after the block's name.
@@ -2369,40 +2369,13 @@ impl Wiring<'_> {
                     .unwrap_or_default()
                     .trim()
                     .to_ascii_uppercase();
-                /// What a block of the list computes.
-                enum Block {
-                    /// AND, OR, XOR, ADD, MUL over all its inputs.
-                    Fold(BinOp),
-                    Not,
-                    Move,
-                    /// EQ, NE, GT, GE, LT, LE, SUB over IN1 and IN2.
-                    Compare(BinOp),
-                    Sel,
-                }
                 // The block's type first: a block outside the list is the error, whatever its
                 // inputs are (a TON's `PT`, an SR fed back from the TON's output).
-                let block = match ty.as_str() {
-                    "AND" => Block::Fold(BinOp::And),
-                    "OR" => Block::Fold(BinOp::Or),
-                    "XOR" => Block::Fold(BinOp::Xor),
-                    "ADD" => Block::Fold(BinOp::Add),
-                    "MUL" => Block::Fold(BinOp::Mul),
-                    "SUB" => Block::Compare(BinOp::Sub),
-                    "NOT" => Block::Not,
-                    "MOVE" => Block::Move,
-                    "EQ" => Block::Compare(BinOp::Eq),
-                    "NE" => Block::Compare(BinOp::Ne),
-                    "GT" => Block::Compare(BinOp::Gt),
-                    "GE" => Block::Compare(BinOp::Ge),
-                    "LT" => Block::Compare(BinOp::Lt),
-                    "LE" => Block::Compare(BinOp::Le),
-                    "SEL" => Block::Sel,
-                    _ => {
-                        return Err(wiring_error(
-                            at,
-                            format!("a wired condition uses {named}{}", refused_block(&ty)),
-                        ));
-                    }
+                let Some(function) = crate::cond::Function::named(&ty) else {
+                    return Err(wiring_error(
+                        at,
+                        format!("a wired condition uses {named}{}", refused_block(&ty)),
+                    ));
                 };
                 let mut ins: Vec<(&str, Expr)> = Vec::new();
                 for (formal, refs) in &n.formal {
@@ -2418,47 +2391,29 @@ impl Wiring<'_> {
                     }
                     ins.push((formal.as_str(), self.any_of(refs, at, visiting)?));
                 }
-                let input =
-                    |ins: &mut Vec<(&str, Expr)>, f: &str| -> Result<Expr, Box<Diagnostic>> {
-                        match ins.iter().position(|(n, _)| n.eq_ignore_ascii_case(f)) {
-                            Some(k) => Ok(ins.remove(k).1),
-                            None => Err(wiring_error(at, format!("{named} has no input {f}"))),
+                // The operands in the function's order: its formal parameters, or all inputs.
+                let args: Vec<Expr> = match function.formals() {
+                    None => ins.into_iter().map(|(_, e)| e).collect(),
+                    Some(formals) => {
+                        let mut args = Vec::with_capacity(formals.len());
+                        for f in formals {
+                            match ins.iter().position(|(n, _)| n.eq_ignore_ascii_case(f)) {
+                                Some(k) => args.push(ins.remove(k).1),
+                                None => {
+                                    return Err(wiring_error(
+                                        at,
+                                        format!("{named} has no input {f}"),
+                                    ));
+                                }
+                            }
                         }
-                    };
-                match block {
-                    Block::Fold(op) => {
-                        let mut it = ins.into_iter().map(|(_, e)| e);
-                        let first = it
-                            .next()
-                            .ok_or_else(|| wiring_error(at, format!("{named} has no inputs")))?;
-                        Ok(it.fold(first, |a, b| Self::bin(op, a, b, at)))
+                        args
                     }
-                    Block::Not => Ok(Expr {
-                        kind: ExprKind::Not(Box::new(input(&mut ins, "IN")?)),
-                        span: at.range.clone(),
-                    }),
-                    Block::Move => input(&mut ins, "IN"),
-                    Block::Compare(op) => {
-                        let a = input(&mut ins, "IN1")?;
-                        let b2 = input(&mut ins, "IN2")?;
-                        Ok(Self::bin(op, a, b2, at))
-                    }
-                    Block::Sel => {
-                        let g = input(&mut ins, "G")?;
-                        let in0 = input(&mut ins, "IN0")?;
-                        let in1 = input(&mut ins, "IN1")?;
-                        let not_g = Expr {
-                            kind: ExprKind::Not(Box::new(g.clone())),
-                            span: at.range.clone(),
-                        };
-                        Ok(Self::bin(
-                            BinOp::Or,
-                            Self::bin(BinOp::And, g, in1, at),
-                            Self::bin(BinOp::And, not_g, in0, at),
-                            at,
-                        ))
-                    }
+                };
+                if args.is_empty() {
+                    return Err(wiring_error(at, format!("{named} has no inputs")));
                 }
+                Ok(function.apply(args, at.range.clone()))
             }
             other => Err(wiring_error(
                 at,
