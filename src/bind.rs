@@ -330,7 +330,7 @@ pub struct Bound {
     pub timers: Vec<(usize, u32)>,
     /// The step time names the conditions use (keys: `wait.t`) and their step.
     pub timer_names: HashMap<String, usize>,
-    /// Step → its position in [`Bound::timers`] (built by [`Bound::index_timers`]).
+    /// Step → its position in [`Bound::timers`] (built by [`Bound::set_timers`]).
     pub timer_index: HashMap<usize, usize>,
 }
 
@@ -424,13 +424,59 @@ fn steps_before(sfc: &Sfc, by_id: &HashMap<u64, usize>, t: usize) -> Vec<usize> 
     out
 }
 
-/// Every element by `localId`.
-fn local_ids(sfc: &Sfc) -> HashMap<u64, usize> {
-    sfc.elements
-        .iter()
-        .enumerate()
-        .map(|(i, e)| (e.local_id, i))
-        .collect()
+/// The step times of a chart's conditions, checked (SPEC.md 3.1): the steps by name and the
+/// elements by `localId`, built at the first dotted name (most charts read no step time).
+#[derive(Default)]
+struct StepTimes {
+    steps: Option<StepNames>,
+    by_id: Option<HashMap<u64, usize>>,
+}
+
+impl StepTimes {
+    /// The steps of the chart by name, once a condition has a dotted name (`None` before).
+    fn names(&mut self, sfc: &Sfc, c: &crate::model::Condition) -> Option<&StepNames> {
+        if self.steps.is_none() && c.expr.names().iter().any(|(n, _)| n.contains('.')) {
+            self.steps = Some(StepNames::new(sfc));
+        }
+        self.steps.as_ref()
+    }
+
+    /// The step times transition `t` (condition `c`) reads, each `(name, step)`; a problem with
+    /// one (`step_time_problem`) is an error at it, and the name is left out.
+    fn read_by<'c>(
+        &mut self,
+        sfc: &Sfc,
+        t: usize,
+        c: &'c crate::model::Condition,
+        in_cell: bool,
+        diags: &mut Diagnostics,
+    ) -> Vec<(&'c str, usize)> {
+        let mut out = Vec::new();
+        if self.names(sfc, c).is_none() {
+            return out;
+        }
+        for (n, at) in c.expr.names() {
+            let Some((step, count)) = self.steps.as_ref().and_then(|s| s.step_time(n)) else {
+                continue;
+            };
+            let by_id = self.by_id.get_or_insert_with(|| {
+                sfc.elements
+                    .iter()
+                    .enumerate()
+                    .map(|(i, e)| (e.local_id, i))
+                    .collect()
+            });
+            match step_time_problem(sfc, by_id, t, n, step, count, in_cell) {
+                Some(why) => diags.push(
+                    Diagnostic::error(Code::BadCondition, format!("condition `{}`: {why}", c.text))
+                        .at(Span::new(sfc.file, at))
+                        .element(format!("localId {}", sfc.elements[t].local_id)),
+                ),
+                None => out.push((n, step)),
+            }
+        }
+        out
+    }
 }
 
 /// Why transition `t` cannot read `name`, the time of `step` (`count` steps have its name), if
@@ -1195,9 +1241,7 @@ pub fn conditions(
     // The first condition that reads a step's time, for a diagnostic about timers.
     let mut first_timed: Option<usize> = None;
     let res = resource.map(|r| &bb.resources[r]);
-    // Built at the first dotted name: most charts read no step time.
-    let mut steps: Option<StepNames> = None;
-    let mut by_id: Option<HashMap<u64, usize>> = None;
+    let mut times = StepTimes::default();
     for (ei, e) in sfc.elements.iter().enumerate() {
         let ElementKind::Transition(Some(c)) = &e.kind else {
             continue;
@@ -1205,10 +1249,7 @@ pub fn conditions(
         if only.is_some_and(|o| !o.contains(&ei)) {
             continue;
         }
-        if steps.is_none() && c.expr.names().iter().any(|(n, _)| n.contains('.')) {
-            steps = Some(StepNames::new(sfc));
-        }
-        let step_names = steps.as_ref();
+        let step_names = times.names(sfc, c);
         let lookup = |n: &str| {
             if step_names.is_some_and(|s| s.step_time(n).is_some()) {
                 return Some(Ty::Time);
@@ -1258,28 +1299,18 @@ pub fn conditions(
             };
             diags.push(d.at(at).element(label));
         }
-        for (n, at) in c.expr.names() {
-            if let Some((step, count)) = steps.as_ref().and_then(|s| s.step_time(n)) {
-                let at = Span::new(sfc.file, at);
-                let label = format!("localId {}", e.local_id);
-                let ids = by_id.get_or_insert_with(|| local_ids(sfc));
-                let problem = step_time_problem(sfc, ids, ei, n, step, count, only.is_some());
-                if let Some(why) = problem {
-                    diags.push(
-                        Diagnostic::error(
-                            Code::BadCondition,
-                            format!("condition `{}`: {why}", c.text),
-                        )
-                        .at(at)
-                        .element(label),
-                    );
-                    continue;
-                }
-                if timed_set.insert(step) {
-                    timed.push(step);
-                }
-                timer_names.insert(crate::names::key(n), step);
-                first_timed.get_or_insert(ei);
+        let read = times.read_by(sfc, ei, c, only.is_some(), diags);
+        for &(n, step) in &read {
+            if timed_set.insert(step) {
+                timed.push(step);
+            }
+            timer_names.insert(crate::names::key(n), step);
+            first_timed.get_or_insert(ei);
+        }
+        let step_names = times.steps.as_ref();
+        for (n, _) in c.expr.names() {
+            // A step's time (read, or refused above) is no signal.
+            if step_names.is_some_and(|s| s.step_time(n).is_some()) {
                 continue;
             }
             if let Some(r) = res
@@ -1380,32 +1411,13 @@ fn number_timers(
 /// Checks the conditions' types as far as they do not depend on names (`--sfc`: no
 /// blackboard, no signals): `3 AND TRUE` is an error, `a AND 3` too, `a AND b` is not.
 pub fn check_conditions_unresolved(sfc: &Sfc, diags: &mut Diagnostics) {
-    let mut steps: Option<StepNames> = None;
-    let mut by_id: Option<HashMap<u64, usize>> = None;
+    let mut times = StepTimes::default();
     for (ei, e) in sfc.elements.iter().enumerate() {
         let ElementKind::Transition(Some(c)) = &e.kind else {
             continue;
         };
-        let names = c.expr.names();
-        if steps.is_none() && names.iter().any(|(n, _)| n.contains('.')) {
-            steps = Some(StepNames::new(sfc));
-        }
-        for (n, at) in &names {
-            if let Some((step, count)) = steps.as_ref().and_then(|s| s.step_time(n)) {
-                let ids = by_id.get_or_insert_with(|| local_ids(sfc));
-                if let Some(why) = step_time_problem(sfc, ids, ei, n, step, count, false) {
-                    diags.push(
-                        Diagnostic::error(
-                            Code::BadCondition,
-                            format!("condition `{}`: {why}", c.text),
-                        )
-                        .at(Span::new(sfc.file, at.clone()))
-                        .element(format!("localId {}", e.local_id)),
-                    );
-                }
-            }
-        }
-        let step_names = steps.as_ref();
+        times.read_by(sfc, ei, c, false, diags);
+        let step_names = times.steps.as_ref();
         let lookup = |n: &str| {
             step_names
                 .and_then(|s| s.step_time(n))
