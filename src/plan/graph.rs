@@ -239,32 +239,45 @@ pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
     let mut succ_count = vec![0usize; n];
     let mut seen: std::collections::HashSet<usize> = std::collections::HashSet::new();
     let mut lost_jumps = Vec::new();
-    // Convergences that gather only jumps, found to a fixed point (one gathers another's).
+    // Convergences that gather only jumps (one may gather another's): each convergence counts
+    // its inputs that are neither a jump nor such a convergence; one whose count falls to 0 is
+    // one, and lowers the counts of the convergences it feeds. Linear, in any document order.
     let mut only_jumps = vec![false; n];
-    let gathers = |e: &crate::model::Element, only_jumps: &[bool]| {
-        matches!(e.kind, ElementKind::SelectionConvergence)
-            && !e.inputs.is_empty()
-            && e.inputs.iter().all(|(r, _)| {
-                ids.get(*r).is_some_and(|p| {
-                    matches!(sfc.elements[p].kind, ElementKind::JumpStep(_)) || only_jumps[p]
-                })
-            })
-    };
     if sfc
         .elements
         .iter()
         .any(|e| matches!(e.kind, ElementKind::JumpStep(_)))
     {
-        loop {
-            let mut changed = false;
-            for (i, e) in sfc.elements.iter().enumerate() {
-                if !only_jumps[i] && gathers(e, &only_jumps) {
-                    only_jumps[i] = true;
-                    changed = true;
+        let is_conv =
+            |e: &crate::model::Element| matches!(e.kind, ElementKind::SelectionConvergence);
+        let mut others = vec![0usize; n];
+        let mut fed: HashMap<usize, Vec<usize>> = HashMap::new();
+        let mut ready = Vec::new();
+        for (i, e) in sfc.elements.iter().enumerate() {
+            if !is_conv(e) || e.inputs.is_empty() {
+                continue;
+            }
+            for (r, _) in e.inputs.iter() {
+                match ids.get(*r) {
+                    Some(p) if matches!(sfc.elements[p].kind, ElementKind::JumpStep(_)) => {}
+                    Some(p) if is_conv(&sfc.elements[p]) => {
+                        others[i] += 1;
+                        fed.entry(p).or_default().push(i);
+                    }
+                    _ => others[i] += 1,
                 }
             }
-            if !changed {
-                break;
+            if others[i] == 0 {
+                ready.push(i);
+            }
+        }
+        while let Some(i) = ready.pop() {
+            only_jumps[i] = true;
+            for &c in fed.get(&i).map(Vec::as_slice).unwrap_or_default() {
+                others[c] -= 1;
+                if others[c] == 0 {
+                    ready.push(c);
+                }
             }
         }
     }
