@@ -14,6 +14,7 @@ use crate::load::{FileSource, FsSource};
 
 use super::config::{self, ProjectSpec};
 use super::events::{Counts, Event, EventSink, OutputInfo};
+use super::settle::Run;
 
 /// The code of the warning that a project's program name was derived (made a KRL name from a
 /// folder or blackboard name; a daemon-only code: the command line is given the name).
@@ -44,6 +45,15 @@ pub(super) enum Outcome {
     },
     /// The project could not be set up (no blackboard): reported.
     Failed,
+    /// An early run ([`Run::Early`]) that did not compile: nothing was reported or written.
+    /// The event loop compiles again once the inputs have been quiet for the whole period, with
+    /// what this run was given.
+    Deferred {
+        changed: Vec<PathBuf>,
+        trigger: &'static str,
+        /// The run skipped the hash check.
+        forced: bool,
+    },
 }
 
 use crate::load::hash_bytes;
@@ -251,6 +261,9 @@ pub(super) struct Job {
     pub(super) known: Option<HashMap<PathBuf, Option<u64>>>,
     pub(super) changed: Vec<PathBuf>,
     pub(super) trigger: &'static str,
+    /// Early (after a complete write, a failure is not reported), settled, or the confirmation
+    /// of an early run's failure.
+    pub(super) run: Run,
     pub(super) may_retry: bool,
     /// Which retry a half-written file would cause (1 for the first).
     pub(super) attempt: u32,
@@ -376,6 +389,9 @@ impl Job {
         let project = self.project();
         // Only when an input's bytes changed (or a new blackboard appeared): reads, `touch`,
         // saves of the same bytes and our own writes start nothing, not even an event.
+        // An early run says nothing until it knows it compiled: its failure is not reported
+        // (the inputs may be half of a save of several files), and then no event may name it.
+        let mut detected = None;
         if let Some(known) = &self.known
             && !known.is_empty()
         {
@@ -393,15 +409,27 @@ impl Job {
                 return Outcome::Unchanged;
             }
             differ.sort();
-            self.sink.emit(
-                Some(&project),
-                Event::ChangeDetected {
-                    paths: differ.iter().map(|p| p.display().to_string()).collect(),
-                },
-            );
+            detected = Some(Event::ChangeDetected {
+                paths: differ.iter().map(|p| p.display().to_string()).collect(),
+            });
         }
-        self.started();
+        let early = self.run == Run::Early;
+        let deferred = |job: Job| Outcome::Deferred {
+            forced: job.known.is_none(),
+            changed: job.changed,
+            trigger: job.trigger,
+        };
+        let announce = |job: &Job, detected: &mut Option<Event>| {
+            if let Some(e) = detected.take() {
+                job.sink.emit(Some(&job.project()), e);
+            }
+            job.started();
+        };
+        if !early {
+            announce(&self, &mut detected);
+        }
         let (blackboard, program) = match config::resolve_project(&self.spec) {
+            Err(_) if early => return deferred(self),
             Ok(x) => x,
             Err(why) => {
                 self.failed(
@@ -451,12 +479,21 @@ impl Job {
         let mut inputs = fs.seen.into_inner().unwrap_or_else(|p| p.into_inner());
         add_link_targets(&mut inputs);
         let ms = || started.elapsed().as_millis() as u64;
+        if early {
+            if c.has_errors() || compile::folder_replaced(&c).is_some() {
+                tracing::debug!(
+                    "{project}: the early compile failed; again when the inputs are quiet"
+                );
+                return deferred(self);
+            }
+            announce(&self, &mut detected);
+        }
         if c.has_errors() {
             // A file whose bytes differ now from those read is being written right now: the
             // writer is still at it, and such an attempt never counts towards the limit (on a
             // loaded machine a burst of saves caught it half-written four times in a row and
             // ended in `compile-failed` while the saves went on).
-            if let Some((file, moving)) = half_written(&c, &inputs)
+            if let Some((file, moving)) = half_written(&c, &inputs, self.run == Run::Confirm)
                 && (self.may_retry || moving)
                 && !fs
                     .own
@@ -641,10 +678,13 @@ pub(super) fn add_link_targets(inputs: &mut HashMap<PathBuf, Option<u64>>) {
 /// unreadable text) in a regular file whose bytes differ now from those read, or, saved within
 /// the last second, differ [`STILL_WRITING`] later. Returns that file and `true` (its bytes are
 /// moving). A file that is not regular, or whose bytes stay, is not being written: the failure
-/// is reported at once.
+/// is reported at once. `complete`: the watch saw the save end (closed or renamed into place)
+/// and the inputs quiet for the whole period since: a file saved a moment ago is not looked at
+/// again.
 pub(super) fn half_written(
     c: &Compilation,
     read: &HashMap<PathBuf, Option<u64>>,
+    complete: bool,
 ) -> Option<(PathBuf, bool)> {
     c.diagnostics.iter().find_map(|d| {
         if !matches!(
@@ -680,7 +720,7 @@ pub(super) fn half_written(
             .ok()
             .and_then(|t| t.elapsed().ok())
             .is_some_and(|age| age < Duration::from_secs(1));
-        if recent {
+        if recent && !complete {
             if open.is_none() && meta.len() == 0 {
                 return Some((file, false));
             }
@@ -774,7 +814,7 @@ mod tests {
         let read = HashMap::from([(sfc.clone(), Some(crate::load::ContentHash::new().finish()))]);
         // The file's text is not the one compiled, so the error has no line, but it still names
         // the file: the daemon tries again instead of failing the run.
-        assert_eq!(half_written(&c, &read), Some((sfc, true)));
+        assert_eq!(half_written(&c, &read, false), Some((sfc, true)));
     }
 
     #[test]
@@ -800,7 +840,10 @@ mod tests {
         );
         assert!(c.has_errors(), "an empty SFC does not compile");
         let read = HashMap::from([(sfc.clone(), Some(crate::load::ContentHash::new().finish()))]);
-        assert!(half_written(&c, &read).is_some(), "a save in progress");
+        assert!(
+            half_written(&c, &read, false).is_some(),
+            "a save in progress"
+        );
         // The writer closes without writing: an empty SFC, complete (the next save compiles).
         drop(writer);
         let aged = std::time::SystemTime::now() - Duration::from_secs(5);
@@ -810,7 +853,7 @@ mod tests {
             .unwrap()
             .set_modified(aged)
             .unwrap();
-        assert_eq!(half_written(&c, &read), None);
+        assert_eq!(half_written(&c, &read, false), None);
     }
 
     #[test]

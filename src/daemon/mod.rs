@@ -370,6 +370,7 @@ impl Daemon {
             },
             changed,
             trigger,
+            run: p.sched.run(),
             may_retry: p.retries < MAX_RETRIES,
             attempt: p.retries + 1,
             confine: !self.config.allow_outside,
@@ -416,7 +417,9 @@ impl Daemon {
     }
 
     fn finish_report(&mut self, r: Report, now: Instant) {
-        if matches!(r.outcome, Outcome::Unchanged) && self.run_ids.get(&r.key) == Some(&r.run_id) {
+        if matches!(r.outcome, Outcome::Unchanged | Outcome::Deferred { .. })
+            && self.run_ids.get(&r.key) == Some(&r.run_id)
+        {
             // No event named this run: the next one takes its run_id, so they stay consecutive.
             self.run_ids.insert(r.key.clone(), r.run_id - 1);
         }
@@ -427,6 +430,18 @@ impl Daemon {
             Outcome::Unchanged | Outcome::Failed => {
                 p.retries = 0;
                 p.sched.finished(now);
+            }
+            Outcome::Deferred {
+                changed,
+                trigger,
+                forced,
+            } => {
+                // The early run said nothing: the next run reports what this one was given.
+                p.changed.extend(changed);
+                p.trigger = Some(trigger);
+                p.force |= forced;
+                p.sched.finished(now);
+                p.sched.confirm(now);
             }
             Outcome::Retry { counted } => {
                 p.force = true;

@@ -307,35 +307,43 @@ impl Daemon {
             }
             (Some(_), None) => {
                 self.detach_root(root);
-                self.attach_root(root, Some("the root was removed"));
+                // Between its removal and here another folder may have taken its name (a root
+                // replaced by two renames, looked at in between): then it is watched again.
+                if self.attach_root(root, Some("the root was removed")) {
+                    self.root_back(root, true, now);
+                }
             }
             (_, Some(_)) => {
                 let replaced = r.id.is_some();
                 self.detach_root(root);
                 if self.attach_root(root, None) {
-                    let backend = self.watchers.backend_of(root).unwrap_or(Backend::Native);
-                    self.sink.emit(
-                        None,
-                        Event::Watching {
-                            root: Some(root.display().to_string()),
-                            blackboard: None,
-                            backend: backend.as_str(),
-                            reason: Some(
-                                if replaced {
-                                    "the root was replaced"
-                                } else {
-                                    "the root exists now"
-                                }
-                                .into(),
-                            ),
-                            program: None,
-                        },
-                    );
-                    self.discover_in(root, now);
-                    self.look_for_missing_folders(now);
+                    self.root_back(root, replaced, now);
                 }
             }
         }
+    }
+
+    /// A root watched again (it appeared, or another folder took its name): `watching`, and its
+    /// projects.
+    fn root_back(&mut self, root: &Path, replaced: bool, now: Instant) {
+        let backend = self.watchers.backend_of(root).unwrap_or(Backend::Native);
+        let reason = if replaced {
+            "the root was replaced"
+        } else {
+            "the root exists now"
+        };
+        self.sink.emit(
+            None,
+            Event::Watching {
+                root: Some(root.display().to_string()),
+                blackboard: None,
+                backend: backend.as_str(),
+                reason: Some(reason.into()),
+                program: None,
+            },
+        );
+        self.discover_in(root, now);
+        self.look_for_missing_folders(now);
     }
 
     /// The spec of the project in the subfolder `dir` of `root`, with the root's settings.

@@ -56,8 +56,13 @@ impl Daemon {
 
     pub(super) fn route(&mut self, e: &notify::Event, now: Instant) {
         use notify::EventKind as K;
-        use notify::event::{AccessKind, AccessMode, MetadataKind, ModifyKind};
+        use notify::event::{AccessKind, AccessMode, MetadataKind, ModifyKind, RenameMode};
         let kind = e.kind;
+        // inotify's rename gives `From` (old name), `To` (new name), then `Both` with the two:
+        // each name was routed already, and `Both` must not undo what `To` said (complete).
+        if matches!(kind, K::Modify(ModifyKind::Name(RenameMode::Both))) {
+            return;
+        }
         // Reads and metadata-only changes (`touch`, chmod) never change bytes.
         let closed_write = matches!(kind, K::Access(AccessKind::Close(AccessMode::Write)));
         if matches!(kind, K::Access(_)) && !closed_write {
@@ -74,6 +79,9 @@ impl Daemon {
             kind,
             K::Modify(ModifyKind::Data(_)) | K::Modify(ModifyKind::Any)
         );
+        // The writer is done with the file: it closed it after writing, or renamed it into
+        // place (an atomic save). Only the native watch says so; polling never does.
+        let complete = closed_write || matches!(kind, K::Modify(ModifyKind::Name(RenameMode::To)));
         // Only these say that a project folder itself came or went.
         let structural = matches!(
             kind,
@@ -124,7 +132,11 @@ impl Daemon {
                 }
                 p.changed.insert(path.clone());
                 p.trigger.get_or_insert("change");
-                p.sched.change(now);
+                if complete && p.backend == Backend::Native && p.writing.is_empty() {
+                    p.sched.completed(now);
+                } else {
+                    p.sched.change(now);
+                }
             }
         }
     }

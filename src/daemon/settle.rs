@@ -1,11 +1,36 @@
 //! When to compile: a quiet period after the last change, capped while changes keep coming, one
 //! compile at a time per project, and exactly one follow-up for changes during a compile.
 //!
+//! A save that ends in a complete write (the writer closed the file, or renamed it into place)
+//! is compiled after a short [`QUICK`] window instead of the quiet period, an *early* run, when
+//! no other write completed within the quiet period before it (a stream of saves is coalesced
+//! as before). An early run that fails reports nothing; [`Scheduler::confirm`] then compiles again
+//! once the inputs have been quiet for the whole period, and that run reports (docs/DAEMON.md,
+//! "When a change compiles").
+//!
 //! [`Scheduler`] is pure state: the caller passes the time (`tokio::time::Instant`, so tests run
 //! under tokio's paused clock) and arms a timer at [`Scheduler::deadline`].
 
 use std::time::Duration;
 use tokio::time::Instant;
+
+/// How long after a complete write (closed, or renamed into place) its compile starts: other
+/// files of the same save (a tool writing the SFC and the blackboard in one go, an editor's
+/// backup removed after its rename) arrive within it. Never longer than the quiet period.
+pub const QUICK: Duration = Duration::from_millis(5);
+
+/// What a compile the scheduler starts is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Run {
+    /// After the quiet period (or at once: startup, rescan).
+    Settled,
+    /// After [`QUICK`]: the burst ended in a complete write. A failure is not reported; the
+    /// caller calls [`Scheduler::confirm`].
+    Early,
+    /// The run after an early one that failed: the inputs were quiet for the whole period since
+    /// a complete write.
+    Confirm,
+}
 
 /// One project's compile schedule.
 #[derive(Debug, Clone)]
@@ -14,11 +39,19 @@ pub struct Scheduler {
     max_wait: Duration,
     /// The first change of the current burst.
     first: Option<Instant>,
+    /// The last change of the current burst (or of the last run's, for [`Scheduler::confirm`]).
+    last: Option<Instant>,
     /// When the burst is considered settled.
     deadline: Option<Instant>,
+    /// What the run at the deadline will be.
+    next: Run,
+    /// What the running (or last) run is.
+    current: Run,
     running: bool,
     /// A change arrived while compiling.
     pending: bool,
+    /// When the last write was seen complete.
+    last_complete: Option<Instant>,
 }
 
 impl Scheduler {
@@ -28,10 +61,18 @@ impl Scheduler {
             settle,
             max_wait: max_wait.max(settle),
             first: None,
+            last: None,
             deadline: None,
+            next: Run::Settled,
+            current: Run::Settled,
             running: false,
             pending: false,
+            last_complete: None,
         }
+    }
+
+    fn quick(&self) -> Duration {
+        QUICK.min(self.settle)
     }
 
     /// Takes a new quiet period and cap (a reloaded configuration); the state stays.
@@ -47,7 +88,41 @@ impl Scheduler {
             return;
         }
         let first = *self.first.get_or_insert(now);
+        self.last = Some(now);
+        self.next = Run::Settled;
         self.deadline = Some((now + self.settle).min(first + self.max_wait));
+    }
+
+    /// A write was seen complete at `now` (the file closed after writing, or renamed into
+    /// place) and no input is open for writing: compile after [`QUICK`], unless another change
+    /// comes first. A change like any other during a compile, or when another write completed
+    /// less than the quiet period before (the saves come in a stream, or a tool writes several
+    /// files).
+    pub fn completed(&mut self, now: Instant) {
+        let stream = self.last_complete.is_some_and(|l| now < l + self.settle);
+        self.last_complete = Some(now);
+        if self.running || stream {
+            self.change(now);
+            return;
+        }
+        self.first.get_or_insert(now);
+        self.last = Some(now);
+        self.next = Run::Early;
+        let quick = now + self.quick();
+        self.deadline = Some(self.deadline.map_or(quick, |d| d.min(quick)));
+    }
+
+    /// An early run failed: compile again when the inputs have been quiet for the whole period
+    /// since the burst's last change (at once if they have). A follow-up already scheduled by a
+    /// change during the run stays what it is.
+    pub fn confirm(&mut self, now: Instant) {
+        if self.running || self.deadline.is_some() {
+            return;
+        }
+        let at = self.last.map_or(now, |l| l + self.settle).max(now);
+        self.first = Some(now);
+        self.next = Run::Confirm;
+        self.deadline = Some(at);
     }
 
     /// Wait again before compiling (a file still being written): one more quiet period, still
@@ -61,6 +136,8 @@ impl Scheduler {
         // already due, and the event loop would wake for it again and again (it did, about a
         // hundred times a second while a program kept an input open for writing).
         self.first.get_or_insert(now);
+        self.last = Some(now);
+        self.next = Run::Settled;
         self.deadline = Some(now + self.settle);
     }
 
@@ -70,6 +147,7 @@ impl Scheduler {
             self.pending = true;
         } else {
             self.first.get_or_insert(now);
+            self.next = Run::Settled;
             self.deadline = Some(now);
         }
     }
@@ -86,6 +164,7 @@ impl Scheduler {
                 self.deadline = None;
                 self.first = None;
                 self.running = true;
+                self.current = std::mem::replace(&mut self.next, Run::Settled);
                 true
             }
             _ => false,
@@ -106,6 +185,11 @@ impl Scheduler {
 
     pub fn is_running(&self) -> bool {
         self.running
+    }
+
+    /// What the running (or last) compile is.
+    pub fn run(&self) -> Run {
+        self.current
     }
 
     /// Whether a compile is waiting or running.
@@ -205,6 +289,120 @@ mod tests {
         // Compile runs 100..600 ms; three changes during it.
         let starts = drive(&[0, 200, 300, 400], Duration::from_millis(500), S * 10).await;
         assert_eq!(starts, vec![100, 700]);
+    }
+
+    #[test]
+    fn a_complete_write_compiles_after_the_quick_window() {
+        let t = Instant::now();
+        let mut s = Scheduler::new(S, S * 10);
+        // An in-place save: its writes, then its close.
+        s.change(t);
+        s.completed(t + Duration::from_millis(2));
+        assert_eq!(s.deadline(), Some(t + Duration::from_millis(2) + QUICK));
+        assert!(s.fire(t + Duration::from_millis(2) + QUICK));
+        assert_eq!(s.run(), Run::Early);
+        assert!(!s.finished(t + Duration::from_millis(10)));
+        assert_eq!(s.deadline(), None);
+    }
+
+    #[test]
+    fn a_change_after_a_complete_write_waits_the_whole_period() {
+        // A tool writes the SFC (closed), then starts on the blackboard.
+        let t = Instant::now();
+        let mut s = Scheduler::new(S, S * 10);
+        s.completed(t);
+        let later = t + Duration::from_millis(3);
+        s.change(later);
+        assert_eq!(s.deadline(), Some(later + S));
+        assert!(s.fire(later + S));
+        assert_eq!(s.run(), Run::Settled);
+    }
+
+    #[test]
+    fn the_quick_window_is_never_longer_than_the_quiet_period() {
+        let t = Instant::now();
+        let mut s = Scheduler::new(Duration::from_millis(1), Duration::from_secs(1));
+        s.completed(t);
+        assert_eq!(s.deadline(), Some(t + Duration::from_millis(1)));
+    }
+
+    #[test]
+    fn a_failed_early_run_is_confirmed_a_quiet_period_after_the_last_change() {
+        let t = Instant::now();
+        let mut s = Scheduler::new(S, S * 10);
+        s.completed(t);
+        assert!(s.fire(t + QUICK));
+        let end = t + QUICK + Duration::from_millis(4);
+        assert!(!s.finished(end));
+        s.confirm(end);
+        assert_eq!(
+            s.deadline(),
+            Some(t + S),
+            "quiet for the period since the save"
+        );
+        assert!(s.fire(t + S));
+        assert_eq!(s.run(), Run::Confirm);
+        s.finished(t + S);
+        // A long early run: quiet already when it ends, confirmed at once.
+        s.completed(t + S * 2);
+        assert!(s.fire(t + S * 2 + QUICK));
+        let end = t + S * 4;
+        s.finished(end);
+        s.confirm(end);
+        assert_eq!(s.deadline(), Some(end));
+    }
+
+    #[test]
+    fn a_change_during_an_early_run_is_what_follows_it() {
+        let t = Instant::now();
+        let mut s = Scheduler::new(S, S * 10);
+        s.completed(t);
+        assert!(s.fire(t + QUICK));
+        // The blackboard is being written while the early run compiles.
+        s.change(t + QUICK + Duration::from_millis(1));
+        let end = t + QUICK + Duration::from_millis(4);
+        assert!(s.finished(end));
+        s.confirm(end);
+        assert_eq!(
+            s.deadline(),
+            Some(end + S),
+            "the follow-up, not a confirmation"
+        );
+        assert!(s.fire(end + S));
+        assert_eq!(s.run(), Run::Settled);
+    }
+
+    #[test]
+    fn saves_in_a_stream_are_coalesced() {
+        let t = Instant::now();
+        let mut s = Scheduler::new(S, S * 10);
+        s.completed(t);
+        assert!(s.fire(t + QUICK));
+        // Saved again during the compile, and 20 ms after that save.
+        let second = t + QUICK + Duration::from_millis(1);
+        s.completed(second);
+        let end = t + QUICK + Duration::from_millis(4);
+        assert!(s.finished(end));
+        assert_eq!(s.deadline(), Some(end + S));
+        let third = second + Duration::from_millis(20);
+        s.completed(third);
+        assert_eq!(s.deadline(), Some(third + S));
+        assert!(s.fire(third + S));
+        assert_eq!(s.run(), Run::Settled);
+        s.finished(third + S);
+        // A save a quiet period after the last one: early again.
+        s.completed(third + S);
+        assert_eq!(s.deadline(), Some(third + S + QUICK));
+    }
+
+    #[test]
+    fn an_input_still_open_turns_an_early_run_into_a_settled_one() {
+        let t = Instant::now();
+        let mut s = Scheduler::new(S, S * 10);
+        s.completed(t);
+        s.postpone(t + QUICK);
+        assert!(s.fire(t + QUICK + S));
+        assert_eq!(s.run(), Run::Settled);
     }
 
     #[tokio::test(start_paused = true)]
