@@ -37,6 +37,15 @@ for t in "${targets[@]}"; do
 done
 
 if [ ${#failed[@]} -gt 0 ]; then
+  # The finding itself last, where a truncated CI log still shows it: the panic message (or
+  # libFuzzer's error) and the input, base64, when it is small.
+  for t in "${failed[@]}"; do
+    echo "fuzz smoke: $t:" >&2
+    grep -m1 -A3 -E "panicked at|ERROR: libFuzzer" "$work/$t.log" >&2 || true
+    for a in fuzz/artifacts/"$t"/*; do
+      [ -f "$a" ] && [ "$(stat -c %s "$a")" -le 4096 ] && { echo "  $a (base64):" >&2; base64 -w0 "$a" >&2; echo >&2; }
+    done
+  done
   echo "fuzz smoke: findings in: ${failed[*]} (inputs in fuzz/artifacts/)" >&2
   exit 1
 fi
