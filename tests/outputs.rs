@@ -374,3 +374,35 @@ fn cli_does_not_take_over_another_users_blackboard() {
         "a temporary file was left"
     );
 }
+
+#[test]
+fn cli_writes_back_into_a_blackboard_that_starts_with_two_boms_and_keeps_them() {
+    // A tool that wrote a BOM before text that had one already (the blackboard fuzz target's
+    // finding crash-c836d2b5 was about this shape): the write-back changes the value only, the
+    // second run finds it right.
+    let (_t, proj, _) = layout();
+    let bb = proj.join("Blackboard.aml");
+    let text = fs::read(&bb).unwrap();
+    let body = text.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&text).to_vec();
+    let body = String::from_utf8(body)
+        .unwrap()
+        .replace("<Value>none</Value>", "<Value>old.src</Value>");
+    assert!(body.contains("<Value>old.src</Value>"));
+    let mut two = b"\xEF\xBB\xBF\xEF\xBB\xBF".to_vec();
+    two.extend_from_slice(body.as_bytes());
+    fs::write(&bb, &two).unwrap();
+    let o = run(&["Blackboard.aml", "Prog"], &proj);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let after = fs::read(&bb).unwrap();
+    let expected = [
+        b"\xEF\xBB\xBF\xEF\xBB\xBF".as_slice(),
+        body.replace("<Value>old.src</Value>", "<Value>Prog.src</Value>")
+            .as_bytes(),
+    ]
+    .concat();
+    assert_eq!(after, expected, "only the value changed, both BOMs kept");
+    let o = run(&["Blackboard.aml", "Prog"], &proj);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("wrote back"), "{}", stderr(&o));
+    assert_eq!(fs::read(&bb).unwrap(), expected);
+}
