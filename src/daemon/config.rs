@@ -9,12 +9,15 @@
 //! forget_after_s = 30                          # optional, 1..=86400
 //! template = "krl.toml"                       # optional, like --template
 //! line_endings = "lf"                          # optional, "crlf" (default) or "lf"
+//! on_success = ["/usr/local/bin/deploy", "{src}"]  # optional: the deploy hook (docs/DAEMON.md)
+//! deploy_timeout_s = 60                        # optional, 1..=3600
 //! [[project]]
 //! path = "cells/Zelle_A"
 //! blackboard = "Zelle_A.aml"   # optional
 //! program = "Zelle_A"          # optional: a KRL name or a pattern ("P_{folder}")
 //! template = "a.toml"          # optional (default: the global one)
 //! line_endings = "crlf"        # optional (default: the global one)
+//! on_success = ["…"]           # optional (default: the global one); deploy_timeout_s too
 //! [[root]]
 //! path = "/srv/planning/projects"
 //! program = "{folder}"         # optional, default "{blackboard}"; template, line_endings too
@@ -79,6 +82,8 @@ pub struct Config {
     pub lf: bool,
     /// The SFC POU of every project that does not name its own (`pou`, like `--pou`).
     pub pou: Option<String>,
+    /// The deploy hook of every project that does not have its own (`on_success`).
+    pub on_success: Option<super::deploy::Hook>,
     /// Explicit projects, with the global `template`/`line_endings` already applied.
     pub projects: Vec<ProjectSpec>,
     /// Folders whose direct subfolders holding a blackboard are projects.
@@ -160,6 +165,8 @@ pub struct ProjectSpec {
     pub lf: bool,
     /// The SFC POU to use, like `--pou`.
     pub pou: Option<String>,
+    /// What runs after a compile that wrote new outputs (docs/DAEMON.md, "Deploying").
+    pub on_success: Option<super::deploy::Hook>,
 }
 
 /// A `[[root]]` entry: its folder and what its projects get.
@@ -174,6 +181,8 @@ pub struct RootSpec {
     pub lf: bool,
     /// The SFC POU of its projects (the root's, else the global one).
     pub pou: Option<String>,
+    /// The deploy hook of its projects (the root's, else the global one).
+    pub on_success: Option<super::deploy::Hook>,
 }
 
 impl RootSpec {
@@ -186,6 +195,7 @@ impl RootSpec {
             template: self.template.clone(),
             lf: self.lf,
             pou: self.pou.clone(),
+            on_success: self.on_success.clone(),
         }
     }
 }
@@ -367,7 +377,7 @@ fn parse_with(text: &str, file: &Path, files: bool) -> Result<Config, ConfigErro
         }
     };
 
-    let raw: RawConfig = toml::from_str(text).map_err(|e| at(e.span(), toml_message(&e)))?;
+    let raw: RawConfig = toml::from_str(text).map_err(|e| at(e.span(), toml_message(&e, text)))?;
 
     // A path from the file: not empty, no `~`, resolved against the file's folder.
     let path = |value: &Spanned<String>, key: &str| -> Result<PathBuf, ConfigError> {
@@ -492,6 +502,55 @@ fn parse_with(text: &str, file: &Path, files: bool) -> Result<Config, ConfigErro
         }
     };
 
+    // The deploy hook: checked where it is written; a timeout of its own or the global one.
+    let timeout_of =
+        |t: &Option<Spanned<i64>>, default: Duration| -> Result<Duration, ConfigError> {
+            let Some(v) = t else { return Ok(default) };
+            let n = *v.get_ref();
+            match u64::try_from(n) {
+                Ok(n) if super::deploy::DEPLOY_TIMEOUT_S_RANGE.contains(&n) => {
+                    Ok(Duration::from_secs(n))
+                }
+                _ => Err(at(
+                    Some(v.span()),
+                    format!(
+                        "`deploy_timeout_s` is {n}, expected {}..={} (seconds)",
+                        super::deploy::DEPLOY_TIMEOUT_S_RANGE.start(),
+                        super::deploy::DEPLOY_TIMEOUT_S_RANGE.end()
+                    ),
+                )),
+            }
+        };
+    let global_timeout = timeout_of(
+        &raw.deploy_timeout_s,
+        Duration::from_secs(super::deploy::DEFAULT_DEPLOY_TIMEOUT_S),
+    )?;
+    let hook =
+        |h: &Spanned<Vec<String>>, timeout: Duration| -> Result<super::deploy::Hook, ConfigError> {
+            super::deploy::check(h.get_ref()).map_err(|m| at(Some(h.span()), m))?;
+            let mut argv = h.get_ref().clone();
+            argv[0] = super::deploy::program_path(&argv[0], &base);
+            Ok(super::deploy::Hook { argv, timeout })
+        };
+    let on_success = raw
+        .on_success
+        .as_ref()
+        .map(|h| hook(h, global_timeout))
+        .transpose()?;
+    // A project's or root's own hook, else the global one (with its own timeout, if set).
+    let own_hook = |h: &Option<Spanned<Vec<String>>>,
+                    t: &Option<Spanned<i64>>|
+     -> Result<Option<super::deploy::Hook>, ConfigError> {
+        let timeout = timeout_of(t, global_timeout)?;
+        Ok(match h {
+            Some(h) => Some(hook(h, timeout)?),
+            None => on_success.clone().map(|mut g| {
+                g.timeout = timeout;
+                g
+            }),
+        })
+    };
+
     let mut projects: Vec<ProjectSpec> = Vec::new();
     let mut seen: Vec<(PathBuf, &Spanned<String>)> = Vec::new();
     for p in &raw.project {
@@ -512,6 +571,7 @@ fn parse_with(text: &str, file: &Path, files: bool) -> Result<Config, ConfigErro
             template,
             lf,
             pou: p.pou.clone().or_else(|| pou.clone()),
+            on_success: own_hook(&p.on_success, &p.deploy_timeout_s)?,
         });
     }
 
@@ -530,10 +590,11 @@ fn parse_with(text: &str, file: &Path, files: bool) -> Result<Config, ConfigErro
             template,
             lf,
             pou: r.pou.clone().or_else(|| pou.clone()),
+            on_success: own_hook(&r.on_success, &r.deploy_timeout_s)?,
         });
     }
 
-    Ok(Config {
+    let config = Config {
         file: Some(file.clone()),
         events,
         settle_ms,
@@ -543,9 +604,54 @@ fn parse_with(text: &str, file: &Path, files: bool) -> Result<Config, ConfigErro
         template,
         lf,
         pou,
+        on_success,
         projects,
         roots,
-    })
+    };
+    let first_hook = raw
+        .on_success
+        .iter()
+        .chain(raw.project.iter().filter_map(|p| p.on_success.as_ref()))
+        .chain(raw.root.iter().filter_map(|r| r.on_success.as_ref()))
+        .next();
+    if let Some(h) = first_hook
+        && let Some(why) = hook_from_a_planners_folder(&config)
+    {
+        return Err(at(Some(h.span()), why));
+    }
+    Ok(config)
+}
+
+/// Whether `config` sets a deploy hook although its file lies in one of its project folders or
+/// roots, where planners write: the hook would run whatever they write into the file. The
+/// sentence to refuse it with.
+pub fn hook_from_a_planners_folder(config: &Config) -> Option<String> {
+    let file = config.file.as_ref()?;
+    let any_hook = config.on_success.is_some()
+        || config.projects.iter().any(|p| p.on_success.is_some())
+        || config.roots.iter().any(|r| r.on_success.is_some());
+    if !any_hook {
+        return None;
+    }
+    let real = canonical_or_literal(file);
+    let folders = config
+        .projects
+        .iter()
+        .map(|p| ("project folder", &p.path))
+        .chain(config.roots.iter().map(|r| ("root", &r.path)));
+    for (what, folder) in folders {
+        if real.starts_with(canonical_or_literal(folder)) || file.starts_with(folder) {
+            return Some(format!(
+                "`on_success` in {}, which lies in the {what} {}: a deploy hook runs programs, \
+                 and only the daemon's own configuration may say which, never a file planners \
+                 can write; move the configuration out of the folder (say, to \
+                 /etc/skillpost/skillpost.toml)",
+                file.display(),
+                folder.display()
+            ));
+        }
+    }
+    None
 }
 
 /// The project folders of a root: its direct subfolders holding at least one `*.aml` file
@@ -635,6 +741,7 @@ pub fn merge(
                 template: config.template.clone(),
                 lf: config.lf,
                 pou: config.pou.clone(),
+                on_success: config.on_success.clone(),
                 ..ProjectSpec::default()
             });
         }
@@ -799,14 +906,24 @@ where
 }
 
 /// The parser's message, with serde's type names put in the file's terms.
-fn toml_message(e: &toml::de::Error) -> String {
+fn toml_message(e: &toml::de::Error, text: &str) -> String {
+    // The key of the line the error is on (`on_success = ...`).
+    let key = e.span().and_then(|span| {
+        let before = text.get(..span.start)?;
+        let line = &text[before.rfind('\n').map_or(0, |i| i + 1)..];
+        let (key, _) = line.split_once('=')?;
+        Some(key.trim().to_owned())
+    });
+    let sequence = if key.as_deref() == Some("on_success") {
+        "expected a list of strings: the program and its arguments, \
+         e.g. [\"/usr/local/bin/deploy\", \"{src}\"] (never a shell line)"
+    } else {
+        "expected a list of tables (write `[[project]]` or `[[root]]` with double brackets)"
+    };
     e.message()
         .trim_end()
         .replace("expected i64", "expected an integer")
-        .replace(
-            "expected a sequence",
-            "expected a list of tables (write `[[project]]` or `[[root]]` with double brackets)",
-        )
+        .replace("expected a sequence", sequence)
 }
 
 /// 1-based line and column (in characters) of a byte offset.
@@ -846,6 +963,8 @@ struct RawConfig {
     allow_outside: bool,
     max_file_size_mb: Option<Spanned<i64>>,
     forget_after_s: Option<Spanned<i64>>,
+    on_success: Option<Spanned<Vec<String>>>,
+    deploy_timeout_s: Option<Spanned<i64>>,
     #[serde(default)]
     project: Vec<RawProject>,
     #[serde(default)]
@@ -861,6 +980,8 @@ struct RawProject {
     template: Option<Spanned<String>>,
     line_endings: Option<Spanned<String>>,
     pou: Option<String>,
+    on_success: Option<Spanned<Vec<String>>>,
+    deploy_timeout_s: Option<Spanned<i64>>,
 }
 
 #[derive(Deserialize)]
@@ -871,6 +992,8 @@ struct RawRoot {
     template: Option<Spanned<String>>,
     line_endings: Option<Spanned<String>>,
     pou: Option<String>,
+    on_success: Option<Spanned<Vec<String>>>,
+    deploy_timeout_s: Option<Spanned<i64>>,
 }
 
 #[cfg(test)]
@@ -937,6 +1060,7 @@ path = "/srv/planning/projects"
                 template: None,
                 lf: false,
                 pou: None,
+                on_success: None,
                 projects: vec![
                     ProjectSpec {
                         path: "/srv/cells/Zelle_A".into(),
@@ -1489,6 +1613,57 @@ template = "t/r2.toml"
     }
 
     #[test]
+    fn deploy_hooks_are_inherited_overridden_and_checked_where_written() {
+        let c = parse(
+            "on_success = [\"deploy\", \"{src}\"]\ndeploy_timeout_s = 30\n\
+             [[project]]\npath = \"/srv/A\"\n\
+             [[project]]\npath = \"/srv/B\"\non_success = [\"bin/copy\", \"{outputs}\"]\n\
+             [[project]]\npath = \"/srv/C\"\ndeploy_timeout_s = 5\n\
+             [[root]]\npath = \"/srv/R\"\n",
+            &file(),
+        )
+        .unwrap();
+        let hook = |i: usize| c.projects[i].on_success.clone().unwrap();
+        assert_eq!(hook(0).argv, ["deploy", "{src}"]);
+        assert_eq!(hook(0).timeout, Duration::from_secs(30));
+        // A relative program path is the configuration folder's.
+        assert_eq!(hook(1).argv, ["/etc/skillpost/bin/copy", "{outputs}"]);
+        assert_eq!(hook(2).argv, ["deploy", "{src}"]);
+        assert_eq!(hook(2).timeout, Duration::from_secs(5));
+        assert_eq!(c.roots[0].on_success, c.on_success);
+        assert_eq!(
+            c.roots[0].project("/srv/R/x".into()).on_success,
+            c.on_success
+        );
+        // Without any: none, and the default timeout for a hook without one.
+        let c = parse("on_success = [\"true\"]\n", &file()).unwrap();
+        assert_eq!(c.on_success.unwrap().timeout, Duration::from_secs(60));
+        for (text, at, says) in [
+            ("on_success = []\n", (1, 14), "empty"),
+            (
+                "on_success = [\"cp\", \"{sauce}\"]\n",
+                (1, 14),
+                "unknown placeholder",
+            ),
+            ("deploy_timeout_s = 0\n", (1, 20), "1..=3600"),
+            (
+                "[[project]]\npath = \"/a\"\non_success = [\"cp\", \"x{outputs}\"]\n",
+                (3, 14),
+                "whole argument",
+            ),
+            (
+                "on_success = \"deploy {src}\"\n",
+                (1, 14),
+                "list of strings",
+            ),
+        ] {
+            let e = err(text);
+            assert_eq!((e.line, e.column), (Some(at.0), Some(at.1)), "{text}: {e}");
+            assert!(e.message.contains(says), "{text}: {e}");
+        }
+    }
+
+    #[test]
     fn merge_precedence() {
         let cwd = std::env::current_dir().unwrap();
         let file = Config {
@@ -1501,6 +1676,7 @@ template = "t/r2.toml"
             template: None,
             lf: false,
             pou: None,
+            on_success: None,
             projects: vec![ProjectSpec {
                 path: "/srv/A".into(),
                 blackboard: Some("A.aml".into()),

@@ -156,6 +156,29 @@ pub enum Event {
         #[serde(skip)]
         skipped: bool,
     },
+    /// The deploy hook of a compile starts (docs/DAEMON.md, "Deploying"): the argument vector
+    /// with its placeholders replaced.
+    DeployStarted {
+        run_id: u64,
+        argv: Vec<String>,
+    },
+    DeploySucceeded {
+        run_id: u64,
+        duration_ms: u64,
+        /// The last lines of the hook's stderr (at most 4 KiB; empty when it said nothing).
+        stderr: String,
+    },
+    DeployFailed {
+        run_id: u64,
+        duration_ms: u64,
+        exit_code: Option<i32>,
+        /// The signal that ended the hook (9 after a timeout).
+        signal: Option<i32>,
+        /// Ended (with its process group) because it ran longer than `deploy_timeout_s`.
+        timed_out: bool,
+        reason: String,
+        stderr: String,
+    },
     Reloaded {
         projects: usize,
         added: Vec<String>,
@@ -199,6 +222,9 @@ impl Event {
             Event::CompileFailed { .. } => "compile-failed",
             Event::CompileRetrying { .. } => "compile-retrying",
             Event::WriteBack { .. } => "write-back",
+            Event::DeployStarted { .. } => "deploy-started",
+            Event::DeploySucceeded { .. } => "deploy-succeeded",
+            Event::DeployFailed { .. } => "deploy-failed",
             Event::Reloaded { .. } => "reloaded",
             Event::ReloadFailed { .. } => "reload-failed",
             Event::Stopped { .. } => "stopped",
@@ -213,7 +239,9 @@ impl Event {
             Event::Stopped { reason, .. } if reason == "timeout" => Level::Error,
             Event::Rescan { reason, .. } if reason != "startup" => Level::Warn,
             Event::WriteBack { skipped: true, .. } => Level::Warn,
-            Event::CompileFailed { .. } | Event::ReloadFailed { .. } => Level::Error,
+            Event::CompileFailed { .. }
+            | Event::ReloadFailed { .. }
+            | Event::DeployFailed { .. } => Level::Error,
             _ => Level::Info,
         }
     }
@@ -1239,6 +1267,24 @@ mod tests {
                 waited_ms: Some(1),
                 skipped: false,
             },
+            Event::DeployStarted {
+                run_id: 1,
+                argv: vec!["x".into()],
+            },
+            Event::DeploySucceeded {
+                run_id: 1,
+                duration_ms: 1,
+                stderr: "x".into(),
+            },
+            Event::DeployFailed {
+                run_id: 1,
+                duration_ms: 1,
+                exit_code: Some(1),
+                signal: Some(9),
+                timed_out: true,
+                reason: "x".into(),
+                stderr: "x".into(),
+            },
             Event::Reloaded {
                 projects: 1,
                 added: vec![],
@@ -1280,9 +1326,12 @@ mod tests {
             Event::Stopped { .. } => 11,
             Event::EventsDropped { .. } => 12,
             Event::CompileRetrying { .. } => 13,
+            Event::DeployStarted { .. } => 14,
+            Event::DeploySucceeded { .. } => 15,
+            Event::DeployFailed { .. } => 16,
         };
         let seen: BTreeSet<usize> = every_event().iter().map(ordinal).collect();
-        assert_eq!(seen, (0..14).collect());
+        assert_eq!(seen, (0..17).collect());
     }
 
     /// The rows of docs/DAEMON.md's event table: (name, level, fields cell).

@@ -42,6 +42,8 @@ pub(super) enum Outcome {
         /// The write-back was skipped because another program had the blackboard open: the
         /// event loop compiles again a few times ([`super::MAX_IN_USE_ROUNDS`]).
         in_use: bool,
+        /// A successful compile that wrote at least one output: what a deploy hook is given.
+        deploy: Option<super::deploy::Context>,
     },
     /// The project could not be set up (no blackboard): reported.
     Failed,
@@ -522,6 +524,7 @@ impl Job {
                 outputs: Vec::new(),
                 again: false,
                 in_use: false,
+                deploy: None,
             };
         }
         // The folder was moved or replaced meanwhile (its inputs may come from two folders):
@@ -563,6 +566,7 @@ impl Job {
                     outputs: c.outputs.iter().map(|(p, _)| p.clone()).collect(),
                     again: false,
                     in_use: false,
+                    deploy: None,
                 };
             }
         };
@@ -647,11 +651,36 @@ impl Job {
                 },
             );
         }
+        // New bytes in some output: what a deploy hook gets (the event loop runs it, if the
+        // project has one).
+        let deploy = applied.outputs.iter().any(|(_, w)| *w).then(|| {
+            let outputs: Vec<PathBuf> = applied.outputs.iter().map(|(p, _)| p.clone()).collect();
+            let main = outputs
+                .iter()
+                .find(|p| {
+                    p.extension().is_some_and(|e| {
+                        ["src", "mod", "script"]
+                            .iter()
+                            .any(|x| e.to_string_lossy().eq_ignore_ascii_case(x))
+                    })
+                })
+                .or(outputs.first())
+                .cloned()
+                .unwrap_or_default();
+            super::deploy::Context {
+                outputs,
+                main,
+                blackboard: blackboard.clone(),
+                project: self.key.clone(),
+                program: program.name.clone(),
+            }
+        });
         Outcome::Compiled {
             inputs,
             outputs: c.outputs.iter().map(|(p, _)| p.clone()).collect(),
             again,
             in_use,
+            deploy,
         }
     }
 }

@@ -30,6 +30,7 @@
 
 pub mod check;
 pub mod config;
+pub mod deploy;
 pub mod events;
 mod job;
 pub mod journal;
@@ -94,6 +95,10 @@ impl Sources {
         }
         // Absolute (as `started.config` reports it), whatever the command line said.
         c.file = file_name;
+        // A folder of the command line may hold the configuration file too.
+        if let Some(why) = config::hook_from_a_planners_folder(&c) {
+            return Err(config::ConfigError::plain(why, c.file.clone()));
+        }
         Ok(c)
     }
 }
@@ -165,6 +170,8 @@ pub async fn run(
         sources,
         force_poll,
         ready: false,
+        deploys: HashMap::new(),
+        deploy_stop: tokio::sync::watch::channel(false).0,
     };
     sink.emit(
         None,
@@ -280,6 +287,10 @@ struct Daemon {
     sources: Sources,
     force_poll: bool,
     ready: bool,
+    /// Each project's deploy hooks, run one at a time on a task of their own.
+    deploys: HashMap<PathBuf, deploy::Worker>,
+    /// Turns true at a stop: running hooks are ended.
+    deploy_stop: tokio::sync::watch::Sender<bool>,
 }
 
 fn settle_of(c: &Config) -> Duration {
@@ -292,6 +303,23 @@ fn max_wait_of(settle: Duration) -> Duration {
 }
 
 impl Daemon {
+    /// Runs `hook` for the compile `run_id` of `key` after the project's running hook, if any
+    /// (docs/DAEMON.md, "Deploying").
+    fn deploy(&mut self, key: &Path, run_id: u64, hook: deploy::Hook, ctx: deploy::Context) {
+        if self.deploys.get(key).is_some_and(|w| w.is_finished()) {
+            self.deploys.remove(key);
+        }
+        let worker = self.deploys.entry(key.to_owned()).or_insert_with(|| {
+            deploy::Worker::start(self.sink.clone(), self.deploy_stop.subscribe())
+        });
+        worker.submit(deploy::Request {
+            project: key.display().to_string(),
+            run_id,
+            hook,
+            ctx,
+        });
+    }
+
     fn next_deadline(&self) -> Option<Instant> {
         self.projects
             .values()
@@ -461,7 +489,11 @@ impl Daemon {
                 outputs,
                 again,
                 in_use,
+                deploy,
             } => {
+                if let (Some(hook), Some(ctx)) = (&p.spec.on_success, deploy) {
+                    self.deploy(&r.key, r.run_id, hook.clone(), ctx);
+                }
                 p.retries = 0;
                 // Another program had the blackboard open (each write-back already waits about
                 // 1.3 s for it): a few more rounds, then the next edit tries again.

@@ -52,6 +52,13 @@ impl Daemon {
         let queued: BTreeSet<PathBuf> = self.queue.drain(..).collect();
         let timeout = stop_timeout();
         let deadline = Instant::now() + timeout;
+        // Running deploy hooks are ended (SIGTERM to their process group, SIGKILL 2 s later)
+        // while the compiles finish; waited for within the same timeout.
+        self.deploy_stop.send_replace(true);
+        let hooks: Vec<_> = std::mem::take(&mut self.deploys)
+            .into_values()
+            .map(|w| w.into_task())
+            .collect();
         while self.running > 0 {
             tokio::select! {
                 r = done.recv() => match r {
@@ -64,6 +71,9 @@ impl Daemon {
                 _ = tokio::time::sleep_until(deadline) => break,
                 Some(Control::Stop(_)) = control.recv() => break,
             }
+        }
+        for h in hooks {
+            let _ = tokio::time::timeout_at(deadline, h).await;
         }
         let result = if self.running == 0 {
             tracing::info!(reason = %reason, "stopped");

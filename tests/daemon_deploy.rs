@@ -1,0 +1,357 @@
+//! The deploy hook (`on_success`, docs/DAEMON.md "Deploying"), through the daemon in this
+//! process and its control channel: success (the worked example: copy to a controller share with
+//! `install -m 0644`), failure with its stderr, a timeout that kills the hook's process group, a
+//! hook that hangs while new compiles arrive (they go on; the newest waiting hook runs after it),
+//! a stop while a hook runs, a hook printing megabytes, and a configuration in a project folder
+//! that tries to set a hook.
+
+mod inproc;
+
+use std::fs;
+use std::path::Path;
+use std::thread::sleep;
+use std::time::{Duration, Instant};
+
+use inproc::*;
+use serde_json::Value;
+
+fn deploys(evs: &[Value], event: &str, project: &Path) -> Vec<Value> {
+    evs.iter()
+        .filter(|e| is_for(e, event, project))
+        .cloned()
+        .collect()
+}
+
+/// A configuration with one project and its hook (TOML array of strings).
+fn config(w: &Workspace, project: &Path, hook: &[&str], extra: &str) -> std::path::PathBuf {
+    let argv: Vec<String> = hook.iter().map(|a| format!("{a:?}")).collect();
+    w.config(&format!(
+        "{extra}\n[[project]]\npath = \"{}\"\non_success = [{}]\n",
+        project.display(),
+        argv.join(", ")
+    ))
+}
+
+/// Whether a process with this pid exists (and is no zombie).
+fn alive(pid: u32) -> bool {
+    fs::read_to_string(format!("/proc/{pid}/stat"))
+        .map(|s| {
+            let state = s.rsplit(')').next().unwrap_or("").trim_start();
+            !state.starts_with('Z')
+        })
+        .unwrap_or(false)
+}
+
+fn pid_in(file: &Path) -> u32 {
+    let mut text = String::new();
+    wait_until(WAIT, || {
+        text = fs::read_to_string(file).unwrap_or_default();
+        text.trim().parse::<u32>().is_ok()
+    });
+    text.trim().parse().unwrap()
+}
+
+#[test]
+fn a_successful_compile_installs_its_outputs_on_the_share() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let share = w.root.join("share");
+    fs::create_dir(&share).unwrap();
+    let share_s = format!("{}/", share.display());
+    // The worked example of docs/DAEMON.md.
+    let c = config(
+        &w,
+        &a,
+        &["install", "-m", "0644", "{src}", "{dat}", &share_s],
+        "",
+    );
+    let d = InProc::with_config(&c);
+    let evs = d.wait_for("the startup deploy", WAIT, |e| {
+        is_for(e, "deploy-succeeded", &a) || is_for(e, "deploy-failed", &a)
+    });
+    let ok = deploys(&evs, "deploy-succeeded", &a);
+    assert_eq!(ok.len(), 1, "{}", dump(&evs));
+    let started = deploys(&evs, "deploy-started", &a);
+    assert_eq!(
+        started[0]["argv"],
+        serde_json::json!([
+            "install",
+            "-m",
+            "0644",
+            a.join("Blackboard.src").display().to_string(),
+            a.join("Blackboard.dat").display().to_string(),
+            share_s
+        ])
+    );
+    // After the outputs: the compile's run, its files as written.
+    let compiled = evs
+        .iter()
+        .find(|e| is_for(e, "compile-succeeded", &a))
+        .unwrap();
+    assert_eq!(started[0]["run_id"], compiled["run_id"]);
+    assert!(seq(&started[0]) > seq(compiled));
+    let wb = evs.iter().find(|e| is_for(e, "write-back", &a)).unwrap();
+    assert!(seq(&started[0]) > seq(wb), "after the write-back");
+    assert_eq!(
+        fs::read(share.join("Blackboard.src")).unwrap(),
+        fs::read(a.join("Blackboard.src")).unwrap()
+    );
+    use std::os::unix::fs::PermissionsExt as _;
+    let mode = fs::metadata(share.join("Blackboard.dat"))
+        .unwrap()
+        .permissions()
+        .mode();
+    assert_eq!(mode & 0o777, 0o644);
+    // An edit: deployed again, with the new program.
+    let mark = d.mark();
+    fs::write(a.join("sfc.xml"), sfc_with_x(321)).unwrap();
+    d.wait_for("the edit's deploy", WAIT, |e| {
+        is_after(e, "deploy-succeeded", &a, mark)
+    });
+    assert!(read_string(&share.join("Blackboard.src")).contains(&ptp_with_x(321)));
+    // Same bytes again (a comment-free save of the same content): nothing new, no deploy.
+    let mark = d.mark();
+    fs::write(a.join("sfc.xml"), sfc_with_x(321)).unwrap();
+    sleep(Duration::from_millis(SETTLE_MS * 8));
+    assert!(
+        !d.events()
+            .iter()
+            .any(|e| is_after(e, "deploy-started", &a, mark)),
+        "{}",
+        dump(&d.events())
+    );
+    d.stop(WAIT);
+}
+
+#[test]
+fn a_failing_hook_reports_its_status_and_the_end_of_its_stderr() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let c = config(
+        &w,
+        &a,
+        &[
+            "sh",
+            "-c",
+            "echo first line >&2; echo \"cannot reach $1\" >&2; exit 3",
+            "sh",
+            "{program}",
+        ],
+        "",
+    );
+    let d = InProc::with_config(&c);
+    let evs = d.wait_for("the failed deploy", WAIT, |e| {
+        is_for(e, "deploy-failed", &a)
+    });
+    let f = &deploys(&evs, "deploy-failed", &a)[0];
+    assert_eq!(f["level"], "error");
+    assert_eq!(f["exit_code"], 3);
+    assert_eq!(f["timed_out"], false);
+    assert_eq!(f["stderr"], "first line\ncannot reach Blackboard");
+    assert!(f["reason"].as_str().unwrap().contains("status 3"), "{f}");
+    // A program that does not exist: said so, the daemon goes on.
+    d.stop(WAIT);
+    let w2 = Workspace::new();
+    let b = w2.project("B");
+    let c = config(&w2, &b, &["/nonexistent/deploy", "{src}"], "");
+    let d = InProc::with_config(&c);
+    let evs = d.wait_for("the failed deploy", WAIT, |e| {
+        is_for(e, "deploy-failed", &b)
+    });
+    let f = &deploys(&evs, "deploy-failed", &b)[0];
+    assert!(
+        f["reason"]
+            .as_str()
+            .unwrap()
+            .contains("cannot run /nonexistent/deploy"),
+        "{f}"
+    );
+    d.stop(WAIT);
+}
+
+#[test]
+fn a_hook_past_its_timeout_is_killed_with_its_process_group() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let pids = w.root.join("pids");
+    // The hook starts a child of its own, then waits: both must be gone after the timeout.
+    let script = format!(
+        "sleep 600 & echo $! > {p}.child; echo $$ > {p}.hook; wait",
+        p = pids.display()
+    );
+    let c = config(&w, &a, &["sh", "-c", &script], "deploy_timeout_s = 1");
+    let d = InProc::with_config(&c);
+    let hook = pid_in(&w.root.join("pids.hook"));
+    let child = pid_in(&w.root.join("pids.child"));
+    let t0 = Instant::now();
+    let evs = d.wait_for("the timeout", WAIT, |e| is_for(e, "deploy-failed", &a));
+    let f = &deploys(&evs, "deploy-failed", &a)[0];
+    assert_eq!(f["timed_out"], true, "{f}");
+    assert_eq!(f["signal"], 9, "{f}");
+    assert!(f["duration_ms"].as_u64().unwrap() >= 1000, "{f}");
+    assert!(t0.elapsed() < Duration::from_secs(4));
+    assert!(
+        wait_until(Duration::from_secs(2), || !alive(hook) && !alive(child)),
+        "the hook ({hook}) or its child ({child}) outlived the timeout"
+    );
+    d.stop(WAIT);
+}
+
+#[test]
+fn compiles_go_on_while_a_hook_hangs_and_the_newest_waiting_hook_runs_after_it() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let log = w.root.join("deployed.log");
+    let gate = w.root.join("gate");
+    // Each hook notes the x of the program it deploys; the first one waits for the gate.
+    let script = format!(
+        "grep -o 'PTP {{{{X [0-9]*' \"$1\" | head -n1 >> {log}; while [ ! -e {gate} ]; do sleep 0.05; done",
+        log = log.display(),
+        gate = gate.display()
+    );
+    let c = config(&w, &a, &["sh", "-c", &script, "sh", "{src}"], "");
+    let d = InProc::with_config(&c);
+    d.wait_for("the first hook", WAIT, |e| is_for(e, "deploy-started", &a));
+    // Three edits while it hangs: each compiles at once.
+    for x in [501, 502, 503] {
+        let mark = d.mark();
+        fs::write(a.join("sfc.xml"), sfc_with_x(x)).unwrap();
+        d.wait_for(&format!("the compile of {x} during the hook"), WAIT, |e| {
+            is_after(e, "compile-succeeded", &a, mark)
+        });
+        assert!(read_string(&src_of(&a)).contains(&ptp_with_x(x)));
+    }
+    let evs = d.events();
+    assert_eq!(
+        deploys(&evs, "deploy-started", &a).len(),
+        1,
+        "one hook at a time\n{}",
+        dump(&evs)
+    );
+    fs::write(&gate, "").unwrap();
+    let evs = d.wait_for("the second hook's end", WAIT, |e| {
+        is_for(e, "deploy-succeeded", &a) && e["run_id"].as_u64() > Some(1)
+    });
+    sleep(Duration::from_millis(300));
+    let evs = d.events().into_iter().chain(evs).collect::<Vec<_>>();
+    let started = deploys(&evs, "deploy-started", &a);
+    // The startup's hook, then only the newest of the three waiting ones.
+    let runs: std::collections::BTreeSet<u64> = started
+        .iter()
+        .map(|e| e["run_id"].as_u64().unwrap())
+        .collect();
+    assert_eq!(runs.len(), 2, "{}", dump(&evs));
+    let last_compile = evs
+        .iter()
+        .filter(|e| is_for(e, "compile-succeeded", &a))
+        .map(|e| e["run_id"].as_u64().unwrap())
+        .max()
+        .unwrap();
+    assert_eq!(runs.iter().max(), Some(&last_compile));
+    let lines = read_string(&log);
+    assert_eq!(lines.lines().count(), 2, "{lines}");
+    assert!(lines.lines().last().unwrap().contains("503"), "{lines}");
+    d.stop(WAIT);
+}
+
+#[test]
+fn a_stop_while_a_hook_runs_ends_it_within_the_stop_timeout() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let pid = w.root.join("pid");
+    // A hook that ignores SIGTERM: the stop's SIGKILL ends it.
+    let script = format!(
+        "trap '' TERM; echo $$ > {}; sleep 600 & wait; wait",
+        pid.display()
+    );
+    let c = config(&w, &a, &["sh", "-c", &script], "");
+    let d = InProc::with_config(&c);
+    let hook = pid_in(&pid);
+    d.wait_for("the hook", WAIT, |e| is_for(e, "deploy-started", &a));
+    let evs_before = d.events();
+    let took = {
+        let buf_events = evs_before.len();
+        let t = d.stop(Duration::from_secs(10));
+        assert!(buf_events > 0);
+        t
+    };
+    assert!(took < Duration::from_secs(5), "the stop took {took:?}");
+    assert!(
+        wait_until(Duration::from_secs(2), || !alive(hook)),
+        "the hook outlived the daemon"
+    );
+}
+
+#[test]
+fn a_hook_printing_megabytes_is_read_and_only_the_end_of_stderr_kept() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let c = config(
+        &w,
+        &a,
+        &[
+            "sh",
+            "-c",
+            "head -c 50000000 /dev/zero; i=0; while [ $i -lt 20000 ]; do echo \"noise $i\"; i=$((i+1)); done >&2; echo last words >&2",
+        ],
+        "",
+    );
+    let d = InProc::with_config(&c);
+    let evs = d.wait_for("the deploy", Duration::from_secs(30), |e| {
+        is_for(e, "deploy-succeeded", &a) || is_for(e, "deploy-failed", &a)
+    });
+    let ok = deploys(&evs, "deploy-succeeded", &a);
+    assert_eq!(ok.len(), 1, "{}", dump(&evs));
+    let tail = ok[0]["stderr"].as_str().unwrap();
+    assert!(tail.len() <= 4096, "{} bytes", tail.len());
+    assert!(tail.ends_with("last words"), "{tail}");
+    assert!(
+        tail.starts_with("noise "),
+        "from a line start: {}",
+        &tail[..20]
+    );
+    d.stop(WAIT);
+}
+
+#[test]
+fn a_configuration_in_a_project_folder_may_not_set_a_hook() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    // The configuration file a planner could write: in the project folder.
+    let file = a.join("skillpost.toml");
+    fs::write(
+        &file,
+        format!(
+            "settle_ms = 50\n[[project]]\npath = \"{}\"\non_success = [\"sh\", \"-c\", \"touch /tmp/owned\"]\n",
+            a.display()
+        ),
+    )
+    .unwrap();
+    let sources = skillpost::daemon::Sources {
+        config_file: Some(file.clone()),
+        ..Default::default()
+    };
+    let e = sources.load().expect_err("refused");
+    assert_eq!(e.line, Some(4), "{e:?}");
+    assert!(e.message.contains("lies in the project folder"), "{e:?}");
+    // And through the command line: exit status 2, the message, nothing run.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["watch", "--config"])
+        .arg(&file)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("on_success"), "{stderr}");
+    assert!(stderr.contains(":4:"), "located: {stderr}");
+    // The same hook from a configuration outside the folder is fine.
+    let outside = w.config(&format!(
+        "[[project]]\npath = \"{}\"\non_success = [\"true\"]\n",
+        a.display()
+    ));
+    let sources = skillpost::daemon::Sources {
+        config_file: Some(outside),
+        ..Default::default()
+    };
+    assert!(sources.load().is_ok());
+}
