@@ -628,6 +628,35 @@ fn check_config_checks_everything_and_writes_nothing() {
     assert_eq!(listing(&w.root), before);
 }
 
+/// Issue 28, deploy: `--check-config` names each deploy hook's program and whether this user
+/// can run it (a bare name in `PATH`), writing nothing and running nothing.
+#[test]
+fn check_config_checks_the_deploy_hooks_program() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let marker = w.root.join("ran");
+    let cfg = w.config(&format!(
+        "on_success = [\"touch\", \"{}\"]\n[[project]]\npath = \"ws/A\"\n\
+         [[project]]\npath = \"ws/B\"\non_success = [\"./no-such-deploy\", \"{{src}}\"]\n",
+        marker.display()
+    ));
+    copy_project(&w.ws().join("B"));
+    let before = listing(&w.root);
+    let (code, out) = check_config(&w, Command::new(bin()), &[&cfg]);
+    assert_eq!(code, Some(1), "{out}");
+    assert_eq!(listing(&w.root), before, "nothing written or run: {out}");
+    assert!(!marker.exists());
+    let touch = out.lines().find(|l| l.contains("  touch  ")).expect(&out);
+    assert!(touch.contains("ok: the deploy hook runs /"), "{touch}");
+    let missing = w.root.join("no-such-deploy");
+    let bad = out
+        .lines()
+        .find(|l| l.contains(&missing.display().to_string()))
+        .expect(&out);
+    assert!(bad.contains("does not exist or cannot be run"), "{bad}");
+    let _ = a;
+}
+
 /// Issue 27, item 3: as an unprivileged user (`nobody` when the tests run as root), an SFC the
 /// user cannot read and a project folder it cannot write to are problems: named, exit status 1,
 /// nothing written.

@@ -88,6 +88,17 @@ pub fn main(
         });
     }
     rows.push(events_row(config.events.as_deref()));
+    // Each deploy hook's program, once.
+    let mut programs: Vec<&str> = config
+        .on_success
+        .iter()
+        .chain(config.projects.iter().filter_map(|p| p.on_success.as_ref()))
+        .chain(config.roots.iter().filter_map(|r| r.on_success.as_ref()))
+        .map(|h| h.argv[0].as_str())
+        .collect();
+    programs.sort();
+    programs.dedup();
+    rows.extend(programs.into_iter().map(hook_row));
     for root in &config.roots {
         rows.push(root_row(&root.path));
         for dir in config::discover(&root.path) {
@@ -210,6 +221,36 @@ fn access(path: &Path, how: Access) -> Result<(), String> {
 }
 
 /// The events file: appended to, or created in its folder.
+/// A deploy hook's program: found (a bare name in `PATH`) and executable by this process.
+fn hook_row(program: &str) -> Row {
+    let candidates: Vec<PathBuf> = if program.contains('/') {
+        vec![PathBuf::from(program)]
+    } else {
+        std::env::var_os("PATH")
+            .map(|p| std::env::split_paths(&p).map(|d| d.join(program)).collect())
+            .unwrap_or_default()
+    };
+    let found = candidates.iter().find(|c| {
+        std::fs::metadata(c).is_ok_and(|m| m.is_file()) && access(c, Access::EXEC_OK).is_ok()
+    });
+    let verdict = match found {
+        Some(f) => Verdict::Ok(format!("the deploy hook runs {}", f.display())),
+        None if program.contains('/') => Verdict::Problem(format!(
+            "the deploy hook's program {program} does not exist or cannot be run by this user"
+        )),
+        None => Verdict::Problem(format!(
+            "the deploy hook's program `{program}` is not in PATH ({}) or cannot be run by this \
+             user; a service's PATH is short: give the absolute path",
+            std::env::var("PATH").unwrap_or_default()
+        )),
+    };
+    Row {
+        what: "(deploy)".into(),
+        folder: program.to_owned(),
+        verdict,
+    }
+}
+
 fn events_row(events: Option<&Path>) -> Row {
     let Some(file) = events else {
         return Row {
