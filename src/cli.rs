@@ -57,6 +57,11 @@ struct Args {
     #[arg(short = 'p', value_name = "B|S|F|O", action = clap::ArgAction::Append,
           value_parser = ["B", "S", "F", "O", "0", "b", "s", "f", "o"])]
     print: Vec<String>,
+    /// Draw the plan as an SVG timeline into FILE (one lane per controller, the steps' times,
+    /// the handshakes, selections and loops, the cycle time); also with --validate. Not written
+    /// when the inputs have errors
+    #[arg(long, value_name = "FILE")]
+    svg: Option<PathBuf>,
     /// How diagnostics are printed: human (stderr), short (stderr), json (one object per line,
     /// stdout)
     #[arg(long, value_enum, default_value_t = Format::Human)]
@@ -262,8 +267,8 @@ fn run(a: Args) -> u8 {
         template: a.template.clone(),
         confine_to: None,
         pou: a.pou.clone(),
-        // The SFC model only for the listings.
-        keep_model: !a.print.is_empty(),
+        // The SFC model only for the listings and the picture.
+        keep_model: !a.print.is_empty() || a.svg.is_some(),
         // Warnings not shown are not built (100,000 unused variables in one step).
         drop_warnings: !warnings,
         bind_split_from: None,
@@ -286,7 +291,50 @@ fn run(a: Args) -> u8 {
         return 2;
     }
     if c.has_errors() {
+        if let Some(svg) = &a.svg {
+            eprintln!("note: {} not drawn: the inputs have errors", svg.display());
+        }
         return status(&c, "", a.format);
+    }
+    if let Some(svg) = &a.svg {
+        let title = format!(
+            "{}: {}",
+            c.program_names
+                .first()
+                .cloned()
+                .unwrap_or_else(|| blackboard.display().to_string()),
+            c.sfc
+                .as_ref()
+                .and_then(|s| s.pou_name.clone())
+                .map_or_else(|| "the chart".to_owned(), |p| format!("the chart of {p}"))
+        );
+        let Some(picture) = compile::picture(&c, &title) else {
+            eprintln!("note: {} not drawn: the chart has no plan", svg.display());
+            return status(&c, "", a.format);
+        };
+        match crate::write::write_if_changed(svg, picture.as_bytes()) {
+            Ok(o) => say(
+                a.format == Format::Json,
+                &format!(
+                    "{} {}",
+                    if o == crate::write::WriteOutcome::Written {
+                        "wrote"
+                    } else {
+                        "unchanged"
+                    },
+                    svg.display()
+                ),
+            ),
+            Err(e) => {
+                let list = [diag::Diagnostic::error(
+                    diag::Code::CannotWrite,
+                    format!("cannot write {}: {e}", svg.display()),
+                )];
+                report(&list, &c.sources, a.format, warnings);
+                summary(&list, a.format, "the picture was not written");
+                return 2;
+            }
+        }
     }
     if a.validate {
         return status(&c, "Input validation successful!", a.format);

@@ -129,6 +129,46 @@ pub struct Compilation {
     pub folder: Option<crate::write::Folder>,
 }
 
+/// The plan as an SVG timeline ([`crate::picture`]): one lane per controller of a cell, else
+/// one. `None` without a plan (errors, or a compile that did not keep the model).
+pub fn picture(c: &Compilation, title: &str) -> Option<String> {
+    let (sfc, plan) = (c.sfc.as_ref()?, c.plan.as_ref()?);
+    let lanes = match (&c.cell, &c.blackboard) {
+        (Some(cell), Some(bb)) => {
+            let mut of = HashMap::new();
+            for (k, p) in cell.programs.iter().enumerate() {
+                plan::visit(&p.body, &mut |b| {
+                    if let plan::Block::Step(i) = b {
+                        of.insert(*i, k);
+                    }
+                });
+            }
+            crate::picture::Lanes {
+                names: cell
+                    .controllers
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &r)| {
+                        (
+                            bb.resources[r].name.text.to_string(),
+                            c.program_names.get(k).cloned().unwrap_or_default(),
+                        )
+                    })
+                    .collect(),
+                of,
+            }
+        }
+        _ => crate::picture::Lanes {
+            names: vec![(
+                c.controller.clone().unwrap_or_else(|| "the robot".into()),
+                c.program_names.first().cloned().unwrap_or_default(),
+            )],
+            of: HashMap::new(),
+        },
+    };
+    Some(crate::picture::svg(sfc, plan, &lanes, title))
+}
+
 impl Compilation {
     pub fn has_errors(&self) -> bool {
         self.diagnostics

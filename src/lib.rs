@@ -20,6 +20,7 @@
 //! - [`compile`]: the whole pipeline for one project: inputs in, outputs + diagnostics out.
 //! - [`daemon`]: `skillpost watch`, the long-running service over the same pipeline.
 //! - [`print`]: the `-pB`/`-pS`/`-pF`/`-pO` and `--info` listings.
+//! - [`picture`]: the plan as an SVG timeline (`--svg`, the daemon's `picture`).
 //! - [`diag`]: diagnostics, their codes and their rendering.
 //! - [`excerpt`]: the lines of a streamed file (the SFC) that diagnostics point into, read
 //!   again without holding the file.
@@ -42,6 +43,7 @@ pub mod load;
 pub mod model;
 pub mod names;
 pub mod paths;
+pub mod picture;
 pub mod plan;
 pub mod print;
 pub mod read;

@@ -9,7 +9,8 @@ use std::path::Path;
 /// From the bottom up.
 const ORDER: &[&str] = &[
     "names", "paths", "convert", "load", "excerpt", "diag", "cond", "value", "template", "lang",
-    "model", "read", "plan", "bind", "emit", "umask", "write", "compile", "print", "daemon", "cli",
+    "model", "read", "plan", "bind", "emit", "umask", "write", "picture", "compile", "print",
+    "daemon", "cli",
 ];
 
 fn module_of(rel: &Path) -> String {

@@ -11,6 +11,7 @@
 //! line_endings = "lf"                          # optional, "crlf" (default) or "lf"
 //! on_success = ["/usr/local/bin/deploy", "{src}"]  # optional: the deploy hook (docs/DAEMON.md)
 //! deploy_timeout_s = 60                        # optional, 1..=3600
+//! picture = true                               # optional: <program>.svg, the plan's timeline
 //! [[project]]
 //! path = "cells/Zelle_A"
 //! blackboard = "Zelle_A.aml"   # optional
@@ -84,6 +85,8 @@ pub struct Config {
     pub pou: Option<String>,
     /// The deploy hook of every project that does not have its own (`on_success`).
     pub on_success: Option<super::deploy::Hook>,
+    /// Every project that does not say otherwise draws its plan (`picture = true`).
+    pub picture: bool,
     /// Explicit projects, with the global `template`/`line_endings` already applied.
     pub projects: Vec<ProjectSpec>,
     /// Folders whose direct subfolders holding a blackboard are projects.
@@ -167,6 +170,8 @@ pub struct ProjectSpec {
     pub pou: Option<String>,
     /// What runs after a compile that wrote new outputs (docs/DAEMON.md, "Deploying").
     pub on_success: Option<super::deploy::Hook>,
+    /// Write `<program>.svg`, the plan's timeline, beside the outputs.
+    pub picture: bool,
 }
 
 /// A `[[root]]` entry: its folder and what its projects get.
@@ -183,6 +188,8 @@ pub struct RootSpec {
     pub pou: Option<String>,
     /// The deploy hook of its projects (the root's, else the global one).
     pub on_success: Option<super::deploy::Hook>,
+    /// Its projects draw their plans (the root's setting, else the global one).
+    pub picture: bool,
 }
 
 impl RootSpec {
@@ -196,6 +203,7 @@ impl RootSpec {
             lf: self.lf,
             pou: self.pou.clone(),
             on_success: self.on_success.clone(),
+            picture: self.picture,
         }
     }
 }
@@ -572,6 +580,7 @@ fn parse_with(text: &str, file: &Path, files: bool) -> Result<Config, ConfigErro
             lf,
             pou: p.pou.clone().or_else(|| pou.clone()),
             on_success: own_hook(&p.on_success, &p.deploy_timeout_s)?,
+            picture: p.picture.unwrap_or(raw.picture),
         });
     }
 
@@ -591,6 +600,7 @@ fn parse_with(text: &str, file: &Path, files: bool) -> Result<Config, ConfigErro
             lf,
             pou: r.pou.clone().or_else(|| pou.clone()),
             on_success: own_hook(&r.on_success, &r.deploy_timeout_s)?,
+            picture: r.picture.unwrap_or(raw.picture),
         });
     }
 
@@ -605,6 +615,7 @@ fn parse_with(text: &str, file: &Path, files: bool) -> Result<Config, ConfigErro
         lf,
         pou,
         on_success,
+        picture: raw.picture,
         projects,
         roots,
     };
@@ -742,6 +753,7 @@ pub fn merge(
                 lf: config.lf,
                 pou: config.pou.clone(),
                 on_success: config.on_success.clone(),
+                picture: config.picture,
                 ..ProjectSpec::default()
             });
         }
@@ -966,6 +978,8 @@ struct RawConfig {
     on_success: Option<Spanned<Vec<String>>>,
     deploy_timeout_s: Option<Spanned<i64>>,
     #[serde(default)]
+    picture: bool,
+    #[serde(default)]
     project: Vec<RawProject>,
     #[serde(default)]
     root: Vec<RawRoot>,
@@ -982,6 +996,7 @@ struct RawProject {
     pou: Option<String>,
     on_success: Option<Spanned<Vec<String>>>,
     deploy_timeout_s: Option<Spanned<i64>>,
+    picture: Option<bool>,
 }
 
 #[derive(Deserialize)]
@@ -994,6 +1009,7 @@ struct RawRoot {
     pou: Option<String>,
     on_success: Option<Spanned<Vec<String>>>,
     deploy_timeout_s: Option<Spanned<i64>>,
+    picture: Option<bool>,
 }
 
 #[cfg(test)]
@@ -1061,6 +1077,7 @@ path = "/srv/planning/projects"
                 lf: false,
                 pou: None,
                 on_success: None,
+                picture: false,
                 projects: vec![
                     ProjectSpec {
                         path: "/srv/cells/Zelle_A".into(),
@@ -1677,6 +1694,7 @@ template = "t/r2.toml"
             lf: false,
             pou: None,
             on_success: None,
+            picture: false,
             projects: vec![ProjectSpec {
                 path: "/srv/A".into(),
                 blackboard: Some("A.aml".into()),

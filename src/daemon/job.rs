@@ -473,7 +473,8 @@ impl Job {
             template: self.spec.template.clone(),
             confine_to: self.confine.then(|| self.key.clone()),
             pou: self.spec.pou.clone(),
-            keep_model: false,
+            // The chart and its plan only for the picture.
+            keep_model: self.spec.picture,
             drop_warnings: false,
             bind_split_from: None,
         };
@@ -570,8 +571,53 @@ impl Job {
                 };
             }
         };
+        // The plan's picture, an output like the others (atomic, only when changed), beside the
+        // main output; a picture that cannot be written is a warning, the programs stand.
+        let mut applied = applied;
+        let mut picture_warning = None;
+        let mut picture_path = None;
+        if self.spec.picture
+            && let Some(main) = applied.outputs.first().map(|(p, _)| p.clone())
+        {
+            let path = main.with_file_name(format!("{}.svg", program.name));
+            let title = format!(
+                "{}: {}",
+                program.name,
+                c.sfc
+                    .as_ref()
+                    .and_then(|s| s.pou_name.clone())
+                    .map_or_else(|| "the chart".to_owned(), |p| format!("the chart of {p}"))
+            );
+            let result = if inputs.contains_key(&path) {
+                Err(format!(
+                    "{} is an input of the compile: the picture is not written over it",
+                    path.display()
+                ))
+            } else {
+                match compile::picture(&c, &title) {
+                    Some(svg) => crate::write::write_if_changed(&path, svg.as_bytes())
+                        .map(|o| o == crate::write::WriteOutcome::Written)
+                        .map_err(|e| format!("cannot write the picture {}: {e}", path.display())),
+                    None => Err("no plan to draw".to_owned()),
+                }
+            };
+            match result {
+                Ok(written) => {
+                    picture_path = Some(path.clone());
+                    applied.outputs.push((path, written));
+                }
+                Err(why) => {
+                    picture_warning = Some(serde_json::json!({
+                        "severity": "warning",
+                        "code": Code::CannotWrite.as_str(),
+                        "message": why,
+                    }))
+                }
+            }
+        }
         let warnings: Vec<_> = renamed
             .into_iter()
+            .chain(picture_warning)
             .chain(
                 c.diagnostics
                     .iter()
@@ -651,10 +697,15 @@ impl Job {
                 },
             );
         }
-        // New bytes in some output: what a deploy hook gets (the event loop runs it, if the
-        // project has one).
-        let deploy = applied.outputs.iter().any(|(_, w)| *w).then(|| {
-            let outputs: Vec<PathBuf> = applied.outputs.iter().map(|(p, _)| p.clone()).collect();
+        // New bytes in some program's file: what a deploy hook gets (the event loop runs it, if
+        // the project has one). The picture is no program: never deployed, and no reason to.
+        let programs: Vec<&(PathBuf, bool)> = applied
+            .outputs
+            .iter()
+            .filter(|(p, _)| Some(p) != picture_path.as_ref())
+            .collect();
+        let deploy = programs.iter().any(|(_, w)| *w).then(|| {
+            let outputs: Vec<PathBuf> = programs.iter().map(|(p, _)| p.clone()).collect();
             let main = outputs
                 .iter()
                 .find(|p| {
@@ -677,7 +728,7 @@ impl Job {
         });
         Outcome::Compiled {
             inputs,
-            outputs: c.outputs.iter().map(|(p, _)| p.clone()).collect(),
+            outputs: applied.outputs.iter().map(|(p, _)| p.clone()).collect(),
             again,
             in_use,
             deploy,
