@@ -93,6 +93,27 @@ enum Command {
     /// Each project's last result, as the running daemons' state files tell it (exit status 0
     /// a daemon runs, 3 only a stopped daemon's state, 1 no state, 2 a state that cannot be read)
     Status(StatusArgs),
+    /// Check robot programs as the compiler checks what it writes: block structure and
+    /// DEF/MODULE layout (KRL .src/.dat, RAPID .mod/.modx/.sys, URScript .script). Exit status
+    /// 0 all pass, 1 a problem, 2 a file that cannot be read or whose language is not known
+    Check(CheckArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct CheckArgs {
+    /// The programs to check
+    #[arg(value_name = "FILE", required = true)]
+    files: Vec<PathBuf>,
+    /// The language, for files whose extension does not say it
+    #[arg(long, value_enum)]
+    language: Option<CheckLanguage>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum CheckLanguage {
+    Krl,
+    Rapid,
+    Urscript,
 }
 
 #[derive(Debug, clap::Args)]
@@ -180,6 +201,7 @@ fn run(a: Args) -> u8 {
     match a.command {
         Some(Command::Watch(w)) => return watch(w),
         Some(Command::Status(s)) => return status_command(s),
+        Some(Command::Check(c)) => return check_command(&c),
         None => {}
     }
     let fs = FsSource {
@@ -447,6 +469,95 @@ fn run(a: Args) -> u8 {
             );
             2
         }
+    }
+}
+
+/// `skillpost check FILE...`: each file's problems as `file:line:column: error: message`, then
+/// a count.
+fn check_command(a: &CheckArgs) -> u8 {
+    use crate::check::{self, Unit};
+    use crate::lang::Language;
+    let mut problems = 0usize;
+    let mut failed = 0usize;
+    let mut unreadable = false;
+    for f in &a.files {
+        let by_ext = check::language_of(f);
+        let (language, unit) = match (a.language, by_ext) {
+            (Some(l), ext) => {
+                let language = match l {
+                    CheckLanguage::Krl => Language::Krl,
+                    CheckLanguage::Rapid => Language::Rapid,
+                    CheckLanguage::Urscript => Language::UrScript,
+                };
+                let unit = match ext {
+                    Some((Language::Krl, Unit::Data)) if language == Language::Krl => Unit::Data,
+                    _ => Unit::Program,
+                };
+                (language, unit)
+            }
+            (None, Some(x)) => x,
+            (None, None) => {
+                eprintln!(
+                    "error: {}: which robot language? The extension says none of .src, .dat \
+                     (KRL), .mod, .modx, .sys (RAPID), .script (URScript); give --language",
+                    f.display()
+                );
+                unreadable = true;
+                continue;
+            }
+        };
+        let text = match crate::load::FileSource::read_max(
+            &crate::load::FsSource::default(),
+            f,
+            64 * 1024 * 1024,
+        ) {
+            Ok(b) => String::from_utf8_lossy(&b).into_owned(),
+            Err(e) => {
+                eprintln!("error: cannot read {}: {e}", f.display());
+                unreadable = true;
+                continue;
+            }
+        };
+        let found = check::check(language, unit, &text);
+        if !found.is_empty() {
+            failed += 1;
+        }
+        for p in &found {
+            problems += 1;
+            let opened = match p.opened {
+                Some((l, c)) if (l, c) != (p.line, p.column) => {
+                    format!(" (opened at {l}:{c})")
+                }
+                _ => String::new(),
+            };
+            println!(
+                "{}:{}:{}: error: {}{opened}",
+                f.display(),
+                p.line,
+                p.column,
+                p.message
+            );
+        }
+    }
+    let checked = a.files.len();
+    if problems > 0 {
+        println!(
+            "{problems} problem{} in {failed} of {checked} file{}",
+            if problems == 1 { "" } else { "s" },
+            if checked == 1 { "" } else { "s" }
+        );
+    } else if !unreadable {
+        println!(
+            "{checked} file{} checked: no problems",
+            if checked == 1 { "" } else { "s" }
+        );
+    }
+    if unreadable {
+        2
+    } else if problems > 0 {
+        1
+    } else {
+        0
     }
 }
 

@@ -871,6 +871,14 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 ),
             }
         }
+        // The built-in check (issue 28): the IRL snippets first, so that a broken one is named
+        // in its file; then every generated file, which must load on its controller.
+        for irl in &irls {
+            check_snippets(&cx.sources, irl, &mut cx.diags);
+        }
+        if !cx.diags.has_errors() {
+            check_generated(&outputs, &mut cx.diags);
+        }
         out.outputs = outputs;
         out.output_programs = output_programs;
         out.program_names = programs.iter().filter_map(|p| p.name.clone()).collect();
@@ -959,6 +967,107 @@ fn check_program_name(cx: &mut Ctx, opts: &Options, language: Option<Language>) 
             Code::BadProgramName,
             format!("program name `{program}` is {why}"),
         ));
+    }
+}
+
+/// `E405` for each IRL snippet (a `definition`, a `function-call`'s code) of `irl` whose blocks
+/// do not close within it, located at the line of the IRL file ([`crate::check`]).
+fn check_snippets(sources: &Sources, irl: &Irl, diags: &mut Diagnostics) {
+    let text = &sources.get(irl.file).text;
+    let Ok(doc) = roxmltree::Document::parse(text) else {
+        return;
+    };
+    for el in doc
+        .descendants()
+        .filter(|n| n.has_tag_name("definition") || n.has_tag_name("function-call"))
+    {
+        // The snippet: the element's own text, line by line, with each line's place.
+        let mut lines: Vec<(usize, &str)> = Vec::new();
+        for t in el.children().filter(|c| c.is_text()) {
+            let start = t.range().start;
+            let body = &text[t.range()];
+            let mut off = 0;
+            for l in body.split('\n') {
+                lines.push((start + off, l.trim_end_matches('\r')));
+                off += l.len() + 1;
+            }
+        }
+        let snippet: String = lines.iter().map(|(_, l)| format!("{l}\n")).collect();
+        let name = el.attribute("name").unwrap_or("?");
+        let what = if el.has_tag_name("definition") {
+            "definition"
+        } else {
+            "function call"
+        };
+        // A KRL definition goes after the program's `END`: routines only.
+        let unit = if irl.language == crate::lang::Language::Krl && what == "definition" {
+            crate::check::Unit::Routines
+        } else {
+            crate::check::Unit::Snippet
+        };
+        for p in crate::check::check(irl.language, unit, &snippet) {
+            let Some(&(line_start, line)) = lines.get(p.line - 1) else {
+                continue;
+            };
+            let col = line
+                .char_indices()
+                .nth(p.column - 1)
+                .map_or(line.len(), |(i, _)| i);
+            let word = line[col..]
+                .find(|c: char| c.is_whitespace())
+                .unwrap_or(line.len() - col);
+            let mut d = Diagnostic::error(
+                Code::BadSnippet,
+                format!(
+                    "{} {what} `{name}`: {}; the program would not load on the controller",
+                    irl.language.name(),
+                    p.message
+                ),
+            )
+            .at(Span::new(
+                irl.file,
+                line_start + col..line_start + col + word.max(1),
+            ));
+            if let Some((ol, oc)) = p.opened.filter(|o| *o != (p.line, p.column))
+                && let Some(&(os, oline)) = lines.get(ol - 1)
+            {
+                let c = oline.char_indices().nth(oc - 1).map_or(0, |(i, _)| i);
+                d = d.related(
+                    Span::new(irl.file, os + c..os + c + 1),
+                    "the block opened here",
+                );
+            }
+            diags.push(d);
+        }
+    }
+}
+
+/// `E606` for each problem the built-in check finds in a generated file ([`crate::check`]):
+/// what the IRL snippets and the output template made together. Nothing is written then.
+fn check_generated(outputs: &[(PathBuf, OutputFile)], diags: &mut Diagnostics) {
+    for (path, f) in outputs {
+        let Some((language, unit)) = crate::check::language_of(path) else {
+            continue;
+        };
+        let problems = crate::check::check(language, unit, &f.text);
+        for p in problems.iter().take(20) {
+            let line = f.text.lines().nth(p.line - 1).unwrap_or("").trim();
+            let opened = match p.opened {
+                Some((l, _)) if l != p.line => format!(" (opened at line {l})"),
+                _ => String::new(),
+            };
+            let file = path
+                .file_name()
+                .map_or(String::new(), |n| n.to_string_lossy().into_owned());
+            diags.push(Diagnostic::error(
+                Code::BadProgram,
+                format!(
+                    "the generated {file} would not load: line {}: {}{opened} (`{line}`); check \
+                     the IRL snippets and the output template",
+                    p.line, p.message
+                ),
+            ));
+        }
     }
 }
 

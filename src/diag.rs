@@ -684,6 +684,9 @@ codes! {
     /// A conversion in an IRL template (`m`, `mm`, `rad`, `deg`, `quat`, `rotvec`) with
     /// arguments that are not parameters or numbers, or the wrong number of them.
     BadConversionCall = "E404",
+    /// An IRL snippet (a definition or a function call's code) whose blocks do not close within
+    /// it (an `IF` without `ENDIF`, an `ENDLOOP` without `LOOP`): the program would not load.
+    BadSnippet = "E405",
 
     /// A mapping names a function the resource does not have.
     UnknownFunction = "E501",
@@ -711,6 +714,9 @@ codes! {
     /// An output (`<program>.src`/`.dat`) is also a file this compile reads (an IRL file, the
     /// SFC, the template, the blackboard): writing it would overwrite an input.
     OutputIsInput = "E605",
+    /// A generated program fails the built-in check of its language ([`crate::check`]):
+    /// nothing is written.
+    BadProgram = "E606",
 
     /// The hierarchy is not named `Blackboard` (the only one was used).
     HierarchyNotNamed = "W201",

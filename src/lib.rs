@@ -30,6 +30,7 @@
 #![forbid(unsafe_code)]
 
 pub mod bind;
+pub mod check;
 pub mod cli;
 pub mod compile;
 pub mod cond;

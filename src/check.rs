@@ -1,0 +1,566 @@
+//! The project's own check of robot programs (issue 28): the block structure a controller
+//! needs before it loads a program, per language, line by line. Used on every IRL snippet a
+//! program uses (so a broken snippet is an error located in its IRL file), on every generated
+//! program before it is written, and by `skillpost check FILE...` for programs edited by hand.
+//!
+//! What it holds a text to:
+//! - **KRL** (`.src`, `.dat`; keywords in any case, `;` comments, `"strings"`): `DEF`/`DEFFCT`
+//!   … `END`/`ENDFCT`, `DEFDAT` … `ENDDAT`, `IF … THEN` [`ELSE`] `ENDIF`, `LOOP`/`ENDLOOP`,
+//!   `WHILE`/`ENDWHILE`, `FOR`/`ENDFOR`, `REPEAT`/`UNTIL`, `SWITCH`/`CASE`/`DEFAULT`/`ENDSWITCH`,
+//!   `SPLINE`/`PTP_SPLINE` … `ENDSPLINE`; `EXIT` only in a loop; `;FOLD`/`;ENDFOLD` balanced; in a
+//!   whole `.src`/`.dat` no statement outside its `DEF`/`DEFDAT` (`&` header lines allowed).
+//! - **RAPID** (`.mod`, `.modx`, `.sys`; any case, `!` comments): `MODULE` … `ENDMODULE`,
+//!   `PROC`/`FUNC`/`TRAP` … `ENDPROC`/`ENDFUNC`/`ENDTRAP` (with `LOCAL`), `IF … THEN`
+//!   [`ELSEIF … THEN`]* [`ELSE`] `ENDIF` (a compact `IF c stmt;` opens nothing), `WHILE … DO`,
+//!   `FOR … DO`, `TEST` with `CASE`/`DEFAULT`, `ENDTEST`; `ERROR`/`BACKWARD`/`UNDO` only in a
+//!   routine; in a whole module no routine outside `MODULE`.
+//! - **URScript** (`.script`; `#` comments): `def`/`thread`/`if`/`elif`/`else`/`while` lines end
+//!   in `:` and open (or continue) a block that a line `end` closes; `elif`/`else` only in an
+//!   `if` (nothing after its `else`); `break`/`continue` only in a `while`.
+//!
+//! Not a full parser: expressions and statements are the tests' business (the KRL grammar and
+//! rapidchecker agree with this check on every program the tests generate).
+
+use crate::lang::Language;
+
+/// One problem: 1-based line and column in the checked text, and what is wrong.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Problem {
+    pub line: usize,
+    pub column: usize,
+    pub message: String,
+    /// Where the block the problem is about was opened (line, column).
+    pub opened: Option<(usize, usize)>,
+}
+
+/// What is checked: a whole file of the language, or a snippet that goes into one (an IRL
+/// definition or call: its blocks must close within it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Unit {
+    /// A KRL `.src`, a RAPID module, a URScript file.
+    Program,
+    /// A KRL `.dat`.
+    Data,
+    /// A snippet that goes into a program: its blocks close within it.
+    Snippet,
+    /// KRL routines that go after the main program's `END` (IRL definitions): a snippet whose
+    /// statements all stand inside its `DEF`s or `DEFFCT`s.
+    Routines,
+}
+
+/// The language of a file by its extension (`skillpost check`).
+pub fn language_of(path: &std::path::Path) -> Option<(Language, Unit)> {
+    let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+    Some(match ext.as_str() {
+        "src" | "sub" => (Language::Krl, Unit::Program),
+        "dat" => (Language::Krl, Unit::Data),
+        "mod" | "modx" | "sys" | "sysx" | "prg" => (Language::Rapid, Unit::Program),
+        "script" | "urscript" => (Language::UrScript, Unit::Program),
+        _ => return None,
+    })
+}
+
+/// Checks `text` as `unit` of `language`.
+pub fn check(language: Language, unit: Unit, text: &str) -> Vec<Problem> {
+    match language {
+        Language::Krl => krl(unit, text),
+        Language::Rapid => rapid(unit, text),
+        Language::UrScript => urscript(text),
+    }
+}
+
+/// An open block: its keyword, where it opened, and what it allows next.
+struct Open {
+    kind: &'static str,
+    line: usize,
+    column: usize,
+    /// An `ELSE` was seen (IF): nothing but the end may follow.
+    closed_else: bool,
+}
+
+/// The code of a line without its comment (`comment` outside `"strings"`), and where the code
+/// starts (1-based column).
+fn code_of(line: &str, comment: char) -> (&str, usize) {
+    let mut in_string = false;
+    let mut end = line.len();
+    for (i, c) in line.char_indices() {
+        match c {
+            '"' => in_string = !in_string,
+            c if c == comment && !in_string => {
+                end = i;
+                break;
+            }
+            _ => {}
+        }
+    }
+    let code = &line[..end];
+    let trimmed = code.trim_start();
+    let column = code[..code.len() - trimmed.len()].chars().count() + 1;
+    (trimmed.trim_end(), column)
+}
+
+/// The first word, upper case (letters, digits, `_`, `$`).
+fn first_word(code: &str) -> String {
+    code.chars()
+        .take_while(|c| c.is_ascii_alphanumeric() || *c == '_' || *c == '$')
+        .collect::<String>()
+        .to_ascii_uppercase()
+}
+
+fn words_upper(code: &str) -> Vec<String> {
+    code.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_' || c == '$'))
+        .filter(|w| !w.is_empty())
+        .map(str::to_ascii_uppercase)
+        .collect()
+}
+
+struct Blocks {
+    stack: Vec<Open>,
+    problems: Vec<Problem>,
+}
+
+impl Blocks {
+    fn new() -> Self {
+        Blocks {
+            stack: Vec::new(),
+            problems: Vec::new(),
+        }
+    }
+
+    fn problem(&mut self, line: usize, column: usize, message: String) {
+        self.problems.push(Problem {
+            line,
+            column,
+            message,
+            opened: None,
+        });
+    }
+
+    fn problem_at(&mut self, line: usize, column: usize, message: String, o: (usize, usize)) {
+        self.problems.push(Problem {
+            line,
+            column,
+            message,
+            opened: Some(o),
+        });
+    }
+
+    fn open(&mut self, kind: &'static str, line: usize, column: usize) {
+        self.stack.push(Open {
+            kind,
+            line,
+            column,
+            closed_else: false,
+        });
+    }
+
+    /// Closes the innermost block with `end` (its keyword), which must be one of `kinds`.
+    fn close(&mut self, end: &str, kinds: &[&'static str], line: usize, column: usize) {
+        match self.stack.last() {
+            Some(o) if kinds.contains(&o.kind) => {
+                self.stack.pop();
+            }
+            Some(o) => {
+                let (k, at) = (o.kind, (o.line, o.column));
+                self.problem_at(
+                    line,
+                    column,
+                    format!("`{end}` where `{k}` is still open"),
+                    at,
+                );
+                // Recover: close up to a matching block if there is one.
+                if let Some(i) = self.stack.iter().rposition(|o| kinds.contains(&o.kind)) {
+                    self.stack.truncate(i);
+                }
+            }
+            None => self.problem(line, column, format!("`{end}` without its `{}`", kinds[0])),
+        }
+    }
+
+    /// A keyword that continues the innermost block (`ELSE`, `CASE`), which must be `kind`.
+    fn middle(&mut self, word: &str, kind: &'static str, line: usize, column: usize) {
+        match self.stack.last_mut() {
+            Some(o) if o.kind == kind => {
+                if o.closed_else {
+                    let at = (o.line, o.column);
+                    self.problem_at(
+                        line,
+                        column,
+                        format!("`{word}` after the `else` of its `{kind}`"),
+                        at,
+                    );
+                }
+            }
+            _ => self.problem(line, column, format!("`{word}` outside an `{kind}` block")),
+        }
+    }
+
+    fn in_any(&self, kinds: &[&str]) -> bool {
+        self.stack.iter().any(|o| kinds.contains(&o.kind))
+    }
+
+    fn finish(mut self) -> Vec<Problem> {
+        for o in std::mem::take(&mut self.stack).into_iter().rev() {
+            let at = (o.line, o.column);
+            self.problem_at(
+                o.line,
+                o.column,
+                format!("`{}` is never closed", o.kind),
+                at,
+            );
+        }
+        self.problems.sort_by_key(|p| (p.line, p.column));
+        self.problems
+    }
+}
+
+fn krl(unit: Unit, text: &str) -> Vec<Problem> {
+    let mut b = Blocks::new();
+    let mut folds: Vec<usize> = Vec::new();
+    const LOOPS: &[&str] = &["LOOP", "WHILE", "FOR", "REPEAT"];
+    for (n, raw) in text.lines().enumerate() {
+        let line = n + 1;
+        // Folds are comments: `;FOLD` … `;ENDFOLD`.
+        let t = raw.trim_start();
+        if let Some(rest) = t.strip_prefix(';') {
+            let w = first_word(rest.trim_start());
+            if w == "FOLD" {
+                folds.push(line);
+            } else if w == "ENDFOLD" && folds.pop().is_none() {
+                b.problem(line, 1, "`;ENDFOLD` without its `;FOLD`".into());
+            }
+        }
+        let (code, col) = code_of(raw, ';');
+        if code.is_empty() || code.starts_with('&') {
+            continue;
+        }
+        let words = words_upper(code);
+        let mut w = first_word(code);
+        let mut rest_words = &words[..];
+        if w == "GLOBAL" {
+            rest_words = &words[1.min(words.len())..];
+            w = rest_words.first().cloned().unwrap_or_default();
+        }
+        let toplevel = b.stack.is_empty();
+        match w.as_str() {
+            "DEF" => {
+                if !toplevel {
+                    b.problem(line, col, "`DEF` inside another block".into());
+                }
+                b.open("DEF", line, col)
+            }
+            "DEFFCT" => {
+                if !toplevel {
+                    b.problem(line, col, "`DEFFCT` inside another block".into());
+                }
+                b.open("DEFFCT", line, col)
+            }
+            "DEFDAT" => b.open("DEFDAT", line, col),
+            "END" => b.close("END", &["DEF"], line, col),
+            "ENDFCT" => b.close("ENDFCT", &["DEFFCT"], line, col),
+            "ENDDAT" => b.close("ENDDAT", &["DEFDAT"], line, col),
+            "IF" => {
+                if rest_words.last().map(String::as_str) != Some("THEN") {
+                    b.problem(
+                        line,
+                        col,
+                        "`IF` without `THEN` at the end of its line".into(),
+                    );
+                }
+                b.open("IF", line, col)
+            }
+            "ELSE" => {
+                b.middle("ELSE", "IF", line, col);
+                if let Some(o) = b.stack.last_mut()
+                    && o.kind == "IF"
+                {
+                    o.closed_else = true;
+                }
+            }
+            "ENDIF" => b.close("ENDIF", &["IF"], line, col),
+            "LOOP" => b.open("LOOP", line, col),
+            "ENDLOOP" => b.close("ENDLOOP", &["LOOP"], line, col),
+            "WHILE" => b.open("WHILE", line, col),
+            "ENDWHILE" => b.close("ENDWHILE", &["WHILE"], line, col),
+            "FOR" => b.open("FOR", line, col),
+            "ENDFOR" => b.close("ENDFOR", &["FOR"], line, col),
+            "REPEAT" => b.open("REPEAT", line, col),
+            "UNTIL" => b.close("UNTIL", &["REPEAT"], line, col),
+            "SWITCH" => b.open("SWITCH", line, col),
+            "CASE" | "DEFAULT" => b.middle(&w, "SWITCH", line, col),
+            "ENDSWITCH" => b.close("ENDSWITCH", &["SWITCH"], line, col),
+            "SPLINE" | "PTP_SPLINE" => b.open("SPLINE", line, col),
+            "ENDSPLINE" => b.close("ENDSPLINE", &["SPLINE"], line, col),
+            "EXIT" if !b.in_any(LOOPS) => {
+                b.problem(line, col, "`EXIT` outside a loop".into());
+            }
+            _ if toplevel && unit != Unit::Snippet => {
+                let within = if unit == Unit::Data { "DEFDAT" } else { "DEF" };
+                let within = if unit == Unit::Routines {
+                    "DEF` or `DEFFCT"
+                } else {
+                    within
+                };
+                b.problem(
+                    line,
+                    col,
+                    format!("a statement outside any `{within}` … `END`: `{code}`"),
+                );
+            }
+            _ => {}
+        }
+    }
+    for l in folds {
+        b.problem(l, 1, "`;FOLD` without its `;ENDFOLD`".into());
+    }
+    b.finish()
+}
+
+fn rapid(unit: Unit, text: &str) -> Vec<Problem> {
+    let mut b = Blocks::new();
+    const ROUTINES: &[&str] = &["PROC", "FUNC", "TRAP"];
+    for (n, raw) in text.lines().enumerate() {
+        let line = n + 1;
+        let (code, col) = code_of(raw, '!');
+        if code.is_empty() || code.starts_with('%') {
+            continue;
+        }
+        let words = words_upper(code);
+        let mut first = 0;
+        while matches!(
+            words.get(first).map(String::as_str),
+            Some("LOCAL" | "TASK" | "GLOBAL")
+        ) {
+            first += 1;
+        }
+        let w = words.get(first).cloned().unwrap_or_default();
+        let last = words.last().map(String::as_str).unwrap_or("");
+        let toplevel = b.stack.is_empty();
+        match w.as_str() {
+            "MODULE" => b.open("MODULE", line, col),
+            "ENDMODULE" => b.close("ENDMODULE", &["MODULE"], line, col),
+            "PROC" | "FUNC" | "TRAP" => {
+                if b.in_any(ROUTINES) {
+                    b.problem(line, col, format!("`{w}` inside another routine"));
+                }
+                if toplevel && unit == Unit::Program {
+                    b.problem(line, col, format!("`{w}` outside `MODULE` … `ENDMODULE`"));
+                }
+                let kind = match w.as_str() {
+                    "PROC" => "PROC",
+                    "FUNC" => "FUNC",
+                    _ => "TRAP",
+                };
+                b.open(kind, line, col)
+            }
+            "ENDPROC" => b.close("ENDPROC", &["PROC"], line, col),
+            "ENDFUNC" => b.close("ENDFUNC", &["FUNC"], line, col),
+            "ENDTRAP" => b.close("ENDTRAP", &["TRAP"], line, col),
+            "ERROR" | "BACKWARD" | "UNDO"
+                if (words.len() == 1 || code.ends_with(')')) && !b.in_any(ROUTINES) =>
+            {
+                b.problem(line, col, format!("`{w}` handler outside a routine"));
+            }
+            // `IF c THEN` opens; a compact `IF c stmt;` is one statement.
+            "IF" if last == "THEN" => b.open("IF", line, col),
+            "ELSEIF" => {
+                if last != "THEN" {
+                    b.problem(
+                        line,
+                        col,
+                        "`ELSEIF` without `THEN` at the end of its line".into(),
+                    );
+                }
+                b.middle("ELSEIF", "IF", line, col)
+            }
+            "ELSE" => {
+                b.middle("ELSE", "IF", line, col);
+                if let Some(o) = b.stack.last_mut()
+                    && o.kind == "IF"
+                {
+                    o.closed_else = true;
+                }
+            }
+            "ENDIF" => b.close("ENDIF", &["IF"], line, col),
+            "WHILE" => {
+                if last != "DO" {
+                    b.problem(
+                        line,
+                        col,
+                        "`WHILE` without `DO` at the end of its line".into(),
+                    );
+                }
+                b.open("WHILE", line, col)
+            }
+            "ENDWHILE" => b.close("ENDWHILE", &["WHILE"], line, col),
+            "FOR" => {
+                if last != "DO" {
+                    b.problem(
+                        line,
+                        col,
+                        "`FOR` without `DO` at the end of its line".into(),
+                    );
+                }
+                b.open("FOR", line, col)
+            }
+            "ENDFOR" => b.close("ENDFOR", &["FOR"], line, col),
+            "TEST" => b.open("TEST", line, col),
+            "CASE" | "DEFAULT" => b.middle(&w, "TEST", line, col),
+            "ENDTEST" => b.close("ENDTEST", &["TEST"], line, col),
+            _ if toplevel && unit == Unit::Program => b.problem(
+                line,
+                col,
+                format!("a statement outside `MODULE` … `ENDMODULE`: `{code}`"),
+            ),
+            _ => {}
+        }
+    }
+    b.finish()
+}
+
+fn urscript(text: &str) -> Vec<Problem> {
+    let mut b = Blocks::new();
+    for (n, raw) in text.lines().enumerate() {
+        let line = n + 1;
+        let (code, col) = code_of(raw, '#');
+        if code.is_empty() {
+            continue;
+        }
+        let w = first_word(code).to_ascii_lowercase();
+        let opens = code.ends_with(':');
+        match w.as_str() {
+            "def" | "thread" | "if" | "while" if opens => {
+                let kind = match w.as_str() {
+                    "def" => "def",
+                    "thread" => "thread",
+                    "if" => "if",
+                    _ => "while",
+                };
+                b.open(kind, line, col)
+            }
+            "def" | "thread" | "if" | "while" | "elif" | "else" if !opens => {
+                b.problem(line, col, format!("`{w}` line without `:` at its end"))
+            }
+            "elif" | "else" => {}
+            _ if opens => b.problem(
+                line,
+                col,
+                format!("a line ending in `:` that opens no block: `{code}`"),
+            ),
+            "end" => b.close("end", &["def", "thread", "if", "while"], line, col),
+            "break" | "continue" if !b.in_any(&["while"]) => {
+                b.problem(line, col, format!("`{w}` outside a `while`"));
+            }
+            _ => {}
+        }
+        if matches!(w.as_str(), "elif" | "else") && opens {
+            let word = if w == "elif" { "elif" } else { "else" };
+            b.middle(word, "if", line, col);
+            if w == "else"
+                && let Some(o) = b.stack.last_mut()
+                && o.kind == "if"
+            {
+                o.closed_else = true;
+            }
+        }
+    }
+    b.finish()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn msgs(l: Language, u: Unit, t: &str) -> Vec<String> {
+        check(l, u, t)
+            .into_iter()
+            .map(|p| format!("{}:{}: {}", p.line, p.column, p.message))
+            .collect()
+    }
+
+    #[test]
+    fn krl_blocks() {
+        let ok = "&ACCESS RVP\nDEF P( )\n  ;FOLD x\n  IF $IN[1] THEN\n    LOOP\n      EXIT\n    ENDLOOP\n  ELSE\n    WAIT SEC 0\n  ENDIF\n  ;ENDFOLD\nEND\n";
+        assert_eq!(msgs(Language::Krl, Unit::Program, ok), Vec::<String>::new());
+        assert_eq!(
+            msgs(Language::Krl, Unit::Snippet, "IF a THEN\n  x = 1\n"),
+            ["1:1: `IF` is never closed"]
+        );
+        assert_eq!(
+            msgs(Language::Krl, Unit::Snippet, "  ENDLOOP\n"),
+            ["1:3: `ENDLOOP` without its `LOOP`"]
+        );
+        assert_eq!(
+            msgs(Language::Krl, Unit::Snippet, "IF a THEN\nENDLOOP\nENDIF\n"),
+            ["2:1: `ENDLOOP` where `IF` is still open"]
+        );
+        assert_eq!(
+            msgs(Language::Krl, Unit::Program, "x = 1\nDEF P()\nEXIT\nEND\n"),
+            [
+                "1:1: a statement outside any `DEF` … `END`: `x = 1`",
+                "3:1: `EXIT` outside a loop"
+            ]
+        );
+        assert_eq!(
+            msgs(
+                Language::Krl,
+                Unit::Snippet,
+                "if a then ; comment ENDIF\nendif\n"
+            ),
+            Vec::<String>::new()
+        );
+        assert_eq!(
+            msgs(Language::Krl, Unit::Snippet, ";FOLD a\n"),
+            ["1:1: `;FOLD` without its `;ENDFOLD`"]
+        );
+    }
+
+    #[test]
+    fn rapid_blocks() {
+        let ok = "MODULE M\n  PROC main()\n    IF a THEN\n      b;\n    ELSEIF c THEN\n    ELSE\n    ENDIF\n    IF a b;\n    WHILE TRUE DO\n    ENDWHILE\n  ERROR\n    RETRY;\n  ENDPROC\nENDMODULE\n";
+        assert_eq!(
+            msgs(Language::Rapid, Unit::Program, ok),
+            Vec::<String>::new()
+        );
+        assert_eq!(
+            msgs(Language::Rapid, Unit::Snippet, "IF a THEN\n  b;\n"),
+            ["1:1: `IF` is never closed"]
+        );
+        assert_eq!(
+            msgs(
+                Language::Rapid,
+                Unit::Snippet,
+                "PROC p()\nIF a THEN\nENDPROC\n"
+            ),
+            ["3:1: `ENDPROC` where `IF` is still open"]
+        );
+    }
+
+    #[test]
+    fn urscript_blocks() {
+        let ok = "def P():\n  if a:\n    b()\n  elif c:\n  else:\n  end\n  while True:\n    break\n  end\nend\nP()\n";
+        assert_eq!(
+            msgs(Language::UrScript, Unit::Program, ok),
+            Vec::<String>::new()
+        );
+        assert_eq!(
+            msgs(Language::UrScript, Unit::Snippet, "if a:\n  b()\n"),
+            ["1:1: `if` is never closed"]
+        );
+        assert_eq!(
+            msgs(Language::UrScript, Unit::Snippet, "end\nbreak\n"),
+            [
+                "1:1: `end` without its `def`",
+                "2:1: `break` outside a `while`"
+            ]
+        );
+        assert_eq!(
+            msgs(
+                Language::UrScript,
+                Unit::Snippet,
+                "if a:\nelse:\nelif b:\nend\n"
+            ),
+            ["3:1: `elif` after the `else` of its `if`"]
+        );
+    }
+}
