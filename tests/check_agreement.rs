@@ -241,7 +241,11 @@ fn skillpost_check_says_where_and_exits_by_what_it_found() {
     let good = tmp.path().join("good.src");
     let bad = tmp.path().join("bad.mod");
     let odd = tmp.path().join("notes.txt");
-    fs::write(&good, "DEF good( )\r\n  LOOP\r\n    EXIT\r\n  ENDLOOP\r\nEND\r\n").unwrap();
+    fs::write(
+        &good,
+        "DEF good( )\r\n  LOOP\r\n    EXIT\r\n  ENDLOOP\r\nEND\r\n",
+    )
+    .unwrap();
     fs::write(
         &bad,
         "MODULE bad\n  PROC main()\n    IF a THEN\n      b;\n  ENDPROC\nENDMODULE\n",

@@ -176,18 +176,23 @@ impl Daemon {
         // A root that exists is watched now: `watching` says so (docs/DAEMON.md, "Watching"); a
         // missing one got `watch-degraded` and says `watching` when it appears.
         if self.attach_root(root, None) {
-            let backend = self.watchers.backend_of(root).unwrap_or(Backend::Native);
-            self.sink.emit(
-                None,
-                Event::Watching {
-                    root: Some(root.display().to_string()),
-                    blackboard: None,
-                    backend: backend.as_str(),
-                    reason: None,
-                    program: None,
-                },
-            );
+            self.root_watching(root, None);
         }
+    }
+
+    /// `watching` for a root (with why it is watched again, when it is).
+    fn root_watching(&mut self, root: &Path, reason: Option<&str>) {
+        let backend = self.watchers.backend_of(root).unwrap_or(Backend::Native);
+        self.sink.emit(
+            None,
+            Event::Watching {
+                root: Some(root.display().to_string()),
+                blackboard: None,
+                backend: backend.as_str(),
+                reason: reason.map(str::to_owned),
+                program: None,
+            },
+        );
     }
 
     /// Watches a root and its subfolders; when it does not exist, its nearest existing ancestor
@@ -326,22 +331,12 @@ impl Daemon {
     /// A root watched again (it appeared, or another folder took its name): `watching`, and its
     /// projects.
     fn root_back(&mut self, root: &Path, replaced: bool, now: Instant) {
-        let backend = self.watchers.backend_of(root).unwrap_or(Backend::Native);
         let reason = if replaced {
             "the root was replaced"
         } else {
             "the root exists now"
         };
-        self.sink.emit(
-            None,
-            Event::Watching {
-                root: Some(root.display().to_string()),
-                blackboard: None,
-                backend: backend.as_str(),
-                reason: Some(reason.into()),
-                program: None,
-            },
-        );
+        self.root_watching(root, Some(reason));
         self.discover_in(root, now);
         self.look_for_missing_folders(now);
     }
