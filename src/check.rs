@@ -8,7 +8,9 @@
 //!   … `END`/`ENDFCT`, `DEFDAT` … `ENDDAT`, `IF … THEN` [`ELSE`] `ENDIF`, `LOOP`/`ENDLOOP`,
 //!   `WHILE`/`ENDWHILE`, `FOR`/`ENDFOR`, `REPEAT`/`UNTIL`, `SWITCH`/`CASE`/`DEFAULT`/`ENDSWITCH`,
 //!   `SPLINE`/`PTP_SPLINE` … `ENDSPLINE`; `EXIT` only in a loop; `;FOLD`/`;ENDFOLD` balanced; in a
-//!   whole `.src`/`.dat` no statement outside its `DEF`/`DEFDAT` (`&` header lines allowed).
+//!   whole `.src`/`.dat` no statement outside its `DEF`/`DEFDAT` (`&` header lines allowed);
+//!   declarations (`DECL`, or a data type) before a routine's first statement; the names of
+//!   `DEF`, `DEFFCT` and `DEFDAT` KRL names.
 //! - **RAPID** (`.mod`, `.modx`, `.sys`; any case, `!` comments): `MODULE` … `ENDMODULE`,
 //!   `PROC`/`FUNC`/`TRAP` … `ENDPROC`/`ENDFUNC`/`ENDTRAP` (with `LOCAL`), `IF … THEN`
 //!   [`ELSEIF … THEN`]* [`ELSE`] `ENDIF` (a compact `IF c stmt;` opens nothing), `WHILE … DO`,
@@ -16,7 +18,8 @@
 //!   routine; in a whole module no routine outside `MODULE`.
 //! - **URScript** (`.script`; `#` comments): `def`/`thread`/`if`/`elif`/`else`/`while` lines end
 //!   in `:` and open (or continue) a block that a line `end` closes; `elif`/`else` only in an
-//!   `if` (nothing after its `else`); `break`/`continue` only in a `while`.
+//!   `if` (nothing after its `else`); `break`/`continue` only in a `while`; a block's lines
+//!   indented deeper than its first line, its `end`/`elif`/`else` as deep as it.
 //!
 //! Not a full parser: expressions and statements are the tests' business (the KRL grammar and
 //! rapidchecker agree with this check on every program the tests generate).
@@ -214,10 +217,46 @@ impl Blocks {
     }
 }
 
+/// KRL's data types a declaration may start with (`DECL` may be left out before them).
+const KRL_TYPES: &[&str] = &[
+    "INT", "REAL", "BOOL", "CHAR", "FRAME", "POS", "E6POS", "AXIS", "E6AXIS", "SIGNAL", "STRUC",
+    "ENUM", "LOAD", "FDAT", "PDAT", "LDAT",
+];
+
+/// A KRL name: a letter or `_`, then letters, digits, `_` or `$`, at most 24 characters.
+fn is_krl_name(s: &str) -> bool {
+    let b = s.as_bytes();
+    !b.is_empty()
+        && b.len() <= 24
+        && (b[0].is_ascii_alphabetic() || b[0] == b'_' || b[0] == b'$')
+        && b.iter()
+            .all(|c| c.is_ascii_alphanumeric() || *c == b'_' || *c == b'$')
+}
+
+/// The name after `DEF`/`DEFFCT type`/`DEFDAT` (before `(` or the end).
+fn declared_name(words: &[String], code: &str, keyword: &str) -> Option<String> {
+    let at = words.iter().position(|w| w == keyword)?;
+    let skip = if keyword == "DEFFCT" { 2 } else { 1 };
+    let _ = words.get(at + skip)?;
+    // From the text (the case as written): the word `skip` words after the keyword.
+    let mut it = code
+        .split(|c: char| c.is_whitespace() || c == '(')
+        .filter(|w| !w.is_empty());
+    let kw = it.position(|w| w.eq_ignore_ascii_case(keyword))?;
+    let _ = kw;
+    let mut name = None;
+    for _ in 0..skip {
+        name = it.next();
+    }
+    name.map(str::to_owned)
+}
+
 fn krl(unit: Unit, text: &str) -> Vec<Problem> {
     let mut b = Blocks::new();
     let mut folds: Vec<usize> = Vec::new();
     const LOOPS: &[&str] = &["LOOP", "WHILE", "FOR", "REPEAT"];
+    // In the routine open now: an executable statement was seen (declarations come first).
+    let mut executed = false;
     for (n, raw) in text.lines().enumerate() {
         let line = n + 1;
         // Folds are comments: `;FOLD` … `;ENDFOLD`.
@@ -242,17 +281,51 @@ fn krl(unit: Unit, text: &str) -> Vec<Problem> {
             w = rest_words.first().cloned().unwrap_or_default();
         }
         let toplevel = b.stack.is_empty();
+        // Names: of a routine or a data list, a KRL name.
+        if let kw @ ("DEF" | "DEFFCT" | "DEFDAT") = w.as_str()
+            && let Some(name) = declared_name(rest_words, code, kw)
+            && !is_krl_name(&name)
+        {
+            b.problem(
+                line,
+                col,
+                format!(
+                    "`{name}` is no KRL name (a letter or `_`, then letters, digits or `_`, at \
+                     most 24 characters)"
+                ),
+            );
+        }
+        // Declarations: before the first statement of their routine.
+        let declaration = w == "DECL"
+            || (KRL_TYPES.contains(&w.as_str()) && !code.contains('='))
+            || (w == "GLOBAL" && rest_words.first().is_some_and(|x| x == "DECL"));
+        let in_routine = b.in_any(&["DEF", "DEFFCT"]);
+        if declaration && in_routine && executed {
+            b.problem(
+                line,
+                col,
+                "a declaration after the first statement of its routine (KRL wants the \
+                 declarations first)"
+                    .into(),
+            );
+        }
+        if in_routine && !declaration && !matches!(w.as_str(), "DEF" | "DEFFCT" | "END" | "ENDFCT")
+        {
+            executed = true;
+        }
         match w.as_str() {
             "DEF" => {
                 if !toplevel {
                     b.problem(line, col, "`DEF` inside another block".into());
                 }
+                executed = false;
                 b.open("DEF", line, col)
             }
             "DEFFCT" => {
                 if !toplevel {
                     b.problem(line, col, "`DEFFCT` inside another block".into());
                 }
+                executed = false;
                 b.open("DEFFCT", line, col)
             }
             "DEFDAT" => b.open("DEFDAT", line, col),
@@ -428,6 +501,32 @@ fn urscript(text: &str) -> Vec<Problem> {
         }
         let w = first_word(code).to_ascii_lowercase();
         let opens = code.ends_with(':');
+        // Indentation: a block's lines deeper than the line that opened it; its `end`, `elif`
+        // and `else` as deep as that line (the column is the code's, in characters).
+        if let Some(o) = b.stack.last() {
+            let closing = matches!(w.as_str(), "end" | "elif" | "else");
+            let (kind, at) = (o.kind, (o.line, o.column));
+            if closing && col != at.1 {
+                b.problem_at(
+                    line,
+                    col,
+                    format!(
+                        "`{w}` indented to column {col}, its `{kind}` to column {}",
+                        at.1
+                    ),
+                    at,
+                );
+            } else if !closing && col <= at.1 {
+                b.problem_at(
+                    line,
+                    col,
+                    format!(
+                        "a line of a `{kind}` block not indented deeper than the block's first line"
+                    ),
+                    at,
+                );
+            }
+        }
         match w.as_str() {
             "def" | "thread" | "if" | "while" if opens => {
                 let kind = match w.as_str() {
@@ -513,6 +612,27 @@ mod tests {
             msgs(Language::Krl, Unit::Snippet, ";FOLD a\n"),
             ["1:1: `;FOLD` without its `;ENDFOLD`"]
         );
+        assert_eq!(
+            msgs(
+                Language::Krl,
+                Unit::Routines,
+                "DEF F(V:IN)\n  DECL REAL V\n  INT i\n  $VEL.CP = V\n  DECL INT late\nEND\n"
+            ),
+            [
+                "5:3: a declaration after the first statement of its routine (KRL wants the declarations first)"
+            ]
+        );
+        assert_eq!(
+            msgs(
+                Language::Krl,
+                Unit::Routines,
+                "DEF Move-It()\nEND\nDEFFCT INT ThisNameIsFarTooLongForKrl_1()\nENDFCT\n"
+            ),
+            [
+                "1:1: `Move-It` is no KRL name (a letter or `_`, then letters, digits or `_`, at most 24 characters)",
+                "3:1: `ThisNameIsFarTooLongForKrl_1` is no KRL name (a letter or `_`, then letters, digits or `_`, at most 24 characters)"
+            ]
+        );
     }
 
     #[test]
@@ -538,7 +658,7 @@ mod tests {
 
     #[test]
     fn urscript_blocks() {
-        let ok = "def P():\n  if a:\n    b()\n  elif c:\n  else:\n  end\n  while True:\n    break\n  end\nend\nP()\n";
+        let ok = "def P():\n  if a:\n    b()\n  elif c:\n    d()\n  else:\n    e()\n  end\n  while True:\n    break\n  end\nend\nP()\n";
         assert_eq!(
             msgs(Language::UrScript, Unit::Program, ok),
             Vec::<String>::new()
@@ -552,6 +672,17 @@ mod tests {
             [
                 "1:1: `end` without its `def`",
                 "2:1: `break` outside a `while`"
+            ]
+        );
+        assert_eq!(
+            msgs(
+                Language::UrScript,
+                Unit::Snippet,
+                "def f():\nmovej(p)\n  end\n"
+            ),
+            [
+                "2:1: a line of a `def` block not indented deeper than the block's first line",
+                "3:3: `end` indented to column 3, its `def` to column 1"
             ]
         );
         assert_eq!(

@@ -1,7 +1,7 @@
 //! The whole pipeline for one project: read → plan → bind → emit, with every file read through a
 //! [`FileSource`]. [`compile`] does no writing; [`apply`] writes the outputs and the write-back.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
@@ -873,8 +873,15 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         }
         // The built-in check (issue 28): the IRL snippets first, so that a broken one is named
         // in its file; then every generated file, which must load on its controller.
-        for irl in &irls {
-            check_snippets(&cx.sources, irl, &mut cx.diags);
+        for (k, irl) in irls.iter().enumerate() {
+            // The definitions a program uses (an unused one is never written), every call.
+            let used: HashSet<&str> = bound_programs
+                .iter()
+                .flat_map(|b| &b.definitions)
+                .filter(|(i, _)| *i == k)
+                .map(|&(_, d)| irl.definitions[d].name.key.as_ref())
+                .collect();
+            check_snippets(&cx.sources, irl, &used, &mut cx.diags);
         }
         if !cx.diags.has_errors() {
             check_generated(&outputs, &mut cx.diags);
@@ -970,9 +977,10 @@ fn check_program_name(cx: &mut Ctx, opts: &Options, language: Option<Language>) 
     }
 }
 
-/// `E405` for each IRL snippet (a `definition`, a `function-call`'s code) of `irl` whose blocks
-/// do not close within it, located at the line of the IRL file ([`crate::check`]).
-fn check_snippets(sources: &Sources, irl: &Irl, diags: &mut Diagnostics) {
+/// `E405` for each IRL snippet of `irl` (a `definition` named in `used`, every
+/// `function-call`'s code) whose blocks do not close within it, located at the line of the IRL
+/// file ([`crate::check`]).
+fn check_snippets(sources: &Sources, irl: &Irl, used: &HashSet<&str>, diags: &mut Diagnostics) {
     let text = &sources.get(irl.file).text;
     let Ok(doc) = roxmltree::Document::parse(text) else {
         return;
@@ -994,6 +1002,9 @@ fn check_snippets(sources: &Sources, irl: &Irl, diags: &mut Diagnostics) {
         }
         let snippet: String = lines.iter().map(|(_, l)| format!("{l}\n")).collect();
         let name = el.attribute("name").unwrap_or("?");
+        if el.has_tag_name("definition") && !used.contains(crate::names::key(name).as_str()) {
+            continue;
+        }
         let what = if el.has_tag_name("definition") {
             "definition"
         } else {

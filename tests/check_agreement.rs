@@ -289,3 +289,36 @@ fn skillpost_check_says_where_and_exits_by_what_it_found() {
     assert_eq!(code, Some(2));
     assert!(err.contains("cannot read"), "{err}");
 }
+
+#[test]
+fn a_broken_definition_the_program_does_not_use_is_no_error() {
+    // The IRL file of fixtures/err/e405_krl_definition_if_without_endif (SetVelCP opens an IF it
+    // never closes) with a chart that never sets a velocity: SetVelCP is not written, so the
+    // program loads; calls are checked whether used or not.
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let tmp = tempfile::tempdir().unwrap();
+    fs::copy(
+        repo.join("fixtures/base/flow/Blackboard.aml"),
+        tmp.path().join("Blackboard.aml"),
+    )
+    .unwrap();
+    fs::copy(
+        repo.join("fixtures/ok/flow-loop-exit/sfc.xml"),
+        tmp.path().join("sfc.xml"),
+    )
+    .unwrap();
+    fs::copy(
+        repo.join("fixtures/err/e405_krl_definition_if_without_endif/kr15-2.irl"),
+        tmp.path().join("kr15-2.irl"),
+    )
+    .unwrap();
+    let o = Command::new(bin())
+        .args(["Blackboard.aml", "LoopExit"])
+        .current_dir(tmp.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let src = fs::read_to_string(tmp.path().join("LoopExit.src")).unwrap();
+    assert!(!src.contains("SetVelCP"));
+    assert!(ours(&tmp.path().join("LoopExit.src")));
+}
