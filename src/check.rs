@@ -103,18 +103,44 @@ fn code_of(line: &str, comment: char) -> (&str, usize) {
 }
 
 /// The first word, upper case (letters, digits, `_`, `$`).
-fn first_word(code: &str) -> String {
-    code.chars()
-        .take_while(|c| c.is_ascii_alphanumeric() || *c == '_' || *c == '$')
-        .collect::<String>()
-        .to_ascii_uppercase()
+fn is_word_char(c: char) -> bool {
+    c.is_ascii_alphanumeric() || c == '_' || c == '$'
 }
 
-fn words_upper(code: &str) -> Vec<String> {
-    code.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_' || c == '$'))
-        .filter(|w| !w.is_empty())
-        .map(str::to_ascii_uppercase)
-        .collect()
+/// A word upper case, on the stack: every line's first word is looked at, and a program of
+/// 100,000 steps has a million lines. Longer words than any keyword are kept as `""`.
+struct Word {
+    buf: [u8; 16],
+    len: usize,
+}
+
+impl Word {
+    fn as_str(&self) -> &str {
+        std::str::from_utf8(&self.buf[..self.len]).unwrap_or("")
+    }
+}
+
+/// The first word of `code` (letters, digits, `_`, `$`), upper case, and the text after it.
+fn first_word(code: &str) -> (Word, &str) {
+    let end = code.find(|c: char| !is_word_char(c)).unwrap_or(code.len());
+    let mut w = Word {
+        buf: [0; 16],
+        len: 0,
+    };
+    if end <= 16 {
+        for (i, b) in code.as_bytes()[..end].iter().enumerate() {
+            w.buf[i] = b.to_ascii_uppercase();
+        }
+        w.len = end;
+    }
+    (w, code[end..].trim_start())
+}
+
+/// Whether the last word of `code` is `word` (any case).
+fn ends_with_word(code: &str, word: &str) -> bool {
+    code.rsplit(|c: char| !is_word_char(c))
+        .find(|w| !w.is_empty())
+        .is_some_and(|w| w.eq_ignore_ascii_case(word))
 }
 
 struct Blocks {
@@ -233,22 +259,16 @@ fn is_krl_name(s: &str) -> bool {
             .all(|c| c.is_ascii_alphanumeric() || *c == b'_' || *c == b'$')
 }
 
-/// The name after `DEF`/`DEFFCT type`/`DEFDAT` (before `(` or the end).
-fn declared_name(words: &[String], code: &str, keyword: &str) -> Option<String> {
-    let at = words.iter().position(|w| w == keyword)?;
-    let skip = if keyword == "DEFFCT" { 2 } else { 1 };
-    let _ = words.get(at + skip)?;
-    // From the text (the case as written): the word `skip` words after the keyword.
-    let mut it = code
+/// The name after `DEF`/`DEFFCT type`/`DEFDAT` (before `(` or the end): `after` is the text
+/// after the keyword.
+fn declared_name<'t>(after: &'t str, keyword: &str) -> Option<&'t str> {
+    let mut it = after
         .split(|c: char| c.is_whitespace() || c == '(')
         .filter(|w| !w.is_empty());
-    let kw = it.position(|w| w.eq_ignore_ascii_case(keyword))?;
-    let _ = kw;
-    let mut name = None;
-    for _ in 0..skip {
-        name = it.next();
+    if keyword == "DEFFCT" {
+        it.next();
     }
-    name.map(str::to_owned)
+    it.next()
 }
 
 fn krl(unit: Unit, text: &str) -> Vec<Problem> {
@@ -262,7 +282,8 @@ fn krl(unit: Unit, text: &str) -> Vec<Problem> {
         // Folds are comments: `;FOLD` … `;ENDFOLD`.
         let t = raw.trim_start();
         if let Some(rest) = t.strip_prefix(';') {
-            let w = first_word(rest.trim_start());
+            let (w, _) = first_word(rest.trim_start());
+            let w = w.as_str();
             if w == "FOLD" {
                 folds.push(line);
             } else if w == "ENDFOLD" && folds.pop().is_none() {
@@ -273,18 +294,17 @@ fn krl(unit: Unit, text: &str) -> Vec<Problem> {
         if code.is_empty() || code.starts_with('&') {
             continue;
         }
-        let words = words_upper(code);
-        let mut w = first_word(code);
-        let mut rest_words = &words[..];
-        if w == "GLOBAL" {
-            rest_words = &words[1.min(words.len())..];
-            w = rest_words.first().cloned().unwrap_or_default();
+        let (first, mut after) = first_word(code);
+        let mut word = first;
+        if word.as_str() == "GLOBAL" {
+            (word, after) = first_word(after);
         }
+        let w = word.as_str();
         let toplevel = b.stack.is_empty();
         // Names: of a routine or a data list, a KRL name.
-        if let kw @ ("DEF" | "DEFFCT" | "DEFDAT") = w.as_str()
-            && let Some(name) = declared_name(rest_words, code, kw)
-            && !is_krl_name(&name)
+        if let kw @ ("DEF" | "DEFFCT" | "DEFDAT") = w
+            && let Some(name) = declared_name(after, kw)
+            && !is_krl_name(name)
         {
             b.problem(
                 line,
@@ -296,9 +316,7 @@ fn krl(unit: Unit, text: &str) -> Vec<Problem> {
             );
         }
         // Declarations: before the first statement of their routine.
-        let declaration = w == "DECL"
-            || (KRL_TYPES.contains(&w.as_str()) && !code.contains('='))
-            || (w == "GLOBAL" && rest_words.first().is_some_and(|x| x == "DECL"));
+        let declaration = w == "DECL" || (KRL_TYPES.contains(&w) && !code.contains('='));
         let in_routine = b.in_any(&["DEF", "DEFFCT"]);
         if declaration && in_routine && executed {
             b.problem(
@@ -309,11 +327,10 @@ fn krl(unit: Unit, text: &str) -> Vec<Problem> {
                     .into(),
             );
         }
-        if in_routine && !declaration && !matches!(w.as_str(), "DEF" | "DEFFCT" | "END" | "ENDFCT")
-        {
+        if in_routine && !declaration && !matches!(w, "DEF" | "DEFFCT" | "END" | "ENDFCT") {
             executed = true;
         }
-        match w.as_str() {
+        match w {
             "DEF" => {
                 if !toplevel {
                     b.problem(line, col, "`DEF` inside another block".into());
@@ -333,7 +350,7 @@ fn krl(unit: Unit, text: &str) -> Vec<Problem> {
             "ENDFCT" => b.close("ENDFCT", &["DEFFCT"], line, col),
             "ENDDAT" => b.close("ENDDAT", &["DEFDAT"], line, col),
             "IF" => {
-                if rest_words.last().map(String::as_str) != Some("THEN") {
+                if !ends_with_word(code, "THEN") {
                     b.problem(
                         line,
                         col,
@@ -360,7 +377,7 @@ fn krl(unit: Unit, text: &str) -> Vec<Problem> {
             "REPEAT" => b.open("REPEAT", line, col),
             "UNTIL" => b.close("UNTIL", &["REPEAT"], line, col),
             "SWITCH" => b.open("SWITCH", line, col),
-            "CASE" | "DEFAULT" => b.middle(&w, "SWITCH", line, col),
+            "CASE" | "DEFAULT" => b.middle(w, "SWITCH", line, col),
             "ENDSWITCH" => b.close("ENDSWITCH", &["SWITCH"], line, col),
             "SPLINE" | "PTP_SPLINE" => b.open("SPLINE", line, col),
             "ENDSPLINE" => b.close("ENDSPLINE", &["SPLINE"], line, col),
@@ -398,18 +415,15 @@ fn rapid(unit: Unit, text: &str) -> Vec<Problem> {
         if code.is_empty() || code.starts_with('%') {
             continue;
         }
-        let words = words_upper(code);
-        let mut first = 0;
-        while matches!(
-            words.get(first).map(String::as_str),
-            Some("LOCAL" | "TASK" | "GLOBAL")
-        ) {
-            first += 1;
+        let (mut word, mut after) = first_word(code);
+        while matches!(word.as_str(), "LOCAL" | "TASK" | "GLOBAL") {
+            (word, after) = first_word(after);
         }
-        let w = words.get(first).cloned().unwrap_or_default();
-        let last = words.last().map(String::as_str).unwrap_or("");
+        let w = word.as_str();
+        let then = ends_with_word(code, "THEN");
+        let ends_do = ends_with_word(code, "DO");
         let toplevel = b.stack.is_empty();
-        match w.as_str() {
+        match w {
             "MODULE" => b.open("MODULE", line, col),
             "ENDMODULE" => b.close("ENDMODULE", &["MODULE"], line, col),
             "PROC" | "FUNC" | "TRAP" => {
@@ -419,7 +433,7 @@ fn rapid(unit: Unit, text: &str) -> Vec<Problem> {
                 if toplevel && unit == Unit::Program {
                     b.problem(line, col, format!("`{w}` outside `MODULE` … `ENDMODULE`"));
                 }
-                let kind = match w.as_str() {
+                let kind = match w {
                     "PROC" => "PROC",
                     "FUNC" => "FUNC",
                     _ => "TRAP",
@@ -430,14 +444,14 @@ fn rapid(unit: Unit, text: &str) -> Vec<Problem> {
             "ENDFUNC" => b.close("ENDFUNC", &["FUNC"], line, col),
             "ENDTRAP" => b.close("ENDTRAP", &["TRAP"], line, col),
             "ERROR" | "BACKWARD" | "UNDO"
-                if (words.len() == 1 || code.ends_with(')')) && !b.in_any(ROUTINES) =>
+                if (after.is_empty() || code.ends_with(')')) && !b.in_any(ROUTINES) =>
             {
                 b.problem(line, col, format!("`{w}` handler outside a routine"));
             }
             // `IF c THEN` opens; a compact `IF c stmt;` is one statement.
-            "IF" if last == "THEN" => b.open("IF", line, col),
+            "IF" if then => b.open("IF", line, col),
             "ELSEIF" => {
-                if last != "THEN" {
+                if !then {
                     b.problem(
                         line,
                         col,
@@ -456,7 +470,7 @@ fn rapid(unit: Unit, text: &str) -> Vec<Problem> {
             }
             "ENDIF" => b.close("ENDIF", &["IF"], line, col),
             "WHILE" => {
-                if last != "DO" {
+                if !ends_do {
                     b.problem(
                         line,
                         col,
@@ -467,7 +481,7 @@ fn rapid(unit: Unit, text: &str) -> Vec<Problem> {
             }
             "ENDWHILE" => b.close("ENDWHILE", &["WHILE"], line, col),
             "FOR" => {
-                if last != "DO" {
+                if !ends_do {
                     b.problem(
                         line,
                         col,
@@ -478,7 +492,7 @@ fn rapid(unit: Unit, text: &str) -> Vec<Problem> {
             }
             "ENDFOR" => b.close("ENDFOR", &["FOR"], line, col),
             "TEST" => b.open("TEST", line, col),
-            "CASE" | "DEFAULT" => b.middle(&w, "TEST", line, col),
+            "CASE" | "DEFAULT" => b.middle(w, "TEST", line, col),
             "ENDTEST" => b.close("ENDTEST", &["TEST"], line, col),
             _ if toplevel && unit == Unit::Program => b.problem(
                 line,
@@ -499,12 +513,13 @@ fn urscript(text: &str) -> Vec<Problem> {
         if code.is_empty() {
             continue;
         }
-        let w = first_word(code).to_ascii_lowercase();
+        // URScript's keywords are lower case (`End` is a name).
+        let w = &code[..code.find(|c: char| !is_word_char(c)).unwrap_or(code.len())];
         let opens = code.ends_with(':');
         // Indentation: a block's lines deeper than the line that opened it; its `end`, `elif`
         // and `else` as deep as that line (the column is the code's, in characters).
         if let Some(o) = b.stack.last() {
-            let closing = matches!(w.as_str(), "end" | "elif" | "else");
+            let closing = matches!(w, "end" | "elif" | "else");
             let (kind, at) = (o.kind, (o.line, o.column));
             if closing && col != at.1 {
                 b.problem_at(
@@ -527,9 +542,9 @@ fn urscript(text: &str) -> Vec<Problem> {
                 );
             }
         }
-        match w.as_str() {
+        match w {
             "def" | "thread" | "if" | "while" if opens => {
-                let kind = match w.as_str() {
+                let kind = match w {
                     "def" => "def",
                     "thread" => "thread",
                     "if" => "if",
@@ -552,7 +567,7 @@ fn urscript(text: &str) -> Vec<Problem> {
             }
             _ => {}
         }
-        if matches!(w.as_str(), "elif" | "else") && opens {
+        if matches!(w, "elif" | "else") && opens {
             let word = if w == "elif" { "elif" } else { "else" };
             b.middle(word, "if", line, col);
             if w == "else"
