@@ -6,7 +6,7 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use crate::bind;
-use crate::diag::{Code, Diagnostic, Diagnostics, Sources, Span};
+use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
 use crate::emit::{EmitInput, LanguageProfile as _, OutputFile, OutputTemplate};
 use crate::lang::Language;
 use crate::load::FileSource;
@@ -884,7 +884,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             check_snippets(&cx.sources, irl, &used, &mut cx.diags);
         }
         if !cx.diags.has_errors() {
-            check_generated(&outputs, &mut cx.diags);
+            check_generated(&outputs, &cx.sources, user_template, &mut cx.diags);
         }
         out.outputs = outputs;
         out.output_programs = output_programs;
@@ -1055,7 +1055,32 @@ fn check_snippets(sources: &Sources, irl: &Irl, used: &HashSet<&str>, diags: &mu
 
 /// `E606` for each problem the built-in check finds in a generated file ([`crate::check`]):
 /// what the IRL snippets and the output template made together. Nothing is written then.
-fn check_generated(outputs: &[(PathBuf, OutputFile)], diags: &mut Diagnostics) {
+fn check_generated(
+    outputs: &[(PathBuf, OutputFile)],
+    sources: &Sources,
+    template: Option<FileId>,
+    diags: &mut Diagnostics,
+) {
+    // A generated line that stands once, as it is, in the `--template` file came from there:
+    // the problem is located at it.
+    let in_template = |line: &str| -> Option<Span> {
+        let tf = template?;
+        let text = &sources.get(tf).text;
+        let mut found = None;
+        let mut at = 0;
+        for l in text.split_inclusive('\n') {
+            let t = l.trim();
+            if !line.is_empty() && t == line {
+                if found.is_some() {
+                    return None;
+                }
+                let start = at + (l.len() - l.trim_start().len());
+                found = Some(Span::new(tf, start..start + t.len()));
+            }
+            at += l.len();
+        }
+        found
+    };
     for (path, f) in outputs {
         let Some((language, unit)) = crate::check::language_of(path) else {
             continue;
@@ -1070,14 +1095,23 @@ fn check_generated(outputs: &[(PathBuf, OutputFile)], diags: &mut Diagnostics) {
             let file = path
                 .file_name()
                 .map_or(String::new(), |n| n.to_string_lossy().into_owned());
-            diags.push(Diagnostic::error(
+            let mut d = Diagnostic::error(
                 Code::BadProgram,
                 format!(
                     "the generated {file} would not load: line {}: {}{opened} (`{line}`); check \
                      the IRL snippets and the output template",
                     p.line, p.message
                 ),
-            ));
+            );
+            if let Some(span) = in_template(line) {
+                d = d.at(span);
+                if let Some((l, _)) = p.opened.filter(|(l, _)| *l != p.line)
+                    && let Some(o) = in_template(f.text.lines().nth(l - 1).unwrap_or("").trim())
+                {
+                    d = d.related(o, "the block opened here");
+                }
+            }
+            diags.push(d);
         }
     }
 }
