@@ -224,6 +224,16 @@ impl Blocks {
         }
     }
 
+    /// The `else` of the innermost block, which must be `kind`: after it only the end.
+    fn else_(&mut self, word: &str, kind: &'static str, line: usize, column: usize) {
+        self.middle(word, kind, line, column);
+        if let Some(o) = self.stack.last_mut()
+            && o.kind == kind
+        {
+            o.closed_else = true;
+        }
+    }
+
     fn in_any(&self, kinds: &[&str]) -> bool {
         self.stack.iter().any(|o| kinds.contains(&o.kind))
     }
@@ -359,14 +369,7 @@ fn krl(unit: Unit, text: &str) -> Vec<Problem> {
                 }
                 b.open("IF", line, col)
             }
-            "ELSE" => {
-                b.middle("ELSE", "IF", line, col);
-                if let Some(o) = b.stack.last_mut()
-                    && o.kind == "IF"
-                {
-                    o.closed_else = true;
-                }
-            }
+            "ELSE" => b.else_("ELSE", "IF", line, col),
             "ENDIF" => b.close("ENDIF", &["IF"], line, col),
             "LOOP" => b.open("LOOP", line, col),
             "ENDLOOP" => b.close("ENDLOOP", &["LOOP"], line, col),
@@ -460,36 +463,20 @@ fn rapid(unit: Unit, text: &str) -> Vec<Problem> {
                 }
                 b.middle("ELSEIF", "IF", line, col)
             }
-            "ELSE" => {
-                b.middle("ELSE", "IF", line, col);
-                if let Some(o) = b.stack.last_mut()
-                    && o.kind == "IF"
-                {
-                    o.closed_else = true;
-                }
-            }
+            "ELSE" => b.else_("ELSE", "IF", line, col),
             "ENDIF" => b.close("ENDIF", &["IF"], line, col),
-            "WHILE" => {
+            "WHILE" | "FOR" => {
+                let kind = if w == "FOR" { "FOR" } else { "WHILE" };
                 if !ends_do {
                     b.problem(
                         line,
                         col,
-                        "`WHILE` without `DO` at the end of its line".into(),
+                        format!("`{kind}` without `DO` at the end of its line"),
                     );
                 }
-                b.open("WHILE", line, col)
+                b.open(kind, line, col)
             }
             "ENDWHILE" => b.close("ENDWHILE", &["WHILE"], line, col),
-            "FOR" => {
-                if !ends_do {
-                    b.problem(
-                        line,
-                        col,
-                        "`FOR` without `DO` at the end of its line".into(),
-                    );
-                }
-                b.open("FOR", line, col)
-            }
             "ENDFOR" => b.close("ENDFOR", &["FOR"], line, col),
             "TEST" => b.open("TEST", line, col),
             "CASE" | "DEFAULT" => b.middle(w, "TEST", line, col),
@@ -568,13 +555,10 @@ fn urscript(text: &str) -> Vec<Problem> {
             _ => {}
         }
         if matches!(w, "elif" | "else") && opens {
-            let word = if w == "elif" { "elif" } else { "else" };
-            b.middle(word, "if", line, col);
-            if w == "else"
-                && let Some(o) = b.stack.last_mut()
-                && o.kind == "if"
-            {
-                o.closed_else = true;
+            if w == "elif" {
+                b.middle("elif", "if", line, col);
+            } else {
+                b.else_("else", "if", line, col);
             }
         }
     }

@@ -106,13 +106,6 @@ fn local_id(sfc: &Sfc, i: usize) -> u64 {
     sfc.elements[i].local_id
 }
 
-fn condition(sfc: &Sfc, t: usize) -> String {
-    match &sfc.elements[t].kind {
-        ElementKind::Transition(Some(c)) => c.text.split_whitespace().collect::<Vec<_>>().join(" "),
-        _ => "TRUE".to_owned(),
-    }
-}
-
 impl Layout<'_> {
     fn walk(&mut self, blocks: &[Block], mut front: Front, row: usize) -> Front {
         for b in blocks {
@@ -189,15 +182,7 @@ impl Layout<'_> {
                             self.rows += 1;
                             self.rows - 1
                         };
-                        let heads = br.heads();
-                        let cond = match heads.as_slice() {
-                            [one] => condition(self.sfc, *one),
-                            many => many
-                                .iter()
-                                .map(|h| format!("({})", condition(self.sfc, *h)))
-                                .collect::<Vec<_>>()
-                                .join(" OR "),
-                        };
+                        let cond = br.condition_text(self.sfc);
                         self.label = Some(format!("{}. {cond}", k + 1));
                         let e = self.walk(&br.body, front, r);
                         if let Some(text) = self.label.take() {

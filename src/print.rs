@@ -8,7 +8,7 @@
 use std::fmt::Write as _;
 
 use crate::model::{Blackboard, ElementKind, Sfc, Signal, SignalKind, Value};
-use crate::plan::{Block, BranchEnd, Plan};
+use crate::plan::{Block, BranchEnd, Plan, condition_text as condition, one_line};
 
 /// A resource's language and where it comes from: the compile's decision for a resource the
 /// program uses (`languages`), else its `Language` attribute, else the default.
@@ -279,32 +279,6 @@ fn duration(sfc: &Sfc, i: usize) -> f64 {
     }
 }
 
-/// The condition of a transition as written, on one line (`TRUE` when it has none).
-fn condition(sfc: &Sfc, t: usize) -> String {
-    match &sfc.elements[t].kind {
-        ElementKind::Transition(Some(c)) => one_line(&c.text),
-        _ => "TRUE".to_owned(),
-    }
-}
-
-/// What selects a selection branch: its transition's condition, or any first condition of the
-/// selection it opens.
-fn branch_condition(sfc: &Sfc, br: &crate::plan::Branch) -> String {
-    let heads = br.heads();
-    if heads.len() == 1 {
-        return condition(sfc, heads[0]);
-    }
-    let parts: Vec<String> = heads
-        .iter()
-        .map(|&h| format!("({})", condition(sfc, h)))
-        .collect();
-    parts.join(" OR ")
-}
-
-fn one_line(s: &str) -> String {
-    s.split_whitespace().collect::<Vec<_>>().join(" ")
-}
-
 /// What the flow's total time means.
 #[derive(Default)]
 struct Totals {
@@ -387,7 +361,7 @@ pub fn flow(sfc: &Sfc, plan: &Plan) -> String {
                         let _ = writeln!(
                             o,
                             "{inner}? {} (transition id={})",
-                            branch_condition(sfc, br),
+                            br.condition_text(sfc),
                             sfc.elements[br.transition].local_id
                         );
                         end = end.max(walk(sfc, &br.body, t, &inner, o, tot));
@@ -578,7 +552,7 @@ fn order_lines(
                 );
                 let inner = format!("{indent}    ");
                 for (k, br) in branches.iter().enumerate() {
-                    let _ = writeln!(o, "{indent}  {}. if {}", k + 1, branch_condition(sfc, br));
+                    let _ = writeln!(o, "{indent}  {}. if {}", k + 1, br.condition_text(sfc));
                     order_lines(sfc, view, &br.body, &inner, n, o);
                     match br.end {
                         BranchEnd::Join => {}
@@ -927,7 +901,7 @@ pub mod json {
                             let (blocks, e) = walk(sfc, &br.body, start, tot);
                             end = end.max(e);
                             let mut o = json!({
-                                "condition": super::branch_condition(sfc, br),
+                                "condition": br.condition_text(sfc),
                                 "transition": local_id(sfc, br.transition),
                                 "blocks": blocks,
                             });
@@ -1070,7 +1044,7 @@ pub mod json {
                             let mut blocks = Vec::new();
                             order_blocks(sfc, view, &br.body, n, &mut blocks);
                             json!({
-                                "condition": super::branch_condition(sfc, br),
+                                "condition": br.condition_text(sfc),
                                 "transition": local_id(sfc, br.transition),
                                 "blocks": blocks,
                                 "then": match br.end {

@@ -98,6 +98,35 @@ pub struct Branch {
     pub end: BranchEnd,
 }
 
+/// The condition of transition `t` as written, on one line (`TRUE` when it has none): what the
+/// listings (`-pF`, `-pO`) and the picture show.
+pub fn condition_text(sfc: &Sfc, t: usize) -> String {
+    match &sfc.elements[t].kind {
+        crate::model::ElementKind::Transition(Some(c)) => one_line(&c.text),
+        _ => "TRUE".to_owned(),
+    }
+}
+
+/// A text on one line: its words joined by single spaces.
+pub fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+impl Branch {
+    /// What selects the branch, as written: its transition's condition, or any first condition
+    /// of the selection it opens (`(a) OR (b)`).
+    pub fn condition_text(&self, sfc: &Sfc) -> String {
+        match self.heads().as_slice() {
+            [one] => condition_text(sfc, *one),
+            heads => heads
+                .iter()
+                .map(|&h| format!("({})", condition_text(sfc, h)))
+                .collect::<Vec<_>>()
+                .join(" OR "),
+        }
+    }
+}
+
 impl State {
     /// Each state's entry element and its number, counting from `first`: what a Goto to that
     /// element goes to.
