@@ -294,6 +294,7 @@ fn run(a: Args) -> u8 {
         // Warnings not shown are not built (100,000 unused variables in one step).
         drop_warnings: !warnings,
         bind_split_from: None,
+        picture: a.svg.clone(),
     };
     // The process ends after this run: the (possibly very large) compilation is left to the
     // OS instead of being freed piece by piece (100,000 warnings: ~5 % of the run).

@@ -42,6 +42,9 @@ pub struct Options {
     /// two at a time (`None`: [`bind::PARALLEL_FROM`]). For the tests, which compare the ways.
     #[doc(hidden)]
     pub bind_split_from: Option<usize>,
+    /// A picture of the plan (`--svg FILE`) written besides the outputs: like an output, it may
+    /// not be a file the compile reads (`E605`).
+    pub picture: Option<PathBuf>,
 }
 
 /// The write-back to do after a successful compile.
@@ -516,12 +519,7 @@ impl<'a> Ctx<'a> {
 /// `.`/`..` are resolved) and, where the file system can tell, with symbolic links resolved, so
 /// `./X.src` and a link to `X.src` count. (The blackboard is the write-back's target, which is
 /// not an output; an *output* named like it is an error.)
-fn check_outputs(
-    cx: &mut Ctx,
-    outputs: &[(PathBuf, crate::emit::OutputFile)],
-    blackboard: &Path,
-    template: Option<&Path>,
-) {
+fn check_outputs(cx: &mut Ctx, outputs: &[&Path], blackboard: &Path, template: Option<&Path>) {
     if outputs.is_empty() {
         return;
     }
@@ -529,7 +527,7 @@ fn check_outputs(
     inputs.extend(template.map(|t| (t.to_owned(), None)));
     inputs.extend(cx.refs.iter().map(|(p, s)| (p.clone(), Some(s.clone()))));
     let mut reported: Vec<(PathBuf, PathBuf)> = Vec::new();
-    for (out, _) in outputs {
+    for &out in outputs {
         let out_real = real_or_parent(&cx.fs, out);
         for (input, at) in &inputs {
             let same = paths::absolute(out) == paths::absolute(input)
@@ -537,7 +535,7 @@ fn check_outputs(
             if !same || reported.iter().any(|(o, i)| o == out && i == input) {
                 continue;
             }
-            reported.push((out.clone(), input.clone()));
+            reported.push((out.to_owned(), input.clone()));
             let name = out.file_name().unwrap_or_default().to_string_lossy();
             let d = Diagnostic::error(
                 Code::OutputIsInput,
@@ -897,7 +895,14 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             cx.load_top(p, &mut out);
         }
     }
-    check_outputs(&mut cx, &out.outputs, blackboard, opts.template.as_deref());
+    let picture = opts.picture.iter().map(|p| p.as_path());
+    let written: Vec<&Path> = out
+        .outputs
+        .iter()
+        .map(|(p, _)| p.as_path())
+        .chain(picture)
+        .collect();
+    check_outputs(&mut cx, &written, blackboard, opts.template.as_deref());
 
     if !cx.diags.has_errors()
         && let Some(wb) = &bb.write_back

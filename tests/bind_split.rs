@@ -40,6 +40,7 @@ fn same_both_ways(bb: &Path) {
                     program: Some("out".into()),
                     drop_warnings,
                     bind_split_from: Some(split),
+                    picture: None,
                     ..Default::default()
                 },
             )

@@ -282,3 +282,20 @@ fn the_daemon_draws_the_plan_beside_the_outputs() {
     assert_eq!(count_after(&d.events(), "compile-started", &a, mark), 1);
     d.stop(WAIT);
 }
+
+#[test]
+fn a_picture_named_like_an_input_is_refused_and_the_input_kept() {
+    let (tmp, bb, program) = materialize("reference-sample");
+    let sfc = tmp.path().join("sfc.xml");
+    let before = fs::read(&sfc).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["--validate", "--svg"])
+        .arg(&sfc)
+        .arg(&bb)
+        .arg(&program)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("E605"));
+    assert_eq!(fs::read(&sfc).unwrap(), before, "the SFC is untouched");
+}

@@ -58,6 +58,7 @@ fuzz_target!(|data: &[u8]| {
         keep_model: data.len() % 3 == 0,
         drop_warnings: data.len() % 5 == 0,
         bind_split_from: (data.len() % 7 == 0).then_some(1),
+        picture: None,
     };
     let c = compile(&fs, Path::new(BLACKBOARD), &opts);
     assert_eq!(c.files_read.first(), Some(&PathBuf::from(BLACKBOARD)));

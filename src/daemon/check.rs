@@ -363,6 +363,7 @@ fn project_row(spec: &ProjectSpec, config: &Config, me: &Process) -> Row {
         keep_model: false,
         drop_warnings: true,
         bind_split_from: None,
+        picture: None,
     };
     let c = compile::compile(&fs, &blackboard, &opts);
     let mut read = 0;

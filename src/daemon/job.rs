@@ -477,6 +477,7 @@ impl Job {
             keep_model: self.spec.picture,
             drop_warnings: false,
             bind_split_from: None,
+            picture: None,
         };
         let mut c = compile::compile(&fs, &blackboard, &opts);
         let mut inputs = fs.seen.into_inner().unwrap_or_else(|p| p.into_inner());
