@@ -72,9 +72,10 @@ pub struct StepOrder {
     /// Element indexes of the steps, in execution order (or document order when the flow could
     /// not be planned: then the values are still checked, but nothing is emitted).
     pub steps: Vec<usize>,
-    /// The start and end steps, which may name no skill; `None` when unknown (then any step may
-    /// name no skill without an error, since the flow errors are reported already).
-    pub start_end: Option<(usize, Option<usize>)>,
+    /// Each sequence's start and end step, which may name no skill; `None` when unknown (then
+    /// any step may name no skill without an error, since the flow errors are reported
+    /// already).
+    pub start_end: Option<Vec<(usize, Option<usize>)>>,
 }
 
 impl StepOrder {
@@ -82,7 +83,7 @@ impl StepOrder {
     pub fn planned(plan: &crate::plan::Plan) -> Self {
         StepOrder {
             steps: plan.steps(),
-            start_end: Some((plan.start, plan.end)),
+            start_end: Some(plan.sequences.clone()),
         }
     }
 
@@ -142,7 +143,8 @@ pub fn resolve(
         let Some(skill_name) = &st.skill else {
             if order
                 .start_end
-                .is_some_and(|(start, end)| i != start && Some(i) != end)
+                .as_ref()
+                .is_some_and(|se| !se.iter().any(|&(start, end)| i == start || Some(i) == end))
             {
                 diags.push(
                     Diagnostic::error(

@@ -623,7 +623,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
     if let Some(s) = &mut sfc {
         plan::close_circles(s);
     }
-    let plan = sfc.as_ref().and_then(|s| plan::plan(s, &mut cx.diags));
+    let mut plan = sfc.as_ref().and_then(|s| plan::plan(s, &mut cx.diags));
     lap(&mut out, "plan");
 
     // Bind, loading the IRL files the used skills need.
@@ -638,6 +638,16 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             None => bind::StepOrder::document(sfc),
         };
         let res = bind::resolve(&bb, sfc, &order, &mut cx.diags);
+        // Several initial steps: each sequence on controllers of its own (SPEC.md 3, 9).
+        if let Some(p) = &mut plan {
+            plan::place_sequences(
+                p,
+                sfc,
+                &|i| res.step_skill[i].map(|(r, _)| bb.controller_of(r)),
+                &|c| bb.resources[c].name.text.to_string(),
+                &mut cx.diags,
+            );
+        }
         let needed = bind::needed_functions(&bb, &res, &mut cx.diags);
         let mut files: Vec<((usize, usize), crate::diag::FileId)> = Vec::new();
         for (r, f) in needed {
@@ -700,7 +710,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                     (
                         bind::StepOrder {
                             steps,
-                            start_end: order.start_end,
+                            start_end: order.start_end.clone(),
                         },
                         &narrowed,
                     )

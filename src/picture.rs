@@ -152,7 +152,7 @@ impl Layout<'_> {
                     self.free[c] = end;
                     front = (end, Some((c, row, *i)));
                 }
-                Block::Parallel { branches, .. } => {
+                Block::Parallel { branches, .. } | Block::Sequences(branches) => {
                     let mut end = front;
                     for br in branches {
                         let e = self.walk(br, front, row);

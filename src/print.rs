@@ -290,7 +290,8 @@ struct Totals {
 }
 
 /// `-pF`: the flow as a pseudo-graphic: one line per step with its start time and duration;
-/// simultaneous branches drawn as `{ | … + | … }`, selection branches as `< | ? cond … + … >`,
+/// simultaneous branches drawn as `{ | … + | … }` (so are the sequences of several initial
+/// steps, with a title), selection branches as `< | ? cond … + … >`,
 /// a loop as `[ loop … ]` with one round of its body. A block of branches ends when its longest
 /// branch ends (simultaneous branches run in parallel in the plan, even though one robot runs
 /// them in turn; of alternatives the longest is counted). A loop counts one round.
@@ -328,8 +329,16 @@ pub fn flow(sfc: &Sfc, plan: &Plan) -> String {
                         sfc.elements[*tr].local_id
                     );
                 }
-                Block::Parallel { branches, .. } => {
-                    let _ = writeln!(o, "{indent}{{");
+                Block::Parallel { branches, .. } | Block::Sequences(branches) => {
+                    if matches!(b, Block::Sequences(_)) {
+                        let _ = writeln!(
+                            o,
+                            "{indent}{{ {} sequences at the same time, each from an initial step:",
+                            branches.len()
+                        );
+                    } else {
+                        let _ = writeln!(o, "{indent}{{");
+                    }
                     let inner = format!("{indent} | ");
                     let mut end = t;
                     for (k, br) in branches.iter().enumerate() {
@@ -509,7 +518,7 @@ fn order_lines(
                     let _ = writeln!(o, "{indent} {}", v.handshake(sfc, m, tell));
                 }
             }
-            Block::Parallel { branches, .. } => {
+            Block::Parallel { branches, .. } | Block::Sequences(branches) => {
                 for br in branches {
                     order_lines(sfc, view, br, indent, n, o);
                 }
@@ -888,6 +897,23 @@ pub mod json {
                         }));
                         t = end;
                     }
+                    Block::Sequences(seqs) => {
+                        let start = t;
+                        let mut end = t;
+                        let mut bs = Vec::new();
+                        for seq in seqs {
+                            let (blocks, e) = walk(sfc, seq, start, tot);
+                            end = end.max(e);
+                            bs.push(json!({"blocks": blocks}));
+                        }
+                        out.push(json!({
+                            "kind": "sequences",
+                            "start": start,
+                            "end": end,
+                            "sequences": bs,
+                        }));
+                        t = end;
+                    }
                     Block::Choice {
                         divergence,
                         branches,
@@ -1023,7 +1049,7 @@ pub mod json {
                         "branch": (tell && decision).then_some(m.value + 1),
                     }));
                 }
-                Block::Parallel { branches, .. } => {
+                Block::Parallel { branches, .. } | Block::Sequences(branches) => {
                     for br in branches {
                         order_blocks(sfc, view, br, n, out);
                     }
@@ -1288,7 +1314,7 @@ pub fn cell_timeline(sfc: &Sfc, plan: &Plan, view: &CellView) -> (Vec<Vec<LaneIt
                     t.free[c] = start + d;
                     front = (start + d, Some((c, *i)));
                 }
-                Block::Parallel { branches, .. } => {
+                Block::Parallel { branches, .. } | Block::Sequences(branches) => {
                     let mut end = front;
                     for br in branches {
                         let e = walk(t, br, front);

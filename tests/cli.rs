@@ -2637,3 +2637,116 @@ fn print_options_compile_and_write_unless_validating() {
         "{help}"
     );
 }
+
+/// SPEC.md 3: several steps marked `initialStep="true"`, nothing connecting them, are sequences
+/// that run at the same time, each on controllers of its own. Each program holds its own
+/// sequence only and waits for nothing from the other: no handshake wire is read or set.
+#[test]
+fn several_initial_steps_are_sequences_on_controllers_of_their_own() {
+    let t = bases_with_case(&["cell", "cell2"], "cell-two-sequences");
+    // The chart alone: valid, and the flow listing shows both sequences side by side.
+    let o = run(&["--sfc", "--format", "json", "-pF", "sfc.xml"], t.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let lines = json_lines(&o);
+    let flow = listing(&lines, "flow");
+    let blocks = flow["blocks"].as_array().unwrap();
+    assert_eq!(blocks.len(), 1, "{flow}");
+    assert_eq!(blocks[0]["kind"], "sequences", "{flow}");
+    assert_eq!(
+        blocks[0]["sequences"].as_array().unwrap().len(),
+        2,
+        "{flow}"
+    );
+    let o = run(&["--lf", "Blackboard.aml", "Cell"], t.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let a = std::fs::read_to_string(t.path().join("Cell_KUKA_KR15_2.src")).unwrap();
+    let b = std::fs::read_to_string(t.path().join("Cell_KUKA_KR16_2.src")).unwrap();
+    for (prog, mine, theirs) in [
+        (
+            &a,
+            &["Pick", "Grip", "PlaceA"][..],
+            &["Weld", "RetreatB"][..],
+        ),
+        (
+            &b,
+            &["Weld", "RetreatB"][..],
+            &["Pick", "Grip", "PlaceA"][..],
+        ),
+    ] {
+        for s in mine {
+            assert!(prog.contains(&format!(" {s}: ")), "{s} missing:\n{prog}");
+        }
+        for s in theirs {
+            assert!(!prog.contains(&format!(" {s}: ")), "{s} in:\n{prog}");
+        }
+        // The wires between the robots: $OUT[11..13] and $IN[21..23] on both.
+        for io in [
+            "$OUT[11]", "$OUT[12]", "$OUT[13]", "$IN[21]", "$IN[22]", "$IN[23]",
+        ] {
+            assert!(!prog.contains(io), "a handshake on {io}:\n{prog}");
+        }
+    }
+    // The second robot's sequence repeats without end, waiting for its part each round.
+    let wait = b.find("WAIT FOR $IN[5]").expect("the wait for More_Parts");
+    let lp = b.find("\nLOOP").expect("an endless loop");
+    assert!(lp < wait && wait < b.find("ENDLOOP").unwrap(), "{b}");
+    // Both paths written back.
+    let bb = std::fs::read_to_string(t.path().join("Blackboard.aml")).unwrap();
+    assert!(bb.contains("Cell_KUKA_KR15_2.src") && bb.contains("Cell_KUKA_KR16_2.src"));
+}
+
+/// A further initial step whose sequence runs no robot's code (a lone step, or steps without
+/// skills between a start and an end: a PLC's own sequence) is left out: the program is the
+/// one of the chart without it. With robot steps on the same controller it is an error.
+#[test]
+fn a_sequence_without_robot_steps_is_left_out() {
+    let t = base_with_case("flow", "flow-guarded-sequence");
+    let sfc = std::fs::read_to_string(t.path().join("sfc.xml")).unwrap();
+    let o = run(&["--lf", "Blackboard.aml", "GuardedSequence"], t.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let alone = std::fs::read_to_string(t.path().join("GuardedSequence.src")).unwrap();
+    let idle = "<step localId=\"900\" name=\"Idle\" initialStep=\"true\"><position x=\"500\" y=\"0\"/></step>\
+        <transition localId=\"901\"><position x=\"500\" y=\"1\"/><connectionPointIn><connection refLocalId=\"900\"/></connectionPointIn>\
+        <condition><inline name=\"\"><ST><xhtml:p>TRUE</xhtml:p></ST></inline></condition></transition>\
+        <step localId=\"902\" name=\"Done\"><position x=\"500\" y=\"2\"/><connectionPointIn><connection refLocalId=\"901\"/></connectionPointIn></step>\
+        <step localId=\"903\" name=\"Lone\" initialStep=\"true\"><position x=\"600\" y=\"0\"/></step>";
+    let with_idle = sfc.replacen("</SFC>", &format!("{idle}</SFC>"), 1);
+    assert_ne!(with_idle, sfc, "the fixture changed");
+    std::fs::write(t.path().join("sfc.xml"), &with_idle).unwrap();
+    std::fs::remove_file(t.path().join("GuardedSequence.src")).unwrap();
+    let o = run(&["--lf", "Blackboard.aml", "GuardedSequence"], t.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert_eq!(
+        std::fs::read_to_string(t.path().join("GuardedSequence.src")).unwrap(),
+        alone
+    );
+    // A robot step in the further sequence, on the only controller: refused, nothing written.
+    let busy = with_idle.replacen(
+        "<step localId=\"902\" name=\"Done\"><position x=\"500\" y=\"2\"/><connectionPointIn><connection refLocalId=\"901\"/></connectionPointIn></step>",
+        &{
+            let step = &sfc[sfc.find("<step localId=\"3\"").unwrap()..];
+            let step = &step[..step.find("</step>").unwrap() + "</step>".len()];
+            let moved = step
+                .replacen("localId=\"3\"", "localId=\"902\"", 1)
+                .replacen("refLocalId=\"2\"", "refLocalId=\"901\"", 1);
+            format!("{moved}<transition localId=\"904\"><position x=\"500\" y=\"3\"/><connectionPointIn><connection refLocalId=\"902\"/></connectionPointIn></transition><step localId=\"905\" name=\"Done\"><position x=\"500\" y=\"4\"/><connectionPointIn><connection refLocalId=\"904\"/></connectionPointIn></step>")
+        },
+        1,
+    );
+    assert_ne!(busy, with_idle, "the fixture changed");
+    std::fs::write(t.path().join("sfc.xml"), &busy).unwrap();
+    let before = std::fs::read(t.path().join("Blackboard.aml")).unwrap();
+    std::fs::remove_file(t.path().join("GuardedSequence.src")).unwrap();
+    let o = run(&["--lf", "Blackboard.aml", "GuardedSequence"], t.path());
+    assert_eq!(o.status.code(), Some(1), "{}", stdout(&o));
+    assert!(
+        stderr(&o).contains("both run on controller"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!t.path().join("GuardedSequence.src").exists());
+    assert_eq!(
+        std::fs::read(t.path().join("Blackboard.aml")).unwrap(),
+        before
+    );
+}

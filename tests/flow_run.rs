@@ -1796,6 +1796,14 @@ const CELL_FIXTURES: &[CellFixture] = &[
         &["KUKA KR15-2", "ABB IRB 1200", "UR10e"],
     ),
     (
+        "cell-two-sequences",
+        &[
+            ("Cell_KUKA_KR15_2", Lang::Krl),
+            ("Cell_KUKA_KR16_2", Lang::Krl),
+        ],
+        &["KUKA KR15-2", "KUKA KR16-2"],
+    ),
+    (
         "cell-flow-states",
         &[
             ("Cell_KUKA_KR15_2", Lang::Krl),

@@ -109,6 +109,7 @@ cases! {
     cell_robot_gripper => "cell-robot-gripper",
     cell_two_robots_weld => "cell-two-robots-weld",
     cell_two_robots_wired => "cell-two-robots-wired",
+    cell_two_sequences => "cell-two-sequences",
     codesys_addata_pou => "codesys-addata-pou",
     flow_codesys_nested_selection => "flow-codesys-nested-selection",
     flow_cyclic => "flow-cyclic",

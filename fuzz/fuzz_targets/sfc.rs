@@ -56,6 +56,11 @@ fuzz_target!(|data: &[u8]| {
                 assert!(!seen[i], "plan step {i} twice");
                 seen[i] = true;
             }
+            // Several initial steps: one sequence each, side by side at the top.
+            match p.body.as_slice() {
+                [plan::Block::Sequences(seqs)] => assert_eq!(seqs.len(), p.sequences.len()),
+                _ => assert_eq!(p.sequences.len(), 1),
+            }
             let (mut gotos, mut machines) = (Vec::new(), Vec::new());
             plan::visit(&p.body, &mut |b| match b {
                 plan::Block::Wait(t) => assert!(matches!(

@@ -191,7 +191,7 @@ impl Writer<'_> {
                     self.line(level, &format!("WAIT FOR {c}"));
                 }
             }
-            Block::Parallel { branches, .. } => {
+            Block::Parallel { branches, .. } | Block::Sequences(branches) => {
                 for br in branches {
                     self.blocks(br, level);
                 }

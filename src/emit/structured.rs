@@ -109,7 +109,9 @@ fn may_leave(b: &Block) -> bool {
         Block::Choice { branches, .. } | Block::Follow { branches, .. } => branches
             .iter()
             .any(|br| br.end == BranchEnd::Leave || br.body.iter().any(may_leave)),
-        Block::Parallel { branches, .. } => branches.iter().flatten().any(may_leave),
+        Block::Parallel { branches, .. } | Block::Sequences(branches) => {
+            branches.iter().flatten().any(may_leave)
+        }
         Block::Step(_)
         | Block::Wait(_)
         | Block::Loop { .. }
@@ -261,7 +263,7 @@ impl Writer<'_> {
                     (self.d.wait)(&mut self.out, level, &c);
                 }
             }
-            Block::Parallel { branches, .. } => {
+            Block::Parallel { branches, .. } | Block::Sequences(branches) => {
                 self.sequence(branches.iter().map(Vec::as_slice), level);
             }
             Block::Choice {

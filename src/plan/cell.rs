@@ -220,6 +220,18 @@ impl Scan<'_> {
                     }
                     ctx = last;
                 }
+                Block::Sequences(seqs) => {
+                    // Each sequence is in the charge of its own first controller.
+                    for seq in seqs {
+                        let mut first = None;
+                        super::visit(seq, &mut |b| {
+                            if let (None, Block::Step(i)) = (first, b) {
+                                first = (self.controller)(*i);
+                            }
+                        });
+                        ctx = self.blocks(seq, first.unwrap_or(ctx), set);
+                    }
+                }
                 Block::Choice {
                     divergence,
                     branches,
@@ -276,7 +288,7 @@ impl Scan<'_> {
                         }
                         walk(scan, body, parts);
                     }
-                    Block::Parallel { branches, .. } => {
+                    Block::Parallel { branches, .. } | Block::Sequences(branches) => {
                         for br in branches {
                             walk(scan, br, parts);
                         }
@@ -297,7 +309,9 @@ fn ends_rounds(branches: &[Branch]) -> bool {
     fn inside(b: &Block) -> bool {
         match b {
             Block::Choice { branches, .. } => ends_rounds(branches),
-            Block::Parallel { branches, .. } => branches.iter().flatten().any(inside),
+            Block::Parallel { branches, .. } | Block::Sequences(branches) => {
+                branches.iter().flatten().any(inside)
+            }
             _ => false,
         }
     }
@@ -441,7 +455,7 @@ impl Splitter<'_> {
                 let k = self.tick(c, *t);
                 vec![(c, k, *t)]
             }
-            Block::Parallel { branches, .. } => {
+            Block::Parallel { branches, .. } | Block::Sequences(branches) => {
                 // On each controller its parts of the branches run one after another.
                 let mut out = Vec::new();
                 for br in branches {

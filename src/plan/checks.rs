@@ -251,25 +251,119 @@ pub fn resolve_jumps(sfc: &Sfc, diags: &mut Diagnostics) -> Vec<Option<usize>> {
     out
 }
 
-/// The start and the end step, found after the jumps are resolved: a step that only jumps lead
-/// to is not a second start (unless there is no other), and a chart that ends in jumps only has
-/// no end step (`None`). Reports a missing or repeated start or end.
+/// The start and the end step of each sequence, found after the jumps are resolved: a step
+/// that only jumps lead to is not a second start (unless there is no other), and a chart that
+/// ends in jumps only has no end step (`None`). Several steps marked `initialStep="true"`, each
+/// in a network of its own (not connected to the others by connections or jumps), begin
+/// sequences of their own (SPEC.md 3), in document order; two in one network are an error.
+/// Reports a missing or repeated start or end.
 pub fn start_end(
     sfc: &Sfc,
     g: &Graph,
     jumps: &[Option<usize>],
     diags: &mut Diagnostics,
-) -> Option<(usize, Option<usize>)> {
+) -> Option<Vec<(usize, Option<usize>)>> {
     let el = &sfc.elements;
     let mut targeted = vec![false; el.len()];
     for t in jumps.iter().flatten() {
         targeted[*t] = true;
     }
-    let has_jumps = el
-        .iter()
-        .any(|e| matches!(e.kind, ElementKind::JumpStep(_)));
+    let net = networks(g, jumps);
+    // The networks with a marked initial step, in the document order of their first one.
+    let mut marked_nets: Vec<usize> = Vec::new();
+    for (i, e) in el.iter().enumerate() {
+        if matches!(&e.kind, ElementKind::Step(st) if st.initial)
+            && !g.in_macro_body(i)
+            && !marked_nets.contains(&net[i])
+        {
+            marked_nets.push(net[i]);
+        }
+    }
+    if marked_nets.len() < 2 {
+        return one_sequence(sfc, g, &targeted, &|_| true, diags).map(|se| vec![se]);
+    }
+    // Several sequences: each network's own start and end. A step in a network without an
+    // initial step is never run.
+    let mut out = Vec::with_capacity(marked_nets.len());
+    let mut ok = true;
+    for &n in &marked_nets {
+        match one_sequence(sfc, g, &targeted, &|i| net[i] == n, diags) {
+            Some(se) => out.push(se),
+            None => ok = false,
+        }
+    }
+    let orphans: Vec<usize> = (0..el.len())
+        .filter(|&i| el[i].kind.is_step() && !g.in_macro_body(i) && !marked_nets.contains(&net[i]))
+        .collect();
+    if let Some(&first) = orphans.first() {
+        let heads: Vec<usize> = orphans
+            .iter()
+            .copied()
+            .filter(|&i| g.preds(i).is_empty())
+            .collect();
+        diags.push(
+            Diagnostic::error(
+                Code::StartStep,
+                format!(
+                    "{} step{} in no sequence with an initial step: {}; the chart has several initial steps, each beginning a sequence of its own, and nothing runs {} (mark {} initialStep=\"true\" to begin a sequence, or connect {} to one)",
+                    orphans.len(),
+                    if orphans.len() == 1 { "" } else { "s" },
+                    list_ids(sfc, &orphans),
+                    if orphans.len() == 1 { "it" } else { "them" },
+                    if heads.is_empty() { "one of them".to_owned() } else { list_ids(sfc, &heads) },
+                    if orphans.len() == 1 { "it" } else { "them" },
+                ),
+            )
+            .at(el[first].span.clone())
+            .element(label(sfc, first)),
+        );
+        ok = false;
+    }
+    ok.then_some(out)
+}
+
+/// The networks of the chart: elements joined by connections or jumps (in either direction)
+/// share a number.
+fn networks(g: &Graph, jumps: &[Option<usize>]) -> Vec<usize> {
+    let n = g.len();
+    let mut parent: Vec<usize> = (0..n).collect();
+    fn root(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    let mut join = |a: usize, b: usize| {
+        let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+        if ra != rb {
+            parent[ra.max(rb)] = ra.min(rb);
+        }
+    };
+    for i in 0..n {
+        for &s in g.succs(i) {
+            join(i, s);
+        }
+        if let Some(Some(t)) = jumps.get(i) {
+            join(i, *t);
+        }
+    }
+    (0..n).map(|i| root(&mut parent, i)).collect()
+}
+
+/// The start and the end of the one sequence of the elements `mine` holds.
+fn one_sequence(
+    sfc: &Sfc,
+    g: &Graph,
+    targeted: &[bool],
+    mine: &dyn Fn(usize) -> bool,
+    diags: &mut Diagnostics,
+) -> Option<(usize, Option<usize>)> {
+    let el = &sfc.elements;
+    let has_jumps =
+        (0..el.len()).any(|i| mine(i) && matches!(el[i].kind, ElementKind::JumpStep(_)));
     let no_pred: Vec<usize> = (0..el.len())
-        .filter(|&i| el[i].kind.is_step() && g.preds(i).is_empty())
+        .filter(|&i| mine(i) && el[i].kind.is_step() && g.preds(i).is_empty())
         .collect();
     let untargeted: Vec<usize> = no_pred.iter().copied().filter(|&i| !targeted[i]).collect();
     // The start is the step marked initialStep="true" (SPEC.md 3): the one marked step without
@@ -280,7 +374,7 @@ pub fn start_end(
         matches!(&el[*i].kind, ElementKind::Step(st) if st.initial) && !g.in_macro_body(*i)
     };
     let marked: Vec<usize> = (0..el.len())
-        .filter(|i| el[*i].kind.is_step() && initial(i))
+        .filter(|i| mine(*i) && el[*i].kind.is_step() && initial(i))
         .collect();
     let marked_free: Vec<usize> = untargeted.iter().copied().filter(initial).collect();
     let starts = match (marked_free.as_slice(), marked.as_slice()) {
@@ -315,7 +409,7 @@ pub fn start_end(
         _ => untargeted,
     };
     let ends: Vec<usize> = (0..el.len())
-        .filter(|&i| el[i].kind.is_step() && g.succs(i).is_empty())
+        .filter(|&i| mine(i) && el[i].kind.is_step() && g.succs(i).is_empty())
         .collect();
     let mut ok = true;
     let start = match starts.as_slice() {
@@ -351,7 +445,7 @@ pub fn start_end(
                 Code::StartStep,
                 if all_marked {
                     format!(
-                        "{} initial steps (marked initialStep=\"true\", without a predecessor): {}; several initial steps are sequences of their own, which needs each on a controller of its own (SPEC.md 9) and is not supported yet",
+                        "{} initial steps (marked initialStep=\"true\", without a predecessor) in one network: {}; a network has one initial step (IEC 61131-3). Several initial steps begin sequences of their own only when nothing connects them (SPEC.md 3)",
                         starts.len(),
                         list_ids(sfc, &starts)
                     )

@@ -78,6 +78,11 @@ pub enum Block {
         heard: cell::Message,
         branches: Vec<Branch>,
     },
+    /// Independent sequences (SPEC.md 3: several steps marked `initialStep="true"`, each
+    /// beginning a network of its own), in the document order of their initial steps. They
+    /// run at the same time, each on controllers of its own ([`place_sequences`]); the cell
+    /// split gives each controller its sequence, with no handshake between sequences.
+    Sequences(Vec<Vec<Block>>),
 }
 
 /// One state of a [`Block::Machine`]: the element it begins at (a step, or a convergence
@@ -171,12 +176,12 @@ pub enum BranchEnd {
 /// The planned program.
 #[derive(Debug)]
 pub struct Plan {
-    /// The whole flow, start and end steps included.
+    /// The whole flow, start and end steps included: one sequence, or one
+    /// [`Block::Sequences`] for several initial steps.
     pub body: Vec<Block>,
-    /// The start step.
-    pub start: usize,
-    /// The end step; `None` for a cyclic chart (it ends in jumps only).
-    pub end: Option<usize>,
+    /// Each sequence's start step and end step (`None` for a cyclic sequence: it ends in
+    /// jumps only), in the order of [`Block::Sequences`].
+    pub sequences: Vec<(usize, Option<usize>)>,
 }
 
 impl Plan {
@@ -207,7 +212,7 @@ pub fn visit(blocks: &[Block], f: &mut dyn FnMut(&Block)) {
                     visit(&st.body, f);
                 }
             }
-            Block::Parallel { branches, .. } => {
+            Block::Parallel { branches, .. } | Block::Sequences(branches) => {
                 for br in branches {
                     visit(br, f);
                 }
@@ -233,7 +238,7 @@ pub fn gotos(blocks: &[Block], out: &mut Vec<usize>) {
             | Block::Wait(_)
             | Block::Tell(_)
             | Block::Hear(_) => {}
-            Block::Parallel { branches, .. } => {
+            Block::Parallel { branches, .. } | Block::Sequences(branches) => {
                 for br in branches {
                     gotos(br, out);
                 }
@@ -283,12 +288,87 @@ pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
     if diags.error_count() > errors_before {
         return None;
     }
-    let (start, end) = ends?;
-    walk(sfc, &g, &jumps, start, diags).map(|mut body| {
-        // Grown by doubling: up to half of it slack (100,000 steps: 8.4 MB for 6.4).
-        body.shrink_to_fit();
-        Plan { body, start, end }
-    })
+    let sequences = ends?;
+    let mut bodies = Vec::with_capacity(sequences.len());
+    for &(start, _) in &sequences {
+        // Every sequence is walked, so one run reports the faults of each.
+        bodies.push(walk(sfc, &g, &jumps, start, diags));
+    }
+    let mut bodies: Vec<Vec<Block>> = bodies.into_iter().collect::<Option<_>>()?;
+    let mut body = if bodies.len() == 1 {
+        bodies.pop().unwrap_or_default()
+    } else {
+        vec![Block::Sequences(bodies)]
+    };
+    // Grown by doubling: up to half of it slack (100,000 steps: 8.4 MB for 6.4).
+    body.shrink_to_fit();
+    Some(Plan { body, sequences })
+}
+
+/// Several initial steps (SPEC.md 3): each sequence runs on controllers of its own. A sequence
+/// none of whose steps runs code on a controller is left out (a PLC's own sequence: nothing in
+/// it is a robot's); two sequences that share a controller are an error at the later one's
+/// initial step, naming the controller (`name`). `controller(step)` is the controller of a
+/// step that runs code.
+pub fn place_sequences(
+    plan: &mut Plan,
+    sfc: &Sfc,
+    controller: &dyn Fn(usize) -> Option<usize>,
+    name: &dyn Fn(usize) -> String,
+    diags: &mut Diagnostics,
+) {
+    let Some(Block::Sequences(seqs)) = plan.body.first() else {
+        return;
+    };
+    let mut kept: Vec<(usize, Vec<Block>)> = Vec::new();
+    let mut owner: std::collections::HashMap<usize, usize> = std::collections::HashMap::new();
+    let mut ok = true;
+    for (k, seq) in seqs.iter().enumerate() {
+        let mut mine = std::collections::BTreeSet::new();
+        visit(seq, &mut |b| {
+            if let Block::Step(i) = b
+                && let Some(c) = controller(*i)
+            {
+                mine.insert(c);
+            }
+        });
+        if mine.is_empty() {
+            continue;
+        }
+        for &c in &mine {
+            if let Some(&other) = owner.get(&c) {
+                let (a, b) = (plan.sequences[other].0, plan.sequences[k].0);
+                diags.push(
+                    Diagnostic::error(
+                        Code::StartStep,
+                        format!(
+                            "the sequences of the initial steps {} and {} both run on controller `{}`; several initial steps are sequences that run at the same time, so each needs a controller of its own (SPEC.md 3, 9): move the steps of one to another controller, or join the sequences into one chart with one initial step",
+                            label(sfc, a),
+                            label(sfc, b),
+                            name(c)
+                        ),
+                    )
+                    .at(sfc.elements[b].span.clone())
+                    .element(label(sfc, b))
+                    .related(sfc.elements[a].span.clone(), "the other initial step"),
+                );
+                ok = false;
+                break;
+            }
+        }
+        for &c in &mine {
+            owner.entry(c).or_insert(k);
+        }
+        kept.push((k, seq.clone()));
+    }
+    if !ok {
+        return;
+    }
+    plan.body = match kept.len() {
+        0 => Vec::new(),
+        1 => kept.pop().map(|(_, b)| b).unwrap_or_default(),
+        _ => vec![Block::Sequences(kept.into_iter().map(|(_, b)| b).collect())],
+    };
 }
 
 pub(crate) fn label(sfc: &Sfc, i: usize) -> String {
@@ -387,6 +467,10 @@ mod tests {
                     let v: Vec<String> = branches.iter().map(|b| shape(sfc, b)).collect();
                     format!("P({})", v.join("|"))
                 }
+                Block::Sequences(seqs) => {
+                    let v: Vec<String> = seqs.iter().map(|b| shape(sfc, b)).collect();
+                    format!("Q({})", v.join("|"))
+                }
                 Block::Tell(m) => format!("T{}", m.channel),
                 Block::Hear(m) => format!("H{}", m.channel),
                 Block::Goto { target, .. } => format!(">{}", id(*target)),
@@ -447,8 +531,8 @@ mod tests {
     }
 
     /// The start is the step marked initialStep="true" (SPEC.md 3); a step only jumps lead to is
-    /// no start; two marked steps without a predecessor are two initial steps (one per
-    /// controller, not supported yet); a step nothing leads to besides the start is an error at
+    /// no start; two marked steps without a predecessor begin two sequences when nothing joins
+    /// them, else they are an error; a step nothing leads to besides the start is an error at
     /// it.
     #[test]
     fn the_start_is_the_marked_initial_step() {
@@ -472,18 +556,31 @@ mod tests {
         // that is reported, but never as a second start step.)
         let (_, _, msgs) = run(&parts);
         assert!(msgs.iter().all(|(c, _)| *c != Code::StartStep), "{msgs:?}");
-        // Two marked initial steps.
+        // Two marked initial steps, nothing between them: two sequences.
+        assert_eq!(
+            planned(&[
+                st(1, "Start", &[]),
+                tr(2, &[1], "TRUE"),
+                st(3, "End", &[2]),
+                st(4, "Other", &[]),
+                tr(5, &[4], "a"),
+                st(6, "End2", &[5]),
+            ]),
+            "Q(S1 S3|S4 W5 S6)"
+        );
+        // A jump joins them: one network with two initial steps.
         let (_, _, msgs) = run(&[
             st(1, "Start", &[]),
             tr(2, &[1], "TRUE"),
             st(3, "End", &[2]),
             st(4, "Other", &[]),
             tr(5, &[4], "TRUE"),
-            st(6, "End2", &[5]),
+            jmp(6, &[5], "End"),
         ]);
         assert!(
-            msgs.iter()
-                .any(|(c, m)| *c == Code::StartStep && m.contains("2 initial steps")),
+            msgs.iter().any(|(c, m)| *c == Code::StartStep
+                && m.contains("2 initial steps")
+                && m.contains("in one network")),
             "{msgs:?}"
         );
         // An unmarked step nothing leads to.

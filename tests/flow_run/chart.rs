@@ -15,6 +15,8 @@ struct Node {
     condition: Option<String>,
     target: Option<String>,
     skill: bool,
+    /// Marked `initialStep="true"`.
+    initial: bool,
 }
 
 pub struct Chart {
@@ -112,6 +114,7 @@ impl Chart {
                     condition,
                     target: e.attribute("targetName").map(str::to_owned),
                     skill: d("skill").next().is_some(),
+                    initial: e.attribute("initialStep") == Some("true"),
                 },
             );
             order.push(id);
@@ -679,6 +682,25 @@ impl Player<'_> {
 }
 
 impl Chart {
+    /// The initial steps: those marked `initialStep="true"` without a predecessor (several
+    /// begin sequences that run at the same time, SPEC.md 3), else the first step without one.
+    fn starts(&self) -> Vec<u64> {
+        let marked: Vec<u64> = self
+            .order
+            .iter()
+            .copied()
+            .filter(|id| {
+                let n = &self.nodes[id];
+                n.tag == "step" && n.initial && n.inputs.is_empty()
+            })
+            .collect();
+        if marked.is_empty() {
+            vec![self.start()]
+        } else {
+            marked
+        }
+    }
+
     fn start(&self) -> u64 {
         *self
             .order
@@ -1461,10 +1483,14 @@ impl Chart {
         type Key = (Vec<u64>, Vec<(u64, usize)>, Vec<usize>);
         let mut visited: BTreeSet<Key> = BTreeSet::new();
         let mut todo = vec![Marking {
-            tokens: vec![Token {
-                id: self.start(),
-                frontier: Vec::new(),
-            }],
+            tokens: self
+                .starts()
+                .into_iter()
+                .map(|id| Token {
+                    id,
+                    frontier: Vec::new(),
+                })
+                .collect(),
             waiting: BTreeMap::new(),
             taken: vec![0; seen.len()],
             run: Vec::new(),
