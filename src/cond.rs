@@ -810,6 +810,20 @@ struct Parser<'t> {
 /// Parses a condition. `map` turns a byte offset of `text` into a byte offset of the file (the
 /// expression's spans are file ranges); errors are ranges of `text`.
 pub fn parse(text: &str, map: &dyn Fn(usize) -> usize) -> Result<Expr, SyntaxError> {
+    parse_operand(text, map).map(as_condition)
+}
+
+/// An expression that is a whole condition: `1` and `0` read as booleans where a boolean
+/// belongs (IEC 61131-3). [`parse`] does this; a wired condition does it once its network is
+/// put together, since an `inVariable`'s `1` may be a number compared with an integer signal.
+pub fn as_condition(e: Expr) -> Expr {
+    booleans(e, true)
+}
+
+/// Parses an expression that is a part of a condition (an `inVariable` of a wired one): as
+/// [`parse`], but a lone `1` or `0` stays a number until the whole condition is known
+/// ([`as_condition`]).
+pub fn parse_operand(text: &str, map: &dyn Fn(usize) -> usize) -> Result<Expr, SyntaxError> {
     let toks = Lexer::run(text)?;
     if let Some((_, r)) = toks.get(MAX_TOKENS) {
         return Err(SyntaxError {
@@ -830,7 +844,7 @@ pub fn parse(text: &str, map: &dyn Fn(usize) -> usize) -> Result<Expr, SyntaxErr
         pos: 0,
         map,
     };
-    let e = booleans(p.expr(0, 0)?, true);
+    let e = p.expr(0, 0)?;
     if let Some((_, r)) = p.toks.get(p.pos) {
         let r = r.clone();
         return Err(SyntaxError {

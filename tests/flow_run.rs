@@ -77,6 +77,8 @@ mod machine;
 mod rapid;
 #[path = "flow_run/urscript.rs"]
 mod urscript;
+#[path = "flow_run/wire.rs"]
+mod wire;
 
 use chart::{Chart, ChartGen, Paths, chart_meaning};
 
@@ -1485,6 +1487,106 @@ fn conditions_keep_their_meaning_rapid() {
 #[test]
 fn conditions_keep_their_meaning_urscript() {
     conditions(Lang::UrScript);
+}
+
+/// A program without its comment lines (KRL `;`, RAPID `!`, URScript `#`; KRL's `;FOLD` lines
+/// kept).
+fn code(program: &str) -> String {
+    program
+        .lines()
+        .filter(|l| {
+            let l = l.trim_start();
+            l.starts_with(";FOLD") || l.starts_with(";ENDFOLD") || !l.starts_with([';', '!', '#'])
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// Every form of condition drawn instead of written (SPEC.md 3.1, wired conditions: FBD blocks
+/// and LD rungs, built from the chart player's reading of the text): compiled in `lang`, the
+/// same program as its inline ST twin, and run against the ST chart's meaning.
+fn wired_conditions(lang: Lang) {
+    let forms = condition_forms();
+    let tmp = tempfile::tempdir().unwrap();
+    lang.setup(tmp.path());
+    let mut rapid = RapidChecker::new();
+    let (mut ld, mut fbd) = (0, 0);
+    for (k, group) in forms.chunks(4).enumerate() {
+        let conds: Vec<&str> = group.iter().map(|f| f.0).collect();
+        let text = ChartGen::conditions(&conds);
+        let sfc = tmp.path().join("sfc.xml");
+        std::fs::write(&sfc, &text).unwrap();
+        let chart = Chart::read(&sfc);
+        compile_project(tmp.path(), "R", &format!("{lang:?}"));
+        let written = lang.read(tmp.path(), "R").main;
+        let wired = wire::wire_conditions(&text, k as u64).expect("inline conditions");
+        ld += wired.matches("<contact ").count();
+        fbd += wired.matches("<block ").count();
+        std::fs::write(&sfc, &wired).unwrap();
+        let case = format!("wired conditions {conds:?}");
+        compile_project(tmp.path(), "R", &format!("{case} ({lang:?})\n{wired}"));
+        let output = lang.read(tmp.path(), "R");
+        // The same code; only a condition's comment shows the network's text, not the ST's.
+        assert_eq!(code(&output.main), code(&written), "{case} ({lang:?})");
+        if let Err(e) = output.syntax("R") {
+            panic!("{case} ({lang:?}): {e}\n{}", output.main);
+        }
+        rapid.add(&case, &output);
+        let seen = check_compiled(&case, &output, "R", &chart, 3 + k as u64, 400);
+        assert!(!seen.contains_key("Running"), "{case}: {seen:?}");
+    }
+    rapid.check();
+    assert!(ld > 10 && fbd > 10, "{ld} contacts, {fbd} blocks");
+}
+
+#[test]
+fn wired_conditions_keep_their_meaning_krl() {
+    wired_conditions(Lang::Krl);
+}
+
+#[test]
+fn wired_conditions_keep_their_meaning_rapid() {
+    wired_conditions(Lang::Rapid);
+}
+
+#[test]
+fn wired_conditions_keep_their_meaning_urscript() {
+    wired_conditions(Lang::UrScript);
+}
+
+/// The random charts (and those reading step times) with every condition wired compile to the
+/// programs of their inline ST twins, whose runs are checked against the chart above.
+#[test]
+fn random_charts_with_wired_conditions_are_the_same_programs() {
+    let tmp = tempfile::tempdir().unwrap();
+    Lang::Krl.setup(tmp.path());
+    let compile = |text: &str, what: &str| -> String {
+        std::fs::write(tmp.path().join("sfc.xml"), text).unwrap();
+        compile_project(tmp.path(), "R", what);
+        code(&Lang::Krl.read(tmp.path(), "R").main)
+    };
+    let mut compared = 0;
+    for seed in 1..=150u64 {
+        for (kind, text) in [
+            ("random chart", ChartGen::chart(seed)),
+            (
+                "random chart with step times",
+                ChartGen::with_step_times(seed),
+            ),
+        ] {
+            let Some(wired) = wire::wire_conditions(&text, seed) else {
+                continue;
+            };
+            let what = format!("{kind} {seed}, wired");
+            assert_eq!(
+                compile(&wired, &format!("{what}\n{wired}")),
+                compile(&text, &what),
+                "{what}"
+            );
+            compared += 1;
+        }
+    }
+    assert!(compared > 200, "{compared} charts with conditions");
 }
 
 // ---------------------------------------------------------------------------------------------

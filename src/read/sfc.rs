@@ -1402,6 +1402,7 @@ impl Stream {
             let mut visiting = Vec::new();
             match w.any_of(&p.refs, &p.at, &mut visiting) {
                 Ok(expr) => {
+                    let expr = crate::cond::as_condition(expr);
                     if let Some(&i) = at_of.get(&p.transition) {
                         let cond = if expr.is_true() {
                             None
@@ -1453,6 +1454,7 @@ impl Stream {
             built: std::cell::Cell::new(0),
         };
         w.any_of(&out.inputs, &out.span, &mut vec![out.local_id])
+            .map(crate::cond::as_condition)
     }
 
     /// Starts building the element `tag` at `depth`: its attributes.
@@ -2316,7 +2318,7 @@ impl Wiring<'_> {
                 ));
             };
             let file_map = |o: usize| map_offset(map, o);
-            crate::cond::parse(t, &file_map).map_err(|e| {
+            crate::cond::parse_operand(t, &file_map).map_err(|e| {
                 let s = map_offset(map, e.at.start);
                 let end = map_offset(map, e.at.end.saturating_sub(1)) + 1;
                 wiring_error(

@@ -203,6 +203,8 @@ impl Chart {
 #[derive(Debug, Clone)]
 pub enum Cond {
     Int(i64),
+    /// `TRUE` or `FALSE` (a number, 1 or 0, to the player).
+    Bool(bool),
     /// A TIME literal (`T#350ms`, `TIME#1s_500ms`, `t#0.35S`), in nanoseconds.
     Time(i64),
     /// A signal, by its name as written.
@@ -452,8 +454,8 @@ impl Reader {
             }
             Tok::Int(n) => Cond::Int(n),
             Tok::Time(ns) => Cond::Time(ns),
-            Tok::Word(w) if w.eq_ignore_ascii_case("TRUE") => Cond::Int(1),
-            Tok::Word(w) if w.eq_ignore_ascii_case("FALSE") => Cond::Int(0),
+            Tok::Word(w) if w.eq_ignore_ascii_case("TRUE") => Cond::Bool(true),
+            Tok::Word(w) if w.eq_ignore_ascii_case("FALSE") => Cond::Bool(false),
             Tok::Word(w) => {
                 assert!(
                     !["NOT", "AND", "OR", "XOR"]
@@ -525,6 +527,7 @@ impl Cond {
         };
         match self {
             Cond::Int(i) => V::N(*i),
+            Cond::Bool(b) => V::N(*b as i64),
             Cond::Time(ns) => V::T(*ns),
             Cond::Signal(s) => V::N(
                 *at.phase
