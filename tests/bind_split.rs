@@ -160,7 +160,7 @@ fn a_cells_programs_are_the_same_written_two_at_a_time() {
             "Blackboard.aml",
         ),
         (
-            &["cell", "abb", "ur"][..],
+            &["cell", "abb", "ur", "mixed"][..],
             "cell-kuka-abb-ur",
             "Blackboard.aml",
         ),

@@ -1311,7 +1311,7 @@ fn wires_between_controllers_are_listed() {
 /// `-pF` one lane per controller with the waits between them and the cell's time; both as JSON.
 #[test]
 fn a_cells_listings_show_each_program_and_the_lanes() {
-    let t = bases_with_case(&["cell", "abb", "ur"], "cell-kuka-abb-ur");
+    let t = bases_with_case(&["cell", "abb", "ur", "mixed"], "cell-kuka-abb-ur");
     // -pB says what each wire the handshakes use does; a spare wire is only a wire.
     let o = run(&["-pB", "Blackboard.aml", "Mix"], t.path());
     let text = stdout(&o);
@@ -1474,7 +1474,7 @@ fn a_cells_program_names_come_from_program_attributes() {
 /// ends as it would.
 #[test]
 fn a_closed_stdout_is_no_panic() {
-    let t = bases_with_case(&["cell", "abb", "ur"], "cell-kuka-abb-ur");
+    let t = bases_with_case(&["cell", "abb", "ur", "mixed"], "cell-kuka-abb-ur");
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
         .args(["--validate", "-pB", "-pO", "-pF", "Blackboard.aml"])
         .current_dir(t.path())

@@ -1906,6 +1906,15 @@ const CELL_FIXTURES: &[CellFixture] = &[
         &["KUKA KR15-2", "KUKA KR16-2"],
     ),
     (
+        "cell-sequences-mixed",
+        &[
+            ("Mix_KUKA_KR15_2", Lang::Krl),
+            ("Mix_ABB_IRB_1200", Lang::Rapid),
+            ("Mix_UR10e", Lang::UrScript),
+        ],
+        &["KUKA KR15-2", "ABB IRB 1200", "UR10e"],
+    ),
+    (
         "cell-flow-states",
         &[
             ("Cell_KUKA_KR15_2", Lang::Krl),
