@@ -1172,6 +1172,16 @@ fn ty(e: &Expr, lookup: &dyn Fn(&str) -> Option<Ty>, errs: &mut Vec<CheckError>)
         }
         ExprKind::Not(a) => {
             let t = ty(a, lookup, errs);
+            if t == Some(Ty::Number) {
+                // ST's bitwise NOT of a number (`NOT n >= 3` is `(NOT n) >= 3`): one error,
+                // here; what it gives is a number, so the comparison around it adds none.
+                errs.push(CheckError {
+                    at: a.span.clone(),
+                    message: "`NOT` needs a boolean, this is a number (`NOT` binds tighter than a comparison in ST, so `NOT n >= 3` is the bitwise NOT of `n`, compared: write `NOT (n >= 3)` to negate the comparison; the bitwise NOT of a number is not part of the condition language)".to_owned(),
+                    unknown: false,
+                });
+                return Some(Ty::Number);
+            }
             want(a, t, Ty::Bool, "`NOT`", errs);
             Some(Ty::Bool)
         }

@@ -1330,9 +1330,10 @@ impl Stream {
                 ([T::Condition], T::ConnectionPointIn) if b.condition.is_some() => b.wired = true,
                 // The wired condition's connections (`condition/connectionPointIn/connection`;
                 // older files: `condition/connection`).
+                // (Also after a written condition: both at once is an error, `condition`.)
                 ([T::Condition, T::ConnectionPointIn], T::Connection)
                 | ([T::Condition], T::Connection)
-                    if b.condition.is_some() && b.inline.is_none() && b.reference.is_none() =>
+                    if b.condition.is_some() =>
                 {
                     b.wired = true;
                     let mark = scratch.len();
