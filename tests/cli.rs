@@ -415,6 +415,21 @@ fn hostile_inputs_give_clear_errors_quickly() {
     )
     .unwrap();
     check("deep list", Some("E315"));
+    // 50,000 initial steps with nothing between them: each would be a sequence of its own.
+    let lone: String = (0..50_000)
+        .map(|k| {
+            format!(
+                "<step localId=\"{}\" name=\"L{k}\" initialStep=\"true\"><position x=\"0\" y=\"0\"/></step>",
+                900_000 + k
+            )
+        })
+        .collect();
+    std::fs::write(
+        &sfc_path,
+        sfc.replacen("</SFC>", &format!("{lone}</SFC>"), 1),
+    )
+    .unwrap();
+    check("50,000 initial steps", Some("E307"));
 }
 
 #[test]

@@ -271,12 +271,31 @@ pub fn start_end(
     let net = networks(g, jumps);
     // The networks with a marked initial step, in the document order of their first one.
     let mut marked_nets: Vec<usize> = Vec::new();
+    let mut has_initial = vec![false; el.len()];
     for (i, e) in el.iter().enumerate() {
         if matches!(&e.kind, ElementKind::Step(st) if st.initial)
             && !g.in_macro_body(i)
-            && !marked_nets.contains(&net[i])
+            && !has_initial[net[i]]
         {
+            has_initial[net[i]] = true;
             marked_nets.push(net[i]);
+            if marked_nets.len() > super::MAX_SEQUENCES {
+                // Each sequence needs a controller of its own; finding each one's start and
+                // end is a pass over the chart.
+                diags.push(
+                    Diagnostic::error(
+                        Code::StartStep,
+                        format!(
+                            "more than {} sequences (steps marked initialStep=\"true\" with nothing connecting them): each runs on controllers of its own (SPEC.md 3, 9); this is the {}th",
+                            super::MAX_SEQUENCES,
+                            marked_nets.len()
+                        ),
+                    )
+                    .at(e.span.clone())
+                    .element(label(sfc, i)),
+                );
+                return None;
+            }
         }
     }
     if marked_nets.len() < 2 {
@@ -293,7 +312,7 @@ pub fn start_end(
         }
     }
     let orphans: Vec<usize> = (0..el.len())
-        .filter(|&i| el[i].kind.is_step() && !g.in_macro_body(i) && !marked_nets.contains(&net[i]))
+        .filter(|&i| el[i].kind.is_step() && !g.in_macro_body(i) && !has_initial[net[i]])
         .collect();
     if let Some(&first) = orphans.first() {
         let heads: Vec<usize> = orphans

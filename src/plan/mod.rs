@@ -26,6 +26,10 @@ use crate::model::Sfc;
 /// Branches and loops nest at most this deep.
 pub const MAX_NESTING: usize = 128;
 
+/// At most this many sequences (several initial steps, SPEC.md 3): each needs controllers of its
+/// own, and each is a walk over the chart.
+pub const MAX_SEQUENCES: usize = 64;
+
 /// One entry of the program tree. Indexes are into [`Sfc::elements`].
 #[derive(Debug, Clone, PartialEq)]
 pub enum Block {
