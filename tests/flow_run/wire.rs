@@ -44,7 +44,7 @@ pub fn wire_conditions(text: &str, seed: u64) -> Option<String> {
         let mut w = Wirer {
             next: &mut next,
             out: &mut network,
-            ld: (seed + k as u64) % 2 == 0,
+            ld: (seed + k as u64).is_multiple_of(2),
             rail: None,
         };
         let outs = w.node(&cond);
