@@ -324,7 +324,7 @@ pub fn place_sequences(
     let Some(Block::Sequences(seqs)) = plan.body.first() else {
         return;
     };
-    let mut kept: Vec<(usize, Vec<Block>)> = Vec::new();
+    let mut kept: Vec<Vec<Block>> = Vec::new();
     let mut owner: std::collections::HashMap<usize, usize> = std::collections::HashMap::new();
     let mut ok = true;
     for (k, seq) in seqs.iter().enumerate() {
@@ -363,15 +363,14 @@ pub fn place_sequences(
         for &c in &mine {
             owner.entry(c).or_insert(k);
         }
-        kept.push((k, seq.clone()));
+        kept.push(seq.clone());
     }
     if !ok {
         return;
     }
     plan.body = match kept.len() {
-        0 => Vec::new(),
-        1 => kept.pop().map(|(_, b)| b).unwrap_or_default(),
-        _ => vec![Block::Sequences(kept.into_iter().map(|(_, b)| b).collect())],
+        0 | 1 => kept.pop().unwrap_or_default(),
+        _ => vec![Block::Sequences(kept)],
     };
 }
 
