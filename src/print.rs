@@ -875,11 +875,8 @@ pub mod json {
                         "kind": "goto",
                         "target": local_id(sfc, *target),
                     })),
-                    Block::Parallel {
-                        divergence,
-                        branches,
-                        ..
-                    } => {
+                    Block::Parallel { branches, .. } | Block::Sequences(branches) => {
+                        // All start together; the block ends with the longest.
                         let start = t;
                         let mut end = t;
                         let mut bs = Vec::new();
@@ -888,30 +885,21 @@ pub mod json {
                             end = end.max(e);
                             bs.push(json!({"blocks": blocks}));
                         }
-                        out.push(json!({
-                            "kind": "parallel",
-                            "divergence": local_id(sfc, *divergence),
-                            "start": start,
-                            "end": end,
-                            "branches": bs,
-                        }));
-                        t = end;
-                    }
-                    Block::Sequences(seqs) => {
-                        let start = t;
-                        let mut end = t;
-                        let mut bs = Vec::new();
-                        for seq in seqs {
-                            let (blocks, e) = walk(sfc, seq, start, tot);
-                            end = end.max(e);
-                            bs.push(json!({"blocks": blocks}));
-                        }
-                        out.push(json!({
-                            "kind": "sequences",
-                            "start": start,
-                            "end": end,
-                            "sequences": bs,
-                        }));
+                        out.push(match b {
+                            Block::Parallel { divergence, .. } => json!({
+                                "kind": "parallel",
+                                "divergence": local_id(sfc, *divergence),
+                                "start": start,
+                                "end": end,
+                                "branches": bs,
+                            }),
+                            _ => json!({
+                                "kind": "sequences",
+                                "start": start,
+                                "end": end,
+                                "sequences": bs,
+                            }),
+                        });
                         t = end;
                     }
                     Block::Choice {
