@@ -90,6 +90,9 @@ struct Layout<'s> {
     label: Option<String>,
     /// Conditions of branches without a step: (lane, row, time, text).
     notes: Vec<(usize, usize, f64, String)>,
+    /// The lane of a step that runs no code and follows nothing on a lane (a sequence's
+    /// start step): the sequence's.
+    lane_hint: Option<usize>,
 }
 
 /// A frontier: when the steps before have ended, and the last of them (lane, row, element).
@@ -111,6 +114,24 @@ impl Layout<'_> {
         for b in blocks {
             match b {
                 Block::Step(i) => {
+                    // In a cell, a step that runs no code (a start or an end step) is drawn on
+                    // the lane before it (a sequence's own at its start) at the front: it
+                    // neither takes the lane's time nor makes a lane wait.
+                    if !self.of.is_empty() && !self.of.contains_key(i) {
+                        let lane = front.1.map(|(c, _, _)| c).or(self.lane_hint).unwrap_or(0);
+                        self.items.push(Item {
+                            lane,
+                            row,
+                            start: front.0,
+                            end: front.0 + duration(self.sfc, *i).unwrap_or(0.0),
+                            kind: Kind::Step {
+                                element: *i,
+                                timed: duration(self.sfc, *i).is_some(),
+                            },
+                            label: self.label.take(),
+                        });
+                        continue;
+                    }
                     let c = self.of.get(i).copied().unwrap_or(0);
                     let d = duration(self.sfc, *i);
                     let start = front.0.max(self.free[c]);
@@ -155,6 +176,16 @@ impl Layout<'_> {
                 Block::Parallel { branches, .. } | Block::Sequences(branches) => {
                     let mut end = front;
                     for br in branches {
+                        if matches!(b, Block::Sequences(_)) {
+                            // The lane of the sequence's first step that runs code.
+                            let mut first = None;
+                            crate::plan::visit(br, &mut |x| {
+                                if let (None, Block::Step(s)) = (first, x) {
+                                    first = self.of.get(s).copied();
+                                }
+                            });
+                            self.lane_hint = first;
+                        }
                         let e = self.walk(br, front, row);
                         if e.0 >= end.0 {
                             end = e;
@@ -303,6 +334,7 @@ pub fn svg(sfc: &Sfc, plan: &Plan, lanes: &Lanes, title: &str) -> String {
         rows: 1,
         label: None,
         notes: Vec::new(),
+        lane_hint: None,
     };
     let end = l.walk(&plan.body, (0.0, None), 0);
     let total = l.free.iter().copied().fold(end.0, f64::max);

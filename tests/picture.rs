@@ -189,6 +189,12 @@ fn three_controllers_of_three_languages() {
     check("cell-kuka-abb-ur", 3);
 }
 
+/// Two initial steps: two sequences side by side from time 0, one per robot, no handshake.
+#[test]
+fn two_sequences() {
+    check("cell-two-sequences", 2);
+}
+
 #[test]
 fn selections() {
     check("flow-selection-three-way", 1);
