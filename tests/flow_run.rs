@@ -622,6 +622,30 @@ macro_rules! flow_cases {
             rapid.check();
         }
 
+        /// RAPID reads a chart's conditions when the robot stands at the end of the motion
+        /// before, as KRL's advance-run stop does (a motion ending in a zone point would
+        /// otherwise still run): every wait is `WaitUntil \InPos`, and a selection decided by
+        /// an `IF` at once has `WaitTime \InPos, 0;` before it.
+        #[test]
+        fn rapid_reads_conditions_when_the_robot_stands() {
+            let mut decisions = 0;
+            for case in [$($dir),*] {
+                let (_, output, _) = compile(case, Lang::Rapid);
+                let lines: Vec<&str> = output.main.lines().map(str::trim).collect();
+                for (i, l) in lines.iter().enumerate() {
+                    if l.starts_with("WaitUntil") {
+                        assert!(l.starts_with("WaitUntil \\InPos, "), "{case}: `{l}`");
+                    }
+                    if l.starts_with("! selection localId") {
+                        let next = lines[i + 1..].iter().find(|l| !l.starts_with('!')).unwrap();
+                        assert!(!next.starts_with("IF "), "{case}: a decision at once: `{next}`");
+                        decisions += usize::from(*next == "WaitTime \\InPos, 0;");
+                    }
+                }
+            }
+            assert!(decisions >= 3, "{decisions} decisions after WaitTime");
+        }
+
         /// Every flow fixture is run.
         #[test]
         fn every_flow_fixture_is_run() {

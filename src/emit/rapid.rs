@@ -137,6 +137,7 @@ const DIALECT: Dialect = Dialect {
     assign: (" := ", ";"),
     equals: " = ",
     wait: |out, level, c| out.line(level, &wait_until(c)),
+    settle: Some("WaitTime \\InPos, 0;"),
     leave: Leave::Flag,
     empty_block: None,
     declare: |branch, flags, state| {
@@ -272,14 +273,14 @@ impl Profile for Rapid {
     }
 }
 
-/// `WaitUntil c;`, the condition in parentheses when it starts with one: an instruction whose
-/// first argument starts with `(` reads as a function call (`WaitUntil (a) OR (b);` is refused
-/// by `rapidchecker`).
+/// `WaitUntil \InPos, c;`: the robot stands at the end of the motion before (as KRL's
+/// `WAIT FOR` stops the advance run), then the program waits for the condition. The condition
+/// is in parentheses when it starts with one, so it never reads as a call's argument list.
 fn wait_until(c: &str) -> String {
     if c.starts_with('(') {
-        format!("WaitUntil ({c});")
+        format!("WaitUntil \\InPos, ({c});")
     } else {
-        format!("WaitUntil {c};")
+        format!("WaitUntil \\InPos, {c};")
     }
 }
 
@@ -288,15 +289,15 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_wait_never_begins_its_argument_with_a_parenthesis() {
-        assert_eq!(wait_until("di_Part = 1"), "WaitUntil di_Part = 1;");
+    fn a_wait_stands_first_and_never_begins_its_condition_with_a_parenthesis() {
+        assert_eq!(wait_until("di_Part = 1"), "WaitUntil \\InPos, di_Part = 1;");
         assert_eq!(
             wait_until("NOT (di_Part = 1)"),
-            "WaitUntil NOT (di_Part = 1);"
+            "WaitUntil \\InPos, NOT (di_Part = 1);"
         );
         assert_eq!(
             wait_until("(di_Part = 1) OR (gi_Type > 2)"),
-            "WaitUntil ((di_Part = 1) OR (gi_Type > 2));"
+            "WaitUntil \\InPos, ((di_Part = 1) OR (gi_Type > 2));"
         );
     }
 }

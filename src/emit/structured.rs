@@ -55,6 +55,9 @@ pub struct Dialect {
     pub equals: &'static str,
     /// Writes a wait for the condition.
     pub wait: fn(&mut Lines, usize, &str),
+    /// What makes the robot stand before a selection with an unconditional branch is decided
+    /// (`None`: the motion commands return only when the motion has ended).
+    pub settle: Option<&'static str>,
     pub leave: Leave,
     /// A statement for a branch that would hold no statement (`None`: an empty block is fine).
     pub empty_block: Option<&'static str>,
@@ -430,6 +433,13 @@ impl Writer<'_> {
             if k == 0 {
                 self.branch(1, &branches[0], level);
                 return;
+            }
+            if let Some(settle) = self.d.settle {
+                self.comment(
+                    level,
+                    "decided when the motion before it has ended (the robot stands first)",
+                );
+                self.out.line(level, settle);
             }
             for (n, br) in branches.iter().enumerate().take(k) {
                 self.if_line(level, n == 0, conds[n].as_deref().unwrap_or_default());

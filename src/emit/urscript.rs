@@ -169,6 +169,8 @@ const DIALECT: Dialect = Dialect {
         out.line(level + 1, "sync()");
         out.line(level, "end");
     },
+    // movel and movej return when the motion has ended.
+    settle: None,
     leave: Leave::Statement("break"),
     // A block of comments only is no block to URScript's Python-like parser: a branch without
     // steps waits one control cycle.

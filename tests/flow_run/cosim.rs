@@ -935,6 +935,11 @@ pub fn parse_structured(text: &str, lang: Lang, wires: &Wires, me: usize) -> Vec
                 out.push(Ins::Assign(name.to_ascii_uppercase(), value(init)));
                 continue;
             }
+            // The robot stands (before a decision): the motions before end.
+            if l == "WaitTime \\InPos, 0;" {
+                out.push(Ins::WaitSec);
+                continue;
+            }
             if let Some(c) = l.strip_prefix("WaitUntil ") {
                 let c = c.trim_end_matches(';');
                 match c.strip_prefix("\\InPos, ") {
@@ -1272,9 +1277,18 @@ fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
             })
             .map(|i| vec![i])
             .unwrap_or_default(),
-            // RAPID: the tell's wait without `\InPos`.
+            // RAPID: the tell's wait without `\InPos` (not a chart's wait, which stands too).
             Lang::Rapid => {
-                return src.replacen("WaitUntil \\InPos, ", "WaitUntil ", 1);
+                let Some(i) = pick(&|i, l| {
+                    l.starts_with("WaitUntil \\InPos, DInput(")
+                        && i > 0
+                        && lines[i - 1].trim_start().starts_with("! handshake: tell")
+                }) else {
+                    return src.to_owned();
+                };
+                let mut out: Vec<String> = lines.iter().map(|l| (*l).to_owned()).collect();
+                out[i] = out[i].replacen("WaitUntil \\InPos, ", "WaitUntil ", 1);
+                return out.join("\n") + "\n";
             }
             // URScript: the tell's wait for `is_steady()` dropped.
             Lang::UrScript => pick(&|_, l| l == "while not is_steady():")

@@ -339,10 +339,14 @@ fn block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, String) {
                     _ => Stmt::ClkStop(c),
                 })
             }
+            // `WaitUntil \InPos, c;`: the robot stands first (a step's motion has ended when
+            // the next line runs here), then the wait.
             "WaitUntil" => {
                 let c = l[9..]
                     .strip_suffix(';')
                     .unwrap_or_else(|| panic!("RAPID: `{l}` without `;`"));
+                let c = c.trim_start();
+                let c = c.strip_prefix("\\InPos,").unwrap_or(c);
                 Some(Stmt::Wait(expr(c)))
             }
             _ => match l.split_once(" := ") {
