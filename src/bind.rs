@@ -450,7 +450,7 @@ impl StepTimes {
         sfc: &Sfc,
         t: usize,
         c: &'c crate::model::Condition,
-        in_cell: bool,
+        here: Option<&HashSet<usize>>,
         diags: &mut Diagnostics,
     ) -> Vec<(&'c str, usize)> {
         let mut out = Vec::new();
@@ -468,7 +468,8 @@ impl StepTimes {
                     .map(|(i, e)| (e.local_id, i))
                     .collect()
             });
-            match step_time_problem(sfc, by_id, t, n, step, count, in_cell) {
+            let elsewhere = here.is_some_and(|h| !h.contains(&step));
+            match step_time_problem(sfc, by_id, t, n, step, count, elsewhere) {
                 Some(why) => diags.push(
                     Diagnostic::error(Code::BadCondition, format!("condition `{}`: {why}", c.text))
                         .at(Span::new(sfc.file, at))
@@ -482,7 +483,8 @@ impl StepTimes {
 }
 
 /// Why transition `t` cannot read `name`, the time of `step` (`count` steps have its name), if
-/// it cannot: the name is not unique, the program is one of a cell, or the transition does not
+/// it cannot: the name is not unique, the step runs on another controller of a cell than the
+/// one that waits for or decides the transition (`elsewhere`), or the transition does not
 /// follow the step.
 fn step_time_problem(
     sfc: &Sfc,
@@ -491,16 +493,17 @@ fn step_time_problem(
     name: &str,
     step: usize,
     count: usize,
-    in_cell: bool,
+    elsewhere: bool,
 ) -> Option<String> {
     let step_name = &name[..name.len() - 2];
     if count > 1 {
         Some(format!(
             "`{name}` reads a step's time, but {count} steps are named `{step_name}`: give the step a name of its own"
         ))
-    } else if in_cell {
+    } else if elsewhere {
         Some(format!(
-            "`{name}` reads a step's time; the chart's steps run on several controllers, and step times are not shared between them: wait for a signal instead"
+            "`{name}` reads the time of step `{step_name}` (localId {}), which runs on another controller than the one that waits for this transition (the controller of the step after it); step times are not shared between controllers: run the step after on the step's controller, or wait for a signal instead",
+            sfc.elements[step].local_id
         ))
     } else if !steps_before(sfc, by_id, t).contains(&step) {
         Some(format!(
@@ -1224,8 +1227,9 @@ pub struct Reads {
 }
 
 /// Resolves the names in every transition condition (or, for a program of a cell, those of
-/// `only`: the transitions it waits for or decides) against the signals of the program's
-/// resource and the chart's steps (a step's time `S.t`), and checks the types (SPEC.md 3.1).
+/// `only`: the transitions it waits for or decides; `only` holds the steps it runs too) against
+/// the signals of the program's resource and the chart's steps (a step's time `S.t`, in a cell
+/// only of a step it runs), and checks the types (SPEC.md 3.1).
 pub fn conditions(
     bb: &Blackboard,
     sfc: &Sfc,
@@ -1301,7 +1305,7 @@ pub fn conditions(
             };
             diags.push(d.at(at).element(label));
         }
-        let read = times.read_by(sfc, ei, c, only.is_some(), diags);
+        let read = times.read_by(sfc, ei, c, only, diags);
         for &(n, step) in &read {
             if timed_set.insert(step) {
                 timed.push(step);
@@ -1418,7 +1422,7 @@ pub fn check_conditions_unresolved(sfc: &Sfc, diags: &mut Diagnostics) {
         let ElementKind::Transition(Some(c)) = &e.kind else {
             continue;
         };
-        times.read_by(sfc, ei, c, false, diags);
+        times.read_by(sfc, ei, c, None, diags);
         let step_names = times.steps.as_ref();
         let lookup = |n: &str| {
             step_names

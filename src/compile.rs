@@ -1281,11 +1281,12 @@ fn name_part(name: &str) -> String {
         .collect()
 }
 
-/// The transitions a program of a cell waits for or decides.
+/// The transitions a program of a cell waits for or decides, and the steps it runs (whose times
+/// its conditions may read).
 fn evaluated(body: &[plan::Block]) -> std::collections::HashSet<usize> {
     let mut out = std::collections::HashSet::new();
     plan::visit(body, &mut |b| match b {
-        plan::Block::Wait(t) => {
+        plan::Block::Wait(t) | plan::Block::Step(t) => {
             out.insert(*t);
         }
         plan::Block::Choice { branches, .. } => {

@@ -2332,26 +2332,50 @@ fn step_times_are_checked_without_a_blackboard() {
     }
 }
 
+/// In a cell, a condition may read the time of a step its own controller runs: the controller
+/// that waits for the transition (the one of the step after it, else the one in charge) starts
+/// the step's timer and reads it. A step of another controller is refused: step times are not
+/// shared between controllers.
 #[test]
-fn step_times_in_a_cell_of_several_controllers_are_refused() {
+fn step_times_in_a_cell_are_read_on_the_steps_controller() {
     let p = bases_with_case(&["cell", "cell2"], "cell-two-robots-weld");
     let sfc = std::fs::read_to_string(p.path().join("sfc.xml")).unwrap();
-    // The transition after Pick (KR15-2) is waited for by the gripper's controller, the same;
-    // the one after Weld (KR16-2) by PlaceA's (KR15-2): a step time of another controller.
-    let at = sfc.find("<transition localId=\"8\">").unwrap();
-    let cond = sfc[at..].find("<xhtml:p>TRUE</xhtml:p>").unwrap() + at;
-    let sfc = format!(
-        "{}<xhtml:p>Weld.t &gt; T#2s</xhtml:p>{}",
-        &sfc[..cond],
-        &sfc[cond + "<xhtml:p>TRUE</xhtml:p>".len()..]
+    let with = |sfc: &str, t: u32, cond: &str| -> String {
+        let at = sfc.find(&format!("<transition localId=\"{t}\">")).unwrap();
+        let c = sfc[at..].find("<xhtml:p>TRUE</xhtml:p>").unwrap() + at;
+        format!(
+            "{}<xhtml:p>{cond}</xhtml:p>{}",
+            &sfc[..c],
+            &sfc[c + "<xhtml:p>TRUE</xhtml:p>".len()..]
+        )
+    };
+    // After Weld (KR16-2's weld source), before the simultaneous branches: KR16-2 waits.
+    std::fs::write(p.path().join("sfc.xml"), with(&sfc, 8, "Weld.t &gt; T#2s")).unwrap();
+    let o = run(&["--lf", "Blackboard.aml", "Cell"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let b = std::fs::read_to_string(p.path().join("Cell_KUKA_KR16_2.src")).unwrap();
+    let start = b.find("$TIMER[9] = 0").expect("the timer starts");
+    let weld = b.find("WeldSeam (180)").unwrap();
+    let read = b
+        .find("WAIT FOR $TIMER[9] > 2000")
+        .expect("the wait reads it");
+    assert!(start < weld && weld < read, "{b}");
+    let a = std::fs::read_to_string(p.path().join("Cell_KUKA_KR15_2.src")).unwrap();
+    assert!(!a.contains("$TIMER"), "{a}");
+    // KR15-2 goes on when KR16-2 tells it that the transition fired.
+    assert!(
+        a.contains(";handshake: wait until KUKA KR16-2 has done localId 8"),
+        "{a}"
     );
-    std::fs::write(p.path().join("sfc.xml"), sfc).unwrap();
+    // After Grip (KR15-2's gripper), waited for by Weld's controller (KR16-2): refused.
+    std::fs::remove_file(p.path().join("Cell_KUKA_KR15_2.src")).unwrap();
+    std::fs::write(p.path().join("sfc.xml"), with(&sfc, 6, "Grip.t &gt; T#1s")).unwrap();
     let before = std::fs::read(p.path().join("Blackboard.aml")).unwrap();
     let o = run(&["--format", "short", "Blackboard.aml", "Cell"], p.path());
     let e = stderr(&o);
     assert_eq!(o.status.code(), Some(1), "{e}");
     assert!(
-        e.contains("E316") && e.contains("several controllers"),
+        e.contains("E316") && e.contains("which runs on another controller"),
         "{e}"
     );
     assert_eq!(
