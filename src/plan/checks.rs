@@ -273,10 +273,7 @@ pub fn start_end(
     let mut marked_nets: Vec<usize> = Vec::new();
     let mut has_initial = vec![false; el.len()];
     for (i, e) in el.iter().enumerate() {
-        if matches!(&e.kind, ElementKind::Step(st) if st.initial)
-            && !g.in_macro_body(i)
-            && !has_initial[net[i]]
-        {
+        if initial(sfc, g, i) && !has_initial[net[i]] {
             has_initial[net[i]] = true;
             marked_nets.push(net[i]);
             if marked_nets.len() > super::MAX_SEQUENCES {
@@ -370,7 +367,14 @@ fn networks(g: &Graph, jumps: &[Option<usize>]) -> Vec<usize> {
     (0..n).map(|i| root(&mut parent, i)).collect()
 }
 
-/// The start and the end of the one sequence of the elements `mine` holds.
+/// Whether element `i` is a step marked `initialStep="true"` of the chart itself (a macro step's
+/// body marks its own initial step).
+fn initial(sfc: &Sfc, g: &Graph, i: usize) -> bool {
+    matches!(&sfc.elements[i].kind, ElementKind::Step(st) if st.initial) && !g.in_macro_body(i)
+}
+
+/// The start and the end of the one sequence of the elements `mine` holds (a pass over the
+/// chart for each sequence: [`super::MAX_SEQUENCES`] bounds them).
 fn one_sequence(
     sfc: &Sfc,
     g: &Graph,
@@ -388,13 +392,8 @@ fn one_sequence(
     // The start is the step marked initialStep="true" (SPEC.md 3): the one marked step without
     // a predecessor (the original also marks its end step), else the one marked step (a chart
     // drawn as a closed circle); else the one step without a predecessor that no jump leads to.
-    // (A macro step's body marks its own initial step.)
-    let initial = |i: &usize| {
-        matches!(&el[*i].kind, ElementKind::Step(st) if st.initial) && !g.in_macro_body(*i)
-    };
-    let marked: Vec<usize> = (0..el.len())
-        .filter(|i| mine(*i) && el[*i].kind.is_step() && initial(i))
-        .collect();
+    let initial = |i: &usize| initial(sfc, g, *i);
+    let marked: Vec<usize> = (0..el.len()).filter(|i| mine(*i) && initial(i)).collect();
     let marked_free: Vec<usize> = untargeted.iter().copied().filter(initial).collect();
     let starts = match (marked_free.as_slice(), marked.as_slice()) {
         ([_], _) | ([], [_]) => {
