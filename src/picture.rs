@@ -178,13 +178,8 @@ impl Layout<'_> {
                     for br in branches {
                         if matches!(b, Block::Sequences(_)) {
                             // The lane of the sequence's first step that runs code.
-                            let mut first = None;
-                            crate::plan::visit(br, &mut |x| {
-                                if let (None, Block::Step(s)) = (first, x) {
-                                    first = self.of.get(s).copied();
-                                }
-                            });
-                            self.lane_hint = first;
+                            let of = self.of;
+                            self.lane_hint = crate::plan::first_step(br, &|s| of.get(&s).copied());
                         }
                         let e = self.walk(br, front, row);
                         if e.0 >= end.0 {

@@ -223,12 +223,7 @@ impl Scan<'_> {
                 Block::Sequences(seqs) => {
                     // Each sequence is in the charge of its own first controller.
                     for seq in seqs {
-                        let mut first = None;
-                        super::visit(seq, &mut |b| {
-                            if let (None, Block::Step(i)) = (first, b) {
-                                first = (self.controller)(*i);
-                            }
-                        });
+                        let first = super::first_step(seq, self.controller);
                         ctx = self.blocks(seq, first.unwrap_or(ctx), set);
                     }
                 }

@@ -231,6 +231,18 @@ pub fn visit(blocks: &[Block], f: &mut dyn FnMut(&Block)) {
     }
 }
 
+/// `f` of the first step of `blocks` (in program order) for which it is `Some`: the controller
+/// or lane of a sequence's first step that runs code.
+pub fn first_step<T>(blocks: &[Block], f: &dyn Fn(usize) -> Option<T>) -> Option<T> {
+    let mut first = None;
+    visit(blocks, &mut |b| {
+        if let (None, Block::Step(i)) = (&first, b) {
+            first = f(*i);
+        }
+    });
+    first
+}
+
 /// The Gotos of `blocks` that leave them (not those inside a nested [`Block::Machine`], which
 /// go to its own states).
 pub fn gotos(blocks: &[Block], out: &mut Vec<usize>) {
