@@ -62,16 +62,20 @@ fn materialize_cell(name: &str) -> (tempfile::TempDir, PathBuf, String, Vec<Stri
     (tmp, bb, case.program, programs)
 }
 
-/// `skillpost --validate --svg OUT BLACKBOARD PROGRAM`: the SVG's text.
-fn draw(bb: &Path, program: &str, out: &Path) -> String {
-    let o = Command::new(env!("CARGO_BIN_EXE_skillpost"))
-        .arg("--validate")
-        .arg("--svg")
+/// `skillpost --validate --svg OUT BLACKBOARD PROGRAM`, run.
+fn svg(bb: &Path, program: &str, out: &Path) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["--validate", "--svg"])
         .arg(out)
         .arg(bb)
         .arg(program)
         .output()
-        .unwrap();
+        .unwrap()
+}
+
+/// [`svg`], which must succeed: the SVG's text.
+fn draw(bb: &Path, program: &str, out: &Path) -> String {
+    let o = svg(bb, program, out);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     fs::read_to_string(out).unwrap()
 }
@@ -217,13 +221,7 @@ fn a_picture_of_inputs_with_errors_is_not_written() {
     let text = fs::read_to_string(&sfc).unwrap();
     fs::write(&sfc, text.replacen("</pou>", "</pous>", 1)).unwrap();
     let out = tmp.path().join("plan.svg");
-    let o = Command::new(env!("CARGO_BIN_EXE_skillpost"))
-        .args(["--validate", "--svg"])
-        .arg(&out)
-        .arg(&bb)
-        .arg(&program)
-        .output()
-        .unwrap();
+    let o = svg(&bb, &program, &out);
     assert_eq!(o.status.code(), Some(1));
     assert!(!out.exists());
     assert!(String::from_utf8_lossy(&o.stderr).contains("not drawn"));
@@ -294,13 +292,7 @@ fn a_picture_named_like_an_input_is_refused_and_the_input_kept() {
     let (tmp, bb, program) = materialize("reference-sample");
     let sfc = tmp.path().join("sfc.xml");
     let before = fs::read(&sfc).unwrap();
-    let o = Command::new(env!("CARGO_BIN_EXE_skillpost"))
-        .args(["--validate", "--svg"])
-        .arg(&sfc)
-        .arg(&bb)
-        .arg(&program)
-        .output()
-        .unwrap();
+    let o = svg(&bb, &program, &sfc);
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains("E605"));
     assert_eq!(fs::read(&sfc).unwrap(), before, "the SFC is untouched");

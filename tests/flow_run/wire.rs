@@ -155,25 +155,24 @@ impl Wirer<'_> {
                 outs.extend(self.contacts(b, from));
                 outs
             }
-            Cond::Signal(_) | Cond::Not(_) => {
-                let (s, negated) = match c {
-                    Cond::Not(a) => match &**a {
-                        Cond::Signal(s) => (s, true),
-                        other => panic!("not a rung: {other:?}"),
-                    },
-                    Cond::Signal(s) => (s, false),
-                    _ => unreachable!(),
-                };
-                let id = self.id();
-                self.out.push_str(&format!(
-                    "<contact localId=\"{id}\"{}><position x=\"0\" y=\"0\"/><connectionPointIn>{}</connectionPointIn><variable>{s}</variable></contact>\n",
-                    if negated { " negated=\"true\"" } else { "" },
-                    connections(&from)
-                ));
-                vec![id]
-            }
+            Cond::Signal(s) => vec![self.contact(s, false, &from)],
+            Cond::Not(a) => match &**a {
+                Cond::Signal(s) => vec![self.contact(s, true, &from)],
+                other => panic!("not a rung: NOT {other:?}"),
+            },
             other => panic!("not a rung: {other:?}"),
         }
+    }
+
+    /// A contact of `signal` (`negated`: normally closed) fed from `from`.
+    fn contact(&mut self, signal: &str, negated: bool, from: &[u64]) -> u64 {
+        let id = self.id();
+        self.out.push_str(&format!(
+            "<contact localId=\"{id}\"{}><position x=\"0\" y=\"0\"/><connectionPointIn>{}</connectionPointIn><variable>{signal}</variable></contact>\n",
+            if negated { " negated=\"true\"" } else { "" },
+            connections(from)
+        ));
+        id
     }
 
     fn block(&mut self, name: &str, inputs: &[(&str, Vec<u64>)]) -> u64 {
