@@ -114,50 +114,42 @@ impl Layout<'_> {
         for b in blocks {
             match b {
                 Block::Step(i) => {
+                    let d = duration(self.sfc, *i);
                     // In a cell, a step that runs no code (a start or an end step) is drawn on
                     // the lane before it (a sequence's own at its start) at the front: it
                     // neither takes the lane's time nor makes a lane wait.
-                    if !self.of.is_empty() && !self.of.contains_key(i) {
-                        let lane = front.1.map(|(c, _, _)| c).or(self.lane_hint).unwrap_or(0);
-                        self.items.push(Item {
-                            lane,
-                            row,
-                            start: front.0,
-                            end: front.0 + duration(self.sfc, *i).unwrap_or(0.0),
-                            kind: Kind::Step {
-                                element: *i,
-                                timed: duration(self.sfc, *i).is_some(),
-                            },
-                            label: self.label.take(),
-                        });
-                        continue;
-                    }
-                    let c = self.of.get(i).copied().unwrap_or(0);
-                    let d = duration(self.sfc, *i);
-                    let start = front.0.max(self.free[c]);
-                    if let Some((pc, prow, pe)) = front.1
-                        && pc != c
-                    {
-                        if front.0 > self.free[c] {
-                            self.items.push(Item {
-                                lane: c,
-                                row,
-                                start: self.free[c],
-                                end: front.0,
-                                kind: Kind::Wait {
-                                    element: pe,
-                                    of: pc,
-                                },
-                                label: None,
+                    let coded = self.of.is_empty() || self.of.contains_key(i);
+                    let (c, start) = if coded {
+                        let c = self.of.get(i).copied().unwrap_or(0);
+                        let start = front.0.max(self.free[c]);
+                        if let Some((pc, prow, pe)) = front.1
+                            && pc != c
+                        {
+                            if front.0 > self.free[c] {
+                                self.items.push(Item {
+                                    lane: c,
+                                    row,
+                                    start: self.free[c],
+                                    end: front.0,
+                                    kind: Kind::Wait {
+                                        element: pe,
+                                        of: pc,
+                                    },
+                                    label: None,
+                                });
+                            }
+                            self.arrows.push(Arrow {
+                                from: (pc, prow),
+                                to: (c, row),
+                                at: front.0,
+                                to_at: start,
                             });
                         }
-                        self.arrows.push(Arrow {
-                            from: (pc, prow),
-                            to: (c, row),
-                            at: front.0,
-                            to_at: start,
-                        });
-                    }
+                        (c, start)
+                    } else {
+                        let lane = front.1.map(|(c, _, _)| c).or(self.lane_hint);
+                        (lane.unwrap_or(0), front.0)
+                    };
                     let end = start + d.unwrap_or(0.0);
                     self.items.push(Item {
                         lane: c,
@@ -170,8 +162,10 @@ impl Layout<'_> {
                         },
                         label: self.label.take(),
                     });
-                    self.free[c] = end;
-                    front = (end, Some((c, row, *i)));
+                    if coded {
+                        self.free[c] = end;
+                        front = (end, Some((c, row, *i)));
+                    }
                 }
                 Block::Parallel { branches, .. } | Block::Sequences(branches) => {
                     let mut end = front;
