@@ -18,7 +18,7 @@ mod walk;
 pub use checks::{check_nodes, find_cycle, resolve_jumps, start_end};
 pub use circles::close_circles;
 pub use graph::{Graph, graph};
-pub use walk::walk;
+pub use walk::{Order, walk};
 
 use crate::diag::{Code, Diagnostic, Diagnostics};
 use crate::model::Sfc;
@@ -306,9 +306,10 @@ pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
     }
     let sequences = ends?;
     let mut bodies = Vec::with_capacity(sequences.len());
+    let order = Order::new(&g);
     for &(start, _) in &sequences {
         // Every sequence is walked, so one run reports the faults of each.
-        bodies.push(walk(sfc, &g, &jumps, start, diags));
+        bodies.push(walk(sfc, &g, &jumps, start, &order, diags));
     }
     let mut bodies: Vec<Vec<Block>> = bodies.into_iter().collect::<Option<_>>()?;
     let mut body = if bodies.len() == 1 {

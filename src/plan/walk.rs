@@ -22,6 +22,7 @@ pub fn walk(
     g: &Graph,
     jumps: &[Option<usize>],
     start: usize,
+    order: &Order,
     diags: &mut Diagnostics,
 ) -> Option<Vec<Block>> {
     // A jump into or out of a simultaneous branch: the chart itself is wrong.
@@ -55,7 +56,7 @@ pub fn walk(
     // begins a state from the start, so a chart of many such jumps is walked once, not once per
     // jump, and the branches they leave do not nest. (Jumps that leave several loops are found
     // by the walk.)
-    let dom = Dominators::new(g, start);
+    let dom = Dominators::new(g, start, order);
     for (j, t) in jumps.iter().enumerate() {
         if let Some(t) = *t
             && !dom.dominates(t, j)
@@ -109,15 +110,13 @@ struct Dominators {
 }
 
 impl Dominators {
-    fn new(g: &Graph, start: usize) -> Self {
+    fn new(g: &Graph, start: usize, o: &Order) -> Self {
         let n = g.len();
-        let order = connection_order(g);
-        let mut by_order: Vec<usize> = (0..n).collect();
-        by_order.sort_unstable_by_key(|&i| order[i]);
+        let (order, by_order) = (&o.place, &o.elements);
         const NONE: usize = usize::MAX;
         let mut idom = vec![NONE; n];
         idom[start] = start;
-        for &v in &by_order {
+        for &v in by_order {
             if v == start {
                 continue;
             }
@@ -178,28 +177,38 @@ impl Dominators {
     }
 }
 
-/// Each element's place in a topological order of the connections (jumps are not connections;
-/// `find_cycle` found no cycle of connections).
-fn connection_order(g: &Graph) -> Vec<usize> {
-    let n = g.len();
-    let mut missing: Vec<usize> = (0..n).map(|i| g.preds(i).len()).collect();
-    // First in, first out: the elements of a short branch (a jump) come before those of a
-    // long one, so more forward jumps are seen as such.
-    let mut ready: std::collections::VecDeque<usize> =
-        (0..n).filter(|&i| missing[i] == 0).collect();
-    let mut order = vec![usize::MAX; n];
-    let mut next = 0;
-    while let Some(i) = ready.pop_front() {
-        order[i] = next;
-        next += 1;
-        for &s in g.succs(i) {
-            missing[s] -= 1;
-            if missing[s] == 0 {
-                ready.push_back(s);
+/// A topological order of the connections (jumps are not connections; `find_cycle` found no
+/// cycle of connections), the same for every sequence of a chart: computed once.
+pub struct Order {
+    /// Each element's place in the order (`usize::MAX`: none, on a cycle).
+    place: Vec<usize>,
+    /// The elements in the order (those on a cycle last).
+    elements: Vec<usize>,
+}
+
+impl Order {
+    pub fn new(g: &Graph) -> Self {
+        let n = g.len();
+        let mut missing: Vec<usize> = (0..n).map(|i| g.preds(i).len()).collect();
+        // First in, first out: the elements of a short branch (a jump) come before those of a
+        // long one, so more forward jumps are seen as such.
+        let mut ready: std::collections::VecDeque<usize> =
+            (0..n).filter(|&i| missing[i] == 0).collect();
+        let mut place = vec![usize::MAX; n];
+        let mut elements = Vec::with_capacity(n);
+        while let Some(i) = ready.pop_front() {
+            place[i] = elements.len();
+            elements.push(i);
+            for &s in g.succs(i) {
+                missing[s] -= 1;
+                if missing[s] == 0 {
+                    ready.push_back(s);
+                }
             }
         }
+        elements.extend((0..n).filter(|&i| place[i] == usize::MAX));
+        Order { place, elements }
     }
-    order
 }
 
 /// A step the chart reaches (by connections and jumps from the start) that `body` does not
