@@ -749,6 +749,11 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                     .channels
                     .iter()
                     .flat_map(|ch| ch.strobe.iter().chain(&ch.data).chain(&ch.ack).copied())
+                    .chain(
+                        cell.links
+                            .iter()
+                            .flat_map(|l| l.run.into_iter().chain(l.ready)),
+                    )
                     .collect();
                 for &si in &bound.signals {
                     let Some(&w) = used

@@ -142,6 +142,15 @@ pub fn wire_uses(
             out.insert(w, format!("acknowledgement {of}"));
         }
     }
+    for l in &cell.links {
+        let of = format!("of {} -> {}", name(l.from), name(l.to));
+        if let Some(w) = l.run {
+            out.insert(w, format!("run {of} (start barrier, restart check)"));
+        }
+        if let Some(w) = l.ready {
+            out.insert(w, format!("ready {of} (start barrier)"));
+        }
+    }
     out
 }
 

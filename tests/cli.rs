@@ -1334,9 +1334,17 @@ fn a_cells_listings_show_each_program_and_the_lanes() {
         text.contains("(Wire) KUKA KR15-2: To_ABB_1 -> ABB IRB 1200: From_KUKA_1   (InternalLink KUKA to ABB 1, handshake: strobe of KUKA KR15-2 -> ABB IRB 1200)"),
         "{text}"
     );
+    // The start barrier's and the restart check's wires, each way.
+    for line in [
+        "(Wire) UR10e: To_ABB_2 -> ABB IRB 1200: From_UR_2   (InternalLink UR to ABB 2, handshake: run of UR10e -> ABB IRB 1200 (start barrier, restart check))\n",
+        "(Wire) UR10e: To_ABB_3 -> ABB IRB 1200: From_UR_3   (InternalLink UR to ABB 3, handshake: ready of UR10e -> ABB IRB 1200 (start barrier))\n",
+        "(Wire) ABB IRB 1200: To_UR_3 -> UR10e: From_ABB_3   (InternalLink ABB to UR 3, handshake: run of ABB IRB 1200 -> UR10e (start barrier, restart check))\n",
+    ] {
+        assert!(text.contains(line), "{line}\n{text}");
+    }
     assert!(
         text.contains(
-            "(Wire) UR10e: To_ABB_2 -> ABB IRB 1200: From_UR_2   (InternalLink UR to ABB 2)\n"
+            "(Wire) UR10e: To_ABB_4 -> ABB IRB 1200: From_UR_4   (InternalLink UR to ABB 4)\n"
         ),
         "{text}"
     );

@@ -1765,6 +1765,8 @@ fn the_urscript_check_refuses_what_is_not_urscript() {
 /// own step durations, speeds, start delays and input changes).
 const CELL_CHARTS: usize = 100;
 const CELL_RUNS: usize = 1_000;
+const RESTART_CHARTS: usize = 40;
+const RESTART_RUNS: usize = 1_000;
 
 /// Every program of a cell passes the KRL grammar check, and all of them together, co-simulated
 /// (`flow_run/cosim.rs`), keep the chart's order whatever the timing: the same branches on every
@@ -1966,6 +1968,128 @@ fn cell_fixtures_keep_the_charts_order_whatever_the_timing() {
             None,
         ) {
             panic!("{case}: {e}");
+        }
+    }
+}
+
+/// A cell that runs shift after shift (SPEC.md 9, restarts and second cycles): random cells
+/// of 2-4 controllers in every language, each run (a) three cycles, each program started
+/// again after its END in a random order with random delays, and (b) one program started
+/// again at a random time mid-cycle, every other one later at a random time: before the
+/// starts again a part of one run of the chart (no step after one cut short), after them no
+/// step before every partner was started again, then (c) one whole run.
+#[test]
+fn cells_run_again_and_again_and_survive_restarts() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut charts, mut seed) = (0, 0u64);
+    let mut langs_seen = std::collections::BTreeSet::new();
+    while charts < RESTART_CHARTS {
+        seed += 1;
+        let Some((chart, cell, robot_of, _)) = cosim::random_cell(&dir.path().join("cell"), seed)
+        else {
+            continue;
+        };
+        langs_seen.extend(cell.langs.iter().map(|l| format!("{l:?}")));
+        for scenario in [cosim::Scenario::Cycles(3), cosim::Scenario::Fault] {
+            if let Err(e) = cosim::co_simulate_in(
+                &chart,
+                &cell,
+                &robot_of,
+                seed,
+                RESTART_RUNS,
+                cosim::Mutation::None,
+                None,
+                scenario,
+            ) {
+                let keep = std::env::temp_dir().join(format!("skillpost-restart-seed-{seed}"));
+                let _ = std::fs::remove_dir_all(&keep);
+                std::fs::create_dir_all(&keep).unwrap();
+                copy_dir(&dir.path().join("cell"), &keep);
+                panic!(
+                    "seed {seed}: {e}\n(the project is kept in {})",
+                    keep.display()
+                );
+            }
+        }
+        charts += 1;
+    }
+    assert_eq!(langs_seen.len(), 3, "{langs_seen:?}");
+}
+
+/// The restart co-simulation catches a cell without the start barrier (run three cycles) and
+/// one whose waits on a partner lack the restart guard (a program started again mid-cycle), in
+/// each language: only the programs of that language are broken.
+#[test]
+fn the_restart_co_simulation_catches_a_missing_barrier_or_guard() {
+    let dir = tempfile::tempdir().unwrap();
+    for (mutation, scenario) in [
+        (cosim::Mutation::NoBarrier, cosim::Scenario::Cycles(3)),
+        (cosim::Mutation::NoGuard, cosim::Scenario::Fault),
+    ] {
+        for lang in [Lang::Krl, Lang::Rapid, Lang::UrScript] {
+            let (mut caught, mut tried, mut seed) = (0, 0, 2000);
+            while tried < 8 && seed < 2400 {
+                seed += 1;
+                let Some((chart, cell, robot_of, _)) =
+                    cosim::random_cell(&dir.path().join("cell"), seed)
+                else {
+                    continue;
+                };
+                let applies = cell.programs.iter().zip(&cell.langs).any(|(p, l)| {
+                    *l == lang
+                        && p.as_ref()
+                            .is_some_and(|(src, _)| src.contains("start barrier"))
+                });
+                if !applies {
+                    continue;
+                }
+                tried += 1;
+                if cosim::co_simulate_in(
+                    &chart,
+                    &cell,
+                    &robot_of,
+                    seed,
+                    200,
+                    mutation,
+                    Some(lang),
+                    scenario,
+                )
+                .is_err()
+                {
+                    caught += 1;
+                }
+            }
+            eprintln!(
+                "{mutation:?} in {lang:?} ({scenario:?}): caught in {caught} of {tried} cells"
+            );
+            assert!(
+                caught > 0,
+                "{mutation:?} in the {lang:?} programs: caught in none of {tried} cells"
+            );
+        }
+    }
+}
+
+/// The cell fixtures, run again and again and started again mid-cycle the same way.
+#[test]
+fn cell_fixtures_survive_restarts() {
+    let dir = tempfile::tempdir().unwrap();
+    for &(case, programs, controllers) in CELL_FIXTURES {
+        let (chart, cell, robot_of) =
+            cosim::fixture_cell(&dir.path().join(case), case, programs, controllers);
+        for scenario in [cosim::Scenario::Cycles(3), cosim::Scenario::Fault] {
+            if let Err(e) = cosim::co_simulate_in(
+                &chart,
+                &cell,
+                &robot_of,
+                11,
+                CELL_RUNS,
+                cosim::Mutation::None,
+                None,
+                scenario,
+            ) {
+                panic!("{case}: {e}");
+            }
         }
     }
 }

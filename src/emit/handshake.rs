@@ -23,10 +23,16 @@ use super::flow::Lines;
 use crate::diag::{Code, Diagnostic, Diagnostics};
 use crate::lang::Language;
 use crate::model::{ElementKind, Signal, SignalKind};
-use crate::plan::cell::{Cell, Kind, Message};
+use crate::plan::cell::{Cell, Kind, Link, Message};
 
 /// The variable a decision is read into.
 pub const DECISION_VAR: &str = "skp_got";
+
+/// KRL's message of a stop (`KrlMsg_T`), its parameters, options and handle (`.dat`).
+const MSG_VAR: &str = "skp_msg";
+const PAR_VAR: &str = "skp_par";
+const OPT_VAR: &str = "skp_opt";
+const HANDLE_VAR: &str = "skp_handle";
 
 /// A program's place in its cell.
 #[derive(Debug, Clone, Copy)]
@@ -167,13 +173,51 @@ impl<'a> Hand<'a> {
         }
     }
 
-    /// A wait until `read` (a wire) equals `var`; `settle`: the robot stands first.
-    fn wait_equal(&self, lines: &mut Vec<(usize, String)>, read: &str, var: &str, settle: bool) {
+    /// A wire read as "is `level`" (an atom of a condition).
+    fn is(&self, read: &str, level: bool) -> String {
+        match (self.lang, level) {
+            (Language::Krl, true) => read.to_owned(),
+            (Language::Krl, false) => format!("NOT {read}"),
+            (Language::Rapid, true) => format!("{read} = 1"),
+            (Language::Rapid, false) => format!("{read} = 0"),
+            (Language::UrScript, true) => read.to_owned(),
+            (Language::UrScript, false) => format!("not {read}"),
+        }
+    }
+
+    /// A wire read as "equals `var`" (a toggle).
+    fn equals(&self, read: &str, var: &str) -> String {
         match self.lang {
-            Language::Krl => lines.push((0, format!("WAIT FOR {read} == {var}"))),
+            Language::Krl | Language::UrScript => format!("{read} == {var}"),
+            Language::Rapid => format!("{read} = {var}"),
+        }
+    }
+
+    /// `parts` joined by `op` (`"AND"`/`"OR"`), each in parentheses when there are several
+    /// (KRL compares last: `a == b AND c` is `a == (b AND c)`).
+    fn join(&self, op: &str, parts: &[String]) -> String {
+        if parts.len() == 1 {
+            return parts[0].clone();
+        }
+        let op = match self.lang {
+            Language::UrScript => op.to_ascii_lowercase(),
+            _ => op.to_owned(),
+        };
+        parts
+            .iter()
+            .map(|p| format!("({p})"))
+            .collect::<Vec<_>>()
+            .join(&format!(" {op} "))
+    }
+
+    /// A wait until `cond` holds; `settle`: the robot stands first (KRL's `WAIT FOR` stops
+    /// the advance run anyway).
+    fn wait_until(&self, lines: &mut Vec<(usize, String)>, cond: &str, settle: bool) {
+        match self.lang {
+            Language::Krl => lines.push((0, format!("WAIT FOR {cond}"))),
             Language::Rapid => {
                 let pos = if settle { "\\InPos, " } else { "" };
-                lines.push((0, format!("WaitUntil {pos}{read} = {var};")));
+                lines.push((0, format!("WaitUntil {pos}{cond};")));
             }
             Language::UrScript => {
                 if settle {
@@ -181,9 +225,146 @@ impl<'a> Hand<'a> {
                     lines.push((1, "sync()".to_owned()));
                     lines.push((0, "end".to_owned()));
                 }
-                lines.push((0, format!("while {read} != {var}:")));
+                lines.push((0, format!("while not ({cond}):")));
                 lines.push((1, "sync()".to_owned()));
                 lines.push((0, "end".to_owned()));
+            }
+        }
+    }
+
+    /// The run wire partner `p` drives to this program, as read here.
+    fn run_of(&self, p: usize) -> String {
+        self.link_read(p, |l| l.run)
+    }
+
+    /// The ready wire partner `p` drives to this program, as read here.
+    fn ready_of(&self, p: usize) -> String {
+        self.link_read(p, |l| l.ready)
+    }
+
+    fn link_read(&self, p: usize, wire: fn(&Link) -> Option<usize>) -> String {
+        self.view
+            .cell
+            .link(p, self.view.me)
+            .and_then(|l| self.signal(wire(l), false))
+            .and_then(|s| self.read(s).ok())
+            .unwrap_or_default()
+    }
+
+    /// The lines that set this program's run (or ready) wire to each partner to `level`.
+    fn set_links(
+        &self,
+        out: &mut Vec<(usize, String)>,
+        wire: fn(&Link) -> Option<usize>,
+        level: bool,
+    ) {
+        let v = if level { self.t() } else { self.f() };
+        for p in self.view.cell.partners(self.view.me) {
+            if let Some(s) = self
+                .view
+                .cell
+                .link(self.view.me, p)
+                .and_then(|l| self.signal(wire(l), true))
+                && let Ok(l) = self.set(s, v)
+            {
+                out.push((0, l));
+            }
+        }
+    }
+
+    /// A handshake's wait until the wire `read` equals the toggle `var`, which also ends when
+    /// partner `p` was started again (its run wire `FALSE`; see [`Hand::stop_unless_running`]).
+    fn guarded_wait(&self, out: &mut Vec<(usize, String)>, read: &str, var: &str, p: usize) {
+        let run = self.run_of(p);
+        let cond = self.join("OR", &[self.equals(read, var), self.is(&run, false)]);
+        self.wait_until(out, &cond, true);
+    }
+
+    /// When partner `p` was started again (its run wire `FALSE`), the program stops with a
+    /// message (`text`, or where a message is short a shorter one about `m`) and stays stopped
+    /// until it is started again itself. Read after the wires of a message: a start again sets
+    /// the run wire `FALSE` before any other, so a message read while it is still `TRUE` is
+    /// this run's.
+    fn stop_unless_running(
+        &self,
+        out: &mut Vec<(usize, String)>,
+        p: usize,
+        text: &str,
+        m: &Message,
+    ) {
+        let run = self.run_of(p);
+        let id = self.input.sfc.elements[m.about].local_id;
+        let short = format!(
+            "{} started again; this program waited at localId {id}",
+            self.name(p)
+        );
+        self.stop_if(out, &self.is(&run, false), text, &short, id);
+    }
+
+    /// `IF cond`: a message to the operator, and the program stops for good (until it is
+    /// started again from its start).
+    fn stop_if(
+        &self,
+        out: &mut Vec<(usize, String)>,
+        cond: &str,
+        text: &str,
+        short: &str,
+        nr: u64,
+    ) {
+        // No quote or backslash inside a string literal of any of the three; KRL's message
+        // and RAPID's reason lines hold 80 characters.
+        let clean = |t: &str| -> String {
+            t.chars()
+                .map(|c| match c {
+                    '"' => '\'',
+                    '\\' => '/',
+                    c => c,
+                })
+                .collect()
+        };
+        let fit = |t: &str| -> String {
+            let t = clean(t);
+            if t.chars().count() <= 80 {
+                return t;
+            }
+            clean(short).chars().take(80).collect()
+        };
+        let text = clean(text);
+        let c = self.comment();
+        match self.lang {
+            Language::Krl => {
+                let short = fit(&text);
+                out.push((0, format!("IF {cond} THEN")));
+                out.push((1, format!("{c}handshake: a partner was started again: stop until this program is started again")));
+                out.push((
+                    1,
+                    format!(
+                        "{MSG_VAR} = {{Modul[] \"skillpost\", Nr {nr}, Msg_Txt[] \"{short}\"}}"
+                    ),
+                ));
+                out.push((
+                    1,
+                    format!("{HANDLE_VAR} = Set_KrlMsg(#QUIT, {MSG_VAR}, {PAR_VAR}[], {OPT_VAR})"),
+                ));
+                out.push((1, "LOOP".to_owned()));
+                out.push((2, "HALT".to_owned()));
+                out.push((1, "ENDLOOP".to_owned()));
+                out.push((0, "ENDIF".to_owned()));
+            }
+            Language::Rapid => {
+                let short = fit(&text);
+                out.push((0, format!("IF {cond} THEN")));
+                out.push((1, format!("{c}handshake: a partner was started again: stop until this program is started again")));
+                out.push((1, format!("ErrWrite \"Partner started again\", \"{short}\" \\RL2:=\"Start this task again from main.\";")));
+                out.push((1, "EXIT;".to_owned()));
+                out.push((0, "ENDIF".to_owned()));
+            }
+            Language::UrScript => {
+                out.push((0, format!("if {cond}:")));
+                out.push((1, format!("{c}handshake: a partner was started again: stop until this program is started again")));
+                out.push((1, format!("popup(\"{text}. Start this program again.\", title=\"skillpost\", error=True, blocking=False)")));
+                out.push((1, "halt".to_owned()));
+                out.push((0, "end".to_owned()));
             }
         }
     }
@@ -236,7 +417,12 @@ impl<'a> Hand<'a> {
             .signal(ch.ack, false)
             .and_then(|s| self.read(s).ok())
             .unwrap_or_default();
-        self.wait_equal(&mut out, &ack, &var, true);
+        let stop = format!(
+            "{} started again; this program was to tell it: {what}",
+            self.name(ch.to)
+        );
+        self.guarded_wait(&mut out, &ack, &var, ch.to);
+        self.stop_unless_running(&mut out, ch.to, &stop, m);
         if m.kind == Kind::Decision {
             for (bit, &w) in ch.data.iter().enumerate() {
                 let on = (m.value >> bit) & 1 == 1;
@@ -275,7 +461,19 @@ impl<'a> Hand<'a> {
             .signal(ch.strobe, false)
             .and_then(|s| self.read(s).ok())
             .unwrap_or_default();
-        self.wait_equal(&mut out, &strobe, &var, true);
+        let stop = match m.kind {
+            Kind::Done => format!(
+                "{} started again; waited for its {}",
+                self.name(ch.from),
+                self.about(m)
+            ),
+            Kind::Decision => format!(
+                "{} started again; waited for its branch at the selection {}",
+                self.name(ch.from),
+                self.about(m)
+            ),
+        };
+        self.guarded_wait(&mut out, &strobe, &var, ch.from);
         if m.kind == Kind::Decision {
             out.push((0, self.assign(DECISION_VAR, "0")));
             for (bit, &w) in ch.data.iter().enumerate() {
@@ -302,6 +500,7 @@ impl<'a> Hand<'a> {
                 }
             }
         }
+        self.stop_unless_running(&mut out, ch.from, &stop, m);
         if let Some(s) = self.signal(ch.ack, true)
             && let Ok(l) = self.set(s, &var)
         {
@@ -323,25 +522,36 @@ impl<'a> Hand<'a> {
         )
     }
 
-    /// The lines at the program's start: every toggle and every wire this program drives
-    /// `FALSE`.
+    /// The lines at the program's start: its run wires `FALSE` first (a partner waiting
+    /// for it sees at once that it was started again), then every other wire it drives and
+    /// every toggle; then the start barrier: wait until every partner is at its start (run
+    /// `FALSE`), say ready, wait until every partner is ready, say running, wait until no
+    /// partner is only ready any more, take ready back.
     pub fn init(&self) -> Vec<(usize, String)> {
         let (tx, rx) = self.own();
         if tx.is_empty() && rx.is_empty() {
             return Vec::new();
         }
+        let c = self.comment();
+        let partners: Vec<usize> = self.view.cell.partners(self.view.me).collect();
+        let names = partners
+            .iter()
+            .map(|&p| self.name(p))
+            .collect::<Vec<_>>()
+            .join(", ");
         let mut out = vec![(
             0,
             format!(
-                "{}handshake: every wire of {} FALSE at the start",
-                self.comment(),
+                "{c}handshake: the start of {}: its run wires FALSE first, then every wire it drives",
                 self.name(self.view.me)
             ),
         )];
+        self.set_links(&mut out, |l| l.run, false);
+        self.set_links(&mut out, |l| l.ready, false);
         let chs = &self.view.cell.channels;
-        for &c in &tx {
-            out.push((0, self.assign(&format!("skp_tx{}", c + 1), self.f())));
-            for w in chs[c].strobe.iter().chain(&chs[c].data) {
+        for &ch in &tx {
+            out.push((0, self.assign(&format!("skp_tx{}", ch + 1), self.f())));
+            for w in chs[ch].strobe.iter().chain(&chs[ch].data) {
                 if let Some(s) = self.signal(Some(*w), true)
                     && let Ok(l) = self.set(s, self.f())
                 {
@@ -349,16 +559,84 @@ impl<'a> Hand<'a> {
                 }
             }
         }
-        for &c in &rx {
-            out.push((0, self.assign(&format!("skp_rx{}", c + 1), self.f())));
-            if let Some(s) = self.signal(chs[c].ack, true)
+        for &ch in &rx {
+            out.push((0, self.assign(&format!("skp_rx{}", ch + 1), self.f())));
+            if let Some(s) = self.signal(chs[ch].ack, true)
                 && let Ok(l) = self.set(s, self.f())
             {
                 out.push((0, l));
             }
         }
-        if self.lang == Language::UrScript && rx.iter().any(|&c| chs[c].decisions) {
+        if self.lang == Language::UrScript && rx.iter().any(|&ch| chs[ch].decisions) {
             out.push((0, self.assign(DECISION_VAR, "0")));
+        }
+        let be = if partners.len() == 1 { "is" } else { "are" };
+        let all = |f: &dyn Fn(usize) -> String| -> String {
+            self.join("AND", &partners.iter().map(|&p| f(p)).collect::<Vec<_>>())
+        };
+        out.push((
+            0,
+            format!(
+                "{c}handshake: start barrier: wait until {names} {be} at the start (run FALSE)"
+            ),
+        ));
+        self.wait_until(&mut out, &all(&|p| self.is(&self.run_of(p), false)), false);
+        self.set_links(&mut out, |l| l.ready, true);
+        out.push((
+            0,
+            format!("{c}handshake: start barrier: wait until {names} {be} ready too"),
+        ));
+        self.wait_until(&mut out, &all(&|p| self.is(&self.ready_of(p), true)), false);
+        self.set_links(&mut out, |l| l.run, true);
+        out.push((
+            0,
+            format!("{c}handshake: start barrier: wait until {names} {be} running too (or started again)"),
+        ));
+        self.wait_until(
+            &mut out,
+            &all(&|p| {
+                self.join(
+                    "OR",
+                    &[
+                        self.is(&self.run_of(p), true),
+                        self.is(&self.ready_of(p), false),
+                    ],
+                )
+            }),
+            false,
+        );
+        self.set_links(&mut out, |l| l.ready, false);
+        out
+    }
+
+    /// The lines at the program's end: it waits until every partner has read its last
+    /// message (or was started again), so that its next start cannot take a message back.
+    pub fn finish(&self) -> Vec<(usize, String)> {
+        let (tx, _) = self.own();
+        let mut out = Vec::new();
+        let chs = &self.view.cell.channels;
+        for &ch in &tx {
+            let to = chs[ch].to;
+            out.push((
+                0,
+                format!(
+                    "{}handshake: the end: wait until {} has read the last message (or was started again)",
+                    self.comment(),
+                    self.name(to)
+                ),
+            ));
+            let ack = self
+                .signal(chs[ch].ack, false)
+                .and_then(|s| self.read(s).ok())
+                .unwrap_or_default();
+            let cond = self.join(
+                "OR",
+                &[
+                    self.equals(&ack, &format!("skp_tx{}", ch + 1)),
+                    self.is(&self.run_of(to), false),
+                ],
+            );
+            self.wait_until(&mut out, &cond, true);
         }
         out
     }
@@ -380,6 +658,16 @@ impl<'a> Hand<'a> {
                 if decisions {
                     out.push(format!("DECL INT {DECISION_VAR}=0"));
                 }
+                if !tx.is_empty() || !rx.is_empty() {
+                    out.push(format!(
+                        "DECL KrlMsg_T {MSG_VAR}={{Modul[] \"skillpost\",Nr 1,Msg_Txt[] \" \"}}"
+                    ));
+                    out.push(format!("DECL KrlMsgPar_T {PAR_VAR}[3]"));
+                    out.push(format!(
+                        "DECL KrlMsgOpt_T {OPT_VAR}={{VL_Stop TRUE,Clear_P_Reset TRUE,Log_to_DB FALSE}}"
+                    ));
+                    out.push(format!("DECL INT {HANDLE_VAR}=0"));
+                }
             }
             Language::Rapid => {
                 out.extend(vars.map(|v| format!("VAR num {v} := 0;")));
@@ -396,8 +684,16 @@ impl<'a> Hand<'a> {
     pub fn check(&self, diags: &mut Diagnostics) {
         let chs = &self.view.cell.channels;
         let mut seen = std::collections::HashSet::new();
+        let mut uses: Vec<(Option<usize>, bool, bool)> = Vec::new(); // (wire, sender side, write)
+        for l in &self.view.cell.links {
+            if l.from == self.view.me {
+                uses.extend([(l.run, true, true), (l.ready, true, true)]);
+            }
+            if l.to == self.view.me {
+                uses.extend([(l.run, false, false), (l.ready, false, false)]);
+            }
+        }
         for ch in chs {
-            let mut uses: Vec<(Option<usize>, bool, bool)> = Vec::new(); // (wire, sender side, write)
             if ch.from == self.view.me {
                 uses.push((ch.strobe, true, true));
                 uses.extend(ch.data.iter().map(|&w| (Some(w), true, true)));
@@ -408,6 +704,8 @@ impl<'a> Hand<'a> {
                 uses.extend(ch.data.iter().map(|&w| (Some(w), false, false)));
                 uses.push((ch.ack, true, true));
             }
+        }
+        {
             for (w, side, write) in uses {
                 let Some(s) = self.signal(w, side) else {
                     continue;

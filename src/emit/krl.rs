@@ -96,6 +96,9 @@ impl Profile for Krl {
         }
         writer.hand = hand;
         writer.blocks(input.body, 0);
+        if let Some(h) = &writer.hand {
+            super::handshake::write(&mut writer.out, 0, h.finish());
+        }
         let mut declarations = declarations(input, writer.uses_branch_var);
         if let Some(h) = &writer.hand {
             declarations.extend(h.declarations());

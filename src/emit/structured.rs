@@ -94,6 +94,9 @@ pub fn generate(input: &EmitInput, dialect: &Dialect) -> Generated {
         super::handshake::write(&mut w.out, 0, h.init());
     }
     w.blocks(input.body, 0);
+    if let Some(h) = &w.hand {
+        super::handshake::write(&mut w.out, 0, h.finish());
+    }
     let mut declarations = (dialect.declare)(w.uses_branch_var, w.flags, w.uses_state_var);
     declarations.extend(timer_declarations);
     if let Some(h) = &w.hand {

@@ -103,6 +103,36 @@ pub struct Cell {
     /// One per controller, in the same order.
     pub programs: Vec<Program>,
     pub channels: Vec<Channel>,
+    /// One per ordered pair of partners (controllers with a channel either way), sorted.
+    pub links: Vec<Link>,
+}
+
+/// What one controller tells a partner about itself, for the start barrier and the restart
+/// guard (`emit::handshake` writes the protocol; `docs/CELLS.md` argues why it is safe): its
+/// **run** wire is `FALSE` from its start until it has met all its partners at the start
+/// barrier, `TRUE` while it runs its cycle (and after its end, until it is started again);
+/// its **ready** wire is `TRUE` only inside the barrier, once it has seen every partner at
+/// its start.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Link {
+    /// Indexes into [`Cell::controllers`]: the wires run `from` → `to`.
+    pub from: usize,
+    pub to: usize,
+    /// Indexes into `Blackboard::wires` once assigned ([`assign_wires`]).
+    pub run: Option<usize>,
+    pub ready: Option<usize>,
+}
+
+impl Cell {
+    /// The link from `a` to `b`, when they are partners.
+    pub fn link(&self, a: usize, b: usize) -> Option<&Link> {
+        self.links.iter().find(|l| (l.from, l.to) == (a, b))
+    }
+
+    /// The partners of controller `c`, in controller order.
+    pub fn partners(&self, c: usize) -> impl Iterator<Item = usize> + '_ {
+        self.links.iter().filter(move |l| l.from == c).map(|l| l.to)
+    }
 }
 
 type Set = BTreeSet<usize>;
@@ -151,10 +181,25 @@ pub fn split(
             body: st.pop().unwrap_or_default(),
         })
         .collect();
+    let mut links: Vec<Link> = s
+        .channels
+        .iter()
+        .flat_map(|ch| [(ch.from, ch.to), (ch.to, ch.from)])
+        .collect::<BTreeSet<_>>()
+        .into_iter()
+        .map(|(from, to)| Link {
+            from,
+            to,
+            run: None,
+            ready: None,
+        })
+        .collect();
+    links.sort_by_key(|l| (l.from, l.to));
     Cell {
         controllers,
         programs,
         channels: s.channels,
+        links,
     }
 }
 
@@ -694,9 +739,12 @@ pub fn wire_counts(cell: &Cell, bb: &Blackboard) -> Vec<((usize, usize), usize, 
         .collect()
 }
 
-/// Wires needed from `a` to `b`: (strobes, data bits, acknowledgements).
-fn needed(cell: &Cell, a: usize, b: usize) -> [usize; 3] {
-    let mut n = [0; 3];
+/// Wires needed from `a` to `b`: (strobes, data bits, acknowledgements, run and ready).
+fn needed(cell: &Cell, a: usize, b: usize) -> [usize; 4] {
+    let mut n = [0; 4];
+    if cell.link(a, b).is_some() {
+        n[3] = 2;
+    }
     for ch in &cell.channels {
         if (ch.from, ch.to) == (a, b) {
             n[0] += 1;
@@ -722,7 +770,7 @@ fn declared(cell: &Cell, bb: &Blackboard, a: usize, b: usize) -> Vec<usize> {
 
 /// Gives every channel its wires, from the blackboard's wires between its two controllers in
 /// document order (the strobe, then the data bits; the acknowledgements of the other way
-/// after those). Too few wires between two controllers: `E212`, saying how many are missing
+/// after those; last the run and the ready wire of the pair's [`Link`]). Too few wires between two controllers: `E212`, saying how many are missing
 /// from which controller to which.
 pub fn assign_wires(cell: &mut Cell, bb: &Blackboard, sfc: &Sfc, diags: &mut Diagnostics) {
     let n = cell.controllers.len();
@@ -748,8 +796,16 @@ pub fn assign_wires(cell: &mut Cell, bb: &Blackboard, sfc: &Sfc, diags: &mut Dia
                 }
                 if need[2] > 0 {
                     what.push(format!(
-                        "1 to acknowledge what `{}` tells `{}`",
+                        "{} to acknowledge what `{}` tells `{}`",
+                        need[2],
                         name(b),
+                        name(a)
+                    ));
+                }
+                if need[3] > 0 {
+                    what.push(format!(
+                        "2 for the start barrier and the restart check (`{}` running, `{}` ready)",
+                        name(a),
                         name(a)
                     ));
                 }
@@ -761,7 +817,7 @@ pub fn assign_wires(cell: &mut Cell, bb: &Blackboard, sfc: &Sfc, diags: &mut Dia
                 let mut d = Diagnostic::error(
                     Code::TooFewWires,
                     format!(
-                        "the plan needs {total} wire{} from controller `{}` to controller `{}` ({}); the blackboard declares {}: {} missing. Add {} InternalLink{} from an Output signal of `{}` (or a device on it) to an Input signal of `{}` (SPEC.md 9)",
+                        "the plan needs {total} wire{} from controller `{}` to controller `{}` ({}); the blackboard declares {}: {} missing. Add {} InternalLink{} from an Output signal of `{}` (or a device on it) to an Input signal of `{}`",
                         if total == 1 { "" } else { "s" },
                         name(a),
                         name(b),
@@ -794,6 +850,10 @@ pub fn assign_wires(cell: &mut Cell, bb: &Blackboard, sfc: &Sfc, diags: &mut Dia
                 if (ch.from, ch.to) == (b, a) {
                     ch.ack = next.next();
                 }
+            }
+            if let Some(l) = cell.links.iter_mut().find(|l| (l.from, l.to) == (a, b)) {
+                l.run = next.next();
+                l.ready = next.next();
             }
         }
     }

@@ -365,6 +365,12 @@ pub fn check_urscript(text: &str) -> Result<(), String> {
                     return Err(at(format!("`{first}` outside a `while`")));
                 }
             }
+            // `halt` ends the program (the URScript manual's keywords).
+            "halt" => {
+                if t.len() != 1 {
+                    return Err(at("`halt` must stand alone".to_owned()));
+                }
+            }
             "return" => {
                 if stack.is_empty() {
                     return Err(at("`return` outside a function".to_owned()));

@@ -41,6 +41,9 @@ pub enum X {
     OneMinus(String),
     Not(Box<X>),
     Same(Box<X>, Box<X>),
+    /// Every / any of the parts (a handshake's compound wait in RAPID and URScript).
+    All(Vec<X>),
+    Any(Vec<X>),
 }
 
 impl From<KExpr> for X {
@@ -59,6 +62,9 @@ pub enum Ins {
     WaitFor(X, bool),
     /// Ends the motions before (KRL's `WAIT SEC`).
     WaitSec,
+    /// The program stops for good until it is started again (KRL `HALT` in a loop, RAPID
+    /// `EXIT`, URScript `halt()`).
+    Halt,
     /// An output (`Number` or `Address`) set.
     SetOut(String, X),
     Assign(String, X),
@@ -137,6 +143,9 @@ pub fn parse(src: &str) -> Vec<Ins> {
                 // (The KRL check of the tests refuses a GOTO into a block.)
                 labels.insert(c.trim_end_matches(':').to_ascii_uppercase(), out.len());
             }
+            "HALT" => out.push(Ins::Halt),
+            // A stop's message to the operator.
+            _ if c.contains("Set_KrlMsg(") || c.contains("= {") => {}
             "WAIT" => {
                 let rest = c[4..].trim_start();
                 if rest.to_ascii_uppercase().starts_with("SEC") {
@@ -297,13 +306,15 @@ fn read_dat(dat: &str) -> (HashMap<String, (u32, u32)>, HashMap<String, Val>) {
     let (signals, decls) = crate::krl::dat_entries(dat);
     let vars = decls
         .into_iter()
-        .map(|(name, ty, init)| {
+        .filter_map(|(name, ty, init)| {
             let v = match ty.as_str() {
                 "BOOL" => Val::B(init == "TRUE"),
                 "INT" => Val::I(init.parse().unwrap()),
+                // A stop's message (`KrlMsg_T` and its kin) is not run here.
+                t if t.starts_with("KrlMsg") => return None,
                 other => panic!("DECL {other}"),
             };
-            (name, v)
+            Some((name, v))
         })
         .collect();
     (signals, vars)
@@ -344,6 +355,33 @@ struct Ctl {
     /// What the advance run did while a motion still ran (an output set, an input tested):
     /// (what, the step whose motion ran).
     advance_faults: Vec<(String, String)>,
+    /// Stopped by the program itself (a partner was started again): until it is started
+    /// again.
+    halted: bool,
+    /// The runs before this one (each start again begins a new one): their steps, and the
+    /// index of a step whose motion the start again cut short.
+    past: Vec<(Vec<Step>, Option<usize>)>,
+    /// When each start again took effect.
+    restarts: Vec<f64>,
+    /// The operator starts it again at this time (or when it gets there, if later).
+    restart_at: Option<f64>,
+    /// How many more times it is started again after its END (the next cycles).
+    cycles_left: usize,
+}
+
+/// A step run: its name, the start and end of its motion.
+pub type Step = (String, f64, f64);
+
+/// How the operator starts the programs of a cell.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Scenario {
+    /// Each program once.
+    Once,
+    /// `n` cycles: each program started again after its END, in any order, with any delay.
+    Cycles(usize),
+    /// One program started again at a random time (mid-cycle, a fault), every other one later
+    /// at a random time (whatever it does then); then one whole cycle.
+    Fault,
 }
 
 /// The world: each controller, the wires, the input phases and when each begins.
@@ -357,6 +395,8 @@ struct World<'w> {
     changes: Vec<f64>,
     /// Decides the inputs no phase names.
     salt: u64,
+    /// Prints every statement run (`COSIM_TRACE_RUN=n`: run n of each co-simulation).
+    trace: bool,
 }
 
 /// The wires of a cell: (controller, input) → (controller, output) that drives it, each side
@@ -486,6 +526,8 @@ impl World<'_> {
             },
             X::Not(a) => Val::B(!self.value(c, a).truth()),
             X::Same(a, b) => Val::B(self.value(c, a).truth() == self.value(c, b).truth()),
+            X::All(v) => Val::B(v.iter().all(|x| self.value(c, x).truth())),
+            X::Any(v) => Val::B(v.iter().any(|x| self.value(c, x).truth())),
         }
     }
 
@@ -621,8 +663,59 @@ impl World<'_> {
         }
     }
 
+    /// Starts controller `c`'s program again at its clock (or `r`, if later): a motion still
+    /// running is cut short, a step not begun yet never runs; its outputs keep their levels.
+    fn restart(&mut self, c: usize, r: f64) {
+        let x = &mut self.ctls[c];
+        let now = x.t.max(r);
+        x.steps.retain(|s| s.1 < now);
+        let mut cut = None;
+        if let Some(last) = x.steps.last_mut()
+            && last.2 > now
+        {
+            last.2 = now;
+            cut = Some(x.steps.len() - 1);
+        }
+        x.motion_end = x.motion_end.min(now);
+        let steps = std::mem::take(&mut x.steps);
+        x.past.push((steps, cut));
+        x.restarts.push(now);
+        x.pc = 0;
+        x.t = now;
+        x.ended = false;
+        x.capped = false;
+        x.blocked = false;
+        x.halted = false;
+        x.restart_at = None;
+        for other in &mut self.ctls {
+            if other.blocked {
+                other.blocked = false;
+                other.t = other.t.max(now);
+            }
+        }
+    }
+
+    /// When controller `c` acts next: `None` while it waits, has stopped or ended (until
+    /// it is started again).
+    fn next_time(&self, c: usize) -> Option<f64> {
+        let x = &self.ctls[c];
+        let asleep = x.ended || x.capped || x.blocked || x.halted;
+        match (x.restart_at, asleep) {
+            (Some(r), true) => Some(x.t.max(r)),
+            (_, false) => Some(x.t),
+            (None, true) => None,
+        }
+    }
+
     /// Runs one statement of controller `c`.
     fn step(&mut self, c: usize, rng: &mut Rng, cap: usize) {
+        if let Some(r) = self.ctls[c].restart_at {
+            let x = &self.ctls[c];
+            if x.t >= r || x.ended || x.capped || x.blocked || x.halted {
+                self.restart(c, r);
+                return;
+            }
+        }
         let ins = self.ctls[c].ins[self.ctls[c].pc].clone();
         let eps = self.ctls[c].eps;
         match ins {
@@ -706,7 +799,16 @@ impl World<'_> {
                 self.ctls[c].pc = to;
                 self.ctls[c].t += eps;
             }
-            Ins::End => self.ctls[c].ended = true,
+            Ins::End => {
+                let x = &mut self.ctls[c];
+                x.ended = true;
+                if x.cycles_left > 0 && x.restart_at.is_none() {
+                    x.cycles_left -= 1;
+                    // The next cycle: started again once the robot stands, after a while.
+                    x.restart_at = Some(x.t.max(x.motion_end) + (rng.next() % 300) as f64);
+                }
+            }
+            Ins::Halt => self.ctls[c].halted = true,
         }
     }
 
@@ -717,10 +819,7 @@ impl World<'_> {
             budget -= 1;
             assert!(budget > 0, "the co-simulation runs away");
             let runnable: Vec<usize> = (0..self.ctls.len())
-                .filter(|&c| {
-                    let x = &self.ctls[c];
-                    !x.ended && !x.capped && !x.blocked
-                })
+                .filter(|&c| self.next_time(c).is_some())
                 .collect();
             if runnable.is_empty() {
                 // The inputs may still change: whoever waits looks again then.
@@ -745,13 +844,24 @@ impl World<'_> {
             }
             let earliest = runnable
                 .iter()
-                .map(|&c| self.ctls[c].t)
+                .map(|&c| self.next_time(c).unwrap())
                 .fold(f64::MAX, f64::min);
             let ties: Vec<usize> = runnable
                 .into_iter()
-                .filter(|&c| self.ctls[c].t == earliest)
+                .filter(|&c| self.next_time(c) == Some(earliest))
                 .collect();
             let c = ties[(rng.next() % ties.len() as u64) as usize];
+            if self.trace {
+                let x = &self.ctls[c];
+                eprintln!(
+                    "R{} t={:.3} pc={} {:?} outs={:?}",
+                    c + 1,
+                    earliest,
+                    x.pc,
+                    x.ins.get(x.pc),
+                    x.outs
+                );
+            }
             self.step(c, rng, cap);
         }
     }
@@ -784,6 +894,7 @@ impl World<'_> {
                     X::Wire(n) => w.source(c, n).map(|(a, _)| a),
                     X::Not(a) => wire(a, w, c),
                     X::Same(a, b) => wire(a, w, c).or_else(|| wire(b, w, c)),
+                    X::All(v) | X::Any(v) => v.iter().find_map(|x| wire(x, w, c)),
                     _ => None,
                 }
             }
@@ -834,6 +945,10 @@ pub fn parse_structured(text: &str, lang: Lang, wires: &Wires, me: usize) -> Vec
     // A wire read: `DInput(x)` (RAPID), `get_standard_digital_in(n)` (URScript).
     let wire_of = |t: &str| -> Option<String> {
         let t = t.trim();
+        // A wire read by its `Address` (URScript `read_input_boolean_register(5)`).
+        if !rapid && is_wire(t) {
+            return Some(t.to_owned());
+        }
         let inner = if rapid {
             t.strip_prefix("DInput(")?.strip_suffix(')')?
         } else {
@@ -842,7 +957,7 @@ pub fn parse_structured(text: &str, lang: Lang, wires: &Wires, me: usize) -> Vec
         };
         is_wire(inner).then(|| inner.to_owned())
     };
-    let cond = |c: &str| -> X {
+    let atom = |c: &str| -> Option<X> {
         let c = c.trim();
         // The handshakes' forms.
         for (op, negate) in [(" != ", true), (" == ", false), (" = ", false)] {
@@ -855,11 +970,76 @@ pub fn parse_structured(text: &str, lang: Lang, wires: &Wires, me: usize) -> Vec
                     v => X::Var(v.to_owned()),
                 };
                 let same = X::Same(Box::new(X::Wire(w)), Box::new(rhs));
-                return if negate { X::Not(Box::new(same)) } else { same };
+                return Some(if negate { X::Not(Box::new(same)) } else { same });
             }
         }
-        if let Some(w) = wire_of(c) {
-            return X::Wire(w);
+        wire_of(c).map(X::Wire)
+    };
+    // A condition made of wire reads only, with AND, OR, NOT and parentheses (the handshakes'
+    // compound waits); `None` for anything else.
+    fn compound(c: &str, atom: &dyn Fn(&str) -> Option<X>) -> Option<X> {
+        let c = c.trim();
+        // Splits at `op` outside parentheses.
+        let split = |op: &str| -> Vec<&str> {
+            let (mut depth, mut parts, mut from) = (0i32, Vec::new(), 0);
+            let b = c.as_bytes();
+            let mut i = 0;
+            while i < b.len() {
+                match b[i] {
+                    b'(' => depth += 1,
+                    b')' => depth -= 1,
+                    _ if depth == 0 && c[i..].starts_with(op) => {
+                        parts.push(&c[from..i]);
+                        i += op.len();
+                        from = i;
+                        continue;
+                    }
+                    _ => {}
+                }
+                i += 1;
+            }
+            parts.push(&c[from..]);
+            parts
+        };
+        for (op, any) in [
+            (" OR ", true),
+            (" or ", true),
+            (" AND ", false),
+            (" and ", false),
+        ] {
+            let parts = split(op);
+            if parts.len() > 1 {
+                let xs = parts
+                    .iter()
+                    .map(|p| compound(p, atom))
+                    .collect::<Option<Vec<X>>>()?;
+                return Some(if any { X::Any(xs) } else { X::All(xs) });
+            }
+        }
+        if let Some(inner) = c.strip_prefix("NOT ").or_else(|| c.strip_prefix("not ")) {
+            return compound(inner, atom).map(|x| X::Not(Box::new(x)));
+        }
+        if let Some(inner) = c.strip_prefix('(').and_then(|r| r.strip_suffix(')')) {
+            // Only when the parentheses enclose it all.
+            let mut depth = 0i32;
+            let whole = inner.bytes().all(|b| {
+                match b {
+                    b'(' => depth += 1,
+                    b')' => depth -= 1,
+                    _ => {}
+                }
+                depth >= 0
+            });
+            if whole {
+                return compound(inner, atom);
+            }
+        }
+        atom(c)
+    }
+    let cond = |c: &str| -> X {
+        let c = c.trim();
+        if let Some(x) = compound(c, &atom) {
+            return x;
         }
         if rapid {
             X::M(crate::rapid::expr(c), true)
@@ -935,6 +1115,10 @@ pub fn parse_structured(text: &str, lang: Lang, wires: &Wires, me: usize) -> Vec
                 out.push(Ins::Assign(name.to_ascii_uppercase(), value(init)));
                 continue;
             }
+            if l == "EXIT;" {
+                out.push(Ins::Halt);
+                continue;
+            }
             // The robot stands (before a decision): the motions before end.
             if l == "WaitTime \\InPos, 0;" {
                 out.push(Ins::WaitSec);
@@ -966,6 +1150,10 @@ pub fn parse_structured(text: &str, lang: Lang, wires: &Wires, me: usize) -> Vec
                 continue;
             }
             if l == "sync()" {
+                continue;
+            }
+            if l == "halt" {
+                out.push(Ins::Halt);
                 continue;
             }
             // A wait: `while c:` `sync()` `end`.
@@ -1098,7 +1286,7 @@ pub fn parse_structured(text: &str, lang: Lang, wires: &Wires, me: usize) -> Vec
 /// file `kr15-2-<language>.irl`), and `m` wires from each to each other
 /// (`benches/common/cell.rs`): robot `k`'s output `To_R<p>_<j>` drives robot `p`'s input
 /// `From_R<k>_<j>`. KRL: `$OUT[100 + 10 p + j]` and `$IN[200 + 10 k + j]`; RAPID: `Address`
-/// `do_To_R<p>_<j>`, `di_From_R<k>_<j>`; URScript (one peer at most, `m` ≤ 4): standard digital
+/// `do_To_R<p>_<j>`, `di_From_R<k>_<j>`; URScript (one peer at most, `m` ≤ 7): standard digital
 /// output `j`, input `j + 3`.
 pub fn cell_blackboard(langs: &[Lang], m: usize) -> String {
     let n = langs.len();
@@ -1120,7 +1308,12 @@ pub fn cell_blackboard(langs: &[Lang], m: usize) -> String {
                     ("Address", format!("do_To_R{p}_{j}")),
                     ("Address", format!("di_From_R{p}_{j}")),
                 ),
-                Lang::UrScript => (number(j), number(j + 3)),
+                // Standard digital inputs 4-7, then boolean input registers (a fieldbus).
+                Lang::UrScript if j + 3 <= 7 => (number(j), number(j + 3)),
+                Lang::UrScript => (
+                    number(j),
+                    ("Address", format!("read_input_boolean_register({j})")),
+                ),
             }
         },
         &|k, text| {
@@ -1238,10 +1431,91 @@ pub enum Mutation {
     DecidesTwice,
     /// The advance run sets an output: a tell's acknowledgement wait dropped.
     AdvanceRun,
+    /// No start barrier: its three waits dropped.
+    NoBarrier,
+    /// No restart guard: every wait on a partner waits for its message only, and never stops.
+    NoGuard,
 }
 
 fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
     let lines: Vec<&str> = src.lines().collect();
+    let barrier = |i: usize| i > 0 && lines[i - 1].contains("handshake: start barrier");
+    match m {
+        Mutation::NoBarrier => {
+            let mut out = Vec::new();
+            let mut skip = 0;
+            for (i, l) in lines.iter().enumerate() {
+                if skip > 0 {
+                    skip -= 1;
+                    continue;
+                }
+                if barrier(i) {
+                    // `while …:` `sync()` `end` in URScript
+                    skip = if lang == Lang::UrScript { 2 } else { 0 };
+                    continue;
+                }
+                out.push(*l);
+            }
+            return out.join("\n") + "\n";
+        }
+        Mutation::NoGuard => {
+            let (cut, head, tail) = match lang {
+                Lang::Krl => (") OR (NOT ", "WAIT FOR (", ""),
+                Lang::Rapid => (") OR (DInput(", "WaitUntil \\InPos, (", ";"),
+                Lang::UrScript => (") or (not ", "while not ((", "):"),
+            };
+            let mut out: Vec<String> = Vec::new();
+            let mut i = 0;
+            while i < lines.len() {
+                let l = lines[i];
+                let t = l.trim_start();
+                let indent = &l[..l.len() - t.len()];
+                if lines
+                    .get(i + 1)
+                    .is_some_and(|n| n.contains("a partner was started again"))
+                {
+                    // The stop: up to the line that closes it, as deep as it.
+                    let close = if lang == Lang::UrScript {
+                        "end"
+                    } else {
+                        "ENDIF"
+                    };
+                    let mut j = i + 1;
+                    while !(lines[j].trim() == close
+                        && lines[j].len() - lines[j].trim_start().len() == indent.len())
+                    {
+                        j += 1;
+                    }
+                    i = j + 1;
+                    continue;
+                }
+                // A handshake's wait (on a toggle), not one of the chart's.
+                if !barrier(i)
+                    && t.contains("skp_")
+                    && t.starts_with(head)
+                    && let Some(at) = t.rfind(cut)
+                {
+                    let keep = &t[head.len()..at];
+                    let open = &head[..head.len() - 1];
+                    let open = if lang == Lang::UrScript {
+                        "while not ("
+                    } else {
+                        open
+                    };
+                    out.push(format!(
+                        "{indent}{open}{keep}{}",
+                        if lang == Lang::UrScript { "):" } else { tail }
+                    ));
+                    i += 1;
+                    continue;
+                }
+                out.push(l.to_owned());
+                i += 1;
+            }
+            return out.join("\n") + "\n";
+        }
+        _ => {}
+    }
     let pick = |pred: &dyn Fn(usize, &str) -> bool| {
         lines
             .iter()
@@ -1249,9 +1523,9 @@ fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
             .position(|(i, l)| pred(i, l.trim()))
     };
     let hear_wait = |l: &str| match lang {
-        Lang::Krl => l.starts_with("WAIT FOR $IN["),
-        Lang::Rapid => l.starts_with("WaitUntil \\InPos, DInput("),
-        Lang::UrScript => l.starts_with("while get_standard_digital_in("),
+        Lang::Krl => l.starts_with("WAIT FOR ($IN["),
+        Lang::Rapid => l.starts_with("WaitUntil \\InPos, (DInput("),
+        Lang::UrScript => l.starts_with("while not ((get_standard_digital_in("),
     };
     // A hear toggles its `skp_rxN` right before its waits.
     let after_toggle = |i: usize| {
@@ -1261,7 +1535,7 @@ fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
     };
     // The lines to drop.
     let drop: Vec<usize> = match m {
-        Mutation::None => Vec::new(),
+        Mutation::None | Mutation::NoBarrier | Mutation::NoGuard => Vec::new(),
         Mutation::DroppedWait => pick(&|i, l| hear_wait(l) && after_toggle(i))
             .map(|i| match lang {
                 // `while …:` `sync()` `end`
@@ -1271,7 +1545,7 @@ fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
             .unwrap_or_default(),
         Mutation::AdvanceRun => match lang {
             Lang::Krl => pick(&|i, l| {
-                l.starts_with("WAIT FOR $IN[")
+                l.starts_with("WAIT FOR ($IN[")
                     && i > 0
                     && lines[i - 1].trim_start().starts_with(";handshake: tell")
             })
@@ -1280,7 +1554,7 @@ fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
             // RAPID: the tell's wait without `\InPos` (not a chart's wait, which stands too).
             Lang::Rapid => {
                 let Some(i) = pick(&|i, l| {
-                    l.starts_with("WaitUntil \\InPos, DInput(")
+                    l.starts_with("WaitUntil \\InPos, (DInput(")
                         && i > 0
                         && lines[i - 1].trim_start().starts_with("! handshake: tell")
                 }) else {
@@ -1324,6 +1598,139 @@ pub fn co_simulate(
     mutation: Mutation,
     only: Option<Lang>,
 ) -> Result<(), String> {
+    co_simulate_in(
+        chart,
+        cell,
+        robot_of,
+        seed,
+        runs,
+        mutation,
+        only,
+        Scenario::Once,
+    )
+}
+
+/// The pairs of controllers whose programs read a wire of the other (partners: they meet at
+/// the start barrier), both ways round.
+fn partners(
+    parsed: &[Option<(Vec<Ins>, String)>],
+    wires: &Wires,
+) -> std::collections::BTreeSet<(usize, usize)> {
+    fn krl(e: &KExpr, out: &mut Vec<String>) {
+        match e {
+            KExpr::Sys(s) => {
+                if let Some(n) = s.strip_prefix("$IN[").and_then(|r| r.strip_suffix(']')) {
+                    out.push(n.to_owned());
+                }
+            }
+            KExpr::Not(a) | KExpr::Neg(a) => krl(a, out),
+            KExpr::Bin(_, a, b) => {
+                krl(a, out);
+                krl(b, out);
+            }
+            _ => {}
+        }
+    }
+    fn reads(e: &X, out: &mut Vec<String>) {
+        match e {
+            X::K(k) => krl(k, out),
+            X::Wire(w) => out.push(w.clone()),
+            X::Not(a) => reads(a, out),
+            X::Same(a, b) => {
+                reads(a, out);
+                reads(b, out);
+            }
+            X::All(v) | X::Any(v) => v.iter().for_each(|x| reads(x, out)),
+            _ => {}
+        }
+    }
+    let mut pairs = std::collections::BTreeSet::new();
+    for (a, p) in parsed.iter().enumerate() {
+        let Some((ins, _)) = p else { continue };
+        let mut names = Vec::new();
+        for i in ins {
+            match i {
+                Ins::WaitFor(e, _) | Ins::JumpIfNot(e, _) => reads(e, &mut names),
+                _ => {}
+            }
+        }
+        for n in names {
+            if let Some((b, _)) = wires.source(a, &n) {
+                pairs.insert((a, b));
+                pairs.insert((b, a));
+            }
+        }
+    }
+    pairs
+}
+
+/// One run of the chart by the controllers (the steps of one run of each program): the chart
+/// explains it (`ended`: all programs ended, so the chart ends there too), and no step started
+/// before a step the chart puts before it had ended — or at all, when that step was cut short.
+fn check_run(
+    chart: &Chart,
+    runs: &[(&[Step], Option<usize>)],
+    robot_of: &HashMap<String, usize>,
+    ended: bool,
+) -> Result<(), String> {
+    let seen: Vec<Vec<String>> = runs
+        .iter()
+        .map(|(steps, _)| steps.iter().map(|s| s.0.clone()).collect())
+        .collect();
+    let Some(explained) = chart.explain(&seen, &|name| robot_of[name], ended) else {
+        return Err(format!(
+            "the controllers did not do what one run of the chart does: {seen:?} (all ended: {ended})"
+        ));
+    };
+    // Each action of the run: its robot's how-manieth step.
+    let mut counts = vec![0usize; runs.len()];
+    let place: Vec<(usize, usize)> = explained
+        .iter()
+        .map(|(name, _)| {
+            let c = robot_of[name];
+            counts[c] += 1;
+            (c, counts[c] - 1)
+        })
+        .collect();
+    for (i, (name, preds)) in explained.iter().enumerate() {
+        let (c, k) = place[i];
+        let start = runs[c].0[k].1;
+        for &p in preds {
+            let (pc, pk) = place[p];
+            let end = runs[pc].0[pk].2;
+            if runs[pc].1 == Some(pk) {
+                return Err(format!(
+                    "step {name} on R{} started at {start:.3} after step {} on R{} was cut short by a start again",
+                    c + 1,
+                    explained[p].0,
+                    pc + 1
+                ));
+            }
+            if end > start {
+                return Err(format!(
+                    "step {name} on R{} started at {start:.3}, before step {} on R{} ended at {end:.3}",
+                    c + 1,
+                    explained[p].0,
+                    pc + 1
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// [`co_simulate`] with the operator starting the programs as `scenario` says.
+#[allow(clippy::too_many_arguments)]
+pub fn co_simulate_in(
+    chart: &Chart,
+    cell: &CellPrograms,
+    robot_of: &HashMap<String, usize>,
+    seed: u64,
+    runs: usize,
+    mutation: Mutation,
+    only: Option<Lang>,
+    scenario: Scenario,
+) -> Result<(), String> {
     let parsed: Vec<Option<(Vec<Ins>, String)>> = cell
         .programs
         .iter()
@@ -1346,6 +1753,7 @@ pub fn co_simulate(
             })
         })
         .collect();
+    let pairs = partners(&parsed, &cell.wires);
     let mut rng = Rng(seed | 1);
     let cap = 25;
     for run in 0..runs {
@@ -1358,6 +1766,10 @@ pub fn co_simulate(
                 t
             })
             .collect();
+        let cycles = match scenario {
+            Scenario::Cycles(n) => n.max(1),
+            _ => 1,
+        };
         let ctls: Vec<Ctl> = parsed
             .iter()
             .map(|p| {
@@ -1379,6 +1791,11 @@ pub fn co_simulate(
                     blocked: false,
                     steps: Vec::new(),
                     advance_faults: Vec::new(),
+                    halted: false,
+                    past: Vec::new(),
+                    restarts: Vec::new(),
+                    restart_at: None,
+                    cycles_left: cycles - 1,
                 }
             })
             .collect();
@@ -1389,9 +1806,26 @@ pub fn co_simulate(
             phases,
             changes,
             salt: rng.next(),
+            trace: std::env::var("COSIM_TRACE_RUN").is_ok_and(|v| v == run.to_string()),
         };
+        let n = w.ctls.len();
+        let mut victim = None;
+        if scenario == Scenario::Fault {
+            // One started again at a random time once all have started (every program starts
+            // before 200), the others later, each at a random time.
+            let v = (rng.next() % n as u64) as usize;
+            let at = 300.0 + (rng.next() % 400) as f64;
+            for c in 0..n {
+                w.ctls[c].restart_at = Some(if c == v {
+                    at
+                } else {
+                    at + 1.0 + (rng.next() % 600) as f64
+                });
+            }
+            victim = Some(v);
+        }
         w.run(&mut rng, cap);
-        let fail = |why: String| Err(format!("run {run}: {why}"));
+        let fail = |why: String| Err(format!("run {run} ({scenario:?}): {why}"));
         for (c, x) in w.ctls.iter().enumerate() {
             if let Some((out, step)) = x.advance_faults.first() {
                 return fail(format!(
@@ -1399,43 +1833,107 @@ pub fn co_simulate(
                     c + 1
                 ));
             }
+            if x.halted {
+                return fail(format!(
+                    "R{} stopped (a partner was started again) and nobody started it again",
+                    c + 1
+                ));
+            }
+            if x.restart_at.is_some() {
+                return fail(format!("R{} was never started again as planned", c + 1));
+            }
         }
         if let Some(why) = w.deadlock() {
             return fail(why);
         }
-        let seen: Vec<Vec<String>> = w
+        let ended = w.ctls.iter().all(|x| x.ended);
+        // Every run of each program: the past ones, then this one.
+        let sessions: Vec<Vec<(&[Step], Option<usize>)>> = w
             .ctls
             .iter()
-            .map(|x| x.steps.iter().map(|s| s.0.clone()).collect())
-            .collect();
-        let ended = w.ctls.iter().all(|x| x.ended);
-        let Some(explained) = chart.explain(&seen, &|name| robot_of[name], ended) else {
-            return fail(format!(
-                "the controllers did not do what one run of the chart does: {seen:?} (all ended: {ended})"
-            ));
-        };
-        // Each action of the run: its robot's how-manieth step.
-        let mut counts = vec![0usize; w.ctls.len()];
-        let place: Vec<(usize, usize)> = explained
-            .iter()
-            .map(|(name, _)| {
-                let c = robot_of[name];
-                counts[c] += 1;
-                (c, counts[c] - 1)
+            .map(|x| {
+                x.past
+                    .iter()
+                    .map(|(s, cut)| (s.as_slice(), *cut))
+                    .chain([(x.steps.as_slice(), None)])
+                    .collect()
             })
             .collect();
-        for (i, (name, preds)) in explained.iter().enumerate() {
-            let (c, k) = place[i];
-            let start = w.ctls[c].steps[k].1;
-            for &p in preds {
-                let (pc, pk) = place[p];
-                let end = w.ctls[pc].steps[pk].2;
-                if end > start {
+        match scenario {
+            Scenario::Once => {
+                let r: Vec<_> = sessions.iter().map(|s| s[0]).collect();
+                if let Err(e) = check_run(chart, &r, robot_of, ended) {
+                    return fail(e);
+                }
+            }
+            Scenario::Cycles(_) => {
+                let k_max = sessions.iter().map(Vec::len).max().unwrap_or(1);
+                for k in 0..k_max {
+                    // A program that ran fewer cycles (an endless chart, capped): nothing.
+                    let r: Vec<(&[Step], Option<usize>)> = sessions
+                        .iter()
+                        .map(|s| s.get(k).copied().unwrap_or((&[][..], None)))
+                        .collect();
+                    // Every program ended this cycle (a capped one did not).
+                    let done = w
+                        .ctls
+                        .iter()
+                        .all(|x| k < x.past.len() || (k == x.past.len() && x.ended));
+                    if let Err(e) = check_run(chart, &r, robot_of, done) {
+                        return fail(format!("cycle {}: {e}", k + 1));
+                    }
+                }
+                // A partner's next cycle begins after this one's steps have ended.
+                for &(a, b) in &pairs {
+                    for k in 1..k_max {
+                        let (Some(prev), Some(next)) = (sessions[b].get(k - 1), sessions[a].get(k))
+                        else {
+                            continue;
+                        };
+                        let done = prev.0.iter().map(|s| s.2).fold(f64::MIN, f64::max);
+                        if let Some(s) = next.0.iter().find(|s| s.1 < done) {
+                            return fail(format!(
+                                "cycle {}: step {} on R{} started at {:.3}, before R{} ended cycle {k} at {done:.3}",
+                                k + 1,
+                                s.0,
+                                a + 1,
+                                s.1,
+                                b + 1
+                            ));
+                        }
+                    }
+                }
+            }
+            Scenario::Fault => {
+                // Before the starts again: a part of one run of the chart, no step after one
+                // cut short.
+                let first: Vec<_> = sessions.iter().map(|s| s[0]).collect();
+                if let Err(e) = check_run(chart, &first, robot_of, false) {
                     return fail(format!(
-                        "step {name} on R{} started at {start:.3}, before step {} on R{} ended at {end:.3}",
-                        c + 1,
-                        explained[p].0,
-                        pc + 1
+                        "before the starts again (R{} first): {e}",
+                        victim.unwrap() + 1
+                    ));
+                }
+                // After: no step before every partner was started again, then one whole run.
+                for &(a, b) in &pairs {
+                    let Some(&again) = w.ctls[b].restarts.last() else {
+                        continue;
+                    };
+                    if let Some(s) = sessions[a].last().unwrap().0.iter().find(|s| s.1 < again) {
+                        return fail(format!(
+                            "R{} started step {} at {:.3}, before its partner R{} was started again at {again:.3}",
+                            a + 1,
+                            s.0,
+                            s.1,
+                            b + 1
+                        ));
+                    }
+                }
+                let last: Vec<_> = sessions.iter().map(|s| *s.last().unwrap()).collect();
+                if let Err(e) = check_run(chart, &last, robot_of, ended) {
+                    return fail(format!(
+                        "after the starts again (R{} first): {e}",
+                        victim.unwrap() + 1
                     ));
                 }
             }
@@ -1443,6 +1941,10 @@ pub fn co_simulate(
     }
     Ok(())
 }
+
+/// Wires from each robot of a random cell to each other: a strobe, the data bits of the
+/// largest decision, an acknowledgement, the run and the ready wire.
+pub const WIRES: usize = 7;
 
 /// A random chart on 2 to 4 robots, compiled; `None` when it uses fewer than two robots.
 pub fn random_cell(
@@ -1491,7 +1993,7 @@ pub fn random_cell_of(
     if used.len() < 2 {
         return Ok(None);
     }
-    let cell = compile_cell(dir, &chart, &langs, 4)?;
+    let cell = compile_cell(dir, &chart, &langs, WIRES)?;
     Ok(Some((Chart::read(&dir.join("sfc.xml")), cell, robot_of, n)))
 }
 
