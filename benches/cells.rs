@@ -85,7 +85,7 @@ fn main() {
     let bb = cell::cell_blackboard(
         "KUKA KR15-2",
         CONTROLLERS,
-        4,
+        6,
         &|_| single.clone(),
         &|_, p, j| {
             let number = |v: usize| ("Number", v.to_string());

@@ -298,7 +298,14 @@ impl<'a> Hand<'a> {
             "{} started again; this program waited at localId {id}",
             self.name(p)
         );
-        self.stop_if(out, &self.is(&run, false), text, &short, id);
+        self.stop_if(
+            out,
+            &self.is(&run, false),
+            text,
+            &short,
+            id,
+            "while this program waited for it",
+        );
     }
 
     /// `IF cond`: a message to the operator, and the program stops for good (until it is
@@ -310,6 +317,7 @@ impl<'a> Hand<'a> {
         text: &str,
         short: &str,
         nr: u64,
+        when: &str,
     ) {
         // No quote or backslash inside a string literal of any of the three; KRL's message
         // and RAPID's reason lines hold 80 characters.
@@ -335,7 +343,7 @@ impl<'a> Hand<'a> {
             Language::Krl => {
                 let short = fit(&text);
                 out.push((0, format!("IF {cond} THEN")));
-                out.push((1, format!("{c}handshake: a partner was started again: stop until this program is started again")));
+                out.push((1, format!("{c}handshake: a partner was started again {when}: stop until this program is started again")));
                 out.push((
                     1,
                     format!(
@@ -354,14 +362,14 @@ impl<'a> Hand<'a> {
             Language::Rapid => {
                 let short = fit(&text);
                 out.push((0, format!("IF {cond} THEN")));
-                out.push((1, format!("{c}handshake: a partner was started again: stop until this program is started again")));
+                out.push((1, format!("{c}handshake: a partner was started again {when}: stop until this program is started again")));
                 out.push((1, format!("ErrWrite \"Partner started again\", \"{short}\" \\RL2:=\"Start this task again from main.\";")));
                 out.push((1, "EXIT;".to_owned()));
                 out.push((0, "ENDIF".to_owned()));
             }
             Language::UrScript => {
                 out.push((0, format!("if {cond}:")));
-                out.push((1, format!("{c}handshake: a partner was started again: stop until this program is started again")));
+                out.push((1, format!("{c}handshake: a partner was started again {when}: stop until this program is started again")));
                 out.push((1, format!("popup(\"{text}. Start this program again.\", title=\"skillpost\", error=True, blocking=False)")));
                 out.push((1, "halt".to_owned()));
                 out.push((0, "end".to_owned()));
@@ -590,20 +598,44 @@ impl<'a> Hand<'a> {
         self.set_links(&mut out, |l| l.run, true);
         out.push((
             0,
-            format!("{c}handshake: start barrier: wait until {names} {be} running too (or started again)"),
+            format!("{c}handshake: start barrier: wait until {names} {be} running too (or one was started again: stop)"),
         ));
+        // A partner back at its start (run and ready FALSE) was started again inside the
+        // barrier: waiting for it here could wait for ever (it waits for this program's run
+        // wire to drop), going on could meet it mid-cycle; so stop.
+        let restarted = self.join(
+            "OR",
+            &partners
+                .iter()
+                .map(|&p| {
+                    self.join(
+                        "AND",
+                        &[
+                            self.is(&self.run_of(p), false),
+                            self.is(&self.ready_of(p), false),
+                        ],
+                    )
+                })
+                .collect::<Vec<_>>(),
+        );
+        let running = all(&|p| self.is(&self.run_of(p), true));
         self.wait_until(
             &mut out,
-            &all(&|p| {
-                self.join(
-                    "OR",
-                    &[
-                        self.is(&self.run_of(p), true),
-                        self.is(&self.ready_of(p), false),
-                    ],
-                )
-            }),
+            &self.join("OR", &[running, restarted.clone()]),
             false,
+        );
+        let text = if partners.len() == 1 {
+            format!("{names} was started again during the start barrier")
+        } else {
+            format!("one of {names} was started again during the start barrier")
+        };
+        self.stop_if(
+            &mut out,
+            &restarted,
+            &text,
+            "a partner was started again during the start barrier",
+            0,
+            "during the start barrier",
         );
         self.set_links(&mut out, |l| l.ready, false);
         out

@@ -1454,6 +1454,24 @@ fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
                     skip = if lang == Lang::UrScript { 2 } else { 0 };
                     continue;
                 }
+                // The barrier's stop: up to the line that closes it, as deep as it.
+                if lines
+                    .get(i + 1)
+                    .is_some_and(|n| n.contains("during the start barrier: stop"))
+                {
+                    let close = if lang == Lang::UrScript {
+                        "end"
+                    } else {
+                        "ENDIF"
+                    };
+                    let depth = l.len() - l.trim_start().len();
+                    skip = lines[i + 1..]
+                        .iter()
+                        .position(|n| n.trim() == close && n.len() - n.trim_start().len() == depth)
+                        .unwrap()
+                        + 1;
+                    continue;
+                }
                 out.push(*l);
             }
             return out.join("\n") + "\n";
