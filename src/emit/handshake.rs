@@ -217,6 +217,13 @@ impl<'a> Hand<'a> {
             Language::Krl => lines.push((0, format!("WAIT FOR {cond}"))),
             Language::Rapid => {
                 let pos = if settle { "\\InPos, " } else { "" };
+                // A condition of several parts in parentheses as a whole (`WaitUntil (a) AND
+                // (b);` reads as a call to `rapidchecker`).
+                let cond = if cond.starts_with('(') {
+                    format!("({cond})")
+                } else {
+                    cond.to_owned()
+                };
                 lines.push((0, format!("WaitUntil {pos}{cond};")));
             }
             Language::UrScript => {

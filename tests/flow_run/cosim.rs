@@ -1479,7 +1479,7 @@ fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
         Mutation::NoGuard => {
             let (cut, head, tail) = match lang {
                 Lang::Krl => (") OR (NOT ", "WAIT FOR (", ""),
-                Lang::Rapid => (") OR (DInput(", "WaitUntil \\InPos, (", ";"),
+                Lang::Rapid => (") OR (DInput(", "WaitUntil \\InPos, ((", ");"),
                 Lang::UrScript => (") or (not ", "while not ((", "):"),
             };
             let mut out: Vec<String> = Vec::new();
@@ -1542,7 +1542,7 @@ fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
     };
     let hear_wait = |l: &str| match lang {
         Lang::Krl => l.starts_with("WAIT FOR ($IN["),
-        Lang::Rapid => l.starts_with("WaitUntil \\InPos, (DInput("),
+        Lang::Rapid => l.starts_with("WaitUntil \\InPos, ((DInput("),
         Lang::UrScript => l.starts_with("while not ((get_standard_digital_in("),
     };
     // A hear toggles its `skp_rxN` right before its waits.
@@ -1572,7 +1572,7 @@ fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
             // RAPID: the tell's wait without `\InPos` (not a chart's wait, which stands too).
             Lang::Rapid => {
                 let Some(i) = pick(&|i, l| {
-                    l.starts_with("WaitUntil \\InPos, (DInput(")
+                    l.starts_with("WaitUntil \\InPos, ((DInput(")
                         && i > 0
                         && lines[i - 1].trim_start().starts_with("! handshake: tell")
                 }) else {
