@@ -211,6 +211,56 @@ pub fn branch_condition(input: &EmitInput, br: &crate::plan::Branch, ops: &Ops) 
     Some(parts.join(&format!(" {} ", (ops.op)(crate::cond::BinOp::Or))))
 }
 
+/// The conditions of a selection's branches ([`branch_condition`]), with the last one `None`
+/// (taken when the others are not: an `ELSE`) where the branches cover every case: two
+/// branches, one the negation of the other (`c` and `NOT c`). A wait for `c OR NOT c` would be
+/// a wait that is always true.
+pub fn branch_conditions(
+    input: &EmitInput,
+    branches: &[crate::plan::Branch],
+    ops: &Ops,
+) -> Vec<Option<String>> {
+    let mut conds: Vec<Option<String>> = branches
+        .iter()
+        .map(|b| branch_condition(input, b, ops))
+        .collect();
+    if let [a, b] = branches
+        && conds.iter().all(Option::is_some)
+        && complementary(input, a, b, ops)
+    {
+        conds[1] = None;
+    }
+    conds
+}
+
+/// Whether one branch's (single) condition is `NOT` the other's.
+fn complementary(
+    input: &EmitInput,
+    a: &crate::plan::Branch,
+    b: &crate::plan::Branch,
+    ops: &Ops,
+) -> bool {
+    let expr = |br: &crate::plan::Branch| -> Option<&crate::cond::Expr> {
+        let heads = br.heads();
+        let [t] = heads.as_slice() else {
+            return None;
+        };
+        match &input.sfc.elements[*t].kind {
+            ElementKind::Transition(Some(c)) => Some(&c.expr),
+            _ => None,
+        }
+    };
+    let (Some(x), Some(y)) = (expr(a), expr(b)) else {
+        return false;
+    };
+    let text = |e: &crate::cond::Expr| crate::cond::render(e, &|n: &str| n.to_owned(), ops);
+    let negates = |n: &crate::cond::Expr, e: &crate::cond::Expr| match &n.kind {
+        crate::cond::ExprKind::Not(inner) => text(inner) == text(e),
+        _ => false,
+    };
+    negates(y, x) || negates(x, y)
+}
+
 /// The condition as written, for comments: on one line, without `;` (a comment inside a KRL
 /// comment, a statement end in RAPID), ASCII.
 pub fn condition_text(input: &EmitInput, t: usize) -> String {

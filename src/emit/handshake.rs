@@ -8,8 +8,8 @@
 //!
 //! - **tell** (A): wait until the acknowledgement equals `skp_txN` (B has read the last
 //!   message; this wait also ends the motion before it: KRL's `WAIT FOR` stops the advance run,
-//!   RAPID's `WaitUntil \InPos` waits for the robot to stand, URScript waits for
-//!   `is_steady()` first), set the data wires, toggle `skp_txN` and put it on the strobe;
+//!   RAPID's `WaitUntil \InPos` waits for the robot to stand, URScript's moves return at
+//!   their target), set the data wires, toggle `skp_txN` and put it on the strobe;
 //! - **hear** (B): toggle `skp_rxN`, wait until the strobe equals it (and, like every wait of
 //!   a handshake, until the motions before it have ended: no wire changes while a motion before
 //!   it may still run), read the data wires into `skp_got`, put `skp_rxN` on the
@@ -210,13 +210,16 @@ impl<'a> Hand<'a> {
             .join(&format!(" {op} "))
     }
 
-    /// A wait until `cond` holds; `settle`: the robot stands first (KRL's `WAIT FOR` stops
-    /// the advance run anyway).
-    fn wait_until(&self, lines: &mut Vec<(usize, String)>, cond: &str, settle: bool) {
+    /// A wait until `cond` holds, once the motions before have ended: KRL's `WAIT FOR` stops
+    /// the advance run, RAPID's `\InPos` waits for the robot to stand, URScript's moves return
+    /// at their target.
+    fn wait_until(&self, lines: &mut Vec<(usize, String)>, cond: &str) {
         match self.lang {
             Language::Krl => lines.push((0, format!("WAIT FOR {cond}"))),
             Language::Rapid => {
-                let pos = if settle { "\\InPos, " } else { "" };
+                // (Also where the robot stands anyway: `rapidchecker` reads
+                // `WaitUntil (c) \PollRate` as a call.)
+                let pos = "\\InPos, ";
                 // A condition of several parts in parentheses as a whole (`WaitUntil (a) AND
                 // (b);` reads as a call to `rapidchecker`).
                 let cond = if cond.starts_with('(') {
@@ -224,14 +227,15 @@ impl<'a> Hand<'a> {
                 } else {
                     cond.to_owned()
                 };
-                lines.push((0, format!("WaitUntil {pos}{cond};")));
+                lines.push((
+                    0,
+                    format!("WaitUntil {pos}{cond} {};", super::rapid::POLL_RATE),
+                ));
             }
+            // URScript's `movel`/`movej` return when the motion has ended (as for the chart's
+            // own waits; an IRL that blends leaves that to its own code): no `is_steady()`,
+            // which turns true only after 0.5 s of standstill and never in force mode.
             Language::UrScript => {
-                if settle {
-                    lines.push((0, "while not is_steady():".to_owned()));
-                    lines.push((1, "sync()".to_owned()));
-                    lines.push((0, "end".to_owned()));
-                }
                 lines.push((0, format!("while not ({cond}):")));
                 lines.push((1, "sync()".to_owned()));
                 lines.push((0, "end".to_owned()));
@@ -284,7 +288,7 @@ impl<'a> Hand<'a> {
     fn guarded_wait(&self, out: &mut Vec<(usize, String)>, read: &str, var: &str, p: usize) {
         let run = self.run_of(p);
         let cond = self.join("OR", &[self.equals(read, var), self.is(&run, false)]);
-        self.wait_until(out, &cond, true);
+        self.wait_until(out, &cond);
     }
 
     /// When partner `p` was started again (its run wire `FALSE`), the program stops with a
@@ -595,13 +599,13 @@ impl<'a> Hand<'a> {
                 "{c}handshake: start barrier: wait until {names} {be} at the start (run FALSE)"
             ),
         ));
-        self.wait_until(&mut out, &all(&|p| self.is(&self.run_of(p), false)), false);
+        self.wait_until(&mut out, &all(&|p| self.is(&self.run_of(p), false)));
         self.set_links(&mut out, |l| l.ready, true);
         out.push((
             0,
             format!("{c}handshake: start barrier: wait until {names} {be} ready too"),
         ));
-        self.wait_until(&mut out, &all(&|p| self.is(&self.ready_of(p), true)), false);
+        self.wait_until(&mut out, &all(&|p| self.is(&self.ready_of(p), true)));
         self.set_links(&mut out, |l| l.run, true);
         out.push((
             0,
@@ -626,19 +630,24 @@ impl<'a> Hand<'a> {
                 .collect::<Vec<_>>(),
         );
         let running = all(&|p| self.is(&self.run_of(p), true));
-        self.wait_until(
-            &mut out,
-            &self.join("OR", &[running, restarted.clone()]),
-            false,
-        );
+        self.wait_until(&mut out, &self.join("OR", &[running, restarted]));
         let text = if partners.len() == 1 {
             format!("{names} was started again during the start barrier")
         } else {
             format!("one of {names} was started again during the start barrier")
         };
+        // Read again: unless every partner is running now, one was started again (it may
+        // already be ready again, so "back at its start" is not what to test here).
+        let not_running = self.join(
+            "OR",
+            &partners
+                .iter()
+                .map(|&p| self.is(&self.run_of(p), false))
+                .collect::<Vec<_>>(),
+        );
         self.stop_if(
             &mut out,
-            &restarted,
+            &not_running,
             &text,
             "a partner was started again during the start barrier",
             0,
@@ -675,7 +684,7 @@ impl<'a> Hand<'a> {
                     self.is(&self.run_of(to), false),
                 ],
             );
-            self.wait_until(&mut out, &cond, true);
+            self.wait_until(&mut out, &cond);
         }
         out
     }

@@ -317,10 +317,7 @@ impl Writer<'_> {
     /// first that holds in [`BRANCH_VAR`] (testing again if none holds any more) and then runs
     /// that branch, so it never passes the selection without taking a branch.
     fn choice(&mut self, div: usize, branches: &[Branch], level: usize) {
-        let conds: Vec<Option<String>> = branches
-            .iter()
-            .map(|b| flow::branch_condition(self.input, b, &Ops::KRL))
-            .collect();
+        let conds = flow::branch_conditions(self.input, branches, &Ops::KRL);
         self.comment(
             level,
             &flow::selection_comment(self.input, div, branches.len()),

@@ -273,14 +273,19 @@ impl Profile for Rapid {
     }
 }
 
-/// `WaitUntil \InPos, c;`: the robot stands at the end of the motion before (as KRL's
-/// `WAIT FOR` stops the advance run), then the program waits for the condition. The condition
-/// is in parentheses when it starts with one, so it never reads as a call's argument list.
+/// How often a `WaitUntil` reads its condition: RAPID's least `\PollRate` (the default is
+/// 0.1 s; KRL reads every interpreter cycle), so a short window is not missed.
+pub const POLL_RATE: &str = "\\PollRate:=0.04";
+
+/// `WaitUntil \InPos, c \PollRate:=0.04;`: the robot stands at the end of the motion before
+/// (as KRL's `WAIT FOR` stops the advance run), then the program waits for the condition,
+/// reading it every 40 ms. The condition is in parentheses when it starts with one, so it never
+/// reads as a call's argument list.
 fn wait_until(c: &str) -> String {
     if c.starts_with('(') {
-        format!("WaitUntil \\InPos, ({c});")
+        format!("WaitUntil \\InPos, ({c}) {POLL_RATE};")
     } else {
-        format!("WaitUntil \\InPos, {c};")
+        format!("WaitUntil \\InPos, {c} {POLL_RATE};")
     }
 }
 
@@ -290,14 +295,17 @@ mod tests {
 
     #[test]
     fn a_wait_stands_first_and_never_begins_its_condition_with_a_parenthesis() {
-        assert_eq!(wait_until("di_Part = 1"), "WaitUntil \\InPos, di_Part = 1;");
+        assert_eq!(
+            wait_until("di_Part = 1"),
+            "WaitUntil \\InPos, di_Part = 1 \\PollRate:=0.04;"
+        );
         assert_eq!(
             wait_until("NOT (di_Part = 1)"),
-            "WaitUntil \\InPos, NOT (di_Part = 1);"
+            "WaitUntil \\InPos, NOT (di_Part = 1) \\PollRate:=0.04;"
         );
         assert_eq!(
             wait_until("(di_Part = 1) OR (gi_Type > 2)"),
-            "WaitUntil \\InPos, ((di_Part = 1) OR (gi_Type > 2));"
+            "WaitUntil \\InPos, ((di_Part = 1) OR (gi_Type > 2)) \\PollRate:=0.04;"
         );
     }
 }

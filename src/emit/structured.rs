@@ -423,10 +423,7 @@ impl Writer<'_> {
     /// condition, testing again if none holds any more), then run.
     fn choice(&mut self, div: usize, branches: &[Branch], level: usize) {
         let input = self.input;
-        let conds: Vec<Option<String>> = branches
-            .iter()
-            .map(|b| flow::branch_condition(input, b, self.d.ops))
-            .collect();
+        let conds = flow::branch_conditions(input, branches, self.d.ops);
         self.comment(
             level,
             &flow::selection_comment(self.input, div, branches.len()),

@@ -367,6 +367,8 @@ struct Ctl {
     restart_at: Option<f64>,
     /// How many more times it is started again after its END (the next cycles).
     cycles_left: usize,
+    /// Its moves return when the motion has ended (URScript): no advance run.
+    blocking: bool,
 }
 
 /// A step run: its name, the start and end of its motion.
@@ -730,7 +732,12 @@ impl World<'_> {
                 ctl.motion_end = start + dur;
                 ctl.steps.push((name, start, start + dur));
                 ctl.pc += 1;
-                ctl.t += eps;
+                // URScript's `movel`/`movej` return when the motion has ended.
+                ctl.t = if ctl.blocking {
+                    start + dur
+                } else {
+                    ctl.t + eps
+                };
             }
             Ins::WaitSec => {
                 let ctl = &mut self.ctls[c];
@@ -1126,6 +1133,7 @@ pub fn parse_structured(text: &str, lang: Lang, wires: &Wires, me: usize) -> Vec
             }
             if let Some(c) = l.strip_prefix("WaitUntil ") {
                 let c = c.trim_end_matches(';');
+                let c = c.strip_suffix(" \\PollRate:=0.04").unwrap_or(c);
                 match c.strip_prefix("\\InPos, ") {
                     Some(c) => out.push(Ins::WaitFor(cond(c), true)),
                     None => out.push(Ins::WaitFor(cond(c), false)),
@@ -1582,10 +1590,8 @@ fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
                 out[i] = out[i].replacen("WaitUntil \\InPos, ", "WaitUntil ", 1);
                 return out.join("\n") + "\n";
             }
-            // URScript: the tell's wait for `is_steady()` dropped.
-            Lang::UrScript => pick(&|_, l| l == "while not is_steady():")
-                .map(|i| vec![i, i + 1, i + 2])
-                .unwrap_or_default(),
+            // URScript has no advance run: its moves return at their target.
+            Lang::UrScript => Vec::new(),
         },
         Mutation::DecidesTwice => {
             return match lang {
@@ -1814,9 +1820,14 @@ pub fn co_simulate_in(
                     restarts: Vec::new(),
                     restart_at: None,
                     cycles_left: cycles - 1,
+                    blocking: false,
                 }
             })
             .collect();
+        let mut ctls = ctls;
+        for (x, lang) in ctls.iter_mut().zip(&cell.langs) {
+            x.blocking = *lang == Lang::UrScript;
+        }
         let mut w = World {
             ctls,
             wires: &cell.wires,

@@ -347,6 +347,8 @@ fn block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, String) {
                     .unwrap_or_else(|| panic!("RAPID: `{l}` without `;`"));
                 let c = c.trim_start();
                 let c = c.strip_prefix("\\InPos,").unwrap_or(c);
+                // Read every 40 ms: here, at every tick.
+                let c = c.trim_end().strip_suffix("\\PollRate:=0.04").unwrap_or(c);
                 Some(Stmt::Wait(expr(c)))
             }
             _ => match l.split_once(" := ") {
