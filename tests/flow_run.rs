@@ -1054,6 +1054,18 @@ fn a_wrong_urscript_program_fails() {
     let no_break = drop_line(&text, "break");
     urscript_check::check_urscript(&no_break).unwrap();
     assert!(noticed(case, &program, &chart, Lang::UrScript, no_break));
+    // A selection whose branches do not cover every case (`Part_OK`, `NOT Part_OK AND
+    // Release`): the program waits for either and records which.
+    let case = "flow-selection-two-way";
+    let (program, out, chart) = compile(case, Lang::UrScript);
+    let text = out.main.clone();
+    assert!(!noticed(
+        case,
+        &program,
+        &chart,
+        Lang::UrScript,
+        text.clone()
+    ));
     // A parenthesis dropped.
     let at = text.find("((").unwrap();
     let unbalanced = format!("{}{}", &text[..at], &text[at + 1..]);
@@ -1075,9 +1087,10 @@ fn a_wrong_urscript_program_fails() {
         Lang::UrScript,
         swapped.join("\n") + "\n"
     ));
-    // An `end` dropped, a `break` outside its loop, an `elif` outside an `if`.
+    // An `end` dropped, a loop's head dropped (its `end` then closes nothing), an `elif`
+    // outside an `if`.
     assert!(urscript_check::check_urscript(&drop_line(&text, "end")).is_err());
-    assert!(urscript_check::check_urscript(&drop_line(&text, "while True:")).is_err());
+    assert!(urscript_check::check_urscript(&drop_line(&text, "while skp_branch == 0:")).is_err());
     assert!(urscript_check::check_urscript(&text.replacen("    if ", "    elif ", 1)).is_err());
 }
 
@@ -1810,14 +1823,7 @@ fn cells_keep_the_charts_order_whatever_the_timing() {
             cosim::Mutation::None,
             None,
         ) {
-            let keep = std::env::temp_dir().join(format!("skillpost-cosim-seed-{seed}"));
-            let _ = std::fs::remove_dir_all(&keep);
-            std::fs::create_dir_all(&keep).unwrap();
-            copy_dir(&dir.path().join("cell"), &keep);
-            panic!(
-                "seed {seed}: {e}\n(the project is kept in {})",
-                keep.display()
-            );
+            fail_keeping_cell(&dir.path().join("cell"), "cosim", seed, &e);
         }
         charts += 1;
     }
@@ -1882,14 +1888,7 @@ fn cells_with_states_keep_the_charts_order_whatever_the_timing() {
             cosim::Mutation::None,
             None,
         ) {
-            let keep = std::env::temp_dir().join(format!("skillpost-cosim-states-seed-{seed}"));
-            let _ = std::fs::remove_dir_all(&keep);
-            std::fs::create_dir_all(&keep).unwrap();
-            copy_dir(&dir.path().join("cell"), &keep);
-            panic!(
-                "seed {seed}: {e}\n(the project is kept in {})",
-                keep.display()
-            );
+            fail_keeping_cell(&dir.path().join("cell"), "cosim-states", seed, &e);
         }
         charts += 1;
     }
@@ -1949,7 +1948,49 @@ const CELL_FIXTURES: &[CellFixture] = &[
         ],
         &["KUKA KR15-2", "KUKA KR16-2"],
     ),
+    (
+        "cell-tell-at-once",
+        &[
+            ("Cell_KUKA_KR15_2", Lang::Krl),
+            ("Cell_KUKA_KR16_2", Lang::Krl),
+        ],
+        &["KUKA KR15-2", "KUKA KR16-2"],
+    ),
 ];
+
+/// Tell at once: after Grip the first robot places (PlaceA) while the second welds (Weld),
+/// which waits for Grip only. The first robot tells that Grip is done right after Grip, before
+/// PlaceA (the branch written first), so Weld can start while PlaceA runs, as `-pF` draws it.
+/// (The co-simulation runs the fixture with the others; it checks the chart's order, not that
+/// nothing waits longer.)
+#[test]
+fn a_tell_stands_right_after_its_step() {
+    let dir = tempfile::tempdir().unwrap();
+    let (case, programs, controllers) = CELL_FIXTURES[5];
+    assert_eq!(case, "cell-tell-at-once");
+    let (_, cell, _) = cosim::fixture_cell(&dir.path().join(case), case, programs, controllers);
+    let src = &cell.programs[0].as_ref().unwrap().0;
+    let at = |what: &str| {
+        src.find(what)
+            .unwrap_or_else(|| panic!("no `{what}` in\n{src}"))
+    };
+    assert!(
+        at(";handshake: tell KUKA KR16-2 that step 'Grip' (localId 5) is done")
+            < at(";FOLD 3 PlaceA"),
+        "{src}"
+    );
+    let flow = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["--validate", "-pF", "Blackboard.aml", "Cell"])
+        .current_dir(dir.path().join(case))
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&flow.stdout);
+    assert!(
+        text.contains("2.5      | PlaceA (id=10) + 2")
+            && text.contains("2.5      |                                | Weld (id=7) + 4"),
+        "{text}"
+    );
+}
 
 /// The cell fixtures, co-simulated the same way.
 #[test]
@@ -1971,6 +2012,19 @@ fn cell_fixtures_keep_the_charts_order_whatever_the_timing() {
             panic!("{case}: {e}");
         }
     }
+}
+
+/// A random cell's co-simulation failed: the project is copied where it stays (the temporary
+/// folder goes with the test) and the test fails, saying where.
+fn fail_keeping_cell(cell: &Path, kind: &str, seed: u64, e: &str) -> ! {
+    let keep = std::env::temp_dir().join(format!("skillpost-{kind}-seed-{seed}"));
+    let _ = std::fs::remove_dir_all(&keep);
+    std::fs::create_dir_all(&keep).unwrap();
+    copy_dir(cell, &keep);
+    panic!(
+        "seed {seed}: {e}\n(the project is kept in {})",
+        keep.display()
+    );
 }
 
 /// A cell that runs shift after shift (SPEC.md 9, restarts and second cycles): random cells
@@ -2002,14 +2056,7 @@ fn cells_run_again_and_again_and_survive_restarts() {
                 None,
                 scenario,
             ) {
-                let keep = std::env::temp_dir().join(format!("skillpost-restart-seed-{seed}"));
-                let _ = std::fs::remove_dir_all(&keep);
-                std::fs::create_dir_all(&keep).unwrap();
-                copy_dir(&dir.path().join("cell"), &keep);
-                panic!(
-                    "seed {seed}: {e}\n(the project is kept in {})",
-                    keep.display()
-                );
+                fail_keeping_cell(&dir.path().join("cell"), "restart", seed, &e);
             }
         }
         charts += 1;

@@ -108,6 +108,7 @@ cases! {
     cell_kuka_abb_ur => "cell-kuka-abb-ur",
     cell_robot_gripper => "cell-robot-gripper",
     cell_sequences_mixed => "cell-sequences-mixed",
+    cell_tell_at_once => "cell-tell-at-once",
     cell_two_robots_weld => "cell-two-robots-weld",
     cell_two_robots_wired => "cell-two-robots-wired",
     cell_two_sequences => "cell-two-sequences",

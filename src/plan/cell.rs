@@ -439,6 +439,65 @@ impl Splitter<'_> {
         }
     }
 
+    /// Tell at once: a branch of a simultaneous divergence that begins with a step (or a
+    /// wait) of a controller with nothing in the branches before it waits for what the
+    /// divergence waits for before any branch is written. So the teller tells right after its
+    /// step before the divergence, not after its own steps in an earlier branch (which the
+    /// partner does not wait for). The hear stands where that controller's part of the block
+    /// begins, as it would when its branch is written; this is still one run of all programs
+    /// in which every message is heard right after it is told.
+    fn tell_at_once(&mut self, branches: &[Vec<Block>], frontier: &[Point]) {
+        let mut before = Set::new();
+        for br in branches {
+            let first = match br.first() {
+                Some(Block::Step(i)) => (self.scan.controller)(*i),
+                Some(Block::Wait(t)) => self.scan.evaluators.get(t).copied(),
+                _ => None,
+            };
+            if let Some(c) = first
+                && !before.contains(&c)
+            {
+                self.acquire(c, frontier);
+            }
+            self.involved(br, &mut before);
+        }
+    }
+
+    /// Every controller with a step, a wait or a decision in `blocks`.
+    fn involved(&self, blocks: &[Block], set: &mut Set) {
+        for b in blocks {
+            match b {
+                Block::Step(i) => set.extend((self.scan.controller)(*i)),
+                Block::Wait(t) => set.extend(self.scan.evaluators.get(t).copied()),
+                Block::Parallel { branches, .. } | Block::Sequences(branches) => {
+                    for br in branches {
+                        self.involved(br, set);
+                    }
+                }
+                Block::Choice {
+                    divergence,
+                    branches,
+                    ..
+                } => {
+                    set.extend(self.scan.choice_parts.get(divergence).into_iter().flatten());
+                    for br in branches {
+                        self.involved(&br.body, set);
+                    }
+                }
+                Block::Loop { head, body, .. } => {
+                    set.extend(self.scan.loop_parts.get(head).into_iter().flatten());
+                    self.involved(body, set);
+                }
+                Block::Machine(states) => {
+                    for st in states {
+                        self.involved(&st.body, set);
+                    }
+                }
+                Block::Goto { .. } | Block::Tell(_) | Block::Hear(_) | Block::Follow { .. } => {}
+            }
+        }
+    }
+
     /// Keeps the latest point of each controller (knowing it is knowing the earlier ones).
     fn latest(points: Vec<Point>) -> Vec<Point> {
         let mut out: Vec<Point> = Vec::new();
@@ -496,6 +555,9 @@ impl Splitter<'_> {
                 vec![(c, k, *t)]
             }
             Block::Parallel { branches, .. } | Block::Sequences(branches) => {
+                if matches!(b, Block::Parallel { .. }) {
+                    self.tell_at_once(branches, &frontier);
+                }
                 // On each controller its parts of the branches run one after another.
                 let mut out = Vec::new();
                 for br in branches {

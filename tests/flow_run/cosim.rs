@@ -1445,6 +1445,21 @@ pub enum Mutation {
     NoGuard,
 }
 
+/// The line that closes the block opened at line `i` (`ENDIF`, URScript's `end`, as deep).
+fn block_end(lines: &[&str], i: usize, lang: Lang) -> usize {
+    let close = if lang == Lang::UrScript {
+        "end"
+    } else {
+        "ENDIF"
+    };
+    let depth = |l: &str| l.len() - l.trim_start().len();
+    i + 1
+        + lines[i + 1..]
+            .iter()
+            .position(|n| n.trim() == close && depth(n) == depth(lines[i]))
+            .unwrap()
+}
+
 fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
     let lines: Vec<&str> = src.lines().collect();
     let barrier = |i: usize| i > 0 && lines[i - 1].contains("handshake: start barrier");
@@ -1462,22 +1477,12 @@ fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
                     skip = if lang == Lang::UrScript { 2 } else { 0 };
                     continue;
                 }
-                // The barrier's stop: up to the line that closes it, as deep as it.
+                // The barrier's stop.
                 if lines
                     .get(i + 1)
                     .is_some_and(|n| n.contains("during the start barrier: stop"))
                 {
-                    let close = if lang == Lang::UrScript {
-                        "end"
-                    } else {
-                        "ENDIF"
-                    };
-                    let depth = l.len() - l.trim_start().len();
-                    skip = lines[i + 1..]
-                        .iter()
-                        .position(|n| n.trim() == close && n.len() - n.trim_start().len() == depth)
-                        .unwrap()
-                        + 1;
+                    skip = block_end(&lines, i, lang) - i;
                     continue;
                 }
                 out.push(*l);
@@ -1500,19 +1505,8 @@ fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
                     .get(i + 1)
                     .is_some_and(|n| n.contains("a partner was started again"))
                 {
-                    // The stop: up to the line that closes it, as deep as it.
-                    let close = if lang == Lang::UrScript {
-                        "end"
-                    } else {
-                        "ENDIF"
-                    };
-                    let mut j = i + 1;
-                    while !(lines[j].trim() == close
-                        && lines[j].len() - lines[j].trim_start().len() == indent.len())
-                    {
-                        j += 1;
-                    }
-                    i = j + 1;
+                    // The stop.
+                    i = block_end(&lines, i, lang) + 1;
                     continue;
                 }
                 // A handshake's wait (on a toggle), not one of the chart's.
@@ -1562,7 +1556,7 @@ fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
     // The lines to drop.
     let drop: Vec<usize> = match m {
         Mutation::None | Mutation::NoBarrier | Mutation::NoGuard => Vec::new(),
-        Mutation::DroppedWait => pick(&|i, l| hear_wait(l) && after_toggle(i))
+        Mutation::DroppedWait => pick(&|i, l| hear_wait(l) && after_toggle(i) && !barrier(i))
             .map(|i| match lang {
                 // `while …:` `sync()` `end`
                 Lang::UrScript => vec![i, i + 1, i + 2],
