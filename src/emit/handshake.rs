@@ -217,11 +217,10 @@ impl<'a> Hand<'a> {
         match self.lang {
             Language::Krl => lines.push((0, format!("WAIT FOR {cond}"))),
             Language::Rapid => {
-                // (Also where the robot stands anyway: `rapidchecker` reads
-                // `WaitUntil (c) \PollRate` as a call.)
+                // `\InPos` also where the robot stands anyway, and a condition of several
+                // parts in parentheses as a whole: `rapidchecker` reads `WaitUntil (a) AND (b)`
+                // and `WaitUntil (c) \PollRate` as calls.
                 let pos = "\\InPos, ";
-                // A condition of several parts in parentheses as a whole (`WaitUntil (a) AND
-                // (b);` reads as a call to `rapidchecker`).
                 let cond = if cond.starts_with('(') {
                     format!("({cond})")
                 } else {
@@ -254,10 +253,13 @@ impl<'a> Hand<'a> {
     }
 
     fn link_read(&self, p: usize, wire: fn(&Link) -> Option<usize>) -> String {
-        self.view
-            .cell
-            .link(p, self.view.me)
-            .and_then(|l| self.signal(wire(l), false))
+        self.read_wire(self.view.cell.link(p, self.view.me).and_then(wire))
+    }
+
+    /// How this program reads a wire it receives (nothing when the wire is not there; `check`
+    /// reports that).
+    fn read_wire(&self, wire: Option<usize>) -> String {
+        self.signal(wire, false)
             .and_then(|s| self.read(s).ok())
             .unwrap_or_default()
     }
@@ -341,18 +343,18 @@ impl<'a> Hand<'a> {
                 })
                 .collect()
         };
-        let fit = |t: &str| -> String {
-            let t = clean(t);
-            if t.chars().count() <= 80 {
-                return t;
+        let text = clean(text);
+        // KRL and RAPID: the text, or where it is too long the short one, cut at 80.
+        let fit = || -> String {
+            if text.chars().count() <= 80 {
+                return text.clone();
             }
             clean(short).chars().take(80).collect()
         };
-        let text = clean(text);
         let c = self.comment();
         match self.lang {
             Language::Krl => {
-                let short = fit(&text);
+                let short = fit();
                 out.push((0, format!("IF {cond} THEN")));
                 out.push((1, format!("{c}handshake: a partner was started again {when}: stop until this program is started again")));
                 out.push((
@@ -371,7 +373,7 @@ impl<'a> Hand<'a> {
                 out.push((0, "ENDIF".to_owned()));
             }
             Language::Rapid => {
-                let short = fit(&text);
+                let short = fit();
                 out.push((0, format!("IF {cond} THEN")));
                 out.push((1, format!("{c}handshake: a partner was started again {when}: stop until this program is started again")));
                 out.push((1, format!("ErrWrite \"Partner started again\", \"{short}\" \\RL2:=\"Start this task again from main.\";")));
@@ -432,10 +434,7 @@ impl<'a> Hand<'a> {
                 self.name(ch.to)
             ),
         ));
-        let ack = self
-            .signal(ch.ack, false)
-            .and_then(|s| self.read(s).ok())
-            .unwrap_or_default();
+        let ack = self.read_wire(ch.ack);
         let stop = format!(
             "{} started again; this program was to tell it: {what}",
             self.name(ch.to)
@@ -476,10 +475,7 @@ impl<'a> Hand<'a> {
         };
         out.push((0, format!("{}handshake: wait {what}", self.comment())));
         out.push((0, self.toggle(&var)));
-        let strobe = self
-            .signal(ch.strobe, false)
-            .and_then(|s| self.read(s).ok())
-            .unwrap_or_default();
+        let strobe = self.read_wire(ch.strobe);
         let stop = match m.kind {
             Kind::Done => format!(
                 "{} started again; waited for its {}",
@@ -544,8 +540,9 @@ impl<'a> Hand<'a> {
     /// The lines at the program's start: its run wires `FALSE` first (a partner waiting
     /// for it sees at once that it was started again), then every other wire it drives and
     /// every toggle; then the start barrier: wait until every partner is at its start (run
-    /// `FALSE`), say ready, wait until every partner is ready, say running, wait until no
-    /// partner is only ready any more, take ready back.
+    /// `FALSE`), say ready, wait until every partner is ready, say running, wait until every
+    /// partner is running (or one is back at its start), stop unless every partner is running,
+    /// take ready back.
     pub fn init(&self) -> Vec<(usize, String)> {
         let (tx, rx) = self.own();
         if tx.is_empty() && rx.is_empty() {
@@ -590,9 +587,11 @@ impl<'a> Hand<'a> {
             out.push((0, self.assign(DECISION_VAR, "0")));
         }
         let be = if partners.len() == 1 { "is" } else { "are" };
-        let all = |f: &dyn Fn(usize) -> String| -> String {
-            self.join("AND", &partners.iter().map(|&p| f(p)).collect::<Vec<_>>())
+        let over = |op: &str, f: &dyn Fn(usize) -> String| -> String {
+            self.join(op, &partners.iter().map(|&p| f(p)).collect::<Vec<_>>())
         };
+        let all = |f: &dyn Fn(usize) -> String| over("AND", f);
+        let any = |f: &dyn Fn(usize) -> String| over("OR", f);
         out.push((
             0,
             format!(
@@ -614,21 +613,15 @@ impl<'a> Hand<'a> {
         // A partner back at its start (run and ready FALSE) was started again inside the
         // barrier: waiting for it here could wait for ever (it waits for this program's run
         // wire to drop), going on could meet it mid-cycle; so stop.
-        let restarted = self.join(
-            "OR",
-            &partners
-                .iter()
-                .map(|&p| {
-                    self.join(
-                        "AND",
-                        &[
-                            self.is(&self.run_of(p), false),
-                            self.is(&self.ready_of(p), false),
-                        ],
-                    )
-                })
-                .collect::<Vec<_>>(),
-        );
+        let restarted = any(&|p| {
+            self.join(
+                "AND",
+                &[
+                    self.is(&self.run_of(p), false),
+                    self.is(&self.ready_of(p), false),
+                ],
+            )
+        });
         let running = all(&|p| self.is(&self.run_of(p), true));
         self.wait_until(&mut out, &self.join("OR", &[running, restarted]));
         let text = if partners.len() == 1 {
@@ -638,13 +631,7 @@ impl<'a> Hand<'a> {
         };
         // Read again: unless every partner is running now, one was started again (it may
         // already be ready again, so "back at its start" is not what to test here).
-        let not_running = self.join(
-            "OR",
-            &partners
-                .iter()
-                .map(|&p| self.is(&self.run_of(p), false))
-                .collect::<Vec<_>>(),
-        );
+        let not_running = any(&|p| self.is(&self.run_of(p), false));
         self.stop_if(
             &mut out,
             &not_running,
@@ -673,10 +660,7 @@ impl<'a> Hand<'a> {
                     self.name(to)
                 ),
             ));
-            let ack = self
-                .signal(chs[ch].ack, false)
-                .and_then(|s| self.read(s).ok())
-                .unwrap_or_default();
+            let ack = self.read_wire(chs[ch].ack);
             let cond = self.join(
                 "OR",
                 &[
@@ -753,35 +737,33 @@ impl<'a> Hand<'a> {
                 uses.push((ch.ack, true, true));
             }
         }
-        {
-            for (w, side, write) in uses {
-                let Some(s) = self.signal(w, side) else {
-                    continue;
-                };
-                let r = if write {
-                    self.set(s, self.t()).map(drop)
-                } else {
-                    self.read(s).map(drop)
-                };
-                if let Err(why) = r
-                    && seen.insert((w, side))
-                {
-                    diags.push(
-                        Diagnostic::error(
-                            Code::BadSignal,
-                            format!(
-                                "signal `{}`, a wire between controllers (InternalLink `{}`), in the {} program of `{}`: {why}",
-                                s.name.text,
-                                w.map(|w| self.input.blackboard.wires[w].name.as_str())
-                                    .unwrap_or_default(),
-                                self.lang,
-                                self.name(self.view.me)
-                            ),
-                        )
-                        .at(s.name.span.clone())
-                        .element(s.element.clone()),
-                    );
-                }
+        for (w, side, write) in uses {
+            let Some(s) = self.signal(w, side) else {
+                continue;
+            };
+            let r = if write {
+                self.set(s, self.t()).map(drop)
+            } else {
+                self.read(s).map(drop)
+            };
+            if let Err(why) = r
+                && seen.insert((w, side))
+            {
+                diags.push(
+                    Diagnostic::error(
+                        Code::BadSignal,
+                        format!(
+                            "signal `{}`, a wire between controllers (InternalLink `{}`), in the {} program of `{}`: {why}",
+                            s.name.text,
+                            w.map(|w| self.input.blackboard.wires[w].name.as_str())
+                                .unwrap_or_default(),
+                            self.lang,
+                            self.name(self.view.me)
+                        ),
+                    )
+                    .at(s.name.span.clone())
+                    .element(s.element.clone()),
+                );
             }
         }
     }

@@ -283,7 +283,7 @@ pub fn start_end(
                     Diagnostic::error(
                         Code::StartStep,
                         format!(
-                            "more than {} sequences (steps marked initialStep=\"true\" with nothing connecting them): each runs on controllers of its own (SPEC.md 3, 9); this is the {}th",
+                            "more than {} sequences (steps marked initialStep=\"true\" with nothing connecting them): each runs on controllers of its own; this is the {}th",
                             super::MAX_SEQUENCES,
                             marked_nets.len()
                         ),
@@ -463,7 +463,7 @@ fn one_sequence(
                 Code::StartStep,
                 if all_marked {
                     format!(
-                        "{} initial steps (marked initialStep=\"true\", without a predecessor) in one network: {}; a network has one initial step (IEC 61131-3). Several initial steps begin sequences of their own only when nothing connects them (SPEC.md 3)",
+                        "{} initial steps (marked initialStep=\"true\", without a predecessor) in one network: {}; a network has one initial step (IEC 61131-3). Several initial steps begin sequences of their own only when nothing connects them",
                         starts.len(),
                         list_ids(sfc, &starts)
                     )

@@ -359,7 +359,7 @@ pub fn place_sequences(
                     Diagnostic::error(
                         Code::StartStep,
                         format!(
-                            "the sequences of the initial steps {} and {} both run on controller `{}`; several initial steps are sequences that run at the same time, so each needs a controller of its own (SPEC.md 3, 9): move the steps of one to another controller, or join the sequences into one chart with one initial step",
+                            "the sequences of the initial steps {} and {} both run on controller `{}`; several initial steps are sequences that run at the same time, so each needs a controller of its own: move the steps of one to another controller, or join the sequences into one chart with one initial step",
                             label(sfc, a),
                             label(sfc, b),
                             name(c)
