@@ -11,7 +11,7 @@ const CORE: &[&str] = &[
     "src/read",
     "src/plan",
     "src/emit",
-    "src/bind.rs",
+    "src/bind",
     "src/template.rs",
     "src/value.rs",
     "src/convert.rs",
