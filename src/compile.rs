@@ -738,9 +738,12 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 prog.controller,
                 sure.then_some(profile),
                 only.as_ref(),
+                cell.as_ref()
+                    .is_some_and(|c| c.partners(k).next().is_some()),
                 &mut cx.diags,
             );
             bound.signals = reads.signals;
+            bound.watch = reads.watch;
             bound.set_timers(reads.timers, reads.timer_names);
             // The handshakes' wires are the handshakes' (SPEC.md 9): a condition reading one
             // would see the toggles.

@@ -631,6 +631,9 @@ codes! {
     /// A resource's `Timers` attribute that names no KRL timers, or fewer than the step times
     /// the conditions read (SPEC.md 3.1).
     BadTimers = "E214",
+    /// A controller's `HandshakeTimeout` attribute that is not a number of seconds from 0 to a
+    /// day (SPEC.md 9).
+    BadHandshakeTimeout = "E215",
 
     /// No `pou` with an `SFC` body (or none of the name asked for).
     NoSfcBody = "E301",

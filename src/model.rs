@@ -186,6 +186,9 @@ pub struct Resource {
     /// The `Timers` attribute's value and span: the KRL timers (`$TIMER[n]`) the program may
     /// use for step times (SPEC.md 3.1), `A-B` or `N`.
     pub timers_attr: Option<(String, Span)>,
+    /// The `HandshakeTimeout` attribute's value and span: after how many seconds a wait on
+    /// another controller of the cell shows on the pendant (SPEC.md 9).
+    pub handshake_timeout_attr: Option<(String, Span)>,
 }
 
 /// Key → index of the first skill, function and signal of that key.

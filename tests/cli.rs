@@ -2340,6 +2340,89 @@ fn step_times_are_checked_without_a_blackboard() {
     }
 }
 
+/// A controller's `HandshakeTimeout` (seconds) says when a wait on a partner shows on the
+/// pendant: `2.5` is `$TIMER[16] >= 2500` in KRL (the last of the controller's `Timers`), and
+/// `0` turns the message off (a plain `WAIT FOR`). A step time in a cell whose `Timers` holds
+/// one timer has none left (`E214` says that the waits use it); a value with a unit is `E215`
+/// at the attribute, and nothing is written.
+#[test]
+fn handshake_timeout_says_when_a_wait_shows_on_the_pendant() {
+    let p = bases_with_case(&["cell", "cell2"], "cell-two-robots-weld");
+    let bb = std::fs::read_to_string(p.path().join("Blackboard.aml")).unwrap();
+    let with = |attrs: &str| {
+        let at = bb.find("<InternalElement Name=\"KUKA KR16-2\"").unwrap();
+        let at = at + bb[at..].find('\n').unwrap();
+        let text = format!("{}\n{attrs}{}", &bb[..at], &bb[at..]);
+        std::fs::write(p.path().join("Blackboard.aml"), text).unwrap();
+    };
+    let attr = |name: &str, v: &str| {
+        format!(
+            "<Attribute Name=\"{name}\" AttributeDataType=\"xs:string\"><Value>{v}</Value></Attribute>"
+        )
+    };
+    let b = || std::fs::read_to_string(p.path().join("Cell_KUKA_KR16_2.src")).unwrap();
+    with(&attr("HandshakeTimeout", "2.5"));
+    let o = run(&["--lf", "Blackboard.aml", "Cell"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let src = b();
+    assert!(src.contains("OR ($TIMER[16] >= 2500)"), "{src}");
+    assert!(src.contains("Set_KrlMsg(#WAITING"), "{src}");
+    // The other controller keeps the default, 10 s.
+    let a = std::fs::read_to_string(p.path().join("Cell_KUKA_KR15_2.src")).unwrap();
+    assert!(a.contains("OR ($TIMER[16] >= 10000)"), "{a}");
+    assert!(!a.contains(">= 2500"), "{a}");
+    with(&attr("HandshakeTimeout", "0"));
+    let o = run(&["--lf", "Blackboard.aml", "Cell"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let src = b();
+    assert!(
+        !src.contains("$TIMER") && !src.contains("#WAITING"),
+        "{src}"
+    );
+    assert!(src.contains("WAIT FOR ($IN["), "{src}");
+    // `Timers` of one timer: the handshakes' own, none left for a step time.
+    let sfc = std::fs::read_to_string(p.path().join("sfc.xml")).unwrap();
+    let at = sfc.find("<transition localId=\"8\">").unwrap();
+    let c = sfc[at..].find("<xhtml:p>TRUE</xhtml:p>").unwrap() + at;
+    let timed = format!(
+        "{}<xhtml:p>Weld.t &gt; T#2s</xhtml:p>{}",
+        &sfc[..c],
+        &sfc[c + "<xhtml:p>TRUE</xhtml:p>".len()..]
+    );
+    std::fs::write(p.path().join("sfc.xml"), &timed).unwrap();
+    with(&attr("Timers", "12"));
+    std::fs::remove_file(p.path().join("Cell_KUKA_KR16_2.src")).unwrap();
+    let o = run(&["--lf", "Blackboard.aml", "Cell"], p.path());
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(e.contains("E214"), "{e}");
+    assert!(
+        e.contains("holds 0")
+            && e.contains("`$TIMER[12]` measures the waits on the other controllers"),
+        "{e}"
+    );
+    assert!(!p.path().join("Cell_KUKA_KR16_2.src").exists());
+    // Without the message, the one timer is the step time's.
+    with(&format!(
+        "{}{}",
+        attr("Timers", "12"),
+        attr("HandshakeTimeout", "0")
+    ));
+    let o = run(&["--lf", "Blackboard.aml", "Cell"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(b().contains("WAIT FOR $TIMER[12] > 2000"), "{}", b());
+    // A unit after the number: E215 at the attribute.
+    std::fs::write(p.path().join("sfc.xml"), &sfc).unwrap();
+    with(&attr("HandshakeTimeout", "10 s"));
+    std::fs::remove_file(p.path().join("Cell_KUKA_KR16_2.src")).unwrap();
+    let o = run(&["--lf", "Blackboard.aml", "Cell"], p.path());
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(e.contains("E215") && e.contains("Blackboard.aml:"), "{e}");
+    assert!(e.contains("`HandshakeTimeout` is `10 s`"), "{e}");
+    assert!(!p.path().join("Cell_KUKA_KR16_2.src").exists());
+}
+
 /// In a cell, a condition may read the time of a step its own controller runs: the controller
 /// that waits for the transition (the one of the step after it, else the one in charge) starts
 /// the step's timer and reads it. A step of another controller is refused: step times are not
@@ -2368,8 +2451,14 @@ fn step_times_in_a_cell_are_read_on_the_steps_controller() {
         .find("WAIT FOR $TIMER[9] > 2000")
         .expect("the wait reads it");
     assert!(start < weld && weld < read, "{b}");
+    // The waits on the partner are measured with the last of the timers (16), the step
+    // times use the others.
+    assert!(
+        b.contains("$TIMER[16] = 0") && !b.contains("$TIMER[16] > "),
+        "{b}"
+    );
     let a = std::fs::read_to_string(p.path().join("Cell_KUKA_KR15_2.src")).unwrap();
-    assert!(!a.contains("$TIMER"), "{a}");
+    assert!(!a.contains("$TIMER[9]"), "{a}");
     // KR15-2 goes on when KR16-2 tells it that the transition fired.
     assert!(
         a.contains(";handshake: wait until KUKA KR16-2 has done localId 8"),

@@ -1791,6 +1791,7 @@ fn cells_keep_the_charts_order_whatever_the_timing() {
     let dir = tempfile::tempdir().unwrap();
     let (mut charts, mut seed, mut programs) = (0, 0u64, 0);
     let mut rapid_sample: Vec<(String, Output)> = Vec::new();
+    let mut messages = std::collections::BTreeMap::new();
     while charts < CELL_CHARTS {
         seed += 1;
         let Some((chart, cell, robot_of, _)) = cosim::random_cell(&dir.path().join("cell"), seed)
@@ -1814,7 +1815,7 @@ fn cells_keep_the_charts_order_whatever_the_timing() {
                 programs += 1;
             }
         }
-        if let Err(e) = cosim::co_simulate(
+        match cosim::co_simulate(
             &chart,
             &cell,
             &robot_of,
@@ -1823,11 +1824,22 @@ fn cells_keep_the_charts_order_whatever_the_timing() {
             cosim::Mutation::None,
             None,
         ) {
-            fail_keeping_cell(&dir.path().join("cell"), "cosim", seed, &e);
+            Ok(r) => {
+                for (lang, n) in r.messages {
+                    *messages.entry(lang).or_insert(0) += n;
+                }
+            }
+            Err(e) => fail_keeping_cell(&dir.path().join("cell"), "cosim", seed, &e),
         }
         charts += 1;
     }
     assert!(programs >= 2 * CELL_CHARTS);
+    // The waits on partners that lasted longer than the robots' `HandshakeTimeout` (50 ms
+    // here) showed their message on the pendant in every language, each taken away when its
+    // wait ended, and none early (`Report`, checked in every run).
+    assert_eq!(messages.len(), 3, "{messages:?}");
+    assert!(messages.values().all(|&n| n > 0), "{messages:?}");
+    eprintln!("messages of waits that lasted: {messages:?}");
     // A sample of the RAPID modules through rapidchecker (half a second each).
     let mut checker = RapidChecker::new();
     for (what, output) in &rapid_sample {
@@ -2143,8 +2155,9 @@ fn cell_fixtures_survive_restarts() {
 }
 
 /// The co-simulation catches each way a handshake can be wrong, in each language: a dropped
-/// wait, a decision taken again by a follower, an output set while the motion before it runs.
-/// Only the programs of one language are broken at a time.
+/// wait, a decision taken again by a follower, an output set while the motion before it runs,
+/// a wait's message left on the pendant after the wait. Only the programs of one language are
+/// broken at a time.
 #[test]
 fn the_cell_co_simulation_catches_broken_handshakes() {
     let dir = tempfile::tempdir().unwrap();
@@ -2152,6 +2165,7 @@ fn the_cell_co_simulation_catches_broken_handshakes() {
         cosim::Mutation::DroppedWait,
         cosim::Mutation::DecidesTwice,
         cosim::Mutation::AdvanceRun,
+        cosim::Mutation::MessageKept,
     ] {
         for lang in [Lang::Krl, Lang::Rapid, Lang::UrScript] {
             // URScript has no advance run (its moves return at their target).

@@ -185,6 +185,8 @@ pub struct Reads {
     pub timers: Vec<(usize, u32)>,
     /// See [`Bound::timer_names`].
     pub timer_names: HashMap<String, usize>,
+    /// See [`Bound::watch`].
+    pub watch: Option<Watch>,
 }
 
 /// Resolves the names in every transition condition (or, for a program of a cell, those of
@@ -197,6 +199,7 @@ pub fn conditions(
     resource: Option<usize>,
     profile: Option<&dyn Rules>,
     only: Option<&HashSet<usize>>,
+    partners: bool,
     diags: &mut Diagnostics,
 ) -> Reads {
     use crate::cond::Ty;
@@ -288,7 +291,8 @@ pub fn conditions(
             }
         }
     }
-    let timers = number_timers(sfc, res, profile, &timed, first_timed, diags);
+    let watch = if partners { watch(res, diags) } else { None };
+    let timers = number_timers(sfc, res, profile, &timed, first_timed, watch, diags);
     // Whether the program's language can read each signal the conditions use (not asked when
     // the language is not known for sure).
     if let (Some(r), Some(profile)) = (res, profile) {
@@ -314,25 +318,76 @@ pub fn conditions(
         signals: used,
         timers,
         timer_names,
+        watch,
     }
 }
 
-/// Numbers the timers of the steps in `timed` (KRL's `$TIMER[n]`, from the resource's `Timers`
-/// attribute or [`DEFAULT_TIMERS`]); a KRL program needing more timers than the range holds is
-/// an error at the attribute (or, without one, at the first condition that reads a step time).
-fn number_timers(
-    sfc: &Sfc,
-    res: Option<&crate::model::Resource>,
-    profile: Option<&dyn Rules>,
-    timed: &[usize],
-    first_timed: Option<usize>,
-    diags: &mut Diagnostics,
-) -> Vec<(usize, u32)> {
-    if timed.is_empty() {
-        return Vec::new();
+/// How long a wait on a partner may last before the pendant shows it, when the resource has no
+/// `HandshakeTimeout` attribute: 10 s.
+pub const DEFAULT_HANDSHAKE_TIMEOUT_MS: u64 = 10_000;
+
+/// The longest `HandshakeTimeout`, in seconds (a day).
+pub const MAX_HANDSHAKE_TIMEOUT_S: f64 = 86_400.0;
+
+/// How a program of a cell shows a wait on a partner that lasts: after `after_ms`
+/// milliseconds a message on the pendant says what it waits for, taken away when the wait ends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Watch {
+    pub after_ms: u64,
+    /// The KRL timer that measures the wait (`$TIMER[n]`): the last of the resource's `Timers`
+    /// (step times use the others).
+    pub timer: u32,
+}
+
+/// The watch of the waits on partners of controller `res`'s program, from its
+/// `HandshakeTimeout` attribute (seconds; `0`: no message); an attribute that is not such a
+/// number is an error at it (and the default is used).
+fn watch(res: Option<&crate::model::Resource>, diags: &mut Diagnostics) -> Option<Watch> {
+    let (_, last) = timers_of(res, &mut Diagnostics::default());
+    let attr = res.and_then(|r| r.handshake_timeout_attr.as_ref());
+    let after_ms = match attr.map(|(v, _)| handshake_timeout(v)) {
+        None => DEFAULT_HANDSHAKE_TIMEOUT_MS,
+        Some(Ok(ms)) => ms,
+        Some(Err(why)) => {
+            let (_, span) = attr.expect("an attribute");
+            diags.push(
+                Diagnostic::error(Code::BadHandshakeTimeout, why)
+                    .at(span.clone())
+                    .element(res.map(|r| r.element.clone()).unwrap_or_default()),
+            );
+            DEFAULT_HANDSHAKE_TIMEOUT_MS
+        }
+    };
+    (after_ms > 0).then_some(Watch {
+        after_ms,
+        timer: last,
+    })
+}
+
+/// The milliseconds of a `HandshakeTimeout` attribute's value (seconds, `0` to a day).
+fn handshake_timeout(attr: &str) -> Result<u64, String> {
+    let t = attr.trim();
+    let why = || {
+        format!(
+            "`HandshakeTimeout` is `{t}`: it is how many seconds a wait on another controller may last before the pendant shows what the program waits for, a number from 0 (no message) to {MAX_HANDSHAKE_TIMEOUT_S} with a `.` for decimals (`10`, `2.5`)"
+        )
+    };
+    let v: f64 = t.parse().map_err(|_| why())?;
+    if !(0.0..=MAX_HANDSHAKE_TIMEOUT_S).contains(&v) || t.starts_with('+') {
+        return Err(why());
     }
+    let ms = (v * 1000.0).round() as u64;
+    if v > 0.0 && ms == 0 {
+        return Err(why());
+    }
+    Ok(ms)
+}
+
+/// The KRL timers `(first, last)` of a resource (its `Timers` attribute or [`DEFAULT_TIMERS`];
+/// a bad attribute is an error in `diags` and the default is used).
+fn timers_of(res: Option<&crate::model::Resource>, diags: &mut Diagnostics) -> (u32, u32) {
     let attr = res.and_then(|r| r.timers_attr.as_ref());
-    let (first, last) = match attr.map(|(v, _)| timer_range(v)) {
+    match attr.map(|(v, _)| timer_range(v)) {
         None => DEFAULT_TIMERS,
         Some(Ok(range)) => range,
         Some(Err(why)) => {
@@ -344,16 +399,44 @@ fn number_timers(
             );
             DEFAULT_TIMERS
         }
-    };
-    let room = (last - first + 1) as usize;
+    }
+}
+
+/// Numbers the timers of the steps in `timed` (KRL's `$TIMER[n]`, from the resource's `Timers`
+/// attribute or [`DEFAULT_TIMERS`], without the last one when `watch` measures the waits on
+/// partners with it); a KRL program needing more timers than the range holds is an error at
+/// the attribute (or, without one, at the first condition that reads a step time).
+fn number_timers(
+    sfc: &Sfc,
+    res: Option<&crate::model::Resource>,
+    profile: Option<&dyn Rules>,
+    timed: &[usize],
+    first_timed: Option<usize>,
+    watch: Option<Watch>,
+    diags: &mut Diagnostics,
+) -> Vec<(usize, u32)> {
+    if timed.is_empty() {
+        return Vec::new();
+    }
+    let attr = res.and_then(|r| r.timers_attr.as_ref());
+    let (first, last) = timers_of(res, diags);
+    let room = (last - first + 1) as usize - usize::from(watch.is_some());
     if timed.len() > room && profile.is_some_and(|p| p.language() == crate::lang::Language::Krl) {
         let msg = format!(
-            "the conditions read the times of {} steps, and each needs a KRL timer; `Timers` {} holds {room} (`$TIMER[{first}]` to `$TIMER[{last}]`): set the resource's attribute `Timers` to a larger range (`A-B`, up to {MAX_TIMER})",
+            "the conditions read the times of {} steps, and each needs a KRL timer; `Timers` {}holds {room} (`$TIMER[{first}]` to `$TIMER[{}]`{}): set the resource's attribute `Timers` to a larger range (`A-B`, up to {MAX_TIMER})",
             timed.len(),
             if attr.is_some() {
                 ""
             } else {
-                "(not set, so 9-16)"
+                "(not set, so 9-16) "
+            },
+            last - u32::from(watch.is_some()),
+            if watch.is_some() {
+                format!(
+                    "; `$TIMER[{last}]` measures the waits on the other controllers of the cell"
+                )
+            } else {
+                String::new()
             },
         );
         let d = Diagnostic::error(Code::BadTimers, msg);
@@ -417,6 +500,20 @@ mod tests {
         assert_eq!(timer_range("1 - 64"), Ok((1, 64)));
         for bad in ["0-4", "5-4", "1-65", "x", "", "-3", "3-"] {
             assert!(timer_range(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn handshake_timeouts() {
+        assert_eq!(handshake_timeout("10"), Ok(10_000));
+        assert_eq!(handshake_timeout(" 2.5 "), Ok(2_500));
+        assert_eq!(handshake_timeout("0"), Ok(0));
+        assert_eq!(handshake_timeout("0.001"), Ok(1));
+        assert_eq!(handshake_timeout("86400"), Ok(86_400_000));
+        for bad in [
+            "-1", "x", "", "2,5", "1e9", "NaN", "inf", "0.0001", "86401", "+3",
+        ] {
+            assert!(handshake_timeout(bad).is_err(), "{bad}");
         }
     }
 }

@@ -15,7 +15,8 @@ use crate::read::irl::Irl;
 
 mod conditions;
 pub use conditions::{
-    DEFAULT_TIMERS, MAX_TIMER, Reads, StepNames, check_conditions_unresolved, conditions,
+    DEFAULT_HANDSHAKE_TIMEOUT_MS, DEFAULT_TIMERS, MAX_TIMER, Reads, StepNames, Watch,
+    check_conditions_unresolved, conditions,
 };
 
 /// What binding needs to know of the program's robot language, handed in as data by the
@@ -339,6 +340,9 @@ pub struct Bound {
     pub timer_names: HashMap<String, usize>,
     /// Step → its position in [`Bound::timers`] (built by [`Bound::set_timers`]).
     pub timer_index: HashMap<usize, usize>,
+    /// A program of a cell: how its waits on partners show on the pendant when they last
+    /// (`None`: not in a cell, or `HandshakeTimeout` 0).
+    pub watch: Option<Watch>,
 }
 
 impl Bound {
@@ -506,6 +510,7 @@ pub fn bind(
         timers: Vec::new(),
         timer_names: HashMap::new(),
         timer_index: HashMap::new(),
+        watch: None,
     };
     for (i, step) in first.steps {
         bound.steps[i] = Some(step);

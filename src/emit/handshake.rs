@@ -33,6 +33,46 @@ const MSG_VAR: &str = "skp_msg";
 const PAR_VAR: &str = "skp_par";
 const OPT_VAR: &str = "skp_opt";
 const HANDLE_VAR: &str = "skp_handle";
+/// KRL: what `Clr_KrlMsg` answers (`.dat`).
+const CLEARED_VAR: &str = "skp_cleared";
+/// RAPID: whether a watched wait ran out of time (`\TimeFlag`, module data).
+const LATE_VAR: &str = "skp_late";
+/// URScript: the seconds a watched wait has lasted (advanced by the program's clock thread).
+pub const WATCH_VAR: &str = "skp_waited";
+
+/// `text` with no quote or backslash (inside a string literal of any of the three languages).
+fn clean(t: &str) -> String {
+    t.chars()
+        .map(|c| match c {
+            '"' => '\'',
+            '\\' => '/',
+            c => c,
+        })
+        .collect()
+}
+
+/// A message for KRL's `Msg_Txt` and RAPID's lines (80 characters): `text`, or where it is
+/// longer `short`, cut at 80; both cleaned.
+fn fit(text: &str, short: &str) -> String {
+    if text.chars().count() <= 80 {
+        return clean(text);
+    }
+    clean(short).chars().take(80).collect()
+}
+
+/// Milliseconds as seconds, as short as the value allows (`10`, `0.05`).
+fn seconds(ms: u64) -> String {
+    if ms.is_multiple_of(1000) {
+        return (ms / 1000).to_string();
+    }
+    let s = format!("{}.{:03}", ms / 1000, ms % 1000);
+    s.trim_end_matches('0').to_owned()
+}
+
+/// A KRL message number (`INT`, 32 bits) of a `localId`.
+fn message_nr(id: u64) -> u64 {
+    id.min(i32::MAX as u64)
+}
 
 /// A program's place in its cell.
 #[derive(Debug, Clone, Copy)]
@@ -242,6 +282,104 @@ impl<'a> Hand<'a> {
         }
     }
 
+    /// A wait on a partner: [`Hand::wait_until`] `cond`, and when it lasts longer than the
+    /// controller's `HandshakeTimeout` ([`crate::bind::Watch`]), a message on the pendant
+    /// saying what the program waits for (`text`, or where a message is short `short`), taken
+    /// away when the wait ends; the program goes on waiting. Each vendor's own way: KUKA's wait
+    /// message (`Set_KrlMsg(#WAITING)`, cleared by `Clr_KrlMsg`), RAPID's `\MaxTime`
+    /// `\TimeFlag` with `TPWrite` (cleared by `TPErase`), URScript's `textmsg` in the log at
+    /// the start and the end of the long wait.
+    fn watched_wait(
+        &self,
+        out: &mut Vec<(usize, String)>,
+        cond: &str,
+        text: &str,
+        short: &str,
+        nr: u64,
+    ) {
+        let Some(w) = self.input.bound.watch else {
+            return self.wait_until(out, cond);
+        };
+        let after = seconds(w.after_ms);
+        match self.lang {
+            Language::Krl => {
+                let t = w.timer;
+                // The timer starts when the motion before has ended (`WAIT SEC 0` stops the
+                // advance run, as the `WAIT FOR` after it would).
+                out.push((0, "WAIT SEC 0".to_owned()));
+                out.push((0, format!("$TIMER[{t}] = 0")));
+                out.push((0, format!("$TIMER_STOP[{t}] = FALSE")));
+                out.push((
+                    0,
+                    format!("WAIT FOR ({cond}) OR ($TIMER[{t}] >= {})", w.after_ms),
+                ));
+                out.push((0, format!("IF NOT ({cond}) THEN")));
+                out.push((
+                    1,
+                    format!(
+                        "{MSG_VAR} = {{Modul[] \"skillpost\", Nr {}, Msg_Txt[] \"{}\"}}",
+                        message_nr(nr),
+                        fit(text, short)
+                    ),
+                ));
+                out.push((
+                    1,
+                    format!(
+                        "{HANDLE_VAR} = Set_KrlMsg(#WAITING, {MSG_VAR}, {PAR_VAR}[], {OPT_VAR})"
+                    ),
+                ));
+                out.push((1, format!("WAIT FOR {cond}")));
+                out.push((1, format!("{CLEARED_VAR} = Clr_KrlMsg({HANDLE_VAR})")));
+                out.push((0, "ENDIF".to_owned()));
+            }
+            Language::Rapid => {
+                let cond = if cond.starts_with('(') {
+                    format!("({cond})")
+                } else {
+                    cond.to_owned()
+                };
+                let poll = super::rapid::POLL_RATE;
+                out.push((
+                    0,
+                    format!(
+                        "WaitUntil \\InPos, {cond} \\MaxTime:={after} \\TimeFlag:={LATE_VAR} {poll};"
+                    ),
+                ));
+                out.push((0, format!("IF {LATE_VAR} THEN")));
+                out.push((1, format!("TPWrite \"{}\";", fit(text, short))));
+                out.push((1, format!("WaitUntil \\InPos, {cond} {poll};")));
+                out.push((1, "TPErase;".to_owned()));
+                out.push((0, "ENDIF".to_owned()));
+            }
+            Language::UrScript => {
+                let text = clean(text);
+                out.push((0, format!("{WATCH_VAR} = 0.0")));
+                // A number URScript reads as a float.
+                let after = if after.contains('.') {
+                    after
+                } else {
+                    format!("{after}.0")
+                };
+                out.push((
+                    0,
+                    format!("while not (({cond}) or ({WATCH_VAR} >= {after})):"),
+                ));
+                out.push((1, "sync()".to_owned()));
+                out.push((0, "end".to_owned()));
+                out.push((0, format!("if not ({cond}):")));
+                out.push((1, format!("textmsg(\"skillpost: {text}\")")));
+                out.push((1, format!("while not ({cond}):")));
+                out.push((2, "sync()".to_owned()));
+                out.push((1, "end".to_owned()));
+                out.push((
+                    1,
+                    format!("textmsg(\"skillpost: {text}: the wait has ended\")"),
+                ));
+                out.push((0, "end".to_owned()));
+            }
+        }
+    }
+
     /// The run wire partner `p` drives to this program, as read here.
     fn run_of(&self, p: usize) -> String {
         self.link_read(p, |l| l.run)
@@ -287,10 +425,26 @@ impl<'a> Hand<'a> {
 
     /// A handshake's wait until the wire `read` equals the toggle `var`, which also ends when
     /// partner `p` was started again (its run wire `FALSE`; see [`Hand::stop_unless_running`]).
-    fn guarded_wait(&self, out: &mut Vec<(usize, String)>, read: &str, var: &str, p: usize) {
+    /// `text` and `short` say what it waits for on the pendant when the wait lasts
+    /// ([`Hand::watched_wait`]).
+    fn guarded_wait(
+        &self,
+        out: &mut Vec<(usize, String)>,
+        (read, var): (&str, &str),
+        p: usize,
+        (text, short): (&str, &str),
+        nr: u64,
+    ) {
         let run = self.run_of(p);
         let cond = self.join("OR", &[self.equals(read, var), self.is(&run, false)]);
-        self.wait_until(out, &cond);
+        self.watched_wait(out, &cond, text, short, nr);
+    }
+
+    /// The name of the signal a received wire arrives at on this controller (for a message).
+    fn wire_name(&self, wire: Option<usize>) -> String {
+        self.signal(wire, false)
+            .map(|s| crate::names::transliterate(&s.name.text))
+            .unwrap_or_default()
     }
 
     /// When partner `p` was started again (its run wire `FALSE`), the program stops with a
@@ -332,29 +486,12 @@ impl<'a> Hand<'a> {
         nr: u64,
         when: &str,
     ) {
-        // No quote or backslash inside a string literal of any of the three; KRL's message
-        // and RAPID's reason lines hold 80 characters.
-        let clean = |t: &str| -> String {
-            t.chars()
-                .map(|c| match c {
-                    '"' => '\'',
-                    '\\' => '/',
-                    c => c,
-                })
-                .collect()
-        };
         let text = clean(text);
-        // KRL and RAPID: the text, or where it is too long the short one, cut at 80.
-        let fit = || -> String {
-            if text.chars().count() <= 80 {
-                return text.clone();
-            }
-            clean(short).chars().take(80).collect()
-        };
         let c = self.comment();
         match self.lang {
             Language::Krl => {
-                let short = fit();
+                let short = fit(&text, short);
+                let nr = message_nr(nr);
                 out.push((0, format!("IF {cond} THEN")));
                 out.push((1, format!("{c}handshake: a partner was started again {when}: stop until this program is started again")));
                 out.push((
@@ -373,7 +510,7 @@ impl<'a> Hand<'a> {
                 out.push((0, "ENDIF".to_owned()));
             }
             Language::Rapid => {
-                let short = fit();
+                let short = fit(&text, short);
                 out.push((0, format!("IF {cond} THEN")));
                 out.push((1, format!("{c}handshake: a partner was started again {when}: stop until this program is started again")));
                 out.push((1, format!("ErrWrite \"Partner started again\", \"{short}\" \\RL2:=\"Start this task again from main.\";")));
@@ -439,7 +576,19 @@ impl<'a> Hand<'a> {
             "{} started again; this program was to tell it: {what}",
             self.name(ch.to)
         );
-        self.guarded_wait(&mut out, &ack, &var, ch.to);
+        let id = self.input.sfc.elements[m.about].local_id;
+        let wire = self.wire_name(ch.ack);
+        let to = self.name(ch.to);
+        self.guarded_wait(
+            &mut out,
+            (&ack, &var),
+            ch.to,
+            (
+                &format!("waits until {to} has read: {what}; wire {wire}"),
+                &format!("waits for {to} to read (localId {id}, wire {wire})"),
+            ),
+            id,
+        );
         self.stop_unless_running(&mut out, ch.to, &stop, m);
         if m.kind == Kind::Decision {
             for (bit, &w) in ch.data.iter().enumerate() {
@@ -488,7 +637,21 @@ impl<'a> Hand<'a> {
                 self.about(m)
             ),
         };
-        self.guarded_wait(&mut out, &strobe, &var, ch.from);
+        let id = self.input.sfc.elements[m.about].local_id;
+        let wire = self.wire_name(ch.strobe);
+        self.guarded_wait(
+            &mut out,
+            (&strobe, &var),
+            ch.from,
+            (
+                &format!("waits {what}; wire {wire}"),
+                &format!(
+                    "waits for {} (localId {id}, wire {wire})",
+                    self.name(ch.from)
+                ),
+            ),
+            id,
+        );
         if m.kind == Kind::Decision {
             out.push((0, self.assign(DECISION_VAR, "0")));
             for (bit, &w) in ch.data.iter().enumerate() {
@@ -598,13 +761,26 @@ impl<'a> Hand<'a> {
                 "{c}handshake: start barrier: wait until {names} {be} at the start (run FALSE)"
             ),
         ));
-        self.wait_until(&mut out, &all(&|p| self.is(&self.run_of(p), false)));
+        let short = format!("start barrier: waits for {names}");
+        self.watched_wait(
+            &mut out,
+            &all(&|p| self.is(&self.run_of(p), false)),
+            &format!("start barrier: waits until {names} {be} at the start (run wires FALSE)"),
+            &short,
+            0,
+        );
         self.set_links(&mut out, |l| l.ready, true);
         out.push((
             0,
             format!("{c}handshake: start barrier: wait until {names} {be} ready too"),
         ));
-        self.wait_until(&mut out, &all(&|p| self.is(&self.ready_of(p), true)));
+        self.watched_wait(
+            &mut out,
+            &all(&|p| self.is(&self.ready_of(p), true)),
+            &format!("start barrier: waits until {names} {be} ready (ready wires TRUE)"),
+            &short,
+            0,
+        );
         self.set_links(&mut out, |l| l.run, true);
         out.push((
             0,
@@ -623,7 +799,13 @@ impl<'a> Hand<'a> {
             )
         });
         let running = all(&|p| self.is(&self.run_of(p), true));
-        self.wait_until(&mut out, &self.join("OR", &[running, restarted]));
+        self.watched_wait(
+            &mut out,
+            &self.join("OR", &[running, restarted]),
+            &format!("start barrier: waits until {names} {be} running (run wires TRUE)"),
+            &short,
+            0,
+        );
         let text = if partners.len() == 1 {
             format!("{names} was started again during the start barrier")
         } else {
@@ -668,7 +850,15 @@ impl<'a> Hand<'a> {
                     self.is(&self.run_of(to), false),
                 ],
             );
-            self.wait_until(&mut out, &cond);
+            let wire = self.wire_name(chs[ch].ack);
+            let to = self.name(to);
+            self.watched_wait(
+                &mut out,
+                &cond,
+                &format!("the end: waits until {to} has read the last message; wire {wire}"),
+                &format!("the end: waits for {to} (wire {wire})"),
+                0,
+            );
         }
         out
     }
@@ -699,12 +889,18 @@ impl<'a> Hand<'a> {
                         "DECL KrlMsgOpt_T {OPT_VAR}={{VL_Stop TRUE,Clear_P_Reset TRUE,Log_to_DB FALSE}}"
                     ));
                     out.push(format!("DECL INT {HANDLE_VAR}=0"));
+                    if self.input.bound.watch.is_some() {
+                        out.push(format!("DECL BOOL {CLEARED_VAR}=FALSE"));
+                    }
                 }
             }
             Language::Rapid => {
                 out.extend(vars.map(|v| format!("VAR num {v} := 0;")));
                 if decisions {
                     out.push(format!("VAR num {DECISION_VAR} := 0;"));
+                }
+                if self.input.bound.watch.is_some() && (!tx.is_empty() || !rx.is_empty()) {
+                    out.push(format!("VAR bool {LATE_VAR} := FALSE;"));
                 }
             }
             Language::UrScript => {}

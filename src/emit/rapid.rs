@@ -154,7 +154,8 @@ const DIALECT: Dialect = Dialect {
         d
     },
     // A clock per step time (`ClkRead` counts seconds).
-    timers: |n| {
+    // A watched wait needs no clock: `WaitUntil \MaxTime \TimeFlag` (see `handshake`).
+    timers: |n, _| {
         let d = (1..=n)
             .map(|k| format!("VAR clock skp_clock{k};"))
             .collect();

@@ -64,9 +64,10 @@ pub struct Dialect {
     /// The declarations of the variables used: whether `skp_branch` was, how many loop flags,
     /// whether [`STATE_VAR`] was.
     pub declare: fn(bool, usize, bool) -> Vec<String>,
-    /// For `n` step timers: their declarations, and the lines (with their levels) that start
-    /// the program before its first step.
-    pub timers: fn(usize) -> TimerLines,
+    /// For `n` step timers, and whether the waits on partners are watched (a program of a
+    /// cell, [`crate::bind::Watch`]): their declarations, and the lines (with their levels)
+    /// that start the program before its first step.
+    pub timers: fn(usize, bool) -> TimerLines,
 }
 
 /// Writes the program tree in `dialect`.
@@ -83,10 +84,11 @@ pub fn generate(input: &EmitInput, dialect: &Dialect) -> Generated {
         states: None,
         uses_state_var: false,
     };
-    let (timer_declarations, prologue) = match input.bound.timers.len() {
-        0 => (Vec::new(), Vec::new()),
-        n => (dialect.timers)(n),
-    };
+    let (timer_declarations, prologue) =
+        match (input.bound.timers.len(), input.bound.watch.is_some()) {
+            (0, false) => (Vec::new(), Vec::new()),
+            (n, watched) => (dialect.timers)(n, watched),
+        };
     for (level, line) in &prologue {
         w.out.line(*level, line);
     }

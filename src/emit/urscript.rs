@@ -178,15 +178,26 @@ const DIALECT: Dialect = Dialect {
     declare: |_, _, _| Vec::new(),
     // URScript has no clock to read: a thread adds each control cycle's time to every step's
     // counter (as PolyScope's timers do); a step's start sets its counter to 0.
-    timers: |n| {
-        let names: Vec<String> = (1..=n).map(|k| format!("skp_time{k}")).collect();
-        let mut lines = vec![(
-            0,
-            format!(
-                "# step times: {} count the seconds since their step started",
-                names.join(", ")
-            ),
-        )];
+    timers: |n, watched| {
+        let mut names: Vec<String> = (1..=n).map(|k| format!("skp_time{k}")).collect();
+        let mut lines = Vec::new();
+        if n > 0 {
+            lines.push((
+                0,
+                format!(
+                    "# step times: {} count the seconds since their step started",
+                    names.join(", ")
+                ),
+            ));
+        }
+        if watched {
+            let v = super::handshake::WATCH_VAR;
+            lines.push((
+                0,
+                format!("# {v} counts the seconds a wait on another controller lasts"),
+            ));
+            names.push(v.to_owned());
+        }
         for v in &names {
             lines.push((0, format!("global {v} = 0.0")));
         }

@@ -689,6 +689,9 @@ impl Reader<'_> {
         let timers_attr = caex_attr(r, "Timers")
             .and_then(|a| caex_value(self.file, a))
             .filter(|(v, _)| !v.trim().is_empty());
+        let handshake_timeout_attr = caex_attr(r, "HandshakeTimeout")
+            .and_then(|a| caex_value(self.file, a))
+            .filter(|(v, _)| !v.trim().is_empty());
         Resource {
             name,
             language,
@@ -696,6 +699,7 @@ impl Reader<'_> {
             controller_attr,
             program_attr,
             timers_attr,
+            handshake_timeout_attr,
             element: caex_element(r),
             id: r.attribute("ID").map(str::to_owned),
             skills,

@@ -44,6 +44,9 @@ pub enum X {
     /// Every / any of the parts (a handshake's compound wait in RAPID and URScript).
     All(Vec<X>),
     Any(Vec<X>),
+    /// The timer (KRL `$TIMER[n]`, URScript's `skp_waited`, RAPID's `\MaxTime`) has run at
+    /// least this many milliseconds: a watched wait lasts too long.
+    Late(String, f64),
 }
 
 impl From<KExpr> for X {
@@ -67,6 +70,14 @@ pub enum Ins {
     Halt,
     /// An output (`Number` or `Address`) set.
     SetOut(String, X),
+    /// A timer starts at 0 (KRL `$TIMER[n] = 0`, URScript `skp_waited = 0.0`, RAPID's
+    /// `WaitUntil \MaxTime`).
+    TimerStart(String),
+    /// The message of a wait that lasts shows on the pendant (KRL `Set_KrlMsg(#WAITING …)`,
+    /// RAPID `TPWrite`, URScript `textmsg` at its start) and is taken away (`Clr_KrlMsg`,
+    /// `TPErase`, `textmsg` at its end).
+    Show,
+    Clear,
     Assign(String, X),
     JumpIfNot(X, usize),
     Jump(usize),
@@ -144,7 +155,9 @@ pub fn parse(src: &str) -> Vec<Ins> {
                 labels.insert(c.trim_end_matches(':').to_ascii_uppercase(), out.len());
             }
             "HALT" => out.push(Ins::Halt),
-            // A stop's message to the operator.
+            // A wait's message to the operator; a stop's (`#QUIT`) is not modelled.
+            _ if c.contains("Set_KrlMsg(#WAITING") => out.push(Ins::Show),
+            _ if c.contains("Clr_KrlMsg(") => out.push(Ins::Clear),
             _ if c.contains("Set_KrlMsg(") || c.contains("= {") => {}
             "WAIT" => {
                 let rest = c[4..].trim_start();
@@ -152,7 +165,22 @@ pub fn parse(src: &str) -> Vec<Ins> {
                     out.push(Ins::WaitSec);
                 } else {
                     assert!(rest.to_ascii_uppercase().starts_with("FOR "));
-                    out.push(Ins::WaitFor(kexpr(&rest[4..]).into(), true));
+                    let c = &rest[4..];
+                    // A watched wait: `WAIT FOR (c) OR ($TIMER[n] >= ms)`.
+                    let x = match c.rsplit_once(" OR ($TIMER[") {
+                        Some((head, tail)) => {
+                            let (n, ms) = tail
+                                .strip_suffix(')')
+                                .and_then(|t| t.split_once("] >= "))
+                                .expect("a watched wait's timer");
+                            X::Any(vec![
+                                kexpr(head).into(),
+                                X::Late(format!("$TIMER[{n}]"), ms.parse().unwrap()),
+                            ])
+                        }
+                        None => kexpr(c).into(),
+                    };
+                    out.push(Ins::WaitFor(x, true));
                 }
             }
             "IF" => {
@@ -264,7 +292,11 @@ pub fn parse(src: &str) -> Vec<Ins> {
                     && !rhs.starts_with('=')
                 {
                     let lhs = lhs.trim();
-                    if let Some(n) = lhs.strip_prefix("$OUT[").and_then(|r| r.strip_suffix(']')) {
+                    if lhs.starts_with("$TIMER[") && rhs.trim() == "0" {
+                        out.push(Ins::TimerStart(lhs.to_owned()));
+                    } else if let Some(n) =
+                        lhs.strip_prefix("$OUT[").and_then(|r| r.strip_suffix(']'))
+                    {
                         out.push(Ins::SetOut(n.to_owned(), kexpr(rhs).into()));
                     } else if lhs
                         .chars()
@@ -283,6 +315,15 @@ pub fn parse(src: &str) -> Vec<Ins> {
         }
     }
     panic!("no END");
+}
+
+/// The timer and time limit of a watched wait.
+fn find_late(e: &X) -> Option<(String, f64)> {
+    match e {
+        X::Late(n, ms) => Some((n.clone(), *ms)),
+        X::Any(v) | X::All(v) => v.iter().find_map(find_late),
+        _ => None,
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -369,6 +410,18 @@ struct Ctl {
     cycles_left: usize,
     /// Its moves return when the motion has ended (URScript): no advance run.
     blocking: bool,
+    /// When each timer started (`Ins::TimerStart`).
+    timers: HashMap<String, f64>,
+    /// A watched wait that waits: when its time is up.
+    wake: Option<f64>,
+    /// The last watched wait's timer and time limit.
+    watched: Option<(String, f64)>,
+    /// Since when a wait's message shows on the pendant.
+    shown: Option<f64>,
+    /// The messages of waits: (shown, taken away).
+    messages: Vec<(f64, f64)>,
+    /// What went wrong with a message (shown too early, never taken away, taken away twice).
+    message_faults: Vec<String>,
 }
 
 /// A step run: its name, the start and end of its motion.
@@ -530,6 +583,24 @@ impl World<'_> {
             X::Same(a, b) => Val::B(self.value(c, a).truth() == self.value(c, b).truth()),
             X::All(v) => Val::B(v.iter().all(|x| self.value(c, x).truth())),
             X::Any(v) => Val::B(v.iter().any(|x| self.value(c, x).truth())),
+            X::Late(n, ms) => {
+                let x = &self.ctls[c];
+                let start = x
+                    .timers
+                    .get(n)
+                    .unwrap_or_else(|| panic!("R{}: timer {n} read before it was started", c + 1));
+                // As `deadline` computes it (no rounding apart).
+                Val::B(x.t >= start + ms)
+            }
+        }
+    }
+
+    /// When the watched wait `e` of controller `c` runs out of time.
+    fn deadline(&self, c: usize, e: &X) -> Option<f64> {
+        match e {
+            X::Late(n, ms) => Some(self.ctls[c].timers.get(n)? + ms),
+            X::Any(v) | X::All(v) => v.iter().find_map(|x| self.deadline(c, x)),
+            _ => None,
         }
     }
 
@@ -689,6 +760,13 @@ impl World<'_> {
         x.blocked = false;
         x.halted = false;
         x.restart_at = None;
+        x.wake = None;
+        x.timers.clear();
+        // A reset takes the program's messages away (`Clear_P_Reset`; RAPID and URScript
+        // hold none while stopped).
+        if let Some(since) = x.shown.take() {
+            x.messages.push((since, now));
+        }
         for other in &mut self.ctls {
             if other.blocked {
                 other.blocked = false;
@@ -701,6 +779,15 @@ impl World<'_> {
     /// it is started again).
     fn next_time(&self, c: usize) -> Option<f64> {
         let x = &self.ctls[c];
+        if x.blocked
+            && let Some(w) = x.wake
+            && !(x.ended || x.capped || x.halted)
+        {
+            return Some(match x.restart_at {
+                Some(r) => x.t.max(w).min(x.t.max(r)),
+                None => x.t.max(w),
+            });
+        }
         let asleep = x.ended || x.capped || x.blocked || x.halted;
         match (x.restart_at, asleep) {
             (Some(r), true) => Some(x.t.max(r)),
@@ -713,16 +800,30 @@ impl World<'_> {
     fn step(&mut self, c: usize, rng: &mut Rng, cap: usize) {
         if let Some(r) = self.ctls[c].restart_at {
             let x = &self.ctls[c];
-            if x.t >= r || x.ended || x.capped || x.blocked || x.halted {
+            // A watched wait whose time is up before the start again shows its message first.
+            let waking = x.blocked && x.wake.is_some_and(|w| w < r);
+            if x.t >= r || x.ended || x.capped || (x.blocked && !waking) || x.halted {
                 self.restart(c, r);
                 return;
             }
+        }
+        // A watched wait whose time is up looks again.
+        if self.ctls[c].blocked
+            && let Some(w) = self.ctls[c].wake.take()
+        {
+            let x = &mut self.ctls[c];
+            x.blocked = false;
+            x.t = x.t.max(w);
         }
         let ins = self.ctls[c].ins[self.ctls[c].pc].clone();
         let eps = self.ctls[c].eps;
         match ins {
             Ins::Step(name) => {
                 let ctl = &mut self.ctls[c];
+                if ctl.shown.is_some() {
+                    ctl.message_faults
+                        .push(format!("step {name} started while a wait's message showed"));
+                }
                 if ctl.steps.len() >= cap {
                     ctl.capped = true;
                     return;
@@ -756,8 +857,50 @@ impl World<'_> {
                     self.ctls[c].pc += 1;
                     self.ctls[c].t += eps;
                 } else {
-                    self.ctls[c].blocked = true;
+                    let d = self.deadline(c, &e);
+                    let x = &mut self.ctls[c];
+                    x.blocked = true;
+                    x.wake = d;
                 }
+                if let Some(late) = find_late(&e) {
+                    self.ctls[c].watched = Some(late);
+                }
+            }
+            Ins::TimerStart(n) => {
+                let x = &mut self.ctls[c];
+                x.timers.insert(n, x.t);
+                x.pc += 1;
+                x.t += eps;
+            }
+            Ins::Show => {
+                let x = &mut self.ctls[c];
+                let (n, ms) = x.watched.clone().expect("a message after a watched wait");
+                let waited = x.t - x.timers[&n];
+                if x.t < x.timers[&n] + ms {
+                    x.message_faults.push(format!(
+                        "its wait's message showed at {:.3}, after {waited:.3} ms, before the {ms} ms were up",
+                        x.t
+                    ));
+                }
+                if x.shown.is_some() {
+                    x.message_faults
+                        .push(format!("a second message showed at {:.3}", x.t));
+                }
+                x.shown = Some(x.t);
+                x.pc += 1;
+                x.t += eps;
+            }
+            Ins::Clear => {
+                let x = &mut self.ctls[c];
+                match x.shown.take() {
+                    Some(since) => x.messages.push((since, x.t)),
+                    None => x.message_faults.push(format!(
+                        "took a message away at {:.3} that was not shown",
+                        x.t
+                    )),
+                }
+                x.pc += 1;
+                x.t += eps;
             }
             Ins::SetOut(n, e) => {
                 let v = self.value(c, &e).truth();
@@ -808,6 +951,10 @@ impl World<'_> {
             }
             Ins::End => {
                 let x = &mut self.ctls[c];
+                if x.shown.is_some() {
+                    x.message_faults
+                        .push("ended while a wait's message showed".to_owned());
+                }
                 x.ended = true;
                 if x.cycles_left > 0 && x.restart_at.is_none() {
                     x.cycles_left -= 1;
@@ -966,6 +1113,11 @@ pub fn parse_structured(text: &str, lang: Lang, wires: &Wires, me: usize) -> Vec
     };
     let atom = |c: &str| -> Option<X> {
         let c = c.trim();
+        match c {
+            "FALSE" | "False" => return Some(X::Truth(false)),
+            "TRUE" | "True" => return Some(X::Truth(true)),
+            _ => {}
+        }
         // The handshakes' forms.
         for (op, negate) in [(" != ", true), (" == ", false), (" = ", false)] {
             if let Some((a, b)) = c.split_once(op)
@@ -1134,10 +1286,39 @@ pub fn parse_structured(text: &str, lang: Lang, wires: &Wires, me: usize) -> Vec
             if let Some(c) = l.strip_prefix("WaitUntil ") {
                 let c = c.trim_end_matches(';');
                 let c = c.strip_suffix(" \\PollRate:=0.04").unwrap_or(c);
-                match c.strip_prefix("\\InPos, ") {
-                    Some(c) => out.push(Ins::WaitFor(cond(c), true)),
-                    None => out.push(Ins::WaitFor(cond(c), false)),
+                let (c, settle) = match c.strip_prefix("\\InPos, ") {
+                    Some(c) => (c, true),
+                    None => (c, false),
+                };
+                // A watched wait: `c \MaxTime:=s \TimeFlag:=v` (its time counted once the
+                // robot stands).
+                if let Some((c, rest)) = c.split_once(" \\MaxTime:=") {
+                    let (s, flag) = rest.split_once(" \\TimeFlag:=").expect("\\TimeFlag");
+                    let timer = "\\MaxTime".to_owned();
+                    if settle {
+                        out.push(Ins::WaitSec);
+                    }
+                    out.push(Ins::TimerStart(timer.clone()));
+                    let ms = s.parse::<f64>().unwrap() * 1000.0;
+                    out.push(Ins::WaitFor(
+                        X::Any(vec![cond(c), X::Late(timer, ms)]),
+                        settle,
+                    ));
+                    out.push(Ins::Assign(
+                        flag.to_ascii_uppercase(),
+                        X::Not(Box::new(cond(c))),
+                    ));
+                    continue;
                 }
+                out.push(Ins::WaitFor(cond(c), settle));
+                continue;
+            }
+            if l.starts_with("TPWrite ") {
+                out.push(Ins::Show);
+                continue;
+            }
+            if l == "TPErase;" {
+                out.push(Ins::Clear);
                 continue;
             }
             if let Some(rest) = l.strip_prefix("SetDO ") {
@@ -1164,13 +1345,50 @@ pub fn parse_structured(text: &str, lang: Lang, wires: &Wires, me: usize) -> Vec
                 out.push(Ins::Halt);
                 continue;
             }
+            // The clock thread (`skp_waited` is a timer here): `thread skp_clock():`
+            // `while True:` … `end` `end`, and its start.
+            if l == "thread skp_clock():" {
+                let mut ends = 0;
+                while ends < 2 {
+                    ends += usize::from(lines[i] == "end");
+                    i += 1;
+                }
+                continue;
+            }
+            if l == "skp_clock_thread = run skp_clock()" {
+                continue;
+            }
+            if l == "skp_waited = 0.0" {
+                out.push(Ins::TimerStart("skp_waited".to_owned()));
+                continue;
+            }
+            // A wait's message in the log: at its start, and when it has ended.
+            if l.starts_with("textmsg(\"skillpost: ") {
+                out.push(if l.ends_with("the wait has ended\")") {
+                    Ins::Clear
+                } else {
+                    Ins::Show
+                });
+                continue;
+            }
             // A wait: `while c:` `sync()` `end`.
             if let Some(c) = l.strip_prefix("while ").and_then(|c| c.strip_suffix(':'))
                 && lines.get(i) == Some(&"sync()")
                 && lines.get(i + 1) == Some(&"end")
             {
                 i += 2;
-                if c == "not is_steady()" {
+                // A watched wait: `while not ((c) or (skp_waited >= s)):`.
+                let watched = c
+                    .strip_prefix("not (")
+                    .and_then(|c| c.strip_suffix(")"))
+                    .and_then(|c| c.rsplit_once(" or (skp_waited >= "));
+                if let Some((head, s)) = watched {
+                    let ms = s.trim_end_matches(')').parse::<f64>().unwrap() * 1000.0;
+                    out.push(Ins::WaitFor(
+                        X::Any(vec![cond(head), X::Late("skp_waited".to_owned(), ms)]),
+                        false,
+                    ));
+                } else if c == "not is_steady()" {
                     out.push(Ins::WaitSec);
                 } else {
                     out.push(Ins::WaitFor(X::Not(Box::new(cond(c))), false));
@@ -1325,13 +1543,24 @@ pub fn cell_blackboard(langs: &[Lang], m: usize) -> String {
             }
         },
         &|k, text| {
-            text.replace(
+            let mut text = text.replace(
                 "<Value>kr15-2.irl</Value>",
                 &format!("<Value>kr15-2-{}.irl</Value>", langs[k - 1].ext()),
-            )
+            );
+            // A wait on a partner shows on the pendant after 50 ms (steps here take 0.1 to
+            // 500 ms: the default 10 s would never show).
+            let at = text.find('\n').unwrap();
+            text.insert_str(
+                at,
+                &format!("\n<Attribute Name=\"HandshakeTimeout\" AttributeDataType=\"xs:double\"><Value>{HANDSHAKE_TIMEOUT_S}</Value></Attribute>"),
+            );
+            text
         },
     )
 }
+
+/// The `HandshakeTimeout` of the robots of [`cell_blackboard`], in seconds.
+pub const HANDSHAKE_TIMEOUT_S: f64 = 0.05;
 
 /// Puts each skill step of a chart on one of `n` robots at random; returns the chart and each
 /// step's robot (from 0), by step name.
@@ -1443,6 +1672,8 @@ pub enum Mutation {
     NoBarrier,
     /// No restart guard: every wait on a partner waits for its message only, and never stops.
     NoGuard,
+    /// A wait's message is never taken away from the pendant.
+    MessageKept,
 }
 
 /// The line that closes the block opened at line `i` (`ENDIF`, URScript's `end`, as deep).
@@ -1460,47 +1691,109 @@ fn block_end(lines: &[&str], i: usize, lang: Lang) -> usize {
             .unwrap()
 }
 
+/// The end (the line after it) of a watched wait on a partner that begins at line `i`: its
+/// timer's start, the wait with a time limit, and the block that shows the message, waits on
+/// and takes the message away (`IF NOT (…)` … `ENDIF`, `IF skp_late THEN` … `ENDIF`,
+/// `if not (…):` … `end`).
+fn unit_end(lines: &[&str], i: usize, lang: Lang) -> usize {
+    let opens = |l: &str| match lang {
+        Lang::Krl => l.starts_with("IF NOT ("),
+        Lang::Rapid => l == "IF skp_late THEN",
+        Lang::UrScript => l.starts_with("if not ("),
+    };
+    let j = (i..lines.len())
+        .find(|&j| opens(lines[j].trim()))
+        .unwrap_or_else(|| panic!("no watched wait at line {}: {}", i + 1, lines[i]));
+    block_end(lines, j, lang) + 1
+}
+
+/// `src` broken as `m` says.
 fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
     let lines: Vec<&str> = src.lines().collect();
     let barrier = |i: usize| i > 0 && lines[i - 1].contains("handshake: start barrier");
+    let keep = |drop: &[std::ops::Range<usize>]| -> String {
+        lines
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| !drop.iter().any(|r| r.contains(k)))
+            .map(|(_, l)| *l)
+            .collect::<Vec<_>>()
+            .join("\n")
+            + "\n"
+    };
     match m {
         Mutation::NoBarrier => {
-            let mut out = Vec::new();
-            let mut skip = 0;
-            for (i, l) in lines.iter().enumerate() {
-                if skip > 0 {
-                    skip -= 1;
-                    continue;
-                }
+            let mut drop = Vec::new();
+            for i in 0..lines.len() {
                 if barrier(i) {
-                    // `while …:` `sync()` `end` in URScript
-                    skip = if lang == Lang::UrScript { 2 } else { 0 };
-                    continue;
+                    drop.push(i..unit_end(&lines, i, lang));
                 }
                 // The barrier's stop.
                 if lines
                     .get(i + 1)
                     .is_some_and(|n| n.contains("during the start barrier: stop"))
                 {
-                    skip = block_end(&lines, i, lang) - i;
-                    continue;
+                    drop.push(i..block_end(&lines, i, lang) + 1);
                 }
-                out.push(*l);
             }
-            return out.join("\n") + "\n";
+            return keep(&drop);
         }
         Mutation::NoGuard => {
-            let (cut, head, tail) = match lang {
-                Lang::Krl => (") OR (NOT ", "WAIT FOR (", ""),
-                Lang::Rapid => (") OR (DInput(", "WaitUntil \\InPos, ((", ");"),
-                Lang::UrScript => (") or (not ", "while not ((", "):"),
+            // Every wait on a message waits for the message only: its guard (the partner's
+            // run wire) becomes FALSE, and the stops go.
+            let (or, never) = match lang {
+                Lang::Krl => (" OR (", "(FALSE)"),
+                Lang::Rapid => (" OR (", "(FALSE)"),
+                Lang::UrScript => (" or (", "(False)"),
+            };
+            let unguard = |l: &str| -> String {
+                let mut out = String::new();
+                let mut rest = l;
+                while let Some(at) = rest.find("skp_") {
+                    let (head, tail) = rest.split_at(at);
+                    out.push_str(head);
+                    // `skp_rxN)` or `skp_txN)` and its guard ` OR (…)` after it.
+                    let toggle = tail.len() > 6
+                        && (tail.starts_with("skp_rx") || tail.starts_with("skp_tx"));
+                    let digits = tail[6.min(tail.len())..]
+                        .bytes()
+                        .take_while(u8::is_ascii_digit)
+                        .count();
+                    let after = 6 + digits;
+                    if toggle && digits > 0 && tail[after..].starts_with(&format!("){or}")) {
+                        out.push_str(&tail[..after + 1 + or.len() - 1]);
+                        let open = after + 1 + or.len() - 1;
+                        // The guard's parentheses.
+                        let mut depth = 0;
+                        let close = tail[open..]
+                            .char_indices()
+                            .find_map(|(k, c)| {
+                                match c {
+                                    '(' => depth += 1,
+                                    ')' => {
+                                        depth -= 1;
+                                        if depth == 0 {
+                                            return Some(open + k);
+                                        }
+                                    }
+                                    _ => {}
+                                }
+                                None
+                            })
+                            .unwrap();
+                        out.push_str(never);
+                        rest = &tail[close + 1..];
+                    } else {
+                        out.push_str(&tail[..4]);
+                        rest = &tail[4..];
+                    }
+                }
+                out.push_str(rest);
+                out
             };
             let mut out: Vec<String> = Vec::new();
             let mut i = 0;
             while i < lines.len() {
-                let l = lines[i];
-                let t = l.trim_start();
-                let indent = &l[..l.len() - t.len()];
                 if lines
                     .get(i + 1)
                     .is_some_and(|n| n.contains("a partner was started again"))
@@ -1509,30 +1802,26 @@ fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
                     i = block_end(&lines, i, lang) + 1;
                     continue;
                 }
-                // A handshake's wait (on a toggle), not one of the chart's.
-                if !barrier(i)
-                    && t.contains("skp_")
-                    && t.starts_with(head)
-                    && let Some(at) = t.rfind(cut)
-                {
-                    let keep = &t[head.len()..at];
-                    let open = &head[..head.len() - 1];
-                    let open = if lang == Lang::UrScript {
-                        "while not ("
-                    } else {
-                        open
-                    };
-                    out.push(format!(
-                        "{indent}{open}{keep}{}",
-                        if lang == Lang::UrScript { "):" } else { tail }
-                    ));
-                    i += 1;
-                    continue;
-                }
-                out.push(l.to_owned());
+                out.push(if barrier(i) {
+                    lines[i].to_owned()
+                } else {
+                    unguard(lines[i])
+                });
                 i += 1;
             }
             return out.join("\n") + "\n";
+        }
+        Mutation::MessageKept => {
+            let clears = |l: &str| match lang {
+                Lang::Krl => l.contains("Clr_KrlMsg("),
+                Lang::Rapid => l == "TPErase;",
+                Lang::UrScript => l.starts_with("textmsg(") && l.ends_with("the wait has ended\")"),
+            };
+            let drop: Vec<_> = (0..lines.len())
+                .filter(|&i| clears(lines[i].trim()))
+                .map(|i| i..i + 1)
+                .collect();
+            return keep(&drop);
         }
         _ => {}
     }
@@ -1542,68 +1831,51 @@ fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
             .enumerate()
             .position(|(i, l)| pred(i, l.trim()))
     };
-    let hear_wait = |l: &str| match lang {
-        Lang::Krl => l.starts_with("WAIT FOR ($IN["),
-        Lang::Rapid => l.starts_with("WaitUntil \\InPos, ((DInput("),
-        Lang::UrScript => l.starts_with("while not ((get_standard_digital_in("),
-    };
-    // A hear toggles its `skp_rxN` right before its waits.
+    // A hear toggles its `skp_rxN` right before its wait.
     let after_toggle = |i: usize| {
-        lines[i.saturating_sub(4)..i]
-            .iter()
-            .any(|l| l.contains("skp_rx"))
-    };
-    // The lines to drop.
-    let drop: Vec<usize> = match m {
-        Mutation::None | Mutation::NoBarrier | Mutation::NoGuard => Vec::new(),
-        Mutation::DroppedWait => pick(&|i, l| hear_wait(l) && after_toggle(i) && !barrier(i))
-            .map(|i| match lang {
-                // `while …:` `sync()` `end`
-                Lang::UrScript => vec![i, i + 1, i + 2],
-                _ => vec![i],
-            })
-            .unwrap_or_default(),
-        Mutation::AdvanceRun => match lang {
-            Lang::Krl => pick(&|i, l| {
-                l.starts_with("WAIT FOR ($IN[")
-                    && i > 0
-                    && lines[i - 1].trim_start().starts_with(";handshake: tell")
-            })
-            .map(|i| vec![i])
-            .unwrap_or_default(),
-            // RAPID: the tell's wait without `\InPos` (not a chart's wait, which stands too).
-            Lang::Rapid => {
-                let Some(i) = pick(&|i, l| {
-                    l.starts_with("WaitUntil \\InPos, ((DInput(")
-                        && i > 0
-                        && lines[i - 1].trim_start().starts_with("! handshake: tell")
-                }) else {
-                    return src.to_owned();
-                };
-                let mut out: Vec<String> = lines.iter().map(|l| (*l).to_owned()).collect();
-                out[i] = out[i].replacen("WaitUntil \\InPos, ", "WaitUntil ", 1);
-                return out.join("\n") + "\n";
-            }
-            // URScript has no advance run: its moves return at their target.
-            Lang::UrScript => Vec::new(),
-        },
-        Mutation::DecidesTwice => {
-            return match lang {
-                Lang::Krl => src.replacen("IF skp_got == 0 THEN", "IF $IN[1] THEN", 1),
-                Lang::Rapid => src.replacen("IF skp_got = 0 THEN", "IF di_Part_OK = 1 THEN", 1),
-                Lang::UrScript => {
-                    src.replacen("if skp_got == 0:", "if get_standard_digital_in(1):", 1)
-                }
-            };
+        i > 0 && {
+            let t = lines[i - 1].trim();
+            t.starts_with("skp_rx")
+                && (t.contains("NOT skp_rx")
+                    || t.contains("not skp_rx")
+                    || t.contains("1 - skp_rx"))
         }
     };
-    lines
-        .iter()
-        .enumerate()
-        .filter(|(k, _)| !drop.contains(k))
-        .map(|(_, l)| *l)
-        .collect::<Vec<_>>()
-        .join("\n")
+    let tell = |i: usize| i > 0 && lines[i - 1].contains("handshake: tell");
+    match m {
+        Mutation::None | Mutation::NoBarrier | Mutation::NoGuard | Mutation::MessageKept => {
+            src.to_owned()
+        }
+        Mutation::DroppedWait => match pick(&|i, _| after_toggle(i) && !barrier(i)) {
+            Some(i) => keep(std::slice::from_ref(&(i..unit_end(&lines, i, lang)))),
+            None => src.to_owned(),
+        },
+        Mutation::AdvanceRun => match lang {
+            Lang::Krl => match pick(&|i, _| tell(i)) {
+                Some(i) => keep(std::slice::from_ref(&(i..unit_end(&lines, i, lang)))),
+                None => src.to_owned(),
+            },
+            // RAPID: the tell's waits without `\InPos` (not a chart's wait, which stands too).
+            Lang::Rapid => {
+                let Some(i) = pick(&|i, _| tell(i)) else {
+                    return src.to_owned();
+                };
+                let end = unit_end(&lines, i, lang);
+                let mut out: Vec<String> = lines.iter().map(|l| (*l).to_owned()).collect();
+                for l in &mut out[i..end] {
+                    *l = l.replacen("WaitUntil \\InPos, ", "WaitUntil ", 1);
+                }
+                out.join("\n") + "\n"
+            }
+            // URScript has no advance run: its moves return at their target.
+            Lang::UrScript => src.to_owned(),
+        },
+        Mutation::DecidesTwice => match lang {
+            Lang::Krl => src.replacen("IF skp_got == 0 THEN", "IF $IN[1] THEN", 1),
+            Lang::Rapid => src.replacen("IF skp_got = 0 THEN", "IF di_Part_OK = 1 THEN", 1),
+            Lang::UrScript => src.replacen("if skp_got == 0:", "if get_standard_digital_in(1):", 1),
+        },
+    }
 }
 
 /// Runs a compiled cell `runs` times with random timing and inputs; the first failure, if any.
@@ -1615,7 +1887,7 @@ pub fn co_simulate(
     runs: usize,
     mutation: Mutation,
     only: Option<Lang>,
-) -> Result<(), String> {
+) -> Result<Report, String> {
     co_simulate_in(
         chart,
         cell,
@@ -1737,6 +2009,14 @@ fn check_run(
     Ok(())
 }
 
+/// What the co-simulation saw besides the faults it reports.
+#[derive(Debug, Default, Clone)]
+pub struct Report {
+    /// The messages of waits on partners that lasted (shown and taken away again), by the
+    /// language of the program that showed them.
+    pub messages: std::collections::BTreeMap<String, usize>,
+}
+
 /// [`co_simulate`] with the operator starting the programs as `scenario` says.
 #[allow(clippy::too_many_arguments)]
 pub fn co_simulate_in(
@@ -1748,7 +2028,8 @@ pub fn co_simulate_in(
     mutation: Mutation,
     only: Option<Lang>,
     scenario: Scenario,
-) -> Result<(), String> {
+) -> Result<Report, String> {
+    let mut report = Report::default();
     let parsed: Vec<Option<(Vec<Ins>, String)>> = cell
         .programs
         .iter()
@@ -1815,6 +2096,12 @@ pub fn co_simulate_in(
                     restart_at: None,
                     cycles_left: cycles - 1,
                     blocking: false,
+                    timers: HashMap::new(),
+                    wake: None,
+                    watched: None,
+                    shown: None,
+                    messages: Vec::new(),
+                    message_faults: Vec::new(),
                 }
             })
             .collect();
@@ -1862,12 +2149,18 @@ pub fn co_simulate_in(
                     c + 1
                 ));
             }
+            if let Some(why) = x.message_faults.first() {
+                return fail(format!("R{} {why}", c + 1));
+            }
             if x.restart_at.is_some() {
                 return fail(format!("R{} was never started again as planned", c + 1));
             }
         }
         if let Some(why) = w.deadlock() {
             return fail(why);
+        }
+        for (x, lang) in w.ctls.iter().zip(&cell.langs) {
+            *report.messages.entry(format!("{lang:?}")).or_default() += x.messages.len();
         }
         let ended = w.ctls.iter().all(|x| x.ended);
         // Every run of each program: the past ones, then this one.
@@ -1962,7 +2255,7 @@ pub fn co_simulate_in(
             }
         }
     }
-    Ok(())
+    Ok(report)
 }
 
 /// Wires from each robot of a random cell to each other: a strobe, the data bits of the
