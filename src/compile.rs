@@ -902,6 +902,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         if !cx.diags.has_errors() {
             check_generated(&outputs, &cx.sources, user_template, &mut cx.diags);
         }
+        lap(&mut out, "check");
         out.outputs = outputs;
         out.output_programs = output_programs;
         out.program_names = programs.iter().filter_map(|p| p.name.clone()).collect();

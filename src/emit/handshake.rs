@@ -35,6 +35,11 @@ const OPT_VAR: &str = "skp_opt";
 const HANDLE_VAR: &str = "skp_handle";
 /// KRL: what `Clr_KrlMsg` answers (`.dat`).
 const CLEARED_VAR: &str = "skp_cleared";
+/// KRL: the program's routines of its handshakes ([`Hand::routines`]).
+const STOP: &str = "skp_stop";
+const WATCH: &str = "skp_watch";
+const SHOW: &str = "skp_show";
+const HIDE: &str = "skp_hide";
 /// RAPID: whether a watched wait ran out of time (`\TimeFlag`, module data).
 const LATE_VAR: &str = "skp_late";
 /// URScript: the seconds a watched wait has lasted (advanced by the program's clock thread).
@@ -302,34 +307,20 @@ impl<'a> Hand<'a> {
         };
         let after = seconds(w.after_ms);
         match self.lang {
+            // The program's routines (see `routines`) start the timer, show and clear the
+            // message; the text goes into the message first.
             Language::Krl => {
                 let t = w.timer;
-                // The timer starts when the motion before has ended (`WAIT SEC 0` stops the
-                // advance run, as the `WAIT FOR` after it would).
-                out.push((0, "WAIT SEC 0".to_owned()));
-                out.push((0, format!("$TIMER[{t}] = 0")));
-                out.push((0, format!("$TIMER_STOP[{t}] = FALSE")));
+                out.push((0, format!("{WATCH}()")));
                 out.push((
                     0,
                     format!("WAIT FOR ({cond}) OR ($TIMER[{t}] >= {})", w.after_ms),
                 ));
                 out.push((0, format!("IF NOT ({cond}) THEN")));
-                out.push((
-                    1,
-                    format!(
-                        "{MSG_VAR} = {{Modul[] \"skillpost\", Nr {}, Msg_Txt[] \"{}\"}}",
-                        message_nr(nr),
-                        fit(text, short)
-                    ),
-                ));
-                out.push((
-                    1,
-                    format!(
-                        "{HANDLE_VAR} = Set_KrlMsg(#WAITING, {MSG_VAR}, {PAR_VAR}[], {OPT_VAR})"
-                    ),
-                ));
+                out.push((1, format!("{MSG_VAR}.Msg_Txt[] = \"{}\"", fit(text, short))));
+                out.push((1, format!("{SHOW}({})", message_nr(nr))));
                 out.push((1, format!("WAIT FOR {cond}")));
-                out.push((1, format!("{CLEARED_VAR} = Clr_KrlMsg({HANDLE_VAR})")));
+                out.push((1, format!("{HIDE}()")));
                 out.push((0, "ENDIF".to_owned()));
             }
             Language::Rapid => {
@@ -465,14 +456,7 @@ impl<'a> Hand<'a> {
             "{} started again; this program waited at localId {id}",
             self.name(p)
         );
-        self.stop_if(
-            out,
-            &self.is(&run, false),
-            text,
-            &short,
-            id,
-            "while this program waited for it",
-        );
+        self.stop_if(out, &self.is(&run, false), text, &short, id, "");
     }
 
     /// `IF cond`: a message to the operator, and the program stops for good (until it is
@@ -489,37 +473,38 @@ impl<'a> Hand<'a> {
         let text = clean(text);
         let c = self.comment();
         match self.lang {
+            // The text into the message, then the program's routine `skp_stop` (see
+            // `routines`): KRL takes no string literal as an argument.
             Language::Krl => {
-                let short = fit(&text, short);
-                let nr = message_nr(nr);
                 out.push((0, format!("IF {cond} THEN")));
-                out.push((1, format!("{c}handshake: a partner was started again {when}: stop until this program is started again")));
                 out.push((
                     1,
-                    format!(
-                        "{MSG_VAR} = {{Modul[] \"skillpost\", Nr {nr}, Msg_Txt[] \"{short}\"}}"
-                    ),
+                    format!("{c}handshake: a partner was started again{when}: stop"),
                 ));
                 out.push((
                     1,
-                    format!("{HANDLE_VAR} = Set_KrlMsg(#QUIT, {MSG_VAR}, {PAR_VAR}[], {OPT_VAR})"),
+                    format!("{MSG_VAR}.Msg_Txt[] = \"{}\"", fit(&text, short)),
                 ));
-                out.push((1, "LOOP".to_owned()));
-                out.push((2, "HALT".to_owned()));
-                out.push((1, "ENDLOOP".to_owned()));
+                out.push((1, format!("{STOP}({})", message_nr(nr))));
                 out.push((0, "ENDIF".to_owned()));
             }
             Language::Rapid => {
                 let short = fit(&text, short);
                 out.push((0, format!("IF {cond} THEN")));
-                out.push((1, format!("{c}handshake: a partner was started again {when}: stop until this program is started again")));
+                out.push((
+                    1,
+                    format!("{c}handshake: a partner was started again{when}: stop"),
+                ));
                 out.push((1, format!("ErrWrite \"Partner started again\", \"{short}\" \\RL2:=\"Start this task again from main.\";")));
                 out.push((1, "EXIT;".to_owned()));
                 out.push((0, "ENDIF".to_owned()));
             }
             Language::UrScript => {
                 out.push((0, format!("if {cond}:")));
-                out.push((1, format!("{c}handshake: a partner was started again {when}: stop until this program is started again")));
+                out.push((
+                    1,
+                    format!("{c}handshake: a partner was started again{when}: stop"),
+                ));
                 out.push((1, format!("popup(\"{text}. Start this program again.\", title=\"skillpost\", error=True, blocking=False)")));
                 out.push((1, "halt".to_owned()));
                 out.push((0, "end".to_owned()));
@@ -820,7 +805,7 @@ impl<'a> Hand<'a> {
             &text,
             "a partner was started again during the start barrier",
             0,
-            "during the start barrier",
+            " during the start barrier",
         );
         self.set_links(&mut out, |l| l.ready, false);
         out
@@ -859,6 +844,54 @@ impl<'a> Hand<'a> {
                 &format!("the end: waits for {to} (wire {wire})"),
                 0,
             );
+        }
+        out
+    }
+
+    /// The routines the handshakes call, written after the program (KRL only: a message takes
+    /// a structure, a call and a handle there, where RAPID and URScript need one statement).
+    /// `skp_stop(nr)` shows `skp_msg` as an acknowledgement message and stops for good;
+    /// `skp_watch()` starts the timer of a wait on a partner once the motion before has ended;
+    /// `skp_show(nr)` shows `skp_msg` as a wait message, `skp_hide()` takes it away.
+    pub fn routines(&self) -> Vec<String> {
+        let (tx, rx) = self.own();
+        if self.lang != Language::Krl || (tx.is_empty() && rx.is_empty()) {
+            return Vec::new();
+        }
+        let mut out = vec![
+            format!("DEF {STOP}(nr:IN)"),
+            "  ;handshake: a partner was started again: the message in skp_msg (acknowledge), then stop until this program is started again".to_owned(),
+            "  DECL INT nr".to_owned(),
+            format!("  {MSG_VAR}.Nr = nr"),
+            format!("  {HANDLE_VAR} = Set_KrlMsg(#QUIT, {MSG_VAR}, {PAR_VAR}[], {OPT_VAR})"),
+            "  LOOP".to_owned(),
+            "    HALT".to_owned(),
+            "  ENDLOOP".to_owned(),
+            "END".to_owned(),
+        ];
+        if let Some(w) = self.input.bound.watch {
+            let t = w.timer;
+            out.extend([
+                String::new(),
+                format!("DEF {WATCH}( )"),
+                format!("  ;handshake: a wait on a partner begins: $TIMER[{t}] counts its milliseconds from when the motion before has ended (WAIT SEC 0 stops the advance run)"),
+                "  WAIT SEC 0".to_owned(),
+                format!("  $TIMER[{t}] = 0"),
+                format!("  $TIMER_STOP[{t}] = FALSE"),
+                "END".to_owned(),
+                String::new(),
+                format!("DEF {SHOW}(nr:IN)"),
+                format!("  ;handshake: a wait on a partner lasts longer than {} s: the message in skp_msg (wait) until {HIDE}", seconds(w.after_ms)),
+                "  DECL INT nr".to_owned(),
+                format!("  {MSG_VAR}.Nr = nr"),
+                format!("  {HANDLE_VAR} = Set_KrlMsg(#WAITING, {MSG_VAR}, {PAR_VAR}[], {OPT_VAR})"),
+                "END".to_owned(),
+                String::new(),
+                format!("DEF {HIDE}( )"),
+                "  ;handshake: the wait has ended: its message goes".to_owned(),
+                format!("  {CLEARED_VAR} = Clr_KrlMsg({HANDLE_VAR})"),
+                "END".to_owned(),
+            ]);
         }
         out
     }

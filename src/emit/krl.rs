@@ -100,12 +100,15 @@ impl Profile for Krl {
             super::handshake::write(&mut writer.out, 0, h.finish());
         }
         let mut declarations = declarations(input, writer.uses_branch_var);
+        let mut routines = Vec::new();
         if let Some(h) = &writer.hand {
             declarations.extend(h.declarations());
+            routines = h.routines();
         }
         Some(Generated {
             steps: writer.out.out,
             declarations,
+            routines,
         })
     }
 }

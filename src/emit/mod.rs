@@ -96,6 +96,9 @@ pub struct Generated {
     pub steps: String,
     /// `{{declarations}}`: one line each.
     pub declarations: Vec<String>,
+    /// `{{definitions}}`, after the IRL definitions: the program's own routines (a cell's
+    /// handshakes), one line each.
+    pub routines: Vec<String>,
 }
 
 /// One generated file: its extension (`src`, `dat`, `mod`, `script`) and its bytes.
@@ -367,6 +370,18 @@ pub fn emit_files(
         ));
         return None;
     }
+    let has_definitions = template
+        .files
+        .iter()
+        .any(|(_, t)| t.lines().any(|l| block_name(l) == Some("definitions")));
+    if !generated.routines.is_empty() && !has_definitions {
+        // The program would call routines nothing defines.
+        diags.push(Diagnostic::error(
+            Code::BadTemplate,
+            "output template: the program calls the routines of its handshakes between controllers, but the template has no `{{definitions}}` line to write them".to_owned(),
+        ));
+        return None;
+    }
     let mut out = Vec::new();
     for (ext, body) in &template.files {
         let mut text = String::with_capacity(body.len() + 1024);
@@ -392,6 +407,16 @@ pub fn emit_files(
                         let def = &input.irls[irl].definitions[d];
                         text.push_str(nl);
                         for l in &def.lines {
+                            if !l.is_empty() {
+                                text.push_str(indent);
+                            }
+                            text.push_str(l);
+                            text.push_str(nl);
+                        }
+                    }
+                    if !generated.routines.is_empty() {
+                        text.push_str(nl);
+                        for l in &generated.routines {
                             if !l.is_empty() {
                                 text.push_str(indent);
                             }

@@ -107,6 +107,7 @@ pub fn generate(input: &EmitInput, dialect: &Dialect) -> Generated {
     Generated {
         steps: w.out.out,
         declarations,
+        routines: Vec::new(),
     }
 }
 

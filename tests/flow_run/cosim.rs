@@ -105,7 +105,8 @@ enum Open {
 
 /// Parses a KRL `.src` main program into flat statements.
 pub fn parse(src: &str) -> Vec<Ins> {
-    let lines: Vec<&str> = src.lines().collect();
+    let expanded = inline_routines(src);
+    let lines: Vec<&str> = expanded.iter().map(String::as_str).collect();
     let mut i = lines
         .iter()
         .position(|l| l.trim_start().starts_with("DEF "))
@@ -324,6 +325,54 @@ fn find_late(e: &X) -> Option<(String, f64)> {
         X::Any(v) | X::All(v) => v.iter().find_map(find_late),
         _ => None,
     }
+}
+
+/// The lines of a KRL `.src` with each call in the main program of a routine defined after it
+/// (`DEF name(…)` … `END`, the handshakes' `skp_stop`, `skp_watch`, …) replaced by that
+/// routine's body (its declarations left out; its parameters are not read here).
+fn inline_routines(src: &str) -> Vec<String> {
+    let lines: Vec<&str> = src.lines().collect();
+    let is_def = |l: &str| l.trim_start().to_ascii_uppercase().starts_with("DEF ");
+    let is_end = |l: &str| code(l.trim()).eq_ignore_ascii_case("END");
+    let main = lines.iter().position(|l| is_def(l)).expect("DEF");
+    let main_end = main + lines[main..].iter().position(|l| is_end(l)).expect("END");
+    let mut routines: HashMap<String, Vec<&str>> = HashMap::new();
+    let mut i = main_end + 1;
+    while i < lines.len() {
+        if is_def(lines[i]) {
+            let name = lines[i].trim()[4..]
+                .split('(')
+                .next()
+                .unwrap()
+                .trim()
+                .to_ascii_uppercase();
+            let end = i + lines[i..].iter().position(|l| is_end(l)).expect("END");
+            let body = lines[i + 1..end]
+                .iter()
+                .copied()
+                .filter(|l| !l.trim_start().to_ascii_uppercase().starts_with("DECL "))
+                .collect();
+            routines.insert(name, body);
+            i = end;
+        }
+        i += 1;
+    }
+    let mut out = Vec::with_capacity(lines.len());
+    for (k, l) in lines.iter().enumerate() {
+        let c = code(l.trim());
+        let callee = c
+            .split('(')
+            .next()
+            .map(|n| n.trim().to_ascii_uppercase())
+            .filter(|n| c.contains('(') && !c.contains('=') && routines.contains_key(n));
+        match callee {
+            Some(n) if k > main && k < main_end => {
+                out.extend(routines[&n].iter().map(|b| (*b).to_owned()));
+            }
+            _ => out.push((*l).to_owned()),
+        }
+    }
+    out
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -1794,9 +1843,13 @@ fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
             let mut out: Vec<String> = Vec::new();
             let mut i = 0;
             while i < lines.len() {
-                if lines
-                    .get(i + 1)
-                    .is_some_and(|n| n.contains("a partner was started again"))
+                if lines[i]
+                    .trim_start()
+                    .to_ascii_uppercase()
+                    .starts_with("IF ")
+                    && lines
+                        .get(i + 1)
+                        .is_some_and(|n| n.contains("a partner was started again"))
                 {
                     // The stop.
                     i = block_end(&lines, i, lang) + 1;
@@ -1813,7 +1866,7 @@ fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
         }
         Mutation::MessageKept => {
             let clears = |l: &str| match lang {
-                Lang::Krl => l.contains("Clr_KrlMsg("),
+                Lang::Krl => l.starts_with("skp_hide("),
                 Lang::Rapid => l == "TPErase;",
                 Lang::UrScript => l.starts_with("textmsg(") && l.ends_with("the wait has ended\")"),
             };
