@@ -152,13 +152,22 @@ fn main() {
         "\nratio four / one: {:.2} (medians of {iters} compiles each, alternating)",
         m4.as_secs_f64() / m1.as_secs_f64()
     );
+    // `SKILLPOST_BENCH_STAGES=1`: each stage's median over as many compiles again.
     if std::env::var("SKILLPOST_BENCH_STAGES").is_ok() {
         for (what, bb) in [("one", &a), ("four", &b)] {
-            let (_, c) = compile_once(bb);
-            let stages: Vec<String> = c
-                .timings
-                .iter()
-                .map(|(s, d)| format!("{s} {:.1} ms", d.as_secs_f64() * 1e3))
+            let mut by_stage: Vec<(&'static str, Vec<Duration>)> = Vec::new();
+            for _ in 0..iters {
+                let (_, c) = compile_once(bb);
+                for (k, (stage, d)) in c.timings.iter().enumerate() {
+                    if by_stage.len() <= k {
+                        by_stage.push((stage, Vec::new()));
+                    }
+                    by_stage[k].1.push(*d);
+                }
+            }
+            let stages: Vec<String> = by_stage
+                .into_iter()
+                .map(|(s, d)| format!("{s} {:.1} ms", median(d).as_secs_f64() * 1e3))
                 .collect();
             println!("{what}: {}", stages.join(", "));
         }

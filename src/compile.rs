@@ -691,6 +691,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             }
             _ => None,
         };
+        lap(&mut out, "resolve+split");
         // A language named wrongly (E210) makes the language a guess: its signal rules are
         // not applied then.
         let sure = !cx.diags.iter().any(|d| d.code == Code::BadLanguage);
@@ -1079,6 +1080,62 @@ fn check_snippets(sources: &Sources, irl: &Irl, used: &HashSet<&str>, diags: &mu
 
 /// `E606` for each problem the built-in check finds in a generated file ([`crate::check`]):
 /// what the IRL snippets and the output template made together. Nothing is written then.
+/// The problems of each generated file (none for a file of no language), the larger files of
+/// a cell checked on a second thread while this one checks the others: the check is one pass
+/// over each file's text, and a cell's programs together are about twice one program's.
+fn check_outputs_in_parallel(outputs: &[(PathBuf, OutputFile)]) -> Vec<Vec<crate::check::Problem>> {
+    let check = |(path, f): &(PathBuf, OutputFile)| match crate::check::language_of(path) {
+        Some((language, unit)) => crate::check::check(language, unit, &f.text),
+        None => Vec::new(),
+    };
+    // Two groups of about the same size, the larger files first; only worth a thread when the
+    // second group is large (as the programs of a cell are written, from about 2,000 steps).
+    let mut order: Vec<usize> = (0..outputs.len()).collect();
+    order.sort_by_key(|&k| std::cmp::Reverse(outputs[k].1.text.len()));
+    let (mut here, mut there, mut sizes) = (Vec::new(), Vec::new(), (0usize, 0usize));
+    for k in order {
+        let n = outputs[k].1.text.len();
+        if sizes.0 <= sizes.1 {
+            here.push(k);
+            sizes.0 += n;
+        } else {
+            there.push(k);
+            sizes.1 += n;
+        }
+    }
+    let mut out: Vec<Vec<crate::check::Problem>> = vec![Vec::new(); outputs.len()];
+    if sizes.1 < PARALLEL_CHECK_FROM {
+        for (k, o) in outputs.iter().enumerate() {
+            out[k] = check(o);
+        }
+        return out;
+    }
+    let theirs = std::thread::scope(|s| {
+        let h = s.spawn(|| {
+            there
+                .iter()
+                .map(|&k| (k, check(&outputs[k])))
+                .collect::<Vec<_>>()
+        });
+        for &k in &here {
+            out[k] = check(&outputs[k]);
+        }
+        h.join()
+    });
+    match theirs {
+        Ok(v) => {
+            for (k, p) in v {
+                out[k] = p;
+            }
+        }
+        Err(panic) => std::panic::resume_unwind(panic),
+    }
+    out
+}
+
+/// The bytes of generated files from which a second thread checks part of them.
+const PARALLEL_CHECK_FROM: usize = 256 * 1024;
+
 fn check_generated(
     outputs: &[(PathBuf, OutputFile)],
     sources: &Sources,
@@ -1105,11 +1162,8 @@ fn check_generated(
         }
         found
     };
-    for (path, f) in outputs {
-        let Some((language, unit)) = crate::check::language_of(path) else {
-            continue;
-        };
-        let problems = crate::check::check(language, unit, &f.text);
+    let problems = check_outputs_in_parallel(outputs);
+    for ((path, f), problems) in outputs.iter().zip(problems) {
         for p in problems.iter().take(20) {
             let line = f.text.lines().nth(p.line - 1).unwrap_or("").trim();
             let opened = match p.opened {

@@ -659,6 +659,49 @@ fn branches_right_of_an_unconditional_one_are_never_taken() {
     );
 }
 
+/// A KRL program of a cell calls the routines of its handshakes (`skp_stop`, `skp_show`, …),
+/// written where the template says `{{definitions}}`: a template without that line is `E603`,
+/// and no program of the cell is written.
+#[test]
+fn a_template_without_definitions_cannot_take_a_cells_routines() {
+    let p = bases_with_case(&["cell", "cell2"], "cell-two-robots-weld");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let krl = std::fs::read_to_string(root.join("templates/krl.toml")).unwrap();
+    std::fs::write(p.path().join("t.toml"), &krl).unwrap();
+    let o = run(
+        &["--template", "t.toml", "Blackboard.aml", "Cell"],
+        p.path(),
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let src = std::fs::read_to_string(p.path().join("Cell_KUKA_KR15_2.src")).unwrap();
+    assert!(src.contains("\r\nDEF skp_stop(nr:IN)\r\n"), "{src}");
+    for f in ["Cell_KUKA_KR15_2.src", "Cell_KUKA_KR16_2.src"] {
+        std::fs::remove_file(p.path().join(f)).unwrap();
+    }
+    std::fs::write(
+        p.path().join("t.toml"),
+        krl.replace("{{definitions}}\n", ""),
+    )
+    .unwrap();
+    let o = run(
+        &[
+            "--format",
+            "short",
+            "--template",
+            "t.toml",
+            "Blackboard.aml",
+            "Cell",
+        ],
+        p.path(),
+    );
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(e.contains("E603") && e.contains("`{{definitions}}`"), "{e}");
+    for f in ["Cell_KUKA_KR15_2.src", "Cell_KUKA_KR16_2.src"] {
+        assert!(!p.path().join(f).exists(), "{f}");
+    }
+}
+
 #[test]
 fn a_template_without_declarations_cannot_take_them() {
     // The two-way selection needs the SKP_BRANCH variable in the .dat.

@@ -92,15 +92,59 @@ pub struct Hand<'a> {
     input: &'a EmitInput<'a>,
     view: CellView<'a>,
     lang: Language,
+    /// What every handshake site repeats, made once (a cell of 10,000 steps has thousands of
+    /// sites): each controller's name, transliterated; for each partner, its run wire read as
+    /// "is `FALSE`" (the restart guard); for each channel of this program, the condition its
+    /// tell (this program sends) or hear (it receives) waits for, and the name of the wire it
+    /// reads there.
+    names: Vec<String>,
+    guards: Vec<String>,
+    waits: Vec<(String, String)>,
 }
 
 impl<'a> Hand<'a> {
     pub fn new(input: &'a EmitInput<'a>) -> Option<Self> {
-        Some(Hand {
+        let mut h = Hand {
             input,
             view: input.cell?,
             lang: input.profile.language(),
-        })
+            names: Vec::new(),
+            guards: Vec::new(),
+            waits: Vec::new(),
+        };
+        let cell = h.view.cell;
+        let bb = input.blackboard;
+        h.names = cell
+            .controllers
+            .iter()
+            .map(|&c| crate::names::transliterate(&bb.resources[c].name.text))
+            .collect();
+        let partners: Vec<usize> = cell.partners(h.view.me).collect();
+        h.guards = (0..cell.controllers.len())
+            .map(|p| {
+                if partners.contains(&p) {
+                    h.is(&h.run_of(p), false)
+                } else {
+                    String::new()
+                }
+            })
+            .collect();
+        h.waits = (0..cell.channels.len())
+            .map(|k| {
+                let ch = &cell.channels[k];
+                let (wire, var, p) = if ch.from == h.view.me {
+                    (ch.ack, format!("skp_tx{}", k + 1), ch.to)
+                } else if ch.to == h.view.me {
+                    (ch.strobe, format!("skp_rx{}", k + 1), ch.from)
+                } else {
+                    return (String::new(), String::new());
+                };
+                let read = h.read_wire(wire);
+                let cond = h.join("OR", &[h.equals(&read, &var), h.guards[p].clone()]);
+                (cond, h.wire_name(wire))
+            })
+            .collect();
+        Some(h)
     }
 
     fn comment(&self) -> &'static str {
@@ -421,14 +465,11 @@ impl<'a> Hand<'a> {
     fn guarded_wait(
         &self,
         out: &mut Vec<(usize, String)>,
-        (read, var): (&str, &str),
-        p: usize,
+        channel: usize,
         (text, short): (&str, &str),
         nr: u64,
     ) {
-        let run = self.run_of(p);
-        let cond = self.join("OR", &[self.equals(read, var), self.is(&run, false)]);
-        self.watched_wait(out, &cond, text, short, nr);
+        self.watched_wait(out, &self.waits[channel].0, text, short, nr);
     }
 
     /// The name of the signal a received wire arrives at on this controller (for a message).
@@ -450,13 +491,12 @@ impl<'a> Hand<'a> {
         text: &str,
         m: &Message,
     ) {
-        let run = self.run_of(p);
         let id = self.input.sfc.elements[m.about].local_id;
         let short = format!(
             "{} started again; this program waited at localId {id}",
             self.name(p)
         );
-        self.stop_if(out, &self.is(&run, false), text, &short, id, "");
+        self.stop_if(out, &self.guards[p], text, &short, id, "");
     }
 
     /// `IF cond`: a message to the operator, and the program stops for good (until it is
@@ -512,14 +552,14 @@ impl<'a> Hand<'a> {
         }
     }
 
-    fn name(&self, c: usize) -> String {
-        let bb = self.input.blackboard;
-        crate::names::transliterate(&bb.resources[self.view.cell.controllers[c]].name.text)
+    fn name(&self, c: usize) -> &str {
+        &self.names[c]
     }
 
     /// The controller that tells `m`.
     pub fn teller(&self, m: &Message) -> String {
         self.name(self.view.cell.channels[m.channel].from)
+            .to_owned()
     }
 
     /// What a message is about, for its comment.
@@ -556,18 +596,16 @@ impl<'a> Hand<'a> {
                 self.name(ch.to)
             ),
         ));
-        let ack = self.read_wire(ch.ack);
         let stop = format!(
             "{} started again; this program was to tell it: {what}",
             self.name(ch.to)
         );
         let id = self.input.sfc.elements[m.about].local_id;
-        let wire = self.wire_name(ch.ack);
+        let wire = &self.waits[m.channel].1;
         let to = self.name(ch.to);
         self.guarded_wait(
             &mut out,
-            (&ack, &var),
-            ch.to,
+            m.channel,
             (
                 &format!("waits until {to} has read: {what}; wire {wire}"),
                 &format!("waits for {to} to read (localId {id}, wire {wire})"),
@@ -609,7 +647,6 @@ impl<'a> Hand<'a> {
         };
         out.push((0, format!("{}handshake: wait {what}", self.comment())));
         out.push((0, self.toggle(&var)));
-        let strobe = self.read_wire(ch.strobe);
         let stop = match m.kind {
             Kind::Done => format!(
                 "{} started again; waited for its {}",
@@ -623,11 +660,10 @@ impl<'a> Hand<'a> {
             ),
         };
         let id = self.input.sfc.elements[m.about].local_id;
-        let wire = self.wire_name(ch.strobe);
+        let wire = &self.waits[m.channel].1;
         self.guarded_wait(
             &mut out,
-            (&strobe, &var),
-            ch.from,
+            m.channel,
             (
                 &format!("waits {what}; wire {wire}"),
                 &format!(
