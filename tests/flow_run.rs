@@ -1968,6 +1968,14 @@ const CELL_FIXTURES: &[CellFixture] = &[
         ],
         &["KUKA KR15-2", "KUKA KR16-2"],
     ),
+    (
+        "cell-eight-wires",
+        &[
+            ("Cell_KUKA_KR15_2", Lang::Krl),
+            ("Cell_KUKA_KR16_2", Lang::Krl),
+        ],
+        &["KUKA KR15-2", "KUKA KR16-2"],
+    ),
 ];
 
 /// Tell at once: after Grip the first robot places (PlaceA) while the second welds (Weld),

@@ -110,6 +110,7 @@ cases! {
     cell_sequences_mixed => "cell-sequences-mixed",
     cell_tell_at_once => "cell-tell-at-once",
     cell_two_robots_weld => "cell-two-robots-weld",
+    cell_eight_wires => "cell-eight-wires",
     cell_two_robots_wired => "cell-two-robots-wired",
     cell_two_sequences => "cell-two-sequences",
     codesys_addata_pou => "codesys-addata-pou",
