@@ -2383,6 +2383,50 @@ fn step_times_are_checked_without_a_blackboard() {
     }
 }
 
+/// A KRL program of a cell reads and drives its wires by their signals' names in the
+/// blackboard: a `SIGNAL` per wire in the `.dat` (inputs, then outputs, by number), the name
+/// made a KRL name (`Eingang Öl 1` → `Eingang_Oel_1`), unique without regard to case, and never
+/// one of the program's own (`skp_rx1` becomes `w_skp_rx1`); the code reads `Eingang_Oel_1`, not
+/// `$IN[41]`.
+#[test]
+fn a_cells_krl_wires_go_by_their_signals_names() {
+    let p = bases_with_case(&["cell", "cell2"], "cell-two-robots-weld");
+    let bb = std::fs::read_to_string(p.path().join("Blackboard.aml")).unwrap();
+    let bb = bb
+        .replace("From_A_1", "Eingang Öl 1")
+        .replace("From_A_2", "skp_rx1")
+        .replace("From_A_4", "eingang_oel_1");
+    std::fs::write(p.path().join("Blackboard.aml"), bb).unwrap();
+    let o = run(&["--lf", "Blackboard.aml", "Cell"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let dat = std::fs::read_to_string(p.path().join("Cell_KUKA_KR16_2.dat")).unwrap();
+    let signals: Vec<&str> = dat.lines().filter(|l| l.starts_with("SIGNAL ")).collect();
+    assert_eq!(
+        signals,
+        [
+            "SIGNAL Eingang_Oel_1 $IN[41]",
+            "SIGNAL w_skp_rx1 $IN[42]",
+            "SIGNAL From_A_3 $IN[43]",
+            "SIGNAL eingang_oel_1_2 $IN[44]",
+            "SIGNAL To_A_1 $OUT[31]",
+            "SIGNAL To_A_2 $OUT[32]",
+            "SIGNAL To_A_3 $OUT[33]",
+            "SIGNAL To_A_4 $OUT[34]",
+            "SIGNAL To_A_5 $OUT[35]",
+        ],
+        "{dat}"
+    );
+    let src = std::fs::read_to_string(p.path().join("Cell_KUKA_KR16_2.src")).unwrap();
+    assert!(
+        src.contains("(Eingang_Oel_1 == skp_rx1) OR (NOT From_A_3)"),
+        "{src}"
+    );
+    assert!(src.contains("To_A_3 = skp_rx1"), "{src}");
+    assert!(!src.contains("$IN[4") && !src.contains("$OUT[3"), "{src}");
+    // The pendant message names the wire as the blackboard does, transliterated.
+    assert!(src.contains("; wire Eingang Oel 1\""), "{src}");
+}
+
 /// A controller's `HandshakeTimeout` (seconds) says when a wait on a partner shows on the
 /// pendant: `2.5` is `$TIMER[16] >= 2500` in KRL (the last of the controller's `Timers`), and
 /// `0` turns the message off (a plain `WAIT FOR`). A step time in a cell whose `Timers` holds
@@ -2422,7 +2466,10 @@ fn handshake_timeout_says_when_a_wait_shows_on_the_pendant() {
         !src.contains("$TIMER") && !src.contains("#WAITING"),
         "{src}"
     );
-    assert!(src.contains("WAIT FOR ($IN["), "{src}");
+    assert!(
+        src.contains("WAIT FOR (From_A_") && !src.contains("skp_watch"),
+        "{src}"
+    );
     // `Timers` of one timer: the handshakes' own, none left for a step time.
     let sfc = std::fs::read_to_string(p.path().join("sfc.xml")).unwrap();
     let at = sfc.find("<transition localId=\"8\">").unwrap();

@@ -103,6 +103,7 @@ macro_rules! cases {
 cases! {
     abb_irb1200 => "abb-irb1200",
     caex3_english => "caex3-english",
+    cell_eight_wires => "cell-eight-wires",
     cell_flow_states => "cell-flow-states",
     cell_gripper_controller_attribute => "cell-gripper-controller-attribute",
     cell_kuka_abb_ur => "cell-kuka-abb-ur",
@@ -110,7 +111,6 @@ cases! {
     cell_sequences_mixed => "cell-sequences-mixed",
     cell_tell_at_once => "cell-tell-at-once",
     cell_two_robots_weld => "cell-two-robots-weld",
-    cell_eight_wires => "cell-eight-wires",
     cell_two_robots_wired => "cell-two-robots-wired",
     cell_two_sequences => "cell-two-sequences",
     codesys_addata_pou => "codesys-addata-pou",

@@ -100,6 +100,10 @@ pub struct Hand<'a> {
     names: Vec<String>,
     guards: Vec<String>,
     waits: Vec<(String, String)>,
+    /// KRL: the name each wire on a numbered input or output (`$IN[n]`, `$OUT[n]`) goes by in
+    /// the program, its signal's name in the blackboard as a KRL name (`SIGNAL` in the `.dat`),
+    /// keyed by the signal's address; in declaration order.
+    names_of_wires: Vec<(usize, String, String)>,
 }
 
 impl<'a> Hand<'a> {
@@ -111,9 +115,13 @@ impl<'a> Hand<'a> {
             names: Vec::new(),
             guards: Vec::new(),
             waits: Vec::new(),
+            names_of_wires: Vec::new(),
         };
         let cell = h.view.cell;
         let bb = input.blackboard;
+        if h.lang == Language::Krl {
+            h.names_of_wires = h.name_wires();
+        }
         h.names = cell
             .controllers
             .iter()
@@ -162,10 +170,100 @@ impl<'a> Hand<'a> {
         bb.resources.get(r)?.signals.get(s)
     }
 
+    /// KRL: the names of the wires this program drives or reads on numbered I/O (inputs, then
+    /// outputs, by number): each signal's name in the blackboard made a KRL name
+    /// ([`crate::names::to_krl_name`]), unique in the program without regard to case (a
+    /// number added), never one of the program's own (`skp_…` becomes `w_skp_…`) nor an
+    /// integer signal's the conditions use.
+    fn name_wires(&self) -> Vec<(usize, String, String)> {
+        let bb = self.input.blackboard;
+        let mut taken: std::collections::HashSet<String> = std::collections::HashSet::new();
+        if let Some(r) = self.input.bound.resource {
+            for &si in &self.input.bound.signals {
+                taken.insert(bb.resources[r].signals[si].name.text.to_ascii_lowercase());
+            }
+        }
+        // Inputs first, then outputs, each by number (the order of an I/O list): a lower number
+        // keeps the plain name when two would be the same.
+        let mut wires: Vec<(usize, &Signal, bool, u32)> = Vec::new();
+        for (wire, side) in self.uses() {
+            let Some(s) = self.signal(wire, side) else {
+                continue;
+            };
+            let SignalKind::Bit(n) = s.kind else {
+                continue;
+            };
+            let key = std::ptr::from_ref(s) as usize;
+            if !wires.iter().any(|(k, ..)| *k == key) {
+                wires.push((key, s, s.output, n));
+            }
+        }
+        wires.sort_by_key(|&(_, _, output, n)| (output, n));
+        let mut out = Vec::with_capacity(wires.len());
+        for (key, s, output, n) in wires {
+            let mut base = crate::names::to_krl_name(&s.name.text);
+            // The program's own names begin with `skp_`: a wire's never does.
+            if base.to_ascii_lowercase().starts_with("skp_") {
+                base = crate::names::to_krl_name(&format!("w_{base}"));
+            }
+            let mut name = base.clone();
+            let mut k = 1;
+            while taken.contains(&name.to_ascii_lowercase()) {
+                k += 1;
+                let suffix = format!("_{k}");
+                let keep = base.len().min(24 - suffix.len());
+                name = format!("{}{suffix}", &base[..keep]);
+            }
+            taken.insert(name.to_ascii_lowercase());
+            let io = if output { "$OUT" } else { "$IN" };
+            out.push((key, name, format!("{io}[{n}]")));
+        }
+        out
+    }
+
+    /// The wires this program uses: (wire, whether on the sender's side, whether it writes).
+    fn uses(&self) -> Vec<(Option<usize>, bool)> {
+        let me = self.view.me;
+        let mut uses = Vec::new();
+        for l in &self.view.cell.links {
+            if l.from == me {
+                uses.extend([(l.run, true), (l.ready, true)]);
+            }
+            if l.to == me {
+                uses.extend([(l.run, false), (l.ready, false)]);
+            }
+        }
+        for ch in &self.view.cell.channels {
+            if ch.from == me {
+                uses.push((ch.strobe, true));
+                uses.extend(ch.data.iter().map(|&w| (Some(w), true)));
+                uses.push((ch.ack, false));
+            }
+            if ch.to == me {
+                uses.push((ch.strobe, false));
+                uses.extend(ch.data.iter().map(|&w| (Some(w), false)));
+                uses.push((ch.ack, true));
+            }
+        }
+        uses
+    }
+
+    /// KRL: the name a numbered wire goes by ([`Hand::name_wires`]).
+    fn wire_named(&self, s: &Signal) -> Option<&str> {
+        let key = std::ptr::from_ref(s) as usize;
+        self.names_of_wires
+            .iter()
+            .find(|(k, _, _)| *k == key)
+            .map(|(_, n, _)| n.as_str())
+    }
+
     /// How this language reads an input wire as a boolean value.
     fn read(&self, s: &Signal) -> Result<String, String> {
         match (self.lang, &s.kind) {
-            (Language::Krl, SignalKind::Bit(n)) => Ok(format!("$IN[{n}]")),
+            (Language::Krl, SignalKind::Bit(n)) => Ok(match self.wire_named(s) {
+                Some(name) => name.to_owned(),
+                None => format!("$IN[{n}]"),
+            }),
             (Language::Krl, SignalKind::Address { text, .. }) if !text.contains('(') => {
                 Ok(text.clone())
             }
@@ -191,7 +289,10 @@ impl<'a> Hand<'a> {
     /// How this language sets an output wire to `value` (a boolean expression).
     fn set(&self, s: &Signal, value: &str) -> Result<String, String> {
         match (self.lang, &s.kind) {
-            (Language::Krl, SignalKind::Bit(n)) => Ok(format!("$OUT[{n}] = {value}")),
+            (Language::Krl, SignalKind::Bit(n)) => Ok(match self.wire_named(s) {
+                Some(name) => format!("{name} = {value}"),
+                None => format!("$OUT[{n}] = {value}"),
+            }),
             (Language::Krl, SignalKind::Address { text, .. })
                 if !text.contains('(') && !text.contains("$IN") =>
             {
@@ -945,6 +1046,11 @@ impl<'a> Hand<'a> {
             .chain(rx.iter().map(|c| format!("skp_rx{}", c + 1)));
         match self.lang {
             Language::Krl => {
+                out.extend(
+                    self.names_of_wires
+                        .iter()
+                        .map(|(_, name, io)| format!("SIGNAL {name} {io}")),
+                );
                 out.extend(vars.map(|v| format!("DECL BOOL {v}=FALSE")));
                 if decisions {
                     out.push(format!("DECL INT {DECISION_VAR}=0"));

@@ -327,6 +327,55 @@ fn find_late(e: &X) -> Option<(String, f64)> {
     }
 }
 
+/// A KRL `.src` with each name of a single-bit `SIGNAL` of its `.dat` (a cell's wire,
+/// `SIGNAL From_A_1 $IN[41]`) replaced by the bit, outside strings and comments.
+pub fn krl_signals(src: &str, dat: &str) -> String {
+    let bits: HashMap<String, String> = dat
+        .lines()
+        .filter_map(|l| {
+            let w: Vec<&str> = code(l.trim()).split_whitespace().collect();
+            (w.len() == 3 && w[0] == "SIGNAL").then(|| (w[1].to_ascii_uppercase(), w[2].to_owned()))
+        })
+        .collect();
+    if bits.is_empty() {
+        return src.to_owned();
+    }
+    let mut out = String::with_capacity(src.len());
+    for line in src.split_inclusive('\n') {
+        let (mut in_string, mut word) = (false, String::new());
+        let mut chars = line.chars().peekable();
+        while let Some(c) = chars.next() {
+            let ident = c.is_ascii_alphanumeric() || c == '_' || c == '$';
+            if !in_string && ident {
+                word.push(c);
+                if chars
+                    .peek()
+                    .is_some_and(|n| n.is_ascii_alphanumeric() || *n == '_')
+                {
+                    continue;
+                }
+                match bits.get(&word.to_ascii_uppercase()) {
+                    Some(bit) => out.push_str(bit),
+                    None => out.push_str(&word),
+                }
+                word.clear();
+                continue;
+            }
+            if c == ';' && !in_string {
+                out.push_str(
+                    &line[line.len() - chars.clone().map(char::len_utf8).sum::<usize>() - 1..],
+                );
+                break;
+            }
+            if c == '"' {
+                in_string = !in_string;
+            }
+            out.push(c);
+        }
+    }
+    out
+}
+
 /// The lines of a KRL `.src` with each call in the main program of a routine defined after it
 /// (`DEF name(…)` … `END`, the handshakes' `skp_stop`, `skp_watch`, …) replaced by that
 /// routine's body (its declarations left out; its parameters are not read here).
@@ -2098,7 +2147,7 @@ pub fn co_simulate_in(
                 };
                 let text = mutate(main, m, lang);
                 let ins = match lang {
-                    Lang::Krl => parse(&text),
+                    Lang::Krl => parse(&krl_signals(&text, dat)),
                     _ => parse_structured(&text, lang, &cell.wires, k),
                 };
                 (ins, dat.clone())
@@ -2425,7 +2474,7 @@ pub fn fixture_cell(
                 _ => String::new(),
             };
             let ins = match lang {
-                Lang::Krl => parse(&main),
+                Lang::Krl => parse(&krl_signals(&main, &dat)),
                 _ => parse_structured(&main, *lang, &wires, k),
             };
             for i in ins {
