@@ -344,20 +344,14 @@ pub struct Watch {
 /// number is an error at it (and the default is used).
 fn watch(res: Option<&crate::model::Resource>, diags: &mut Diagnostics) -> Option<Watch> {
     let (_, last) = timers_of(res, &mut Diagnostics::default());
-    let attr = res.and_then(|r| r.handshake_timeout_attr.as_ref());
-    let after_ms = match attr.map(|(v, _)| handshake_timeout(v)) {
-        None => DEFAULT_HANDSHAKE_TIMEOUT_MS,
-        Some(Ok(ms)) => ms,
-        Some(Err(why)) => {
-            let (_, span) = attr.expect("an attribute");
-            diags.push(
-                Diagnostic::error(Code::BadHandshakeTimeout, why)
-                    .at(span.clone())
-                    .element(res.map(|r| r.element.clone()).unwrap_or_default()),
-            );
-            DEFAULT_HANDSHAKE_TIMEOUT_MS
-        }
-    };
+    let after_ms = resource_attr(
+        res,
+        res.and_then(|r| r.handshake_timeout_attr.as_ref()),
+        handshake_timeout,
+        Code::BadHandshakeTimeout,
+        DEFAULT_HANDSHAKE_TIMEOUT_MS,
+        diags,
+    );
     (after_ms > 0).then_some(Watch {
         after_ms,
         timer: last,
@@ -386,18 +380,38 @@ fn handshake_timeout(attr: &str) -> Result<u64, String> {
 /// The KRL timers `(first, last)` of a resource (its `Timers` attribute or [`DEFAULT_TIMERS`];
 /// a bad attribute is an error in `diags` and the default is used).
 fn timers_of(res: Option<&crate::model::Resource>, diags: &mut Diagnostics) -> (u32, u32) {
-    let attr = res.and_then(|r| r.timers_attr.as_ref());
-    match attr.map(|(v, _)| timer_range(v)) {
-        None => DEFAULT_TIMERS,
-        Some(Ok(range)) => range,
-        Some(Err(why)) => {
-            let (_, span) = attr.expect("an attribute");
+    resource_attr(
+        res,
+        res.and_then(|r| r.timers_attr.as_ref()),
+        timer_range,
+        Code::BadTimers,
+        DEFAULT_TIMERS,
+        diags,
+    )
+}
+
+/// A resource attribute's value (`attr`: its text and span) read by `parse`: `default` without
+/// the attribute, and also when `parse` refuses it, with an error `code` at the attribute.
+fn resource_attr<T>(
+    res: Option<&crate::model::Resource>,
+    attr: Option<&(String, Span)>,
+    parse: fn(&str) -> Result<T, String>,
+    code: Code,
+    default: T,
+    diags: &mut Diagnostics,
+) -> T {
+    let Some((text, span)) = attr else {
+        return default;
+    };
+    match parse(text) {
+        Ok(v) => v,
+        Err(why) => {
             diags.push(
-                Diagnostic::error(Code::BadTimers, why)
+                Diagnostic::error(code, why)
                     .at(span.clone())
                     .element(res.map(|r| r.element.clone()).unwrap_or_default()),
             );
-            DEFAULT_TIMERS
+            default
         }
     }
 }

@@ -355,11 +355,13 @@ pub fn emit_files(
         line.replace("{{program}}", input.program)
             .replace("{{comment}}", &comment)
     };
-    let has_declarations = template
-        .files
-        .iter()
-        .any(|(_, t)| t.lines().any(|l| block_name(l) == Some("declarations")));
-    if !generated.declarations.is_empty() && !has_declarations {
+    let has_block = |name: &str| {
+        template
+            .files
+            .iter()
+            .any(|(_, t)| t.lines().any(|l| block_name(l) == Some(name)))
+    };
+    if !generated.declarations.is_empty() && !has_block("declarations") {
         // The program would use names nothing declares.
         diags.push(Diagnostic::error(
             Code::BadTemplate,
@@ -370,11 +372,7 @@ pub fn emit_files(
         ));
         return None;
     }
-    let has_definitions = template
-        .files
-        .iter()
-        .any(|(_, t)| t.lines().any(|l| block_name(l) == Some("definitions")));
-    if !generated.routines.is_empty() && !has_definitions {
+    if !generated.routines.is_empty() && !has_block("definitions") {
         // The program would call routines nothing defines.
         diags.push(Diagnostic::error(
             Code::BadTemplate,
