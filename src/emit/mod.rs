@@ -401,20 +401,14 @@ pub fn emit_files(
                             .profile
                             .definition_rank(lines.first().map_or("", String::as_str))
                     });
-                    for &(irl, d) in &defs {
-                        let def = &input.irls[irl].definitions[d];
+                    // Each definition, then the program's own routines, after an empty line.
+                    let blocks = defs
+                        .iter()
+                        .map(|&(irl, d)| &input.irls[irl].definitions[d].lines)
+                        .chain(Some(&generated.routines).filter(|r| !r.is_empty()));
+                    for lines in blocks {
                         text.push_str(nl);
-                        for l in &def.lines {
-                            if !l.is_empty() {
-                                text.push_str(indent);
-                            }
-                            text.push_str(l);
-                            text.push_str(nl);
-                        }
-                    }
-                    if !generated.routines.is_empty() {
-                        text.push_str(nl);
-                        for l in &generated.routines {
+                        for l in lines {
                             if !l.is_empty() {
                                 text.push_str(indent);
                             }
