@@ -1,5 +1,5 @@
 //! Exhaustive explicit-state model check of the cell handshake protocol as the compiler writes
-//! it (src/emit/handshake.rs: `Hand::init`, `tell`, `hear`, `finish`: the barrier at each
+//! it (src/emit/handshake/mod.rs: `Hand::init`, `tell`, `hear`, `finish`: the barrier at each
 //! program's start, then Tell/Hear on strobe/ack wires), std only. Every interleaving of the
 //! programs' atomic actions and of the environment's events is explored breadth-first (so each
 //! printed counter-example is a shortest one); `cargo test --release --test protocol_model --
