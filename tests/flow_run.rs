@@ -73,6 +73,8 @@ mod cosim;
 mod krl;
 #[path = "flow_run/machine.rs"]
 mod machine;
+#[path = "flow_run/mutate.rs"]
+mod mutate;
 #[path = "flow_run/rapid.rs"]
 mod rapid;
 #[path = "flow_run/urscript.rs"]
