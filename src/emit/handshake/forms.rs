@@ -16,6 +16,16 @@ pub(super) fn clean(t: &str) -> String {
         .collect()
 }
 
+/// A RAPID condition for `WaitUntil`: one of several parts in parentheses as a whole
+/// (`rapidchecker` reads `WaitUntil (a) AND (b)` and `WaitUntil (c) \PollRate` as calls).
+fn rapid_whole(cond: &str) -> std::borrow::Cow<'_, str> {
+    if cond.starts_with('(') {
+        format!("({cond})").into()
+    } else {
+        cond.into()
+    }
+}
+
 /// A message for KRL's `Msg_Txt` and RAPID's lines (80 characters): `text`, or where it is
 /// longer `short`, cut at 80; both cleaned.
 pub(super) fn fit(text: &str, short: &str) -> String {
@@ -289,14 +299,13 @@ impl<'a> Hand<'a> {
                 // parts in parentheses as a whole: `rapidchecker` reads `WaitUntil (a) AND (b)`
                 // and `WaitUntil (c) \PollRate` as calls.
                 let pos = "\\InPos, ";
-                let cond = if cond.starts_with('(') {
-                    format!("({cond})")
-                } else {
-                    cond.to_owned()
-                };
                 lines.push((
                     0,
-                    format!("WaitUntil {pos}{cond} {};", crate::emit::rapid::POLL_RATE),
+                    format!(
+                        "WaitUntil {pos}{} {};",
+                        rapid_whole(cond),
+                        crate::emit::rapid::POLL_RATE
+                    ),
                 ));
             }
             // URScript's `movel`/`movej` return when the motion has ended (as for the chart's
@@ -342,26 +351,22 @@ impl<'a> Hand<'a> {
                 out.push((0, format!("IF NOT ({cond}) THEN")));
                 out.push((1, format!("{MSG_VAR}.Msg_Txt[] = \"{}\"", fit(text, short))));
                 out.push((1, format!("{SHOW}({})", message_nr(nr))));
-                out.push((1, format!("WAIT FOR {cond}")));
+                self.wait_inside(out, cond);
                 out.push((1, format!("{HIDE}()")));
                 out.push((0, "ENDIF".to_owned()));
             }
             Language::Rapid => {
-                let cond = if cond.starts_with('(') {
-                    format!("({cond})")
-                } else {
-                    cond.to_owned()
-                };
                 let poll = crate::emit::rapid::POLL_RATE;
                 out.push((
                     0,
                     format!(
-                        "WaitUntil \\InPos, {cond} \\MaxTime:={after} \\TimeFlag:={LATE_VAR} {poll};"
+                        "WaitUntil \\InPos, {} \\MaxTime:={after} \\TimeFlag:={LATE_VAR} {poll};",
+                        rapid_whole(cond)
                     ),
                 ));
                 out.push((0, format!("IF {LATE_VAR} THEN")));
                 out.push((1, format!("TPWrite \"{}\";", fit(text, short))));
-                out.push((1, format!("WaitUntil \\InPos, {cond} {poll};")));
+                self.wait_inside(out, cond);
                 out.push((1, "TPErase;".to_owned()));
                 out.push((0, "ENDIF".to_owned()));
             }
@@ -374,23 +379,25 @@ impl<'a> Hand<'a> {
                 } else {
                     format!("{after}.0")
                 };
-                out.push((
-                    0,
-                    format!("while not (({cond}) or ({WATCH_VAR} >= {after})):"),
-                ));
-                out.push((1, "sync()".to_owned()));
-                out.push((0, "end".to_owned()));
+                self.wait_until(out, &format!("({cond}) or ({WATCH_VAR} >= {after})"));
                 out.push((0, format!("if not ({cond}):")));
                 out.push((1, format!("textmsg(\"skillpost: {text}\")")));
-                out.push((1, format!("while not ({cond}):")));
-                out.push((2, "sync()".to_owned()));
-                out.push((1, "end".to_owned()));
+                self.wait_inside(out, cond);
                 out.push((
                     1,
                     format!("textmsg(\"skillpost: {text}: the wait has ended\")"),
                 ));
                 out.push((0, "end".to_owned()));
             }
+        }
+    }
+
+    /// [`Hand::wait_until`] one level deeper (the wait inside a watched wait's message block).
+    fn wait_inside(&self, out: &mut Vec<(usize, String)>, cond: &str) {
+        let at = out.len();
+        self.wait_until(out, cond);
+        for (level, _) in &mut out[at..] {
+            *level += 1;
         }
     }
 
