@@ -212,9 +212,10 @@ pub fn branch_condition(input: &EmitInput, br: &crate::plan::Branch, ops: &Ops) 
 }
 
 /// The conditions of a selection's branches ([`branch_condition`]), with the last one `None`
-/// (taken when the others are not: an `ELSE`) where the branches cover every case: two
-/// branches, one the negation of the other (`c` and `NOT c`). A wait for `c OR NOT c` would be
-/// a wait that is always true.
+/// (taken when the others are not: an `ELSE`) where the branches cover every case: whatever
+/// the inputs, one of the conditions holds (`c` and `NOT c`; `V = 2 AND NOT E`, `NOT E`, `E`).
+/// A wait for their `OR` would be a wait that is always true; in priority order, when none of
+/// the others holds the last one does.
 pub fn branch_conditions(
     input: &EmitInput,
     branches: &[crate::plan::Branch],
@@ -224,41 +225,103 @@ pub fn branch_conditions(
         .iter()
         .map(|b| branch_condition(input, b, ops))
         .collect();
-    if let [a, b] = branches
-        && conds.iter().all(Option::is_some)
-        && complementary(input, a, b, ops)
+    if conds.len() > 1 && conds.iter().all(Option::is_some) && covers_every_case(input, branches)
     {
-        conds[1] = None;
+        *conds.last_mut().expect("two or more") = None;
     }
     conds
 }
 
-/// Whether one branch's (single) condition is `NOT` the other's.
-fn complementary(
-    input: &EmitInput,
-    a: &crate::plan::Branch,
-    b: &crate::plan::Branch,
-    ops: &Ops,
-) -> bool {
-    let expr = |br: &crate::plan::Branch| -> Option<&crate::cond::Expr> {
-        let heads = br.heads();
-        let [t] = heads.as_slice() else {
-            return None;
-        };
-        match &input.sfc.elements[*t].kind {
-            ElementKind::Transition(Some(c)) => Some(&c.expr),
-            _ => None,
+/// A selection's conditions cover every case when their `OR` holds for every value of their
+/// atoms: each signal, step time and comparison taken as a truth value of its own (`V <> 2` as
+/// `NOT (V = 2)`). Atoms are compared by their text; more than [`MAX_ATOMS`] are not tried (a
+/// wait is kept, as for any selection that may wait).
+fn covers_every_case(input: &EmitInput, branches: &[crate::plan::Branch]) -> bool {
+    let mut exprs = Vec::new();
+    for br in branches {
+        for t in br.heads() {
+            match &input.sfc.elements[t].kind {
+                ElementKind::Transition(Some(c)) => exprs.push(&c.expr),
+                _ => return false,
+            }
         }
-    };
-    let (Some(x), Some(y)) = (expr(a), expr(b)) else {
-        return false;
-    };
-    let text = |e: &crate::cond::Expr| crate::cond::render(e, &|n: &str| n.to_owned(), ops);
-    let negates = |n: &crate::cond::Expr, e: &crate::cond::Expr| match &n.kind {
-        crate::cond::ExprKind::Not(inner) => text(inner) == text(e),
-        _ => false,
-    };
-    negates(y, x) || negates(x, y)
+    }
+    always_one_holds(&exprs)
+}
+
+/// Whether one of `exprs` holds whatever values their atoms have ([`covers_every_case`]).
+fn always_one_holds(exprs: &[&crate::cond::Expr]) -> bool {
+    let mut atoms: Vec<String> = Vec::new();
+    for e in exprs {
+        if !collect_atoms(e, &mut atoms) || atoms.len() > MAX_ATOMS {
+            return false;
+        }
+    }
+    (0u32..1 << atoms.len()).all(|values| {
+        exprs
+            .iter()
+            .any(|e| truth(e, &atoms, values) == Some(true))
+    })
+}
+
+/// The most atoms [`covers_every_case`] tries (2^10 cases).
+const MAX_ATOMS: usize = 10;
+
+/// An atom's key: a name, or a comparison with its operands' text (`<>` as `=`).
+fn atom_key(e: &crate::cond::Expr) -> Option<(String, bool)> {
+    use crate::cond::{BinOp, ExprKind};
+    let text = |x: &crate::cond::Expr| crate::cond::render(x, &|n: &str| n.to_owned(), &Ops::KRL);
+    match &e.kind {
+        ExprKind::Name(n) => Some((format!("name {n}"), false)),
+        ExprKind::Bin(op, a, b) => {
+            let (op, negated) = match op {
+                BinOp::Ne => (BinOp::Eq, true),
+                BinOp::Eq | BinOp::Lt | BinOp::Gt | BinOp::Le | BinOp::Ge => (*op, false),
+                _ => return None,
+            };
+            Some((format!("{op:?} ({}) ({})", text(a), text(b)), negated))
+        }
+        _ => None,
+    }
+}
+
+/// Adds `e`'s atoms to `atoms`; `false` when `e` is not a truth value made of atoms, `NOT`,
+/// `AND`, `OR`, `XOR` and `TRUE`/`FALSE`.
+fn collect_atoms(e: &crate::cond::Expr, atoms: &mut Vec<String>) -> bool {
+    use crate::cond::{BinOp, ExprKind};
+    match &e.kind {
+        ExprKind::Bool(_) => true,
+        ExprKind::Not(x) => collect_atoms(x, atoms),
+        ExprKind::Bin(BinOp::And | BinOp::Or | BinOp::Xor, a, b) => {
+            collect_atoms(a, atoms) && collect_atoms(b, atoms)
+        }
+        _ => match atom_key(e) {
+            Some((key, _)) => {
+                if !atoms.contains(&key) {
+                    atoms.push(key);
+                }
+                true
+            }
+            None => false,
+        },
+    }
+}
+
+/// `e`'s truth when atom `k` has the value of bit `k` of `values`.
+fn truth(e: &crate::cond::Expr, atoms: &[String], values: u32) -> Option<bool> {
+    use crate::cond::{BinOp, ExprKind};
+    Some(match &e.kind {
+        ExprKind::Bool(b) => *b,
+        ExprKind::Not(x) => !truth(x, atoms, values)?,
+        ExprKind::Bin(BinOp::And, a, b) => truth(a, atoms, values)? && truth(b, atoms, values)?,
+        ExprKind::Bin(BinOp::Or, a, b) => truth(a, atoms, values)? || truth(b, atoms, values)?,
+        ExprKind::Bin(BinOp::Xor, a, b) => truth(a, atoms, values)? != truth(b, atoms, values)?,
+        _ => {
+            let (key, negated) = atom_key(e)?;
+            let k = atoms.iter().position(|a| *a == key)?;
+            ((values >> k) & 1 == 1) != negated
+        }
+    })
 }
 
 /// The condition as written, for comments: on one line, without `;` (a comment inside a KRL
@@ -403,6 +466,27 @@ pub fn follow_comment(
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_selection_covers_every_case_only_when_one_condition_always_holds() {
+        let holds = |conds: &[&str]| {
+            let exprs: Vec<crate::cond::Expr> = conds
+                .iter()
+                .map(|c| crate::cond::parse(c, &|i| i).expect("parses"))
+                .collect();
+            super::always_one_holds(&exprs.iter().collect::<Vec<_>>())
+        };
+        assert!(holds(&["A", "NOT A"]));
+        assert!(holds(&["V = 2 AND NOT E", "NOT E", "E"]));
+        assert!(holds(&["V = 2", "V <> 2"]));
+        assert!(holds(&["A AND B", "A XOR B", "NOT A AND NOT B"]));
+        assert!(holds(&["S1.t > T#150ms", "NOT (S1.t > T#150ms)"]));
+        assert!(!holds(&["A", "B"]));
+        assert!(!holds(&["V = 2 AND NOT E", "E"]));
+        // Different comparisons are different atoms: never taken for a cover.
+        assert!(!holds(&["V < 2", "V >= 2"]));
+        assert!(!holds(&["A AND B", "NOT A"]));
+    }
+
     /// The same digits as `format!`, at the ends of the range and around each power of ten.
     #[test]
     fn push_decimal_is_format() {
