@@ -2427,6 +2427,48 @@ fn a_cells_krl_wires_go_by_their_signals_names() {
     assert!(src.contains("; wire Eingang Oel 1\""), "{src}");
 }
 
+/// A URScript program of a cell names its wires as the blackboard does: a constant per wire of
+/// the standard digital I/O at the program's start, used in every read and set; never a
+/// keyword or function URScript code calls (`sleep`) nor a word of the program's IRL code (`v`
+/// of `movel(…, v=0.25)`): a snippet's assignment would change the wire silently.
+#[test]
+fn a_cells_urscript_wires_are_named_constants() {
+    let p = bases_with_case(&["cell", "abb", "ur", "mixed"], "cell-kuka-abb-ur");
+    let bb = std::fs::read_to_string(p.path().join("Blackboard.aml")).unwrap();
+    let ur = "{20000000-0000-0000-0000-000000000002}";
+    let bb = bb
+        .replace("Name=\"From_ABB_1\" ID=\"{u-in-1}\"", "Name=\"sleep\" ID=\"{u-in-1}\"")
+        .replace(&format!("{ur}:From_ABB_1\""), &format!("{ur}:sleep\""))
+        .replace("Name=\"From_ABB_2\" ID=\"{u-in-2}\"", "Name=\"v\" ID=\"{u-in-2}\"")
+        .replace(&format!("{ur}:From_ABB_2\""), &format!("{ur}:v\""));
+    std::fs::write(p.path().join("Blackboard.aml"), bb).unwrap();
+    let o = run(&["--lf", "Blackboard.aml", "Mix"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let script = std::fs::read_to_string(p.path().join("Mix_UR10e.script")).unwrap();
+    for constant in ["sleep_2 = 4", "v_2 = 5", "From_ABB_3 = 6", "To_ABB_1 = 1"] {
+        assert!(
+            script.lines().any(|l| l.trim() == constant),
+            "{constant}: {script}"
+        );
+    }
+    assert!(
+        script.contains("while not (((get_standard_digital_in(sleep_2) == skp_rx3) or (not get_standard_digital_in(From_ABB_3)))"),
+        "{script}"
+    );
+    assert!(script.contains("if get_standard_digital_in(v_2):"), "{script}");
+    assert!(script.contains("set_standard_digital_out(To_ABB_1, skp_rx3)"), "{script}");
+    assert!(script.contains("movel(") && script.contains("sleep(0.3)"), "{script}");
+    assert!(
+        !script.contains("digital_in(4)") && !script.contains("digital_out(1,"),
+        "{script}"
+    );
+    // Each handshake comment says the level it waits for, by the wires' names.
+    assert!(
+        script.contains("# handshake: wait for the branch ABB IRB 1200 takes at the selection localId 8: for sleep_2 = NOT skp_rx3 (the next message) or From_ABB_3 FALSE (started again)"),
+        "{script}"
+    );
+}
+
 /// A controller's `HandshakeTimeout` (seconds) says when a wait on a partner shows on the
 /// pendant: `2.5` is `$TIMER[16] >= 2500` in KRL (the last of the controller's `Timers`), and
 /// `0` turns the message off (a plain `WAIT FOR`). A step time in a cell whose `Timers` holds

@@ -329,6 +329,44 @@ fn find_late(e: &X) -> Option<(String, f64)> {
     }
 }
 
+/// A URScript program with each wire constant of its handshakes (`From_A_1 = 4`, in the lines
+/// after the comment that opens them) put in its name's place in the digital I/O calls, and
+/// the constants' lines left out.
+pub fn ur_constants(text: &str) -> String {
+    let mut names: Vec<(String, String)> = Vec::new();
+    let mut out = String::with_capacity(text.len());
+    let mut in_block = false;
+    for line in text.split_inclusive('\n') {
+        let t = line.trim();
+        if t.starts_with("# handshake: the wires, standard digital I/O") {
+            in_block = true;
+            continue;
+        }
+        if in_block {
+            if let Some((name, n)) = t.split_once(" = ")
+                && n.bytes().all(|b| b.is_ascii_digit())
+            {
+                names.push((name.to_owned(), n.to_owned()));
+                continue;
+            }
+            in_block = false;
+        }
+        out.push_str(line);
+    }
+    for (name, n) in &names {
+        out = out
+            .replace(
+                &format!("get_standard_digital_in({name})"),
+                &format!("get_standard_digital_in({n})"),
+            )
+            .replace(
+                &format!("set_standard_digital_out({name},"),
+                &format!("set_standard_digital_out({n},"),
+            );
+    }
+    out
+}
+
 /// A KRL `.src` with each name of a single-bit `SIGNAL` of its `.dat` (a cell's wire,
 /// `SIGNAL From_A_1 $IN[41]`) replaced by the bit, outside strings and comments.
 pub fn krl_signals(src: &str, dat: &str) -> String {
@@ -1925,7 +1963,7 @@ pub fn co_simulate_in(
                 let text = mutate(main, m, lang);
                 let ins = match lang {
                     Lang::Krl => parse(&krl_signals(&text, dat)),
-                    _ => parse_structured(&text, lang, &cell.wires, k),
+                    _ => parse_structured(&ur_constants(&text), lang, &cell.wires, k),
                 };
                 (ins, dat.clone())
             })
@@ -2252,7 +2290,7 @@ pub fn fixture_cell(
             };
             let ins = match lang {
                 Lang::Krl => parse(&krl_signals(&main, &dat)),
-                _ => parse_structured(&main, *lang, &wires, k),
+                _ => parse_structured(&ur_constants(&main), *lang, &wires, k),
             };
             for i in ins {
                 if let Ins::Step(name) = i {

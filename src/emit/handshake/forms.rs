@@ -16,6 +16,16 @@ pub(super) fn clean(t: &str) -> String {
         .collect()
 }
 
+/// URScript's keywords and the functions the generated code calls: no wire is named so.
+const UR_RESERVED: &[&str] = &[
+    "and", "break", "continue", "def", "elif", "else", "end", "False", "for", "global", "halt",
+    "if", "in", "join", "kill", "local", "None", "not", "or", "pass", "return", "run", "sec",
+    "thread", "True", "while", "xor", "p", "sync", "sleep", "popup", "textmsg", "movel",
+    "movej", "movep", "movec", "servoj", "speedl", "speedj", "stopl", "stopj", "get_steptime",
+    "get_standard_digital_in", "set_standard_digital_out", "get_standard_digital_out",
+    "is_steady", "set_tcp", "set_payload", "enter_critical", "exit_critical",
+];
+
 /// A RAPID condition for `WaitUntil`: one of several parts in parentheses as a whole
 /// (`rapidchecker` reads `WaitUntil (a) AND (b)` and `WaitUntil (c) \PollRate` as calls).
 fn rapid_whole(cond: &str) -> std::borrow::Cow<'_, str> {
@@ -58,18 +68,43 @@ impl<'a> Hand<'a> {
         }
     }
 
-    /// KRL: the names of the wires this program drives or reads on numbered I/O (inputs, then
-    /// outputs, by number): each signal's name in the blackboard made a KRL name
-    /// ([`crate::names::to_krl_name`]), unique in the program without regard to case (a
-    /// number added), never one of the program's own (`skp_…` becomes `w_skp_…`) nor an
-    /// integer signal's the conditions use.
+    /// KRL and URScript: the names of the wires this program drives or reads on numbered I/O
+    /// (inputs, then outputs, by number): each signal's name in the blackboard made a KRL name
+    /// ([`crate::names::to_krl_name`], also a URScript name), unique in the program without
+    /// regard to case (a number added), never one of the program's own (`skp_…` becomes
+    /// `w_skp_…`) nor, in KRL, an integer signal's the conditions use, nor, in URScript, a
+    /// keyword, a function the generated code calls or a word of the program's IRL code (a
+    /// variable of a snippet that assigned a wire's name would change the wire silently).
     pub(super) fn name_wires(&self) -> Vec<(usize, String, String)> {
         let bb = self.input.blackboard;
         let mut taken: std::collections::HashSet<String> = std::collections::HashSet::new();
-        if let Some(r) = self.input.bound.resource {
-            for &si in &self.input.bound.signals {
-                taken.insert(bb.resources[r].signals[si].name.text.to_ascii_lowercase());
+        match self.lang {
+            Language::Krl => {
+                if let Some(r) = self.input.bound.resource {
+                    for &si in &self.input.bound.signals {
+                        taken.insert(bb.resources[r].signals[si].name.text.to_ascii_lowercase());
+                    }
+                }
             }
+            Language::UrScript => {
+                taken.extend(UR_RESERVED.iter().map(|w| w.to_ascii_lowercase()));
+                let mut words = |text: &str| {
+                    for w in text.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_')) {
+                        if !w.is_empty() {
+                            taken.insert(w.to_ascii_lowercase());
+                        }
+                    }
+                };
+                for b in self.input.bound.steps.iter().flatten() {
+                    words(&b.code);
+                }
+                for &(i, d) in &self.input.bound.definitions {
+                    for l in &self.input.irls[i].definitions[d].lines {
+                        words(l);
+                    }
+                }
+            }
+            Language::Rapid => return Vec::new(),
         }
         // Inputs first, then outputs, each by number (the order of an I/O list): a lower number
         // keeps the plain name when two would be the same.
@@ -81,6 +116,9 @@ impl<'a> Hand<'a> {
             let SignalKind::Bit(n) = s.kind else {
                 continue;
             };
+            if self.lang == Language::UrScript && n > 7 {
+                continue;
+            }
             let key = std::ptr::from_ref(s) as usize;
             if !wires.iter().any(|(k, ..)| *k == key) {
                 wires.push((key, s, s.output, n));
@@ -103,8 +141,12 @@ impl<'a> Hand<'a> {
                 name = format!("{}{suffix}", &base[..keep]);
             }
             taken.insert(name.to_ascii_lowercase());
-            let io = if output { "$OUT" } else { "$IN" };
-            out.push((key, name, format!("{io}[{n}]")));
+            let address = match (self.lang, output) {
+                (Language::Krl, true) => format!("$OUT[{n}]"),
+                (Language::Krl, false) => format!("$IN[{n}]"),
+                _ => n.to_string(),
+            };
+            out.push((key, name, address));
         }
         out
     }
@@ -136,7 +178,7 @@ impl<'a> Hand<'a> {
         uses
     }
 
-    /// KRL: the name a numbered wire goes by ([`Hand::name_wires`]).
+    /// KRL and URScript: the name a numbered wire goes by ([`Hand::name_wires`]).
     pub(super) fn wire_named(&self, s: &Signal) -> Option<&str> {
         let key = std::ptr::from_ref(s) as usize;
         self.names_of_wires
@@ -162,9 +204,10 @@ impl<'a> Hand<'a> {
                     integer: false,
                 },
             ) => Ok(format!("DInput({text})")),
-            (Language::UrScript, SignalKind::Bit(n)) if *n <= 7 => {
-                Ok(format!("get_standard_digital_in({n})"))
-            }
+            (Language::UrScript, SignalKind::Bit(n)) if *n <= 7 => Ok(match self.wire_named(s) {
+                Some(name) => format!("get_standard_digital_in({name})"),
+                None => format!("get_standard_digital_in({n})"),
+            }),
             (Language::UrScript, SignalKind::Address { text, .. })
                 if !text.starts_with('$') && !text.contains('[') =>
             {
@@ -193,9 +236,10 @@ impl<'a> Hand<'a> {
                     integer: false,
                 },
             ) => Ok(format!("SetDO {text}, {value};")),
-            (Language::UrScript, SignalKind::Bit(n)) if *n <= 7 => {
-                Ok(format!("set_standard_digital_out({n}, {value})"))
-            }
+            (Language::UrScript, SignalKind::Bit(n)) if *n <= 7 => Ok(match self.wire_named(s) {
+                Some(name) => format!("set_standard_digital_out({name}, {value})"),
+                None => format!("set_standard_digital_out({n}, {value})"),
+            }),
             _ => Err(self.cannot("write")),
         }
     }

@@ -68,9 +68,11 @@ pub struct Hand<'a> {
     names: Vec<String>,
     guards: Vec<String>,
     waits: Vec<(String, String)>,
-    /// KRL: the name each wire on a numbered input or output (`$IN[n]`, `$OUT[n]`) goes by in
-    /// the program, its signal's name in the blackboard as a KRL name (`SIGNAL` in the `.dat`),
-    /// keyed by the signal's address; in declaration order.
+    /// KRL and URScript: the name each wire on a numbered input or output (`$IN[n]`,
+    /// `$OUT[n]`; URScript's standard digital I/O) goes by in the program, its signal's name in
+    /// the blackboard as a KRL name (`SIGNAL` in the `.dat`, a URScript constant set at the
+    /// program's start), keyed by the signal's address; in declaration order, with the
+    /// address (`$IN[41]`; URScript the number).
     names_of_wires: Vec<(usize, String, String)>,
 }
 
@@ -87,9 +89,7 @@ impl<'a> Hand<'a> {
         };
         let cell = h.view.cell;
         let bb = input.blackboard;
-        if h.lang == Language::Krl {
-            h.names_of_wires = h.name_wires();
-        }
+        h.names_of_wires = h.name_wires();
         h.names = cell
             .controllers
             .iter()
@@ -187,6 +187,33 @@ impl<'a> Hand<'a> {
         self.watched_wait(out, &self.waits[channel].0, text, short, nr);
     }
 
+    /// A wire as this program names it, for a comment: KRL's `SIGNAL` or URScript's constant,
+    /// RAPID's signal, else its signal's name in the blackboard (`sender_side`: the wire this
+    /// program drives).
+    fn label(&self, wire: Option<usize>, sender_side: bool) -> String {
+        let Some(s) = self.signal(wire, sender_side) else {
+            return String::new();
+        };
+        if let Some(n) = self.wire_named(s) {
+            return n.to_owned();
+        }
+        match &s.kind {
+            SignalKind::Address { text, .. } => forms::clean(text),
+            _ => crate::names::transliterate(&s.name.text),
+        }
+    }
+
+    /// The wires of one kind (`run`, `ready`) the partners drive to this program, for a
+    /// comment: `From_A_3` or `From_A_3, From_B_3`.
+    fn labels_of(&self, wire: fn(&Link) -> Option<usize>) -> String {
+        self.view
+            .cell
+            .partners(self.view.me)
+            .map(|p| self.label(self.view.cell.link(p, self.view.me).and_then(wire), false))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
     /// The name of the signal a received wire arrives at on this controller (for a message).
     fn wire_name(&self, wire: Option<usize>) -> String {
         self.signal(wire, false)
@@ -253,9 +280,12 @@ impl<'a> Hand<'a> {
         out.push((
             0,
             format!(
-                "{}handshake: tell {} that {what}",
+                "{}handshake: tell {} that {what}: wait for {} = {var} (the last message read) or {} FALSE (started again), then {} = NOT {var}",
                 self.comment(),
-                self.name(ch.to)
+                self.name(ch.to),
+                self.label(ch.ack, false),
+                self.label(self.view.cell.link(ch.to, self.view.me).and_then(|l| l.run), false),
+                self.label(ch.strobe, true),
             ),
         ));
         let stop = format!(
@@ -307,7 +337,15 @@ impl<'a> Hand<'a> {
                 self.about(m)
             ),
         };
-        out.push((0, format!("{}handshake: wait {what}", self.comment())));
+        out.push((
+            0,
+            format!(
+                "{}handshake: wait {what}: for {} = NOT {var} (the next message) or {} FALSE (started again)",
+                self.comment(),
+                self.label(ch.strobe, false),
+                self.label(self.view.cell.link(ch.from, self.view.me).and_then(|l| l.run), false),
+            ),
+        ));
         out.push((0, self.toggle(&var)));
         let stop = match m.kind {
             Kind::Done => format!(
@@ -401,13 +439,25 @@ impl<'a> Hand<'a> {
             .map(|&p| self.name(p))
             .collect::<Vec<_>>()
             .join(", ");
-        let mut out = vec![(
+        let mut out = Vec::new();
+        if self.lang == Language::UrScript && !self.names_of_wires.is_empty() {
+            out.push((
+                0,
+                format!("{c}handshake: the wires, standard digital I/O by their signals' names in the blackboard"),
+            ));
+            out.extend(
+                self.names_of_wires
+                    .iter()
+                    .map(|(_, name, n)| (0, format!("{name} = {n}"))),
+            );
+        }
+        out.push((
             0,
             format!(
                 "{c}handshake: the start of {}: its run wires FALSE first, then every wire it drives",
                 self.name(self.view.me)
             ),
-        )];
+        ));
         self.set_links(&mut out, |l| l.run, false);
         self.set_links(&mut out, |l| l.ready, false);
         let chs = &self.view.cell.channels;
@@ -441,7 +491,8 @@ impl<'a> Hand<'a> {
         out.push((
             0,
             format!(
-                "{c}handshake: start barrier: wait until {names} {be} at the start (run FALSE)"
+                "{c}handshake: start barrier: wait until {names} {be} at the start (run {} FALSE)",
+                self.labels_of(|l| l.run)
             ),
         ));
         let short = format!("start barrier: waits for {names}");
@@ -455,7 +506,10 @@ impl<'a> Hand<'a> {
         self.set_links(&mut out, |l| l.ready, true);
         out.push((
             0,
-            format!("{c}handshake: start barrier: wait until {names} {be} ready too"),
+            format!(
+                "{c}handshake: start barrier: wait until {names} {be} ready too (ready {} TRUE)",
+                self.labels_of(|l| l.ready)
+            ),
         ));
         self.watched_wait(
             &mut out,
@@ -467,7 +521,10 @@ impl<'a> Hand<'a> {
         self.set_links(&mut out, |l| l.run, true);
         out.push((
             0,
-            format!("{c}handshake: start barrier: wait until {names} {be} running too (or one was started again: stop)"),
+            format!(
+                "{c}handshake: start barrier: wait until {names} {be} running too (run {} TRUE; a partner's run and ready FALSE: started again, stop)",
+                self.labels_of(|l| l.run)
+            ),
         ));
         // A partner back at its start (run and ready FALSE) was started again inside the
         // barrier: waiting for it here could wait for ever (it waits for this program's run
@@ -520,9 +577,12 @@ impl<'a> Hand<'a> {
             out.push((
                 0,
                 format!(
-                    "{}handshake: the end: wait until {} has read the last message (or was started again)",
+                    "{}handshake: the end: wait until {} has read the last message: for {} = skp_tx{} or {} FALSE (started again)",
                     self.comment(),
-                    self.name(to)
+                    self.name(to),
+                    self.label(chs[ch].ack, false),
+                    ch + 1,
+                    self.label(self.view.cell.link(to, self.view.me).and_then(|l| l.run), false),
                 ),
             ));
             let ack = self.read_wire(chs[ch].ack);
