@@ -1224,6 +1224,12 @@ impl CellView<'_> {
                 m.value + 1
             ),
             (false, Kind::Done) => format!("wait for {}: {about} done", self.controller(ch.from)),
+            (true, Kind::Passed(c)) => {
+                format!("tell {}: it {} {about}", self.controller(ch.to), c.verb())
+            }
+            (false, Kind::Passed(c)) => {
+                format!("wait for {}: it {} {about}", self.controller(ch.from), c.verb())
+            }
             (false, Kind::Decision) => format!(
                 "wait for {}: its branch at the selection {about}",
                 self.controller(ch.from)

@@ -2166,7 +2166,8 @@ fn cell_fixtures_survive_restarts() {
 
 /// The co-simulation catches each way a handshake can be wrong, in each language: a dropped
 /// wait, a decision taken again by a follower, an output set while the motion before it runs,
-/// a wait's message left on the pendant after the wait. Only the programs of one language are
+/// a wait's message left on the pendant after the wait, a tell that a step is done moved after
+/// the teller's next step (its partner would wait for that step too). Only the programs of one language are
 /// broken at a time.
 #[test]
 fn the_cell_co_simulation_catches_broken_handshakes() {
@@ -2176,6 +2177,7 @@ fn the_cell_co_simulation_catches_broken_handshakes() {
         cosim::Mutation::DecidesTwice,
         cosim::Mutation::AdvanceRun,
         cosim::Mutation::MessageKept,
+        cosim::Mutation::TellLate,
     ] {
         for lang in [Lang::Krl, Lang::Rapid, Lang::UrScript] {
             // URScript has no advance run (its moves return at their target).
@@ -2194,6 +2196,9 @@ fn the_cell_co_simulation_catches_broken_handshakes() {
                     *l == lang
                         && p.as_ref().is_some_and(|(src, _)| match mutation {
                             cosim::Mutation::DecidesTwice => src.contains("skp_got"),
+                            cosim::Mutation::TellLate => {
+                                cosim::mutate(src, mutation, lang) != *src
+                            }
                             _ => src.contains("skp_rx"),
                         })
                 });

@@ -43,6 +43,38 @@ pub enum Kind {
     Done,
     /// The selection at divergence `about` took branch `value` (from 0).
     Decision,
+    /// The teller has come past a construct: a loop (`about`: its first step), a selection
+    /// (its divergence; for the decider, once it has decided) or states (their first step).
+    /// It may have run steps since the ones before it; a partner waits for the construct.
+    Passed(Construct),
+}
+
+/// What a [`Kind::Passed`] message's teller has come past.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Construct {
+    Loop,
+    Selection,
+    /// The decider has decided the selection (the points inside its branches).
+    Decided,
+    States,
+    /// The barrier where states begin (`about`: the first state's step).
+    Enter,
+    /// The barrier at a jump between states (`about`: the step it goes on at).
+    Jump,
+}
+
+impl Construct {
+    /// What the teller has done, before the element's name: `has left the loop at` step 'S'.
+    pub fn verb(self) -> &'static str {
+        match self {
+            Construct::Loop => "has left the loop at",
+            Construct::Selection => "has passed the selection",
+            Construct::Decided => "has decided the selection",
+            Construct::States => "has left the states from",
+            Construct::Enter => "has come to the states from",
+            Construct::Jump => "has come to the jump to",
+        }
+    }
 }
 
 /// One handshake message on a [`Channel`].
@@ -137,8 +169,9 @@ impl Cell {
 
 type Set = BTreeSet<usize>;
 
-/// A point of a controller's program: (controller, tick, the element it is about).
-type Point = (usize, u32, usize);
+/// A point of a controller's program: (controller, tick, the element it is about, what a
+/// message about it says).
+type Point = (usize, u32, usize, Kind);
 
 /// Splits the planned `body` into one program per controller. `controller(step)` is the
 /// controller index (into `controllers`) running a step, `None` for a step without code (the
@@ -169,7 +202,7 @@ pub fn split(
         by_pair: HashMap::new(),
         loops: Vec::new(),
         machines: Vec::new(),
-        last: vec![0; n],
+        last: vec![(0, Kind::Done); n],
     };
     s.blocks(body, Vec::new());
     let programs = s
@@ -375,7 +408,7 @@ struct Splitter<'a> {
     /// The controllers of each enclosing [`Block::Machine`], innermost last.
     machines: Vec<Set>,
     /// Per controller, what its latest tick is about.
-    last: Vec<usize>,
+    last: Vec<(usize, Kind)>,
 }
 
 impl Splitter<'_> {
@@ -385,8 +418,8 @@ impl Splitter<'_> {
         }
     }
 
-    fn tick(&mut self, c: usize, about: usize) -> u32 {
-        self.last[c] = about;
+    fn tick(&mut self, c: usize, about: usize, kind: Kind) -> u32 {
+        self.last[c] = (about, kind);
         self.clock[c] += 1;
         self.know[c][c] = self.clock[c];
         self.clock[c]
@@ -422,14 +455,18 @@ impl Splitter<'_> {
 
     /// `c` waits until every point of the frontier has been passed.
     fn acquire(&mut self, c: usize, frontier: &[Point]) {
-        for &(d, t, about) in frontier {
+        for &(d, t, ..) in frontier {
             if d == c || self.know[c][d] >= t {
                 continue;
             }
+            // The tell stands at `d`'s place now, which may be past the point (its steps in an
+            // earlier simultaneous branch, a loop left): it says what `d` has done last, which
+            // the point is part of, so its comment and message are true where they stand.
+            let (about, kind) = self.last[d];
             let channel = self.channel(d, c, about);
             let m = Message {
                 channel,
-                kind: Kind::Done,
+                kind,
                 value: 0,
                 about,
             };
@@ -524,7 +561,7 @@ impl Splitter<'_> {
             Block::Goto { target, from } => {
                 // Every controller of the machine has come here before any goes on at the
                 // target: a state starts with everything before it done.
-                self.barrier();
+                self.barrier(*target, Construct::Jump);
                 if let Some(parts) = self.machines.last().cloned() {
                     for p in parts {
                         self.push(
@@ -544,15 +581,15 @@ impl Splitter<'_> {
                 };
                 self.acquire(c, &frontier);
                 self.push(c, Block::Step(*i));
-                let t = self.tick(c, *i);
-                vec![(c, t, *i)]
+                let t = self.tick(c, *i, Kind::Done);
+                vec![(c, t, *i, Kind::Done)]
             }
             Block::Wait(t) => {
                 let c = self.scan.evaluators[t];
                 self.acquire(c, &frontier);
                 self.push(c, Block::Wait(*t));
-                let k = self.tick(c, *t);
-                vec![(c, k, *t)]
+                let k = self.tick(c, *t, Kind::Done);
+                vec![(c, k, *t, Kind::Done)]
             }
             Block::Parallel { branches, .. } | Block::Sequences(branches) => {
                 if matches!(b, Block::Parallel { .. }) {
@@ -608,8 +645,9 @@ impl Splitter<'_> {
                             endless: *endless,
                         },
                     );
-                    let t = self.tick(p, *head);
-                    out.push((p, t, *head));
+                    let passed = Kind::Passed(Construct::Loop);
+                    let t = self.tick(p, *head, passed);
+                    out.push((p, t, *head, passed));
                 }
                 out
             }
@@ -619,13 +657,18 @@ impl Splitter<'_> {
 
     /// Each controller of the innermost machine waits until every other has come as far as the
     /// walk has.
-    fn barrier(&mut self) {
+    /// The message says where (`about`, `what`): which state came before is not known when
+    /// the programs are written, so not which step was done last.
+    fn barrier(&mut self, about: usize, what: Construct) {
         let Some(parts) = self.machines.last().cloned() else {
             return;
         };
+        for &d in &parts {
+            self.last[d] = (about, Kind::Passed(what));
+        }
         let points: Vec<Point> = parts
             .iter()
-            .map(|&d| (d, self.clock[d], self.last[d]))
+            .map(|&d| (d, self.clock[d], about, Kind::Passed(what)))
             .collect();
         for &c in &parts {
             self.acquire(c, &points);
@@ -647,7 +690,7 @@ impl Splitter<'_> {
             self.acquire(p, &frontier);
         }
         self.machines.push(parts.clone());
-        self.barrier();
+        self.barrier(first.entry, Construct::Enter);
         let entry = self.know.clone();
         let mut written: Vec<Vec<super::State>> = vec![Vec::new(); self.n];
         for st in states {
@@ -678,8 +721,9 @@ impl Splitter<'_> {
         for &p in &parts {
             let states = std::mem::take(&mut written[p]);
             self.push(p, Block::Machine(states));
-            let t = self.tick(p, first.entry);
-            out.push((p, t, first.entry));
+            let passed = Kind::Passed(Construct::States);
+            let t = self.tick(p, first.entry, passed);
+            out.push((p, t, first.entry, passed));
         }
         out
     }
@@ -700,7 +744,7 @@ impl Splitter<'_> {
         }
         // The decider decides once what comes before is done.
         self.acquire(d, &frontier);
-        let decided = self.tick(d, div);
+        let decided = self.tick(d, div, Kind::Passed(Construct::Decided));
         let followers: Vec<usize> = parts.iter().copied().filter(|&p| p != d).collect();
         let channels: Vec<usize> = followers
             .iter()
@@ -716,9 +760,12 @@ impl Splitter<'_> {
             self.merge(d, f);
         }
         let after_decision = self.know.clone();
+        // What each controller did last, as each branch begins (not the earlier branch's).
+        let last_after_decision = self.last.clone();
         let mut written: Vec<Vec<Branch>> = vec![Vec::new(); self.n];
         for (k, br) in branches.iter().enumerate() {
             self.know = after_decision.clone();
+            self.last.clone_from(&last_after_decision);
             for &p in &parts {
                 self.stacks[p].push(Vec::new());
             }
@@ -731,7 +778,10 @@ impl Splitter<'_> {
                 };
                 self.push(d, Block::Tell(m));
             }
-            let end = self.blocks(&br.body, vec![(d, decided, div)]);
+            let end = self.blocks(
+                &br.body,
+                vec![(d, decided, div, Kind::Passed(Construct::Decided))],
+            );
             if matches!(br.end, BranchEnd::Repeat(_))
                 && let Some(l) = self.loops.last().cloned()
             {
@@ -773,8 +823,9 @@ impl Splitter<'_> {
                 }
             };
             self.push(p, block);
-            let t = self.tick(p, div);
-            out.push((p, t, div));
+            let passed = Kind::Passed(Construct::Selection);
+            let t = self.tick(p, div, passed);
+            out.push((p, t, div, passed));
         }
         out
     }

@@ -21,8 +21,7 @@ use std::collections::HashMap;
 use crate::chart::{Chart, ChartGen};
 use crate::krl::{KExpr, bits, code, kexpr};
 use crate::machine::{Expr as MExpr, Op};
-pub use crate::mutate::Mutation;
-use crate::mutate::mutate;
+pub use crate::mutate::{Mutation, mutate};
 use crate::{Lang, Phase, Rng, SIGNALS, repo, sequences};
 
 /// An expression of a program: KRL's, or (RAPID, URScript) the machine's for conditions and
@@ -81,6 +80,9 @@ pub enum Ins {
     Show,
     Clear,
     Assign(String, X),
+    /// A tell that step `name` is done begins (its comment): the program has started no
+    /// other step since that one (a partner that waits for it would wait for more).
+    Told(String),
     JumpIfNot(X, usize),
     Jump(usize),
     End,
@@ -106,6 +108,16 @@ enum Open {
 }
 
 /// Parses a KRL `.src` main program into flat statements.
+/// The step a tell's comment (`handshake: tell R2 that step 'Grip' (localId 5) is done…`)
+/// says is done: its name's first word, as a step title gives it.
+fn told(comment: &str) -> Option<String> {
+    let rest = comment.strip_prefix("handshake: tell ")?;
+    let (_, after) = rest.split_once(" that step '")?;
+    let (name, tail) = after.split_once('\'')?;
+    tail.contains(") is done")
+        .then(|| name.split_whitespace().next().unwrap_or_default().to_owned())
+}
+
 pub fn parse(src: &str) -> Vec<Ins> {
     let expanded = inline_routines(src);
     let lines: Vec<&str> = expanded.iter().map(String::as_str).collect();
@@ -130,6 +142,10 @@ pub fn parse(src: &str) -> Vec<Ins> {
             if let Some(name) = crate::krl::fold(&lines, &mut i, title) {
                 out.push(Ins::Step(name));
             }
+            continue;
+        }
+        if let Some(name) = raw.strip_prefix(';').and_then(told) {
+            out.push(Ins::Told(name));
             continue;
         }
         let c = code(raw);
@@ -560,6 +576,12 @@ struct Ctl {
     messages: Vec<(f64, f64)>,
     /// What went wrong with a message (shown too early, never taken away, taken away twice).
     message_faults: Vec<String>,
+    /// The step it started last in this run ([`Ins::Told`]).
+    last_step: Option<String>,
+    /// The names of its own steps (a tell may also pass on a partner's step, or a round's end).
+    own_steps: std::collections::HashSet<String>,
+    /// A tell that came after another step than the one it reports.
+    late_tells: Vec<String>,
 }
 
 /// A step run: its name, the start and end of its motion.
@@ -893,6 +915,7 @@ impl World<'_> {
         x.restarts.push(now);
         x.pc = 0;
         x.t = now;
+        x.last_step = None;
         x.ended = false;
         x.capped = false;
         x.blocked = false;
@@ -969,6 +992,7 @@ impl World<'_> {
                 let dur = ctl.slow * (1 + rng.next() % 50) as f64;
                 let start = ctl.t.max(ctl.motion_end);
                 ctl.motion_end = start + dur;
+                ctl.last_step = Some(name.clone());
                 ctl.steps.push((name, start, start + dur));
                 ctl.pc += 1;
                 // URScript's `movel`/`movej` return when the motion has ended.
@@ -1003,6 +1027,16 @@ impl World<'_> {
                 if let Some(late) = find_late(&e) {
                     self.ctls[c].watched = Some(late);
                 }
+            }
+            Ins::Told(name) => {
+                let x = &mut self.ctls[c];
+                if x.own_steps.contains(&name) && x.last_step.as_deref() != Some(name.as_str()) {
+                    x.late_tells.push(format!(
+                        "told that step {name} is done only after step {} (a partner that waits for {name} waits for that too)",
+                        x.last_step.as_deref().unwrap_or("(none)")
+                    ));
+                }
+                x.pc += 1;
             }
             Ins::TimerStart(n) => {
                 let x = &mut self.ctls[c];
@@ -1393,6 +1427,8 @@ pub fn parse_structured(text: &str, lang: Lang, wires: &Wires, me: usize) -> Vec
         if let Some(c) = l.strip_prefix(comment) {
             if let Some(title) = c.trim_start().strip_prefix("step ") {
                 out.push(Ins::Step(crate::machine::step_name(title)));
+            } else if let Some(name) = told(c.trim_start()) {
+                out.push(Ins::Told(name));
             }
             continue;
         }
@@ -1992,9 +2028,17 @@ pub fn co_simulate_in(
                 let (ins, dat) = p.clone().unwrap_or((vec![Ins::End], String::new()));
                 let (signals, vars) = read_dat(&dat);
                 let slow = [0.1, 1.0, 3.0, 10.0][(rng.next() % 4) as usize];
+                let own_steps = ins
+                    .iter()
+                    .filter_map(|i| match i {
+                        Ins::Step(n) => Some(n.clone()),
+                        _ => None,
+                    })
+                    .collect();
                 Ctl {
                     ins,
                     pc: 0,
+                    own_steps,
                     vars,
                     signals,
                     t: (rng.next() % 200) as f64,
@@ -2019,6 +2063,8 @@ pub fn co_simulate_in(
                     shown: None,
                     messages: Vec::new(),
                     message_faults: Vec::new(),
+                    last_step: None,
+                    late_tells: Vec::new(),
                 }
             })
             .collect();
@@ -2067,6 +2113,9 @@ pub fn co_simulate_in(
                 ));
             }
             if let Some(why) = x.message_faults.first() {
+                return fail(format!("R{} {why}", c + 1));
+            }
+            if let Some(why) = x.late_tells.first() {
                 return fail(format!("R{} {why}", c + 1));
             }
             if x.restart_at.is_some() {

@@ -22,6 +22,8 @@ pub enum Mutation {
     NoGuard,
     /// A wait's message is never taken away from the pendant.
     MessageKept,
+    /// A tell that a step is done moved after the teller's next step (right below it).
+    TellLate,
 }
 
 /// The line that closes the block opened at line `i` (`ENDIF`, URScript's `end`, as deep).
@@ -163,6 +165,79 @@ pub fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
             }
             return out.join("\n") + "\n";
         }
+        Mutation::TellLate => {
+            let indent = |l: &str| l.len() - l.trim_start().len();
+            let comment = match lang {
+                Lang::Krl => ";",
+                Lang::Rapid => "!",
+                Lang::UrScript => "#",
+            };
+            // The tell's last line puts the flipped toggle on the strobe.
+            let strobe = |l: &str| {
+                let t = l.trim().trim_end_matches([';', ')']);
+                t.rsplit_once("skp_tx").is_some_and(|(head, n)| {
+                    !n.is_empty()
+                        && n.bytes().all(|b| b.is_ascii_digit())
+                        && !["NOT ", "not ", "1 - ", "WAIT", "Wait", "while", "=="]
+                            .iter()
+                            .any(|w| head.contains(w))
+                })
+            };
+            for i in 0..lines.len() {
+                if !(lines[i].contains("handshake: tell ") && lines[i].contains(") is done")) {
+                    continue;
+                }
+                let Some(e) = (i + 1..lines.len()).find(|&k| strobe(lines[k])) else {
+                    continue;
+                };
+                let Some(next) = lines.get(e + 1) else {
+                    continue;
+                };
+                let t = next.trim();
+                let step = match lang {
+                    Lang::Krl => t.starts_with(";FOLD "),
+                    _ => t.starts_with(&format!("{comment} step ")),
+                };
+                if !step || indent(next) != indent(lines[i]) {
+                    continue;
+                }
+                let d = indent(next);
+                let end = match lang {
+                    Lang::Krl => {
+                        let mut depth = 0;
+                        (e + 1..lines.len())
+                            .find(|&k| {
+                                let t = lines[k].trim();
+                                if t.starts_with(";FOLD") {
+                                    depth += 1;
+                                } else if t.starts_with(";ENDFOLD") {
+                                    depth -= 1;
+                                }
+                                depth == 0
+                            })
+                            .unwrap()
+                            + 1
+                    }
+                    _ => (e + 2..lines.len())
+                        .find(|&k| {
+                            let l = lines[k];
+                            !l.trim().is_empty()
+                                && (indent(l) < d
+                                    || (indent(l) == d && l.trim().starts_with(comment)))
+                        })
+                        .unwrap_or(lines.len()),
+                };
+                let order: Vec<&str> = lines[..i]
+                    .iter()
+                    .chain(&lines[e + 1..end])
+                    .chain(&lines[i..e + 1])
+                    .chain(&lines[end..])
+                    .copied()
+                    .collect();
+                return order.join("\n") + "\n";
+            }
+            return src.to_owned();
+        }
         Mutation::MessageKept => {
             let clears = |l: &str| match lang {
                 Lang::Krl => l.starts_with("skp_hide("),
@@ -195,7 +270,11 @@ pub fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
     };
     let tell = |i: usize| i > 0 && lines[i - 1].contains("handshake: tell");
     match m {
-        Mutation::None | Mutation::NoBarrier | Mutation::NoGuard | Mutation::MessageKept => {
+        Mutation::None
+        | Mutation::NoBarrier
+        | Mutation::NoGuard
+        | Mutation::MessageKept
+        | Mutation::TellLate => {
             src.to_owned()
         }
         Mutation::DroppedWait => match pick(&|i, _| after_toggle(i) && !barrier(i)) {

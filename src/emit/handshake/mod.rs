@@ -271,6 +271,7 @@ impl<'a> Hand<'a> {
         let mut out = Vec::new();
         let what = match m.kind {
             Kind::Done => format!("{} is done", self.about(m)),
+            Kind::Passed(c) => format!("it {} {}", c.verb(), self.about(m)),
             Kind::Decision => format!(
                 "branch {} was taken at the selection {}",
                 m.value + 1,
@@ -331,6 +332,12 @@ impl<'a> Hand<'a> {
         let mut out = Vec::new();
         let what = match m.kind {
             Kind::Done => format!("until {} has done {}", self.name(ch.from), self.about(m)),
+            Kind::Passed(c) => format!(
+                "until {} {} {}",
+                self.name(ch.from),
+                c.verb(),
+                self.about(m)
+            ),
             Kind::Decision => format!(
                 "for the branch {} takes at the selection {}",
                 self.name(ch.from),
@@ -356,6 +363,12 @@ impl<'a> Hand<'a> {
             Kind::Decision => format!(
                 "{} started again; waited for its branch at the selection {}",
                 self.name(ch.from),
+                self.about(m)
+            ),
+            Kind::Passed(c) => format!(
+                "{} started again; waited until it {} {}",
+                self.name(ch.from),
+                c.verb(),
                 self.about(m)
             ),
         };
