@@ -1228,7 +1228,11 @@ impl CellView<'_> {
                 format!("tell {}: it {} {about}", self.controller(ch.to), c.verb())
             }
             (false, Kind::Passed(c)) => {
-                format!("wait for {}: it {} {about}", self.controller(ch.from), c.verb())
+                format!(
+                    "wait for {}: it {} {about}",
+                    self.controller(ch.from),
+                    c.verb()
+                )
             }
             (false, Kind::Decision) => format!(
                 "wait for {}: its branch at the selection {about}",

@@ -2437,9 +2437,15 @@ fn a_cells_urscript_wires_are_named_constants() {
     let bb = std::fs::read_to_string(p.path().join("Blackboard.aml")).unwrap();
     let ur = "{20000000-0000-0000-0000-000000000002}";
     let bb = bb
-        .replace("Name=\"From_ABB_1\" ID=\"{u-in-1}\"", "Name=\"sleep\" ID=\"{u-in-1}\"")
+        .replace(
+            "Name=\"From_ABB_1\" ID=\"{u-in-1}\"",
+            "Name=\"sleep\" ID=\"{u-in-1}\"",
+        )
         .replace(&format!("{ur}:From_ABB_1\""), &format!("{ur}:sleep\""))
-        .replace("Name=\"From_ABB_2\" ID=\"{u-in-2}\"", "Name=\"v\" ID=\"{u-in-2}\"")
+        .replace(
+            "Name=\"From_ABB_2\" ID=\"{u-in-2}\"",
+            "Name=\"v\" ID=\"{u-in-2}\"",
+        )
         .replace(&format!("{ur}:From_ABB_2\""), &format!("{ur}:v\""));
     std::fs::write(p.path().join("Blackboard.aml"), bb).unwrap();
     let o = run(&["--lf", "Blackboard.aml", "Mix"], p.path());
@@ -2455,9 +2461,18 @@ fn a_cells_urscript_wires_are_named_constants() {
         script.contains("while not (((get_standard_digital_in(sleep_2) == skp_rx3) or (not get_standard_digital_in(From_ABB_3)))"),
         "{script}"
     );
-    assert!(script.contains("if get_standard_digital_in(v_2):"), "{script}");
-    assert!(script.contains("set_standard_digital_out(To_ABB_1, skp_rx3)"), "{script}");
-    assert!(script.contains("movel(") && script.contains("sleep(0.3)"), "{script}");
+    assert!(
+        script.contains("if get_standard_digital_in(v_2):"),
+        "{script}"
+    );
+    assert!(
+        script.contains("set_standard_digital_out(To_ABB_1, skp_rx3)"),
+        "{script}"
+    );
+    assert!(
+        script.contains("movel(") && script.contains("sleep(0.3)"),
+        "{script}"
+    );
     assert!(
         !script.contains("digital_in(4)") && !script.contains("digital_out(1,"),
         "{script}"

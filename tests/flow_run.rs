@@ -2196,9 +2196,7 @@ fn the_cell_co_simulation_catches_broken_handshakes() {
                     *l == lang
                         && p.as_ref().is_some_and(|(src, _)| match mutation {
                             cosim::Mutation::DecidesTwice => src.contains("skp_got"),
-                            cosim::Mutation::TellLate => {
-                                cosim::mutate(src, mutation, lang) != *src
-                            }
+                            cosim::Mutation::TellLate => cosim::mutate(src, mutation, lang) != *src,
                             _ => src.contains("skp_rx"),
                         })
                 });

@@ -225,8 +225,7 @@ pub fn branch_conditions(
         .iter()
         .map(|b| branch_condition(input, b, ops))
         .collect();
-    if conds.len() > 1 && conds.iter().all(Option::is_some) && covers_every_case(input, branches)
-    {
+    if conds.len() > 1 && conds.iter().all(Option::is_some) && covers_every_case(input, branches) {
         *conds.last_mut().expect("two or more") = None;
     }
     conds
@@ -257,11 +256,8 @@ fn always_one_holds(exprs: &[&crate::cond::Expr]) -> bool {
             return false;
         }
     }
-    (0u32..1 << atoms.len()).all(|values| {
-        exprs
-            .iter()
-            .any(|e| truth(e, &atoms, values) == Some(true))
-    })
+    (0u32..1 << atoms.len())
+        .all(|values| exprs.iter().any(|e| truth(e, &atoms, values) == Some(true)))
 }
 
 /// The most atoms [`covers_every_case`] tries (2^10 cases).

@@ -114,8 +114,12 @@ fn told(comment: &str) -> Option<String> {
     let rest = comment.strip_prefix("handshake: tell ")?;
     let (_, after) = rest.split_once(" that step '")?;
     let (name, tail) = after.split_once('\'')?;
-    tail.contains(") is done")
-        .then(|| name.split_whitespace().next().unwrap_or_default().to_owned())
+    tail.contains(") is done").then(|| {
+        name.split_whitespace()
+            .next()
+            .unwrap_or_default()
+            .to_owned()
+    })
 }
 
 pub fn parse(src: &str) -> Vec<Ins> {

@@ -274,9 +274,7 @@ pub fn mutate(src: &str, m: Mutation, lang: Lang) -> String {
         | Mutation::NoBarrier
         | Mutation::NoGuard
         | Mutation::MessageKept
-        | Mutation::TellLate => {
-            src.to_owned()
-        }
+        | Mutation::TellLate => src.to_owned(),
         Mutation::DroppedWait => match pick(&|i, _| after_toggle(i) && !barrier(i)) {
             Some(i) => keep(std::slice::from_ref(&(i..unit_end(&lines, i, lang)))),
             None => src.to_owned(),
