@@ -244,6 +244,15 @@ impl Runnable {
             Runnable::Structured(p) => machine::run(p, seq, flicker),
         }
     }
+
+    /// [`Runnable::run`] with time as the controller reads it: a wait reads its condition
+    /// every `tick` milliseconds (RAPID: at its `\PollRate`), and the inputs change at a time.
+    fn run_timed(&self, seq: &[Phase], tick: i64, change: &machine::Change) -> Vec<String> {
+        match self {
+            Runnable::Krl(program, dat) => krl::krl_run_timed(program, dat, seq, tick, change),
+            Runnable::Structured(p) => machine::run_timed(p, seq, tick, change),
+        }
+    }
 }
 
 impl Lang {
@@ -793,6 +802,70 @@ fn step_timer(lang: Lang) -> &'static str {
         Lang::Krl => "$TIMER[",
         Lang::Rapid => "ClkRead(skp_clock",
         Lang::UrScript => "skp_time",
+    }
+}
+
+/// How often each controller reads a wait's condition, in milliseconds: KRL every interpreter
+/// cycle (12 ms on KR C4), URScript every control cycle (`sync()`; 8 ms on CB3, 2 ms on
+/// e-Series: the slower), RAPID at its `\PollRate` (the reader takes it from the program).
+fn poll_ms(lang: Lang) -> i64 {
+    match lang {
+        Lang::Krl => 12,
+        Lang::Rapid => 100,
+        Lang::UrScript => 8,
+    }
+}
+
+/// A step-time window of 150 ms takes the same branch in every language
+/// (`fixtures/ok/flow-step-time`: after `Grip`, `Grip.t < T#150ms AND Part_OK` lifts, a
+/// timeout retreats). `Part_OK` comes on at a time after `Grip` began (its action takes 100
+/// ms, then the selection waits), each controller reading the condition at its own rate:
+/// whenever it comes before 140 ms (the window less RAPID's 40 ms poll rate) all three lift,
+/// from 150 ms on all three retreat. RAPID's default rate of 100 ms would read at 100 ms and
+/// 200 ms and retreat for a part that came at 120 ms (checked too, so the test can fail).
+#[test]
+fn a_150_ms_step_time_window_takes_the_same_branch_in_every_language() {
+    let quiet: Phase = [("Part_OK", 0), ("Release", 0)].into_iter().collect();
+    let part: Phase = [("Part_OK", 1), ("Release", 0)].into_iter().collect();
+    let after_grip = |actions: &[String]| -> String {
+        let at = actions.iter().position(|a| a == "Grip").expect("Grip runs");
+        actions.get(at + 1).cloned().unwrap_or_default()
+    };
+    let change = |delay: i64| machine::Change {
+        after: "Grip".to_owned(),
+        delay,
+        phase: part.clone(),
+    };
+    for lang in [Lang::Krl, Lang::Rapid, Lang::UrScript] {
+        let (program, output, _) = compile("flow-step-time", lang);
+        let run = output.parse(&program);
+        for delay in [
+            0, 40, 99, 100, 101, 110, 120, 130, 139, 140, 150, 151, 200, 1000,
+        ] {
+            let actions =
+                run.run_timed(std::slice::from_ref(&quiet), poll_ms(lang), &change(delay));
+            let expect = if delay <= 140 { "Lift" } else { "Retreat" };
+            assert_eq!(
+                after_grip(&actions),
+                expect,
+                "{lang:?}: Part_OK {delay} ms after Grip began: {actions:?}\n{}",
+                output.main
+            );
+        }
+        if lang == Lang::Rapid {
+            let slow = Output {
+                lang,
+                main: output.main.replace("\\PollRate:=0.04", ""),
+                dat: String::new(),
+            };
+            assert_ne!(slow.main, output.main);
+            let actions = slow.parse(&program).run_timed(
+                std::slice::from_ref(&quiet),
+                poll_ms(lang),
+                &change(120),
+            );
+            assert_eq!(after_grip(&actions), "Retreat", "{actions:?}");
+        }
     }
 }
 

@@ -375,6 +375,11 @@ struct Machine<'a> {
     now: i64,
     timers: HashMap<usize, Timer>,
     time_reads: std::cell::Cell<usize>,
+    /// The timed mode ([`krl_run_timed`]): a `WAIT FOR` reads its condition every `tick`
+    /// milliseconds (the interpreter cycle), and the inputs change at a time (their bits).
+    timed: Option<(i64, &'a crate::machine::Change, HashMap<String, bool>)>,
+    /// When the action of the change began.
+    change_at: Option<i64>,
 }
 
 enum Flow {
@@ -388,6 +393,11 @@ enum Flow {
 
 impl Machine<'_> {
     fn bits(&self) -> &HashMap<String, bool> {
+        if let (Some((_, ch, bits)), Some(at)) = (&self.timed, self.change_at)
+            && self.now >= at + ch.delay
+        {
+            return bits;
+        }
         if self.flicker {
             let r = self.reads.get();
             self.reads.set(r + 1);
@@ -515,6 +525,12 @@ impl Machine<'_> {
                     if self.actions.len() >= MAX_ACTIONS {
                         return Flow::Running;
                     }
+                    if let Some((_, ch, _)) = &self.timed
+                        && ch.after == *name
+                        && self.change_at.is_none()
+                    {
+                        self.change_at = Some(self.now);
+                    }
                     self.actions.push(name.clone());
                     self.now += ACTION_MS;
                     Flow::Next
@@ -532,7 +548,7 @@ impl Machine<'_> {
                         if self.time_reads.get() == reads || self.now - since >= STUCK_MS {
                             break Flow::Stuck;
                         }
-                        self.now += TICK_MS;
+                        self.now += self.timed.as_ref().map_or(TICK_MS, |t| t.0);
                     }
                 }
                 Stmt::Sleep(ms) => {
@@ -707,6 +723,8 @@ fn krl_run_clocked(
         now: 0,
         timers: HashMap::new(),
         time_reads: std::cell::Cell::new(0),
+        timed: None,
+        change_at: None,
     };
     let outcome = match m.run(program) {
         Flow::Next => Outcome::Done,
@@ -716,6 +734,36 @@ fn krl_run_clocked(
         Flow::Goto(l) => panic!("GOTO {l}: no label it may go to"),
     };
     (m.actions, outcome, m.now)
+}
+
+/// [`krl_run_with`] in timed mode: the inputs of `seq`'s first phase, changed as `change`
+/// says at its time; a `WAIT FOR` reads its condition every `tick` milliseconds.
+pub fn krl_run_timed(
+    program: &[Stmt],
+    dat: &str,
+    seq: &[Phase],
+    tick: i64,
+    change: &crate::machine::Change,
+) -> Vec<String> {
+    let (signals, vars) = read_dat(dat);
+    let mut m = Machine {
+        seq,
+        flicker: false,
+        reads: std::cell::Cell::new(0),
+        bits: seq.iter().map(bits).collect(),
+        actions: Vec::new(),
+        vars,
+        signals,
+        steps: 0,
+        visits: HashMap::new(),
+        now: 0,
+        timers: HashMap::new(),
+        time_reads: std::cell::Cell::new(0),
+        timed: Some((tick, change, bits(&change.phase))),
+        change_at: None,
+    };
+    m.run(program);
+    m.actions
 }
 
 /// The interpreter itself: KRL's precedence is not ST's, so a condition without the emitted
@@ -739,6 +787,8 @@ fn the_interpreter_uses_krl_precedence() {
         now: 0,
         timers: HashMap::new(),
         time_reads: std::cell::Cell::new(0),
+        timed: None,
+        change_at: None,
     };
     // `$IN[1] OR $IN[3] == FALSE` is `($IN[1] OR $IN[3]) == FALSE` in KRL.
     assert!(!m.truth(&kexpr("$IN[1] OR $IN[3] == FALSE")));

@@ -46,8 +46,10 @@ pub enum Expr {
 pub enum Stmt {
     /// A step's title line (`! step 2 Grip: …`, `# step 2 Grip: …`): the step's name.
     Step(String),
-    /// RAPID's `WaitUntil c;`, URScript's `while not (c): sync() end`.
-    Wait(Expr),
+    /// RAPID's `WaitUntil c;` with the milliseconds between its reads (`\PollRate`; 100
+    /// without, RAPID's default), URScript's `while not (c): sync() end` (`None`: every control
+    /// cycle). Only the timed mode reads at these rates ([`run_timed`]).
+    Wait(Expr, Option<i64>),
     /// RAPID's `WaitTime \InPos, 0;` (the robot stands still: no time here), `WaitTime t;`:
     /// milliseconds.
     Sleep(i64),
@@ -163,9 +165,23 @@ enum Flow {
     Running,
 }
 
+/// Inputs that change at a time: `phase` holds from `delay` milliseconds after the action
+/// `after` began (its step became active) on, in place of the sequence's.
+#[derive(Debug, Clone)]
+pub struct Change {
+    pub after: String,
+    pub delay: i64,
+    pub phase: Phase,
+}
+
 struct Machine<'a> {
     program: &'a Program,
     seq: &'a [Phase],
+    /// The timed mode ([`run_timed`]): a wait reads its condition every `tick` (RAPID: its
+    /// `\PollRate`, else 100 ms), and the inputs change at a time.
+    timed: Option<(i64, &'a Change)>,
+    /// When the action of the change began.
+    change_at: Option<i64>,
     flicker: bool,
     reads: std::cell::Cell<usize>,
     actions: Vec<String>,
@@ -190,6 +206,8 @@ impl<'a> Machine<'a> {
         Machine {
             program,
             seq,
+            timed: None,
+            change_at: None,
             flicker,
             reads: std::cell::Cell::new(0),
             actions: Vec::new(),
@@ -209,6 +227,11 @@ impl<'a> Machine<'a> {
     }
 
     fn phase(&self) -> &Phase {
+        if let (Some((_, ch)), Some(at)) = (self.timed, self.change_at)
+            && self.now >= at + ch.delay
+        {
+            return &ch.phase;
+        }
         if self.flicker {
             let r = self.reads.get();
             self.reads.set(r + 1);
@@ -326,6 +349,12 @@ impl<'a> Machine<'a> {
                     if self.actions.len() >= MAX_ACTIONS {
                         return Flow::Running;
                     }
+                    if let Some((_, ch)) = self.timed
+                        && ch.after == *name
+                        && self.change_at.is_none()
+                    {
+                        self.change_at = Some(self.now);
+                    }
                     self.actions.push(name.clone());
                     self.advance(ACTION_MS);
                     Flow::Next
@@ -355,7 +384,11 @@ impl<'a> Machine<'a> {
                     self.counting = true;
                     Flow::Next
                 }
-                Stmt::Wait(c) => {
+                Stmt::Wait(c, poll) => {
+                    let tick = match self.timed {
+                        Some((tick, _)) => poll.unwrap_or(tick),
+                        None => TICK_MS,
+                    };
                     // Inputs change only when the robot acts: a false condition that read no
                     // time stays false; one that read a time is read again every tick, until
                     // it has waited STUCK_MS. Flickering inputs: read again a while.
@@ -376,7 +409,7 @@ impl<'a> Machine<'a> {
                         if (!timed && tried >= tries) || (timed && self.now - since >= STUCK_MS) {
                             break Flow::Stuck;
                         }
-                        self.advance(TICK_MS);
+                        self.advance(tick);
                     }
                 }
                 Stmt::If(arms, otherwise) => {
@@ -455,6 +488,16 @@ impl<'a> Machine<'a> {
 pub fn run(program: &Program, seq: &[Phase], flicker: bool) -> (Vec<String>, Outcome) {
     let (actions, outcome, _) = run_clocked(program, seq, flicker);
     (actions, outcome)
+}
+
+/// [`run`] in timed mode: the inputs of `seq`'s first phase, changed as `change` says at its
+/// time; a wait reads its condition every `tick` milliseconds (URScript: its control cycle),
+/// RAPID's at its `\PollRate` (100 ms without one, RAPID's default).
+pub fn run_timed(program: &Program, seq: &[Phase], tick: i64, change: &Change) -> Vec<String> {
+    let mut m = Machine::new(program, seq, false);
+    m.timed = Some((tick, change));
+    m.run(&program.body);
+    m.actions
 }
 
 /// [`run`], and the clock at the end (milliseconds).

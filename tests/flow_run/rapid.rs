@@ -347,9 +347,13 @@ fn block(lines: &[&str], i: &mut usize, until: &[&str]) -> (Vec<Stmt>, String) {
                     .unwrap_or_else(|| panic!("RAPID: `{l}` without `;`"));
                 let c = c.trim_start();
                 let c = c.strip_prefix("\\InPos,").unwrap_or(c);
-                // Read every 40 ms: here, at every tick.
-                let c = c.trim_end().strip_suffix("\\PollRate:=0.04").unwrap_or(c);
-                Some(Stmt::Wait(expr(c)))
+                // Read every 40 ms with `\PollRate:=0.04`, else every 100 ms (RAPID's default);
+                // the machine's timed mode reads at that rate, the others every tick.
+                let (c, poll) = match c.trim_end().strip_suffix("\\PollRate:=0.04") {
+                    Some(c) => (c, 40),
+                    None => (c, 100),
+                };
+                Some(Stmt::Wait(expr(c), Some(poll)))
             }
             _ => match l.split_once(" := ") {
                 Some((var, e)) if var.bytes().all(|c| c.is_ascii_alphanumeric() || c == b'_') => {

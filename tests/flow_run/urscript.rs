@@ -347,7 +347,9 @@ fn block(
                 assert_eq!(end, "end");
                 // A wait: one control cycle at a time until the condition holds.
                 match c {
-                    Expr::Not(c) if matches!(body.as_slice(), [Stmt::Sync]) => Some(Stmt::Wait(*c)),
+                    Expr::Not(c) if matches!(body.as_slice(), [Stmt::Sync]) => {
+                        Some(Stmt::Wait(*c, None))
+                    }
                     c => Some(Stmt::While(c, body)),
                 }
             }
