@@ -19,7 +19,7 @@ pub const DEFAULT_TEMPLATE: &str = include_str!("../../templates/urscript.toml")
 
 /// URScript's keywords and the names a value must not be (they would become code or change
 /// what a name means).
-const KEYWORDS: &[&str] = &[
+pub(crate) const KEYWORDS: &[&str] = &[
     "and",
     "break",
     "continue",

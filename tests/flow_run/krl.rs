@@ -391,7 +391,28 @@ enum Flow {
     Running,
 }
 
-impl Machine<'_> {
+impl<'a> Machine<'a> {
+    /// A machine at its start: the `.dat`'s signals and values, the inputs of `seq`.
+    fn new(dat: &str, seq: &'a [Phase], flicker: bool) -> Machine<'a> {
+        let (signals, vars) = read_dat(dat);
+        Machine {
+            seq,
+            flicker,
+            reads: std::cell::Cell::new(0),
+            bits: seq.iter().map(bits).collect(),
+            actions: Vec::new(),
+            vars,
+            signals,
+            steps: 0,
+            visits: HashMap::new(),
+            now: 0,
+            timers: HashMap::new(),
+            time_reads: std::cell::Cell::new(0),
+            timed: None,
+            change_at: None,
+        }
+    }
+
     fn bits(&self) -> &HashMap<String, bool> {
         if let (Some((_, ch, bits)), Some(at)) = (&self.timed, self.change_at)
             && self.now >= at + ch.delay
@@ -709,23 +730,7 @@ fn krl_run_clocked(
     seq: &[Phase],
     flicker: bool,
 ) -> (Vec<String>, Outcome, i64) {
-    let (signals, vars) = read_dat(dat);
-    let mut m = Machine {
-        seq,
-        flicker,
-        reads: std::cell::Cell::new(0),
-        bits: seq.iter().map(bits).collect(),
-        actions: Vec::new(),
-        vars,
-        signals,
-        steps: 0,
-        visits: HashMap::new(),
-        now: 0,
-        timers: HashMap::new(),
-        time_reads: std::cell::Cell::new(0),
-        timed: None,
-        change_at: None,
-    };
+    let mut m = Machine::new(dat, seq, flicker);
     let outcome = match m.run(program) {
         Flow::Next => Outcome::Done,
         Flow::Exit => panic!("EXIT outside a loop"),
@@ -745,23 +750,8 @@ pub fn krl_run_timed(
     tick: i64,
     change: &crate::machine::Change,
 ) -> Vec<String> {
-    let (signals, vars) = read_dat(dat);
-    let mut m = Machine {
-        seq,
-        flicker: false,
-        reads: std::cell::Cell::new(0),
-        bits: seq.iter().map(bits).collect(),
-        actions: Vec::new(),
-        vars,
-        signals,
-        steps: 0,
-        visits: HashMap::new(),
-        now: 0,
-        timers: HashMap::new(),
-        time_reads: std::cell::Cell::new(0),
-        timed: Some((tick, change, bits(&change.phase))),
-        change_at: None,
-    };
+    let mut m = Machine::new(dat, seq, false);
+    m.timed = Some((tick, change, bits(&change.phase)));
     m.run(program);
     m.actions
 }

@@ -16,35 +16,10 @@ pub(super) fn clean(t: &str) -> String {
         .collect()
 }
 
-/// URScript's keywords and the functions the generated code calls: no wire is named so.
-const UR_RESERVED: &[&str] = &[
-    "and",
-    "break",
-    "continue",
-    "def",
-    "elif",
-    "else",
-    "end",
-    "False",
-    "for",
-    "global",
-    "halt",
-    "if",
-    "in",
-    "join",
-    "kill",
-    "local",
+/// Besides URScript's keywords ([`crate::emit::urscript::KEYWORDS`]), the functions the
+/// generated code calls: no wire is named so.
+const UR_CALLED: &[&str] = &[
     "None",
-    "not",
-    "or",
-    "pass",
-    "return",
-    "run",
-    "sec",
-    "thread",
-    "True",
-    "while",
-    "xor",
     "p",
     "sync",
     "sleep",
@@ -66,8 +41,6 @@ const UR_RESERVED: &[&str] = &[
     "is_steady",
     "set_tcp",
     "set_payload",
-    "enter_critical",
-    "exit_critical",
 ];
 
 /// A RAPID condition for `WaitUntil`: one of several parts in parentheses as a whole
@@ -131,7 +104,12 @@ impl<'a> Hand<'a> {
                 }
             }
             Language::UrScript => {
-                taken.extend(UR_RESERVED.iter().map(|w| w.to_ascii_lowercase()));
+                taken.extend(
+                    crate::emit::urscript::KEYWORDS
+                        .iter()
+                        .chain(UR_CALLED)
+                        .map(|w| w.to_ascii_lowercase()),
+                );
                 let mut words = |text: &str| {
                     for w in text.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_')) {
                         if !w.is_empty() {
