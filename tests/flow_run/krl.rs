@@ -764,22 +764,8 @@ fn the_interpreter_uses_krl_precedence() {
         .into_iter()
         .collect();
     let seq = vec![phase];
-    let m = Machine {
-        seq: &seq,
-        flicker: false,
-        reads: std::cell::Cell::new(0),
-        bits: seq.iter().map(bits).collect(),
-        actions: Vec::new(),
-        vars: HashMap::new(),
-        signals: [("V".to_owned(), (9, 12))].into_iter().collect(),
-        steps: 0,
-        visits: HashMap::new(),
-        now: 0,
-        timers: HashMap::new(),
-        time_reads: std::cell::Cell::new(0),
-        timed: None,
-        change_at: None,
-    };
+    let mut m = Machine::new("", &seq, false);
+    m.signals = [("V".to_owned(), (9, 12))].into_iter().collect();
     // `$IN[1] OR $IN[3] == FALSE` is `($IN[1] OR $IN[3]) == FALSE` in KRL.
     assert!(!m.truth(&kexpr("$IN[1] OR $IN[3] == FALSE")));
     assert!(m.truth(&kexpr("$IN[1] OR ($IN[3] == FALSE)")));
