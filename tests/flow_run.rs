@@ -2056,8 +2056,8 @@ const CELL_FIXTURES: &[CellFixture] = &[
 /// Tell at once: after Grip the first robot places (PlaceA) while the second welds (Weld),
 /// which waits for Grip only. The first robot tells that Grip is done right after Grip, before
 /// PlaceA (the branch written first), so Weld can start while PlaceA runs, as `-pF` draws it.
-/// (The co-simulation runs the fixture with the others; it checks the chart's order, not that
-/// nothing waits longer.)
+/// (The co-simulation runs the fixture with the others, and checks in every run of every cell
+/// that a tell that a step is done comes before the teller's next step.)
 #[test]
 fn a_tell_stands_right_after_its_step() {
     let dir = tempfile::tempdir().unwrap();
