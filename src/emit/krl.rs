@@ -80,7 +80,7 @@ impl Profile for Krl {
         }
     }
 
-    fn generate(&self, input: &EmitInput, _diags: &mut Diagnostics) -> Option<Generated> {
+    fn generate(&self, input: &EmitInput, diags: &mut Diagnostics) -> Option<Generated> {
         let mut writer = Writer {
             input,
             out: Lines::new(input, flow::steps_estimate(input)),
@@ -92,6 +92,7 @@ impl Profile for Krl {
         };
         let hand = super::handshake::Hand::new(input);
         if let Some(h) = &hand {
+            h.check(diags);
             super::handshake::write(&mut writer.out, 0, h.init());
         }
         writer.hand = hand;

@@ -345,9 +345,6 @@ pub fn emit_files(
     template: &OutputTemplate,
     diags: &mut Diagnostics,
 ) -> Option<Vec<OutputFile>> {
-    if let Some(h) = handshake::Hand::new(input) {
-        h.check(diags);
-    }
     let mut generated = input.profile.generate(input, diags)?;
     let nl = input.newline;
     let comment = header_comment(&input.sfc.header);

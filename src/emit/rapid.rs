@@ -269,8 +269,8 @@ impl Profile for Rapid {
         }
     }
 
-    fn generate(&self, input: &EmitInput, _diags: &mut Diagnostics) -> Option<Generated> {
-        Some(structured::generate(input, &DIALECT))
+    fn generate(&self, input: &EmitInput, diags: &mut Diagnostics) -> Option<Generated> {
+        Some(structured::generate(input, &DIALECT, diags))
     }
 }
 

@@ -70,8 +70,13 @@ pub struct Dialect {
     pub timers: fn(usize, bool) -> TimerLines,
 }
 
-/// Writes the program tree in `dialect`.
-pub fn generate(input: &EmitInput, dialect: &Dialect) -> Generated {
+/// Writes the program tree in `dialect`; a cell's wires the language cannot use go into
+/// `diags` (`E209`).
+pub fn generate(
+    input: &EmitInput,
+    dialect: &Dialect,
+    diags: &mut crate::diag::Diagnostics,
+) -> Generated {
     let mut w = Writer {
         input,
         d: dialect,
@@ -93,6 +98,7 @@ pub fn generate(input: &EmitInput, dialect: &Dialect) -> Generated {
         w.out.line(*level, line);
     }
     if let Some(h) = &w.hand {
+        h.check(diags);
         super::handshake::write(&mut w.out, 0, h.init());
     }
     w.blocks(input.body, 0);

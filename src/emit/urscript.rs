@@ -301,8 +301,8 @@ impl Profile for UrScript {
         }
     }
 
-    fn generate(&self, input: &EmitInput, _diags: &mut Diagnostics) -> Option<Generated> {
-        Some(structured::generate(input, &DIALECT))
+    fn generate(&self, input: &EmitInput, diags: &mut Diagnostics) -> Option<Generated> {
+        Some(structured::generate(input, &DIALECT, diags))
     }
 }
 
