@@ -1044,6 +1044,10 @@ pub mod json {
                         "about": local_id(sfc, m.about),
                         "decision": decision,
                         "branch": (tell && decision).then_some(m.value + 1),
+                        "passed": match m.kind {
+                            crate::plan::cell::Kind::Passed(c) => Some(c.name()),
+                            _ => None,
+                        },
                     }));
                 }
                 Block::Parallel { branches, .. } | Block::Sequences(branches) => {

@@ -1867,6 +1867,9 @@ fn cells_keep_the_charts_order_whatever_the_timing() {
     let (mut charts, mut seed, mut programs) = (0, 0u64, 0);
     let mut rapid_sample: Vec<(String, Output)> = Vec::new();
     let mut messages = std::collections::BTreeMap::new();
+    // Programs with a tell that says the teller has come past a loop or a selection (after
+    // steps of its own since the point the partner waits for).
+    let mut passed = std::collections::BTreeMap::new();
     while charts < CELL_CHARTS {
         seed += 1;
         let Some((chart, cell, robot_of, _)) = cosim::random_cell(&dir.path().join("cell"), seed)
@@ -1886,6 +1889,11 @@ fn cells_keep_the_charts_order_whatever_the_timing() {
                 }
                 if *lang == Lang::Rapid && rapid_sample.len() < 12 {
                     rapid_sample.push((format!("seed {seed} {name}"), output));
+                }
+                for what in ["has left the loop at", "has passed the selection"] {
+                    if main.contains(&format!("that it {what}")) {
+                        *passed.entry(what).or_insert(0) += 1;
+                    }
                 }
                 programs += 1;
             }
@@ -1915,6 +1923,12 @@ fn cells_keep_the_charts_order_whatever_the_timing() {
     assert_eq!(messages.len(), 3, "{messages:?}");
     assert!(messages.values().all(|&n| n > 0), "{messages:?}");
     eprintln!("messages of waits that lasted: {messages:?}");
+    assert_eq!(
+        passed.len(),
+        2,
+        "tells past a loop or a selection: {passed:?}"
+    );
+    eprintln!("programs with tells past a construct: {passed:?}");
     // A sample of the RAPID modules through rapidchecker (half a second each).
     let mut checker = RapidChecker::new();
     for (what, output) in &rapid_sample {

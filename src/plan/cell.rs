@@ -64,6 +64,18 @@ pub enum Construct {
 }
 
 impl Construct {
+    /// Its name in `-pO`'s JSON (`"passed"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Construct::Loop => "loop",
+            Construct::Selection => "selection",
+            Construct::Decided => "decision",
+            Construct::States => "states",
+            Construct::Enter => "states-entered",
+            Construct::Jump => "jump",
+        }
+    }
+
     /// What the teller has done, before the element's name: `has left the loop at` step 'S'.
     pub fn verb(self) -> &'static str {
         match self {
