@@ -750,6 +750,8 @@ codes! {
     /// Flow the structured forms cannot express: compiled with labels and `GOTO` (KRL) or as
     /// a state machine (RAPID, URScript).
     Unstructured = "W307",
+    /// An IRL definition whose routine no program of the compile calls: it is not written.
+    UnusedDefinition = "W308",
 }
 
 impl std::fmt::Display for Code {

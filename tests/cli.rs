@@ -2427,6 +2427,74 @@ fn a_cells_krl_wires_go_by_their_signals_names() {
     assert!(src.contains("; wire Eingang Oel 1\""), "{src}");
 }
 
+/// An IRL definition goes into the program when the program's code calls the routine it
+/// defines (RAPID: `ArcSeam 10;`, no parentheses), by the routine's own name, whatever the
+/// definition is named, and transitively through the definitions already in; a definition
+/// nothing calls stays out with `W308` naming it, and the rest of the program is written.
+#[test]
+fn definitions_go_in_when_the_code_calls_their_routines() {
+    let p = bases_with_case(&["abb"], "abb-irb1200");
+    let irl = std::fs::read_to_string(p.path().join("irb1200.irl")).unwrap();
+    let irl = irl
+        .replace("<definition name=\"GoHome\">", "<definition name=\"Moves\">")
+        .replace(
+            "MoveAbsJ [[0, 0, 0, 0, 30, 0], [9E9, 9E9, 9E9, 9E9, 9E9, 9E9]], v500, fine, tool0;",
+            "MoveAbsJ [[0, 0, 0, 0, 30, 0], [9E9, 9E9, 9E9, 9E9, 9E9, 9E9]], v500, fine, tool0;\n\t\t\t  ArcSeam 10;",
+        )
+        .replace(
+            "\t</def>",
+            "\t\t<definition name=\"Weld\">\n\t\t\tPROC ArcSeam(num speed)\n\t\t\t  SetDO do_Arc, 1;\n\t\t\tENDPROC\n\t\t</definition>\n\t\t<definition name=\"Spare\">\n\t\t\tPROC Calibrate()\n\t\t\t  SetDO do_Arc, 0;\n\t\t\tENDPROC\n\t\t</definition>\n\t</def>",
+        );
+    std::fs::write(p.path().join("irb1200.irl"), irl).unwrap();
+    let o = run(&["--warn", "--lf", "Cell.aml", "Palletize"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let m = std::fs::read_to_string(p.path().join("Palletize.mod")).unwrap();
+    assert!(m.contains("PROC GoHome()"), "{m}");
+    assert!(m.contains("PROC ArcSeam(num speed)"), "{m}");
+    assert!(m.find("PROC GoHome()") < m.find("PROC ArcSeam("), "{m}");
+    assert!(!m.contains("Calibrate"), "{m}");
+    let e = stderr(&o);
+    assert!(
+        e.contains("W308")
+            && e.contains(
+                "definition `Spare` is not written into any program: no program calls `Calibrate`"
+            ),
+        "{e}"
+    );
+    assert!(!e.contains("`ArcSeam`") && !e.contains("`GoHome`"), "{e}");
+}
+
+/// A program of a cell whose code calls a routine that only another controller's IRL file
+/// defines (the weld source's call uses the gripper's `GripClose`, and the gripper is on the
+/// other robot) would not load: `E606` names the routine, the IRL file and its definition, and
+/// nothing is written.
+#[test]
+fn a_call_to_another_controllers_routine_is_e606() {
+    let p = bases_with_case(&["cell", "cell2"], "cell-two-robots-weld");
+    let irl = std::fs::read_to_string(p.path().join("schweiss.irl")).unwrap();
+    let irl = irl.replace(
+        "\t\t\tWeldSeam (CURRENT)\n",
+        "\t\t\tWeldSeam (CURRENT)\n\t\t\tGripClose (CURRENT)\n",
+    );
+    std::fs::write(p.path().join("schweiss.irl"), irl).unwrap();
+    let before: Vec<_> = std::fs::read_dir(p.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    let o = run(&["--lf", "Blackboard.aml", "Cell"], p.path());
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(
+        e.contains("E606") && e.contains("calls `GripClose` but does not hold it: greifer.irl defines it (definition `GripClose`)"),
+        "{e}"
+    );
+    let after: Vec<_> = std::fs::read_dir(p.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(before.len(), after.len(), "nothing is written: {after:?}");
+}
+
 /// A URScript program of a cell names its wires as the blackboard does: a constant per wire of
 /// the standard digital I/O at the program's start, used in every read and set; never a
 /// keyword or function URScript code calls (`sleep`) nor a word of the program's IRL code (`v`

@@ -130,6 +130,7 @@ cases! {
     flow_selection_three_way => "flow-selection-three-way",
     flow_selection_two_way => "flow-selection-two-way",
     flow_step_time => "flow-step-time",
+    irl_helper_definitions => "irl-helper-definitions",
     lf_output => "lf-output",
     mappings_overloads => "mappings-overloads",
     no_writeback_target => "no-writeback-target",

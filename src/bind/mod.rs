@@ -14,6 +14,7 @@ use crate::model::{Blackboard, ElementKind, Sfc, Step};
 use crate::read::irl::Irl;
 
 mod conditions;
+pub mod definitions;
 pub use conditions::{
     DEFAULT_HANDSHAKE_TIMEOUT_MS, DEFAULT_TIMERS, MAX_TIMER, Reads, StepNames, Watch,
     check_conditions_unresolved, conditions,

@@ -1,0 +1,250 @@
+//! Which IRL definitions a program holds: the ones its calls name (a `definition` named like a
+//! `function-call`), and every one whose routine the program's code calls, by the routine's
+//! own name as its `DEF`/`DEFFCT` (KRL), `PROC`/`FUNC`/`TRAP` (RAPID) or `def` (URScript) line
+//! says, transitively through the definitions already in. RAPID module data a definition
+//! declares (`PERS`, `VAR`, `CONST`) counts as a routine: code that names it needs it.
+//!
+//! A routine is called when its name stands as a word in the code (KRL and RAPID without regard
+//! to case): a RAPID procedure call has no parentheses (`ArcSeam 10;`), and a word that only
+//! names a variable of the same name brings in a routine that is not needed, which is harmless.
+
+use std::collections::HashSet;
+
+use crate::lang::Language;
+use crate::read::irl::{Irl, IrlDefinition};
+
+use super::Bound;
+
+/// The routines a definition defines, by the names its own lines give them, in order.
+pub fn routines(lang: Language, def: &IrlDefinition) -> Vec<String> {
+    def.lines.iter().filter_map(|l| routine(lang, l)).collect()
+}
+
+/// The routine a line opens, if it opens one.
+pub fn routine(lang: Language, line: &str) -> Option<String> {
+    let mut words = line
+        .split(|c: char| c.is_whitespace() || c == '(' || c == ':')
+        .filter(|w| !w.is_empty());
+    let mut first = words.next()?;
+    let upper = |w: &str| w.to_ascii_uppercase();
+    let name = match lang {
+        Language::Krl => {
+            if upper(first) == "GLOBAL" {
+                first = words.next()?;
+            }
+            match upper(first).as_str() {
+                "DEF" => words.next()?,
+                "DEFFCT" => {
+                    words.next()?;
+                    words.next()?
+                }
+                _ => return None,
+            }
+        }
+        Language::Rapid => {
+            if matches!(upper(first).as_str(), "LOCAL" | "TASK") {
+                first = words.next()?;
+            }
+            match upper(first).as_str() {
+                "PROC" | "TRAP" => words.next()?,
+                // A function, and module data (`PERS tooldata tGripper := …;`): the code
+                // names them as it calls a routine.
+                "FUNC" | "PERS" | "VAR" | "CONST" => {
+                    words.next()?;
+                    words.next()?
+                }
+                _ => return None,
+            }
+        }
+        Language::UrScript => match first {
+            "def" => words.next()?,
+            _ => return None,
+        },
+    };
+    let name: String = name
+        .chars()
+        .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+        .collect();
+    (!name.is_empty()).then_some(name)
+}
+
+/// A name as the language compares names (KRL and RAPID without regard to case).
+pub fn key(lang: Language, name: &str) -> String {
+    match lang {
+        Language::UrScript => name.to_owned(),
+        _ => name.to_ascii_lowercase(),
+    }
+}
+
+/// Adds the words of `text` (names: letters, digits, `_`) to `words`, compared as `lang` does.
+fn add_words(lang: Language, text: &str, words: &mut HashSet<String>) {
+    for w in text.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_')) {
+        if !w.is_empty() && !w.starts_with(|c: char| c.is_ascii_digit()) {
+            words.insert(key(lang, w));
+        }
+    }
+}
+
+/// Puts into `bound` every definition of the IRL files `files` (of the program's language) whose
+/// routine the program's code calls, directly or through a definition already in, after the
+/// ones its calls named. Of two definitions of one routine the first (in `files`' order) is
+/// taken.
+pub fn complete(bound: &mut Bound, irls: &[Irl], files: &[usize], lang: Language) {
+    let mut defined: HashSet<String> = HashSet::new();
+    for &(i, d) in &bound.definitions {
+        for r in routines(lang, &irls[i].definitions[d]) {
+            defined.insert(key(lang, &r));
+        }
+    }
+    let mut candidates: Vec<((usize, usize), Vec<String>)> = Vec::new();
+    for &i in files {
+        if irls[i].language != lang {
+            continue;
+        }
+        for (d, def) in irls[i].definitions.iter().enumerate() {
+            if bound.definitions.contains(&(i, d)) {
+                continue;
+            }
+            let names: Vec<String> = routines(lang, def).iter().map(|r| key(lang, r)).collect();
+            if !names.is_empty() {
+                candidates.push(((i, d), names));
+            }
+        }
+    }
+    if candidates.is_empty() {
+        return;
+    }
+    let mut words = HashSet::new();
+    for step in bound.steps.iter().flatten() {
+        add_words(lang, &step.code, &mut words);
+    }
+    for &(i, d) in &bound.definitions {
+        for l in &irls[i].definitions[d].lines {
+            add_words(lang, l, &mut words);
+        }
+    }
+    while let Some(k) = candidates.iter().position(|(_, names)| {
+        names
+            .iter()
+            .any(|n| words.contains(n) && !defined.contains(n))
+    }) {
+        let ((i, d), names) = candidates.remove(k);
+        defined.extend(names);
+        bound.definitions.push((i, d));
+        for l in &irls[i].definitions[d].lines {
+            add_words(lang, l, &mut words);
+        }
+    }
+}
+
+/// The routines a generated program calls that one of `irls` defines but the program does not
+/// hold (`held`: the keys of the routines of its definitions): each with the IRL file and
+/// definition that define it. Words in comments and strings do not count. Only routines not
+/// held are looked for, so a program that holds every definition costs nothing here.
+pub fn missing(
+    lang: Language,
+    text: &str,
+    irls: &[Irl],
+    held: &HashSet<String>,
+) -> Vec<(String, usize, usize)> {
+    let mut wanted: Vec<(String, String, usize, usize)> = Vec::new();
+    for (i, f) in irls.iter().enumerate() {
+        if f.language != lang {
+            continue;
+        }
+        for (d, def) in f.definitions.iter().enumerate() {
+            for r in routines(lang, def) {
+                let k = key(lang, &r);
+                if !held.contains(&k) && !wanted.iter().any(|w| w.0 == k) {
+                    wanted.push((k, r, i, d));
+                }
+            }
+        }
+    }
+    if wanted.is_empty() {
+        return Vec::new();
+    }
+    let comment = match lang {
+        Language::Krl => b';',
+        Language::Rapid => b'!',
+        Language::UrScript => b'#',
+    };
+    let folded;
+    let hay: &[u8] = match lang {
+        Language::UrScript => text.as_bytes(),
+        _ => {
+            folded = text.to_ascii_lowercase();
+            folded.as_bytes()
+        }
+    };
+    let word = |b: u8| b.is_ascii_alphanumeric() || b == b'_';
+    // Whether the match at `at` stands in code: not in a string or after the line's comment.
+    let in_code = |at: usize| {
+        let start = hay[..at]
+            .iter()
+            .rposition(|&b| b == b'\n')
+            .map_or(0, |p| p + 1);
+        let mut in_string = false;
+        for &b in &hay[start..at] {
+            if b == b'"' {
+                in_string = !in_string;
+            } else if b == comment && !in_string {
+                return false;
+            }
+        }
+        !in_string
+    };
+    let mut out = Vec::new();
+    for (k, name, i, d) in wanted {
+        let called = memchr::memmem::find_iter(hay, k.as_bytes()).any(|at| {
+            let end = at + k.len();
+            (at == 0 || !word(hay[at - 1])) && hay.get(end).is_none_or(|&b| !word(b)) && in_code(at)
+        });
+        if called {
+            out.push((name, i, d));
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn def(lines: &[&str]) -> IrlDefinition {
+        IrlDefinition {
+            name: crate::model::Name::new("x", crate::diag::Span::new(0, 0..0)),
+            lines: lines.iter().map(|l| (*l).to_owned()).collect(),
+            span: crate::diag::Span::new(0, 0..0),
+        }
+    }
+
+    #[test]
+    fn a_definitions_routines_are_named_by_its_own_lines() {
+        let krl = def(&[
+            "DEF G1_Set(CLOSE:IN, WAITTIME:IN)",
+            "END",
+            "global deffct REAL Half(X:IN)",
+            "ENDFCT",
+        ]);
+        assert_eq!(routines(Language::Krl, &krl), ["G1_Set", "Half"]);
+        let rapid = def(&[
+            "PROC ArcSeam(num speed)",
+            "ENDPROC",
+            "LOCAL FUNC num Twice(num x)",
+            "TRAP Stop",
+            "PERS tooldata tGripper := [TRUE, [[0, 0, 120], [1, 0, 0, 0]]];",
+            "  MoveL p, v200, fine, tGripper;",
+        ]);
+        assert_eq!(
+            routines(Language::Rapid, &rapid),
+            ["ArcSeam", "Twice", "Stop", "tGripper"]
+        );
+        let ur = def(&[
+            "def grip(close):",
+            "  set_standard_digital_out(0, close)",
+            "end",
+        ]);
+        assert_eq!(routines(Language::UrScript, &ur), ["grip"]);
+    }
+}
