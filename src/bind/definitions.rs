@@ -76,13 +76,13 @@ pub fn key(lang: Language, name: &str) -> String {
     }
 }
 
-/// Adds the words of `text` (names: letters, digits, `_`) to `words`, compared as `lang` does.
-fn add_words(lang: Language, text: &str, words: &mut HashSet<String>) {
-    for w in text.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_')) {
-        if !w.is_empty() && !w.starts_with(|c: char| c.is_ascii_digit()) {
-            words.insert(key(lang, w));
-        }
-    }
+/// Whether `name` stands in `hay` as a word (not part of a longer name).
+fn has_word(hay: &[u8], name: &str) -> bool {
+    let word = |b: u8| b.is_ascii_alphanumeric() || b == b'_';
+    memchr::memmem::find_iter(hay, name.as_bytes()).any(|at| {
+        let end = at + name.len();
+        (at == 0 || !word(hay[at - 1])) && hay.get(end).is_none_or(|&b| !word(b))
+    })
 }
 
 /// Puts into `bound` every definition of the IRL files `files` (of the program's language) whose
@@ -114,25 +114,33 @@ pub fn complete(bound: &mut Bound, irls: &[Irl], files: &[usize], lang: Language
     if candidates.is_empty() {
         return;
     }
-    let mut words = HashSet::new();
+    // The code as the language compares names, searched for each routine's name as a word.
+    let fold = |text: &str, hay: &mut String| match lang {
+        Language::UrScript => hay.push_str(text),
+        _ => hay.extend(text.chars().map(|c| c.to_ascii_lowercase())),
+    };
+    let mut hay = String::new();
     for step in bound.steps.iter().flatten() {
-        add_words(lang, &step.code, &mut words);
+        fold(&step.code, &mut hay);
+        hay.push('\n');
     }
     for &(i, d) in &bound.definitions {
         for l in &irls[i].definitions[d].lines {
-            add_words(lang, l, &mut words);
+            fold(l, &mut hay);
+            hay.push('\n');
         }
     }
     while let Some(k) = candidates.iter().position(|(_, names)| {
         names
             .iter()
-            .any(|n| words.contains(n) && !defined.contains(n))
+            .any(|n| !defined.contains(n) && has_word(hay.as_bytes(), n))
     }) {
         let ((i, d), names) = candidates.remove(k);
         defined.extend(names);
         bound.definitions.push((i, d));
         for l in &irls[i].definitions[d].lines {
-            add_words(lang, l, &mut words);
+            fold(l, &mut hay);
+            hay.push('\n');
         }
     }
 }

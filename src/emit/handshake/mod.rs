@@ -281,12 +281,11 @@ impl<'a> Hand<'a> {
         out.push((
             0,
             format!(
-                "{}handshake: tell {} that {what}: wait for {} = {var} (the last message read) or {} FALSE (started again), then {} = NOT {var}",
+                "{}handshake: tell {} that {what}: wait for {} = {var} (read) or {} FALSE (started again)",
                 self.comment(),
                 self.name(ch.to),
                 self.label(ch.ack, false),
                 self.label(self.view.cell.link(ch.to, self.view.me).and_then(|l| l.run), false),
-                self.label(ch.strobe, true),
             ),
         ));
         let stop = format!(
