@@ -76,13 +76,18 @@ pub fn key(lang: Language, name: &str) -> String {
     }
 }
 
-/// Whether `name` stands in `hay` as a word (not part of a longer name).
-fn has_word(hay: &[u8], name: &str) -> bool {
+/// Where `name` stands in `hay` as a word (not part of a longer name).
+fn words_at<'h>(hay: &'h [u8], name: &'h str) -> impl Iterator<Item = usize> + 'h {
     let word = |b: u8| b.is_ascii_alphanumeric() || b == b'_';
-    memchr::memmem::find_iter(hay, name.as_bytes()).any(|at| {
+    memchr::memmem::find_iter(hay, name.as_bytes()).filter(move |&at| {
         let end = at + name.len();
         (at == 0 || !word(hay[at - 1])) && hay.get(end).is_none_or(|&b| !word(b))
     })
+}
+
+/// Whether `name` stands in `hay` as a word.
+fn has_word(hay: &[u8], name: &str) -> bool {
+    words_at(hay, name).next().is_some()
 }
 
 /// Puts into `bound` every definition of the IRL files `files` (of the program's language) whose
@@ -185,7 +190,6 @@ pub fn missing(
             folded.as_bytes()
         }
     };
-    let word = |b: u8| b.is_ascii_alphanumeric() || b == b'_';
     // Whether the match at `at` stands in code: not in a string or after the line's comment.
     let in_code = |at: usize| {
         let start = hay[..at]
@@ -204,11 +208,7 @@ pub fn missing(
     };
     let mut out = Vec::new();
     for (k, name, i, d) in wanted {
-        let called = memchr::memmem::find_iter(hay, k.as_bytes()).any(|at| {
-            let end = at + k.len();
-            (at == 0 || !word(hay[at - 1])) && hay.get(end).is_none_or(|&b| !word(b)) && in_code(at)
-        });
-        if called {
+        if words_at(hay, &k).any(in_code) {
             out.push((name, i, d));
         }
     }

@@ -250,18 +250,71 @@ fn covers_every_case(input: &EmitInput, branches: &[crate::plan::Branch]) -> boo
 
 /// Whether one of `exprs` holds whatever values their atoms have ([`covers_every_case`]).
 fn always_one_holds(exprs: &[&crate::cond::Expr]) -> bool {
-    let mut atoms: Vec<String> = Vec::new();
+    let mut atoms = Atoms::default();
     for e in exprs {
-        if !collect_atoms(e, &mut atoms) || atoms.len() > MAX_ATOMS {
+        if !atoms.collect(e) || atoms.keys.len() > MAX_ATOMS {
             return false;
         }
     }
-    (0u32..1 << atoms.len())
-        .all(|values| exprs.iter().any(|e| truth(e, &atoms, values) == Some(true)))
+    (0u32..1 << atoms.keys.len())
+        .all(|values| exprs.iter().any(|e| atoms.truth(e, values) == Some(true)))
 }
 
 /// The most atoms [`covers_every_case`] tries (2^10 cases).
 const MAX_ATOMS: usize = 10;
+
+/// The atoms of a selection's conditions: their keys ([`atom_key`]), and for each atom node of
+/// the conditions its atom and whether it is negated (found once, not at every case tried).
+#[derive(Default)]
+struct Atoms {
+    keys: Vec<String>,
+    places: Vec<(*const crate::cond::Expr, usize, bool)>,
+}
+
+impl Atoms {
+    /// Adds `e`'s atoms; `false` when `e` is not a truth value made of atoms, `NOT`, `AND`,
+    /// `OR`, `XOR` and `TRUE`/`FALSE`.
+    fn collect(&mut self, e: &crate::cond::Expr) -> bool {
+        use crate::cond::{BinOp, ExprKind};
+        match &e.kind {
+            ExprKind::Bool(_) => true,
+            ExprKind::Not(x) => self.collect(x),
+            ExprKind::Bin(BinOp::And | BinOp::Or | BinOp::Xor, a, b) => {
+                self.collect(a) && self.collect(b)
+            }
+            _ => match atom_key(e) {
+                Some((key, negated)) => {
+                    let k = match self.keys.iter().position(|a| *a == key) {
+                        Some(k) => k,
+                        None => {
+                            self.keys.push(key);
+                            self.keys.len() - 1
+                        }
+                    };
+                    self.places.push((std::ptr::from_ref(e), k, negated));
+                    true
+                }
+                None => false,
+            },
+        }
+    }
+
+    /// `e`'s truth when atom `k` has the value of bit `k` of `values`.
+    fn truth(&self, e: &crate::cond::Expr, values: u32) -> Option<bool> {
+        use crate::cond::{BinOp, ExprKind};
+        Some(match &e.kind {
+            ExprKind::Bool(b) => *b,
+            ExprKind::Not(x) => !self.truth(x, values)?,
+            ExprKind::Bin(BinOp::And, a, b) => self.truth(a, values)? && self.truth(b, values)?,
+            ExprKind::Bin(BinOp::Or, a, b) => self.truth(a, values)? || self.truth(b, values)?,
+            ExprKind::Bin(BinOp::Xor, a, b) => self.truth(a, values)? != self.truth(b, values)?,
+            _ => {
+                let &(_, k, negated) = self.places.iter().find(|p| p.0 == std::ptr::from_ref(e))?;
+                ((values >> k) & 1 == 1) != negated
+            }
+        })
+    }
+}
 
 /// An atom's key: a name, or a comparison with its operands' text (`<>` as `=`).
 fn atom_key(e: &crate::cond::Expr) -> Option<(String, bool)> {
@@ -279,45 +332,6 @@ fn atom_key(e: &crate::cond::Expr) -> Option<(String, bool)> {
         }
         _ => None,
     }
-}
-
-/// Adds `e`'s atoms to `atoms`; `false` when `e` is not a truth value made of atoms, `NOT`,
-/// `AND`, `OR`, `XOR` and `TRUE`/`FALSE`.
-fn collect_atoms(e: &crate::cond::Expr, atoms: &mut Vec<String>) -> bool {
-    use crate::cond::{BinOp, ExprKind};
-    match &e.kind {
-        ExprKind::Bool(_) => true,
-        ExprKind::Not(x) => collect_atoms(x, atoms),
-        ExprKind::Bin(BinOp::And | BinOp::Or | BinOp::Xor, a, b) => {
-            collect_atoms(a, atoms) && collect_atoms(b, atoms)
-        }
-        _ => match atom_key(e) {
-            Some((key, _)) => {
-                if !atoms.contains(&key) {
-                    atoms.push(key);
-                }
-                true
-            }
-            None => false,
-        },
-    }
-}
-
-/// `e`'s truth when atom `k` has the value of bit `k` of `values`.
-fn truth(e: &crate::cond::Expr, atoms: &[String], values: u32) -> Option<bool> {
-    use crate::cond::{BinOp, ExprKind};
-    Some(match &e.kind {
-        ExprKind::Bool(b) => *b,
-        ExprKind::Not(x) => !truth(x, atoms, values)?,
-        ExprKind::Bin(BinOp::And, a, b) => truth(a, atoms, values)? && truth(b, atoms, values)?,
-        ExprKind::Bin(BinOp::Or, a, b) => truth(a, atoms, values)? || truth(b, atoms, values)?,
-        ExprKind::Bin(BinOp::Xor, a, b) => truth(a, atoms, values)? != truth(b, atoms, values)?,
-        _ => {
-            let (key, negated) = atom_key(e)?;
-            let k = atoms.iter().position(|a| *a == key)?;
-            ((values >> k) & 1 == 1) != negated
-        }
-    })
 }
 
 /// The condition as written, for comments: on one line, without `;` (a comment inside a KRL

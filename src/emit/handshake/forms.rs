@@ -209,13 +209,15 @@ impl<'a> Hand<'a> {
             .map(|(_, n, _)| n.as_str())
     }
 
+    /// A numbered wire in the program: its name ([`Hand::name_wires`]), else `number()`.
+    fn bit(&self, s: &Signal, number: impl FnOnce() -> String) -> String {
+        self.wire_named(s).map_or_else(number, str::to_owned)
+    }
+
     /// How this language reads an input wire as a boolean value.
     pub(super) fn read(&self, s: &Signal) -> Result<String, String> {
         match (self.lang, &s.kind) {
-            (Language::Krl, SignalKind::Bit(n)) => Ok(match self.wire_named(s) {
-                Some(name) => name.to_owned(),
-                None => format!("$IN[{n}]"),
-            }),
+            (Language::Krl, SignalKind::Bit(n)) => Ok(self.bit(s, || format!("$IN[{n}]"))),
             (Language::Krl, SignalKind::Address { text, .. }) if !text.contains('(') => {
                 Ok(text.clone())
             }
@@ -226,10 +228,10 @@ impl<'a> Hand<'a> {
                     integer: false,
                 },
             ) => Ok(format!("DInput({text})")),
-            (Language::UrScript, SignalKind::Bit(n)) if *n <= 7 => Ok(match self.wire_named(s) {
-                Some(name) => format!("get_standard_digital_in({name})"),
-                None => format!("get_standard_digital_in({n})"),
-            }),
+            (Language::UrScript, SignalKind::Bit(n)) if *n <= 7 => Ok(format!(
+                "get_standard_digital_in({})",
+                self.bit(s, || n.to_string())
+            )),
             (Language::UrScript, SignalKind::Address { text, .. })
                 if !text.starts_with('$') && !text.contains('[') =>
             {
@@ -242,10 +244,10 @@ impl<'a> Hand<'a> {
     /// How this language sets an output wire to `value` (a boolean expression).
     pub(super) fn set(&self, s: &Signal, value: &str) -> Result<String, String> {
         match (self.lang, &s.kind) {
-            (Language::Krl, SignalKind::Bit(n)) => Ok(match self.wire_named(s) {
-                Some(name) => format!("{name} = {value}"),
-                None => format!("$OUT[{n}] = {value}"),
-            }),
+            (Language::Krl, SignalKind::Bit(n)) => Ok(format!(
+                "{} = {value}",
+                self.bit(s, || format!("$OUT[{n}]"))
+            )),
             (Language::Krl, SignalKind::Address { text, .. })
                 if !text.contains('(') && !text.contains("$IN") =>
             {
@@ -258,10 +260,10 @@ impl<'a> Hand<'a> {
                     integer: false,
                 },
             ) => Ok(format!("SetDO {text}, {value};")),
-            (Language::UrScript, SignalKind::Bit(n)) if *n <= 7 => Ok(match self.wire_named(s) {
-                Some(name) => format!("set_standard_digital_out({name}, {value})"),
-                None => format!("set_standard_digital_out({n}, {value})"),
-            }),
+            (Language::UrScript, SignalKind::Bit(n)) if *n <= 7 => Ok(format!(
+                "set_standard_digital_out({}, {value})",
+                self.bit(s, || n.to_string())
+            )),
             _ => Err(self.cannot("write")),
         }
     }
