@@ -309,6 +309,15 @@ fn run(a: Args) -> u8 {
     }
     print_listings(&c, &print, a.format, &mut stdout);
     report(&c.diagnostics, &c.sources, a.format, warnings);
+    if !warnings && c.dropped_warnings > 0 {
+        // Counted, not shown: the user learns there is something to look at.
+        let n = c.dropped_warnings;
+        eprintln!(
+            "{n} warning{}; --warn shows {}",
+            if n == 1 { "" } else { "s" },
+            if n == 1 { "it" } else { "them" }
+        );
+    }
     if c.io_failure {
         summary(&c.diagnostics, a.format, "nothing was written");
         return 2;

@@ -97,6 +97,8 @@ pub struct Compilation {
     pub sources: Sources,
     /// Sorted by file and position.
     pub diagnostics: Vec<Diagnostic>,
+    /// Warnings found but not kept ([`Options::drop_warnings`]): the run says how many.
+    pub dropped_warnings: usize,
     /// Every file the compile asked for, read or not (the daemon watches these).
     pub files_read: Vec<PathBuf>,
     /// Set when the blackboard itself (or the SFC with `--sfc`, or the `--template`) could not be
@@ -1356,9 +1358,7 @@ fn emit_programs(
     emitted
         .into_iter()
         .map(|(files, d)| {
-            for x in d.into_vec() {
-                diags.push(x);
-            }
+            diags.append(d);
             files
         })
         .collect()
@@ -1649,6 +1649,7 @@ fn finish(mut cx: Ctx, mut out: Compilation) -> Compilation {
     cx.diags.snap(&cx.sources);
     let mut diags = cx.diags;
     diags.sort();
+    out.dropped_warnings = diags.dropped_warnings();
     out.diagnostics = diags.into_vec();
     out.sources = cx.sources;
     out.files_read = cx.fs.read.into_inner();

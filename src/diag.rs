@@ -390,6 +390,8 @@ pub struct Diagnostics {
     list: Vec<Diagnostic>,
     /// Warnings are not kept ([`Diagnostics::drop_warnings`]).
     no_warnings: bool,
+    /// Warnings not kept, counted (the run says how many it does not show).
+    dropped: usize,
 }
 
 impl Diagnostics {
@@ -397,7 +399,29 @@ impl Diagnostics {
     /// so no stage spends time building or locating them.
     pub fn drop_warnings(&mut self) {
         self.no_warnings = true;
+        let before = self.list.len();
         self.list.retain(|d| d.severity != Severity::Warning);
+        self.dropped += before - self.list.len();
+    }
+
+    /// Counts `n` warnings not built: a stage that skips building warnings that would not be
+    /// kept ([`Diagnostics::keeps_warnings`]) says how many it would have pushed.
+    pub fn count_dropped(&mut self, n: usize) {
+        self.dropped += n;
+    }
+
+    /// How many warnings were not kept.
+    pub fn dropped_warnings(&self) -> usize {
+        self.dropped
+    }
+
+    /// Moves `other`'s diagnostics (work done aside, [`Diagnostics::empty_like`]) after these,
+    /// its count of dropped warnings with them.
+    pub fn append(&mut self, other: Diagnostics) {
+        self.dropped += other.dropped;
+        for d in other.list {
+            self.push(d);
+        }
     }
 
     /// An empty list that keeps what this one keeps (for work done aside, appended later).
@@ -405,6 +429,7 @@ impl Diagnostics {
         Diagnostics {
             list: Vec::new(),
             no_warnings: self.no_warnings,
+            dropped: 0,
         }
     }
 
@@ -528,6 +553,7 @@ impl Diagnostics {
 
     pub fn push(&mut self, d: Diagnostic) {
         if self.no_warnings && d.severity == Severity::Warning {
+            self.dropped += 1;
             return;
         }
         self.list.push(d);

@@ -333,13 +333,24 @@ fn run_case(name: &str) {
             .unwrap();
     }
     let mtimes: Vec<SystemTime> = watched.iter().map(|p| mtime(p)).collect();
-    let out2 = run(dir, &case, &bb_name);
+    // Run 2 without `--warn`: the warnings are counted, not shown, and their number is the
+    // number run 1 showed (also those a run without `--warn` does not build).
+    let out2 = run_with(dir, &case, &bb_name, false);
     let stderr2 = String::from_utf8_lossy(&out2.stderr).into_owned();
     assert_eq!(
         out2.status.code(),
         Some(0),
         "{name}: run 2 failed:\n{stderr2}"
     );
+    let shown = String::from_utf8_lossy(&out.stderr)
+        .matches("warning[")
+        .count();
+    let counted = match shown {
+        0 => String::new(),
+        1 => "1 warning; --warn shows it\n".to_owned(),
+        n => format!("{n} warnings; --warn shows them\n"),
+    };
+    assert_eq!(stderr2, counted, "{name}: run 2 (without --warn) said");
     for (p, m) in watched.iter().zip(&mtimes) {
         assert_eq!(
             mtime(p),
@@ -360,8 +371,12 @@ fn run_case(name: &str) {
 }
 
 fn run(dir: &Path, case: &CaseToml, bb: &str) -> Output {
+    run_with(dir, case, bb, true)
+}
+
+fn run_with(dir: &Path, case: &CaseToml, bb: &str, warn: bool) -> Output {
     Command::new(env!("CARGO_BIN_EXE_skillpost"))
-        .arg("--warn")
+        .args(warn.then_some("--warn"))
         .args(&case.args)
         .arg(bb)
         .arg(&case.program)

@@ -498,9 +498,7 @@ pub fn bind(
         (cx.run(steps, diags), None)
     };
     if let Some((part, other)) = second {
-        for d in other.into_vec() {
-            diags.push(d);
-        }
+        diags.append(other);
         first.append(part);
     }
     let mut bound = Bound {
@@ -806,10 +804,6 @@ fn check_variables(
             );
         }
     }
-    if !diags.keeps_warnings() {
-        // The `W303`s would not be kept: a step with 100,000 unused variables costs nothing.
-        return ok;
-    }
     match &vars.by {
         ByKey::Few(list) => {
             for v in *list {
@@ -845,11 +839,15 @@ struct Extras {
     index: HashMap<(Arc<str>, Arc<str>), usize>,
 }
 
-/// One unused variable of one skill: the warning for its first place, and every step's id.
+/// One unused variable of one skill: its first place, and every step's id. The warning is
+/// built only when it is kept ([`Extras::report`]).
 struct Extra {
     skill: Arc<str>,
     variable: Arc<str>,
-    first: Diagnostic,
+    /// The names as written, and the variable's place at its first step.
+    skill_text: Arc<str>,
+    variable_text: Arc<str>,
+    span: crate::diag::Span,
     steps: Vec<u64>,
 }
 
@@ -906,21 +904,12 @@ impl Extras {
             self.list[at].steps.push(e.local_id);
             return;
         }
-        // Without `format!`: 100,000 distinct variables make 100,000 of these.
-        let (name, skill_name) = (&*v.name.text, &*skill.name.text);
-        let mut message = String::with_capacity(35 + name.len() + skill_name.len());
-        message.push_str("variable `");
-        message.push_str(name);
-        message.push_str("` is not used by skill `");
-        message.push_str(skill_name);
-        message.push('`');
-        let d = Diagnostic::warning(Code::ExtraVariable, message)
-            .at(v.name.span.clone())
-            .element(label(e));
         self.list.push(Extra {
             skill: skill.name.key.clone(),
             variable: v.name.key.clone(),
-            first: d,
+            skill_text: skill.name.text.clone(),
+            variable_text: v.name.text.clone(),
+            span: v.name.span.clone(),
             steps: vec![e.local_id],
         });
     }
@@ -935,23 +924,39 @@ impl Extras {
         }
     }
 
+    /// One `W303` per group; only counted when warnings are not kept.
     fn report(self, diags: &mut Diagnostics) {
-        for Extra {
-            first: mut d,
-            steps: ids,
-            ..
-        } in self.list
-        {
+        if !diags.keeps_warnings() {
+            diags.count_dropped(self.list.len());
+            return;
+        }
+        for x in self.list {
+            // Without `format!`: 100,000 distinct variables make 100,000 of these.
+            let (name, skill_name) = (&*x.variable_text, &*x.skill_text);
+            let mut message = String::with_capacity(35 + name.len() + skill_name.len());
+            message.push_str("variable `");
+            message.push_str(name);
+            message.push_str("` is not used by skill `");
+            message.push_str(skill_name);
+            message.push('`');
+            let ids = &x.steps;
             if ids.len() > 1 {
                 let shown: Vec<String> = ids.iter().take(5).map(u64::to_string).collect();
-                d.message.push_str(&format!(
+                message.push_str(&format!(
                     " (at {} steps: localId {}{})",
                     ids.len(),
                     shown.join(", "),
                     if ids.len() > 5 { ", ..." } else { "" }
                 ));
             }
-            diags.push(d);
+            let mut element = String::with_capacity(28);
+            element.push_str("localId ");
+            crate::convert::push_u64(&mut element, ids[0]);
+            diags.push(
+                Diagnostic::warning(Code::ExtraVariable, message)
+                    .at(x.span)
+                    .element(element),
+            );
         }
     }
 }

@@ -77,9 +77,7 @@ pub fn walk(
             }
         }
         if !new {
-            for d in local.into_vec() {
-                diags.push(d);
-            }
+            diags.append(local);
             if let Some(body) = &result
                 && let Some(lost) = unplaced_step(sfc, g, jumps, start, body)
             {
@@ -318,6 +316,10 @@ fn walk_once(
                 );
             }
         });
+    } else {
+        let mut n = 0;
+        visit(&body, &mut |b| n += usize::from(matches!(b, Block::Goto { .. })));
+        w.diags.count_dropped(n);
     }
     (Some(body), Vec::new())
 }

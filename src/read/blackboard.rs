@@ -83,9 +83,8 @@ pub fn read_blackboard(
         }
     };
 
-    if diags.keeps_warnings() {
-        unknown_elements(file, root, diags);
-    }
+    // Always: a run that keeps no warnings counts them (a blackboard is small).
+    unknown_elements(file, root, diags);
     let r = Reader { file, diags };
     Some(r.hierarchy(hierarchy))
 }
