@@ -60,7 +60,7 @@ pub struct WriteBack {
     pub site: crate::write::SpliceSite,
     /// The value to write: the `.src` path relative to the blackboard, with `/`.
     pub value: String,
-    /// The other programs of a cell, each into its controller's `Code` interface (SPEC.md 9).
+    /// The other programs of a cell, each into its controller's `Code` interface (docs/CELLS.md).
     pub more: Vec<(crate::write::SpliceSite, String)>,
 }
 
@@ -121,9 +121,9 @@ pub struct Compilation {
     pub language: Option<Language>,
     /// Wall time per stage, in order (`read-blackboard`, `read-sfc`, `plan`, `bind`, `emit`).
     pub timings: Vec<(&'static str, std::time::Duration)>,
-    /// The resource whose controller runs the program (SPEC.md 9).
+    /// The resource whose controller runs the program (docs/CELLS.md).
     pub controller: Option<String>,
-    /// Per output (same order): its program's name and its controller's (SPEC.md 9).
+    /// Per output (same order): its program's name and its controller's (docs/CELLS.md).
     pub output_programs: Vec<(String, String)>,
     /// The programs' names, the written-back one first (empty without a program name).
     pub program_names: Vec<String>,
@@ -722,7 +722,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             None => bind::StepOrder::document(sfc),
         };
         let res = bind::resolve(&bb, sfc, &order, &mut cx.diags);
-        // Several initial steps: each sequence on controllers of its own (SPEC.md 3, 9).
+        // Several initial steps: each sequence on controllers of its own (docs/INPUTS.md, docs/CELLS.md).
         if let Some(p) = &mut plan {
             plan::place_sequences(
                 p,
@@ -759,7 +759,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 fn_irl.insert((r, f), i);
             }
         }
-        // The programs: one, or one per controller of a cell (SPEC.md 9).
+        // The programs: one, or one per controller of a cell (docs/CELLS.md).
         let programs = programs(&mut cx, &bb, opts, &controllers, &langs);
         let cell = match (&plan, controllers.len() > 1) {
             (Some(plan), true) => {
@@ -827,8 +827,16 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             mine.sort_unstable();
             mine.dedup();
             bind::definitions::complete(&mut bound, &irls, &mine, prog.language);
-            // A program of a cell reads the conditions it waits for or decides.
-            let only = cell.as_ref().map(|c| evaluated(&c.programs[k].body));
+            // A program of a cell reads the conditions it waits for or decides. When the flow
+            // has errors (no plan), which controller decides a condition is not known: the
+            // first program reads them all, a name any resource declares is no error then (not
+            // a follow-on of the flow's errors), the others read none.
+            let undecided = cell.is_none() && controllers.len() > 1;
+            let only = match &cell {
+                Some(c) => Some(evaluated(&c.programs[k].body)),
+                None if undecided && k > 0 => Some(std::collections::HashSet::new()),
+                None => None,
+            };
             let reads = bind::conditions(
                 &bb,
                 sfc,
@@ -837,12 +845,13 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 only.as_ref(),
                 cell.as_ref()
                     .is_some_and(|c| c.partners(k).next().is_some()),
+                undecided,
                 &mut cx.diags,
             );
             bound.signals = reads.signals;
             bound.watch = reads.watch;
             bound.set_timers(reads.timers, reads.timer_names);
-            // The handshakes' wires are the handshakes' (SPEC.md 9): a condition reading one
+            // The handshakes' wires are the handshakes' (docs/CELLS.md): a condition reading one
             // would see the toggles.
             if let (Some(cell), Some(c)) = (&cell, prog.controller) {
                 let used: Vec<usize> = cell
@@ -1373,7 +1382,7 @@ struct ProgramSpec {
     language: Language,
 }
 
-/// The programs of this compile and their names (SPEC.md 9): one program `<PROGRAM>`; or, for
+/// The programs of this compile and their names (docs/CELLS.md): one program `<PROGRAM>`; or, for
 /// several controllers, each controller's `Program` attribute or `<PROGRAM>_<controller>`.
 /// `E601` for a name that is not one of its language or is used twice.
 fn programs(
@@ -1495,7 +1504,7 @@ impl Languages {
     }
 }
 
-/// Decides the languages (SPEC.md 8): a resource's `Language` attribute, else the language its
+/// Decides the languages (docs/LANGUAGES.md): a resource's `Language` attribute, else the language its
 /// IRL files declare, else KRL. An IRL file declaring another language than its resource's, and
 /// steps of resources of different languages, are `E319`.
 fn languages(
@@ -1529,7 +1538,7 @@ fn languages(
         let resource = &bb.resources[r];
         let own = by_resource.get(&r).map_or(&[][..], Vec::as_slice);
         let from_irl = own.iter().find_map(|(_, file)| declared[file].clone());
-        // A device without a language of its own is in its controller's (SPEC.md 9).
+        // A device without a language of its own is in its controller's (docs/CELLS.md).
         let controller = &bb.resources[bb.controller_of(r)];
         let decided = resource
             .language
@@ -1563,7 +1572,7 @@ fn languages(
             }
         }
     }
-    // Each controller's program is in one language (SPEC.md 9): its own, else its first
+    // Each controller's program is in one language (docs/CELLS.md): its own, else its first
     // device's with steps.
     let program_of = |c: usize| {
         resources.get(&c).copied().or_else(|| {

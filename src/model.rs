@@ -123,7 +123,7 @@ impl Interner {
 pub struct Blackboard {
     pub file: FileId,
     pub resources: Vec<Resource>,
-    /// Which resource's controller runs each resource (SPEC.md 9), by resource index: its
+    /// Which resource's controller runs each resource (docs/CELLS.md), by resource index: its
     /// `Controller` attribute when that names a resource, else the nearest enclosing resource's
     /// controller, else itself. Empty for a blackboard built by hand (then each is its own).
     pub controllers: Vec<usize>,
@@ -134,7 +134,7 @@ pub struct Blackboard {
     /// Where the `.src` path is written back.
     pub write_back: Option<WriteBackTarget>,
     /// Every `ExternalInterface` of `Code` with a `refURI` value, by its `Name`: where the
-    /// programs of a cell's other controllers are written back (SPEC.md 9).
+    /// programs of a cell's other controllers are written back (docs/CELLS.md).
     pub code_targets: Vec<(String, WriteBackTarget)>,
 }
 
@@ -169,7 +169,7 @@ pub struct Resource {
     pub functions: Vec<Function>,
     /// Keys of functions that are present but malformed (reported): not "unknown".
     pub broken_functions: Vec<Arc<str>>,
-    /// The I/O signals transition conditions may name (SPEC.md 3.1), in document order.
+    /// The I/O signals transition conditions may name (docs/INPUTS.md), in document order.
     pub signals: Vec<Signal>,
     /// Keys of signals that are present but malformed (reported): not "unknown".
     pub broken_signals: Vec<Arc<str>>,
@@ -181,14 +181,18 @@ pub struct Resource {
     /// The `Controller` (`Steuerung`) attribute's value and the value's span.
     pub controller_attr: Option<(String, Span)>,
     /// The `Program` (`Programm`) attribute's value and span: a controller's program name in a
-    /// cell of several controllers (SPEC.md 9).
+    /// cell of several controllers (docs/CELLS.md).
     pub program_attr: Option<(String, Span)>,
     /// The `Timers` attribute's value and span: the KRL timers (`$TIMER[n]`) the program may
-    /// use for step times (SPEC.md 3.1), `A-B` or `N`.
+    /// use for step times (docs/INPUTS.md), `A-B` or `N`.
     pub timers_attr: Option<(String, Span)>,
     /// The `HandshakeTimeout` attribute's value and span: after how many seconds a wait on
-    /// another controller of the cell shows on the pendant (SPEC.md 9).
+    /// another controller of the cell shows on the pendant (docs/CELLS.md).
     pub handshake_timeout_attr: Option<(String, Span)>,
+    /// Child InternalElements named near a group skillpost reads but not as it (`Skils` for
+    /// `Skills`): their name, place and the group's name. Not read; an error about what the
+    /// group would hold names them.
+    pub misnamed: Vec<(String, Span, &'static str)>,
 }
 
 /// Key → index of the first skill, function and signal of that key.
@@ -250,7 +254,7 @@ impl Resource {
 }
 
 /// An I/O signal of a resource: an `ExternalInterface` whose `RefBaseClassPath` ends in
-/// `SignalInterface` or `Channel` (SPEC.md 3.1).
+/// `SignalInterface` or `Channel` (docs/INPUTS.md).
 #[derive(Debug, Clone)]
 pub struct Signal {
     pub name: Name,
@@ -264,7 +268,7 @@ pub struct Signal {
     pub holder: Option<String>,
 }
 
-/// A wire between two controllers (SPEC.md 9): an `InternalLink` from an `Output` signal of one
+/// A wire between two controllers (docs/CELLS.md): an `InternalLink` from an `Output` signal of one
 /// controller's resources to an `Input` signal of another's.
 #[derive(Debug, Clone)]
 pub struct Wire {
@@ -402,7 +406,7 @@ pub struct Sfc {
     /// Connections back to an earlier step, made loops (`plan::close_circles`): each became a
     /// jumpStep element appended to `elements`.
     pub closed: Vec<Closed>,
-    /// The macro steps with a body (SPEC.md 3): the body's elements follow the macroStep in
+    /// The macro steps with a body (docs/INPUTS.md): the body's elements follow the macroStep in
     /// `elements`, ascending.
     pub macros: Vec<MacroBody>,
 }
@@ -566,7 +570,7 @@ impl ElementKind {
     }
 }
 
-/// A transition's condition (SPEC.md 3.1), parsed.
+/// A transition's condition (docs/INPUTS.md), parsed.
 #[derive(Debug)]
 pub struct Condition {
     /// The inline ST text as written (trimmed), or the reference's name.

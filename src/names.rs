@@ -12,6 +12,64 @@ pub fn key(name: &str) -> String {
     }
 }
 
+/// How many single-character edits (insert, delete, replace; case ignored) turn `a` into `b`.
+pub fn edit_distance(a: &str, b: &str) -> usize {
+    let a: Vec<char> = key(a).chars().collect();
+    let b: Vec<char> = key(b).chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.iter().enumerate() {
+        let mut diag = row[0];
+        row[0] = i + 1;
+        for (j, cb) in b.iter().enumerate() {
+            let up = row[j + 1];
+            row[j + 1] = (up + 1).min(row[j] + 1).min(diag + usize::from(ca != cb));
+            diag = up;
+        }
+    }
+    row[b.len()]
+}
+
+/// The candidate nearest to `name` for a "did you mean" (case ignored): at most two edits away
+/// and fewer edits than half of `name`'s letters (`R2 Weldng` finds `R2 Welding`, `x` finds
+/// nothing), or else the only candidate that contains `name` or is contained in it, both of 3
+/// letters or more (`Weld` finds `R2 Weld`). Ties go to the first. `None` when nothing is near, or `name`
+/// itself is a candidate.
+pub fn closest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
+    let k = key(name);
+    let n = k.chars().count();
+    if n == 0 {
+        return None;
+    }
+    let mut best: Option<(usize, &'a str)> = None;
+    let mut containing: Vec<&'a str> = Vec::new();
+    for c in candidates {
+        let ck = key(c);
+        if ck == k {
+            return None;
+        }
+        // Far longer or shorter names cannot be two edits away.
+        if ck.chars().count().abs_diff(n) <= 2 {
+            let d = edit_distance(&k, &ck);
+            if d <= 2 && 2 * d < n && best.is_none_or(|(b, _)| d < b) {
+                best = Some((d, c));
+            }
+        }
+        if n >= 3 && (ck.contains(&k) || (ck.len() >= 3 && k.contains(&ck))) {
+            containing.push(c);
+        }
+    }
+    match (best, containing.as_slice()) {
+        (Some((_, c)), _) => Some(c),
+        (None, [one]) => Some(one),
+        _ => None,
+    }
+}
+
+/// `; did you mean `X`?` for [`closest`], or nothing.
+pub fn did_you_mean<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> String {
+    closest(name, candidates).map_or(String::new(), |c| format!("; did you mean `{c}`?"))
+}
+
 /// Whether two names are the same under [`key`].
 pub fn eq(a: &str, b: &str) -> bool {
     let (a, b) = (a.trim(), b.trim());
@@ -192,6 +250,22 @@ pub fn transliterate(text: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_nearest_name_is_suggested_only_when_it_is_near() {
+        let steps = ["PickPart", "PlacePart", "Start", "End"];
+        assert_eq!(closest("PickPrt", steps), Some("PickPart"));
+        assert_eq!(closest("pickpart ", steps), None, "the name itself");
+        assert_eq!(closest("Xyz", steps), None);
+        assert_eq!(closest("En", steps), None, "one edit of two letters is too far");
+        let resources = ["R1 Handling", "R2 Welding", "Gripper G1"];
+        assert_eq!(closest("R2 Weldng", resources), Some("R2 Welding"));
+        assert_eq!(closest("Welding", resources), Some("R2 Welding"));
+        assert_eq!(closest("R", resources), None);
+        assert_eq!(closest("VariantB", ["More_Parts", "Variant_B"]), Some("Variant_B"));
+        assert_eq!(did_you_mean("Skils", ["Skills"]), "; did you mean `Skills`?");
+        assert_eq!(did_you_mean("Foo", ["Skills"]), "");
+    }
 
     #[test]
     fn keys_fold_case_and_umlauts() {

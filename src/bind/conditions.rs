@@ -1,4 +1,4 @@
-//! What the transition conditions read (SPEC.md 3.1): the signals of the program's resource and
+//! What the transition conditions read (docs/INPUTS.md): the signals of the program's resource and
 //! the steps' times, with the KRL timers those use, type-checked.
 
 use std::collections::{HashMap, HashSet};
@@ -70,7 +70,7 @@ fn steps_before(sfc: &Sfc, by_id: &HashMap<u64, usize>, t: usize) -> Vec<usize> 
     out
 }
 
-/// The step times of a chart's conditions, checked (SPEC.md 3.1): the steps by name and the
+/// The step times of a chart's conditions, checked (docs/INPUTS.md): the steps by name and the
 /// elements by `localId`, built at the first dotted name (most charts read no step time).
 #[derive(Default)]
 struct StepTimes {
@@ -189,10 +189,95 @@ pub struct Reads {
     pub watch: Option<Watch>,
 }
 
+/// `E318` for `name`, which resource `r` (the program's) does not declare: the near name it
+/// does declare, or the other resources that declare `name` and, in a cell (`cell`), why this
+/// controller decides the condition: it runs the step before it.
+fn unknown_signal(
+    bb: &Blackboard,
+    sfc: &Sfc,
+    t: usize,
+    r: &crate::model::Resource,
+    name: &str,
+    cell: bool,
+) -> Diagnostic {
+    let key = crate::names::key(name);
+    let elsewhere: Vec<&str> = bb
+        .resources
+        .iter()
+        .filter(|o| !std::ptr::eq(*o, r) && o.signal(&key).is_some())
+        .map(|o| o.name.text.as_ref())
+        .collect();
+    let declare = format!(
+        "an ExternalInterface named `{name}` with RefBaseClassPath ending in `SignalInterface`, directly under the resource or under its `Signals` element, with `Number` (or `Address`)"
+    );
+    if elsewhere.is_empty() {
+        let misnamed = r
+            .misnamed
+            .iter()
+            .find(|m| m.2 == "Signals" || m.2 == "Signale");
+        let near = match crate::names::closest(name, r.signals.iter().map(|s| s.name.text.as_ref()))
+        {
+            Some(n) => format!("; did you mean `{n}`? Or declare it there: {declare}"),
+            None => match misnamed {
+                Some((n, _, meant)) => format!(
+                    "; its InternalElement `{n}` is not read: did you mean `{meant}`?"
+                ),
+                None => format!("; declare it there: {declare}"),
+            },
+        };
+        return Diagnostic::error(
+            Code::UnknownSignal,
+            format!(
+                "condition names `{name}`, which is not a signal of resource `{}` (it has {}){near}",
+                r.name.text,
+                known(r.signals.iter().map(|s| s.name.text.as_ref()))
+            ),
+        );
+    }
+    let on = elsewhere
+        .iter()
+        .map(|n| format!("`{n}`"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let by_id: HashMap<u64, usize> = sfc
+        .elements
+        .iter()
+        .enumerate()
+        .map(|(i, e)| (e.local_id, i))
+        .collect();
+    let before: Vec<String> = steps_before(sfc, &by_id, t)
+        .into_iter()
+        .map(|i| {
+            let e = &sfc.elements[i];
+            match &e.kind {
+                ElementKind::Step(st) => format!("`{}` (localId {})", st.name, e.local_id),
+                _ => format!("localId {}", e.local_id),
+            }
+        })
+        .collect();
+    let who = if cell && !before.is_empty() {
+        format!(
+            "but controller `{}` decides it: it runs the step before the condition, {}. Declare `{name}` on `{}` too ({declare}, wired to the same input), or let a step of {on} come right before the condition",
+            r.name.text,
+            before.join(", "),
+            r.name.text
+        )
+    } else {
+        format!(
+            "not of resource `{}`, whose program reads this condition: declare it on `{}` too ({declare})",
+            r.name.text, r.name.text
+        )
+    };
+    Diagnostic::error(
+        Code::UnknownSignal,
+        format!("condition names `{name}`, a signal of {on}, {who}"),
+    )
+}
+
 /// Resolves the names in every transition condition (or, for a program of a cell, those of
 /// `only`: the transitions it waits for or decides; `only` holds the steps it runs too) against
 /// the signals of the program's resource and the chart's steps (a step's time `S.t`, in a cell
-/// only of a step it runs), and checks the types (SPEC.md 3.1).
+/// only of a step it runs), and checks the types (docs/INPUTS.md).
 pub fn conditions(
     bb: &Blackboard,
     sfc: &Sfc,
@@ -200,6 +285,7 @@ pub fn conditions(
     profile: Option<&dyn Rules>,
     only: Option<&HashSet<usize>>,
     partners: bool,
+    undecided: bool,
     diags: &mut Diagnostics,
 ) -> Reads {
     use crate::cond::Ty;
@@ -224,9 +310,17 @@ pub fn conditions(
             if step_names.is_some_and(|s| s.step_time(n).is_some()) {
                 return Some(Ty::Time);
             }
-            let r = res?;
             let key = crate::names::key(n);
-            let s = &r.signals[r.signal(&key)?];
+            let s = match res.and_then(|r| Some(&r.signals[r.signal(&key)?])) {
+                Some(s) => s,
+                // Which controller decides is not known (the chart's flow has errors): a
+                // signal of any resource is no error of its own.
+                None if undecided => bb
+                    .resources
+                    .iter()
+                    .find_map(|r| Some(&r.signals[r.signal(&key)?]))?,
+                None => return None,
+            };
             Some(if s.is_integer() { Ty::Number } else { Ty::Bool })
         };
         for err in crate::cond::check(&c.expr, &lookup) {
@@ -252,14 +346,7 @@ pub fn conditions(
                 {
                     continue;
                 }
-                Some(r) => Diagnostic::error(
-                    Code::UnknownSignal,
-                    format!(
-                        "condition names `{name}`, which is not a signal of resource `{}` (it has {}); declare it there: an ExternalInterface named `{name}` with RefBaseClassPath ending in `SignalInterface`, directly under the resource or under its `Signals` element, with `Number` (or `Address`)",
-                        r.name.text,
-                        known(r.signals.iter().map(|s| s.name.text.as_ref()))
-                    ),
-                ),
+                Some(r) => unknown_signal(bb, sfc, ei, r, name, only.is_some()),
                 None => Diagnostic::error(
                     Code::UnknownSignal,
                     format!(

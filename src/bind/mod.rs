@@ -1,5 +1,5 @@
 //! Binding: each skill step's resource and skill, its function calls in order, and every value
-//! taken from the SFC, type-checked (SPEC.md 2.1–2.3, 4).
+//! taken from the SFC, type-checked (docs/INPUTS.md).
 //!
 //! Binding runs in two passes so the compiler can load exactly the IRL files it needs in between:
 //! [`resolve`] finds each step's resource and skill; [`needed_functions`] lists the functions
@@ -44,7 +44,7 @@ pub struct Resolution {
 }
 
 impl Resolution {
-    /// The controllers that run steps, in the order of their first step (SPEC.md 9).
+    /// The controllers that run steps, in the order of their first step (docs/CELLS.md).
     pub fn controllers(&self, bb: &Blackboard, order: &StepOrder) -> Vec<usize> {
         let mut out: Vec<usize> = Vec::new();
         for &i in &order.steps {
@@ -129,6 +129,8 @@ pub fn resolve(
     // names' places in memory (the reader shares one `Arc` per distinct name): a plan repeats
     // a handful of skills, and each would otherwise hash its resource and its pair again.
     let mut recent: [Option<Recent>; 4] = [None; 4];
+    // The resources whose `Skills` element is misnamed, said once each.
+    let mut misnamed_said: HashSet<usize> = HashSet::new();
     let mut next_recent = 0;
     for &i in &order.steps {
         let e = &sfc.elements[i];
@@ -175,9 +177,13 @@ pub fn resolve(
                         Diagnostic::error(
                             Code::UnknownResource,
                             format!(
-                                "unknown resource `{}`; the blackboard has {}",
+                                "unknown resource `{}`; the blackboard has {}{}",
                                 rn.text,
-                                known(bb.resources.iter().map(|r| r.name.text.as_ref()))
+                                known(bb.resources.iter().map(|r| r.name.text.as_ref())),
+                                crate::names::did_you_mean(
+                                    &rn.text,
+                                    bb.resources.iter().map(|r| r.name.text.as_ref())
+                                )
                             ),
                         )
                         .at(rn.span.clone())
@@ -232,14 +238,38 @@ pub fn resolve(
         };
         let resource = &bb.resources[res];
         let Some(sk) = resource.skill(&skill_name.key) else {
+            let misnamed = resource.misnamed.iter().find(|m| m.2 == "Skills");
+            if let Some((n, at, _)) = misnamed.filter(|_| resource.skills.is_empty()) {
+                // The root cause, once per resource at the element: the skills are there, under
+                // a name that is not read.
+                if misnamed_said.insert(res) {
+                    diags.push(
+                        Diagnostic::error(
+                            Code::UnknownSkill,
+                            format!(
+                                "resource `{}` has no `Skills` element, so it has no skill `{}` (nor any other); its InternalElement `{n}` is not read: did you mean `Skills`?",
+                                resource.name.text, skill_name.text,
+                            ),
+                        )
+                        .at(at.clone())
+                        .element(resource.element.clone())
+                        .related(skill_name.span.clone(), format!("the first step that uses it, {}", label())),
+                    );
+                }
+                continue;
+            }
             diags.push(
                 Diagnostic::error(
                     Code::UnknownSkill,
                     format!(
-                        "resource `{}` has no skill `{}`; it offers {}",
+                        "resource `{}` has no skill `{}`; it offers {}{}",
                         resource.name.text,
                         skill_name.text,
-                        known(resource.skills.iter().map(|s| s.name.text.as_ref()))
+                        known(resource.skills.iter().map(|s| s.name.text.as_ref())),
+                        crate::names::did_you_mean(
+                            &skill_name.text,
+                            resource.skills.iter().map(|s| s.name.text.as_ref())
+                        )
                     ),
                 )
                 .at(skill_name.span.clone())
@@ -247,7 +277,7 @@ pub fn resolve(
             );
             continue;
         };
-        // The program is the controller's (SPEC.md 9): a robot and the devices on it; the
+        // The program is the controller's (docs/CELLS.md): a robot and the devices on it; the
         // first controller's program is the one written back (a cell of several controllers
         // gets one program per controller, `plan::cell`).
         if r.resource.is_none() {
@@ -306,11 +336,15 @@ pub fn needed_functions(
                     Diagnostic::error(
                         Code::UnknownFunction,
                         format!(
-                            "skill `{}` maps function `{}`, which resource `{}` does not have; it has {}",
+                            "skill `{}` maps function `{}`, which resource `{}` does not have; it has {}{}",
                             resource.skills[sk].name.text,
                             m.function.text,
                             resource.name.text,
-                            known(resource.functions.iter().map(|f| f.name.text.as_ref()))
+                            known(resource.functions.iter().map(|f| f.name.text.as_ref())),
+                            crate::names::did_you_mean(
+                                &m.function.text,
+                                resource.functions.iter().map(|f| f.name.text.as_ref())
+                            )
                         ),
                     )
                     .at(m.function.span.clone())
@@ -333,7 +367,7 @@ pub struct Bound {
     pub resource: Option<usize>,
     /// The signals the conditions use (indexes into the resource's), in first-use order.
     pub signals: Vec<usize>,
-    /// The steps whose time a condition reads (`S.t`, SPEC.md 3.1), in first-use order, each
+    /// The steps whose time a condition reads (`S.t`, docs/INPUTS.md), in first-use order, each
     /// with its KRL timer number (`$TIMER[n]`); the k-th is RAPID's `skp_clock<k+1>` and
     /// URScript's `skp_time<k+1>`.
     pub timers: Vec<(usize, u32)>,
@@ -795,8 +829,20 @@ fn check_variables(
                 Diagnostic::error(
                     Code::MissingVariable,
                     format!(
-                        "step lacks variable `{}`, which skill `{}` needs for parameter `{}`",
-                        var.text, skill.name.text, p.path.text
+                        "step lacks variable `{}`, which skill `{}` needs for parameter `{}`{}",
+                        var.text,
+                        skill.name.text,
+                        p.path.text,
+                        // The step's variables no parameter reads: one of them may be meant.
+                        crate::names::did_you_mean(
+                            &var.text,
+                            match &vars.by {
+                                ByKey::Few(list) => list.iter().collect::<Vec<_>>(),
+                                ByKey::Many { unused, .. } => unused.clone(),
+                            }
+                            .into_iter()
+                            .map(|v| v.name.text.as_ref())
+                        )
                     ),
                 )
                 .at(e.span.clone())
@@ -1102,8 +1148,13 @@ fn prepare(
                 Diagnostic::error(
                     Code::UnknownCommand,
                     format!(
-                        "function `{}`: its IRL file has no function-call `{}`",
-                        f.name.text, f.command.text
+                        "function `{}`: its IRL file has no function-call `{}`{}",
+                        f.name.text,
+                        f.command.text,
+                        crate::names::did_you_mean(
+                            &f.command.text,
+                            irl.calls.iter().map(|c| c.name.text.as_ref())
+                        )
                     ),
                 )
                 .at(f.command.span.clone())

@@ -224,7 +224,18 @@ pub fn resolve_jumps(sfc: &Sfc, diags: &mut Diagnostics) -> Vec<Option<usize>> {
             None | Some([]) => diags.push(
                 Diagnostic::error(
                     Code::BadJump,
-                    format!("jump target `{}` names no step", target.text),
+                    format!(
+                        "jump target `{}` names no step{}",
+                        target.text,
+                        // Only on this error path: every step's name is looked at.
+                        crate::names::did_you_mean(
+                            &target.text,
+                            el.iter().filter_map(|e| match &e.kind {
+                                ElementKind::Step(st) => Some(st.name.as_ref()),
+                                _ => None,
+                            })
+                        )
+                    ),
                 )
                 .at(target.span.clone())
                 .element(label(sfc, i)),
@@ -255,7 +266,7 @@ pub fn resolve_jumps(sfc: &Sfc, diags: &mut Diagnostics) -> Vec<Option<usize>> {
 /// that only jumps lead to is not a second start (unless there is no other), and a chart that
 /// ends in jumps only has no end step (`None`). Several steps marked `initialStep="true"`, each
 /// in a network of its own (not connected to the others by connections or jumps), begin
-/// sequences of their own (SPEC.md 3), in document order; two in one network are an error.
+/// sequences of their own (docs/INPUTS.md), in document order; two in one network are an error.
 /// Reports a missing or repeated start or end.
 pub fn start_end(
     sfc: &Sfc,
@@ -389,7 +400,7 @@ fn one_sequence(
         .filter(|&i| mine(i) && el[i].kind.is_step() && g.preds(i).is_empty())
         .collect();
     let untargeted: Vec<usize> = no_pred.iter().copied().filter(|&i| !targeted[i]).collect();
-    // The start is the step marked initialStep="true" (SPEC.md 3): the one marked step without
+    // The start is the step marked initialStep="true" (docs/INPUTS.md): the one marked step without
     // a predecessor (the original also marks its end step), else the one marked step (a chart
     // drawn as a closed circle); else the one step without a predecessor that no jump leads to.
     let initial = |i: &usize| initial(sfc, g, *i);

@@ -1,5 +1,5 @@
 //! The AutomationML blackboard (CAEX 2.15 or 3.0): resources, skills, functions, mappings, and
-//! the SFC and write-back references (SPEC.md section 2).
+//! the SFC and write-back references (docs/INPUTS.md).
 
 use roxmltree::Node;
 
@@ -149,29 +149,11 @@ const ANY_CONTENT: &[&str] = &[
     "Value",
 ];
 
-/// How many single-character edits (insert, delete, replace, ASCII case ignored) turn `a` into
-/// `b`.
-fn edit_distance(a: &str, b: &str) -> usize {
-    let a: Vec<char> = a.chars().map(|c| c.to_ascii_lowercase()).collect();
-    let b: Vec<char> = b.chars().map(|c| c.to_ascii_lowercase()).collect();
-    let mut row: Vec<usize> = (0..=b.len()).collect();
-    for (i, ca) in a.iter().enumerate() {
-        let mut diag = row[0];
-        row[0] = i + 1;
-        for (j, cb) in b.iter().enumerate() {
-            let up = row[j + 1];
-            row[j + 1] = (up + 1).min(row[j] + 1).min(diag + usize::from(ca != cb));
-            diag = up;
-        }
-    }
-    row[b.len()]
-}
-
 /// The CAEX element name closest to `name`, at most two edits away.
 fn closest_element(name: &str) -> Option<&'static str> {
     CAEX_ELEMENTS
         .iter()
-        .map(|k| (edit_distance(name, k), *k))
+        .map(|k| (crate::names::edit_distance(name, k), *k))
         .filter(|(d, _)| *d <= 2)
         .min_by_key(|(d, _)| *d)
         .map(|(_, k)| k)
@@ -195,7 +177,7 @@ fn no_hierarchy(sources: &Sources, file: FileId, root: Node) -> Diagnostic {
     let found = root
         .children()
         .filter(|c| is_unknown_element(root, *c))
-        .min_by_key(|c| edit_distance(c.tag_name().name(), "InstanceHierarchy"));
+        .min_by_key(|c| crate::names::edit_distance(c.tag_name().name(), "InstanceHierarchy"));
     let Some(found) = found else {
         return Diagnostic::error(Code::NoHierarchy, "the blackboard has no InstanceHierarchy")
             .at(tag_span(file, root));
@@ -303,10 +285,10 @@ pub fn is_safe_address(s: &str) -> bool {
     ident && index_ok && !names::is_krl_keyword(name)
 }
 
-/// The resources under `Ressourcen`/`Resources` (SPEC.md 2): its children that have a child
+/// The resources under `Ressourcen`/`Resources` (docs/INPUTS.md): its children that have a child
 /// named `Skills` or `FunctionDescription(s)`, and at any depth below grouping elements (plant,
 /// line, cell) those that do; a child with no resource below it is a resource itself. Then the
-/// devices: resources standing inside a resource (SPEC.md 9), with the index of the resource
+/// devices: resources standing inside a resource (docs/CELLS.md), with the index of the resource
 /// they stand in. Top-level resources in document order, then each resource's devices.
 fn resource_nodes<'a, 'i>(res: Node<'a, 'i>) -> Vec<(Node<'a, 'i>, Option<usize>)> {
     let is_resource = |n: Node| {
@@ -450,7 +432,7 @@ impl Reader<'_> {
         }
     }
 
-    /// Which resource's controller runs each resource (SPEC.md 9): its `Controller` attribute
+    /// Which resource's controller runs each resource (docs/CELLS.md): its `Controller` attribute
     /// when that names another resource, else the nearest enclosing resource's, else itself;
     /// followed along the chain. A chain that comes back to where it started is `E211` at the
     /// attribute that closes it (that resource is then its own controller); a device whose
@@ -549,7 +531,7 @@ impl Reader<'_> {
         out
     }
 
-    /// The wires between controllers (SPEC.md 9): every `InternalLink` in the hierarchy whose two
+    /// The wires between controllers (docs/CELLS.md): every `InternalLink` in the hierarchy whose two
     /// partners (`RefPartnerSideA`, `RefPartnerSideB`: `<element ID>:<interface name>`) are
     /// signals of resources on two different controllers, one an `Output`, the other an `Input`.
     /// Links between other things (or within one controller) are no wires and are left alone; a
@@ -691,10 +673,26 @@ impl Reader<'_> {
         let handshake_timeout_attr = caex_attr(r, "HandshakeTimeout")
             .and_then(|a| caex_value(self.file, a))
             .filter(|(v, _)| !v.trim().is_empty());
+        const GROUPS: [&str; 5] = [
+            "Skills",
+            "FunctionDescription",
+            "FunctionDescriptions",
+            "Signals",
+            "Signale",
+        ];
+        let misnamed = children(r, "InternalElement")
+            .filter_map(|e| {
+                let n = caex_name(e)?;
+                let meant = names::closest(n, GROUPS)?;
+                let meant = GROUPS.into_iter().find(|g| *g == meant)?;
+                Some((n.to_owned(), self.span(e), meant))
+            })
+            .collect();
         Resource {
             name,
             language,
             parent: None,
+            misnamed,
             controller_attr,
             program_attr,
             timers_attr,
@@ -1406,8 +1404,8 @@ mod tests {
 
     #[test]
     fn the_closest_caex_element_is_at_most_two_edits_away() {
-        assert_eq!(edit_distance("Atribute", "Attribute"), 1);
-        assert_eq!(edit_distance("kitten", "sitting"), 3);
+        assert_eq!(crate::names::edit_distance("Atribute", "Attribute"), 1);
+        assert_eq!(crate::names::edit_distance("kitten", "sitting"), 3);
         assert_eq!(closest_element("Atribute"), Some("Attribute"));
         assert_eq!(
             closest_element("InstanceHierachy"),
