@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Benchmark of `skillpost watch` (SPEC.md section 7): edit latency and scale.
+"""Benchmark of `skillpost watch` (docs/DAEMON.md): edit latency and scale.
 
     cargo build --release && cargo build --release --example generate
     python3 bench/daemon.py                      # everything, about 8 minutes

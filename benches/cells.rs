@@ -1,4 +1,4 @@
-//! Cells (SPEC.md 9): the cost of splitting a chart over several controllers (`harness = false`).
+//! Cells (docs/CELLS.md): the cost of splitting a chart over several controllers (`harness = false`).
 //!
 //! ```text
 //! cargo bench --bench cells                         # 10,000 steps, 1 and 4 controllers

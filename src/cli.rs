@@ -1,4 +1,4 @@
-//! The command line (SPEC.md section 6): parses arguments, runs the compiler, prints diagnostics
+//! The command line (docs/COMMAND-LINE.md): parses arguments, runs the compiler, prints diagnostics
 //! and listings, writes outputs, and maps the result to an exit status (0 success, 1 the inputs
 //! have errors, 2 usage or I/O failure).
 
@@ -692,7 +692,7 @@ fn print_listings(
     if print('B')
         && let Some(bb) = &c.blackboard
     {
-        // The wires a cell's handshakes use, and what for (SPEC.md 9).
+        // The wires a cell's handshakes use, and what for (docs/CELLS.md).
         let uses = c
             .cell
             .as_ref()
@@ -708,7 +708,7 @@ fn print_listings(
         emit(&|| crate::print::sfc(sfc), &|| json::sfc(sfc));
     }
     if let (Some(sfc), Some(plan)) = (&c.sfc, &c.plan) {
-        // A cell of several controllers: one lane and one order per program (SPEC.md 9).
+        // A cell of several controllers: one lane and one order per program (docs/CELLS.md).
         let cell = match (&c.cell, &c.blackboard) {
             (Some(cell), Some(bb)) => Some(crate::print::CellView {
                 cell,

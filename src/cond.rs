@@ -1,4 +1,4 @@
-//! Transition conditions (SPEC.md 3.1): the ST subset `TRUE`, `FALSE`, integer and decimal
+//! Transition conditions (docs/INPUTS.md): the ST subset `TRUE`, `FALSE`, integer and decimal
 //! literals (IEC 61131-3's: `1`/`0` as booleans where a boolean belongs, `BOOL#1`, typed
 //! `INT#5`/`REAL#1.5`, based `2#`/`8#`/`16#`, `_` between digits; kept in decimal), names (IEC
 //! identifiers, any Unicode letter, and qualified names `A.B`), `NOT`, `AND` (`&`), `OR`, `XOR`, `=`, `<>`, `<`, `>`,
@@ -55,7 +55,7 @@ pub enum BinOp {
     Le,
     Ge,
     /// Arithmetic, from the standard functions `ADD`, `SUB`, `MUL` (wired blocks or calls in
-    /// ST; SPEC 3.1's ST has no infix arithmetic).
+    /// ST; the condition language of docs/INPUTS.md has no infix arithmetic).
     Add,
     Sub,
     Mul,
@@ -688,7 +688,7 @@ impl Lexer {
     }
 }
 
-/// The standard functions a condition may use, as a wired block or called in ST (SPEC 3.1),
+/// The standard functions a condition may use, as a wired block or called in ST (docs/INPUTS.md),
 /// as messages list them.
 pub const STANDARD_FUNCTIONS: &str =
     "AND, OR, XOR, NOT, EQ, NE, GT, GE, LT, LE, ADD, SUB, MUL, SEL and MOVE";
@@ -1451,7 +1451,7 @@ mod tests {
         assert!(e("a; b").contains("one expression"));
     }
 
-    /// IEC 61131-3 literals (SPEC 3.1): `1`/`0` as booleans where a boolean belongs, `BOOL#1`,
+    /// IEC 61131-3 literals (docs/INPUTS.md): `1`/`0` as booleans where a boolean belongs, `BOOL#1`,
     /// typed and based literals, `_` between digits; written in decimal.
     #[test]
     fn iec_literals_are_read() {
@@ -1573,7 +1573,7 @@ mod tests {
                 .contains("larger than a KRL integer")
         );
         assert!(p("n = 2147483647").is_ok());
-        // Unicode letters are letters of names (SPEC 3.1); other characters are not.
+        // Unicode letters are letters of names (docs/INPUTS.md); other characters are not.
         assert_eq!(st("Störung AND Grüße"), "Störung AND Grüße");
         assert!(e("a € b").message.contains("`€`"));
         let deep = format!("{}a{}", "(".repeat(100), ")".repeat(100));

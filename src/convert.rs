@@ -1,5 +1,5 @@
-//! The conversions an IRL template may call, evaluated when compiling (SPEC 8, "Conversions in IRL
-//! templates"), and the way their results are written into the program text.
+//! The conversions an IRL template may call, evaluated when compiling (docs/LANGUAGES.md,
+//! "Conversions"), and the way their results are written into the program text.
 //!
 //! The plan's frames are KUKA's `(x, y, z, a, b, c)` in mm and degrees: `A` about Z, then `B` about
 //! the new Y, then `C` about the new X (intrinsic Z-Y'-X'', so `R = Rz(A)·Ry(B)·Rx(C)`). Other

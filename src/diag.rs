@@ -649,16 +649,16 @@ codes! {
     /// A resource's `Language` or an IRL file's `info@language` names no language skillpost
     /// writes (KRL, RAPID, URScript).
     BadLanguage = "E210",
-    /// A chain of `Controller` attributes that comes back to where it started (SPEC.md 9).
+    /// A chain of `Controller` attributes that comes back to where it started (docs/CELLS.md).
     ControllerLoop = "E211",
     /// A cell's plan needs more wires between two controllers than the blackboard declares
-    /// (SPEC.md 9): how many are missing, from which controller to which.
+    /// (docs/CELLS.md): how many are missing, from which controller to which.
     TooFewWires = "E212",
     /// A resource's `Timers` attribute that names no KRL timers, or fewer than the step times
-    /// the conditions read (SPEC.md 3.1).
+    /// the conditions read (docs/INPUTS.md).
     BadTimers = "E214",
     /// A controller's `HandshakeTimeout` attribute that is not a number of seconds from 0 to a
-    /// day (SPEC.md 9).
+    /// day (docs/CELLS.md).
     BadHandshakeTimeout = "E215",
 
     /// No `pou` with an `SFC` body (or none of the name asked for).
@@ -692,7 +692,7 @@ codes! {
     MissingVariable = "E314",
     /// A variable's value is not a well-formed value or list.
     BadVariableSyntax = "E315",
-    /// A transition condition is not in the condition language (SPEC.md 3.1), or names a
+    /// A transition condition is not in the condition language (docs/INPUTS.md), or names a
     /// signal of the wrong type.
     BadCondition = "E316",
     /// A jump without a usable target, or one that cannot be structured (not back to a step on
@@ -756,11 +756,13 @@ codes! {
     /// No write-back target in the blackboard.
     NoWriteBackTarget = "W204",
     /// A program of a cell whose controller has no `Code` interface of its name: its path is
-    /// not written back (SPEC.md 9).
+    /// not written back (docs/CELLS.md).
     NoProgramTarget = "W205",
     /// A blackboard element whose name is no CAEX element (a misspelling: it and what it holds
     /// are ignored); names the CAEX element closest to it.
     UnknownElement = "W206",
+    /// An InternalLink between signals whose one side names no signal: the wire is left out.
+    LinkPartnerMissing = "W207",
     /// The start step is not marked `initialStep="true"`.
     StartNotInitial = "W301",
     /// A step's resource was inferred from its skill.

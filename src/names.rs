@@ -257,13 +257,23 @@ mod tests {
         assert_eq!(closest("PickPrt", steps), Some("PickPart"));
         assert_eq!(closest("pickpart ", steps), None, "the name itself");
         assert_eq!(closest("Xyz", steps), None);
-        assert_eq!(closest("En", steps), None, "one edit of two letters is too far");
+        assert_eq!(
+            closest("En", steps),
+            None,
+            "one edit of two letters is too far"
+        );
         let resources = ["R1 Handling", "R2 Welding", "Gripper G1"];
         assert_eq!(closest("R2 Weldng", resources), Some("R2 Welding"));
         assert_eq!(closest("Welding", resources), Some("R2 Welding"));
         assert_eq!(closest("R", resources), None);
-        assert_eq!(closest("VariantB", ["More_Parts", "Variant_B"]), Some("Variant_B"));
-        assert_eq!(did_you_mean("Skils", ["Skills"]), "; did you mean `Skills`?");
+        assert_eq!(
+            closest("VariantB", ["More_Parts", "Variant_B"]),
+            Some("Variant_B")
+        );
+        assert_eq!(
+            did_you_mean("Skils", ["Skills"]),
+            "; did you mean `Skills`?"
+        );
         assert_eq!(did_you_mean("Foo", ["Skills"]), "");
     }
 

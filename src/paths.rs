@@ -1,10 +1,10 @@
-//! Path handling in one place: `refURI` values → paths (SPEC.md 2.4), lexical normalisation, and
+//! Path handling in one place: `refURI` values → paths (docs/INPUTS.md), lexical normalisation, and
 //! absolute paths. No function here touches the file system (except [`absolute`], which asks for
 //! the current directory); symbolic links are not resolved.
 
 use std::path::{Component, Path, PathBuf};
 
-/// Turns a `refURI` value into a path (SPEC.md 2.4): surrounding quotes stripped, a `#fragment`
+/// Turns a `refURI` value into a path (docs/INPUTS.md): surrounding quotes stripped, a `#fragment`
 /// dropped, `file:` URLs accepted, percent-escapes decoded, `\` read as `/`, and a relative path
 /// resolved against `base` (the blackboard's folder, relative or absolute). The result is
 /// [`normalize`]d, so it can be compared with a project folder; a relative `base` gives a relative

@@ -29,7 +29,7 @@ pub fn language_text(
 
 /// `-pB`: resources (with their language), their skills with the calls they map, and functions
 /// with their IRL files.
-/// The `-pB` controller line of resource `ri` (SPEC.md 9), when there is anything to say: the
+/// The `-pB` controller line of resource `ri` (docs/CELLS.md), when there is anything to say: the
 /// resource whose controller runs it and why, or the controller a `Controller` value describes.
 fn controller_text(bb: &Blackboard, ri: usize) -> Option<String> {
     let r = &bb.resources[ri];
@@ -122,7 +122,7 @@ pub fn blackboard(
     o
 }
 
-/// What each wire a cell's handshakes use does (SPEC.md 9): `strobe of A -> B`, `data bit 1 of
+/// What each wire a cell's handshakes use does (docs/CELLS.md): `strobe of A -> B`, `data bit 1 of
 /// A -> B`, `acknowledgement of A -> B` (the channel from A to B), by wire index.
 pub fn wire_uses(
     cell: &crate::plan::cell::Cell,
@@ -1185,7 +1185,7 @@ pub mod json {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Cells (SPEC.md 9): `-pO` per program, `-pF` one lane per controller
+// Cells (docs/CELLS.md): `-pO` per program, `-pF` one lane per controller
 // ---------------------------------------------------------------------------------------------
 
 /// What the cell listings need besides the chart: the programs, the blackboard's names, the

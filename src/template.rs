@@ -1,4 +1,4 @@
-//! IRL template parsing and parameter substitution (SPEC.md 4).
+//! IRL template parsing and parameter substitution (docs/INPUTS.md).
 //!
 //! A template is compiled once ([`Template::compile`]) into a list of pieces — literal text and
 //! parameter slots — and rendered many times ([`Template::render`]) by a plain walk over them.
@@ -31,7 +31,7 @@
 //!   ([`Syntax`]): KRL comments start with `;` and `{...}` is an aggregate; RAPID comments start
 //!   with `!`, URScript's with `#`, and neither has the aggregate rule (`;` ends a RAPID
 //!   statement and is copied like any punctuation).
-//! - **Conversions** (SPEC.md 8): `m(P)`, `mm(P)`, `rad(P)`, `deg(P)`, `quat(A, B, C)`,
+//! - **Conversions** (docs/LANGUAGES.md): `m(P)`, `mm(P)`, `rad(P)`, `deg(P)`, `quat(A, B, C)`,
 //!   `rotvec(A, B, C)` — the exact lower-case name, then `(`, arguments that are parameters or
 //!   numbers, `)` — are evaluated when the program is bound: the whole call is replaced by the
 //!   result, numbers joined by `, ` ([`crate::convert`]). A conversion with other arguments is a

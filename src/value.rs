@@ -1,10 +1,10 @@
-//! SFC variable values (SPEC.md 2.3): the list syntax `(a, (b, c))`, looking an item up in place,
+//! SFC variable values (docs/INPUTS.md): the list syntax `(a, (b, c))`, looking an item up in place,
 //! and the language-neutral typed [`Literal`] a value becomes for a parameter. Which text a
 //! literal is in a robot language is the language profile's business (`emit::Profile`).
 
 use std::borrow::Cow;
 
-/// The value types of SPEC.md 2.1.
+/// The value types of docs/INPUTS.md.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ValueType {
     Double,

@@ -3,7 +3,7 @@
 //! over all steps) and definitions (in order of first use) joined after. The result must be what
 //! one thread gives: compared through `compile` over every fixture (split at every chart of two
 //! steps or more) and a generated 3,000-step project with errors and warnings in both halves.
-//! The same switch writes a cell's programs two at a time (SPEC.md 9): the cell fixtures, with
+//! The same switch writes a cell's programs two at a time (docs/CELLS.md): the cell fixtures, with
 //! their bases, are compared the same way.
 
 use std::path::{Path, PathBuf};

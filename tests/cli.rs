@@ -1793,8 +1793,8 @@ fn an_actions_sfc_body_is_a_chart_named_pou_dot_action() {
 
 /// Issue 26, item 2: conditions drawn instead of written. An LD network (power rail, a contact,
 /// a negated contact in series) and an FBD network (an OR block over two variables, into an AND
-/// block with a third) give the programs of their inline ST twins; a block outside SPEC 3.1's
-/// list (a timer) is an error at it, naming it.
+/// block with a third) give the programs of their inline ST twins; a block outside the
+/// list of docs/INPUTS.md (a timer) is an error at it, naming it.
 #[test]
 fn wired_conditions_are_their_inline_twins() {
     let t = base_with_case("flow", "flow-guarded-sequence");
@@ -1850,7 +1850,7 @@ fn wired_conditions_are_their_inline_twins() {
         expected.iter().any(|l| l.contains("$IN[1]")),
         "{expected:?}"
     );
-    // Arithmetic (SPEC 3.1's ADD, SUB, MUL): the wired net and its ST call twin.
+    // Arithmetic (the ADD, SUB, MUL of docs/INPUTS.md): the wired net and its ST call twin.
     let arith_net = r#"
             <inVariable localId="120"><position x="0" y="0"/><expression>Variant</expression></inVariable>
             <inVariable localId="121"><position x="0" y="0"/><expression>3</expression></inVariable>
@@ -1946,7 +1946,7 @@ fn qualified_names_are_signals_of_that_name() {
     );
 }
 
-/// Issue 26: a wired condition through a block outside SPEC 3.1's list is one error at that
+/// Issue 26: a wired condition through a block outside the list of docs/INPUTS.md is one error at that
 /// block, naming its type and localId, whatever is wired around it: a TON in a feedback loop
 /// through an SR (the Beremiz traffic light), a TON whose `PT` is not a condition's text (the
 /// andisama chart), an edge detector, arithmetic other than `ADD`, `SUB`, `MUL` (which are
@@ -2057,7 +2057,7 @@ fn wired_conditions_name_the_block_that_is_refused() {
         325,
         "a wired condition uses block comparison localId 325: a wired condition may use only the blocks",
     );
-    // ADD, SUB, MUL are read (SPEC 3.1); DIV is not.
+    // ADD, SUB, MUL are read (docs/INPUTS.md); DIV is not.
     for (ty, want) in [
         ("ADD", "wait for ADD(Variant, 2) > 2"),
         ("SUB", "wait for SUB(Variant, 2) > 2"),
@@ -2115,7 +2115,7 @@ fn wired_conditions_name_the_block_that_is_refused() {
     );
 }
 
-/// A hostile wired condition (SPEC.md 3.1) is a clear error, not a stack overflow or a run
+/// A hostile wired condition (docs/INPUTS.md) is a clear error, not a stack overflow or a run
 /// without end: a chain of 5,000 contacts in series, and 30 AND blocks each wired twice from
 /// the one before (2^30 paths through the net).
 #[test]
@@ -2268,7 +2268,7 @@ fn a_macro_step_nested_in_a_macro_step_runs_in_its_place() {
     );
 }
 
-/// Macro steps nest up to the limit branches have (SPEC.md 3): 100 deep compile, 140 deep are
+/// Macro steps nest up to the limit branches have (docs/INPUTS.md): 100 deep compile, 140 deep are
 /// one E313 at the first macro step too deep.
 #[test]
 fn macro_steps_nest_up_to_the_limit() {
@@ -2994,7 +2994,7 @@ fn print_options_compile_and_write_unless_validating() {
     );
 }
 
-/// SPEC.md 3: several steps marked `initialStep="true"`, nothing connecting them, are sequences
+/// docs/INPUTS.md: several steps marked `initialStep="true"`, nothing connecting them, are sequences
 /// that run at the same time, each on controllers of its own. Each program holds its own
 /// sequence only and waits for nothing from the other: no handshake wire is read or set.
 #[test]
@@ -3105,4 +3105,51 @@ fn a_sequence_without_robot_steps_is_left_out() {
         std::fs::read(t.path().join("Blackboard.aml")).unwrap(),
         before
     );
+}
+
+/// A wire whose partner interface does not exist (`Go_b` misspelled `Go_X`) is not left out
+/// silently: a warning at the link says which side names nothing and the near name, and the
+/// cell then lacks the wire (`E212`).
+#[test]
+fn an_internal_link_to_a_missing_interface_is_a_warning_at_the_link() {
+    let p = base_with_case("cell", "cell-two-robots-wired");
+    let path = p.path().join("Blackboard.aml");
+    let bb = std::fs::read_to_string(&path).unwrap();
+    std::fs::write(
+        &path,
+        bb.replace("000000000051}:Go_B\"", "000000000051}:Go_X\""),
+    )
+    .unwrap();
+    let o = run(&["--warn", "Blackboard.aml", "output"], p.path());
+    let e = stderr(&o);
+    assert!(
+        e.contains(
+            "warning[W207]: InternalLink `A done to B` is left out: side B names `{00000000-0000-0000-0000-000000000051}:Go_X`, but the element with the ID `{00000000-0000-0000-0000-000000000051}` has no signal `Go_X`; did you mean `Go_B`?"
+        ),
+        "{e}"
+    );
+    assert!(e.contains("┌─ Blackboard.aml:143:7"), "{e}");
+    // This cell has a spare wire each way: it still compiles.
+    assert_eq!(o.status.code(), Some(0), "{e}");
+    // The fixture's link `not a wire` names an interface `Somewhere` that is not there either.
+    assert!(
+        e.contains("warning[W207]: InternalLink `not a wire` is left out: side A names `{00000000-0000-0000-0000-000000000002}:Somewhere`, but no element with the ID `{00000000-0000-0000-0000-000000000002}` holds a signal"),
+        "{e}"
+    );
+    assert_eq!(e.matches("warning[W207]").count(), 2, "{e}");
+    // Once `Somewhere` is there (an interface, no signal), that link is no wire and not
+    // skillpost's: no warning.
+    let start = "ID=\"{00000000-0000-0000-0000-000000000002}\">";
+    assert!(bb.contains(start));
+    std::fs::write(
+        &path,
+        bb.replacen(
+            start,
+            &format!("{start}<ExternalInterface Name=\"Somewhere\" ID=\"{{x-somewhere}}\" RefBaseClassPath=\"AutomationMLInterfaceClassLib/AutomationMLBaseInterface\"/>"),
+            1,
+        ),
+    )
+    .unwrap();
+    let e = stderr(&run(&["--warn", "Blackboard.aml", "output"], p.path()));
+    assert!(!e.contains("W207"), "{e}");
 }

@@ -329,7 +329,7 @@ fn an_invalid_program_name_in_the_configuration_says_how_to_fix_it() {
 
 /// `skillpost watch` with neither a folder nor `--config` (issue 27, item 8): a `SIGHUP` could
 /// add nothing, so it does not wait for one; it exits at once with status 2 and says what to
-/// pass, writing nothing (SPEC.md 7 takes projects from the command line and the configuration
+/// pass, writing nothing (the daemon, docs/DAEMON.md, takes projects from the command line and the configuration
 /// only, so the current folder is not watched on its own). With `--config` it does start.
 #[test]
 fn watch_without_folders_or_configuration_exits_with_a_usage_hint() {

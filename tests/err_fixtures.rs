@@ -18,7 +18,8 @@
 //! file = "sfc.xml"   # relative to the case folder, compared as a path suffix;
 //!                    # omitted: the diagnostic has no file
 //! line = 31          # 1-based; omitted: the diagnostic has no line
-//! # optional: column = 12, element = "localId 7", message_contains = "..."
+//! # optional: column = 12, element = "localId 7", message_contains = "...",
+//! # note_contains = "..."
 //! ```
 //!
 //! Each case runs the built binary with `--format json` on a fresh copy of the folder and must
@@ -69,6 +70,8 @@ struct ExpectedError {
     column: Option<usize>,
     element: Option<String>,
     message_contains: Option<String>,
+    /// Text one of the diagnostic's notes must contain.
+    note_contains: Option<String>,
 }
 
 /// One diagnostic as `--format json` prints it.
@@ -81,6 +84,8 @@ struct Reported {
     line: Option<usize>,
     column: Option<usize>,
     element: Option<String>,
+    #[serde(default)]
+    notes: Vec<String>,
 }
 
 impl Reported {
@@ -122,6 +127,10 @@ impl ExpectedError {
                 .message_contains
                 .as_ref()
                 .is_none_or(|m| r.message.contains(m.as_str()))
+            && self
+                .note_contains
+                .as_ref()
+                .is_none_or(|m| r.notes.iter().any(|n| n.contains(m.as_str())))
     }
 
     fn describe(&self) -> String {
@@ -139,6 +148,9 @@ impl ExpectedError {
         }
         if let Some(m) = &self.message_contains {
             s.push_str(&format!(" with message containing {m:?}"));
+        }
+        if let Some(m) = &self.note_contains {
+            s.push_str(&format!(" with a note containing {m:?}"));
         }
         s
     }

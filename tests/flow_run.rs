@@ -385,7 +385,7 @@ impl Output {
     }
 }
 
-/// RAPID's syntax check, `rapidchecker` (PyPI; SPEC.md 8), run once over a batch of modules
+/// RAPID's syntax check, `rapidchecker` (PyPI; docs/LANGUAGES.md), run once over a batch of modules
 /// (it is a Python program: one start per module would be slow), the pinned version of
 /// `tests/common/rapid.rs`. Without it the batch is skipped with a note (a failure under
 /// `SKILLPOST_STRICT_TESTS=1`). It takes about half a second
@@ -796,7 +796,7 @@ fn random_charts_do_what_they_mean_urscript() {
     random_charts(Lang::UrScript);
 }
 
-/// How `lang` reads a step's time (the timers of SPEC.md 3.1's step times).
+/// How `lang` reads a step's time (the timers of docs/INPUTS.md's step times).
 fn step_timer(lang: Lang) -> &'static str {
     match lang {
         Lang::Krl => "$TIMER[",
@@ -936,7 +936,7 @@ fn retarget(text: &str, seed: u64) -> Option<String> {
 
 /// Charts that may not be structured: a random chart with one jump retargeted to a random step
 /// (forward, into another branch, out of a loop, ...). Every such chart compiles into a program
-/// that does what the chart means (SPEC.md 3.1, "any other flow": labels and GOTO in KRL, a
+/// that does what the chart means (docs/INPUTS.md, "Loops and jumps": labels and GOTO in KRL, a
 /// state variable in RAPID and URScript), unless the jump enters or leaves a simultaneous
 /// branch (an unsafe chart, checked here independently of the compiler): then it is refused
 /// with E317 at the jump. Returns which charts compiled and the codes of the refusals. `timed`:
@@ -1008,7 +1008,7 @@ fn retargeted_jumps(lang: Lang, timed: bool) -> (BTreeSet<u64>, BTreeMap<String,
             Some(1) => {
                 refused += 1;
                 // Only a jump that enters or leaves a simultaneous branch is refused (IEC
-                // 61131-3: an unsafe chart); any other flow compiles (SPEC.md 3.1).
+                // 61131-3: an unsafe chart); any other flow compiles (docs/INPUTS.md).
                 assert!(
                     !Chart::read(&sfc).jumps_stay_in_their_branches(),
                     "retargeted chart {seed} ({lang:?}) is refused, though its jumps stay in their simultaneous branches:\n{stderr}"
@@ -1615,7 +1615,7 @@ fn code(program: &str) -> String {
         .join("\n")
 }
 
-/// Every form of condition drawn instead of written (SPEC.md 3.1, wired conditions: FBD blocks
+/// Every form of condition drawn instead of written (docs/INPUTS.md, wired conditions: FBD blocks
 /// and LD rungs, built from the chart player's reading of the text): compiled in `lang`, the
 /// same program as its inline ST twin, and run against the ST chart's meaning.
 fn wired_conditions(lang: Lang) {
@@ -1847,7 +1847,7 @@ fn the_urscript_check_refuses_what_is_not_urscript() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Cells: several controllers (SPEC.md 9)
+// Cells: several controllers (docs/CELLS.md)
 // ---------------------------------------------------------------------------------------------
 
 /// Random charts put on 2 to 4 KUKA controllers: how many, and runs per chart (each with its
@@ -1937,7 +1937,7 @@ fn cells_keep_the_charts_order_whatever_the_timing() {
     checker.check();
 }
 
-/// Cells whose chart has a retargeted jump (flow beyond the structured forms, SPEC.md 3.1):
+/// Cells whose chart has a retargeted jump (flow beyond the structured forms, docs/INPUTS.md):
 /// every program goes through the same states, and the co-simulation finds the chart's order
 /// kept whatever the timing. A chart the compiler refuses must be unsafe (E317: a jump into
 /// or out of a simultaneous branch).
@@ -2136,7 +2136,7 @@ fn fail_keeping_cell(cell: &Path, kind: &str, seed: u64, e: &str) -> ! {
     );
 }
 
-/// A cell that runs shift after shift (SPEC.md 9, restarts and second cycles): random cells
+/// A cell that runs shift after shift (docs/CELLS.md, "Starting a cell, faults, second cycles"): random cells
 /// of 2-4 controllers in every language, each run (a) three cycles, each program started
 /// again after its END in a random order with random delays, and (b) one program started
 /// again at a random time mid-cycle, every other one later at a random time: before the
@@ -2306,7 +2306,7 @@ fn the_cell_co_simulation_catches_broken_handshakes() {
     }
 }
 
-/// `text` with every jumpStep drawn as a connection instead (SPEC.md 3.1, "a connection back
+/// `text` with every jumpStep drawn as a connection instead (docs/INPUTS.md, "a connection back
 /// to an earlier step is the same as a jump to it"): the jump goes, and its input becomes a
 /// second connection of the target step's `connectionPointIn`. `None` without a jump.
 fn jumps_as_connections(text: &str) -> Option<String> {

@@ -15,7 +15,7 @@
 //! tc6_valid = ["sfc.xml"]      # optional; SFC files that must validate against tc6_xml_v201.xsd
 //! stderr_contains = ["W204"]   # optional; text the compiler's stderr must contain
 //! stdout_contains = ["wrote"]  # optional; text the compiler's stdout must contain
-//! cell = [                     # optional: a cell of several controllers (SPEC.md 9), one
+//! cell = [                     # optional: a cell of several controllers (docs/CELLS.md), one
 //!   { program = "P_A" },       # program each (the written-back one first), each in its
 //!   { program = "P_B", language = "URScript" },  # language; snapshots named by program
 //! ]
@@ -440,14 +440,14 @@ fn visible(text: &str) -> String {
 // The write-back
 // ---------------------------------------------------------------------------------------------
 
-/// The write-back target's `Value` element, found independently of the compiler (SPEC.md 2:
+/// The write-back target's `Value` element, found independently of the compiler (docs/INPUTS.md:
 /// hierarchy `Blackboard` (or the only one) → `Code` → `KRL code` (else the first
 /// ExternalDataConnector) → `refURI` → `Value`). `None`: no target at all; `Some(None)`: the
 /// `refURI` attribute has no `Value`; `Some(Some((element, content)))`: the byte ranges of the
 /// `Value` element and of its content.
 type ValueRanges = Option<(Range<usize>, Range<usize>)>;
 
-/// A cell's write-back (SPEC.md 9): the blackboard is the original with the `Value` of each
+/// A cell's write-back (docs/CELLS.md): the blackboard is the original with the `Value` of each
 /// named `Code` interface's `refURI` replaced by its program's path, and nothing else changed.
 fn check_cell_write_back(
     case: &str,

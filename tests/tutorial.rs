@@ -113,12 +113,12 @@ fn diff(want: &[String], got: &[String]) -> String {
             let _ = writeln!(out, "  {}", want[i]);
             i += 1;
             j += 1;
-        } else if j < m && (i == n || lcs[i][j + 1] >= lcs[i + 1][j]) {
-            let _ = writeln!(out, "+ {}", got[j]);
-            j += 1;
-        } else {
+        } else if i < n && (j == m || lcs[i + 1][j] >= lcs[i][j + 1]) {
             let _ = writeln!(out, "- {}", want[i]);
             i += 1;
+        } else {
+            let _ = writeln!(out, "+ {}", got[j]);
+            j += 1;
         }
     }
     out
@@ -158,7 +158,11 @@ impl Shell {
         let dir = self.root.join(step);
         if !dir.exists() {
             let from = repo().join("examples/tutorial").join(step);
-            assert!(from.is_dir(), "docs/TUTORIAL.md runs `{step}`, but there is no {}", from.display());
+            assert!(
+                from.is_dir(),
+                "docs/TUTORIAL.md runs `{step}`, but there is no {}",
+                from.display()
+            );
             copy_dir(&from, &dir);
         }
         dir
@@ -192,9 +196,10 @@ impl Shell {
                 self.last_status = 0;
                 let mut text = String::new();
                 for f in args {
-                    text.push_str(&String::from_utf8_lossy(&fs::read(dir.join(f)).unwrap_or_else(
-                        |e| panic!("docs/TUTORIAL.md: `cat {f}`: {e}"),
-                    )));
+                    text.push_str(&String::from_utf8_lossy(
+                        &fs::read(dir.join(f))
+                            .unwrap_or_else(|e| panic!("docs/TUTORIAL.md: `cat {f}`: {e}")),
+                    ));
                 }
                 text
             }
@@ -217,7 +222,9 @@ impl Shell {
                 found.join("\n")
             }
             "echo" if args == ["$?"] => self.last_status.to_string(),
-            _ => panic!("docs/TUTORIAL.md: `{line}`: this test runs skillpost, cat, ls, grep and echo $? only"),
+            _ => panic!(
+                "docs/TUTORIAL.md: `{line}`: this test runs skillpost, cat, ls, grep and echo $? only"
+            ),
         }
     }
 }
@@ -245,7 +252,8 @@ fn files_to_show() -> Vec<(String, Option<String>)> {
         names.sort();
         for name in names {
             let same_as = before.filter(|b| {
-                fs::read(base.join(b).join(&name)).ok() == fs::read(base.join(step).join(&name)).ok()
+                fs::read(base.join(b).join(&name)).ok()
+                    == fs::read(base.join(step).join(&name)).ok()
             });
             out.push((
                 format!("{step}/{name}"),
@@ -338,7 +346,10 @@ fn the_tutorial_shows_what_its_files_and_commands_give() {
             Kind::Other => {}
         }
     }
-    assert!(consoles >= 5, "docs/TUTORIAL.md runs its steps ({consoles} console blocks)");
+    assert!(
+        consoles >= 5,
+        "docs/TUTORIAL.md runs its steps ({consoles} console blocks)"
+    );
     // A file not shown must be the same as one of the step before that is shown (or is the
     // same as one shown before it).
     let mut covered: Vec<String> = Vec::new();

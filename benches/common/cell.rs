@@ -1,4 +1,4 @@
-//! A blackboard of a cell (SPEC.md 9) made from a blackboard of one robot: the robot's element
+//! A blackboard of a cell (docs/CELLS.md) made from a blackboard of one robot: the robot's element
 //! copied once per robot `R1`, `R2`, … (each copy from its own text, so each may be in another
 //! language), with IDs made unique, wire signals added to each and an `InternalLink` per wire.
 //!

@@ -969,7 +969,7 @@ pub fn write_shape(dir: &Path, dim: &str, n: usize) -> Option<io::Result<Project
                 g.special_step("End", Some(t));
             }
             "jumps" | "overlap" => {
-                // Flow beyond the structured forms (SPEC.md 3.1): blocks of a head step `Jk`, a
+                // Flow beyond the structured forms (docs/INPUTS.md): blocks of a head step `Jk`, a
                 // body step `Bk` and a selection that jumps away or goes on. `jumps`: forward,
                 // over the next block (to `Jk+2`); `overlap`: back into the previous block's
                 // body (`Bk-1`), so each loop overlaps the next. Both compile into states.

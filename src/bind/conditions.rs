@@ -219,9 +219,9 @@ fn unknown_signal(
         {
             Some(n) => format!("; did you mean `{n}`? Or declare it there: {declare}"),
             None => match misnamed {
-                Some((n, _, meant)) => format!(
-                    "; its InternalElement `{n}` is not read: did you mean `{meant}`?"
-                ),
+                Some((n, _, meant)) => {
+                    format!("; its InternalElement `{n}` is not read: did you mean `{meant}`?")
+                }
                 None => format!("; declare it there: {declare}"),
             },
         };
@@ -278,6 +278,7 @@ fn unknown_signal(
 /// `only`: the transitions it waits for or decides; `only` holds the steps it runs too) against
 /// the signals of the program's resource and the chart's steps (a step's time `S.t`, in a cell
 /// only of a step it runs), and checks the types (docs/INPUTS.md).
+#[allow(clippy::too_many_arguments)]
 pub fn conditions(
     bb: &Blackboard,
     sfc: &Sfc,

@@ -1,4 +1,4 @@
-//! The daemon's configuration (SPEC.md section 7): a TOML file and the command line.
+//! The daemon's configuration (docs/DAEMON.md): a TOML file and the command line.
 //!
 //! The file (see `config/skillpost.toml` for a commented example):
 //!

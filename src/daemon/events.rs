@@ -1,4 +1,4 @@
-//! The event stream (SPEC.md section 7, "Events"): one JSON object per line, flushed per line,
+//! The event stream (docs/DAEMON.md, "Events"): one JSON object per line, flushed per line,
 //! on stdout or appended to a file. Every event carries the envelope `schema`, `ts` (RFC 3339,
 //! UTC), `seq` (per-process counter), `instance` (this daemon run's identity: the same in
 //! every event of one sink, another in the next run, so runs appended to one file can be told
@@ -68,7 +68,7 @@ pub struct OutputInfo {
     pub path: String,
     /// False when the file already held these bytes.
     pub written: bool,
-    /// The program the file belongs to (SPEC.md 9: one per controller of the cell).
+    /// The program the file belongs to (docs/CELLS.md: one per controller of the cell).
     pub program: String,
     /// The resource whose controller runs that program.
     #[serde(skip_serializing_if = "Option::is_none")]

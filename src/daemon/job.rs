@@ -635,7 +635,7 @@ impl Job {
                 .iter()
                 .enumerate()
                 .map(|(k, (p, w))| {
-                    // A cell's outputs each name their program and controller (SPEC.md 9).
+                    // A cell's outputs each name their program and controller (docs/CELLS.md).
                     let (prog, controller) = match c.output_programs.get(k) {
                         Some((prog, ctl)) => (prog.clone(), Some(ctl.clone())),
                         None => (program.name.clone(), c.controller.clone()),

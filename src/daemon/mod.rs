@@ -1,4 +1,4 @@
-//! `skillpost watch`: keeps project folders compiled (SPEC.md section 7).
+//! `skillpost watch`: keeps project folders compiled (docs/DAEMON.md).
 //!
 //! # Layout
 //!

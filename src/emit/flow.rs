@@ -461,7 +461,7 @@ pub fn selection_comment(input: &EmitInput, divergence: usize, branches: usize) 
     )
 }
 
-/// The comment before a selection another controller decides (a cell, SPEC.md 9).
+/// The comment before a selection another controller decides (a cell, docs/CELLS.md).
 pub fn follow_comment(
     input: &EmitInput,
     divergence: usize,

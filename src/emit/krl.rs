@@ -1,4 +1,4 @@
-//! The KUKA KRL profile: `<program>.src` and `<program>.dat` (SPEC.md section 5).
+//! The KUKA KRL profile: `<program>.src` and `<program>.dat` (docs/LANGUAGES.md).
 //!
 //! The fixed text (header, initialisation, closing) comes from the output template: the
 //! built-in `templates/krl.toml` or the user's copy.

@@ -1,4 +1,4 @@
-//! Language profiles: the bound program → output files (SPEC.md 5, 8).
+//! Language profiles: the bound program → output files (docs/LANGUAGES.md).
 //!
 //! A [`Profile`] holds everything one robot language decides: its output files and their
 //! built-in template (`templates/<lang>.toml`), how IRL templates are read ([`Syntax`]), how a

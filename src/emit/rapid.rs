@@ -1,4 +1,4 @@
-//! The ABB RAPID profile: one module, `<program>.mod` (SPEC.md 8).
+//! The ABB RAPID profile: one module, `<program>.mod` (docs/LANGUAGES.md).
 //!
 //! The program is `PROC main()` of `MODULE <program>`; IRL definitions become the module's
 //! routines. Written so `rapidchecker` accepts it: two spaces per level, keywords upper case, no

@@ -1,4 +1,4 @@
-//! The Universal Robots URScript profile: `<program>.script` (SPEC.md 8).
+//! The Universal Robots URScript profile: `<program>.script` (docs/LANGUAGES.md).
 //!
 //! The program is `def <program>():` … `end` with the IRL definitions inside before the steps,
 //! then a call of it. Blocks close with `end`; a wait is `while not (c): sync() end`; a loop is

@@ -1,4 +1,4 @@
-//! The cell split (SPEC.md 9): the program tree of a chart whose steps run on several
+//! The cell split (docs/CELLS.md): the program tree of a chart whose steps run on several
 //! controllers → one tree per controller, with the handshakes that keep the chart's order
 //! between them.
 //!
@@ -294,7 +294,7 @@ impl Scan<'_> {
                     }
                 }
                 Block::Wait(t) => {
-                    // Waited for by the controller of the step after it (SPEC.md 9), else by
+                    // Waited for by the controller of the step after it (docs/CELLS.md), else by
                     // the one in charge.
                     let c = match blocks.get(k + 1) {
                         Some(Block::Step(j)) => (self.controller)(*j).unwrap_or(ctx),
@@ -882,6 +882,26 @@ fn needed(cell: &Cell, a: usize, b: usize) -> [usize; 4] {
     n
 }
 
+/// What the wires from `a` to `b` that [`needed`] counts are for, as words.
+fn purposes(need: &[usize; 4], a: &str, b: &str) -> Vec<String> {
+    let mut what = Vec::new();
+    if need[0] > 0 {
+        what.push(format!("1 to tell `{b}` that a step is done"));
+    }
+    if need[1] > 0 {
+        what.push(format!("{} for the branch `{a}` decided", need[1]));
+    }
+    if need[2] > 0 {
+        what.push(format!("{} to acknowledge what `{b}` tells `{a}`", need[2]));
+    }
+    if need[3] > 0 {
+        what.push(format!(
+            "2 for the start barrier and the restart check (`{a}` running, `{a}` ready)"
+        ));
+    }
+    what
+}
+
 /// The wires from controller `a`'s resources to `b`'s, in document order.
 fn declared(cell: &Cell, bb: &Blackboard, a: usize, b: usize) -> Vec<usize> {
     (0..bb.wires.len())
@@ -911,29 +931,55 @@ pub fn assign_wires(cell: &mut Cell, bb: &Blackboard, sfc: &Sfc, diags: &mut Dia
             }
             let have = declared(cell, bb, a, b);
             let name = |c: usize| bb.resources[cell.controllers[c]].name.text.to_string();
+            // No wire at all between the two, either way: most likely one is a device on the
+            // other's controller that the blackboard does not put there. One error for the
+            // pair, which says how to put it there.
+            let back = declared(cell, bb, b, a);
+            if have.is_empty() && back.is_empty() {
+                if a > b && needed(cell, b, a).iter().sum::<usize>() > 0 {
+                    continue; // said with (b, a)
+                }
+                let back_need = needed(cell, b, a);
+                let back_total: usize = back_need.iter().sum();
+                let list = |need: &[usize; 4], from: &str, to: &str| {
+                    let w = purposes(need, from, to);
+                    if w.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" ({})", w.join(", "))
+                    }
+                };
+                let about = cell
+                    .channels
+                    .iter()
+                    .find(|c| (c.from, c.to) == (a, b) || (c.from, c.to) == (b, a))
+                    .map(|c| c.first_about);
+                let (x, y) = (name(a), name(b));
+                let mut d = Diagnostic::error(
+                    Code::TooFewWires,
+                    format!(
+                        "controllers `{x}` and `{y}` run steps of one plan, so they must tell each other where they are: the plan needs {total} wire{} from `{x}` to `{y}`{} and {back_total} from `{y}` to `{x}`{}; the blackboard declares none between them",
+                        if total == 1 { "" } else { "s" },
+                        list(&need, &x, &y),
+                        list(&back_need, &y, &x),
+                    ),
+                )
+                .note(format!(
+                    "if `{y}` is a device on `{x}`'s controller (a gripper, a welding source wired to the robot), put it there, and its steps go into `{x}`'s program without any wire: give `{y}` the attribute `<Attribute Name=\"Controller\"><Value>{x}</Value></Attribute>` (or move its InternalElement inside `{x}`'s); the other way round, give `{x}` one naming `{y}`"
+                ))
+                .note(format!(
+                    "if they are two controllers, wire them: InternalLinks from Output signals of `{x}` to Input signals of `{y}` and back"
+                ));
+                if let Some(e) = about {
+                    d = d
+                        .at(sfc.elements[e].span.clone())
+                        .element(format!("localId {}", sfc.elements[e].local_id));
+                }
+                diags.push(d);
+                continue;
+            }
             if have.len() < total {
-                let mut what = Vec::new();
-                if need[0] > 0 {
-                    what.push(format!("1 to tell `{}` that a step is done", name(b)));
-                }
-                if need[1] > 0 {
-                    what.push(format!("{} for the branch `{}` decided", need[1], name(a)));
-                }
-                if need[2] > 0 {
-                    what.push(format!(
-                        "{} to acknowledge what `{}` tells `{}`",
-                        need[2],
-                        name(b),
-                        name(a)
-                    ));
-                }
-                if need[3] > 0 {
-                    what.push(format!(
-                        "2 for the start barrier and the restart check (`{}` running, `{}` ready)",
-                        name(a),
-                        name(a)
-                    ));
-                }
+                let what = purposes(&need, &name(a), &name(b));
                 let about = cell
                     .channels
                     .iter()

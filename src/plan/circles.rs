@@ -1,4 +1,4 @@
-//! Charts drawn as closed circles (SPEC.md 3, 3.1): Beremiz and OpenPLC draw a sequence loop as a
+//! Charts drawn as closed circles (docs/INPUTS.md): Beremiz and OpenPLC draw a sequence loop as a
 //! connection from the last transition back to an earlier step (or to the selection convergence
 //! right before it), not as a jumpStep. Such a connection is a loop like a jump to that step:
 //! before planning, [`close_circles`] takes each one out of the inputs it stands in and adds a

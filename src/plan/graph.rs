@@ -130,13 +130,13 @@ pub fn graph(sfc: &Sfc, diags: &mut Diagnostics) -> Graph {
             ids.insert(e.local_id, i);
         }
     }
-    // Macro steps (SPEC.md 3): the body's chart runs in the step's place. What follows the
+    // Macro steps (docs/INPUTS.md): the body's chart runs in the step's place. What follows the
     // macro step follows the body's end step; the body's initial step follows the macro step.
     let mut after_macro: HashMap<usize, (usize, std::ops::Range<usize>)> = HashMap::new();
     let mut into_body: HashMap<usize, usize> = HashMap::new();
     // Each body element's innermost macro step, in one sweep over the elements with the bodies
     // open at each (bodies nest or are apart); a macro step in more bodies than branches may
-    // nest in each other is E313 (SPEC.md 3).
+    // nest in each other is E313 (docs/INPUTS.md).
     const NONE: usize = usize::MAX;
     let mut owner = vec![NONE; if sfc.macros.is_empty() { 0 } else { n }];
     if !sfc.macros.is_empty() {

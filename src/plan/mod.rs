@@ -1,4 +1,4 @@
-//! SFC graph checks and the ordered program tree (SPEC.md sections 3 and 3.1).
+//! SFC graph checks and the ordered program tree (docs/INPUTS.md).
 //!
 //! [`plan`] runs in parts, each with its own tests: [`graph`] (ids and connections),
 //! [`check_nodes`] (each element's inputs and outputs), [`resolve_jumps`] (jump targets),
@@ -26,7 +26,7 @@ use crate::model::Sfc;
 /// Branches and loops nest at most this deep.
 pub const MAX_NESTING: usize = 128;
 
-/// At most this many sequences (several initial steps, SPEC.md 3): each needs controllers of its
+/// At most this many sequences (several initial steps, docs/INPUTS.md): each needs controllers of its
 /// own, and each is a walk over the chart.
 pub const MAX_SEQUENCES: usize = 64;
 
@@ -61,12 +61,12 @@ pub enum Block {
         body: Vec<Block>,
         endless: bool,
     },
-    /// A handshake (SPEC.md 9): this controller tells another that a step is done or which
+    /// A handshake (docs/CELLS.md): this controller tells another that a step is done or which
     /// branch it took. Only in the programs of a cell of several controllers ([`cell`]).
     Tell(cell::Message),
     /// A handshake: this controller waits until another tells it what it waits for.
     Hear(cell::Message),
-    /// Flow the structured forms cannot express (SPEC.md 3.1, "any other flow"): states, the
+    /// Flow the structured forms cannot express (docs/INPUTS.md, "Loops and jumps"): states, the
     /// first begins at the start. Each state's body is structured; where the chart goes on at
     /// another state, a branch or the state's sequence ends in [`Block::Goto`]. The program
     /// ends when a state ends without one. KRL: a label per state and `GOTO`; RAPID and
@@ -82,7 +82,7 @@ pub enum Block {
         heard: cell::Message,
         branches: Vec<Branch>,
     },
-    /// Independent sequences (SPEC.md 3: several steps marked `initialStep="true"`, each
+    /// Independent sequences (docs/INPUTS.md: several steps marked `initialStep="true"`, each
     /// beginning a network of its own), in the document order of their initial steps. They
     /// run at the same time, each on controllers of its own ([`place_sequences`]); the cell
     /// split gives each controller its sequence, with no handshake between sequences.
@@ -322,7 +322,7 @@ pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
     Some(Plan { body, sequences })
 }
 
-/// Several initial steps (SPEC.md 3): each sequence runs on controllers of its own. A sequence
+/// Several initial steps (docs/INPUTS.md): each sequence runs on controllers of its own. A sequence
 /// none of whose steps runs code on a controller is left out (a PLC's own sequence: nothing in
 /// it is a robot's); two sequences that share a controller are an error at the later one's
 /// initial step, naming the controller (`name`). `controller(step)` is the controller of a
@@ -546,7 +546,7 @@ mod tests {
         assert!(msgs[0].1.contains("no steps"));
     }
 
-    /// The start is the step marked initialStep="true" (SPEC.md 3); a step only jumps lead to is
+    /// The start is the step marked initialStep="true" (docs/INPUTS.md); a step only jumps lead to is
     /// no start; two marked steps without a predecessor begin two sequences when nothing joins
     /// them, else they are an error; a step nothing leads to besides the start is an error at
     /// it.
@@ -886,7 +886,7 @@ mod tests {
         }
         parts.push(st(5, "End", &[last]));
         let (p, _, msgs) = run(&parts);
-        // The loops beyond the limit begin states (SPEC.md 3.1): the tree itself stays within
+        // The loops beyond the limit begin states (docs/INPUTS.md): the tree itself stays within
         // the limit, so nothing that walks it recurses deeper.
         assert!(msgs.is_empty(), "{msgs:?}");
         let p = p.expect("a plan");

@@ -318,7 +318,9 @@ fn walk_once(
         });
     } else {
         let mut n = 0;
-        visit(&body, &mut |b| n += usize::from(matches!(b, Block::Goto { .. })));
+        visit(&body, &mut |b| {
+            n += usize::from(matches!(b, Block::Goto { .. }))
+        });
         w.diags.count_dropped(n);
     }
     (Some(body), Vec::new())

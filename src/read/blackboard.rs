@@ -566,11 +566,68 @@ impl Reader<'_> {
             .descendants()
             .filter(|n| n.is_element() && n.tag_name().name() == "InternalLink")
         {
-            let (Some(a), Some(b)) = (
-                partner(link.attribute("RefPartnerSideA")),
-                partner(link.attribute("RefPartnerSideB")),
-            ) else {
-                continue;
+            let sides = [
+                link.attribute("RefPartnerSideA"),
+                link.attribute("RefPartnerSideB"),
+            ];
+            let (a, b) = match (partner(sides[0]), partner(sides[1])) {
+                (Some(a), Some(b)) => (a, b),
+                (None, None) => continue, // no wire between signals
+                (found, _) => {
+                    // One side is a signal, the other names none: said, not silently dropped.
+                    let (side, missing) = if found.is_some() {
+                        ("B", sides[1])
+                    } else {
+                        ("A", sides[0])
+                    };
+                    let missing = missing.unwrap_or("").trim();
+                    let (id, wanted) = missing.split_once(':').unwrap_or((missing, ""));
+                    // A link from a signal to an interface that is there but is no signal is
+                    // not a wire, and not skillpost's (looked for only here: rare).
+                    let exists = h
+                        .descendants()
+                        .find(|n| {
+                            n.is_element() && n.attribute("ID").map(str::trim) == Some(id.trim())
+                        })
+                        .is_some_and(|holder| {
+                            children(holder, "ExternalInterface")
+                                .any(|i| caex_name(i).is_some_and(|n| names::eq(n, wanted)))
+                        });
+                    if exists {
+                        continue;
+                    }
+                    let there: Vec<&str> = resources
+                        .iter()
+                        .flat_map(|r| &r.signals)
+                        .filter(|s| s.holder.as_deref() == Some(id.trim()))
+                        .map(|s| s.name.text.as_ref())
+                        .collect();
+                    let why = if missing.is_empty() {
+                        format!("it has no RefPartnerSide{side}")
+                    } else if there.is_empty() {
+                        format!(
+                            "side {side} names `{missing}`, but no element with the ID `{}` holds a signal",
+                            id.trim()
+                        )
+                    } else {
+                        format!(
+                            "side {side} names `{missing}`, but the element with the ID `{}` has no signal `{}`{}",
+                            id.trim(),
+                            wanted.trim(),
+                            names::did_you_mean(wanted.trim(), there.iter().copied())
+                        )
+                    };
+                    let name = caex_name(link).unwrap_or("");
+                    self.diags.push(
+                        Diagnostic::warning(
+                            Code::LinkPartnerMissing,
+                            format!("InternalLink `{name}` is left out: {why}"),
+                        )
+                        .at(self.span(link))
+                        .element(caex_element(link)),
+                    );
+                    continue;
+                }
             };
             let controller = |(r, _): (usize, usize)| controllers.get(r).copied().unwrap_or(r);
             if controller(a) == controller(b) {

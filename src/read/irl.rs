@@ -1,4 +1,4 @@
-//! IRL reader (SPEC.md 4): an `<irl>` document's `function-call` templates and `definition`s.
+//! IRL reader (docs/INPUTS.md): an `<irl>` document's `function-call` templates and `definition`s.
 //!
 //! Element names are matched exactly (by local name), `name` attribute values
 //! case-insensitively (through [`Name`]). The reader reports every problem it finds and keeps
@@ -256,7 +256,7 @@ fn element_name(file: FileId, node: Node, what: &str, diags: &mut Diagnostics) -
 }
 
 /// The element's own text (its text and CDATA children, not the `<parameter>` elements'
-/// content). Non-ASCII characters in `;` comments are transliterated (SPEC.md 5); elsewhere the
+/// content). Non-ASCII characters in `;` comments are transliterated (docs/LANGUAGES.md); elsewhere the
 /// first one is `E602`.
 fn element_text(
     file: FileId,

@@ -1,5 +1,5 @@
 //! The SFC (PLCopen TC6 XML 2.01, 2.00 or 1.0; namespaces ignored): the program's elements,
-//! their connections, and the skill steps' data (SPEC.md section 3).
+//! their connections, and the skill steps' data (docs/INPUTS.md).
 //!
 //! The SFC is the one input that grows with the product (100,000 steps make 78 MB), so it is read
 //! as a stream ([`read_sfc_stream`], `quick-xml` over any [`BufRead`]): the compile hands it the
@@ -39,7 +39,7 @@ pub fn read_sfc(sources: &Sources, file: FileId, diags: &mut Diagnostics) -> Opt
 }
 
 /// Reads the SFC file's POU named `pou` (`--pou`, or the reference's `#fragment`); without a
-/// name, the first program with an SFC body, else the first POU with one (SPEC.md 3). When
+/// name, the first program with an SFC body, else the first POU with one (docs/INPUTS.md). When
 /// several POUs have an SFC body and none was named, a warning names the one used and the
 /// others.
 pub fn read_sfc_pou(
@@ -188,7 +188,7 @@ struct Stream {
     /// Every step's variables and their values' texts ([`Sfc::variables`], [`Sfc::values`]).
     variables: Vec<Variable>,
     values: String,
-    /// The named transitions of the POU being read, by key (SPEC.md 3.1): read before its
+    /// The named transitions of the POU being read, by key (docs/INPUTS.md): read before its
     /// body (the schema puts `transitions` first).
     named: HashMap<String, Named>,
     /// The FBD/LD elements of the SFC body being read, and its transitions whose conditions
@@ -197,7 +197,7 @@ struct Stream {
     pending_wired: Vec<PendingWired>,
 }
 
-/// An FBD/LD element a wired condition may be drawn from (SPEC.md 3.1).
+/// An FBD/LD element a wired condition may be drawn from (docs/INPUTS.md).
 #[derive(Debug)]
 struct WireNode {
     local_id: u64,
@@ -274,14 +274,14 @@ pub(crate) enum Tag {
     Types,
     Pous,
     Pou,
-    /// A POU's list of named transitions (SPEC.md 3.1).
+    /// A POU's list of named transitions (docs/INPUTS.md).
     Transitions,
-    /// Parts of the FBD/LD elements a wired condition is drawn from (SPEC.md 3.1): an
+    /// Parts of the FBD/LD elements a wired condition is drawn from (docs/INPUTS.md): an
     /// `inVariable`'s `expression`, a `contact`'s `variable`, a `block`'s `inputVariables`.
     Expression,
     WireVariable,
     InputVariables,
-    /// A POU's actions, whose bodies may be SFC charts (`POU.ACTION`, SPEC.md 3).
+    /// A POU's actions, whose bodies may be SFC charts (`POU.ACTION`, docs/INPUTS.md).
     Actions,
     Action,
     Body,
@@ -955,7 +955,7 @@ impl Stream {
                     && depth == b.depth + 1
                     && !empty
                 {
-                    // A macro step's body (SPEC.md 3): the step is complete, and its body's
+                    // A macro step's body (docs/INPUTS.md): the step is complete, and its body's
                     // chart is read as elements of this one.
                     building = false;
                     if let Some(el) = self.finish(&mut b, diags)
@@ -983,7 +983,7 @@ impl Stream {
                     }
                     continue;
                 }
-                // A named transition of the POU being read (SPEC.md 3.1): its name, then its
+                // A named transition of the POU being read (docs/INPUTS.md): its name, then its
                 // body's language; its ST text is gathered by `named_text`.
                 if let Some(n) = &mut named {
                     if depth == n.depth + 2
@@ -1378,7 +1378,7 @@ impl Stream {
         r
     }
 
-    /// The transitions whose conditions are wired (SPEC.md 3.1) get their expressions, built
+    /// The transitions whose conditions are wired (docs/INPUTS.md) get their expressions, built
     /// from the FBD/LD elements of the body; the body's parts are then forgotten.
     fn resolve_wired(&mut self, els: &mut [Element], diags: &mut Diagnostics) {
         let nodes = std::mem::take(&mut self.wire_nodes);
@@ -1423,7 +1423,7 @@ impl Stream {
         }
     }
 
-    /// A named transition's LD/FBD body (SPEC.md 3.1): the expression its coil or output
+    /// A named transition's LD/FBD body (docs/INPUTS.md): the expression its coil or output
     /// variable of the transition's name is wired from.
     fn named_network(
         &self,
@@ -1543,7 +1543,7 @@ impl Stream {
                     | "block"
             ) =>
             {
-                // A part a wired condition may be drawn from (SPEC.md 3.1): kept aside.
+                // A part a wired condition may be drawn from (docs/INPUTS.md): kept aside.
                 if let Some(Ok(id)) = b.val(&b.local_id).map(|v| v.trim().parse::<u64>()) {
                     self.wire_nodes.push(WireNode {
                         local_id: id,
@@ -1647,7 +1647,7 @@ impl Stream {
         } else if let Some((name, _)) = &b.reference
             && let Some(body) = self.named.get(&crate::names::key(name.trim()))
         {
-            // A named transition of the POU (SPEC.md 3.1): its body is the condition.
+            // A named transition of the POU (docs/INPUTS.md): its body is the condition.
             return match body {
                 Named::Wired(Ok(expr)) if expr.is_true() => None,
                 Named::Wired(Ok(expr)) => Some(Box::new(Condition {
@@ -1897,7 +1897,7 @@ impl Stream {
         first_pou: Option<(Span, String)>,
         diags: &mut Diagnostics,
     ) -> Option<Sfc> {
-        // A program's chart, else any POU's, else an action's (SPEC.md 3).
+        // A program's chart, else any POU's, else an action's (docs/INPUTS.md).
         let chosen = self
             .found
             .iter()
@@ -2028,7 +2028,7 @@ impl PathKind {
         let open = |i: usize| stack.tags[i].0;
         match tag {
             T::FileHeader if n == 1 && open(0) == T::Project => PathKind::FileHeader,
-            // A POU at `n` (SPEC.md 3): in `types/pous`, or kept in an `addData/data` anywhere
+            // A POU at `n` (docs/INPUTS.md): in `types/pous`, or kept in an `addData/data` anywhere
             // (CODESYS and TwinCAT exports).
             T::Pou if PathKind::pou_at(stack, n) => PathKind::Pou,
             T::Action if PathKind::action_at(stack, n) => PathKind::Action,
@@ -2171,7 +2171,7 @@ fn map_offset(map: &[(usize, usize, bool)], o: usize) -> usize {
     }
 }
 
-/// Builds a wired condition's expression (SPEC.md 3.1) from the FBD/LD elements of the body.
+/// Builds a wired condition's expression (docs/INPUTS.md) from the FBD/LD elements of the body.
 struct Wiring<'a> {
     file: FileId,
     nodes: &'a HashMap<u64, &'a WireNode>,
@@ -2183,7 +2183,7 @@ struct Wiring<'a> {
     built: std::cell::Cell<usize>,
 }
 
-/// The blocks a wired condition may use (SPEC.md 3.1), as messages list them.
+/// The blocks a wired condition may use (docs/INPUTS.md), as messages list them.
 const WIRED_BLOCKS: &str = crate::cond::STANDARD_FUNCTIONS;
 
 /// Why a wired condition cannot use a block of type `ty` (upper case) that is not one of

@@ -47,7 +47,7 @@ pub fn splice_at(text: &str, site: &SpliceSite, value: &str) -> Result<Option<St
 }
 
 /// [`splice_at`] at several sites of one text (a cell writes every program's path into its
-/// `Code` interface, SPEC.md 9), from the last to the first so each range still holds; `Ok(None)`
+/// `Code` interface, docs/CELLS.md), from the last to the first so each range still holds; `Ok(None)`
 /// when every value is already right. `Err` as [`splice_at`], or when two sites overlap.
 pub fn splice_all(text: &str, splices: &[(&SpliceSite, &str)]) -> Result<Option<String>, String> {
     let mut order: Vec<&(&SpliceSite, &str)> = splices.iter().collect();

@@ -175,7 +175,7 @@ pub fn write_back(
 }
 
 /// [`write_back`] of several values at once, in one new file ([`splice_all`]): a cell's
-/// programs (SPEC.md 9).
+/// programs (docs/CELLS.md).
 pub fn write_back_all(
     path: &Path,
     expected: &[u8],

@@ -1,4 +1,4 @@
-//! The RAPID syntax check: `rapidchecker` (PyPI), which SPEC 8 says every generated RAPID module
+//! The RAPID syntax check: `rapidchecker` (PyPI), which docs/LANGUAGES.md says every generated RAPID module
 //! passes. `.ci/run` installs the pinned version into a venv (see [`venv_python`]).
 //!
 //! rapidchecker installs no command of its own: it is run as `python -m rapidchecker FILE…`. It

@@ -1,5 +1,5 @@
-//! A block-structure check of a generated URScript file (SPEC.md 8: "URScript files are checked
-//! by the project's own block-structure test"). Used on every `.script` the tests generate
+//! A block-structure check of a generated URScript file (docs/LANGUAGES.md, "Checks of the output":
+//! URScript files are checked by the project's own block-structure test). Used on every `.script` the tests generate
 //! (`#[path = "common/urscript.rs"] mod urscript_check;`).
 //!
 //! What it holds a file to, line by line (URScript has one statement per line, no continuation):

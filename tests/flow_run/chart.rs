@@ -43,7 +43,7 @@ impl Chart {
             .expect("an SFC body");
         let mut nodes = BTreeMap::new();
         let mut order = Vec::new();
-        // The chart's elements and, in a macro step's place, its body's (SPEC.md 3): each macro
+        // The chart's elements and, in a macro step's place, its body's (docs/INPUTS.md): each macro
         // step with its body's elements.
         let mut all = Vec::new();
         let mut macros: Vec<(u64, Vec<u64>)> = Vec::new();
@@ -686,7 +686,7 @@ impl Player<'_> {
 
 impl Chart {
     /// The initial steps: those marked `initialStep="true"` without a predecessor (several
-    /// begin sequences that run at the same time, SPEC.md 3), else the first step without one.
+    /// begin sequences that run at the same time, docs/INPUTS.md), else the first step without one.
     fn starts(&self) -> Vec<u64> {
         let marked: Vec<u64> = self
             .order

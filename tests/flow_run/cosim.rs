@@ -1,4 +1,4 @@
-//! The cell co-simulation (SPEC.md 9): every program of a cell of several KUKA controllers runs
+//! The cell co-simulation (docs/CELLS.md): every program of a cell of several KUKA controllers runs
 //! at the same time on a KRL machine of its own, with the blackboard's wires connecting one's
 //! `$OUT` to the other's `$IN`, under random step durations, speeds, start delays and inputs
 //! that change at random times. A discrete-event simulation: each controller has its own clock;

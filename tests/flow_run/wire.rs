@@ -1,4 +1,4 @@
-//! Conditions drawn instead of written (SPEC.md 3.1, "wired conditions"): [`wire_conditions`]
+//! Conditions drawn instead of written (docs/INPUTS.md, "Conditions"): [`wire_conditions`]
 //! turns every inline ST condition of a chart into a network in the same SFC body, built from
 //! the chart player's own reading of the text ([`Cond`]), not from the project's parser:
 //!

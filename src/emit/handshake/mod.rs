@@ -1,4 +1,4 @@
-//! Handshakes between the programs of a cell (SPEC.md 9), in each language's own I/O
+//! Handshakes between the programs of a cell (docs/CELLS.md), in each language's own I/O
 //! statements, written inline where the program tree has a [`Block::Tell`] or
 //! [`Block::Hear`] (see `plan::cell` for where they stand and why they are enough).
 //!
