@@ -349,3 +349,120 @@ fn a_configuration_in_a_project_folder_may_not_set_a_hook() {
     };
     assert!(sources.load().is_ok());
 }
+
+/// A cell of two controllers: each program goes to its own controller. The hook runs once per
+/// written program with that program's placeholders (`{program}`, `{controller}`, `{src}`); a
+/// failed one is a `deploy-failed` for that program, and `skillpost status` shows the last
+/// deploy of each program, ok or failed and why.
+#[test]
+fn a_cell_deploys_each_program_to_its_own_controller() {
+    let w = Workspace::new();
+    let a = w.ws().join("Cell");
+    fs::create_dir_all(&a).unwrap();
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for dir in [
+        "fixtures/base/cell",
+        "fixtures/base/cell2",
+        "fixtures/ok/cell-tell-at-once",
+    ] {
+        for e in fs::read_dir(repo.join(dir)).unwrap() {
+            let e = e.unwrap();
+            let name = e.file_name();
+            if name != "case.toml" && name != "README.txt" {
+                fs::copy(e.path(), a.join(name)).unwrap();
+            }
+        }
+    }
+    let log = w.root.join("deployed.log");
+    // The second robot's share is offline.
+    let script = format!(
+        "echo \"$1|$2|$3\" >> {}; if [ \"$1\" = 'KUKA KR16-2' ]; then echo 'share //kr16/r1 offline' >&2; exit 4; fi",
+        log.display()
+    );
+    let c = config(
+        &w,
+        &a,
+        &[
+            "sh",
+            "-c",
+            &script,
+            "sh",
+            "{controller}",
+            "{program}",
+            "{src}",
+        ],
+        "",
+    );
+    let sources = skillpost::daemon::Sources {
+        config_file: Some(c.clone()),
+        settle_ms: Some(SETTLE_MS),
+        ..Default::default()
+    };
+    let state = w.root.join("status.json");
+    let d = InProc::start_with_state(sources.load().unwrap(), sources, &state);
+    // The second program's deploy (the one that fails) runs after the first's.
+    let evs = d.wait_for("both deploys", WAIT, |e| is_for(e, "deploy-failed", &a));
+    let started = deploys(&evs, "deploy-started", &a);
+    let programs: Vec<(&str, &str)> = started
+        .iter()
+        .map(|e| {
+            (
+                e["program"].as_str().unwrap(),
+                e["controller"].as_str().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        programs,
+        [
+            ("Blackboard_KUKA_KR15_2", "KUKA KR15-2"),
+            ("Blackboard_KUKA_KR16_2", "KUKA KR16-2")
+        ],
+        "{}",
+        dump(&evs)
+    );
+    // Each run got its own program's file.
+    assert_eq!(
+        read_string(&log),
+        format!(
+            "KUKA KR15-2|Blackboard_KUKA_KR15_2|{}\nKUKA KR16-2|Blackboard_KUKA_KR16_2|{}\n",
+            a.join("Blackboard_KUKA_KR15_2.src").display(),
+            a.join("Blackboard_KUKA_KR16_2.src").display()
+        )
+    );
+    let ok = deploys(&evs, "deploy-succeeded", &a);
+    assert_eq!(ok.len(), 1, "{}", dump(&evs));
+    assert_eq!(ok[0]["program"], "Blackboard_KUKA_KR15_2");
+    let failed = deploys(&evs, "deploy-failed", &a);
+    assert_eq!(failed[0]["program"], "Blackboard_KUKA_KR16_2");
+    assert_eq!(failed[0]["exit_code"], 4);
+    // `skillpost status` (the state file, read by the binary): the last deploy of each program.
+    let mut table = String::new();
+    wait_until(WAIT, || {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
+            .args(["status", "--state"])
+            .arg(&state)
+            .output()
+            .unwrap();
+        table = String::from_utf8_lossy(&out.stdout).into_owned();
+        table.contains("Blackboard_KUKA_KR16_2 (KUKA KR16-2)")
+    });
+    let row = |program: &str| {
+        table
+            .lines()
+            .find(|l| l.contains(program) && (l.contains(" ok ") || l.contains(" failed ")))
+            .unwrap_or_else(|| panic!("no deploy row for {program}:\n{table}"))
+            .to_owned()
+    };
+    assert!(
+        row("Blackboard_KUKA_KR15_2 (KUKA KR15-2)").contains(" ok "),
+        "{table}"
+    );
+    let bad = row("Blackboard_KUKA_KR16_2 (KUKA KR16-2)");
+    assert!(bad.contains(" failed "), "{table}");
+    assert!(
+        bad.contains("exited with status 4: share //kr16/r1 offline"),
+        "{table}"
+    );
+    d.stop(WAIT);
+}

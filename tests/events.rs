@@ -949,3 +949,47 @@ fn events_on_stdout_and_json_log_lines_on_stderr() {
     assert_eq!(compiles[1]["level"], "WARN");
     assert_eq!(compiles[1]["fields"]["code"], "E502");
 }
+
+/// A deploy that fails is a warning line in the log (the journal under systemd: `journalctl
+/// -p warning` lists it) naming the project, the program and the hook's last stderr line; one
+/// that succeeds an info line.
+#[test]
+fn a_failed_deploy_is_a_warning_line_in_the_log() {
+    let (_tmp, root) = workspace();
+    let a = root.join("ws/A");
+    copy_project(&a);
+    let ev = root.join("ev.jsonl");
+    let config = root.join("skillpost.toml");
+    fs::write(
+        &config,
+        format!(
+            "[[project]]\npath = \"{}\"\non_success = [\"sh\", \"-c\", \"echo trying >&2; echo share //r1 offline >&2; exit 3\"]\n",
+            a.display()
+        ),
+    )
+    .unwrap();
+    let mut d = Daemon::start(
+        &root,
+        &[
+            "--events",
+            ev.to_str().unwrap(),
+            "--config",
+            config.to_str().unwrap(),
+        ],
+        &[],
+        false,
+    );
+    let project = a.display().to_string();
+    let line = format!(
+        " WARN {project}: deploy of Blackboard (controller KUKA KR15-2) failed: sh exited with status 3: share //r1 offline"
+    );
+    assert!(wait_until(WAIT, || d.log().contains(&line)), "{}", d.log());
+    d.signal("TERM");
+    assert!(d.wait_exit(WAIT).success());
+    let log = d.log();
+    assert_eq!(
+        log.lines().filter(|l| l.contains(&line)).count(),
+        1,
+        "one warning line for the failed deploy:\n{log}"
+    );
+}

@@ -43,6 +43,7 @@ pub const PLACEHOLDERS: &[&str] = &[
     "blackboard",
     "project",
     "program",
+    "controller",
 ];
 
 /// A configured hook: the argument vector as written (placeholders not yet replaced) and its
@@ -63,6 +64,8 @@ pub struct Context {
     pub blackboard: PathBuf,
     pub project: PathBuf,
     pub program: String,
+    /// The resource whose controller runs the program (empty when the compile does not say).
+    pub controller: String,
 }
 
 /// The pieces of an argument: text and placeholder names, `{{`/`}}` as braces.
@@ -187,6 +190,7 @@ pub fn expand(argv: &[String], ctx: &Context) -> Result<Vec<String>, String> {
                 "blackboard" => s.push_str(&ctx.blackboard.display().to_string()),
                 "project" => s.push_str(&ctx.project.display().to_string()),
                 "program" => s.push_str(&ctx.program),
+                "controller" => s.push_str(&ctx.controller),
                 other => return Err(format!("`{{{other}}}` is not allowed here")),
             }
         }
@@ -201,7 +205,9 @@ pub struct Request {
     pub project: String,
     pub run_id: u64,
     pub hook: Hook,
-    pub ctx: Context,
+    /// One per program the compile wrote new bytes for, in the compile's order: the hook runs
+    /// once for each, one after the other.
+    pub programs: Vec<Context>,
 }
 
 /// The hooks of one project: a task that runs them one at a time, the newest waiting one next.
@@ -256,7 +262,12 @@ async fn work(
         if *stop.borrow() {
             return;
         }
-        run(&sink, r, &mut stop).await;
+        for ctx in &r.programs {
+            if *stop.borrow() {
+                return;
+            }
+            run(&sink, &r, ctx, &mut stop).await;
+        }
     }
 }
 
@@ -267,16 +278,20 @@ enum End {
     Stopped,
 }
 
-async fn run(sink: &EventSink, r: Request, stop: &mut watch::Receiver<bool>) {
+async fn run(sink: &EventSink, r: &Request, ctx: &Context, stop: &mut watch::Receiver<bool>) {
     let project = Some(r.project.as_str());
     let started = std::time::Instant::now();
     let ms = || started.elapsed().as_millis() as u64;
-    let argv = match expand(&r.hook.argv, &r.ctx) {
+    let program = ctx.program.clone();
+    let controller = (!ctx.controller.is_empty()).then(|| ctx.controller.clone());
+    let argv = match expand(&r.hook.argv, ctx) {
         Ok(a) => a,
         Err(why) => {
             sink.emit(
                 project,
                 Event::DeployFailed {
+                    program: program.clone(),
+                    controller: controller.clone(),
                     run_id: r.run_id,
                     duration_ms: 0,
                     exit_code: None,
@@ -292,13 +307,15 @@ async fn run(sink: &EventSink, r: Request, stop: &mut watch::Receiver<bool>) {
     sink.emit(
         project,
         Event::DeployStarted {
+            program: program.clone(),
+            controller: controller.clone(),
             run_id: r.run_id,
             argv: argv.clone(),
         },
     );
     let mut cmd = tokio::process::Command::new(&argv[0]);
     cmd.args(&argv[1..])
-        .current_dir(&r.ctx.project)
+        .current_dir(&ctx.project)
         .stdin(std::process::Stdio::null())
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
@@ -311,6 +328,8 @@ async fn run(sink: &EventSink, r: Request, stop: &mut watch::Receiver<bool>) {
             sink.emit(
                 project,
                 Event::DeployFailed {
+                    program: program.clone(),
+                    controller: controller.clone(),
                     run_id: r.run_id,
                     duration_ms: ms(),
                     exit_code: None,
@@ -397,6 +416,8 @@ async fn run(sink: &EventSink, r: Request, stop: &mut watch::Receiver<bool>) {
     let stderr = tail_text(&tail, cut);
     let event = match end {
         End::Exited(s) if s.success() => Event::DeploySucceeded {
+            program: program.clone(),
+            controller: controller.clone(),
             run_id: r.run_id,
             duration_ms: ms(),
             stderr,
@@ -404,6 +425,8 @@ async fn run(sink: &EventSink, r: Request, stop: &mut watch::Receiver<bool>) {
         End::Exited(s) => {
             use std::os::unix::process::ExitStatusExt as _;
             Event::DeployFailed {
+                program: program.clone(),
+                controller: controller.clone(),
                 run_id: r.run_id,
                 duration_ms: ms(),
                 exit_code: s.code(),
@@ -418,6 +441,8 @@ async fn run(sink: &EventSink, r: Request, stop: &mut watch::Receiver<bool>) {
             }
         }
         End::TimedOut => Event::DeployFailed {
+            program: program.clone(),
+            controller: controller.clone(),
             run_id: r.run_id,
             duration_ms: ms(),
             exit_code: None,
@@ -431,6 +456,8 @@ async fn run(sink: &EventSink, r: Request, stop: &mut watch::Receiver<bool>) {
             stderr,
         },
         End::Stopped => Event::DeployFailed {
+            program: program.clone(),
+            controller: controller.clone(),
             run_id: r.run_id,
             duration_ms: ms(),
             exit_code: None,

@@ -160,16 +160,24 @@ pub enum Event {
     /// with its placeholders replaced.
     DeployStarted {
         run_id: u64,
+        /// The program deployed (a compile of a cell deploys each program it wrote) and its
+        /// controller's resource.
+        program: String,
+        controller: Option<String>,
         argv: Vec<String>,
     },
     DeploySucceeded {
         run_id: u64,
+        program: String,
+        controller: Option<String>,
         duration_ms: u64,
         /// The last lines of the hook's stderr (at most 4 KiB; empty when it said nothing).
         stderr: String,
     },
     DeployFailed {
         run_id: u64,
+        program: String,
+        controller: Option<String>,
         duration_ms: u64,
         exit_code: Option<i32>,
         /// The signal that ended the hook (9 after a timeout).
@@ -1269,15 +1277,21 @@ mod tests {
             },
             Event::DeployStarted {
                 run_id: 1,
+                program: "x".into(),
+                controller: s(),
                 argv: vec!["x".into()],
             },
             Event::DeploySucceeded {
                 run_id: 1,
+                program: "x".into(),
+                controller: s(),
                 duration_ms: 1,
                 stderr: "x".into(),
             },
             Event::DeployFailed {
                 run_id: 1,
+                program: "x".into(),
+                controller: s(),
                 duration_ms: 1,
                 exit_code: Some(1),
                 signal: Some(9),

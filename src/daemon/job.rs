@@ -42,8 +42,9 @@ pub(super) enum Outcome {
         /// The write-back was skipped because another program had the blackboard open: the
         /// event loop compiles again a few times ([`super::MAX_IN_USE_ROUNDS`]).
         in_use: bool,
-        /// A successful compile that wrote at least one output: what a deploy hook is given.
-        deploy: Option<super::deploy::Context>,
+        /// A successful compile that wrote at least one output: what a deploy hook is given,
+        /// one per program with new bytes.
+        deploy: Option<Vec<super::deploy::Context>>,
     },
     /// The project could not be set up (no blackboard): reported.
     Failed,
@@ -698,35 +699,61 @@ impl Job {
                 },
             );
         }
-        // New bytes in some program's file: what a deploy hook gets (the event loop runs it, if
-        // the project has one). The picture is no program: never deployed, and no reason to.
-        let programs: Vec<&(PathBuf, bool)> = applied
-            .outputs
-            .iter()
-            .filter(|(p, _)| Some(p) != picture_path.as_ref())
-            .collect();
-        let deploy = programs.iter().any(|(_, w)| *w).then(|| {
-            let outputs: Vec<PathBuf> = programs.iter().map(|(p, _)| p.clone()).collect();
-            let main = outputs
-                .iter()
-                .find(|p| {
-                    p.extension().is_some_and(|e| {
-                        ["src", "mod", "script"]
-                            .iter()
-                            .any(|x| e.to_string_lossy().eq_ignore_ascii_case(x))
-                    })
-                })
-                .or(outputs.first())
-                .cloned()
-                .unwrap_or_default();
-            super::deploy::Context {
-                outputs,
-                main,
-                blackboard: blackboard.clone(),
-                project: self.key.clone(),
-                program: program.name.clone(),
+        // New bytes in some program's files: what a deploy hook gets (the event loop runs it, if
+        // the project has one), once per such program with that program's files. The picture
+        // is no program: never deployed, and no reason to.
+        let mut deploy: Vec<(super::deploy::Context, bool)> = Vec::new();
+        for (k, (p, w)) in applied.outputs.iter().enumerate() {
+            if Some(p) == picture_path.as_ref() {
+                continue;
             }
-        });
+            let (prog, controller) = match c.output_programs.get(k) {
+                Some((prog, ctl)) => (prog.clone(), ctl.clone()),
+                None => (
+                    program.name.clone(),
+                    c.controller.clone().unwrap_or_default(),
+                ),
+            };
+            let at = match deploy.iter().position(|(d, _)| d.program == prog) {
+                Some(at) => at,
+                None => {
+                    let ctx = super::deploy::Context {
+                        outputs: Vec::new(),
+                        main: PathBuf::new(),
+                        blackboard: blackboard.clone(),
+                        project: self.key.clone(),
+                        program: prog,
+                        controller,
+                    };
+                    deploy.push((ctx, false));
+                    deploy.len() - 1
+                }
+            };
+            deploy[at].0.outputs.push(p.clone());
+            deploy[at].1 |= *w;
+        }
+        // Only the programs with new bytes; each one's main file: its .src/.mod/.script.
+        let deploy: Vec<super::deploy::Context> = deploy
+            .into_iter()
+            .filter(|(_, written)| *written)
+            .map(|(mut d, _)| {
+                d.main = d
+                    .outputs
+                    .iter()
+                    .find(|p| {
+                        p.extension().is_some_and(|e| {
+                            ["src", "mod", "script"]
+                                .iter()
+                                .any(|x| e.to_string_lossy().eq_ignore_ascii_case(x))
+                        })
+                    })
+                    .or(d.outputs.first())
+                    .cloned()
+                    .unwrap_or_default();
+                d
+            })
+            .collect();
+        let deploy = (!deploy.is_empty()).then_some(deploy);
         Outcome::Compiled {
             inputs,
             outputs: applied.outputs.iter().map(|(p, _)| p.clone()).collect(),

@@ -9,6 +9,9 @@
 //!   errors)`: the form DAEMON-INSTALL.md documents (and scripts may grep), kept;
 //! - `write-back` that was skipped: `warn`, `<project>: write-back into <file> skipped: <why>`;
 //!   one that waited for another program to close the blackboard: `info`, with how long;
+//! - `deploy-succeeded`: `info`, `<project>: deployed <program> (controller <c>) in 80 ms`;
+//! - `deploy-failed`: `warn`, `<project>: deploy of <program> (controller <c>) failed: <why>:
+//!   <the hook's last stderr line>`;
 //! - `reload-failed`: `error`, `reload failed, keeping the previous configuration: ...`.
 //!
 //! Each is one line (a message's line breaks become spaces). A compile's lines are inside the
@@ -141,6 +144,43 @@ pub fn log(project: Option<&str>, event: &Event) {
                     short(name, file),
                 );
             }
+        }
+        Event::DeploySucceeded {
+            run_id,
+            program,
+            controller,
+            duration_ms,
+            ..
+        } => {
+            tracing::info!(
+                project = name,
+                run_id,
+                duration_ms,
+                "{name}: deployed {program}{} in {duration_ms} ms",
+                controller
+                    .as_deref()
+                    .map_or_else(String::new, |c| format!(" (controller {c})")),
+            );
+        }
+        Event::DeployFailed {
+            run_id,
+            program,
+            controller,
+            reason,
+            stderr,
+            ..
+        } => {
+            let last = stderr.lines().rev().find(|l| !l.trim().is_empty());
+            tracing::warn!(
+                project = name,
+                run_id,
+                "{name}: deploy of {program}{} failed: {}{}",
+                controller
+                    .as_deref()
+                    .map_or_else(String::new, |c| format!(" (controller {c})")),
+                one_line(reason),
+                last.map_or_else(String::new, |l| format!(": {}", l.trim())),
+            );
         }
         Event::ReloadFailed {
             error,

@@ -305,7 +305,13 @@ fn max_wait_of(settle: Duration) -> Duration {
 impl Daemon {
     /// Runs `hook` for the compile `run_id` of `key` after the project's running hook, if any
     /// (docs/DAEMON.md, "Deploying").
-    fn deploy(&mut self, key: &Path, run_id: u64, hook: deploy::Hook, ctx: deploy::Context) {
+    fn deploy(
+        &mut self,
+        key: &Path,
+        run_id: u64,
+        hook: deploy::Hook,
+        programs: Vec<deploy::Context>,
+    ) {
         if self.deploys.get(key).is_some_and(|w| w.is_finished()) {
             self.deploys.remove(key);
         }
@@ -316,7 +322,7 @@ impl Daemon {
             project: key.display().to_string(),
             run_id,
             hook,
-            ctx,
+            programs,
         });
     }
 

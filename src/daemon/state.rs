@@ -90,6 +90,25 @@ pub struct ProjectState {
     /// The first error of a failed compile, `code file:line:col: message`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub first_error: Option<String>,
+    /// The last deploy of each program (the deploy hook, `on_success`), in the order they ran.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub deploys: Vec<DeployState>,
+}
+
+/// The last deploy of one program of a project.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct DeployState {
+    pub program: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub controller: Option<String>,
+    /// `running`, `ok` or `failed`.
+    pub result: String,
+    /// When it started (`running`) or ended (RFC 3339, UTC).
+    pub time: String,
+    pub run_id: u64,
+    /// Why it failed: the reason and the hook's last stderr line.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
 }
 
 /// The counts [`sentence`] reads.
@@ -266,6 +285,64 @@ impl Tracker {
     /// Takes what concerns the state from an event as it is emitted (any thread): the
     /// compile results; and `stopped`, which writes the file one last time.
     pub fn observe(&self, project: Option<&str>, event: &Event) {
+        let deploy = match (project, event) {
+            (
+                Some(p),
+                Event::DeployStarted {
+                    run_id,
+                    program,
+                    controller,
+                    ..
+                },
+            ) => Some((p, *run_id, program, controller, "running", None)),
+            (
+                Some(p),
+                Event::DeploySucceeded {
+                    run_id,
+                    program,
+                    controller,
+                    ..
+                },
+            ) => Some((p, *run_id, program, controller, "ok", None)),
+            (
+                Some(p),
+                Event::DeployFailed {
+                    run_id,
+                    program,
+                    controller,
+                    reason,
+                    stderr,
+                    ..
+                },
+            ) => {
+                let last = stderr.lines().rev().find(|l| !l.trim().is_empty());
+                let why = match last {
+                    Some(l) => format!("{reason}: {}", l.trim()),
+                    None => reason.clone(),
+                };
+                Some((p, *run_id, program, controller, "failed", Some(why)))
+            }
+            _ => None,
+        };
+        if let Some((p, run_id, program, controller, result, reason)) = deploy {
+            let mut st = self.lock();
+            if let Some(r) = st.results.get_mut(p) {
+                let d = DeployState {
+                    program: program.clone(),
+                    controller: controller.clone(),
+                    result: result.into(),
+                    time: now(),
+                    run_id,
+                    reason,
+                };
+                match r.deploys.iter_mut().find(|x| x.program == *program) {
+                    Some(x) => *x = d,
+                    None => r.deploys.push(d),
+                }
+                st.dirty = true;
+            }
+            return;
+        }
         let result = match (project, event) {
             (
                 Some(p),
@@ -287,6 +364,7 @@ impl Tracker {
                 warnings: counts.warnings,
                 first_error: None,
                 waiting: None,
+                deploys: Vec::new(),
             },
             (
                 Some(p),
@@ -310,6 +388,7 @@ impl Tracker {
                     .or(diagnostics.first())
                     .map(describe),
                 waiting: None,
+                deploys: Vec::new(),
             },
             // A project folder that is not watched (missing, or kept by another daemon) is
             // waited for; `watching` ends the wait.
@@ -357,6 +436,12 @@ impl Tracker {
         };
         let mut st = self.lock();
         let failed = result.result == "failed";
+        let mut result = result;
+        // The last deploys stay: a compile that deploys nothing leaves the controllers as they
+        // were.
+        if let Some(b) = st.results.get_mut(&result.project) {
+            result.deploys = std::mem::take(&mut b.deploys);
+        }
         let before = st.results.insert(result.project.clone(), result);
         let was = before.is_some_and(|b| b.result == "failed");
         match (was, failed) {
@@ -787,6 +872,58 @@ pub fn table(s: &Snapshot) -> String {
         l.push('\n');
         l
     };
+    out.push_str(&line(&header));
+    for r in &rows {
+        out.push_str(&line(&r.each_ref().map(String::as_str)));
+    }
+    out.push_str(&deploy_table(s));
+    out
+}
+
+/// The last deploy of each program, under the projects (nothing when no project deploys).
+fn deploy_table(s: &Snapshot) -> String {
+    let header = ["PROJECT", "PROGRAM", "DEPLOY", "WHEN", "WHY"];
+    let rows: Vec<[String; 5]> = s
+        .projects
+        .iter()
+        .flat_map(|p| {
+            p.deploys.iter().map(|d| {
+                [
+                    p.project.clone(),
+                    match &d.controller {
+                        Some(c) => format!("{} ({c})", d.program),
+                        None => d.program.clone(),
+                    },
+                    d.result.clone(),
+                    d.time.clone(),
+                    d.reason.clone().unwrap_or_default(),
+                ]
+            })
+        })
+        .collect();
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut width = header.map(|h| h.chars().count());
+    for r in &rows {
+        for (w, c) in width.iter_mut().zip(r) {
+            *w = (*w).max(c.chars().count());
+        }
+    }
+    let line = |cells: &[&str]| {
+        let mut l = String::new();
+        for (i, c) in cells.iter().enumerate() {
+            let c = c.replace(['\t', '\n', '\r'], " ");
+            l.push_str(&c);
+            if i + 1 < cells.len() {
+                l.push_str(&" ".repeat(width[i] - c.chars().count() + 2));
+            }
+        }
+        l.truncate(l.trim_end().len());
+        l.push('\n');
+        l
+    };
+    let mut out = String::from("\n");
     out.push_str(&line(&header));
     for r in &rows {
         out.push_str(&line(&r.each_ref().map(String::as_str)));
