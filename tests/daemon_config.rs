@@ -585,8 +585,7 @@ fn check_config_checks_everything_and_writes_nothing() {
     let b = w.ws().join("root").join("B");
     copy_project(&b);
     let cfg = w.config(
-        "events = \"ev.jsonl\"\n[[project]]\npath = \"ws/A\"\n[[project]]\npath = \"ws/Later\"\n\
-         [[root]]\npath = \"ws/root\"\n",
+        "events = \"ev.jsonl\"\n[[project]]\npath = \"ws/A\"\n[[root]]\npath = \"ws/root\"\n",
     );
     let before = listing(&w.root);
     let (code, out) = check_config(&w, Command::new(bin()), &[&cfg]);
@@ -608,13 +607,58 @@ fn check_config_checks_everything_and_writes_nothing() {
             "{l}"
         );
     }
-    assert!(line(&w.ws().join("Later")).contains("waiting: "), "{out}");
     assert!(
         line(&w.ws().join("root")).contains("ok: lists the root: 1 project"),
         "{out}"
     );
     assert!(line(&w.root.join("ev.jsonl")).contains("ok: creates the events file"));
     assert!(out.ends_with("configuration OK\n"), "{out}");
+
+    // A project folder that does not exist (`ws/Alhpa` for `ws/Alpha`), a blackboard name
+    // that does not exist, a root that does not exist: a problem row each, all in one run,
+    // exit status 1, the near names suggested.
+    fs::create_dir(w.ws().join("Alpha")).unwrap();
+    fs::write(
+        &cfg,
+        "[[project]]\npath = \"ws/Alhpa\"\n[[project]]\npath = \"ws/A\"\nblackboard = \"Blackbord.aml\"\n\
+         [[root]]\npath = \"ws/rot\"\n",
+    )
+    .unwrap();
+    let before = listing(&w.root);
+    let (code, out) = check_config(&w, Command::new(bin()), &[&cfg]);
+    assert_eq!(code, Some(1), "{out}");
+    assert_eq!(listing(&w.root), before, "nothing written: {out}");
+    let line = |folder: &Path| {
+        let f = format!("  {}  ", folder.display());
+        out.lines()
+            .find(|l| l.contains(&f))
+            .unwrap_or_else(|| panic!("a line for {f}: {out}"))
+            .to_owned()
+    };
+    assert!(
+        line(&w.ws().join("Alhpa")).contains(&format!(
+            "PROBLEM: the project folder does not exist; did you mean {}? (the daemon would wait for it)",
+            w.ws().join("Alpha").display()
+        )),
+        "{out}"
+    );
+    assert!(
+        line(&a).contains(
+            "PROBLEM: the blackboard Blackbord.aml does not exist in the folder; did you mean `Blackboard.aml`?"
+        ),
+        "{out}"
+    );
+    assert!(
+        line(&w.ws().join("rot")).contains(&format!(
+            "PROBLEM: the root does not exist; did you mean {}?",
+            w.ws().join("root").display()
+        )),
+        "{out}"
+    );
+    assert!(
+        out.ends_with("configuration check failed: 3 problems\n"),
+        "{out}"
+    );
 
     // An invalid configuration: the error with file, line and column, exit status 1.
     fs::write(&cfg, "[[project]]\npath = \"ws/A\"\nsettle = 5\n").unwrap();

@@ -29,8 +29,6 @@ struct Row {
 
 enum Verdict {
     Ok(String),
-    /// Not a problem: the daemon waits for the folder.
-    Waiting(String),
     Problem(String),
 }
 
@@ -138,7 +136,6 @@ fn table(rows: &[Row]) -> String {
     for r in rows {
         let result = match &r.verdict {
             Verdict::Ok(s) => format!("ok: {s}"),
-            Verdict::Waiting(s) => format!("waiting: {s}"),
             Verdict::Problem(s) => format!("PROBLEM: {s}"),
         };
         out.push_str(&format!("{:w0$}  {:w1$}  {result}\n", r.what, r.folder));
@@ -283,13 +280,32 @@ fn events_row(events: Option<&Path>) -> Row {
     }
 }
 
+/// `; did you mean `…`?` with the folder beside `path` whose name is near its own, or nothing.
+fn near_folder(path: &Path) -> String {
+    let (Some(parent), Some(name)) = (path.parent(), path.file_name()) else {
+        return String::new();
+    };
+    let siblings: Vec<String> = std::fs::read_dir(parent)
+        .map(|d| {
+            d.filter_map(Result::ok)
+                .filter(|e| e.file_type().is_ok_and(|t| t.is_dir()))
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect()
+        })
+        .unwrap_or_default();
+    match crate::names::closest(&name.to_string_lossy(), siblings.iter().map(String::as_str)) {
+        Some(n) => format!("; did you mean {}?", parent.join(n).display()),
+        None => String::new(),
+    }
+}
+
 /// A root: listed (its subfolders are its projects).
 fn root_row(root: &Path) -> Row {
     let verdict = match std::fs::metadata(root) {
-        Err(_) => Verdict::Waiting(
-            "the root does not exist yet; the daemon waits for it and finds its projects then"
-                .into(),
-        ),
+        Err(_) => Verdict::Problem(format!(
+            "the root does not exist{} (the daemon would wait for it and find its projects then): create it, or correct the path",
+            near_folder(root)
+        )),
         Ok(m) if !m.is_dir() => Verdict::Problem("the root is not a folder".into()),
         Ok(_) => match access(root, Access::READ_OK | Access::EXEC_OK) {
             Err(e) => Verdict::Problem(format!("cannot list the root: {e}")),
@@ -320,11 +336,13 @@ fn project_row(spec: &ProjectSpec, config: &Config, me: &Process) -> Row {
     };
     match std::fs::metadata(&spec.path) {
         Err(_) => {
+            // Most often a typo (`cel-project`): a problem, with the near folder.
             return row(
                 "-".into(),
-                Verdict::Waiting(
-                    "the project folder does not exist yet; the daemon waits for it".into(),
-                ),
+                Verdict::Problem(format!(
+                    "the project folder does not exist{} (the daemon would wait for it): create it, or correct the path",
+                    near_folder(&spec.path)
+                )),
             );
         }
         Ok(m) if !m.is_dir() => {
@@ -343,11 +361,45 @@ fn project_row(spec: &ProjectSpec, config: &Config, me: &Process) -> Row {
     }
     let (blackboard, program) = match config::resolve_project(spec) {
         Ok(x) => x,
+        // A folder made for a project whose planners have not saved a blackboard yet: the
+        // project's matter, not the configuration's (as a compile with errors is).
+        Err(_)
+            if problems.is_empty()
+                && config::blackboards(&spec.path).is_ok_and(|b| b.is_empty()) =>
+        {
+            return row(
+                "-".into(),
+                Verdict::Ok(
+                    "no blackboard (*.aml) in the folder yet: the daemon reports E101 until a planner saves one, then compiles it"
+                        .into(),
+                ),
+            );
+        }
         Err(why) => {
             problems.push(why);
             return row("-".into(), Verdict::Problem(problems.join("; ")));
         }
     };
+    // A blackboard the configuration names that is not there.
+    if spec.blackboard.is_some() && std::fs::metadata(&blackboard).is_err() {
+        let have: Vec<String> = config::blackboards(&spec.path)
+            .unwrap_or_default()
+            .iter()
+            .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+            .collect();
+        let named = blackboard
+            .file_name()
+            .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+        problems.push(format!(
+            "the blackboard {named} does not exist in the folder{}",
+            match crate::names::closest(&named, have.iter().map(String::as_str)) {
+                Some(n) => format!("; did you mean `{n}`?"),
+                None if have.is_empty() => " (it has no *.aml)".to_owned(),
+                None => format!(" (it has {})", have.join(", ")),
+            }
+        ));
+        return row(program.name.clone(), Verdict::Problem(problems.join("; ")));
+    }
     let what = program.name.clone();
     let fs = FsSource {
         max_file_size: config

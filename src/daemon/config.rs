@@ -856,7 +856,7 @@ pub fn is_blackboard_name(name: &OsStr) -> bool {
 }
 
 /// The blackboards directly in `dir` (regular files, symlinks followed), sorted.
-fn blackboards(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+pub(super) fn blackboards(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     let mut found: Vec<PathBuf> = std::fs::read_dir(dir)?
         .filter_map(Result::ok)
         .filter(|e| is_blackboard_name(&e.file_name()))
