@@ -937,3 +937,78 @@ fn a_reload_retries_a_project_whose_outputs_could_not_be_written() {
     assert!(src.is_file());
     d.stop(WAIT);
 }
+
+/// A cell's `Program` renamed (`Welding` → `WeldingB`): the new program is written and the old
+/// one's file stays (it may still be on the controller) — never deleted, but named as stale in
+/// `compile-succeeded` and in `skillpost status`. The write-back event lists every program's
+/// value (each controller's), not only the first.
+#[test]
+fn a_renamed_programs_old_files_are_named_stale_and_kept() {
+    let w = Workspace::new();
+    let a = w.ws().join("Cell");
+    fs::create_dir_all(&a).unwrap();
+    let step5 = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/tutorial/step5");
+    for e in fs::read_dir(&step5).unwrap() {
+        let e = e.unwrap();
+        fs::copy(e.path(), a.join(e.file_name())).unwrap();
+    }
+    let sources = skillpost::daemon::Sources {
+        dirs: vec![a.clone()],
+        settle_ms: Some(SETTLE_MS),
+        ..Default::default()
+    };
+    let state = w.root.join("status.json");
+    let d = InProc::start_with_state(sources.load().unwrap(), sources, &state);
+    let evs = d.wait_for("the first compile", WAIT, |e| is_for(e, "write-back", &a));
+    let first = evs
+        .iter()
+        .find(|e| is_for(e, "compile-succeeded", &a))
+        .unwrap();
+    assert!(first.get("stale").is_none(), "{first}");
+    let wb = evs.iter().find(|e| is_for(e, "write-back", &a)).unwrap();
+    let values = wb["values"].as_array().unwrap();
+    assert_eq!(values.len(), 2, "both controllers' values: {wb}");
+    assert!(values.iter().any(|v| v == "Welding.mod"), "{wb}");
+    assert!(a.join("Welding.mod").exists());
+
+    let mark = d.mark();
+    let bb = a.join("Blackboard.aml");
+    let text = fs::read_to_string(&bb).unwrap();
+    fs::write(
+        &bb,
+        text.replace(
+            "<Attribute Name=\"Program\"><Value>Welding</Value></Attribute>",
+            "<Attribute Name=\"Program\"><Value>WeldingB</Value></Attribute>",
+        ),
+    )
+    .unwrap();
+    let evs = d.wait_for("the compile of the rename", WAIT, |e| {
+        is_after(e, "compile-succeeded", &a, mark)
+    });
+    let second = evs
+        .iter()
+        .find(|e| is_after(e, "compile-succeeded", &a, mark))
+        .unwrap();
+    assert_eq!(
+        second["stale"],
+        serde_json::json!([a.join("Welding.mod").display().to_string()]),
+        "{second}"
+    );
+    assert!(a.join("WeldingB.mod").exists());
+    assert!(a.join("Welding.mod").exists(), "never deleted");
+    let mut table = String::new();
+    wait_until(WAIT, || {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
+            .args(["status", "--state"])
+            .arg(&state)
+            .output()
+            .unwrap();
+        table = String::from_utf8_lossy(&out.stdout).into_owned();
+        table.contains("stale")
+    });
+    assert!(
+        table.contains("WeldingB.mod; stale (not written, kept): Welding.mod"),
+        "{table}"
+    );
+    d.stop(WAIT);
+}

@@ -123,6 +123,11 @@ pub enum Event {
         run_id: u64,
         duration_ms: u64,
         outputs: Vec<OutputInfo>,
+        /// Program files beside the outputs that this compile did not write (`.src`, `.dat`,
+        /// `.mod`, `.script`): most likely a program's before its `Program` was renamed. Never
+        /// deleted: they may be on a controller too. Left out when there are none.
+        #[serde(skip_serializing_if = "Vec::is_empty")]
+        stale: Vec<String>,
         counts: Counts,
         /// Diagnostics as `--format json` prints them.
         warnings: Vec<Value>,
@@ -146,7 +151,10 @@ pub enum Event {
     WriteBack {
         run_id: u64,
         file: String,
+        /// The first program's value; `values` has every program's (a cell writes one per
+        /// controller), in the order of the outputs.
         value: String,
+        values: Vec<String>,
         written: bool,
         reason: Option<String>,
         /// How long the write-back waited for another program to close the blackboard (left
@@ -1253,6 +1261,7 @@ mod tests {
                 run_id: 1,
                 duration_ms: 1,
                 outputs: vec![],
+                stale: vec!["x".into()],
                 counts: Counts {
                     steps: 1,
                     warnings: 0,
@@ -1270,6 +1279,7 @@ mod tests {
                 run_id: 1,
                 file: "x".into(),
                 value: "x".into(),
+                values: vec!["x".into()],
                 written: true,
                 reason: s(),
                 waited_ms: Some(1),

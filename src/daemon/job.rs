@@ -627,8 +627,10 @@ impl Job {
                     .map(|d| serde_json::json!(d.locate(&c.sources))),
             )
             .collect();
+        let stale = stale_programs(&applied.outputs, &inputs);
         // The compile itself: reading, compiling, writing the outputs, one write-back attempt.
         self.outcome(Event::CompileSucceeded {
+            stale,
             run_id: self.run_id,
             duration_ms: ms(),
             outputs: applied
@@ -692,6 +694,7 @@ impl Job {
                     run_id: self.run_id,
                     file: wb.blackboard.display().to_string(),
                     value: wb.value.clone(),
+                    values: wb.splices().iter().map(|(_, v)| (*v).to_owned()).collect(),
                     written,
                     reason: error.or(reason.map(str::to_owned)),
                     waited_ms: waited.map(|d| d.as_millis() as u64),
@@ -762,6 +765,42 @@ impl Job {
             deploy,
         }
     }
+}
+
+/// Program files (`.src`, `.dat`, `.mod`, `.script`) in the folders of `outputs` that are
+/// neither an output of this compile nor one of its inputs, sorted: the files of a program
+/// this compile no longer writes (its `Program` renamed). Only named, never deleted: the old
+/// program may still run on a controller.
+fn stale_programs(
+    outputs: &[(PathBuf, bool)],
+    inputs: &HashMap<PathBuf, Option<u64>>,
+) -> Vec<String> {
+    let mut folders: Vec<&Path> = outputs.iter().filter_map(|(p, _)| p.parent()).collect();
+    folders.sort();
+    folders.dedup();
+    let mut stale = Vec::new();
+    for dir in folders {
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            let path = e.path();
+            let program = path.extension().is_some_and(|x| {
+                ["src", "dat", "mod", "script"]
+                    .iter()
+                    .any(|k| x.to_string_lossy().eq_ignore_ascii_case(k))
+            });
+            if program
+                && e.file_type().is_ok_and(|t| t.is_file())
+                && !outputs.iter().any(|(o, _)| *o == path)
+                && !inputs.contains_key(&path)
+            {
+                stale.push(path.display().to_string());
+            }
+        }
+    }
+    stale.sort();
+    stale
 }
 
 /// Adds, for every input reached through a symbolic link (the file or a folder on its path), the

@@ -49,6 +49,7 @@ pub fn log(project: Option<&str>, event: &Event) {
             run_id,
             duration_ms,
             outputs,
+            stale,
             counts,
             ..
         } => {
@@ -68,11 +69,20 @@ pub fn log(project: Option<&str>, event: &Event) {
                 1 => ", 1 warning".to_owned(),
                 n => format!(", {n} warnings"),
             };
+            let stale = if stale.is_empty() {
+                String::new()
+            } else {
+                let files: Vec<String> = stale.iter().map(|f| short(name, f)).collect();
+                format!(
+                    "; stale, not written (a renamed program?): {}",
+                    files.join(", ")
+                )
+            };
             tracing::info!(
                 project = name,
                 run_id,
                 duration_ms,
-                "{name} compiled in {duration_ms} ms: {}{warnings}",
+                "{name} compiled in {duration_ms} ms: {}{warnings}{stale}",
                 files.join(", ")
             );
         }

@@ -90,6 +90,10 @@ pub struct ProjectState {
     /// The first error of a failed compile, `code file:line:col: message`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub first_error: Option<String>,
+    /// Program files beside the outputs the last successful compile did not write (a program
+    /// renamed since: its old files stay, never deleted).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stale: Vec<String>,
     /// The last deploy of each program (the deploy hook, `on_success`), in the order they ran.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub deploys: Vec<DeployState>,
@@ -350,10 +354,12 @@ impl Tracker {
                     run_id,
                     duration_ms,
                     outputs,
+                    stale,
                     counts,
                     ..
                 },
             ) => ProjectState {
+                stale: stale.clone(),
                 project: p.to_owned(),
                 result: "ok".into(),
                 time: Some(now()),
@@ -388,6 +394,7 @@ impl Tracker {
                     .or(diagnostics.first())
                     .map(describe),
                 waiting: None,
+                stale: Vec::new(),
                 deploys: Vec::new(),
             },
             // A project folder that is not watched (missing, or kept by another daemon) is
@@ -831,15 +838,19 @@ pub fn table(s: &Snapshot) -> String {
             } else if p.result == "failed" {
                 p.first_error.clone().unwrap_or_default()
             } else {
-                p.outputs
-                    .iter()
-                    .map(|o| {
-                        Path::new(o)
-                            .file_name()
-                            .map_or_else(|| o.clone(), |n| n.to_string_lossy().into_owned())
-                    })
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                let name = |o: &String| {
+                    Path::new(o)
+                        .file_name()
+                        .map_or_else(|| o.clone(), |n| n.to_string_lossy().into_owned())
+                };
+                let mut s = p.outputs.iter().map(name).collect::<Vec<_>>().join(", ");
+                if !p.stale.is_empty() {
+                    s.push_str(&format!(
+                        "; stale (not written, kept): {}",
+                        p.stale.iter().map(name).collect::<Vec<_>>().join(", ")
+                    ));
+                }
+                s
             };
             [
                 p.project.clone(),
@@ -1134,6 +1145,7 @@ mod tests {
                     program: "Zelle_A".into(),
                     controller: Some("KUKA KR15-2".into()),
                 }],
+                stale: vec![],
                 counts: Counts {
                     steps: 3,
                     warnings: 1,
