@@ -763,6 +763,8 @@ codes! {
     UnknownElement = "W206",
     /// An InternalLink between signals whose one side names no signal: the wire is left out.
     LinkPartnerMissing = "W207",
+    /// A resource attribute whose name is near one skillpost reads (`Controler`): not read.
+    NearAttribute = "W208",
     /// The start step is not marked `initialStep="true"`.
     StartNotInitial = "W301",
     /// A step's resource was inferred from its skill.

@@ -3153,3 +3153,32 @@ fn an_internal_link_to_a_missing_interface_is_a_warning_at_the_link() {
     let e = stderr(&run(&["--warn", "Blackboard.aml", "output"], p.path()));
     assert!(!e.contains("W207"), "{e}");
 }
+
+/// A resource attribute misspelled (`Controler`) is not read, and said so with the name meant;
+/// here the gripper then stands beside its robot as a controller of its own (E212).
+#[test]
+fn a_misspelled_resource_attribute_is_a_warning_naming_the_one_meant() {
+    let p = base_with_case("cell", "cell-gripper-controller-attribute");
+    let path = p.path().join("Blackboard.aml");
+    let bb = std::fs::read_to_string(&path).unwrap();
+    assert!(bb.contains("<Attribute Name=\"Controller\""));
+    std::fs::write(
+        &path,
+        bb.replace(
+            "<Attribute Name=\"Controller\"",
+            "<Attribute Name=\"Controler\"",
+        ),
+    )
+    .unwrap();
+    let o = run(&["--warn", "Blackboard.aml", "output"], p.path());
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains("warning[W208]: attribute `Controler` is not read: did you mean `Controller`?"),
+        "{e}"
+    );
+    assert!(e.contains("┌─ Blackboard.aml:97:9"), "{e}");
+    assert!(e.contains("error[E212]"), "{e}");
+    // The sample's other attributes (`Steuerung` on the robot, vendor data) are no warning.
+    assert_eq!(e.matches("warning[W208]").count(), 1, "{e}");
+}

@@ -716,6 +716,7 @@ impl Reader<'_> {
         );
         let (signals, broken_signals) = self.signals(r);
         let language = self.language(r, &name);
+        self.near_attributes(r);
         let controller_attr = caex_attr(r, "Controller")
             .or_else(|| caex_attr(r, "Steuerung"))
             .and_then(|a| caex_value(self.file, a))
@@ -762,6 +763,43 @@ impl Reader<'_> {
             signals,
             broken_signals,
             index: Default::default(),
+        }
+    }
+
+    /// `W208` for each attribute of resource `r` whose name is near, but not, one a resource's
+    /// attributes skillpost reads (`Controler`): it would be ignored without a word.
+    fn near_attributes(&mut self, r: Node) {
+        const READ: [&str; 8] = [
+            "Controller",
+            "Steuerung",
+            "Program",
+            "Programm",
+            "Language",
+            "Sprache",
+            "Timers",
+            "HandshakeTimeout",
+        ];
+        for a in children(r, "Attribute") {
+            let Some(name) = caex_name(a) else { continue };
+            if READ.iter().any(|k| names::eq(k, name)) {
+                continue;
+            }
+            let n = names::key(name).chars().count();
+            let near = READ
+                .iter()
+                .map(|k| (names::edit_distance(name, k), *k))
+                .filter(|(d, _)| *d <= 2 && 2 * d < n)
+                .min_by_key(|(d, _)| *d);
+            if let Some((_, meant)) = near {
+                self.diags.push(
+                    Diagnostic::warning(
+                        Code::NearAttribute,
+                        format!("attribute `{name}` is not read: did you mean `{meant}`?"),
+                    )
+                    .at(self.span(a))
+                    .element(caex_element(r)),
+                );
+            }
         }
     }
 
