@@ -329,18 +329,7 @@ fn run(a: Args) -> u8 {
         return status(&c, "", a.format);
     }
     if let Some(svg) = &a.svg {
-        let title = format!(
-            "{}: {}",
-            c.program_names
-                .first()
-                .cloned()
-                .unwrap_or_else(|| blackboard.display().to_string()),
-            c.sfc
-                .as_ref()
-                .and_then(|s| s.pou_name.clone())
-                .map_or_else(|| "the chart".to_owned(), |p| format!("the chart of {p}"))
-        );
-        let Some(picture) = compile::picture(&c, &title) else {
+        let Some(picture) = compile::picture(&c, &blackboard.display().to_string()) else {
             eprintln!("note: {} not drawn: the chart has no plan", svg.display());
             return status(&c, "", a.format);
         };

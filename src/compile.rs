@@ -134,9 +134,12 @@ pub struct Compilation {
     pub folder: Option<crate::write::Folder>,
 }
 
-/// The plan as an SVG timeline ([`crate::picture`]): one lane per controller of a cell, else
-/// one. `None` without a plan (errors, or a compile that did not keep the model).
-pub fn picture(c: &Compilation, title: &str) -> Option<String> {
+/// The plan as an SVG timeline ([`crate::picture`]): one lane per controller of a cell (with
+/// its program's handshakes), else one. Its title names every program, by its main file and
+/// its controller, and the chart: `Cell: A.src (KUKA KR15-2), B.mod (ABB IRB 1200): the chart
+/// of Demo`; `name` stands for the program when the compile has no program name. `None`
+/// without a plan (errors, or a compile that did not keep the model).
+pub fn picture(c: &Compilation, name: &str) -> Option<String> {
     let (sfc, plan) = (c.sfc.as_ref()?, c.plan.as_ref()?);
     let lanes = match (&c.cell, &c.blackboard) {
         (Some(cell), Some(bb)) => {
@@ -161,6 +164,7 @@ pub fn picture(c: &Compilation, title: &str) -> Option<String> {
                     })
                     .collect(),
                 of,
+                programs: cell.programs.iter().map(|p| p.body.as_slice()).collect(),
             }
         }
         _ => crate::picture::Lanes {
@@ -169,9 +173,43 @@ pub fn picture(c: &Compilation, title: &str) -> Option<String> {
                 c.program_names.first().cloned().unwrap_or_default(),
             )],
             of: HashMap::new(),
+            programs: Vec::new(),
         },
     };
-    Some(crate::picture::svg(sfc, plan, &lanes, title))
+    // Each program by its main file (its first output), else its name.
+    let programs: Vec<String> = lanes
+        .names
+        .iter()
+        .map(|(controller, program)| {
+            let file = c
+                .outputs
+                .iter()
+                .zip(&c.output_programs)
+                .find(|(_, (p, _))| p == program && !program.is_empty())
+                .and_then(|((path, _), _)| path.file_name())
+                .map(|f| f.to_string_lossy().into_owned());
+            let program = match (file, program.is_empty()) {
+                (Some(f), _) => f,
+                (None, false) => program.clone(),
+                (None, true) => name.to_owned(),
+            };
+            if c.controller.is_none() && c.cell.is_none() {
+                program
+            } else {
+                format!("{program} ({controller})")
+            }
+        })
+        .collect();
+    let chart = sfc
+        .pou_name
+        .as_ref()
+        .map_or_else(|| "the chart".to_owned(), |p| format!("the chart of {p}"));
+    let title = if programs.len() > 1 {
+        format!("Cell: {}: {chart}", programs.join(", "))
+    } else {
+        format!("{}: {chart}", programs.join(", "))
+    };
+    Some(crate::picture::svg(sfc, plan, &lanes, &title))
 }
 
 impl Compilation {

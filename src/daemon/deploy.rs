@@ -511,6 +511,7 @@ mod tests {
             blackboard: "/p/P.aml".into(),
             project: "/p".into(),
             program: "P".into(),
+            controller: "KUKA KR15-2".into(),
         }
     }
 

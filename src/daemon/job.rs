@@ -582,21 +582,13 @@ impl Job {
             && let Some(main) = applied.outputs.first().map(|(p, _)| p.clone())
         {
             let path = main.with_file_name(format!("{}.svg", program.name));
-            let title = format!(
-                "{}: {}",
-                program.name,
-                c.sfc
-                    .as_ref()
-                    .and_then(|s| s.pou_name.clone())
-                    .map_or_else(|| "the chart".to_owned(), |p| format!("the chart of {p}"))
-            );
             let result = if inputs.contains_key(&path) {
                 Err(format!(
                     "{} is an input of the compile: the picture is not written over it",
                     path.display()
                 ))
             } else {
-                match compile::picture(&c, &title) {
+                match compile::picture(&c, &program.name) {
                     Some(svg) => crate::write::write_if_changed(&path, svg.as_bytes())
                         .map(|o| o == crate::write::WriteOutcome::Written)
                         .map_err(|e| format!("cannot write the picture {}: {e}", path.display())),
