@@ -309,8 +309,9 @@ fn run(a: Args) -> u8 {
     }
     print_listings(&c, &print, a.format, &mut stdout);
     report(&c.diagnostics, &c.sources, a.format, warnings);
-    if !warnings && c.dropped_warnings > 0 {
-        // Counted, not shown: the user learns there is something to look at.
+    if !warnings && c.dropped_warnings > 0 && a.format != Format::Json {
+        // Counted, not shown: the user learns there is something to look at (JSON: stdout
+        // holds the objects, stderr stays for what the run wrote).
         let n = c.dropped_warnings;
         eprintln!(
             "{n} warning{}; --warn shows {}",
