@@ -862,31 +862,7 @@ pub fn table(s: &Snapshot) -> String {
             ]
         })
         .collect();
-    let mut width = header.map(|h| h.chars().count());
-    for r in &rows {
-        for (w, c) in width.iter_mut().zip(r) {
-            *w = (*w).max(c.chars().count());
-        }
-    }
-    let line = |cells: &[&str]| {
-        let mut l = String::new();
-        for (i, c) in cells.iter().enumerate() {
-            let c = c.replace(['\t', '\n', '\r'], " ");
-            if i + 1 == cells.len() {
-                l.push_str(&c);
-            } else {
-                l.push_str(&c);
-                l.push_str(&" ".repeat(width[i] - c.chars().count() + 2));
-            }
-        }
-        l.truncate(l.trim_end().len());
-        l.push('\n');
-        l
-    };
-    out.push_str(&line(&header));
-    for r in &rows {
-        out.push_str(&line(&r.each_ref().map(String::as_str)));
-    }
+    out.push_str(&aligned(header, &rows));
     out.push_str(&deploy_table(s));
     out
 }
@@ -915,8 +891,14 @@ fn deploy_table(s: &Snapshot) -> String {
     if rows.is_empty() {
         return String::new();
     }
+    format!("\n{}", aligned(header, &rows))
+}
+
+/// Rows under their header, each column as wide as its widest cell plus two spaces; line
+/// breaks and tabs in a cell become spaces, no trailing blanks.
+fn aligned<const N: usize>(header: [&str; N], rows: &[[String; N]]) -> String {
     let mut width = header.map(|h| h.chars().count());
-    for r in &rows {
+    for r in rows {
         for (w, c) in width.iter_mut().zip(r) {
             *w = (*w).max(c.chars().count());
         }
@@ -934,9 +916,8 @@ fn deploy_table(s: &Snapshot) -> String {
         l.push('\n');
         l
     };
-    let mut out = String::from("\n");
-    out.push_str(&line(&header));
-    for r in &rows {
+    let mut out = line(&header);
+    for r in rows {
         out.push_str(&line(&r.each_ref().map(String::as_str)));
     }
     out
