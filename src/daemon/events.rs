@@ -262,6 +262,15 @@ impl Event {
         }
     }
 
+    /// Why a deploy failed, for a line a person reads (the log, `skillpost status`): the
+    /// reason and the last non-blank line of the hook's stderr.
+    pub fn deploy_failure(reason: &str, stderr: &str) -> String {
+        match stderr.lines().rev().find(|l| !l.trim().is_empty()) {
+            Some(l) => format!("{reason}: {}", l.trim()),
+            None => reason.to_owned(),
+        }
+    }
+
     /// A `compile-failed` event with one diagnostic of our own (not from the compiler).
     pub fn failed_with(run_id: u64, duration_ms: u64, code: &str, message: String) -> Event {
         Event::CompileFailed {

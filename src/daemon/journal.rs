@@ -180,16 +180,14 @@ pub fn log(project: Option<&str>, event: &Event) {
             stderr,
             ..
         } => {
-            let last = stderr.lines().rev().find(|l| !l.trim().is_empty());
             tracing::warn!(
                 project = name,
                 run_id,
-                "{name}: deploy of {program}{} failed: {}{}",
+                "{name}: deploy of {program}{} failed: {}",
                 controller
                     .as_deref()
                     .map_or_else(String::new, |c| format!(" (controller {c})")),
-                one_line(reason),
-                last.map_or_else(String::new, |l| format!(": {}", l.trim())),
+                one_line(&Event::deploy_failure(reason, stderr)),
             );
         }
         Event::ReloadFailed {

@@ -319,11 +319,7 @@ impl Tracker {
                     ..
                 },
             ) => {
-                let last = stderr.lines().rev().find(|l| !l.trim().is_empty());
-                let why = match last {
-                    Some(l) => format!("{reason}: {}", l.trim()),
-                    None => reason.clone(),
-                };
+                let why = Event::deploy_failure(reason, stderr);
                 Some((p, *run_id, program, controller, "failed", Some(why)))
             }
             _ => None,

@@ -931,6 +931,21 @@ pub fn assign_wires(cell: &mut Cell, bb: &Blackboard, sfc: &Sfc, diags: &mut Dia
             }
             let have = declared(cell, bb, a, b);
             let name = |c: usize| bb.resources[cell.controllers[c]].name.text.to_string();
+            // An error about the pair stands at the first step (or selection) a handshake
+            // between them reports.
+            let place = |d: Diagnostic| {
+                let about = cell
+                    .channels
+                    .iter()
+                    .find(|c| (c.from, c.to) == (a, b) || (c.from, c.to) == (b, a))
+                    .map(|c| c.first_about);
+                match about {
+                    Some(e) => d
+                        .at(sfc.elements[e].span.clone())
+                        .element(format!("localId {}", sfc.elements[e].local_id)),
+                    None => d,
+                }
+            };
             // No wire at all between the two, either way: most likely one is a device on the
             // other's controller that the blackboard does not put there. One error for the
             // pair, which says how to put it there.
@@ -949,13 +964,8 @@ pub fn assign_wires(cell: &mut Cell, bb: &Blackboard, sfc: &Sfc, diags: &mut Dia
                         format!(" ({})", w.join(", "))
                     }
                 };
-                let about = cell
-                    .channels
-                    .iter()
-                    .find(|c| (c.from, c.to) == (a, b) || (c.from, c.to) == (b, a))
-                    .map(|c| c.first_about);
                 let (x, y) = (name(a), name(b));
-                let mut d = Diagnostic::error(
+                let d = Diagnostic::error(
                     Code::TooFewWires,
                     format!(
                         "controllers `{x}` and `{y}` run steps of one plan, so they must tell each other where they are: the plan needs {total} wire{} from `{x}` to `{y}`{} and {back_total} from `{y}` to `{x}`{}; the blackboard declares none between them",
@@ -970,22 +980,12 @@ pub fn assign_wires(cell: &mut Cell, bb: &Blackboard, sfc: &Sfc, diags: &mut Dia
                 .note(format!(
                     "if they are two controllers, wire them: InternalLinks from Output signals of `{x}` to Input signals of `{y}` and back"
                 ));
-                if let Some(e) = about {
-                    d = d
-                        .at(sfc.elements[e].span.clone())
-                        .element(format!("localId {}", sfc.elements[e].local_id));
-                }
-                diags.push(d);
+                diags.push(place(d));
                 continue;
             }
             if have.len() < total {
                 let what = purposes(&need, &name(a), &name(b));
-                let about = cell
-                    .channels
-                    .iter()
-                    .find(|c| (c.from, c.to) == (a, b) || (c.from, c.to) == (b, a))
-                    .map(|c| c.first_about);
-                let mut d = Diagnostic::error(
+                let d = Diagnostic::error(
                     Code::TooFewWires,
                     format!(
                         "the plan needs {total} wire{} from controller `{}` to controller `{}` ({}); the blackboard declares {}: {} missing. Add {} InternalLink{} from an Output signal of `{}` (or a device on it) to an Input signal of `{}`",
@@ -1001,12 +1001,7 @@ pub fn assign_wires(cell: &mut Cell, bb: &Blackboard, sfc: &Sfc, diags: &mut Dia
                         name(b)
                     ),
                 );
-                if let Some(e) = about {
-                    d = d
-                        .at(sfc.elements[e].span.clone())
-                        .element(format!("localId {}", sfc.elements[e].local_id));
-                }
-                diags.push(d);
+                diags.push(place(d));
                 continue;
             }
             let mut next = have.into_iter();
