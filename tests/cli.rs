@@ -3185,3 +3185,47 @@ fn a_misspelled_resource_attribute_is_a_warning_naming_the_one_meant() {
     // The sample's other attributes (`Steuerung` on the robot, vendor data) are no warning.
     assert_eq!(e.matches("warning[W208]").count(), 1, "{e}");
 }
+
+/// The count of warnings not shown is the number `--warn` shows also where many unused
+/// variables are only counted: steps with more than a handful of variables (looked up by
+/// hash), more groups than the scan holds, the same variable at several steps and in another
+/// case (one warning per skill and variable).
+#[test]
+fn many_unused_variables_are_counted_as_warn_shows_them() {
+    let p = project();
+    let path = p.path().join("sfc.xml");
+    let sfc = std::fs::read_to_string(&path).unwrap();
+    let extra = |case_upper: bool| -> String {
+        (0..30)
+            .map(|i| {
+                let name = if case_upper && i % 2 == 0 {
+                    format!("EXTRA_{i}")
+                } else {
+                    format!("extra_{i}")
+                };
+                format!("<Variable name=\"{name}\" Value=\"{i}\"/>")
+            })
+            .collect()
+    };
+    let mut n = 0;
+    let sfc: String = sfc
+        .split_inclusive('\n')
+        .map(|l| {
+            if l.contains("<Variable name=\"JointConfig\" Value=\"(2, 35)\"/>") {
+                n += 1;
+                format!("{l}{}\n", extra(n == 2))
+            } else {
+                l.to_owned()
+            }
+        })
+        .collect();
+    assert_eq!(n, 3);
+    std::fs::write(&path, sfc).unwrap();
+    let shown = stderr(&run(&["--warn", "Blackboard.aml", "out"], p.path()))
+        .matches("warning[")
+        .count();
+    assert!(shown > 60, "{shown}");
+    let o = run(&["Blackboard.aml", "out"], p.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert_eq!(stderr(&o), format!("{shown} warnings; --warn shows them\n"));
+}

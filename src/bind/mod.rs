@@ -850,6 +850,8 @@ fn check_variables(
             );
         }
     }
+    // Without `--warn` the `W303`s are counted, not built.
+    let keep = diags.keeps_warnings();
     match &vars.by {
         ByKey::Few(list) => {
             for v in *list {
@@ -863,13 +865,21 @@ fn check_variables(
                     used.contains(&v.name.key)
                 };
                 if !read {
-                    extras.add(skill, v, e);
+                    if keep {
+                        extras.add(skill, v, e);
+                    } else {
+                        extras.count(skill, v, 0);
+                    }
                 }
             }
         }
         ByKey::Many { unused, .. } => {
-            for v in unused {
-                extras.add(skill, v, e);
+            for (k, v) in unused.iter().enumerate() {
+                if keep {
+                    extras.add(skill, v, e);
+                } else {
+                    extras.count(skill, v, unused.len() - k);
+                }
             }
         }
     }
@@ -883,6 +893,12 @@ struct Extras {
     list: Vec<Extra>,
     /// `(skill key, variable key)` → index into `list`.
     index: HashMap<(Arc<str>, Arc<str>), usize>,
+    /// When the warnings are not kept, only counted: the groups by key, nothing built; the
+    /// first [`Extras::SCAN`] in `few` (a usual plan repeats a handful at every step: a scan,
+    /// mostly of shared strings, beats hashing), the others in `counted`.
+    few: Vec<(Arc<str>, Arc<str>)>,
+    /// Per skill (a handful: scanned), its other variables' keys.
+    counted: Vec<(Arc<str>, HashSet<Arc<str>>)>,
 }
 
 /// One unused variable of one skill: its first place, and every step's id. The warning is
@@ -960,8 +976,51 @@ impl Extras {
         });
     }
 
+    /// Counts the group of `(skill, v)` when the warnings are not kept; `more`: how many
+    /// variables are still to come (room for them at once).
+    fn count(&mut self, skill: &crate::model::Skill, v: &crate::model::Variable, more: usize) {
+        let (sk, var) = (&skill.name.key, &v.name.key);
+        let same = |a: &Arc<str>, b: &Arc<str>| Arc::ptr_eq(a, b) || a == b;
+        if self.few.iter().any(|(s, x)| same(s, sk) && same(x, var)) {
+            return;
+        }
+        self.count_key(sk, var, more);
+    }
+
+    /// [`Extras::count`] past the scan of `few`.
+    fn count_key(&mut self, sk: &Arc<str>, var: &Arc<str>, more: usize) {
+        if self.few.len() < Self::SCAN {
+            self.few.push((sk.clone(), var.clone()));
+            return;
+        }
+        let at = match self.counted.iter().position(|(s, _)| s == sk) {
+            Some(at) => at,
+            None => {
+                self.counted.push((sk.clone(), HashSet::new()));
+                self.counted.len() - 1
+            }
+        };
+        let set = &mut self.counted[at].1;
+        set.reserve(more);
+        set.insert(var.clone());
+    }
+
+    /// How many groups [`Extras::count`] found.
+    fn counted(&self) -> usize {
+        self.few.len() + self.counted.iter().map(|(_, v)| v.len()).sum::<usize>()
+    }
+
     /// `later` (the groups of the steps after these) added after these.
     fn merge(&mut self, later: Extras) {
+        let later_counted = later
+            .counted
+            .into_iter()
+            .flat_map(|(sk, vars)| vars.into_iter().map(move |v| (sk.clone(), v)));
+        for (sk, var) in later.few.into_iter().chain(later_counted) {
+            if !self.few.iter().any(|(s, x)| *s == sk && *x == var) {
+                self.count_key(&sk, &var, 0);
+            }
+        }
         for x in later.list {
             match self.group(&x.skill, &x.variable) {
                 Some(at) => self.list[at].steps.extend(x.steps),
@@ -973,7 +1032,7 @@ impl Extras {
     /// One `W303` per group; only counted when warnings are not kept.
     fn report(self, diags: &mut Diagnostics) {
         if !diags.keeps_warnings() {
-            diags.count_dropped(self.list.len());
+            diags.count_dropped(self.counted());
             return;
         }
         for x in self.list {
