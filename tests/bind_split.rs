@@ -16,7 +16,8 @@ mod common;
 #[path = "../benches/common/generator.rs"]
 mod generator;
 
-/// What a user sees of a compile: the outputs, the write-back, every diagnostic with its place.
+/// What a user sees of a compile: the outputs, the write-back, every diagnostic with its place,
+/// and how many warnings were counted without being kept ("N warnings; --warn shows them").
 fn seen(c: &Compilation) -> String {
     let outputs: Vec<(PathBuf, &str)> = c
         .outputs
@@ -25,8 +26,9 @@ fn seen(c: &Compilation) -> String {
         .collect();
     let wb = c.write_back.as_ref().map(|w| w.value.clone());
     format!(
-        "{outputs:#?}\n{wb:?}\n{}",
-        render(&c.diagnostics, &c.sources, Format::Json, true, false)
+        "{outputs:#?}\n{wb:?}\n{}\n{} warnings not kept",
+        render(&c.diagnostics, &c.sources, Format::Json, true, false),
+        c.dropped_warnings
     )
 }
 
