@@ -1720,6 +1720,22 @@ pub fn folder_replaced(c: &Compilation) -> Option<String> {
     })
 }
 
+/// Writes one more file of the compile (the daemon's picture of the plan) atomically and only
+/// when its bytes change, through the folder the blackboard was read from, like [`apply`]'s
+/// outputs: a project folder swapped for a link after the programs landed never gets the file
+/// written into the link's target.
+pub fn write_beside(
+    c: &Compilation,
+    path: &Path,
+    bytes: &[u8],
+) -> std::io::Result<crate::write::WriteOutcome> {
+    match &c.folder {
+        Some(f) => crate::write::write_if_changed(&f.route(path), bytes)
+            .map_err(|e| std::io::Error::new(e.kind(), f.unroute(&e.to_string()))),
+        None => crate::write::write_if_changed(path, bytes),
+    }
+}
+
 /// What [`apply`] did.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Applied {

@@ -589,7 +589,7 @@ impl Job {
                 ))
             } else {
                 match compile::picture(&c, &program.name) {
-                    Some(svg) => crate::write::write_if_changed(&path, svg.as_bytes())
+                    Some(svg) => compile::write_beside(&c, &path, svg.as_bytes())
                         .map(|o| o == crate::write::WriteOutcome::Written)
                         .map_err(|e| format!("cannot write the picture {}: {e}", path.display())),
                     None => Err("no plan to draw".to_owned()),
