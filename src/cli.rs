@@ -329,36 +329,51 @@ fn run(a: Args) -> u8 {
         }
         return status(&c, "", a.format);
     }
-    if let Some(svg) = &a.svg {
-        let Some(picture) = compile::picture(&c, &blackboard.display().to_string()) else {
-            eprintln!("note: {} not drawn: the chart has no plan", svg.display());
-            return status(&c, "", a.format);
-        };
-        match crate::write::write_if_changed(svg, picture.as_bytes()) {
-            Ok(o) => say(
-                a.format == Format::Json,
-                &format!(
-                    "{} {}",
-                    if o == crate::write::WriteOutcome::Written {
-                        "wrote"
-                    } else {
-                        "unchanged"
-                    },
-                    svg.display()
-                ),
-            ),
+    // The picture: drawn now, written after the programs (a failed write of the programs leaves
+    // it unwritten too: "nothing was written" holds), through the folder they went to.
+    let picture = match &a.svg {
+        Some(svg) => match compile::picture(&c, &blackboard.display().to_string()) {
+            Some(p) => Some((svg, p)),
+            None => {
+                eprintln!("note: {} not drawn: the chart has no plan", svg.display());
+                return status(&c, "", a.format);
+            }
+        },
+        None => None,
+    };
+    let draw = |written: &str| -> Option<u8> {
+        let (svg, picture) = picture.as_ref()?;
+        match compile::write_beside(&c, svg, picture.as_bytes()) {
+            Ok(o) => {
+                say(
+                    a.format == Format::Json,
+                    &format!(
+                        "{} {}",
+                        if o == crate::write::WriteOutcome::Written {
+                            "wrote"
+                        } else {
+                            "unchanged"
+                        },
+                        svg.display()
+                    ),
+                );
+                None
+            }
             Err(e) => {
                 let list = [diag::Diagnostic::error(
                     diag::Code::CannotWrite,
                     format!("cannot write {}: {e}", svg.display()),
                 )];
                 report(&list, &c.sources, a.format, warnings);
-                summary(&list, a.format, "the picture was not written");
-                return 2;
+                summary(&list, a.format, written);
+                Some(2)
             }
         }
-    }
+    };
     if a.validate {
+        if let Some(code) = draw("the picture was not written") {
+            return code;
+        }
         return status(&c, "Input validation successful!", a.format);
     }
     let result = compile::apply(&c);
@@ -444,7 +459,7 @@ fn run(a: Args) -> u8 {
                     )
                 };
             }
-            0
+            draw("the programs were written, the picture was not").unwrap_or(0)
         }
         Err(e) => {
             // As the daemon reports it (`compile-failed` with E604), and with `--format json`

@@ -677,6 +677,28 @@ fn check_outputs(cx: &mut Ctx, outputs: &[&Path], blackboard: &Path, template: O
     }
 }
 
+/// The picture (`--svg FILE`) may not be one of the programs' files: both would be written to
+/// one name (and a failed write of the programs left the picture in the program's place).
+fn check_picture(cx: &mut Ctx, picture: &Path, outputs: &[(PathBuf, OutputFile)]) {
+    let pic_real = real_or_parent(&cx.fs, picture);
+    for (out, _) in outputs {
+        let same = paths::absolute(out) == paths::absolute(picture)
+            || (pic_real.is_some() && pic_real == real_or_parent(&cx.fs, out));
+        if same {
+            cx.diags.push(Diagnostic::error(
+                Code::CannotWrite,
+                format!(
+                    "the picture `{}` (--svg) is also a file of the program this compile writes: \
+                     choose another name for the picture (e.g. `{}`)",
+                    picture.display(),
+                    out.with_extension("svg").display()
+                ),
+            ));
+            return;
+        }
+    }
+}
+
 /// The real path of a file, or of its folder joined with its name when the file does not exist
 /// (an output about to be created); `None` where the file system cannot tell.
 fn real_or_parent(fs: &dyn FileSource, p: &Path) -> Option<PathBuf> {
@@ -1075,6 +1097,9 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         .chain(picture)
         .collect();
     check_outputs(&mut cx, &written, blackboard, opts.template.as_deref());
+    if let Some(pic) = &opts.picture {
+        check_picture(&mut cx, pic, &out.outputs);
+    }
 
     if !cx.diags.has_errors()
         && let Some(wb) = &bb.write_back

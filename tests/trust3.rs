@@ -84,3 +84,70 @@ fn the_picture_never_lands_in_a_folder_swapped_in_after_the_program() {
         "no trial swapped the folder before the picture was written"
     );
 }
+
+fn skillpost(args: &[&str], cwd: &Path) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .unwrap()
+}
+
+/// Finding 12: `--svg` naming one of the program's own files is refused before anything is
+/// written (before, the picture went over `P.src` and a failed write of the pair left it there).
+#[test]
+fn a_picture_named_like_a_program_file_is_refused_and_nothing_is_written() {
+    let w = Workspace::new();
+    let p = w.project("P");
+    let before = fs::read_dir(&p).unwrap().count();
+    let o = skillpost(&["--svg", "out.src", "Blackboard.aml", "out"], &p);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("error[E604]") && err.contains("--svg"),
+        "{err}"
+    );
+    assert!(
+        err.contains("out.svg"),
+        "the message suggests a name: {err}"
+    );
+    assert_eq!(
+        fs::read_dir(&p).unwrap().count(),
+        before,
+        "a file was written"
+    );
+}
+
+/// Finding 12: when the programs cannot be written, neither is the picture, so "nothing was
+/// written" is true.
+#[test]
+fn a_picture_is_not_written_when_the_programs_are_not() {
+    let w = Workspace::new();
+    let p = w.project("P");
+    // The `.dat` cannot be written: a folder stands at its name.
+    fs::create_dir(p.join("out.dat")).unwrap();
+    let o = skillpost(&["--svg", "plan.svg", "Blackboard.aml", "out"], &p);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("nothing was written"), "{err}");
+    assert!(
+        !p.join("plan.svg").exists(),
+        "the picture was written: {err}"
+    );
+    assert!(!p.join("out.src").exists());
+    // And with the programs written, the picture is too.
+    fs::remove_dir(p.join("out.dat")).unwrap();
+    let o = skillpost(&["--svg", "plan.svg", "Blackboard.aml", "out"], &p);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(String::from_utf8_lossy(&o.stdout).contains("wrote plan.svg"));
+    assert!(
+        fs::read_to_string(p.join("plan.svg"))
+            .unwrap()
+            .starts_with("<svg")
+    );
+}
