@@ -72,16 +72,33 @@ fn a_successful_compile_installs_its_outputs_on_the_share() {
     let ok = deploys(&evs, "deploy-succeeded", &a);
     assert_eq!(ok.len(), 1, "{}", dump(&evs));
     let started = deploys(&evs, "deploy-started", &a);
+    // `{src}` and `{dat}`: the daemon's own copy of what it wrote (same names), not the files
+    // in the project folder that anyone who writes there could replace; gone after the hook.
+    let argv: Vec<&str> = started[0]["argv"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a.as_str().unwrap())
+        .collect();
+    assert_eq!(argv[..3], ["install", "-m", "0644"]);
+    assert_eq!(argv[5], share_s);
+    for (copy, name) in [(argv[3], "Blackboard.src"), (argv[4], "Blackboard.dat")] {
+        let copy = Path::new(copy);
+        assert_eq!(copy.file_name().unwrap(), name, "{argv:?}");
+        assert!(!copy.starts_with(&a), "{argv:?}");
+        assert!(
+            copy.parent().unwrap().parent().unwrap().ends_with("deploy"),
+            "{argv:?}"
+        );
+        assert!(
+            !copy.exists(),
+            "the copy outlived its hook: {}",
+            copy.display()
+        );
+    }
     assert_eq!(
-        started[0]["argv"],
-        serde_json::json!([
-            "install",
-            "-m",
-            "0644",
-            a.join("Blackboard.src").display().to_string(),
-            a.join("Blackboard.dat").display().to_string(),
-            share_s
-        ])
+        fs::read(share.join("Blackboard.dat")).unwrap(),
+        fs::read(a.join("Blackboard.dat")).unwrap()
     );
     // After the outputs: the compile's run, its files as written.
     let compiled = evs
@@ -376,8 +393,9 @@ fn a_cell_deploys_each_program_to_its_own_controller() {
     let log = w.root.join("deployed.log");
     // The second robot's share is offline.
     let script = format!(
-        "echo \"$1|$2|$3\" >> {}; if [ \"$1\" = 'KUKA KR16-2' ]; then echo 'share //kr16/r1 offline' >&2; exit 4; fi",
-        log.display()
+        "echo \"$1|$2|$(basename \"$3\")\" >> {log}; cat \"$3\" > {root}/\"$2\".got; if [ \"$1\" = 'KUKA KR16-2' ]; then echo 'share //kr16/r1 offline' >&2; exit 4; fi",
+        log = log.display(),
+        root = w.root.display()
     );
     let c = config(
         &w,
@@ -424,12 +442,16 @@ fn a_cell_deploys_each_program_to_its_own_controller() {
     // Each run got its own program's file.
     assert_eq!(
         read_string(&log),
-        format!(
-            "KUKA KR15-2|Blackboard_KUKA_KR15_2|{}\nKUKA KR16-2|Blackboard_KUKA_KR16_2|{}\n",
-            a.join("Blackboard_KUKA_KR15_2.src").display(),
-            a.join("Blackboard_KUKA_KR16_2.src").display()
-        )
+        "KUKA KR15-2|Blackboard_KUKA_KR15_2|Blackboard_KUKA_KR15_2.src\n\
+         KUKA KR16-2|Blackboard_KUKA_KR16_2|Blackboard_KUKA_KR16_2.src\n"
     );
+    for program in ["Blackboard_KUKA_KR15_2", "Blackboard_KUKA_KR16_2"] {
+        assert_eq!(
+            read_string(&w.root.join(format!("{program}.got"))),
+            read_string(&a.join(format!("{program}.src"))),
+            "{program}: the hook got another program's bytes"
+        );
+    }
     let ok = deploys(&evs, "deploy-succeeded", &a);
     assert_eq!(ok.len(), 1, "{}", dump(&evs));
     assert_eq!(ok[0]["program"], "Blackboard_KUKA_KR15_2");

@@ -151,3 +151,107 @@ fn a_picture_is_not_written_when_the_programs_are_not() {
             .starts_with("<svg")
     );
 }
+
+/// A deploy hook that waits for `<root>/go` before copying `{src}` and `{dat}` into
+/// `<root>/share/`, and the configuration running it for project `p`.
+fn waiting_hook(w: &Workspace, p: &Path) -> std::path::PathBuf {
+    fs::create_dir_all(w.root.join("share")).unwrap();
+    w.config(&format!(
+        "on_success = [\"sh\", \"-c\", \"while [ ! -e \\\"$0/go\\\" ]; do sleep 0.01; done; \
+         rm \\\"$0/go\\\"; cp \\\"$1\\\" \\\"$2\\\" \\\"$0/share/\\\"\", \"{root}\", \"{{src}}\", \"{{dat}}\"]\n\
+         [[project]]\npath = \"{p}\"\n",
+        root = w.root.display(),
+        p = p.display()
+    ))
+}
+
+/// Finding 2: a hand-written `.src` renamed over the compiled one, or the folder swapped for
+/// another with its own program, after the compile and before the hook copies: the hook still
+/// ships the bytes the daemon wrote, never a program it did not write.
+#[test]
+fn the_hook_ships_the_bytes_the_daemon_wrote_whatever_replaced_them() {
+    for swap_folder in [false, true] {
+        let w = Workspace::new();
+        let p = w.project("P");
+        fs::write(p.join("sfc.xml"), inproc::sfc_with_x(111)).unwrap();
+        let d = InProc::with_config(&waiting_hook(&w, &p));
+        d.wait_for("the hook", Duration::from_secs(10), |e| {
+            is_for(e, "deploy-started", &p)
+        });
+        let compiled = fs::read_to_string(p.join("Blackboard.src")).unwrap();
+        assert!(compiled.contains(&inproc::ptp_with_x(111)));
+        let forged = "DEF Blackboard()\nPTP {A1 -170}\nEND\n";
+        if swap_folder {
+            let other = w.root.join("OTHER");
+            fs::create_dir(&other).unwrap();
+            fs::write(other.join("Blackboard.src"), forged).unwrap();
+            fs::write(other.join("Blackboard.dat"), "DEFDAT Blackboard\nENDDAT\n").unwrap();
+            fs::rename(&p, p.with_extension("real")).unwrap();
+            std::os::unix::fs::symlink(&other, &p).unwrap();
+        } else {
+            fs::write(p.join("forged"), forged).unwrap();
+            fs::rename(p.join("forged"), p.join("Blackboard.src")).unwrap();
+        }
+        fs::write(w.root.join("go"), "").unwrap();
+        let evs = d.wait_for("the hook's end", Duration::from_secs(10), |e| {
+            is_for(e, "deploy-succeeded", &p) || is_for(e, "deploy-failed", &p)
+        });
+        assert!(
+            evs.iter().any(|e| is_for(e, "deploy-succeeded", &p)),
+            "{}",
+            inproc::dump(&evs)
+        );
+        let shipped = fs::read_to_string(w.root.join("share/Blackboard.src")).unwrap();
+        assert!(
+            shipped == compiled,
+            "swap_folder {swap_folder}: the hook shipped a program the daemon did not write:\n{shipped}"
+        );
+        let dat = fs::read_to_string(w.root.join("share/Blackboard.dat")).unwrap();
+        assert!(dat.contains("DEFDAT"), "{dat}");
+        d.stop(Duration::from_secs(10));
+    }
+}
+
+/// Finding 2: a slow hook and a new compile while it waits: the hook ships its own compile's
+/// `.src` and `.dat` (a pair of one compile), and the next hook the next compile's.
+#[test]
+fn a_slow_hook_ships_the_pair_of_its_own_compile() {
+    let w = Workspace::new();
+    let p = w.project("P");
+    fs::write(p.join("sfc.xml"), inproc::sfc_with_x(111)).unwrap();
+    let d = InProc::with_config(&waiting_hook(&w, &p));
+    d.wait_for("the hook", Duration::from_secs(10), |e| {
+        is_for(e, "deploy-started", &p)
+    });
+    let (src1, dat1) = (
+        fs::read(p.join("Blackboard.src")).unwrap(),
+        fs::read(p.join("Blackboard.dat")).unwrap(),
+    );
+    // The next compile lands while the first hook waits.
+    let mark = d.mark();
+    fs::write(p.join("sfc.xml"), inproc::sfc_with_x(222)).unwrap();
+    d.wait_for("the edit's compile", Duration::from_secs(10), |e| {
+        inproc::is_after(e, "compile-succeeded", &p, mark)
+    });
+    assert!(inproc::read_string(&p.join("Blackboard.src")).contains(&inproc::ptp_with_x(222)));
+    fs::write(w.root.join("go"), "").unwrap();
+    d.wait_for("the first hook's end", Duration::from_secs(10), |e| {
+        is_for(e, "deploy-succeeded", &p)
+    });
+    assert!(fs::read(w.root.join("share/Blackboard.src")).unwrap() == src1);
+    assert!(fs::read(w.root.join("share/Blackboard.dat")).unwrap() == dat1);
+    // The second one ships the second compile's pair.
+    let mark = d.mark();
+    fs::write(w.root.join("go"), "").unwrap();
+    d.wait_for("the second hook's end", Duration::from_secs(10), |e| {
+        inproc::is_after(e, "deploy-succeeded", &p, mark)
+    });
+    assert!(
+        fs::read(w.root.join("share/Blackboard.src")).unwrap()
+            == fs::read(p.join("Blackboard.src")).unwrap()
+    );
+    assert!(
+        fs::read(w.root.join("share/Blackboard.dat")).unwrap()
+            == fs::read(p.join("Blackboard.dat")).unwrap()
+    );
+}

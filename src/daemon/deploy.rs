@@ -66,6 +66,9 @@ pub struct Context {
     pub program: String,
     /// The resource whose controller runs the program (empty when the compile does not say).
     pub controller: String,
+    /// The daemon's own copy of the program's files, which `outputs` and `main` name (see
+    /// [`super::snapshot`]); removed when the last clone of this context is dropped.
+    pub snapshot: Option<super::snapshot::Held>,
 }
 
 /// The pieces of an argument: text and placeholder names, `{{`/`}}` as braces.
@@ -210,23 +213,31 @@ pub struct Request {
     pub programs: Vec<Context>,
 }
 
+/// The request waiting to run: taken out by the worker, so that a request (and its snapshot)
+/// lives only until its hooks have run.
+type Slot = Arc<std::sync::Mutex<Option<Request>>>;
+
 /// The hooks of one project: a task that runs them one at a time, the newest waiting one next.
 pub struct Worker {
-    tx: watch::Sender<Option<Request>>,
+    /// Rings when a request waits in `slot`; closed when the worker is dropped.
+    tx: watch::Sender<()>,
+    slot: Slot,
     task: tokio::task::JoinHandle<()>,
 }
 
 impl Worker {
     /// Starts the project's worker. `stop` turns true when the daemon stops.
     pub fn start(sink: Arc<EventSink>, stop: watch::Receiver<bool>) -> Worker {
-        let (tx, rx) = watch::channel(None);
-        let task = tokio::spawn(work(sink, rx, stop));
-        Worker { tx, task }
+        let (tx, rx) = watch::channel(());
+        let slot = Slot::default();
+        let task = tokio::spawn(work(sink, rx, slot.clone(), stop));
+        Worker { tx, slot, task }
     }
 
     /// Runs `r` after the running hook; replaces one that waits (it is not run).
     pub fn submit(&self, r: Request) {
-        self.tx.send_replace(Some(r));
+        *self.slot.lock().unwrap_or_else(|p| p.into_inner()) = Some(r);
+        self.tx.send_replace(());
     }
 
     /// Whether its task has ended.
@@ -243,7 +254,8 @@ impl Worker {
 
 async fn work(
     sink: Arc<EventSink>,
-    mut rx: watch::Receiver<Option<Request>>,
+    mut rx: watch::Receiver<()>,
+    slot: Slot,
     mut stop: watch::Receiver<bool>,
 ) {
     loop {
@@ -255,7 +267,8 @@ async fn work(
             }
             _ = stop.wait_for(|s| *s) => return,
         }
-        let Some(r) = rx.borrow_and_update().clone() else {
+        rx.borrow_and_update();
+        let Some(r) = slot.lock().unwrap_or_else(|p| p.into_inner()).take() else {
             continue;
         };
         // Taken: a newer one waits in the channel from now on.
@@ -512,6 +525,7 @@ mod tests {
             project: "/p".into(),
             program: "P".into(),
             controller: "KUKA KR15-2".into(),
+            snapshot: None,
         }
     }
 

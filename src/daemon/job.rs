@@ -275,6 +275,9 @@ pub(super) struct Job {
     pub(super) run_id: u64,
     pub(super) sink: Arc<EventSink>,
     pub(super) progress: Arc<Progress>,
+    /// The runtime directory, where the copies a deploy hook ships are kept
+    /// ([`super::snapshot`]); `None` when the project has no hook.
+    pub(super) snapshots: Option<PathBuf>,
 }
 
 impl Job {
@@ -386,6 +389,67 @@ impl Job {
             }
         }
         (outcome, Some(start.elapsed()), error)
+    }
+
+    /// Each program's files as this compile wrote them, copied into a snapshot of the daemon's
+    /// own: what the hook gets instead of the files in the project folder, which anyone who
+    /// can write there may replace. A program whose copy cannot be made is not deployed
+    /// (`deploy-failed` with the reason): never the folder's files in its place.
+    fn snapshot(
+        &self,
+        runtime: &Path,
+        c: &Compilation,
+        deploy: Vec<super::deploy::Context>,
+    ) -> Vec<super::deploy::Context> {
+        let bytes = |p: &PathBuf| {
+            c.outputs
+                .iter()
+                .find(|(o, _)| o == p)
+                .map(|(_, f)| f.text.as_bytes())
+        };
+        let mut kept = Vec::with_capacity(deploy.len());
+        for mut ctx in deploy {
+            let files: Option<Vec<(&Path, &[u8])>> = ctx
+                .outputs
+                .iter()
+                .map(|p| bytes(p).map(|b| (p.as_path(), b)))
+                .collect();
+            let taken = match files {
+                Some(files) => super::snapshot::take(runtime, &files),
+                None => Err(std::io::Error::other("an output's bytes are not at hand")),
+            };
+            match taken {
+                Ok((held, copies)) => {
+                    if let Some(k) = ctx.outputs.iter().position(|p| *p == ctx.main) {
+                        ctx.main = copies[k].clone();
+                    }
+                    ctx.outputs = copies;
+                    ctx.snapshot = Some(held);
+                    kept.push(ctx);
+                }
+                Err(e) => {
+                    let controller = (!ctx.controller.is_empty()).then(|| ctx.controller.clone());
+                    self.sink.emit(
+                        Some(&self.project()),
+                        Event::DeployFailed {
+                            program: ctx.program.clone(),
+                            controller,
+                            run_id: self.run_id,
+                            duration_ms: 0,
+                            exit_code: None,
+                            signal: None,
+                            timed_out: false,
+                            reason: format!(
+                                "cannot keep a copy of the program for the hook in {}: {e}",
+                                runtime.display()
+                            ),
+                            stderr: String::new(),
+                        },
+                    );
+                }
+            }
+        }
+        kept
     }
 
     pub(super) fn run(self) -> Outcome {
@@ -719,6 +783,7 @@ impl Job {
                         project: self.key.clone(),
                         program: prog,
                         controller,
+                        snapshot: None,
                     };
                     deploy.push((ctx, false));
                     deploy.len() - 1
@@ -748,6 +813,10 @@ impl Job {
                 d
             })
             .collect();
+        let deploy = match &self.snapshots {
+            Some(runtime) => self.snapshot(runtime, &c, deploy),
+            None => deploy,
+        };
         let deploy = (!deploy.is_empty()).then_some(deploy);
         Outcome::Compiled {
             inputs,

@@ -39,6 +39,7 @@ mod poll;
 mod project;
 mod route;
 pub mod settle;
+pub mod snapshot;
 pub mod state;
 mod stop;
 mod watch;
@@ -134,12 +135,11 @@ pub async fn run(
     let force_poll = std::env::var_os("SKILLPOST_FORCE_POLL").is_some();
     // One daemon per folder: a second one on any of these folders stops here (exit status 2).
     lock::raise_open_file_limit();
-    let mut locks = lock::Locks::new(
-        sources
-            .runtime_dir
-            .clone()
-            .unwrap_or_else(lock::runtime_dir),
-    );
+    let runtime = sources
+        .runtime_dir
+        .clone()
+        .unwrap_or_else(lock::runtime_dir);
+    let mut locks = lock::Locks::new(runtime.clone());
     for folder in config.projects.iter().map(|p| p.path.clone()).chain(
         config
             .roots
@@ -172,6 +172,7 @@ pub async fn run(
         ready: false,
         deploys: HashMap::new(),
         deploy_stop: tokio::sync::watch::channel(false).0,
+        runtime,
     };
     sink.emit(
         None,
@@ -291,6 +292,8 @@ struct Daemon {
     deploys: HashMap<PathBuf, deploy::Worker>,
     /// Turns true at a stop: running hooks are ended.
     deploy_stop: tokio::sync::watch::Sender<bool>,
+    /// The runtime directory (lock notes, the deploy hooks' snapshots).
+    runtime: PathBuf,
 }
 
 fn settle_of(c: &Config) -> Duration {
@@ -415,6 +418,7 @@ impl Daemon {
             run_id,
             sink: self.sink.clone(),
             progress: progress.clone(),
+            snapshots: p.spec.on_success.is_some().then(|| self.runtime.clone()),
         };
         p.force = false;
         self.running += 1;
