@@ -46,8 +46,10 @@ fn base(runtime: &Path) -> std::io::Result<PathBuf> {
 /// Writes `files` (each the path the compile wrote and its bytes) into a new snapshot folder
 /// under `runtime`: the folder and the paths of the copies, in the order given.
 pub fn take(runtime: &Path, files: &[(&Path, &[u8])]) -> std::io::Result<(Held, Vec<PathBuf>)> {
+    use std::os::unix::fs::PermissionsExt as _;
     let dir = tempfile::Builder::new()
         .prefix("deploy-")
+        .permissions(std::fs::Permissions::from_mode(0o700))
         .tempdir_in(base(runtime)?)?;
     let mut copies = Vec::with_capacity(files.len());
     for (path, bytes) in files {
