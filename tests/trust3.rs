@@ -255,3 +255,66 @@ fn a_slow_hook_ships_the_pair_of_its_own_compile() {
             == fs::read(p.join("Blackboard.dat")).unwrap()
     );
 }
+
+/// Finding 3: a save of two files 20 ms apart (the SFC, then the IRL file), five times. The
+/// compile that read the SFC's new bytes and the IRL file's old ones may run (an early run
+/// after a complete write), but it is never deployed: a deploy waits until the inputs have been
+/// quiet for the whole quiet period, and the next compile's program replaces it.
+#[test]
+fn a_compile_of_half_a_save_is_never_deployed() {
+    let w = Workspace::new();
+    let p = w.project("P");
+    let shipped = w.root.join("shipped");
+    fs::create_dir(&shipped).unwrap();
+    let cfg = w.config(&format!(
+        "settle_ms = 300\n\
+         on_success = [\"sh\", \"-c\", \"cat \\\"$1\\\" > \\\"$0/$(date +%s%N)\\\"\", \"{}\", \"{{src}}\"]\n\
+         [[project]]\npath = \"{}\"\n",
+        shipped.display(),
+        p.display()
+    ));
+    let d = InProc::with_config(&cfg);
+    d.wait_for("the startup deploy", Duration::from_secs(10), |e| {
+        is_for(e, "deploy-succeeded", &p)
+    });
+    let irl = inproc::sample_text("kr15-2.irl");
+    assert!(irl.contains("$VEL.CP = VALUE\n"));
+    for round in 1..=5u32 {
+        let mark = d.mark();
+        let x = 100 + round;
+        fs::write(p.join("sfc.xml"), inproc::sfc_with_x(x)).unwrap();
+        std::thread::sleep(Duration::from_millis(20));
+        let marked = irl.replace(
+            "$VEL.CP = VALUE\n",
+            &format!("$VEL.CP = VALUE ; save {round}\n"),
+        );
+        fs::write(p.join("kr15-2.irl"), marked).unwrap();
+        d.wait_for("the save's deploy", Duration::from_secs(10), |e| {
+            inproc::is_after(e, "deploy-succeeded", &p, mark)
+        });
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    let evs = d.events();
+    let compiles = evs
+        .iter()
+        .filter(|e| is_for(e, "compile-succeeded", &p))
+        .count();
+    // Every program shipped is one of a whole save: its x and its IRL file's mark agree.
+    let mut n = 0;
+    for f in fs::read_dir(&shipped).unwrap() {
+        let text = fs::read_to_string(f.unwrap().path()).unwrap();
+        for round in 1..=5u32 {
+            if text.contains(&inproc::ptp_with_x(100 + round)) {
+                assert!(
+                    text.contains(&format!("; save {round}")),
+                    "round {round}: a program of half a save was deployed"
+                );
+            }
+        }
+        n += 1;
+    }
+    assert_eq!(
+        n, 6,
+        "one deploy at startup and one per save ({compiles} compiles)"
+    );
+}

@@ -45,6 +45,8 @@ pub(super) enum Outcome {
         /// A successful compile that wrote at least one output: what a deploy hook is given,
         /// one per program with new bytes.
         deploy: Option<Vec<super::deploy::Context>>,
+        /// The compile succeeded and its outputs are on disk.
+        succeeded: bool,
     },
     /// The project could not be set up (no blackboard): reported.
     Failed,
@@ -592,6 +594,7 @@ impl Job {
                 again: false,
                 in_use: false,
                 deploy: None,
+                succeeded: false,
             };
         }
         // The folder was moved or replaced meanwhile (its inputs may come from two folders):
@@ -634,6 +637,7 @@ impl Job {
                     again: false,
                     in_use: false,
                     deploy: None,
+                    succeeded: false,
                 };
             }
         };
@@ -824,6 +828,7 @@ impl Job {
             again,
             in_use,
             deploy,
+            succeeded: true,
         }
     }
 }

@@ -213,7 +213,8 @@ pub async fn run(
     let stop_reason;
     loop {
         d.start_due(Instant::now());
-        let next = d.next_deadline();
+        d.deploy_when_quiet(Instant::now());
+        let next = d.next_deadline(Instant::now());
         let sleep = async {
             match next {
                 Some(t) => tokio::time::sleep_until(t).await,
@@ -329,11 +330,43 @@ impl Daemon {
         });
     }
 
-    fn next_deadline(&self) -> Option<Instant> {
+    fn next_deadline(&self, now: Instant) -> Option<Instant> {
         self.projects
             .values()
             .filter_map(|p| p.sched.deadline())
+            .chain(
+                self.projects
+                    .values()
+                    .filter(|p| !p.held.is_empty() && p.last_ok)
+                    .filter_map(|p| p.sched.quiet_at(now)),
+            )
             .min()
+    }
+
+    /// Hands each project's held programs to its hook once its inputs have been quiet for the
+    /// whole quiet period since the last change and its last compile succeeded: a compile
+    /// that read half of a save (the SFC saved, the blackboard a moment later) is replaced by
+    /// the next one before its programs go to a controller. A change during the wait keeps them
+    /// waiting for the compile it brings.
+    fn deploy_when_quiet(&mut self, now: Instant) {
+        let due: Vec<PathBuf> = self
+            .projects
+            .iter()
+            .filter(|(_, p)| {
+                !p.held.is_empty() && p.last_ok && p.sched.quiet_at(now).is_some_and(|t| t <= now)
+            })
+            .map(|(k, _)| k.clone())
+            .collect();
+        for k in due {
+            let Some(p) = self.projects.get_mut(&k) else {
+                continue;
+            };
+            let programs = std::mem::take(&mut p.held);
+            let run_id = p.held_run;
+            if let Some(hook) = p.spec.on_success.clone() {
+                self.deploy(&k, run_id, hook, programs);
+            }
+        }
     }
 
     /// Starts every compile whose quiet period is over, as far as the parallel limit allows.
@@ -465,8 +498,13 @@ impl Daemon {
             return;
         };
         match r.outcome {
-            Outcome::Unchanged | Outcome::Failed => {
+            Outcome::Unchanged => {
                 p.retries = 0;
+                p.sched.finished(now);
+            }
+            Outcome::Failed => {
+                p.retries = 0;
+                p.last_ok = false;
                 p.sched.finished(now);
             }
             Outcome::Deferred {
@@ -500,10 +538,17 @@ impl Daemon {
                 again,
                 in_use,
                 deploy,
+                succeeded,
             } => {
-                if let (Some(hook), Some(ctx)) = (&p.spec.on_success, deploy) {
-                    self.deploy(&r.key, r.run_id, hook.clone(), ctx);
+                // Held until the inputs have been quiet for the whole period
+                // (`deploy_when_quiet`): a newer compile's program replaces the same program's.
+                if let (Some(_), Some(ctxs)) = (&p.spec.on_success, deploy) {
+                    p.held
+                        .retain(|old| !ctxs.iter().any(|c| c.program == old.program));
+                    p.held.extend(ctxs);
+                    p.held_run = r.run_id;
                 }
+                p.last_ok = succeeded;
                 p.retries = 0;
                 // Another program had the blackboard open (each write-back already waits about
                 // 1.3 s for it): a few more rounds, then the next edit tries again.

@@ -75,6 +75,14 @@ pub(super) struct Project {
     /// The folder appeared, but another daemon keeps it: waited for like a missing folder
     /// (said once, with `watch-degraded`).
     pub(super) foreign: bool,
+    /// The programs to deploy, each from the last successful compile that wrote it new bytes:
+    /// handed to the hook once the inputs have been quiet for the whole quiet period
+    /// ([`Scheduler::quiet_at`]) and the last compile succeeded (docs/DAEMON.md, "Deploying").
+    pub(super) held: Vec<super::deploy::Context>,
+    /// The `run_id` of the newest compile among `held`.
+    pub(super) held_run: u64,
+    /// The last compile succeeded (or found nothing changed after one that did).
+    pub(super) last_ok: bool,
 }
 
 impl Daemon {
@@ -521,6 +529,9 @@ impl Daemon {
             trigger: Some("startup"),
             retries: 0,
             in_use_rounds: 0,
+            held: Vec::new(),
+            held_run: 0,
+            last_ok: false,
             missing: false,
             missing_since: None,
             claim: None,

@@ -192,6 +192,17 @@ impl Scheduler {
         self.current
     }
 
+    /// When the inputs will have been quiet for the whole period since the last change seen
+    /// (`now` when none was seen, or it is that long ago); `None` while a compile waits or runs.
+    /// A deploy waits for it: a compile that read half of a save (the SFC saved, the blackboard
+    /// still to come) is never deployed.
+    pub fn quiet_at(&self, now: Instant) -> Option<Instant> {
+        if self.is_busy() {
+            return None;
+        }
+        Some(self.last.map_or(now, |l| (l + self.settle).max(now)))
+    }
+
     /// Whether a compile is waiting or running.
     pub fn is_busy(&self) -> bool {
         self.running || self.deadline.is_some() || self.pending
@@ -416,5 +427,33 @@ mod tests {
         advance(Duration::from_millis(5)).await;
         assert!(s.finished(Instant::now()));
         assert!(s.is_busy());
+    }
+
+    #[test]
+    fn the_inputs_are_quiet_a_whole_period_after_the_last_change_and_never_while_busy() {
+        let t = Instant::now();
+        let mut s = Scheduler::new(S, S * 10);
+        assert_eq!(s.quiet_at(t), Some(t), "nothing seen: quiet now");
+        s.completed(t);
+        assert_eq!(s.quiet_at(t), None, "a compile waits");
+        assert!(s.fire(t + QUICK));
+        assert_eq!(s.quiet_at(t + QUICK), None, "a compile runs");
+        // The second file of the save arrives during the early run.
+        s.change(t + QUICK * 2);
+        assert!(s.finished(t + QUICK * 3));
+        assert_eq!(s.quiet_at(t + QUICK * 3), None, "its compile waits");
+        assert!(s.fire(t + QUICK * 3 + S));
+        assert!(!s.finished(t + QUICK * 4 + S));
+        // Quiet a whole period after the follow-up was scheduled (the last change seen).
+        assert_eq!(s.quiet_at(t + QUICK * 4 + S), Some(t + QUICK * 4 + S));
+        let mut s = Scheduler::new(S, S * 10);
+        s.completed(t);
+        assert!(s.fire(t + QUICK));
+        assert!(!s.finished(t + QUICK * 2));
+        assert_eq!(
+            s.quiet_at(t + QUICK * 2),
+            Some(t + S),
+            "a period after the save"
+        );
     }
 }
