@@ -69,6 +69,26 @@ pub fn percent_decode(s: &str) -> Option<String> {
         .map(|c| c.into_owned())
 }
 
+/// A path for a message, exactly: bytes that are not UTF-8 as `\xFF`, control characters
+/// escaped (`\u{1b}`), so two names never read alike and nothing reaches a terminal raw.
+pub fn escaped(p: &Path) -> String {
+    use std::os::unix::ffi::OsStrExt as _;
+    let mut out = String::new();
+    for chunk in p.as_os_str().as_bytes().utf8_chunks() {
+        for c in chunk.valid().chars() {
+            if c.is_control() {
+                out.extend(c.escape_default());
+            } else {
+                out.push(c);
+            }
+        }
+        for b in chunk.invalid() {
+            out.push_str(&format!("\\x{b:02X}"));
+        }
+    }
+    out
+}
+
 /// Folds `.` and `..` lexically (no file-system access): `.` is dropped, `..` removes the name
 /// before it; a `..` with no name before it is kept in a relative path (`../../p` stays) and
 /// dropped at the root (`/..` is `/`). The empty path stands for the starting folder: `a/..` → ``.

@@ -318,3 +318,138 @@ fn a_compile_of_half_a_save_is_never_deployed() {
         "one deploy at startup and one per save ({compiles} compiles)"
     );
 }
+
+/// Finding 4: `A\xff` (not UTF-8) and `A\u{FFFD}` (`A\xEF\xBF\xBD`) under one root, with a
+/// hook: the first is refused with its bytes named, the second compiles and its hook gets its
+/// own folder and files; the events and the state never merge the two.
+#[test]
+fn a_folder_name_that_is_not_utf8_is_refused_never_merged_with_its_look_alike() {
+    use std::os::unix::ffi::OsStrExt as _;
+    let w = Workspace::new();
+    let root = w.ws();
+    let bad = root.join(std::ffi::OsStr::from_bytes(b"A\xff"));
+    let good = root.join("A\u{FFFD}");
+    inproc::copy_project(&bad);
+    inproc::copy_project(&good);
+    let log = w.root.join("hook.log");
+    let cfg = w.config(&format!(
+        "on_success = [\"sh\", \"-c\", \"echo \\\"$1|$2\\\" >> {}\", \"sh\", \"{{project}}\", \"{{src}}\"]\n\
+         [[root]]\npath = \"{}\"\n",
+        log.display(),
+        root.display()
+    ));
+    let d = InProc::with_config(&cfg);
+    let evs = d.wait_for("the good one's deploy", Duration::from_secs(10), |e| {
+        is_for(e, "deploy-succeeded", &good)
+    });
+    std::thread::sleep(Duration::from_millis(300));
+    let evs2 = d.events();
+    let refusal = evs2
+        .iter()
+        .find(|e| {
+            inproc::is(e, "watch-degraded")
+                && e["reason"].as_str().is_some_and(|r| r.contains("A\\xFF"))
+        })
+        .unwrap_or_else(|| panic!("no refusal naming A\\xFF:\n{}", inproc::dump(&evs)));
+    assert!(
+        refusal["reason"].as_str().unwrap().contains("not UTF-8"),
+        "{refusal}"
+    );
+    // One compile, of the good one; the hook got the good folder.
+    let compiles: Vec<&serde_json::Value> = evs2
+        .iter()
+        .filter(|e| inproc::is(e, "compile-started"))
+        .collect();
+    assert_eq!(compiles.len(), 1, "{}", inproc::dump(&evs2));
+    assert_eq!(compiles[0]["project"], good.display().to_string());
+    let hooked = fs::read_to_string(&log).unwrap();
+    assert_eq!(hooked.lines().count(), 1, "{hooked}");
+    assert!(
+        hooked.starts_with(&format!("{}|", good.display())),
+        "{hooked}"
+    );
+    assert!(!bad.join("Blackboard.src").exists());
+}
+
+/// Finding 12: a folder named with an escape sequence: the log (the journal) and the
+/// `skillpost status` table show it escaped, never the raw ESC.
+#[test]
+fn escape_sequences_in_folder_names_never_reach_the_log_or_the_status_table_raw() {
+    let w = Workspace::new();
+    let p = w.ws().join("P\u{1b}[31mX");
+    inproc::copy_project(&p);
+    let state = w.root.join("state.json");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["watch", "--settle", "50", "--state"])
+        .arg(&state)
+        .arg(&p)
+        .env("XDG_RUNTIME_DIR", &w.root)
+        .env_remove("RUNTIME_DIRECTORY")
+        .env_remove("JOURNAL_STREAM")
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let compiled = inproc::wait_until(Duration::from_secs(20), || {
+        p.join("Blackboard.src").exists() && state.exists()
+    });
+    // The state file follows the compile (rate-limited): wait for it to name the project.
+    inproc::wait_until(Duration::from_secs(5), || {
+        inproc::read_string(&state).contains("compiled")
+            || inproc::read_string(&state).contains("ok")
+    });
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["status", "--state"])
+        .arg(&state)
+        .output()
+        .unwrap();
+    let _ = std::process::Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status();
+    let _ = child.wait();
+    let mut log = Vec::new();
+    std::io::Read::read_to_end(child.stderr.as_mut().unwrap(), &mut log).unwrap();
+    let log = String::from_utf8_lossy(&log);
+    assert!(compiled, "no compile: {log}");
+    assert!(log.contains("compiled in"), "{log}");
+    assert!(!log.contains('\u{1b}'), "a raw ESC in the log: {log:?}");
+    assert!(log.contains("P\\u{1b}[31mX"), "{log}");
+    let table = String::from_utf8_lossy(&status.stdout);
+    assert!(table.contains("P\\u{1b}[31mX"), "{table}");
+    assert!(
+        !table.contains('\u{1b}'),
+        "a raw ESC in the status table: {table:?}"
+    );
+}
+
+/// Finding 4, the blackboard: a project whose only blackboard's name is not UTF-8 fails with
+/// the reason (its bytes escaped); nothing is written, no hook runs.
+#[test]
+fn a_blackboard_name_that_is_not_utf8_is_a_clear_failure() {
+    use std::os::unix::ffi::OsStrExt as _;
+    let w = Workspace::new();
+    let p = w.project("P");
+    fs::rename(
+        p.join("Blackboard.aml"),
+        p.join(std::ffi::OsStr::from_bytes(b"Cell\xff.aml")),
+    )
+    .unwrap();
+    let d = InProc::with_dirs(&[&p]);
+    let evs = d.wait_for("the failure", Duration::from_secs(10), |e| {
+        is_for(e, "compile-failed", &p)
+    });
+    let failed = evs
+        .iter()
+        .find(|e| is_for(e, "compile-failed", &p))
+        .unwrap();
+    let message = failed["diagnostics"][0]["message"].as_str().unwrap_or("");
+    assert!(
+        message.contains("Cell\\xFF.aml") && message.contains("not UTF-8"),
+        "{failed}"
+    );
+    assert!(fs::read_dir(&p).unwrap().all(|e| {
+        let n = e.unwrap().file_name();
+        !n.as_bytes().ends_with(b".src")
+    }));
+}

@@ -727,6 +727,13 @@ pub fn resolve_project(spec: &ProjectSpec) -> Result<(PathBuf, ProgramName), Str
             }
         }
     };
+    if blackboard.to_str().is_none() {
+        return Err(format!(
+            "the blackboard's name {} is not UTF-8: a deploy hook's arguments and the events \
+             could not name it exactly; rename it",
+            crate::paths::escaped(&blackboard)
+        ));
+    }
     let program = program_name(spec.program.as_deref(), &spec.path, &blackboard);
     Ok((blackboard, program))
 }

@@ -23,13 +23,18 @@ use serde_json::Value;
 use super::events::Event;
 use super::state::describe;
 
-/// One line: line breaks in a message become spaces.
+/// One line: line breaks in a message become spaces, and every other control character is
+/// written escaped (`\u{1b}`): a folder named with an escape sequence cannot recolour or rewrite
+/// a terminal or the journal.
 fn one_line(s: &str) -> String {
-    s.split(['\n', '\r'])
-        .filter(|l| !l.trim().is_empty())
-        .map(str::trim)
-        .collect::<Vec<_>>()
-        .join(" ")
+    super::state::printable(
+        &s.split(['\n', '\r'])
+            .filter(|l| !l.trim().is_empty())
+            .map(str::trim)
+            .collect::<Vec<_>>()
+            .join(" "),
+    )
+    .into_owned()
 }
 
 /// A path as the line shows it: relative to the project folder when inside it.

@@ -504,6 +504,33 @@ impl Daemon {
         settle: Duration,
     ) -> bool {
         let key = spec.path.clone();
+        // A name that is not UTF-8 cannot be carried exactly by a hook's arguments, the events or
+        // the state file (`A\xFF` and `A\u{FFFD}` would be one project there): refused, once
+        // (until a reload), the event naming it with its bytes escaped.
+        if key.to_str().is_none() {
+            if let Origin::Root(r) = &origin
+                && let Some(root) = self.roots.get_mut(r)
+            {
+                root.locked_out.insert(key.clone());
+            }
+            self.sink.emit(
+                None,
+                Event::WatchDegraded {
+                    root: match &origin {
+                        Origin::Root(r) => Some(r.display().to_string()),
+                        Origin::Explicit => None,
+                    },
+                    reason: format!(
+                        "the project folder {} is not watched: its name is not UTF-8, and a \
+                         deploy hook's arguments, the events and the state file could not name \
+                         it exactly; rename it",
+                        crate::paths::escaped(&key)
+                    ),
+                    backend: Some("none"),
+                },
+            );
+            return false;
+        }
         if let Err(why) = self.locks.acquire(&key) {
             if let Origin::Root(r) = &origin
                 && let Some(root) = self.roots.get_mut(r)

@@ -892,7 +892,34 @@ fn deploy_table(s: &Snapshot) -> String {
 
 /// Rows under their header, each column as wide as its widest cell plus two spaces; line
 /// breaks and tabs in a cell become spaces, no trailing blanks.
+/// `s` with its control characters escaped (`\u{1b}`; a tab and line breaks become spaces
+/// first where a caller wants that): what a table or a log line shows of a name from disk.
+pub fn printable(s: &str) -> std::borrow::Cow<'_, str> {
+    if !s.chars().any(char::is_control) {
+        return std::borrow::Cow::Borrowed(s);
+    }
+    std::borrow::Cow::Owned(
+        s.chars()
+            .map(|c| {
+                if c.is_control() {
+                    c.escape_default().to_string()
+                } else {
+                    c.to_string()
+                }
+            })
+            .collect(),
+    )
+}
+
 fn aligned<const N: usize>(header: [&str; N], rows: &[[String; N]]) -> String {
+    let rows: Vec<[String; N]> = rows
+        .iter()
+        .map(|r| {
+            r.each_ref()
+                .map(|c| printable(&c.replace(['\t', '\n', '\r'], " ")).into_owned())
+        })
+        .collect();
+    let rows = &rows[..];
     let mut width = header.map(|h| h.chars().count());
     for r in rows {
         for (w, c) in width.iter_mut().zip(r) {
