@@ -453,3 +453,101 @@ fn a_blackboard_name_that_is_not_utf8_is_a_clear_failure() {
         !n.as_bytes().ends_with(b".src")
     }));
 }
+
+/// A two-controller cell project in `dir` (the fixtures' welding cell, tell-at-once).
+fn cell_project(dir: &Path) {
+    fs::create_dir_all(dir).unwrap();
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for sub in [
+        "fixtures/base/cell",
+        "fixtures/base/cell2",
+        "fixtures/ok/cell-tell-at-once",
+    ] {
+        for e in fs::read_dir(repo.join(sub)).unwrap() {
+            let e = e.unwrap();
+            let name = e.file_name();
+            if name != "case.toml" && name != "README.txt" {
+                fs::copy(e.path(), dir.join(name)).unwrap();
+            }
+        }
+    }
+}
+
+/// Finding 5: a cell's hook that cannot tell the programs apart (DAEMON.md's single-robot
+/// install example, `install {src} {dat} /mnt/…/R1/`) would put robot 2's program on robot 1's
+/// share: neither program is deployed, each `deploy-failed` says why; with `{controller}` each
+/// program goes to its own controller's share.
+#[test]
+fn a_cell_program_never_goes_to_another_controllers_share() {
+    let w = Workspace::new();
+    let a = w.ws().join("Cell");
+    cell_project(&a);
+    let r1 = w.root.join("R1");
+    fs::create_dir(&r1).unwrap();
+    let cfg = w.config(&format!(
+        "on_success = [\"install\", \"-m\", \"0644\", \"{{src}}\", \"{{dat}}\", \"{}/\"]\n\
+         [[project]]\npath = \"{}\"\n",
+        r1.display(),
+        a.display()
+    ));
+    let d = InProc::with_config(&cfg);
+    d.wait_for("the compile", Duration::from_secs(10), |e| {
+        is_for(e, "compile-succeeded", &a)
+    });
+    std::thread::sleep(Duration::from_millis(500));
+    let evs = d.events();
+    let failed: Vec<&serde_json::Value> = evs
+        .iter()
+        .filter(|e| is_for(e, "deploy-failed", &a))
+        .collect();
+    assert_eq!(failed.len(), 2, "{}", inproc::dump(&evs));
+    assert!(
+        failed[0]["reason"]
+            .as_str()
+            .unwrap()
+            .contains("name neither `{controller}` nor `{program}`"),
+        "{}",
+        failed[0]
+    );
+    assert!(!evs.iter().any(|e| is_for(e, "deploy-started", &a)));
+    assert_eq!(
+        fs::read_dir(&r1).unwrap().count(),
+        0,
+        "a program on R1's share"
+    );
+    d.stop(Duration::from_secs(10));
+
+    // Chosen by `{controller}`: each program on its own controller's share.
+    let b = w.ws().join("Cell2");
+    cell_project(&b);
+    let shares = w.root.join("shares");
+    for ctl in ["KUKA KR15-2", "KUKA KR16-2"] {
+        fs::create_dir_all(shares.join(ctl)).unwrap();
+    }
+    let cfg = w.config(&format!(
+        "on_success = [\"sh\", \"-c\", \"install -m 0644 \\\"$1\\\" \\\"$2\\\" \\\"$0/$3/\\\"\", \"{}\", \"{{src}}\", \"{{dat}}\", \"{{controller}}\"]\n\
+         [[project]]\npath = \"{}\"\n",
+        shares.display(),
+        b.display()
+    ));
+    let d = InProc::with_config(&cfg);
+    d.wait_for("both deploys", Duration::from_secs(10), |e| {
+        is_for(e, "deploy-succeeded", &b) && e["controller"] == "KUKA KR16-2"
+    });
+    for (ctl, program) in [
+        ("KUKA KR15-2", "Blackboard_KUKA_KR15_2"),
+        ("KUKA KR16-2", "Blackboard_KUKA_KR16_2"),
+    ] {
+        let names: Vec<String> = fs::read_dir(shares.join(ctl))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        let mut names = names;
+        names.sort();
+        assert_eq!(
+            names,
+            [format!("{program}.dat"), format!("{program}.src")],
+            "{ctl}"
+        );
+    }
+}

@@ -152,6 +152,18 @@ pub fn check(argv: &[String]) -> Result<(), String> {
     Ok(())
 }
 
+/// Whether the hook's arguments tell one program from another (`{controller}` or `{program}`):
+/// a hook that does not would send every program of a cell to one place, all but one of them
+/// to the wrong controller.
+pub fn tells_programs_apart(argv: &[String]) -> bool {
+    argv.iter().any(|a| {
+        pieces(a).is_ok_and(|p| {
+            p.iter()
+                .any(|(ph, n)| *ph && (n == "controller" || n == "program"))
+        })
+    })
+}
+
 /// The argument vector for one compile. `Err` when a placeholder names a file this compile did
 /// not write (`{dat}` of a RAPID program).
 pub fn expand(argv: &[String], ctx: &Context) -> Result<Vec<String>, String> {

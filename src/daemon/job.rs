@@ -817,6 +817,45 @@ impl Job {
                 d
             })
             .collect();
+        // A cell's programs (several controllers) only to a hook that tells them apart.
+        let mut controllers: Vec<&str> = c
+            .output_programs
+            .iter()
+            .map(|(_, ctl)| ctl.as_str())
+            .collect();
+        controllers.sort_unstable();
+        controllers.dedup();
+        let deploy = match &self.spec.on_success {
+            Some(hook)
+                if controllers.len() > 1 && !super::deploy::tells_programs_apart(&hook.argv) =>
+            {
+                for ctx in &deploy {
+                    self.sink.emit(
+                        Some(&self.project()),
+                        Event::DeployFailed {
+                            program: ctx.program.clone(),
+                            controller: Some(ctx.controller.clone()),
+                            run_id: self.run_id,
+                            duration_ms: 0,
+                            exit_code: None,
+                            signal: None,
+                            timed_out: false,
+                            reason: format!(
+                                "not deployed: the project's programs run on {} controllers \
+                                 ({}), and the hook's arguments name neither `{{controller}}` \
+                                 nor `{{program}}`, so every program would go to the same place; \
+                                 choose the destination by `{{controller}}`",
+                                controllers.len(),
+                                controllers.join(", ")
+                            ),
+                            stderr: String::new(),
+                        },
+                    );
+                }
+                Vec::new()
+            }
+            _ => deploy,
+        };
         let deploy = match &self.snapshots {
             Some(runtime) => self.snapshot(runtime, &c, deploy),
             None => deploy,
