@@ -19,13 +19,7 @@ fn cell(w: &Workspace, name: &str) -> std::path::PathBuf {
 
 /// Copies `fixtures/base/<base>` into `dir`.
 fn copy_base(dir: &Path, base: &str) {
-    let from = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("fixtures/base")
-        .join(base);
-    for e in fs::read_dir(from).unwrap() {
-        let e = e.unwrap();
-        fs::copy(e.path(), dir.join(e.file_name())).unwrap();
-    }
+    inproc::copy_fixture_layers(dir, &[&format!("base/{base}")]);
 }
 
 /// The `compile-succeeded` of the daemon's first compile of `p`.

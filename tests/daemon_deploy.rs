@@ -375,21 +375,7 @@ fn a_configuration_in_a_project_folder_may_not_set_a_hook() {
 fn a_cell_deploys_each_program_to_its_own_controller() {
     let w = Workspace::new();
     let a = w.ws().join("Cell");
-    fs::create_dir_all(&a).unwrap();
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
-    for dir in [
-        "fixtures/base/cell",
-        "fixtures/base/cell2",
-        "fixtures/ok/cell-tell-at-once",
-    ] {
-        for e in fs::read_dir(repo.join(dir)).unwrap() {
-            let e = e.unwrap();
-            let name = e.file_name();
-            if name != "case.toml" && name != "README.txt" {
-                fs::copy(e.path(), a.join(name)).unwrap();
-            }
-        }
-    }
+    inproc::copy_fixture_layers(&a, &inproc::TWO_CONTROLLER_CELL);
     let log = w.root.join("deployed.log");
     // The second robot's share is offline.
     let script = format!(

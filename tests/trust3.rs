@@ -454,25 +454,6 @@ fn a_blackboard_name_that_is_not_utf8_is_a_clear_failure() {
     }));
 }
 
-/// A two-controller cell project in `dir` (the fixtures' welding cell, tell-at-once).
-fn cell_project(dir: &Path) {
-    fs::create_dir_all(dir).unwrap();
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
-    for sub in [
-        "fixtures/base/cell",
-        "fixtures/base/cell2",
-        "fixtures/ok/cell-tell-at-once",
-    ] {
-        for e in fs::read_dir(repo.join(sub)).unwrap() {
-            let e = e.unwrap();
-            let name = e.file_name();
-            if name != "case.toml" && name != "README.txt" {
-                fs::copy(e.path(), dir.join(name)).unwrap();
-            }
-        }
-    }
-}
-
 /// Finding 5: a cell's hook that cannot tell the programs apart (DAEMON.md's single-robot
 /// install example, `install {src} {dat} /mnt/…/R1/`) would put robot 2's program on robot 1's
 /// share: neither program is deployed, each `deploy-failed` says why; with `{controller}` each
@@ -481,7 +462,7 @@ fn cell_project(dir: &Path) {
 fn a_cell_program_never_goes_to_another_controllers_share() {
     let w = Workspace::new();
     let a = w.ws().join("Cell");
-    cell_project(&a);
+    inproc::copy_fixture_layers(&a, &inproc::TWO_CONTROLLER_CELL);
     let r1 = w.root.join("R1");
     fs::create_dir(&r1).unwrap();
     let cfg = w.config(&format!(
@@ -519,7 +500,7 @@ fn a_cell_program_never_goes_to_another_controllers_share() {
 
     // Chosen by `{controller}`: each program on its own controller's share.
     let b = w.ws().join("Cell2");
-    cell_project(&b);
+    inproc::copy_fixture_layers(&b, &inproc::TWO_CONTROLLER_CELL);
     let shares = w.root.join("shares");
     for ctl in ["KUKA KR15-2", "KUKA KR16-2"] {
         fs::create_dir_all(shares.join(ctl)).unwrap();

@@ -393,6 +393,24 @@ impl Job {
         (outcome, Some(start.elapsed()), error)
     }
 
+    /// `deploy-failed` for a program whose hook is not run at all, and why.
+    fn not_deployed(&self, ctx: &super::deploy::Context, reason: String) {
+        self.sink.emit(
+            Some(&self.project()),
+            Event::DeployFailed {
+                program: ctx.program.clone(),
+                controller: (!ctx.controller.is_empty()).then(|| ctx.controller.clone()),
+                run_id: self.run_id,
+                duration_ms: 0,
+                exit_code: None,
+                signal: None,
+                timed_out: false,
+                reason,
+                stderr: String::new(),
+            },
+        );
+    }
+
     /// Each program's files as this compile wrote them, copied into a snapshot of the daemon's
     /// own: what the hook gets instead of the files in the project folder, which anyone who
     /// can write there may replace. A program whose copy cannot be made is not deployed
@@ -429,26 +447,13 @@ impl Job {
                     ctx.snapshot = Some(held);
                     kept.push(ctx);
                 }
-                Err(e) => {
-                    let controller = (!ctx.controller.is_empty()).then(|| ctx.controller.clone());
-                    self.sink.emit(
-                        Some(&self.project()),
-                        Event::DeployFailed {
-                            program: ctx.program.clone(),
-                            controller,
-                            run_id: self.run_id,
-                            duration_ms: 0,
-                            exit_code: None,
-                            signal: None,
-                            timed_out: false,
-                            reason: format!(
-                                "cannot keep a copy of the program for the hook in {}: {e}",
-                                runtime.display()
-                            ),
-                            stderr: String::new(),
-                        },
-                    );
-                }
+                Err(e) => self.not_deployed(
+                    &ctx,
+                    format!(
+                        "cannot keep a copy of the program for the hook in {}: {e}",
+                        runtime.display()
+                    ),
+                ),
             }
         }
         kept
@@ -830,26 +835,16 @@ impl Job {
                 if controllers.len() > 1 && !super::deploy::tells_programs_apart(&hook.argv) =>
             {
                 for ctx in &deploy {
-                    self.sink.emit(
-                        Some(&self.project()),
-                        Event::DeployFailed {
-                            program: ctx.program.clone(),
-                            controller: Some(ctx.controller.clone()),
-                            run_id: self.run_id,
-                            duration_ms: 0,
-                            exit_code: None,
-                            signal: None,
-                            timed_out: false,
-                            reason: format!(
-                                "not deployed: the project's programs run on {} controllers \
-                                 ({}), and the hook's arguments name neither `{{controller}}` \
-                                 nor `{{program}}`, so every program would go to the same place; \
-                                 choose the destination by `{{controller}}`",
-                                controllers.len(),
-                                controllers.join(", ")
-                            ),
-                            stderr: String::new(),
-                        },
+                    self.not_deployed(
+                        ctx,
+                        format!(
+                            "not deployed: the project's programs run on {} controllers ({}), \
+                             and the hook's arguments name neither `{{controller}}` nor \
+                             `{{program}}`, so every program would go to the same place; choose \
+                             the destination by `{{controller}}`",
+                            controllers.len(),
+                            controllers.join(", ")
+                        ),
                     );
                 }
                 Vec::new()

@@ -70,6 +70,27 @@ pub fn copy_project(dir: &Path) {
     }
 }
 
+/// Copies the fixtures' folders `layers` (relative to `fixtures/`, e.g. `base/cell`) into `dir`
+/// (created), each over the one before, without their `case.toml` and `README.txt`: a
+/// fixture case as a project folder (`["base/cell", "base/cell2", "ok/cell-tell-at-once"]`, a
+/// two-controller cell).
+pub fn copy_fixture_layers(dir: &Path, layers: &[&str]) {
+    fs::create_dir_all(dir).unwrap();
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
+    for layer in layers {
+        for e in fs::read_dir(fixtures.join(layer)).unwrap() {
+            let e = e.unwrap();
+            let name = e.file_name();
+            if name != "case.toml" && name != "README.txt" {
+                fs::copy(e.path(), dir.join(name)).unwrap();
+            }
+        }
+    }
+}
+
+/// The layers of a two-controller cell for [`copy_fixture_layers`].
+pub const TWO_CONTROLLER_CELL: [&str; 3] = ["base/cell", "base/cell2", "ok/cell-tell-at-once"];
+
 pub fn src_of(project: &Path) -> PathBuf {
     project.join("Blackboard.src")
 }
