@@ -729,6 +729,9 @@ codes! {
     /// A conversion in a template got a value that is not a number (or gave a result too
     /// large to write).
     BadConversion = "E505",
+    /// A value outside what the blackboard's `Constraint` on its parameter allows (below
+    /// `RequiredMinValue`, above `RequiredMaxValue`, or none of the `RequiredValue`s).
+    OutOfRange = "E506",
 
     /// The program name is not a name of the program's language (or too long for it).
     BadProgramName = "E601",
@@ -765,6 +768,9 @@ codes! {
     LinkPartnerMissing = "W207",
     /// A resource attribute whose name is near one skillpost reads (`Controler`): not read.
     NearAttribute = "W208",
+    /// A parameter's `Constraint` that cannot be checked (a bound that is not a number, no
+    /// value in it): not checked.
+    UnusableConstraint = "W209",
     /// The start step is not marked `initialStep="true"`.
     StartNotInitial = "W301",
     /// A step's resource was inferred from its skill.

@@ -351,6 +351,25 @@ pub struct Param {
     pub ty: Option<ValueType>,
     /// Whether the attribute has no nested attributes.
     pub leaf: bool,
+    /// What the blackboard allows its values to be (CAEX `Constraint`s of a leaf parameter).
+    pub constraints: Vec<Constraint>,
+}
+
+/// A CAEX `Constraint` on a skill parameter: `OrdinalScaledType` bounds
+/// (`RequiredMinValue`/`RequiredMaxValue`, numbers, inclusive) and required values
+/// (`RequiredValue`, of `OrdinalScaledType` or, several, of `NominalScaledType`: the value must be
+/// one of them).
+#[derive(Debug, Clone)]
+pub struct Constraint {
+    /// Its `Name`.
+    pub name: String,
+    /// The `Constraint` element's start tag.
+    pub span: Span,
+    /// The least value allowed, and as written.
+    pub min: Option<(f64, String)>,
+    pub max: Option<(f64, String)>,
+    /// The values allowed (empty: any).
+    pub one_of: Vec<String>,
 }
 
 pub use crate::value::{Value, ValueType};

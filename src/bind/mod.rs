@@ -1145,6 +1145,20 @@ fn value_of<'a>(
         _ => None,
     };
     let neutral = typed.is_ok();
+    if let Ok(l) = &typed
+        && let Some((k, why)) = outside_constraints(&p.constraints, l)
+    {
+        return Err(err(
+            Code::OutOfRange,
+            format!(
+                "`{}` = `{s}` for parameter `{}`: the blackboard's constraint `{}` {why}",
+                path(p.indices.len()),
+                p.path.text,
+                k.name
+            ),
+        )
+        .map(|d| Box::new(d.related(k.span.clone(), "the constraint"))));
+    }
     match typed.and_then(|l| profile.literal(&l)) {
         Ok(t) => Ok((t, number)),
         Err(why) => {
@@ -1168,6 +1182,79 @@ fn value_of<'a>(
         }
     }
 }
+/// The first constraint `value` is outside of, and how (`below the least value 0`, `not one of
+/// A, B (did you mean …)`); `None` when every constraint allows it. Bounds compare numbers
+/// (a value that is not one is outside them); required values compare as numbers when both are
+/// numbers, else as text (`true`/`false` whatever their case).
+fn outside_constraints<'k>(
+    constraints: &'k [crate::model::Constraint],
+    value: &crate::value::Literal,
+) -> Option<(&'k crate::model::Constraint, String)> {
+    use crate::value::Literal;
+    if constraints.is_empty() {
+        return None;
+    }
+    let text: std::borrow::Cow<str> = match value {
+        Literal::Number(n) => std::borrow::Cow::Borrowed(n.as_ref()),
+        Literal::Bool(b) => std::borrow::Cow::Owned(b.to_string()),
+        Literal::Str(t) | Literal::Word(t) => std::borrow::Cow::Borrowed(t),
+    };
+    let number = match value {
+        Literal::Number(n) => n.parse::<f64>().ok(),
+        _ => None,
+    };
+    for k in constraints {
+        let range = match (&k.min, &k.max) {
+            (Some((_, lo)), Some((_, hi))) => format!(" (from {lo} to {hi})"),
+            _ => String::new(),
+        };
+        if let Some((lo, written)) = &k.min {
+            match number {
+                Some(x) if x < *lo => {
+                    return Some((k, format!("allows no value below {written}{range}")));
+                }
+                None => {
+                    return Some((k, format!("allows numbers only, at least {written}{range}")));
+                }
+                _ => {}
+            }
+        }
+        if let Some((hi, written)) = &k.max {
+            match number {
+                Some(x) if x > *hi => {
+                    return Some((k, format!("allows no value above {written}{range}")));
+                }
+                None => return Some((k, format!("allows numbers only, at most {written}{range}"))),
+                _ => {}
+            }
+        }
+        if !k.one_of.is_empty() {
+            let allowed = k.one_of.iter().any(|a| match (number, a.parse::<f64>()) {
+                (Some(x), Ok(y)) => x == y,
+                _ => {
+                    *a == *text
+                        || (matches!(value, Literal::Bool(_)) && a.eq_ignore_ascii_case(&text))
+                }
+            });
+            if !allowed {
+                // A number: the nearest allowed number; else the nearest name.
+                let nearest = number.and_then(|x| {
+                    k.one_of
+                        .iter()
+                        .filter_map(|a| Some((a, (a.parse::<f64>().ok()? - x).abs())))
+                        .min_by(|a, b| a.1.total_cmp(&b.1))
+                });
+                let near = match nearest {
+                    Some((a, _)) => format!("; the nearest is `{a}`"),
+                    None => crate::names::did_you_mean(&text, k.one_of.iter().map(String::as_str)),
+                };
+                return Some((k, format!("allows only {}{near}", k.one_of.join(", "))));
+            }
+        }
+    }
+    None
+}
+
 /// Prepares a skill's calls: functions, IRL commands, overloads and parameter fit. Reports
 /// problems once per skill; `None` when the skill cannot be rendered.
 fn prepare(
@@ -1370,6 +1457,23 @@ mod tests {
 
     fn typed_in(l: Language, s: &str, ty: Option<ValueType>) -> Result<Cow<'_, str>, String> {
         crate::value::literal(s, ty).and_then(|v| l.profile().literal(&v))
+    }
+
+    #[test]
+    fn required_words_and_booleans_compare_as_written_and_suggest_the_near_one() {
+        use crate::value::Literal;
+        let k = [crate::model::Constraint {
+            name: "modes".into(),
+            span: Span::new(0, 0..0),
+            min: None,
+            max: None,
+            one_of: vec!["fast".into(), "slow".into(), "TRUE".into()],
+        }];
+        assert!(outside_constraints(&k, &Literal::Word("fast")).is_none());
+        assert!(outside_constraints(&k, &Literal::Bool(true)).is_none());
+        let (_, why) = outside_constraints(&k, &Literal::Word("fasst")).unwrap();
+        assert_eq!(why, "allows only fast, slow, TRUE; did you mean `fast`?");
+        assert!(outside_constraints(&k, &Literal::Str("Fast")).is_some());
     }
 
     #[test]

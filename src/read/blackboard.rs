@@ -1164,12 +1164,18 @@ impl Reader<'_> {
         } else {
             None
         };
+        let constraints = if leaf {
+            self.constraints(a, &path)
+        } else {
+            Vec::new()
+        };
         out.push(Param {
             path: Name::new(&path, name_span),
             variable: if usable { this_variable.clone() } else { None },
             indices: indices.clone(),
             ty,
             leaf,
+            constraints,
         });
         for n in nested {
             self.param(
@@ -1184,6 +1190,76 @@ impl Reader<'_> {
         if pushed_index {
             indices.pop();
         }
+    }
+
+    /// The `Constraint`s of the parameter attribute `a` (`path`, for messages). One that cannot
+    /// be checked (a bound that is not a number, nothing in it) is a warning, and left out.
+    fn constraints(&mut self, a: Node, path: &str) -> Vec<crate::model::Constraint> {
+        let text = |n: Node| -> String {
+            n.children()
+                .filter(|c| c.is_text())
+                .filter_map(|c| c.text())
+                .collect::<String>()
+                .trim()
+                .to_owned()
+        };
+        let mut out = Vec::new();
+        for c in children(a, "Constraint") {
+            let name = caex_name(c).unwrap_or("").trim().to_owned();
+            let span = super::xml::tag_span(self.file, c);
+            let mut k = crate::model::Constraint {
+                name: name.clone(),
+                span: span.clone(),
+                min: None,
+                max: None,
+                one_of: Vec::new(),
+            };
+            let mut unusable = None;
+            for scale in c.children().filter(|n| n.is_element()) {
+                for v in scale.children().filter(|n| n.is_element()) {
+                    let value = text(v);
+                    match v.tag_name().name() {
+                        bound @ ("RequiredMinValue" | "RequiredMaxValue") => {
+                            match value.parse::<f64>().ok().filter(|x| x.is_finite()) {
+                                Some(x) if bound == "RequiredMinValue" => k.min = Some((x, value)),
+                                Some(x) => k.max = Some((x, value)),
+                                None => {
+                                    unusable =
+                                        Some(format!("its {bound} `{value}` is not a number"))
+                                }
+                            }
+                        }
+                        "RequiredValue" if !value.is_empty() => k.one_of.push(value),
+                        _ => {}
+                    }
+                }
+            }
+            if unusable.is_none() && k.min.is_none() && k.max.is_none() && k.one_of.is_empty() {
+                unusable = Some(
+                    "it names no value (no RequiredMinValue, RequiredMaxValue or RequiredValue)"
+                        .to_owned(),
+                );
+            }
+            if let (Some((lo, l)), Some((hi, h))) = (&k.min, &k.max)
+                && lo > hi
+            {
+                unusable = Some(format!(
+                    "its RequiredMinValue {l} is above its RequiredMaxValue {h}"
+                ));
+            }
+            match unusable {
+                Some(why) => self.diags.push(
+                    Diagnostic::warning(
+                        Code::UnusableConstraint,
+                        format!("parameter `{path}`: constraint `{name}` is not checked: {why}"),
+                    )
+                    .at(span)
+                    .element(caex_element(a)),
+                ),
+                None => out.push(k),
+            }
+        }
+        out
     }
 
     fn mapping(
