@@ -39,7 +39,7 @@ fn a_robot_and_its_gripper_compile_as_one_program_and_follow_every_input() {
     let d = InProc::with_dirs(&[&p]);
     let ok = startup_compile(&d, &p);
     let outputs = ok["outputs"].as_array().unwrap();
-    assert_eq!(outputs.len(), 2, "{ok}");
+    assert_eq!(outputs.len(), 3, "the .src, .dat and I/O list: {ok}");
     for o in outputs {
         assert_eq!(o["program"], "Blackboard", "{o}");
         assert_eq!(o["controller"], "KUKA KR15-2", "{o}");
@@ -108,12 +108,22 @@ fn a_cell_of_two_controllers_compiles_both_programs_on_every_input_edit() {
                 "KUKA KR15-2"
             ),
             want(
+                "Blackboard_KUKA_KR15_2.io.csv",
+                "Blackboard_KUKA_KR15_2",
+                "KUKA KR15-2"
+            ),
+            want(
                 "Blackboard_KUKA_KR16_2.src",
                 "Blackboard_KUKA_KR16_2",
                 "KUKA KR16-2"
             ),
             want(
                 "Blackboard_KUKA_KR16_2.dat",
+                "Blackboard_KUKA_KR16_2",
+                "KUKA KR16-2"
+            ),
+            want(
+                "Blackboard_KUKA_KR16_2.io.csv",
                 "Blackboard_KUKA_KR16_2",
                 "KUKA KR16-2"
             ),

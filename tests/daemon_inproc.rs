@@ -528,7 +528,15 @@ fn rapid_and_urscript_projects_are_compiled_watched_and_reported_like_krl_ones()
             .iter()
             .map(|o| o["path"].as_str().unwrap())
             .collect();
-        assert_eq!(paths, [output.to_str().unwrap()], "{name}: {ok}");
+        // The program, its I/O list, and for RAPID its EIO.cfg fragment.
+        let mut want = vec![
+            output.display().to_string(),
+            dir.join("Cell.io.csv").display().to_string(),
+        ];
+        if *ext == "mod" {
+            want.push(dir.join("Cell.eio.cfg").display().to_string());
+        }
+        assert_eq!(paths, want, "{name}: {ok}");
         assert!(!dir.join("Cell.src").exists(), "{name}: a .src");
         let bb = read_string(&dir.join("Cell.aml"));
         assert!(
@@ -1007,7 +1015,7 @@ fn a_renamed_programs_old_files_are_named_stale_and_kept() {
         table.contains("stale")
     });
     assert!(
-        table.contains("WeldingB.mod; stale (not written, kept): Welding.mod"),
+        table.contains("WeldingB.eio.cfg; stale (not written, kept): Welding.mod"),
         "{table}"
     );
     d.stop(WAIT);

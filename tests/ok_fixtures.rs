@@ -77,12 +77,59 @@ struct CellProgram {
     code: Option<String>,
 }
 
+/// A RAPID module links only when every signal it names is configured: each signal of its I/O
+/// list that goes by an `Address` is declared in its EIO.cfg fragment, with the type its
+/// direction and kind ask for.
+fn check_eio(name: &str, module: &str, io: &str, eio: &str) {
+    assert!(
+        eio.starts_with("EIO:CFG_1.0:"),
+        "{name}: EIO.cfg header:\n{eio}"
+    );
+    let declared: Vec<(&str, &str)> = eio
+        .lines()
+        .filter_map(|l| {
+            let rest = l.trim().strip_prefix("-Name \"")?;
+            let (n, rest) = rest.split_once('"')?;
+            let t = rest.split("-SignalType \"").nth(1)?.split('"').next()?;
+            Some((n, t))
+        })
+        .collect();
+    for row in io.lines().skip(1) {
+        let cells: Vec<&str> = row.split(',').collect();
+        let (dir, address, ty) = (cells[0], cells[3], cells[4]);
+        if address.is_empty() {
+            continue;
+        }
+        let want = match (ty.starts_with("integer"), dir) {
+            (false, "in") => "DI",
+            (false, _) => "DO",
+            (true, "in") => "GI",
+            (true, _) => "GO",
+        };
+        assert!(
+            declared.contains(&(address, want)),
+            "{name}: `{address}` ({want}) is not declared in the EIO.cfg fragment:\n{eio}"
+        );
+    }
+    // Every wire and condition signal the module reads or sets is among them.
+    let rows_named = io
+        .lines()
+        .skip(1)
+        .filter(|r| !r.contains("signal of "))
+        .count();
+    assert!(
+        rows_named == 0 || declared.iter().any(|(n, _)| module.contains(n)),
+        "{name}: the module names none of the signals declared:\n{eio}"
+    );
+}
+
 /// A language's outputs, the main one (the write-back's) first.
 fn extensions(name: &str, language: Option<&str>) -> &'static [&'static str] {
     match language.map(str::to_ascii_lowercase).as_deref() {
-        None | Some("krl") => &["src", "dat"],
-        Some("rapid") => &["mod"],
-        Some("urscript") => &["script"],
+        // The program's files, then its I/O list (and for RAPID its EIO.cfg fragment).
+        None | Some("krl") => &["src", "dat", "io.csv"],
+        Some("rapid") => &["mod", "io.csv", "eio.cfg"],
+        Some("urscript") => &["script", "io.csv"],
         Some(other) => panic!("{name}: case.toml: unknown language `{other}`"),
     }
 }
@@ -273,7 +320,10 @@ fn run_case(name: &str) {
                     );
                 }
             }
-            "mod" => check_rapid(name, &out_paths[at], &texts[at]),
+            "mod" => {
+                check_rapid(name, &out_paths[at], &texts[at]);
+                check_eio(name, &texts[at], &texts[at + 1], &texts[at + 2]);
+            }
             _ => check_script(name, &texts[at]),
         }
         at += exts.len();

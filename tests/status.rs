@@ -135,7 +135,8 @@ fn status_and_journal_after_a_success_a_failure_and_a_failed_reload() {
             .unwrap()
     };
     assert_eq!(by(&good)["result"], "ok");
-    assert_eq!(by(&good)["outputs"].as_array().unwrap().len(), 2);
+    // The .src, .dat and I/O list.
+    assert_eq!(by(&good)["outputs"].as_array().unwrap().len(), 3);
     assert_eq!(by(&good)["errors"], 0);
     assert_eq!(by(&bad)["result"], "failed");
     assert!(by(&bad)["errors"].as_u64().unwrap() >= 1);

@@ -44,6 +44,8 @@ pub const PLACEHOLDERS: &[&str] = &[
     "project",
     "program",
     "controller",
+    "io",
+    "eio",
 ];
 
 /// A configured hook: the argument vector as written (placeholders not yet replaced) and its
@@ -69,6 +71,9 @@ pub struct Context {
     /// The daemon's own copy of the program's files, which `outputs` and `main` name (see
     /// [`super::snapshot`]); removed when the last clone of this context is dropped.
     pub snapshot: Option<super::snapshot::Held>,
+    /// The program's I/O list and, for RAPID, its `EIO.cfg` fragment (`{io}`, `{eio}`): for
+    /// commissioning, not program files (`{outputs}` does not hold them).
+    pub io: Vec<PathBuf>,
 }
 
 /// The pieces of an argument: text and placeholder names, `{{`/`}}` as braces.
@@ -205,6 +210,30 @@ pub fn expand(argv: &[String], ctx: &Context) -> Result<Vec<String>, String> {
                 "blackboard" => s.push_str(&ctx.blackboard.display().to_string()),
                 "project" => s.push_str(&ctx.project.display().to_string()),
                 "program" => s.push_str(&ctx.program),
+                "io" | "eio" => {
+                    let suffix = if text == "io" {
+                        crate::emit::IO_LIST
+                    } else {
+                        crate::emit::IO_CONFIG
+                    };
+                    let found = ctx.io.iter().find(|p| {
+                        p.file_name()
+                            .is_some_and(|n| n.to_string_lossy().ends_with(&format!(".{suffix}")))
+                    });
+                    match found {
+                        Some(p) => s.push_str(&p.display().to_string()),
+                        None => {
+                            return Err(format!(
+                                "`{{{text}}}`: this compile wrote no `.{suffix}` file{}",
+                                if text == "eio" {
+                                    " (only a RAPID module has an EIO.cfg fragment)"
+                                } else {
+                                    ""
+                                }
+                            ));
+                        }
+                    }
+                }
                 "controller" => s.push_str(&ctx.controller),
                 other => return Err(format!("`{{{other}}}` is not allowed here")),
             }
@@ -538,6 +567,7 @@ mod tests {
             program: "P".into(),
             controller: "KUKA KR15-2".into(),
             snapshot: None,
+            io: vec!["/p/P.io.csv".into()],
         }
     }
 

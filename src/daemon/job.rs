@@ -432,6 +432,7 @@ impl Job {
             let files: Option<Vec<(&Path, &[u8])>> = ctx
                 .outputs
                 .iter()
+                .chain(&ctx.io)
                 .map(|p| bytes(p).map(|b| (p.as_path(), b)))
                 .collect();
             let taken = match files {
@@ -443,6 +444,8 @@ impl Job {
                     if let Some(k) = ctx.outputs.iter().position(|p| *p == ctx.main) {
                         ctx.main = copies[k].clone();
                     }
+                    let mut copies = copies;
+                    ctx.io = copies.split_off(ctx.outputs.len());
                     ctx.outputs = copies;
                     ctx.snapshot = Some(held);
                     kept.push(ctx);
@@ -793,12 +796,22 @@ impl Job {
                         program: prog,
                         controller,
                         snapshot: None,
+                        io: Vec::new(),
                     };
                     deploy.push((ctx, false));
                     deploy.len() - 1
                 }
             };
-            deploy[at].0.outputs.push(p.clone());
+            // The I/O list and EIO fragment: `{io}`/`{eio}`, not program files.
+            let name = p.file_name().unwrap_or_default().to_string_lossy();
+            if [crate::emit::IO_LIST, crate::emit::IO_CONFIG]
+                .iter()
+                .any(|x| name.ends_with(&format!(".{x}")))
+            {
+                deploy[at].0.io.push(p.clone());
+            } else {
+                deploy[at].0.outputs.push(p.clone());
+            }
             deploy[at].1 |= *w;
         }
         // Only the programs with new bytes; each one's main file: its .src/.mod/.script.

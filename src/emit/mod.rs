@@ -14,6 +14,7 @@
 
 pub mod flow;
 pub mod handshake;
+pub mod io;
 pub mod krl;
 pub mod rapid;
 pub mod structured;
@@ -61,6 +62,11 @@ pub trait Profile: crate::bind::Rules {
     /// Whether template lines lose trailing spaces after their placeholders are filled (RAPID:
     /// `rapidchecker` refuses trailing whitespace, as in `! ` with an empty header comment).
     fn trim_trailing_spaces(&self) -> bool {
+        false
+    }
+    /// Whether the program's signals must be declared in the controller's I/O configuration
+    /// before it loads (RAPID: an `EIO.cfg` fragment is written beside the module, [`io::eio`]).
+    fn declares_signals(&self) -> bool {
         false
     }
     /// Writes the program tree and its declarations (see [`Generated`]).
@@ -447,8 +453,25 @@ pub fn emit_files(
             text,
         });
     }
+    // For commissioning: the signals to wire, and for RAPID their declarations.
+    let rows = io::rows(input);
+    out.push(OutputFile {
+        extension: IO_LIST,
+        text: io::csv(&rows, nl),
+    });
+    if input.profile.declares_signals() {
+        out.push(OutputFile {
+            extension: IO_CONFIG,
+            text: io::eio(&rows, nl),
+        });
+    }
     Some(out)
 }
+
+/// The I/O list's "extension": `<program>.io.csv` ([`io::csv`]).
+pub const IO_LIST: &str = "io.csv";
+/// A RAPID module's `EIO.cfg` fragment: `<program>.eio.cfg` ([`io::eio`]).
+pub const IO_CONFIG: &str = "eio.cfg";
 
 /// The byte index of the first non-ASCII character. `is_ascii` reads words at a time; the place
 /// is looked for only when there is one (13 MB of program text for 100,000 steps).

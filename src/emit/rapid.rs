@@ -230,6 +230,10 @@ impl Profile for Rapid {
         &["mod"]
     }
 
+    fn declares_signals(&self) -> bool {
+        true
+    }
+
     fn builtin_template(&self) -> &'static str {
         DEFAULT_TEMPLATE
     }
