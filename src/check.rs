@@ -63,8 +63,30 @@ pub fn language_of(path: &std::path::Path) -> Option<(Language, Unit)> {
     })
 }
 
-/// Checks `text` as `unit` of `language`.
+/// At most this many problems of one text are kept (the first ones found); the others are only
+/// counted ([`Checked::more`]), so a hostile file's report and memory stay small.
+pub const MAX_PROBLEMS: usize = 100;
+
+/// Blocks (and KRL folds) open at once beyond which a text is not checked further: no program
+/// skillpost writes comes near (branches and loops nest at most 128 levels, a few blocks each),
+/// and the open blocks are what the check keeps per line.
+pub const MAX_OPEN: usize = 4096;
+
+/// What [`check_counted`] found: the first [`MAX_PROBLEMS`] problems, sorted by place, and how
+/// many more there were.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Checked {
+    pub problems: Vec<Problem>,
+    pub more: usize,
+}
+
+/// Checks `text` as `unit` of `language`: its first [`MAX_PROBLEMS`] problems.
 pub fn check(language: Language, unit: Unit, text: &str) -> Vec<Problem> {
+    check_counted(language, unit, text).problems
+}
+
+/// Checks `text` as `unit` of `language`, counting the problems beyond [`MAX_PROBLEMS`].
+pub fn check_counted(language: Language, unit: Unit, text: &str) -> Checked {
     match language {
         Language::Krl => krl(unit, text),
         Language::Rapid => rapid(unit, text),
@@ -148,9 +170,36 @@ fn ends_with_word(code: &str, word: &str) -> bool {
         .is_some_and(|w| w.eq_ignore_ascii_case(word))
 }
 
+/// A problem (`problem!(blocks, line, column, message)`), its message made only when it is kept.
+macro_rules! problem {
+    ($b:expr, $line:expr, $column:expr, $message:expr $(,)?) => {
+        if $b.keeps() {
+            $b.problem($line, $column, $message)
+        } else {
+            $b.more += 1
+        }
+    };
+}
+
+/// A problem about a block opened at `$opened` (`problem_at!(blocks, line, column, message,
+/// opened)`), its message made only when it is kept.
+macro_rules! problem_at {
+    ($b:expr, $line:expr, $column:expr, $message:expr, $opened:expr $(,)?) => {
+        if $b.keeps() {
+            $b.problem_at($line, $column, $message, $opened)
+        } else {
+            $b.more += 1
+        }
+    };
+}
+
 struct Blocks {
     stack: Vec<Open>,
     problems: Vec<Problem>,
+    /// Problems found beyond [`MAX_PROBLEMS`].
+    more: usize,
+    /// More than [`MAX_OPEN`] blocks were open: the rest of the text is not checked.
+    stopped: bool,
 }
 
 impl Blocks {
@@ -158,28 +207,63 @@ impl Blocks {
         Blocks {
             stack: Vec::new(),
             problems: Vec::new(),
+            more: 0,
+            stopped: false,
         }
     }
 
+    /// Keeps a problem while fewer than [`MAX_PROBLEMS`] are kept, else counts it; the message
+    /// is made only when it is kept.
+    fn push(
+        &mut self,
+        line: usize,
+        column: usize,
+        message: impl FnOnce() -> String,
+        opened: Option<(usize, usize)>,
+    ) {
+        if self.problems.len() < MAX_PROBLEMS {
+            self.problems.push(Problem {
+                line,
+                column,
+                message: message(),
+                opened,
+            });
+        } else {
+            self.more += 1;
+        }
+    }
+
+    /// Whether a problem found now is kept (else only counted).
+    fn keeps(&self) -> bool {
+        self.problems.len() < MAX_PROBLEMS
+    }
+
     fn problem(&mut self, line: usize, column: usize, message: String) {
-        self.problems.push(Problem {
-            line,
-            column,
-            message,
-            opened: None,
-        });
+        self.push(line, column, || message, None);
     }
 
     fn problem_at(&mut self, line: usize, column: usize, message: String, o: (usize, usize)) {
-        self.problems.push(Problem {
-            line,
-            column,
-            message,
-            opened: Some(o),
-        });
+        self.push(line, column, || message, Some(o));
+    }
+
+    /// Stops the check at `line` when `open` blocks (or folds) are more than [`MAX_OPEN`].
+    fn too_deep(&mut self, open: usize, line: usize, column: usize) -> bool {
+        if open >= MAX_OPEN && !self.stopped {
+            self.stopped = true;
+            self.push(
+                line,
+                column,
+                || format!("blocks nested deeper than {MAX_OPEN} levels: the rest is not checked"),
+                None,
+            );
+        }
+        self.stopped
     }
 
     fn open(&mut self, kind: &'static str, line: usize, column: usize) {
+        if self.too_deep(self.stack.len(), line, column) {
+            return;
+        }
         self.stack.push(Open {
             kind,
             line,
@@ -196,7 +280,8 @@ impl Blocks {
             }
             Some(o) => {
                 let (k, at) = (o.kind, (o.line, o.column));
-                self.problem_at(
+                problem_at!(
+                    self,
                     line,
                     column,
                     format!("`{end}` where `{k}` is still open"),
@@ -207,7 +292,12 @@ impl Blocks {
                     self.stack.truncate(i);
                 }
             }
-            None => self.problem(line, column, format!("`{end}` without its `{}`", kinds[0])),
+            None => problem!(
+                self,
+                line,
+                column,
+                format!("`{end}` without its `{}`", kinds[0])
+            ),
         }
     }
 
@@ -217,7 +307,8 @@ impl Blocks {
             Some(o) if o.kind == kind => {
                 if o.closed_else {
                     let at = (o.line, o.column);
-                    self.problem_at(
+                    problem_at!(
+                        self,
                         line,
                         column,
                         format!("`{word}` after the `else` of its `{kind}`"),
@@ -225,7 +316,12 @@ impl Blocks {
                     );
                 }
             }
-            _ => self.problem(line, column, format!("`{word}` outside an `{kind}` block")),
+            _ => problem!(
+                self,
+                line,
+                column,
+                format!("`{word}` outside an `{kind}` block")
+            ),
         }
     }
 
@@ -243,10 +339,11 @@ impl Blocks {
         self.stack.iter().any(|o| kinds.contains(&o.kind))
     }
 
-    fn finish(mut self) -> Vec<Problem> {
+    fn finish(mut self) -> Checked {
         for o in std::mem::take(&mut self.stack).into_iter().rev() {
             let at = (o.line, o.column);
-            self.problem_at(
+            problem_at!(
+                self,
                 o.line,
                 o.column,
                 format!("`{}` is never closed", o.kind),
@@ -254,7 +351,10 @@ impl Blocks {
             );
         }
         self.problems.sort_by_key(|p| (p.line, p.column));
-        self.problems
+        Checked {
+            problems: self.problems,
+            more: self.more,
+        }
     }
 }
 
@@ -286,13 +386,16 @@ fn declared_name<'t>(after: &'t str, keyword: &str) -> Option<&'t str> {
     it.next()
 }
 
-fn krl(unit: Unit, text: &str) -> Vec<Problem> {
+fn krl(unit: Unit, text: &str) -> Checked {
     let mut b = Blocks::new();
     let mut folds: Vec<usize> = Vec::new();
     const LOOPS: &[&str] = &["LOOP", "WHILE", "FOR", "REPEAT"];
     // In the routine open now: an executable statement was seen (declarations come first).
     let mut executed = false;
     for (n, raw) in text.lines().enumerate() {
+        if b.stopped {
+            break;
+        }
         let line = n + 1;
         // Folds are comments: `;FOLD` … `;ENDFOLD`.
         let t = raw.trim_start();
@@ -300,9 +403,12 @@ fn krl(unit: Unit, text: &str) -> Vec<Problem> {
             let (w, _) = first_word(rest.trim_start());
             let w = w.as_str();
             if w == "FOLD" {
+                if b.too_deep(folds.len(), line, 1) {
+                    break;
+                }
                 folds.push(line);
             } else if w == "ENDFOLD" && folds.pop().is_none() {
-                b.problem(line, 1, "`;ENDFOLD` without its `;FOLD`".into());
+                problem!(b, line, 1, "`;ENDFOLD` without its `;FOLD`".into());
             }
         }
         let (code, col) = code_of(raw, ';');
@@ -321,7 +427,8 @@ fn krl(unit: Unit, text: &str) -> Vec<Problem> {
             && let Some(name) = declared_name(after, kw)
             && !is_krl_name(name)
         {
-            b.problem(
+            problem!(
+                b,
                 line,
                 col,
                 format!(
@@ -334,7 +441,8 @@ fn krl(unit: Unit, text: &str) -> Vec<Problem> {
         let declaration = w == "DECL" || (KRL_TYPES.contains(&w) && !code.contains('='));
         let in_routine = b.in_any(&["DEF", "DEFFCT"]);
         if declaration && in_routine && executed {
-            b.problem(
+            problem!(
+                b,
                 line,
                 col,
                 "a declaration after the first statement of its routine (KRL wants the \
@@ -348,14 +456,14 @@ fn krl(unit: Unit, text: &str) -> Vec<Problem> {
         match w {
             "DEF" => {
                 if !toplevel {
-                    b.problem(line, col, "`DEF` inside another block".into());
+                    problem!(b, line, col, "`DEF` inside another block".into());
                 }
                 executed = false;
                 b.open("DEF", line, col)
             }
             "DEFFCT" => {
                 if !toplevel {
-                    b.problem(line, col, "`DEFFCT` inside another block".into());
+                    problem!(b, line, col, "`DEFFCT` inside another block".into());
                 }
                 executed = false;
                 b.open("DEFFCT", line, col)
@@ -366,7 +474,8 @@ fn krl(unit: Unit, text: &str) -> Vec<Problem> {
             "ENDDAT" => b.close("ENDDAT", &["DEFDAT"], line, col),
             "IF" => {
                 if !ends_with_word(code, "THEN") {
-                    b.problem(
+                    problem!(
+                        b,
                         line,
                         col,
                         "`IF` without `THEN` at the end of its line".into(),
@@ -390,7 +499,7 @@ fn krl(unit: Unit, text: &str) -> Vec<Problem> {
             "SPLINE" | "PTP_SPLINE" => b.open("SPLINE", line, col),
             "ENDSPLINE" => b.close("ENDSPLINE", &["SPLINE"], line, col),
             "EXIT" if !b.in_any(LOOPS) => {
-                b.problem(line, col, "`EXIT` outside a loop".into());
+                problem!(b, line, col, "`EXIT` outside a loop".into());
             }
             _ if toplevel && unit != Unit::Snippet => {
                 let within = if unit == Unit::Data { "DEFDAT" } else { "DEF" };
@@ -399,7 +508,8 @@ fn krl(unit: Unit, text: &str) -> Vec<Problem> {
                 } else {
                     within
                 };
-                b.problem(
+                problem!(
+                    b,
                     line,
                     col,
                     format!("a statement outside any `{within}` … `END`: `{code}`"),
@@ -409,15 +519,18 @@ fn krl(unit: Unit, text: &str) -> Vec<Problem> {
         }
     }
     for l in folds {
-        b.problem(l, 1, "`;FOLD` without its `;ENDFOLD`".into());
+        problem!(b, l, 1, "`;FOLD` without its `;ENDFOLD`".into());
     }
     b.finish()
 }
 
-fn rapid(unit: Unit, text: &str) -> Vec<Problem> {
+fn rapid(unit: Unit, text: &str) -> Checked {
     let mut b = Blocks::new();
     const ROUTINES: &[&str] = &["PROC", "FUNC", "TRAP"];
     for (n, raw) in text.lines().enumerate() {
+        if b.stopped {
+            break;
+        }
         let line = n + 1;
         let (code, col) = code_of(raw, '!');
         if code.is_empty() || code.starts_with('%') {
@@ -436,10 +549,15 @@ fn rapid(unit: Unit, text: &str) -> Vec<Problem> {
             "ENDMODULE" => b.close("ENDMODULE", &["MODULE"], line, col),
             "PROC" | "FUNC" | "TRAP" => {
                 if b.in_any(ROUTINES) {
-                    b.problem(line, col, format!("`{w}` inside another routine"));
+                    problem!(b, line, col, format!("`{w}` inside another routine"));
                 }
                 if toplevel && unit == Unit::Program {
-                    b.problem(line, col, format!("`{w}` outside `MODULE` … `ENDMODULE`"));
+                    problem!(
+                        b,
+                        line,
+                        col,
+                        format!("`{w}` outside `MODULE` … `ENDMODULE`")
+                    );
                 }
                 let kind = match w {
                     "PROC" => "PROC",
@@ -454,13 +572,14 @@ fn rapid(unit: Unit, text: &str) -> Vec<Problem> {
             "ERROR" | "BACKWARD" | "UNDO"
                 if (after.is_empty() || code.ends_with(')')) && !b.in_any(ROUTINES) =>
             {
-                b.problem(line, col, format!("`{w}` handler outside a routine"));
+                problem!(b, line, col, format!("`{w}` handler outside a routine"));
             }
             // `IF c THEN` opens; a compact `IF c stmt;` is one statement.
             "IF" if then => b.open("IF", line, col),
             "ELSEIF" => {
                 if !then {
-                    b.problem(
+                    problem!(
+                        b,
                         line,
                         col,
                         "`ELSEIF` without `THEN` at the end of its line".into(),
@@ -473,7 +592,8 @@ fn rapid(unit: Unit, text: &str) -> Vec<Problem> {
             "WHILE" | "FOR" => {
                 let kind = if w == "FOR" { "FOR" } else { "WHILE" };
                 if !ends_do {
-                    b.problem(
+                    problem!(
+                        b,
                         line,
                         col,
                         format!("`{kind}` without `DO` at the end of its line"),
@@ -486,7 +606,8 @@ fn rapid(unit: Unit, text: &str) -> Vec<Problem> {
             "TEST" => b.open("TEST", line, col),
             "CASE" | "DEFAULT" => b.middle(w, "TEST", line, col),
             "ENDTEST" => b.close("ENDTEST", &["TEST"], line, col),
-            _ if toplevel && unit == Unit::Program => b.problem(
+            _ if toplevel && unit == Unit::Program => problem!(
+                b,
                 line,
                 col,
                 format!("a statement outside `MODULE` … `ENDMODULE`: `{code}`"),
@@ -497,9 +618,12 @@ fn rapid(unit: Unit, text: &str) -> Vec<Problem> {
     b.finish()
 }
 
-fn urscript(text: &str) -> Vec<Problem> {
+fn urscript(text: &str) -> Checked {
     let mut b = Blocks::new();
     for (n, raw) in text.lines().enumerate() {
+        if b.stopped {
+            break;
+        }
         let line = n + 1;
         let (code, col) = code_of(raw, '#');
         if code.is_empty() {
@@ -514,7 +638,8 @@ fn urscript(text: &str) -> Vec<Problem> {
             let closing = matches!(w, "end" | "elif" | "else");
             let (kind, at) = (o.kind, (o.line, o.column));
             if closing && col != at.1 {
-                b.problem_at(
+                problem_at!(
+                    b,
                     line,
                     col,
                     format!(
@@ -524,7 +649,8 @@ fn urscript(text: &str) -> Vec<Problem> {
                     at,
                 );
             } else if !closing && col <= at.1 {
-                b.problem_at(
+                problem_at!(
+                    b,
                     line,
                     col,
                     format!(
@@ -545,17 +671,18 @@ fn urscript(text: &str) -> Vec<Problem> {
                 b.open(kind, line, col)
             }
             "def" | "thread" | "if" | "while" | "elif" | "else" if !opens => {
-                b.problem(line, col, format!("`{w}` line without `:` at its end"))
+                problem!(b, line, col, format!("`{w}` line without `:` at its end"))
             }
             "elif" | "else" => {}
-            _ if opens => b.problem(
+            _ if opens => problem!(
+                b,
                 line,
                 col,
                 format!("a line ending in `:` that opens no block: `{code}`"),
             ),
             "end" => b.close("end", &["def", "thread", "if", "while"], line, col),
             "break" | "continue" if !b.in_any(&["while"]) => {
-                b.problem(line, col, format!("`{w}` outside a `while`"));
+                problem!(b, line, col, format!("`{w}` outside a `while`"));
             }
             _ => {}
         }
@@ -579,6 +706,30 @@ mod tests {
             .into_iter()
             .map(|p| format!("{}:{}: {}", p.line, p.column, p.message))
             .collect()
+    }
+
+    #[test]
+    fn problems_beyond_the_cap_are_counted_and_deep_nesting_stops_the_check() {
+        let c = check_counted(Language::Krl, Unit::Snippet, &"ENDIF\n".repeat(1000));
+        assert_eq!(
+            (c.problems.len(), c.more),
+            (MAX_PROBLEMS, 1000 - MAX_PROBLEMS)
+        );
+        assert_eq!(c.problems[MAX_PROBLEMS - 1].line, MAX_PROBLEMS);
+        let deep = "if a:\n".repeat(2 * MAX_OPEN) + "end\n";
+        let c = check_counted(Language::UrScript, Unit::Program, &deep);
+        // Lines 2 to MAX_OPEN + 1 not indented, the stop at line MAX_OPEN + 1, the open
+        // blocks never closed; nothing after the stop.
+        assert_eq!(c.problems.len() + c.more, 2 * MAX_OPEN + 1);
+        assert!(c.problems.iter().all(|p| p.line <= MAX_OPEN + 1), "{c:?}");
+        let folds = ";FOLD\n".repeat(MAX_OPEN + 10);
+        let c = check_counted(Language::Krl, Unit::Snippet, &folds);
+        assert!(
+            c.problems
+                .iter()
+                .any(|p| p.message.contains("nested deeper")),
+            "{c:?}"
+        );
     }
 
     #[test]

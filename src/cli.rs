@@ -9,6 +9,8 @@ use std::process::ExitCode;
 
 use clap::Parser;
 
+mod check;
+
 use crate::compile::{self, Compilation, Options};
 use crate::diag::{self, Format};
 use crate::load::FsSource;
@@ -201,7 +203,7 @@ fn run(a: Args) -> u8 {
     match a.command {
         Some(Command::Watch(w)) => return watch(w),
         Some(Command::Status(s)) => return status_command(s),
-        Some(Command::Check(c)) => return check_command(&c),
+        Some(Command::Check(c)) => return check::check_command(&c),
         None => {}
     }
     let fs = FsSource {
@@ -484,95 +486,6 @@ fn run(a: Args) -> u8 {
             );
             2
         }
-    }
-}
-
-/// `skillpost check FILE...`: each file's problems as `file:line:column: error: message`, then
-/// a count.
-fn check_command(a: &CheckArgs) -> u8 {
-    use crate::check::{self, Unit};
-    use crate::lang::Language;
-    let mut problems = 0usize;
-    let mut failed = 0usize;
-    let mut unreadable = false;
-    for f in &a.files {
-        let by_ext = check::language_of(f);
-        let (language, unit) = match (a.language, by_ext) {
-            (Some(l), ext) => {
-                let language = match l {
-                    CheckLanguage::Krl => Language::Krl,
-                    CheckLanguage::Rapid => Language::Rapid,
-                    CheckLanguage::Urscript => Language::UrScript,
-                };
-                let unit = match ext {
-                    Some((Language::Krl, Unit::Data)) if language == Language::Krl => Unit::Data,
-                    _ => Unit::Program,
-                };
-                (language, unit)
-            }
-            (None, Some(x)) => x,
-            (None, None) => {
-                eprintln!(
-                    "error: {}: which robot language? The extension says none of .src, .dat \
-                     (KRL), .mod, .modx, .sys (RAPID), .script (URScript); give --language",
-                    f.display()
-                );
-                unreadable = true;
-                continue;
-            }
-        };
-        let text = match crate::load::FileSource::read_max(
-            &crate::load::FsSource::default(),
-            f,
-            64 * 1024 * 1024,
-        ) {
-            Ok(b) => String::from_utf8_lossy(&b).into_owned(),
-            Err(e) => {
-                eprintln!("error: cannot read {}: {e}", f.display());
-                unreadable = true;
-                continue;
-            }
-        };
-        let found = check::check(language, unit, &text);
-        if !found.is_empty() {
-            failed += 1;
-        }
-        for p in &found {
-            problems += 1;
-            let opened = match p.opened {
-                Some((l, c)) if (l, c) != (p.line, p.column) => {
-                    format!(" (opened at {l}:{c})")
-                }
-                _ => String::new(),
-            };
-            println!(
-                "{}:{}:{}: error: {}{opened}",
-                f.display(),
-                p.line,
-                p.column,
-                p.message
-            );
-        }
-    }
-    let checked = a.files.len();
-    if problems > 0 {
-        println!(
-            "{problems} problem{} in {failed} of {checked} file{}",
-            if problems == 1 { "" } else { "s" },
-            if checked == 1 { "" } else { "s" }
-        );
-    } else if !unreadable {
-        println!(
-            "{checked} file{} checked: no problems",
-            if checked == 1 { "" } else { "s" }
-        );
-    }
-    if unreadable {
-        2
-    } else if problems > 0 {
-        1
-    } else {
-        0
     }
 }
 

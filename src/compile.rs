@@ -800,7 +800,12 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 files.push(((r, f), file));
             }
         }
-        let controllers = res.controllers(&bb, &order);
+        // A cell past the budget is refused before it is split, bound or written.
+        let Some(controllers) =
+            bind::budget::controllers_within_budget(&res, &bb, &order, sfc, &mut cx.diags)
+        else {
+            return finish(cx, out);
+        };
         let langs = languages(&mut cx, &bb, &res, &files);
         language = Some(langs.program);
         out.languages = langs.resources.clone();

@@ -7,6 +7,11 @@ use crate::diag::{FileId, Span};
 use std::ops::Range;
 use std::sync::Arc;
 
+/// Branches, loops and macro steps nest at most this deep (docs/INPUTS.md): the SFC reader
+/// refuses a macro step deeper than this when it reads its body (`E313`), before anything
+/// grows with the depth; the planner refuses deeper branches and loops.
+pub const MAX_NESTING: usize = 128;
+
 /// A name as written, with its comparison key ([`crate::names::key`]) and its place. The strings
 /// are shared (`Arc`), so a name repeated 100,000 times in an SFC is stored once.
 #[derive(Debug, Clone)]

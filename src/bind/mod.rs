@@ -13,6 +13,7 @@ use crate::diag::{Code, Diagnostic, Diagnostics, Span};
 use crate::model::{Blackboard, ElementKind, Sfc, Step};
 use crate::read::irl::Irl;
 
+pub mod budget;
 mod conditions;
 pub mod definitions;
 pub use conditions::{
@@ -44,20 +45,6 @@ pub struct Resolution {
 }
 
 impl Resolution {
-    /// The controllers that run steps, in the order of their first step (docs/CELLS.md).
-    pub fn controllers(&self, bb: &Blackboard, order: &StepOrder) -> Vec<usize> {
-        let mut out: Vec<usize> = Vec::new();
-        for &i in &order.steps {
-            if let Some((r, _)) = self.step_skill[i] {
-                let c = bb.controller_of(r);
-                if !out.contains(&c) {
-                    out.push(c);
-                }
-            }
-        }
-        out
-    }
-
     /// This resolution narrowed to the steps of one controller: its program's.
     pub fn of_controller(&self, bb: &Blackboard, controller: usize) -> Resolution {
         let mine = |&(r, _): &(usize, usize)| bb.controller_of(r) == controller;

@@ -23,8 +23,9 @@ pub use walk::{Order, walk};
 use crate::diag::{Code, Diagnostic, Diagnostics};
 use crate::model::Sfc;
 
-/// Branches and loops nest at most this deep.
-pub const MAX_NESTING: usize = 128;
+/// Branches, loops and macro steps nest at most this deep ([`crate::model::MAX_NESTING`]: the SFC
+/// reader refuses deeper macro steps as it reads them).
+pub const MAX_NESTING: usize = crate::model::MAX_NESTING;
 
 /// At most this many sequences (several initial steps, docs/INPUTS.md): each needs controllers of its
 /// own, and each is a walk over the chart.

@@ -97,6 +97,8 @@ pub fn read_sfc_stream_with<R: BufRead + Send>(
         named: HashMap::new(),
         wire_nodes: Vec::new(),
         pending_wired: Vec::new(),
+        derived_text: 0,
+        derived_refused: false,
         len_hint: usize::try_from(len_hint).unwrap_or(usize::MAX),
         file,
         names: Interner::default(),
@@ -195,7 +197,19 @@ struct Stream {
     /// are wired from them (made expressions at the body's end).
     wire_nodes: Vec<WireNode>,
     pending_wired: Vec<PendingWired>,
+    /// The bytes of condition text transitions took from named transitions and wired networks
+    /// so far ([`MAX_DERIVED_TEXT`]), and whether that was refused.
+    derived_text: usize,
+    derived_refused: bool,
 }
+
+/// How much condition text (in bytes of ST) the transitions of a file may take from named
+/// transitions and wired networks together: 16 MiB. Such a condition is written once and used
+/// by any number of transitions, and a wired network's paths multiply (docs/INPUTS.md), while
+/// every transition gets a copy of it in the model and in the program; the text written in the
+/// file is paid by the file's size. 20,000 transitions wired to one 512-path network took
+/// 2.78 GB and wrote a 279 MB `.src`.
+pub const MAX_DERIVED_TEXT: usize = 16 * 1024 * 1024;
 
 /// An FBD/LD element a wired condition may be drawn from (docs/INPUTS.md).
 #[derive(Debug)]
@@ -961,6 +975,21 @@ impl Stream {
                     if let Some(el) = self.finish(&mut b, diags)
                         && let Some((_, _, els)) = &mut sfc
                     {
+                        if open_macros.len() == crate::model::MAX_NESTING {
+                            // Refused here, as it is read: what the planner does with nested
+                            // bodies grows with their depth times their size.
+                            return Ok(Err(Box::new(
+                                Diagnostic::error(
+                                    Code::Unsupported,
+                                    format!(
+                                        "macro steps nested deeper than {} levels",
+                                        crate::model::MAX_NESTING
+                                    ),
+                                )
+                                .at(el.span.clone())
+                                .element(format!("localId {}", el.local_id)),
+                            )));
+                        }
                         els.push(el);
                         open_macros.push(OpenMacro {
                             body_depth: depth,
@@ -1380,6 +1409,41 @@ impl Stream {
 
     /// The transitions whose conditions are wired (docs/INPUTS.md) get their expressions, built
     /// from the FBD/LD elements of the body; the body's parts are then forgotten.
+    /// Counts a condition a transition takes from a named transition or a wired network
+    /// against [`MAX_DERIVED_TEXT`]: past it, `E316` once (at `at`, the transition `element`)
+    /// and no condition.
+    fn derived(
+        &mut self,
+        cond: Option<Box<Condition>>,
+        at: &Span,
+        element: String,
+        diags: &mut Diagnostics,
+    ) -> Option<Box<Condition>> {
+        let c = cond?;
+        self.derived_text = self.derived_text.saturating_add(c.text.len());
+        if self.derived_text <= MAX_DERIVED_TEXT {
+            return Some(c);
+        }
+        if !self.derived_refused {
+            self.derived_refused = true;
+            diags.push(
+                Diagnostic::error(
+                    Code::BadCondition,
+                    format!(
+                        "the conditions that transitions take from named transitions and wired \
+                         networks come to more than {} MiB of text here (each transition gets its \
+                         own copy in the program): give a condition many transitions share a \
+                         signal of its own, set once, and name that signal in them",
+                        MAX_DERIVED_TEXT >> 20
+                    ),
+                )
+                .at(at.clone())
+                .element(element),
+            );
+        }
+        None
+    }
+
     fn resolve_wired(&mut self, els: &mut [Element], diags: &mut Diagnostics) {
         let nodes = std::mem::take(&mut self.wire_nodes);
         let pending = std::mem::take(&mut self.pending_wired);
@@ -1393,6 +1457,9 @@ impl Stream {
             .map(|(i, e)| (e.local_id, i))
             .collect();
         for p in pending {
+            if self.derived_refused {
+                break;
+            }
             let w = Wiring {
                 file: self.file,
                 nodes: &by_id,
@@ -1415,6 +1482,8 @@ impl Stream {
                                 reference: false,
                             }))
                         };
+                        let label = format!("localId {}", p.transition);
+                        let cond = self.derived(cond, &p.at, label, diags);
                         els[i].kind = ElementKind::Transition(cond);
                     }
                 }
@@ -1648,7 +1717,10 @@ impl Stream {
             && let Some(body) = self.named.get(&crate::names::key(name.trim()))
         {
             // A named transition of the POU (docs/INPUTS.md): its body is the condition.
-            return match body {
+            if self.derived_refused {
+                return None;
+            }
+            let made = match body {
                 Named::Wired(Ok(expr)) if expr.is_true() => None,
                 Named::Wired(Ok(expr)) => Some(Box::new(Condition {
                     text: expr.to_st(),
@@ -1714,6 +1786,7 @@ impl Stream {
                     }
                 }
             };
+            return self.derived(made, c, label(), diags);
         } else if let Some((name, range)) = &b.reference {
             // The name is the condition: one name, nothing else.
             let lead = name.len() - name.trim_start().len();
