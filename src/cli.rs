@@ -736,6 +736,7 @@ fn watch(w: WatchArgs) -> u8 {
         events: w.events.clone(),
         settle_ms: w.settle,
         runtime_dir: None,
+        own_process: true,
     };
     let config = match sources.load() {
         Ok(c) => c,

@@ -72,6 +72,13 @@ fn a_successful_compile_installs_its_outputs_on_the_share() {
     let ok = deploys(&evs, "deploy-succeeded", &a);
     assert_eq!(ok.len(), 1, "{}", dump(&evs));
     let started = deploys(&evs, "deploy-started", &a);
+    // A bare name is the program PATH's absolute folders hold, found when the configuration
+    // was read.
+    let install = started[0]["argv"][0].as_str().unwrap().to_owned();
+    assert!(
+        install.starts_with('/') && install.ends_with("/install"),
+        "{install}"
+    );
     // `{src}` and `{dat}`: the daemon's own copy of what it wrote (same names), not the files
     // in the project folder that anyone who writes there could replace; gone after the hook.
     let argv: Vec<&str> = started[0]["argv"]
@@ -80,7 +87,7 @@ fn a_successful_compile_installs_its_outputs_on_the_share() {
         .iter()
         .map(|a| a.as_str().unwrap())
         .collect();
-    assert_eq!(argv[..3], ["install", "-m", "0644"]);
+    assert_eq!(argv[1..3], ["-m", "0644"]);
     assert_eq!(argv[5], share_s);
     for (copy, name) in [(argv[3], "Blackboard.src"), (argv[4], "Blackboard.dat")] {
         let copy = Path::new(copy);
@@ -473,4 +480,175 @@ fn a_cell_deploys_each_program_to_its_own_controller() {
         "{table}"
     );
     d.stop(WAIT);
+}
+
+/// Issue 37, item 6: what a hook leaves running ends with it, also in a session of its own
+/// (`setsid`) and without its parent: after a hook that exits at once, after the timeout, and at
+/// a stop.
+#[test]
+fn a_hooks_background_processes_end_with_it_also_under_setsid() {
+    let w = Workspace::new();
+    let a = w.project("A");
+    let p = w.root.join("pid");
+    // Two detached children: one in a session of its own, one also without its parent (the
+    // subshell ends), neither holding the hook's pipes.
+    let leave = format!(
+        "setsid sleep 600 </dev/null >/dev/null 2>&1 & echo $! > {p}.a; \
+         (setsid sleep 601 </dev/null >/dev/null 2>&1 & echo $! > {p}.b)",
+        p = p.display()
+    );
+    let c = config(&w, &a, &["sh", "-c", &format!("{leave}; exit 0")], "");
+    let d = InProc::with_config(&c);
+    let evs = d.wait_for("the deploy", WAIT, |e| {
+        is_for(e, "deploy-succeeded", &a) || is_for(e, "deploy-failed", &a)
+    });
+    assert_eq!(
+        deploys(&evs, "deploy-succeeded", &a).len(),
+        1,
+        "{}",
+        dump(&evs)
+    );
+    let (x, y) = (pid_in(&w.root.join("pid.a")), pid_in(&w.root.join("pid.b")));
+    assert!(
+        wait_until(Duration::from_secs(5), || !alive(x) && !alive(y)),
+        "a hook's detached processes ({x}, {y}) outlived it"
+    );
+    d.stop(WAIT);
+
+    // Past the timeout: the hook and what it detached.
+    let b = w.project("B");
+    let c = config(
+        &w,
+        &b,
+        &[
+            "sh",
+            "-c",
+            &format!("{leave}; echo $$ > {p}.c; sleep 600", p = p.display()),
+        ],
+        "deploy_timeout_s = 1",
+    );
+    for f in ["pid.a", "pid.b"] {
+        fs::remove_file(w.root.join(f)).unwrap();
+    }
+    let d = InProc::with_config(&c);
+    let evs = d.wait_for("the timeout", WAIT, |e| is_for(e, "deploy-failed", &b));
+    let f = &deploys(&evs, "deploy-failed", &b)[0];
+    assert_eq!(f["timed_out"], true, "{f}");
+    let pids = ["pid.a", "pid.b", "pid.c"].map(|f| pid_in(&w.root.join(f)));
+    assert!(
+        wait_until(Duration::from_secs(5), || pids.iter().all(|p| !alive(*p))),
+        "processes of a timed-out hook ({pids:?}) outlived it"
+    );
+    d.stop(WAIT);
+
+    // A stop while the hook runs.
+    let e = w.project("E");
+    for f in ["pid.a", "pid.b", "pid.c"] {
+        fs::remove_file(w.root.join(f)).unwrap();
+    }
+    let c = config(
+        &w,
+        &e,
+        &[
+            "sh",
+            "-c",
+            &format!("{leave}; echo $$ > {p}.c; sleep 600", p = p.display()),
+        ],
+        "",
+    );
+    let d = InProc::with_config(&c);
+    let pids = ["pid.a", "pid.b", "pid.c"].map(|f| pid_in(&w.root.join(f)));
+    d.stop(Duration::from_secs(10));
+    assert!(
+        wait_until(Duration::from_secs(5), || pids.iter().all(|p| !alive(*p))),
+        "processes of a hook ({pids:?}) outlived the daemon's stop"
+    );
+}
+
+/// Issue 37, item 8: a hook's program in a project folder (where planners write) is refused:
+/// by the daemon (exit status 2, and a reload would keep the old configuration) and as a
+/// PROBLEM row of `--check-config`.
+#[test]
+fn a_hook_program_in_a_project_folder_is_refused() {
+    use std::os::unix::fs::PermissionsExt as _;
+    let w = Workspace::new();
+    let a = w.project("A");
+    let script = a.join("deploy.sh");
+    fs::write(&script, "#!/bin/sh\ntouch \"$0.ran\"\n").unwrap();
+    fs::set_permissions(&script, fs::Permissions::from_mode(0o755)).unwrap();
+    let c = config(&w, &a, &[script.to_str().unwrap(), "{src}"], "");
+    let sources = skillpost::daemon::Sources {
+        config_file: Some(c.clone()),
+        ..Default::default()
+    };
+    let e = sources.load().expect_err("refused");
+    assert!(e.message.contains("lies in the project folder"), "{e:?}");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["watch", "--config"])
+        .arg(&c)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("deploy.sh lies in the project folder"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["watch", "--check-config", "--config"])
+        .arg(&c)
+        .output()
+        .unwrap();
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{table}");
+    assert!(
+        table
+            .lines()
+            .any(|l| l.starts_with("(deploy)") && l.contains("PROBLEM: the deploy hook's program")),
+        "{table}"
+    );
+    assert!(!a.join("deploy.sh.ran").exists());
+}
+
+/// Issue 37, item 8: with an empty entry in `PATH` (the current folder), a bare hook name never
+/// runs a planner's program of that name in the project folder: it is looked up in PATH's
+/// absolute folders only, when the configuration is read.
+#[test]
+fn an_empty_path_entry_never_runs_a_planners_program() {
+    use std::os::unix::fs::PermissionsExt as _;
+    let w = Workspace::new();
+    let a = w.project("A");
+    let planted = a.join("skp-deploy-37");
+    fs::write(&planted, "#!/bin/sh\ntouch \"$PWD/owned\"\n").unwrap();
+    fs::set_permissions(&planted, fs::Permissions::from_mode(0o755)).unwrap();
+    let c = config(&w, &a, &["skp-deploy-37", "{src}"], "");
+    let ev = w.root.join("events.jsonl");
+    let path = format!(":{}", std::env::var("PATH").unwrap_or_default());
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["watch", "--settle", "50", "--config"])
+        .arg(&c)
+        .arg("--events")
+        .arg(&ev)
+        .env("PATH", &path)
+        .env("XDG_RUNTIME_DIR", &w.root)
+        .env_remove("RUNTIME_DIRECTORY")
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let done = wait_until(Duration::from_secs(30), || {
+        let t = read_string(&ev);
+        t.contains("\"deploy-failed\"") || t.contains("\"deploy-succeeded\"")
+    });
+    let _ = child.kill();
+    let _ = child.wait();
+    let text = read_string(&ev);
+    assert!(done, "no deploy: {text}");
+    assert!(
+        !a.join("owned").exists(),
+        "the planner's program ran: {text}"
+    );
+    assert!(text.contains("\"deploy-failed\""), "{text}");
+    assert!(text.contains("absolute folders of PATH"), "{text}");
 }

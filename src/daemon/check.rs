@@ -55,8 +55,9 @@ pub fn main(
         events,
         settle_ms,
         runtime_dir: None,
+        own_process: false,
     };
-    let config = match sources.load() {
+    let config = match sources.read() {
         Ok(c) => c,
         Err(e) => {
             eprintln!("error: {e}");
@@ -87,16 +88,11 @@ pub fn main(
     }
     rows.push(events_row(config.events.as_deref()));
     // Each deploy hook's program, once.
-    let mut programs: Vec<&str> = config
-        .on_success
-        .iter()
-        .chain(config.projects.iter().filter_map(|p| p.on_success.as_ref()))
-        .chain(config.roots.iter().filter_map(|r| r.on_success.as_ref()))
-        .map(|h| h.argv[0].as_str())
-        .collect();
-    programs.sort();
-    programs.dedup();
-    rows.extend(programs.into_iter().map(hook_row));
+    rows.extend(
+        config::hook_programs(&config)
+            .into_iter()
+            .map(|p| hook_row(p, config::hook_program_problem(&config, p))),
+    );
     for root in &config.roots {
         rows.push(root_row(&root.path));
         for dir in config::discover(&root.path) {
@@ -219,27 +215,27 @@ fn access(path: &Path, how: Access) -> Result<(), String> {
 
 /// The events file: appended to, or created in its folder.
 /// A deploy hook's program: found (a bare name in `PATH`) and executable by this process.
-fn hook_row(program: &str) -> Row {
-    let candidates: Vec<PathBuf> = if program.contains('/') {
-        vec![PathBuf::from(program)]
-    } else {
-        std::env::var_os("PATH")
-            .map(|p| std::env::split_paths(&p).map(|d| d.join(program)).collect())
-            .unwrap_or_default()
+/// A deploy hook's program: absolute (as the configuration resolved it), or a bare name that was
+/// not found in the absolute folders of `PATH`. `misplaced`: it lies where planners write.
+fn hook_row(program: &str, misplaced: Option<String>) -> Row {
+    let runs = |p: &Path| {
+        std::fs::metadata(p).is_ok_and(|m| m.is_file()) && access(p, Access::EXEC_OK).is_ok()
     };
-    let found = candidates.iter().find(|c| {
-        std::fs::metadata(c).is_ok_and(|m| m.is_file()) && access(c, Access::EXEC_OK).is_ok()
-    });
-    let verdict = match found {
-        Some(f) => Verdict::Ok(format!("the deploy hook runs {}", f.display())),
-        None if program.contains('/') => Verdict::Problem(format!(
-            "the deploy hook's program {program} does not exist or cannot be run by this user"
-        )),
-        None => Verdict::Problem(format!(
-            "the deploy hook's program `{program}` is not in PATH ({}) or cannot be run by this \
-             user; a service's PATH is short: give the absolute path",
+    let verdict = if let Some(why) = misplaced {
+        Verdict::Problem(why)
+    } else if !program.contains('/') {
+        Verdict::Problem(format!(
+            "the deploy hook's program `{program}` is not in PATH's absolute folders ({}) or \
+             cannot be run; an empty or relative PATH entry is never searched (it would be the \
+             project folder), and a service's PATH is short: give the absolute path",
             std::env::var("PATH").unwrap_or_default()
-        )),
+        ))
+    } else if runs(Path::new(program)) {
+        Verdict::Ok(format!("the deploy hook runs {program}"))
+    } else {
+        Verdict::Problem(format!(
+            "the deploy hook's program {program} does not exist or cannot be run by this user"
+        ))
     };
     Row {
         what: "(deploy)".into(),

@@ -18,8 +18,12 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
+use std::collections::{BTreeSet, HashMap, HashSet};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+
 use tokio::io::AsyncReadExt;
-use tokio::sync::watch;
+use tokio::sync::{Semaphore, watch};
 
 use super::events::{Event, EventSink};
 
@@ -31,6 +35,20 @@ pub const DEPLOY_TIMEOUT_S_RANGE: RangeInclusive<u64> = 1..=3600;
 pub const STDERR_TAIL: usize = 4096;
 /// After a stop's `SIGTERM`, how long a hook may take before its group gets `SIGKILL`.
 const TERM_GRACE: Duration = Duration::from_secs(2);
+/// How many hooks run at once, of all projects, when the configuration does not say
+/// (`max_deploys`).
+pub const DEFAULT_MAX_DEPLOYS: usize = 4;
+/// The allowed values of `max_deploys`.
+pub const MAX_DEPLOYS_RANGE: RangeInclusive<u64> = 1..=64;
+/// The descriptors one running hook may hold in the daemon: its stdout and stderr pipes and
+/// the process descriptor its end is waited on, and for a moment while it starts the pipes'
+/// other ends and the pipe that reports a failed `exec`. The folder locks leave this many per
+/// hook ([`super::lock::Locks::reserving`]), so hooks never take the compiles' descriptors.
+pub const FDS_PER_HOOK: u64 = 8;
+/// The variable each hook (and whatever it starts, which inherits it) carries: its token, by
+/// which the daemon finds the hook's processes also after they left its process group
+/// (`setsid`) or lost their parent.
+pub const HOOK_ENV: &str = "SKILLPOST_DEPLOY";
 
 /// The placeholders an argument may hold; `{outputs}` only as a whole argument.
 pub const PLACEHOLDERS: &[&str] = &[
@@ -257,6 +275,69 @@ pub struct Request {
 /// The request waiting to run: taken out by the worker, so that a request (and its snapshot)
 /// lives only until its hooks have run.
 type Slot = Arc<std::sync::Mutex<Option<Request>>>;
+/// What the hooks of all projects share: the cap on how many run at once, the hooks running
+/// (their main process, which tokio reaps), and whether the daemon is its hooks' subreaper.
+pub struct Pool {
+    slots: std::sync::Arc<Semaphore>,
+    cap: Mutex<usize>,
+    next: AtomicU64,
+    /// When the pool was made (nanoseconds of the clock): part of every token.
+    born: u128,
+    /// Main pid of each running hook. Held while a hook starts and while orphans are reaped, so
+    /// that the reaper never takes a running hook's exit status from tokio.
+    running: Mutex<HashSet<u32>>,
+    /// The daemon is its hooks' subreaper (`PR_SET_CHILD_SUBREAPER`): a hook's process whose
+    /// parent ended becomes the daemon's child (not init's) and is reaped here.
+    subreaper: bool,
+}
+
+impl Pool {
+    /// `cap` hooks at once. `subreaper`: make this process the subreaper of its hooks' processes
+    /// (the daemon's own process only: a test process running the daemon keeps its children).
+    pub fn new(cap: usize, subreaper: bool) -> Pool {
+        let subreaper = subreaper
+            && rustix::process::set_child_subreaper(Some(rustix::process::getpid())).is_ok();
+        Pool {
+            slots: std::sync::Arc::new(Semaphore::new(cap)),
+            cap: Mutex::new(cap),
+            next: AtomicU64::new(1),
+            born: std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_nanos()),
+            running: Mutex::new(HashSet::new()),
+            subreaper,
+        }
+    }
+
+    /// Takes a new cap (a reload): more slots at once; fewer as running hooks end.
+    pub fn set_cap(&self, cap: usize) {
+        let mut old = self.cap.lock().unwrap_or_else(|p| p.into_inner());
+        if cap > *old {
+            self.slots.add_permits(cap - *old);
+        } else if cap < *old {
+            let fewer = (*old - cap) as u32;
+            let slots = self.slots.clone();
+            tokio::spawn(async move {
+                if let Ok(p) = slots.acquire_many_owned(fewer).await {
+                    p.forget();
+                }
+            });
+        }
+        *old = cap;
+    }
+
+    /// A token no other hook carries: this process, this pool (several daemons may run in one
+    /// process: tests), this hook.
+    fn token(&self) -> String {
+        format!(
+            "{}-{:x}-{:x}-{}",
+            std::process::id(),
+            self.born,
+            std::sync::Arc::as_ptr(&self.slots) as usize,
+            self.next.fetch_add(1, Ordering::Relaxed)
+        )
+    }
+}
 
 /// The hooks of one project: a task that runs them one at a time, the newest waiting one next.
 pub struct Worker {
@@ -268,10 +349,10 @@ pub struct Worker {
 
 impl Worker {
     /// Starts the project's worker. `stop` turns true when the daemon stops.
-    pub fn start(sink: Arc<EventSink>, stop: watch::Receiver<bool>) -> Worker {
+    pub fn start(sink: Arc<EventSink>, stop: watch::Receiver<bool>, pool: Arc<Pool>) -> Worker {
         let (tx, rx) = watch::channel(());
         let slot = Slot::default();
-        let task = tokio::spawn(work(sink, rx, slot.clone(), stop));
+        let task = tokio::spawn(work(sink, rx, slot.clone(), stop, pool));
         Worker { tx, slot, task }
     }
 
@@ -298,6 +379,7 @@ async fn work(
     mut rx: watch::Receiver<()>,
     slot: Slot,
     mut stop: watch::Receiver<bool>,
+    pool: Arc<Pool>,
 ) {
     loop {
         tokio::select! {
@@ -320,7 +402,16 @@ async fn work(
             if *stop.borrow() {
                 return;
             }
-            run(&sink, &r, ctx, &mut stop).await;
+            // One of the pool's slots: at most `max_deploys` hooks run at once.
+            let slot = tokio::select! {
+                s = pool.slots.clone().acquire_owned() => match s {
+                    Ok(s) => s,
+                    Err(_) => return,
+                },
+                _ = stop.wait_for(|s| *s) => return,
+            };
+            run(&sink, &r, ctx, &mut stop, &pool).await;
+            drop(slot);
         }
     }
 }
@@ -332,7 +423,13 @@ enum End {
     Stopped,
 }
 
-async fn run(sink: &EventSink, r: &Request, ctx: &Context, stop: &mut watch::Receiver<bool>) {
+async fn run(
+    sink: &EventSink,
+    r: &Request,
+    ctx: &Context,
+    stop: &mut watch::Receiver<bool>,
+    pool: &Pool,
+) {
     let project = Some(r.project.as_str());
     let started = std::time::Instant::now();
     let ms = || started.elapsed().as_millis() as u64;
@@ -358,6 +455,29 @@ async fn run(sink: &EventSink, r: &Request, ctx: &Context, stop: &mut watch::Rec
             return;
         }
     };
+    if !Path::new(&argv[0]).is_absolute() {
+        sink.emit(
+            project,
+            Event::DeployFailed {
+                program: program.clone(),
+                controller: controller.clone(),
+                run_id: r.run_id,
+                duration_ms: 0,
+                exit_code: None,
+                signal: None,
+                timed_out: false,
+                reason: format!(
+                    "`{}` was not found in the absolute folders of PATH when the configuration \
+                     was read (an empty or relative PATH entry is never searched: it would be \
+                     the project folder); give the program's absolute path, or install it and \
+                     reload",
+                    argv[0]
+                ),
+                stderr: String::new(),
+            },
+        );
+        return;
+    }
     sink.emit(
         project,
         Event::DeployStarted {
@@ -376,7 +496,19 @@ async fn run(sink: &EventSink, r: &Request, ctx: &Context, stop: &mut watch::Rec
         // Its own process group: a timeout or a stop ends the hook and whatever it started.
         .process_group(0)
         .kill_on_drop(true);
-    let mut child = match cmd.spawn() {
+    let token = pool.token();
+    cmd.env(HOOK_ENV, &token);
+    let spawned = {
+        let mut running = pool.running.lock().unwrap_or_else(|p| p.into_inner());
+        let c = cmd.spawn();
+        if let Ok(c) = &c
+            && let Some(id) = c.id()
+        {
+            running.insert(id);
+        }
+        c
+    };
+    let mut child = match spawned {
         Ok(c) => c,
         Err(e) => {
             sink.emit(
@@ -396,7 +528,8 @@ async fn run(sink: &EventSink, r: &Request, ctx: &Context, stop: &mut watch::Rec
             return;
         }
     };
-    let pgid = child.id().map(|id| id as i32);
+    let main = child.id();
+    let pgid = main.map(|id| id as i32);
     // Both pipes read as they come: a hook that prints megabytes never blocks on a full pipe,
     // and only the end of stderr is kept.
     let out = child.stdout.take().map(|mut s| {
@@ -442,6 +575,7 @@ async fn run(sink: &EventSink, r: &Request, ctx: &Context, stop: &mut watch::Rec
                 if matches!(other, End::Stopped) {
                     // A stop asks first; the timeout has waited long enough.
                     kill_group(g, rustix::process::Signal::TERM);
+                    signal_tree(&token, rustix::process::Signal::TERM);
                     if tokio::time::timeout(TERM_GRACE, child.wait())
                         .await
                         .is_err()
@@ -456,6 +590,22 @@ async fn run(sink: &EventSink, r: &Request, ctx: &Context, stop: &mut watch::Rec
             other
         }
     };
+    if let Some(id) = main {
+        pool.running
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .remove(&id);
+    }
+    // The hook's whole process tree ends with it: what it left running in its group, in a
+    // session of its own (`setsid`), or without a parent.
+    let left = end_tree(pool, &token).await;
+    if left > 0 {
+        tracing::warn!(
+            "{}: {left} process(es) of the deploy hook {} could not be ended",
+            r.project,
+            argv[0]
+        );
+    }
     // A process that left the group may still hold the pipes: wait for them boundedly.
     if let Some(o) = out {
         let _ = tokio::time::timeout(Duration::from_millis(500), o).await;
@@ -524,6 +674,148 @@ async fn run(sink: &EventSink, r: &Request, ctx: &Context, stop: &mut watch::Rec
     sink.emit(project, event);
 }
 
+/// The processes of the hook whose token is `token`: those whose environment carries it
+/// (every process the hook started inherits it, whatever its group, session or parent), and
+/// every descendant of those (one that cleared its environment while its parent lives). Zombies
+/// are left out (they hold nothing and cannot be signalled). This process is never among them.
+fn tree(token: &str) -> Vec<u32> {
+    let needle = format!("{HOOK_ENV}={token}\0");
+    let me = std::process::id();
+    let mut children: HashMap<u32, Vec<u32>> = HashMap::new();
+    let mut marked: BTreeSet<u32> = BTreeSet::new();
+    let Ok(dir) = std::fs::read_dir("/proc") else {
+        return Vec::new();
+    };
+    for e in dir.flatten() {
+        let Some(pid) = e.file_name().to_str().and_then(|n| n.parse::<u32>().ok()) else {
+            continue;
+        };
+        let Some((state, ppid)) = stat(pid) else {
+            continue;
+        };
+        if state == 'Z' || pid == me {
+            continue;
+        }
+        children.entry(ppid).or_default().push(pid);
+        if environ_has(pid, needle.as_bytes()) {
+            marked.insert(pid);
+        }
+    }
+    let mut all = marked.clone();
+    let mut todo: Vec<u32> = marked.into_iter().collect();
+    while let Some(p) = todo.pop() {
+        for c in children.get(&p).into_iter().flatten() {
+            if all.insert(*c) {
+                todo.push(*c);
+            }
+        }
+    }
+    all.remove(&me);
+    all.into_iter().collect()
+}
+
+/// A process's state letter and parent, from `/proc/PID/stat` (the name in parentheses may
+/// hold anything: read after its last `)`).
+fn stat(pid: u32) -> Option<(char, u32)> {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    let mut f = s.get(s.rfind(')')? + 1..)?.split_whitespace();
+    let state = f.next()?.chars().next()?;
+    let ppid = f.next()?.parse().ok()?;
+    Some((state, ppid))
+}
+
+/// Whether the process's environment (as it started) holds `needle` (`NAME=value\0`). Only a
+/// process of this user can be read; at most 1 MiB of it.
+fn environ_has(pid: u32, needle: &[u8]) -> bool {
+    use std::io::Read as _;
+    let Ok(f) = std::fs::File::open(format!("/proc/{pid}/environ")) else {
+        return false;
+    };
+    let mut env = Vec::new();
+    if f.take(1 << 20).read_to_end(&mut env).is_err() {
+        return false;
+    }
+    env.windows(needle.len())
+        .enumerate()
+        .any(|(i, w)| w == needle && (i == 0 || env[i - 1] == 0))
+}
+
+/// Sends `sig` to every process of the hook's tree; how many there were.
+fn signal_tree(token: &str, sig: rustix::process::Signal) -> usize {
+    let pids = tree(token);
+    for p in &pids {
+        if let Some(pid) = rustix::process::Pid::from_raw(*p as i32) {
+            let _ = rustix::process::kill_process(pid, sig);
+        }
+    }
+    pids.len()
+}
+
+/// Ends every process left of the hook `token` (`SIGKILL`, again until none is found: one may
+/// start another before it is killed), reaps those that became this process's children, and
+/// returns how many could not be ended.
+async fn end_tree(pool: &Pool, token: &str) -> usize {
+    let mut ended: BTreeSet<u32> = BTreeSet::new();
+    let mut left = 0;
+    for _ in 0..50 {
+        let pids = tree(token);
+        left = pids.len();
+        if pids.is_empty() {
+            break;
+        }
+        for p in &pids {
+            if let Some(pid) = rustix::process::Pid::from_raw(*p as i32) {
+                let _ = rustix::process::kill_process(pid, rustix::process::Signal::KILL);
+            }
+            ended.insert(*p);
+        }
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    if pool.subreaper {
+        // Those whose parent had ended are ours now: reap them (a killed process becomes a
+        // zombie at once or after its last thread ends).
+        for _ in 0..50 {
+            if reap(pool, &ended) == 0 {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+    }
+    left
+}
+
+/// Reaps this process's children that ended and are no running hook's main process (tokio
+/// reaps those): `ended`, and any other zombie child (a hook's orphan that ended on its own).
+/// Returns how many of `ended` are still this process's unreaped children.
+fn reap(pool: &Pool, ended: &BTreeSet<u32>) -> usize {
+    let running = pool.running.lock().unwrap_or_else(|p| p.into_inner());
+    let me = std::process::id();
+    let mut waiting = 0;
+    let zombies = std::fs::read_dir("/proc")
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|e| {
+            let pid = e.file_name().to_str()?.parse::<u32>().ok()?;
+            let (state, ppid) = stat(pid)?;
+            (ppid == me && (state == 'Z' || ended.contains(&pid))).then_some((pid, state))
+        });
+    for (pid, state) in zombies.collect::<Vec<_>>() {
+        if running.contains(&pid) {
+            continue;
+        }
+        let Some(p) = rustix::process::Pid::from_raw(pid as i32) else {
+            continue;
+        };
+        match rustix::process::waitpid(Some(p), rustix::process::WaitOptions::NOHANG) {
+            Ok(Some(_)) => {}
+            Ok(None) if state != 'Z' => waiting += 1,
+            _ => {}
+        }
+    }
+    waiting
+}
+
 fn kill_group(pgid: i32, sig: rustix::process::Signal) {
     if let Some(pid) = rustix::process::Pid::from_raw(pgid) {
         let _ = rustix::process::kill_process_group(pid, sig);
@@ -542,16 +834,35 @@ fn tail_text(bytes: &[u8], cut: bool) -> String {
     String::from_utf8_lossy(b).trim_end().to_owned()
 }
 
-/// The hook's program as the configuration gives it: a path with a `/` relative to the
-/// configuration file's folder, a bare name looked up in `PATH` when it runs.
+/// The hook's program as the configuration gives it: an absolute path as written, a path with a
+/// `/` relative to the configuration file's folder, a bare name looked up when the
+/// configuration is read in the absolute folders of `PATH` ([`find_in_path`]). A bare name not
+/// found there stays bare: [`run`] refuses to run it (it never falls to the process's own
+/// lookup, which would search an empty or relative `PATH` entry in the project folder).
 pub fn program_path(program: &str, base: &Path) -> String {
-    if program.contains('/') && !program.starts_with('/') {
+    if program.starts_with('/') {
+        program.to_owned()
+    } else if program.contains('/') {
         crate::paths::normalize(&base.join(program))
             .display()
             .to_string()
     } else {
-        program.to_owned()
+        find_in_path(program, std::env::var_os("PATH").as_deref())
+            .map_or_else(|| program.to_owned(), |p| p.display().to_string())
     }
+}
+
+/// The first executable regular file `name` in the absolute folders of `path` (a `PATH` value):
+/// an empty entry or a relative one (`.`, `bin`) means the current folder, which for a hook is
+/// the project folder, where planners write; such entries are skipped.
+pub fn find_in_path(name: &str, path: Option<&std::ffi::OsStr>) -> Option<PathBuf> {
+    use std::os::unix::fs::PermissionsExt as _;
+    std::env::split_paths(path?)
+        .filter(|d| d.is_absolute())
+        .map(|d| d.join(name))
+        .find(|c| {
+            std::fs::metadata(c).is_ok_and(|m| m.is_file() && m.permissions().mode() & 0o111 != 0)
+        })
 }
 
 #[cfg(test)]

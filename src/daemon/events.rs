@@ -147,6 +147,9 @@ pub enum Event {
         file: Option<String>,
         /// Which retry follows (1 to 3).
         attempt: u32,
+        /// Why, when it is not a file caught half-written (the daemon ran out of descriptors
+        /// or memory).
+        reason: Option<String>,
     },
     WriteBack {
         run_id: u64,
@@ -1283,6 +1286,7 @@ mod tests {
                 duration_ms: 1,
                 file: s(),
                 attempt: 1,
+                reason: s(),
             },
             Event::WriteBack {
                 run_id: 1,

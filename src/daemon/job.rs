@@ -33,7 +33,8 @@ pub(super) enum Outcome {
     Unchanged,
     /// A file was caught half-written: try again after a quiet period. `counted`: whether
     /// the attempt counts towards the limit (not when the file's bytes were still changing).
-    Retry { counted: bool },
+    /// `starved`: the process ran out of descriptors or memory ([`starved`]): try again later.
+    Retry { counted: bool, starved: bool },
     Compiled {
         inputs: HashMap<PathBuf, Option<u64>>,
         outputs: Vec<PathBuf>,
@@ -272,6 +273,9 @@ pub(super) struct Job {
     pub(super) may_retry: bool,
     /// Which retry a half-written file would cause (1 for the first).
     pub(super) attempt: u32,
+    /// Whether a compile that ran out of descriptors or memory may be tried again
+    /// ([`starved`]; counted apart from the half-written retries).
+    pub(super) may_retry_starved: bool,
     pub(super) confine: bool,
     pub(super) max_file_size: u64,
     pub(super) run_id: u64,
@@ -288,6 +292,29 @@ impl Job {
     }
 
     /// Emits `compile-failed` with these diagnostics (JSON objects as `--format json` prints).
+    /// A run that failed because the process ran out of descriptors or memory (`why`, the
+    /// error's text): `compile-retrying` saying so, and the retry, while more may follow.
+    fn starved_retry(&self, duration_ms: u64, why: &str) -> Option<Outcome> {
+        if !self.may_retry_starved || !starved(why) {
+            return None;
+        }
+        let project = self.project();
+        tracing::warn!("{project}: {why}; trying again");
+        self.outcome(Event::CompileRetrying {
+            run_id: self.run_id,
+            duration_ms,
+            file: Some(project),
+            attempt: self.attempt,
+            reason: Some(format!(
+                "the daemon ran short of a resource ({why}); trying again shortly"
+            )),
+        });
+        Some(Outcome::Retry {
+            counted: false,
+            starved: true,
+        })
+    }
+
     pub(super) fn failed(&self, duration_ms: u64, diagnostics: Vec<serde_json::Value>) {
         self.outcome(Event::CompileFailed {
             run_id: self.run_id,
@@ -509,6 +536,9 @@ impl Job {
             Err(_) if early => return deferred(self),
             Ok(x) => x,
             Err(why) => {
+                if let Some(o) = self.starved_retry(0, &why) {
+                    return o;
+                }
                 self.failed(
                     0,
                     vec![serde_json::json!({"severity": "error", "code": Code::FileUnreadable.as_str(), "message": why, "file": project})],
@@ -584,8 +614,22 @@ impl Job {
                     duration_ms: ms(),
                     file: Some(file.display().to_string()),
                     attempt: self.attempt,
+                    reason: None,
                 });
-                return Outcome::Retry { counted: !moving };
+                return Outcome::Retry {
+                    counted: !moving,
+                    starved: false,
+                };
+            }
+            let why = c
+                .diagnostics
+                .iter()
+                .filter(|d| d.severity == Severity::Error)
+                .find(|d| starved(&d.message));
+            if let Some(d) = why
+                && let Some(o) = self.starved_retry(ms(), &d.message)
+            {
+                return o;
             }
             let diags = renamed
                 .into_iter()
@@ -614,8 +658,12 @@ impl Job {
                 duration_ms: ms(),
                 file: Some(project.clone()),
                 attempt: self.attempt,
+                reason: None,
             });
-            return Outcome::Retry { counted: true };
+            return Outcome::Retry {
+                counted: true,
+                starved: false,
+            };
         }
         // The outputs first; the write-back is tried here, so that a wait for another program
         // to close the blackboard is neither part of the compile's `duration_ms` nor of a new
@@ -633,6 +681,9 @@ impl Job {
         let (applied, first) = match applied {
             Ok(a) => a,
             Err(e) => {
+                if let Some(o) = self.starved_retry(ms(), &e.to_string()) {
+                    return o;
+                }
                 self.outcome(Event::failed_with(
                     self.run_id,
                     ms(),
@@ -991,6 +1042,17 @@ pub(super) fn half_written(
         }
         None
     })
+}
+
+/// Whether an error's text is that of a resource the process ran short of, which passes: too
+/// many open files (`EMFILE`), in the system too (`ENFILE`), no memory (`ENOMEM`), a thread or
+/// process that could not be started now (`EAGAIN`). The text is the operating system's, as
+/// `std::io::Error` writes it (`... (os error 24)`), wherever the error was wrapped.
+pub(super) fn starved(text: &str) -> bool {
+    use rustix::io::Errno;
+    [Errno::MFILE, Errno::NFILE, Errno::NOMEM, Errno::AGAIN]
+        .iter()
+        .any(|e| text.contains(&format!("(os error {})", e.raw_os_error())))
 }
 
 /// How long [`half_written`] waits to see whether a file saved a moment ago is still changing.

@@ -79,8 +79,10 @@ pub(super) struct Locks {
     /// Folder as given → the lock it holds, or `None` while the folder does not exist.
     names: HashMap<PathBuf, Option<Id>>,
     held: HashMap<Id, Held>,
-    /// The open-file limit (locks stop [`RESERVE`] below it).
+    /// The open-file limit (locks stop [`RESERVE`] and `hooks` below it).
     limit: u64,
+    /// Descriptors left for the deploy hooks running at once.
+    hooks: u64,
 }
 
 impl Locks {
@@ -92,7 +94,19 @@ impl Locks {
             limit: rustix::process::getrlimit(rustix::process::Resource::Nofile)
                 .current
                 .unwrap_or(u64::MAX),
+            hooks: 0,
         }
+    }
+
+    /// Leaves `hooks` descriptors for the deploy hooks besides [`RESERVE`].
+    pub(super) fn reserving(mut self, hooks: u64) -> Self {
+        self.hooks = hooks;
+        self
+    }
+
+    /// Takes a new share for the hooks (a reload): folders locked already stay locked.
+    pub(super) fn reserve(&mut self, hooks: u64) {
+        self.hooks = hooks;
     }
 
     /// With this open-file limit instead of the process's (tests).
@@ -104,7 +118,7 @@ impl Locks {
 
     /// Whether no further folder can be locked (the open-file limit less [`RESERVE`]).
     pub(super) fn at_limit(&self) -> bool {
-        self.held.len() as u64 + RESERVE >= self.limit
+        self.held.len() as u64 + RESERVE + self.hooks >= self.limit
     }
 
     pub(super) fn holds(&self, folder: &Path) -> bool {
@@ -118,11 +132,16 @@ impl Locks {
             return self.ensure(folder).map(drop);
         }
         self.names.insert(folder.to_owned(), None);
-        let r = self.ensure(folder);
-        if r.is_err() {
-            self.names.remove(folder);
+        match self.lock(folder) {
+            Ok(_) => Ok(()),
+            // Another program's lock (a planner's `flock`): kept like a missing folder, so only
+            // this folder waits; [`Locks::ensure`] says why and takes it once it is let go.
+            Err(Refused::Other(_)) => Ok(()),
+            Err(Refused::Daemon(why)) => {
+                self.names.remove(folder);
+                Err(why)
+            }
         }
-        r.map(drop)
     }
 
     /// Locks `folder` (kept by [`Locks::acquire`]) if it exists now and is not locked yet.
@@ -130,6 +149,10 @@ impl Locks {
     /// compile it until a later call returns `true` (a folder that appears right after this
     /// answer is not ours yet).
     pub(super) fn ensure(&mut self, folder: &Path) -> Result<bool, String> {
+        self.lock(folder).map_err(Refused::into_sentence)
+    }
+
+    fn lock(&mut self, folder: &Path) -> Result<bool, Refused> {
         match self.names.get(folder) {
             Some(Some(id)) => {
                 // Still the folder we locked? One deleted (or moved away) and made again under
@@ -143,7 +166,7 @@ impl Locks {
                 }
             }
             Some(None) => {}
-            None => return Err(format!("{} is not kept", folder.display())),
+            None => return Err(Refused::Daemon(format!("{} is not kept", folder.display()))),
         }
         let opened = std::fs::File::options()
             .read(true)
@@ -153,9 +176,9 @@ impl Locks {
             .open(folder);
         let (dir, meta) = match opened {
             Ok(dir) => {
-                let meta = dir
-                    .metadata()
-                    .map_err(|e| format!("cannot lock {}: {e}", folder.display()))?;
+                let meta = dir.metadata().map_err(|e| {
+                    Refused::Daemon(format!("cannot lock {}: {e}", folder.display()))
+                })?;
                 (Some(dir), meta)
             }
             // There, but not to be opened for reading (no read permission): the lock file.
@@ -173,14 +196,16 @@ impl Locks {
             return Ok(true);
         }
         if self.at_limit() {
-            return Err(format!(
+            return Err(Refused::Daemon(format!(
                 "cannot keep {}: this daemon keeps {} folders, as many as its open-file limit \
-                 ({}) allows with {RESERVE} descriptors left for the compiles; raise the limit \
-                 (systemd: LimitNOFILE=) or split the folders between services",
+                 ({}) allows with {RESERVE} descriptors left for the compiles and {} for the \
+                 deploy hooks; raise the limit (systemd: LimitNOFILE=) or split the folders \
+                 between services",
                 folder.display(),
                 self.held.len(),
-                self.limit
-            ));
+                self.limit,
+                self.hooks
+            )));
         }
         let real = std::fs::canonicalize(folder).unwrap_or_else(|_| folder.to_owned());
         let note = self.dir.join(lock_name(&real));
@@ -194,7 +219,7 @@ impl Locks {
             }
             // No flock on folders here (a network file system), or the folder cannot be opened:
             // the lock file instead.
-            _ => self.lock_file(&real, &note)?,
+            _ => self.lock_file(&real, &note).map_err(Refused::Daemon)?,
         };
         let note = self.write_note(&note, &real);
         self.held.insert(
@@ -209,9 +234,11 @@ impl Locks {
         Ok(true)
     }
 
-    /// The message when another daemon keeps `real` (whose locked file is `id`); with its pid
-    /// when the kernel's list of locks or its note says it.
-    fn refusal(&self, real: &Path, note: &Path, id: Option<Id>) -> String {
+    /// Why `real` (whose locked file is `id`) cannot be locked: another skillpost daemon keeps
+    /// it, or another program holds a lock on it. The holder's pid comes from the kernel's list
+    /// of locks, else from the note a daemon leaves; a holder the kernel names is a daemon only
+    /// when it is a skillpost process ([`is_skillpost`]). Without `/proc`, a daemon.
+    fn refusal(&self, real: &Path, note: &Path, id: Option<Id>) -> Refused {
         let from_note = || {
             crate::load::read_limited(note, 4096)
                 .ok()
@@ -223,15 +250,25 @@ impl Locks {
                         .and_then(|p| p.parse::<u32>().ok())
                 })
         };
-        let pid = id
-            .and_then(holder_pid)
+        let holder = id.and_then(holder_pid);
+        if let Some(pid) = holder
+            && let Some(name) = not_skillpost(pid)
+        {
+            return Refused::Other(format!(
+                "{} is locked by {name} (pid {pid}), a program that is not a skillpost daemon \
+                 (a `flock` of someone working there?): this folder waits until the lock is let \
+                 go (tried again every 2 s); the other folders are served",
+                real.display()
+            ));
+        }
+        let pid = holder
             .or_else(from_note)
             .map(|p| format!(" (pid {p})"))
             .unwrap_or_default();
-        format!(
+        Refused::Daemon(format!(
             "another skillpost daemon{pid} already watches {}: one daemon per folder",
             real.display()
-        )
+        ))
     }
 
     /// The runtime directory, made if needed: a folder of our own nobody else can write to.
@@ -295,7 +332,7 @@ impl Locks {
                 Ok(()) => {}
                 Err(rustix::io::Errno::WOULDBLOCK) => {
                     let id = f.metadata().ok().map(|m| (m.dev(), m.ino()));
-                    return Err(self.refusal(real, file, id));
+                    return Err(self.refusal(real, file, id).into_sentence());
                 }
                 Err(e) => return Err(format!("cannot lock {}: {e}", file.display())),
             }
@@ -339,6 +376,47 @@ impl Drop for Locks {
             }
         }
     }
+}
+
+/// Why a folder cannot be locked.
+enum Refused {
+    /// Another skillpost daemon keeps it, or it cannot be locked at all: refused.
+    Daemon(String),
+    /// Another program holds a lock on it: this folder waits, the daemon goes on.
+    Other(String),
+}
+
+impl Refused {
+    fn into_sentence(self) -> String {
+        match self {
+            Refused::Daemon(s) | Refused::Other(s) => s,
+        }
+    }
+}
+
+/// `None` when `pid` is a skillpost process (this one, one whose command is `skillpost`, or one
+/// running the same executable); else the program's name as the kernel gives it (`flock`), or
+/// a sentence when the process has ended (a child it started may hold the lock on).
+fn not_skillpost(pid: u32) -> Option<String> {
+    if pid == std::process::id() {
+        return None;
+    }
+    let Ok(comm) = std::fs::read_to_string(format!("/proc/{pid}/comm")) else {
+        // Hidden (`hidepid`, another user's process): it may be a daemon.
+        let gone = rustix::process::Pid::from_raw(pid as i32)
+            .is_some_and(|p| rustix::process::test_kill_process(p) == Err(rustix::io::Errno::SRCH));
+        return gone
+            .then(|| "a process that has ended (a program it started holds the lock)".into());
+    };
+    let comm = comm.trim_end_matches('\n');
+    if comm == "skillpost" {
+        return None;
+    }
+    let id = |p: &str| std::fs::metadata(p).ok().map(|m| (m.dev(), m.ino()));
+    if id(&format!("/proc/{pid}/exe")).is_some_and(|e| Some(e) == id("/proc/self/exe")) {
+        return None;
+    }
+    Some(format!("`{comm}`"))
 }
 
 /// The pid holding an `flock` on the file `id`, as the kernel's list of locks says

@@ -80,11 +80,28 @@ pub struct Sources {
     /// Where the lock notes go instead of [`lock::runtime_dir`] (tests keep them in their own
     /// folders).
     pub runtime_dir: Option<PathBuf>,
+    /// The daemon is the process (`skillpost watch`), not a test running it: it becomes the
+    /// subreaper of its hooks' processes ([`deploy::Pool::new`]).
+    pub own_process: bool,
 }
 
 impl Sources {
-    /// Reads the configuration file (if any) and merges the command line over it.
+    /// Reads the configuration file (if any) and merges the command line over it; refused when
+    /// a hook's program lies in a project folder or root.
     pub fn load(&self) -> Result<Config, config::ConfigError> {
+        let c = self.read()?;
+        if let Some(why) = config::hook_programs(&c)
+            .into_iter()
+            .find_map(|p| config::hook_program_problem(&c, p))
+        {
+            return Err(config::ConfigError::plain(why, c.file.clone()));
+        }
+        Ok(c)
+    }
+
+    /// [`Sources::load`] without the check of the hooks' programs (`--check-config` shows it as
+    /// a row of its own).
+    pub fn read(&self) -> Result<Config, config::ConfigError> {
         let file = match &self.config_file {
             Some(f) => Some(config::load(f)?),
             None => None,
@@ -108,6 +125,9 @@ impl Sources {
 pub const DEFAULT_SETTLE_MS: u64 = 100;
 /// Retries of a compile that failed on a file caught half-written.
 const MAX_RETRIES: u32 = 3;
+/// Retries of a compile that ran short of descriptors or memory, 1 s after the first, each
+/// twice as long after the one before (about a minute in all).
+const MAX_STARVED_RETRIES: u32 = 6;
 /// Compiles again after a write-back skipped because the blackboard was open elsewhere.
 const MAX_IN_USE_ROUNDS: u32 = 5;
 /// How often missing project folders are looked for again.
@@ -133,13 +153,16 @@ pub async fn run(
     let (wtx, mut wrx) = mpsc::unbounded_channel();
     let (dtx, mut drx) = mpsc::unbounded_channel();
     let force_poll = std::env::var_os("SKILLPOST_FORCE_POLL").is_some();
+    let sources_own_process = sources.own_process;
     // One daemon per folder: a second one on any of these folders stops here (exit status 2).
     lock::raise_open_file_limit();
     let runtime = sources
         .runtime_dir
         .clone()
         .unwrap_or_else(lock::runtime_dir);
-    let mut locks = lock::Locks::new(runtime.clone());
+    let hooks = config.max_deploys();
+    let mut locks =
+        lock::Locks::new(runtime.clone()).reserving(hooks as u64 * deploy::FDS_PER_HOOK);
     for folder in config.projects.iter().map(|p| p.path.clone()).chain(
         config
             .roots
@@ -173,6 +196,7 @@ pub async fn run(
         deploys: HashMap::new(),
         deploy_stop: tokio::sync::watch::channel(false).0,
         runtime,
+        deploy_pool: Arc::new(deploy::Pool::new(hooks, sources_own_process)),
     };
     sink.emit(
         None,
@@ -295,6 +319,8 @@ struct Daemon {
     deploy_stop: tokio::sync::watch::Sender<bool>,
     /// The runtime directory (lock notes, the deploy hooks' snapshots).
     runtime: PathBuf,
+    /// The cap on hooks at once, of all projects (`max_deploys`), and their processes.
+    deploy_pool: Arc<deploy::Pool>,
 }
 
 fn settle_of(c: &Config) -> Duration {
@@ -320,7 +346,11 @@ impl Daemon {
             self.deploys.remove(key);
         }
         let worker = self.deploys.entry(key.to_owned()).or_insert_with(|| {
-            deploy::Worker::start(self.sink.clone(), self.deploy_stop.subscribe())
+            deploy::Worker::start(
+                self.sink.clone(),
+                self.deploy_stop.subscribe(),
+                self.deploy_pool.clone(),
+            )
         });
         worker.submit(deploy::Request {
             project: key.display().to_string(),
@@ -442,7 +472,8 @@ impl Daemon {
             trigger,
             run: p.sched.run(),
             may_retry: p.retries < MAX_RETRIES,
-            attempt: p.retries + 1,
+            attempt: p.retries + p.starved + 1,
+            may_retry_starved: p.starved < MAX_STARVED_RETRIES,
             confine: !self.config.allow_outside,
             max_file_size: self
                 .config
@@ -500,6 +531,7 @@ impl Daemon {
         match r.outcome {
             Outcome::Unchanged => {
                 p.retries = 0;
+                p.starved = 0;
                 p.sched.finished(now);
             }
             Outcome::Failed => {
@@ -519,7 +551,15 @@ impl Daemon {
                 p.sched.finished(now);
                 p.sched.confirm(now);
             }
-            Outcome::Retry { counted } => {
+            Outcome::Retry { starved: true, .. } => {
+                p.force = true;
+                p.trigger = Some("retry");
+                p.sched.finished(now);
+                p.sched
+                    .retry_after(now, Duration::from_secs(1) * (1 << p.starved.min(6)));
+                p.starved += 1;
+            }
+            Outcome::Retry { counted, .. } => {
                 p.force = true;
                 p.trigger = Some("retry");
                 // The writer is still at it (the file's bytes changed after the read, or changes
@@ -550,6 +590,7 @@ impl Daemon {
                 }
                 p.last_ok = succeeded;
                 p.retries = 0;
+                p.starved = 0;
                 // Another program had the blackboard open (each write-back already waits about
                 // 1.3 s for it): a few more rounds, then the next edit tries again.
                 p.in_use_rounds = if in_use { p.in_use_rounds + 1 } else { 0 };
@@ -620,6 +661,9 @@ impl Daemon {
         }
         match loaded {
             Ok(c) => {
+                let hooks = c.max_deploys();
+                self.deploy_pool.set_cap(hooks);
+                self.locks.reserve(hooks as u64 * deploy::FDS_PER_HOOK);
                 let (added, removed) = self.apply_config(c, now);
                 // New projects, and those whose last compile could not write (E604: an
                 // administrator fixed the folder's permissions and reloads), compile now.

@@ -35,6 +35,9 @@ pub(super) struct Root {
     /// The (device, inode) of a root that exists but could not be watched (reported once; tried
     /// again when it is another folder).
     pub(super) failed: Option<(u64, u64)>,
+    /// Another program (not a skillpost daemon) holds a lock on the root: not watched until
+    /// it lets go (said once; tried again with the missing folders' check).
+    pub(super) held_elsewhere: bool,
 }
 
 pub(super) struct Project {
@@ -58,6 +61,8 @@ pub(super) struct Project {
     /// Why the next compile runs: the first reason of the burst counts.
     pub(super) trigger: Option<&'static str>,
     pub(super) retries: u32,
+    /// Retries in a row of compiles that ran short of descriptors or memory.
+    pub(super) starved: u32,
     /// Consecutive compiles whose write-back found the blackboard open elsewhere.
     pub(super) in_use_rounds: u32,
     pub(super) missing: bool,
@@ -181,6 +186,18 @@ impl Daemon {
             return;
         }
         self.roots.insert(root.to_owned(), Root::default());
+        if let Err(why) = self.locks.ensure(root) {
+            self.sink.emit(
+                None,
+                Event::WatchDegraded {
+                    root: Some(root.display().to_string()),
+                    reason: why,
+                    backend: Some("none"),
+                },
+            );
+            self.roots.get_mut(root).expect("root").held_elsewhere = true;
+            return;
+        }
         // A root that exists is watched now: `watching` says so (docs/DAEMON.md, "Watching"); a
         // missing one got `watch-degraded` and says `watching` when it appears.
         if self.attach_root(root, None) {
@@ -298,6 +315,17 @@ impl Daemon {
         let Some(r) = self.roots.get(root) else {
             return;
         };
+        if r.held_elsewhere {
+            // Another program's lock: watched once it is let go (or the root is gone).
+            if self.locks.ensure(root).is_err() {
+                return;
+            }
+            self.roots.get_mut(root).expect("root").held_elsewhere = false;
+            if self.attach_root(root, None) {
+                self.root_back(root, false, now);
+            }
+            return;
+        }
         let current = dir_id(root);
         match (r.id, current) {
             (Some(a), Some(b)) if a == b => {}
@@ -555,6 +583,7 @@ impl Daemon {
             writing: HashMap::new(),
             trigger: Some("startup"),
             retries: 0,
+            starved: 0,
             in_use_rounds: 0,
             held: Vec::new(),
             held_run: 0,

@@ -141,6 +141,18 @@ impl Scheduler {
         self.deadline = Some(now + self.settle);
     }
 
+    /// Try again after `delay` (a compile that ran short of descriptors or memory).
+    pub fn retry_after(&mut self, now: Instant, delay: Duration) {
+        if self.running {
+            self.pending = true;
+            return;
+        }
+        self.first.get_or_insert(now);
+        self.last = Some(now);
+        self.next = Run::Settled;
+        self.deadline = Some(now + delay);
+    }
+
     /// Compile now, without a quiet period (startup, rescan).
     pub fn immediately(&mut self, now: Instant) {
         if self.running {
