@@ -690,7 +690,12 @@ fn check_config_checks_the_deploy_hooks_program() {
     assert_eq!(code, Some(1), "{out}");
     assert_eq!(listing(&w.root), before, "nothing written or run: {out}");
     assert!(!marker.exists());
-    let touch = out.lines().find(|l| l.contains("  touch  ")).expect(&out);
+    // A bare name: the program PATH's absolute folders hold, found when the configuration
+    // was read (issue 37, item 8).
+    let touch = out
+        .lines()
+        .find(|l| l.starts_with("(deploy)") && l.contains("/touch  "))
+        .expect(&out);
     assert!(touch.contains("ok: the deploy hook runs /"), "{touch}");
     let missing = w.root.join("no-such-deploy");
     let bad = out
