@@ -1038,3 +1038,153 @@ fn the_daemon_leaves_a_read_only_blackboard_alone() {
     assert_eq!(fs::read(&bb).unwrap(), before);
     assert_eq!(fs::metadata(&bb).unwrap().ino(), ino);
 }
+
+/// Issue 37, item 7: a planner's `flock` on a project folder and on a root is not another
+/// daemon's: the daemon starts, names the holder as what it is, serves the other folders, and
+/// compiles the locked folder once the lock is let go.
+#[test]
+fn a_planners_flock_makes_only_that_folder_wait() {
+    let w = Workspace::new();
+    let (p, q) = (w.project("P"), w.project("Q"));
+    let root = w.ws().join("R");
+    inproc::copy_project(&root.join("S"));
+    let cfg = w.config(&format!(
+        "[[project]]\npath = \"{}\"\n[[project]]\npath = \"{}\"\n[[root]]\npath = \"{}\"\n",
+        p.display(),
+        q.display(),
+        root.display()
+    ));
+    let hold = |dir: &Path| {
+        // `-o`: the lock is flock's own, not its command's.
+        let mut c = Command::new("flock")
+            .args(["-n", "-o"])
+            .arg(dir)
+            .args(["sh", "-c", "echo held; exec sleep 600"])
+            .stdout(Stdio::piped())
+            .spawn()
+            .expect("flock(1) from util-linux");
+        let mut line = String::new();
+        std::io::BufRead::read_line(
+            &mut std::io::BufReader::new(c.stdout.take().unwrap()),
+            &mut line,
+        )
+        .unwrap();
+        assert_eq!(line.trim(), "held");
+        c
+    };
+    let mut flocks = [hold(&p), hold(&root)];
+    let ev = w.root.join("events.jsonl");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["watch", "--settle", "50", "--config"])
+        .arg(&cfg)
+        .arg("--events")
+        .arg(&ev)
+        .env("XDG_RUNTIME_DIR", &w.root)
+        .env_remove("RUNTIME_DIRECTORY")
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let compiled = |dir: &Path| {
+        let needle = format!(
+            "\"project\":{}",
+            serde_json::json!(dir.display().to_string())
+        );
+        inproc::read_string(&ev)
+            .lines()
+            .any(|l| l.contains("\"compile-succeeded\"") && l.contains(&needle))
+    };
+    let served = inproc::wait_until(Duration::from_secs(60), || {
+        compiled(&q) && compiled(&root.join("S"))
+    });
+    let text = inproc::read_string(&ev);
+    let p_waits = !compiled(&p);
+    for f in &mut flocks {
+        let _ = f.kill();
+        let _ = f.wait();
+    }
+    let p_later = inproc::wait_until(Duration::from_secs(30), || compiled(&p));
+    let _ = child.kill();
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        served,
+        "the other folders were not served: {stderr}\n{text}"
+    );
+    assert!(!text.contains("another skillpost daemon"), "{text}");
+    assert_eq!(
+        text.matches("a program that is not a skillpost daemon")
+            .count(),
+        2,
+        "P and R named as held by another program: {text}"
+    );
+    assert!(text.contains("`flock`"), "the holder named: {text}");
+    assert!(p_waits, "P compiled while a planner held its lock: {text}");
+    assert!(
+        p_later,
+        "P not compiled after the lock was let go: {}",
+        inproc::read_string(&ev)
+    );
+}
+
+/// Issue 37, item 6: 600 projects under one root, a 3 s hook, `ulimit -n 1024`: every project
+/// compiles (no "Too many open files"), and at most `max_deploys` (default 4) hooks run at once.
+/// The attack of the report: 435 of 600 `compile-failed` before.
+#[test]
+fn hooks_never_take_the_compiles_descriptors() {
+    let w = Workspace::new();
+    let root = w.ws().join("R");
+    let n = std::env::var("SKILLPOST_HOOK_PROJECTS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(600usize);
+    for i in 0..n {
+        inproc::copy_project(&root.join(format!("p{i:03}")));
+    }
+    let cfg = w.config(&format!(
+        "[[root]]\npath = \"{}\"\non_success = [\"/bin/sh\", \"-c\", \"sleep 3\"]\n",
+        root.display()
+    ));
+    let ev = w.root.join("events.jsonl");
+    let child = Command::new("sh")
+        .args(["-c", "ulimit -n 1024; exec \"$0\" \"$@\""])
+        .arg(env!("CARGO_BIN_EXE_skillpost"))
+        .args(["watch", "--settle", "50", "--config"])
+        .arg(&cfg)
+        .arg("--events")
+        .arg(&ev)
+        .env("XDG_RUNTIME_DIR", &w.root)
+        .env_remove("RUNTIME_DIRECTORY")
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let outcomes = |t: &str| {
+        t.matches("\"compile-succeeded\"").count() + t.matches("\"compile-failed\"").count()
+    };
+    let done = inproc::wait_until(Duration::from_secs(600), || {
+        outcomes(&inproc::read_string(&ev)) >= n
+    });
+    let text = inproc::read_string(&ev);
+    let pid = rustix::process::Pid::from_child(&child);
+    rustix::process::kill_process(pid, rustix::process::Signal::TERM).unwrap();
+    let stopped = ended_within(child, Duration::from_secs(30));
+    let (mut running, mut most) = (0i64, 0i64);
+    for l in text.lines() {
+        if l.contains("\"deploy-started\"") {
+            running += 1;
+            most = most.max(running);
+        } else if l.contains("\"deploy-succeeded\"") || l.contains("\"deploy-failed\"") {
+            running -= 1;
+        }
+    }
+    let ok = text.matches("\"compile-succeeded\"").count();
+    eprintln!("{ok} of {n} compiled; at most {most} hooks at once");
+    assert!(done, "not every project was compiled: {ok} of {n}");
+    assert!(!text.contains("Too many open files"), "descriptors ran out");
+    assert_eq!(ok, n, "compiled");
+    assert!(most <= 4, "{most} hooks at once");
+    assert!(stopped.is_some(), "SIGTERM did not stop the daemon");
+}

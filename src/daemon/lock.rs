@@ -128,17 +128,19 @@ impl Locks {
     /// Keeps `folder`: locks it if it exists, else remembers it for [`Locks::ensure`] when it
     /// appears. Error: the sentence to report (another daemon keeps it, or it cannot be locked).
     pub(super) fn acquire(&mut self, folder: &Path) -> Result<(), String> {
-        if self.holds(folder) {
-            return self.ensure(folder).map(drop);
+        let kept = self.holds(folder);
+        if !kept {
+            self.names.insert(folder.to_owned(), None);
         }
-        self.names.insert(folder.to_owned(), None);
         match self.lock(folder) {
             Ok(_) => Ok(()),
             // Another program's lock (a planner's `flock`): kept like a missing folder, so only
             // this folder waits; [`Locks::ensure`] says why and takes it once it is let go.
             Err(Refused::Other(_)) => Ok(()),
             Err(Refused::Daemon(why)) => {
-                self.names.remove(folder);
+                if !kept {
+                    self.names.remove(folder);
+                }
                 Err(why)
             }
         }
