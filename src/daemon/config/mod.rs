@@ -424,104 +424,62 @@ fn parse_with(text: &str, file: &Path, files: bool) -> Result<Config, ConfigErro
         Ok((template, lf, program.as_ref().map(|p| p.get_ref().clone())))
     };
 
-    let settle_ms = match &raw.settle_ms {
-        None => None,
-        Some(v) => {
-            let n = *v.get_ref();
-            match u64::try_from(n) {
-                Ok(n) if SETTLE_MS_RANGE.contains(&n) => Some(n),
-                _ => {
-                    return Err(at(
-                        Some(v.span()),
-                        format!(
-                            "`settle_ms` is {n}, expected {}..={} (milliseconds)",
-                            SETTLE_MS_RANGE.start(),
-                            SETTLE_MS_RANGE.end()
-                        ),
-                    ));
-                }
-            }
+    // A whole number key within its range (`settle_ms` is 0, expected 1..=60000 (milliseconds)).
+    let ranged = |v: &Option<Spanned<i64>>,
+                  key: &str,
+                  range: &RangeInclusive<u64>,
+                  unit: &str|
+     -> Result<Option<u64>, ConfigError> {
+        let Some(v) = v else { return Ok(None) };
+        let n = *v.get_ref();
+        match u64::try_from(n) {
+            Ok(n) if range.contains(&n) => Ok(Some(n)),
+            _ => Err(at(
+                Some(v.span()),
+                format!(
+                    "`{key}` is {n}, expected {}..={} ({unit})",
+                    range.start(),
+                    range.end()
+                ),
+            )),
         }
     };
-
-    let max_file_size_mb = match &raw.max_file_size_mb {
-        None => None,
-        Some(v) => {
-            let n = *v.get_ref();
-            match u64::try_from(n) {
-                Ok(n) if MAX_FILE_SIZE_MB_RANGE.contains(&n) => Some(n),
-                _ => {
-                    return Err(at(
-                        Some(v.span()),
-                        format!(
-                            "`max_file_size_mb` is {n}, expected {}..={} (MiB)",
-                            MAX_FILE_SIZE_MB_RANGE.start(),
-                            MAX_FILE_SIZE_MB_RANGE.end()
-                        ),
-                    ));
-                }
-            }
-        }
-    };
-
-    let forget_after_s = match &raw.forget_after_s {
-        None => None,
-        Some(v) => {
-            let n = *v.get_ref();
-            match u64::try_from(n) {
-                Ok(n) if FORGET_AFTER_S_RANGE.contains(&n) => Some(n),
-                _ => {
-                    return Err(at(
-                        Some(v.span()),
-                        format!(
-                            "`forget_after_s` is {n}, expected {}..={} (seconds)",
-                            FORGET_AFTER_S_RANGE.start(),
-                            FORGET_AFTER_S_RANGE.end()
-                        ),
-                    ));
-                }
-            }
-        }
-    };
-
-    let max_deploys = match &raw.max_deploys {
-        None => None,
-        Some(v) => {
-            let n = *v.get_ref();
-            match u64::try_from(n) {
-                Ok(n) if super::deploy::MAX_DEPLOYS_RANGE.contains(&n) => Some(n as usize),
-                _ => {
-                    return Err(at(
-                        Some(v.span()),
-                        format!(
-                            "`max_deploys` is {n}, expected {}..={} (deploy hooks at once)",
-                            super::deploy::MAX_DEPLOYS_RANGE.start(),
-                            super::deploy::MAX_DEPLOYS_RANGE.end()
-                        ),
-                    ));
-                }
-            }
-        }
-    };
+    let settle_ms = ranged(
+        &raw.settle_ms,
+        "settle_ms",
+        &SETTLE_MS_RANGE,
+        "milliseconds",
+    )?;
+    let max_file_size_mb = ranged(
+        &raw.max_file_size_mb,
+        "max_file_size_mb",
+        &MAX_FILE_SIZE_MB_RANGE,
+        "MiB",
+    )?;
+    let forget_after_s = ranged(
+        &raw.forget_after_s,
+        "forget_after_s",
+        &FORGET_AFTER_S_RANGE,
+        "seconds",
+    )?;
+    let max_deploys = ranged(
+        &raw.max_deploys,
+        "max_deploys",
+        &super::deploy::MAX_DEPLOYS_RANGE,
+        "deploy hooks at once",
+    )?
+    .map(|n| n as usize);
 
     // The deploy hook: checked where it is written; a timeout of its own or the global one.
     let timeout_of =
         |t: &Option<Spanned<i64>>, default: Duration| -> Result<Duration, ConfigError> {
-            let Some(v) = t else { return Ok(default) };
-            let n = *v.get_ref();
-            match u64::try_from(n) {
-                Ok(n) if super::deploy::DEPLOY_TIMEOUT_S_RANGE.contains(&n) => {
-                    Ok(Duration::from_secs(n))
-                }
-                _ => Err(at(
-                    Some(v.span()),
-                    format!(
-                        "`deploy_timeout_s` is {n}, expected {}..={} (seconds)",
-                        super::deploy::DEPLOY_TIMEOUT_S_RANGE.start(),
-                        super::deploy::DEPLOY_TIMEOUT_S_RANGE.end()
-                    ),
-                )),
-            }
+            Ok(ranged(
+                t,
+                "deploy_timeout_s",
+                &super::deploy::DEPLOY_TIMEOUT_S_RANGE,
+                "seconds",
+            )?
+            .map_or(default, Duration::from_secs))
         };
     let global_timeout = timeout_of(
         &raw.deploy_timeout_s,
