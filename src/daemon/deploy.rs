@@ -440,17 +440,7 @@ async fn run(
         Err(why) => {
             sink.emit(
                 project,
-                Event::DeployFailed {
-                    program: program.clone(),
-                    controller: controller.clone(),
-                    run_id: r.run_id,
-                    duration_ms: 0,
-                    exit_code: None,
-                    signal: None,
-                    timed_out: false,
-                    reason: why,
-                    stderr: String::new(),
-                },
+                Event::deploy_not_run(&program, controller.as_deref(), r.run_id, 0, why),
             );
             return;
         }
@@ -458,23 +448,19 @@ async fn run(
     if !Path::new(&argv[0]).is_absolute() {
         sink.emit(
             project,
-            Event::DeployFailed {
-                program: program.clone(),
-                controller: controller.clone(),
-                run_id: r.run_id,
-                duration_ms: 0,
-                exit_code: None,
-                signal: None,
-                timed_out: false,
-                reason: format!(
+            Event::deploy_not_run(
+                &program,
+                controller.as_deref(),
+                r.run_id,
+                0,
+                format!(
                     "`{}` was not found in the absolute folders of PATH when the configuration \
                      was read (an empty or relative PATH entry is never searched: it would be \
                      the project folder); give the program's absolute path, or install it and \
                      reload",
                     argv[0]
                 ),
-                stderr: String::new(),
-            },
+            ),
         );
         return;
     }
@@ -513,17 +499,13 @@ async fn run(
         Err(e) => {
             sink.emit(
                 project,
-                Event::DeployFailed {
-                    program: program.clone(),
-                    controller: controller.clone(),
-                    run_id: r.run_id,
-                    duration_ms: ms(),
-                    exit_code: None,
-                    signal: None,
-                    timed_out: false,
-                    reason: format!("cannot run {}: {e}", argv[0]),
-                    stderr: String::new(),
-                },
+                Event::deploy_not_run(
+                    &program,
+                    controller.as_deref(),
+                    r.run_id,
+                    ms(),
+                    format!("cannot run {}: {e}", argv[0]),
+                ),
             );
             return;
         }

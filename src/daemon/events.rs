@@ -274,6 +274,28 @@ impl Event {
         }
     }
 
+    /// `deploy-failed` for a hook that did not run (or could not be started): no exit status,
+    /// no stderr, the reason.
+    pub fn deploy_not_run(
+        program: &str,
+        controller: Option<&str>,
+        run_id: u64,
+        duration_ms: u64,
+        reason: String,
+    ) -> Event {
+        Event::DeployFailed {
+            program: program.to_owned(),
+            controller: controller.map(str::to_owned),
+            run_id,
+            duration_ms,
+            exit_code: None,
+            signal: None,
+            timed_out: false,
+            reason,
+            stderr: String::new(),
+        }
+    }
+
     /// A `compile-failed` event with one diagnostic of our own (not from the compiler).
     pub fn failed_with(run_id: u64, duration_ms: u64, code: &str, message: String) -> Event {
         Event::CompileFailed {

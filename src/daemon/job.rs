@@ -422,19 +422,10 @@ impl Job {
 
     /// `deploy-failed` for a program whose hook is not run at all, and why.
     fn not_deployed(&self, ctx: &super::deploy::Context, reason: String) {
+        let controller = (!ctx.controller.is_empty()).then_some(ctx.controller.as_str());
         self.sink.emit(
             Some(&self.project()),
-            Event::DeployFailed {
-                program: ctx.program.clone(),
-                controller: (!ctx.controller.is_empty()).then(|| ctx.controller.clone()),
-                run_id: self.run_id,
-                duration_ms: 0,
-                exit_code: None,
-                signal: None,
-                timed_out: false,
-                reason,
-                stderr: String::new(),
-            },
+            Event::deploy_not_run(&ctx.program, controller, self.run_id, 0, reason),
         );
     }
 
