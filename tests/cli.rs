@@ -3229,3 +3229,30 @@ fn many_unused_variables_are_counted_as_warn_shows_them() {
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     assert_eq!(stderr(&o), format!("{shown} warnings; --warn shows them\n"));
 }
+
+/// A step time that is not a number of seconds of at least 0 (`-2.75`, `2 s`) is a warning at
+/// the attribute, and the step has no time (it passed silently before).
+#[test]
+fn a_negative_or_unreadable_step_time_is_a_warning_at_the_attribute() {
+    for (bad, shown) in [("-2.75", "`-2.75`"), ("2 s", "`2 s`")] {
+        let p = project();
+        let path = p.path().join("sfc.xml");
+        let sfc = std::fs::read_to_string(&path).unwrap();
+        assert!(sfc.contains("<time duration=\"1.5\"/>"));
+        std::fs::write(
+            &path,
+            sfc.replacen(
+                "<time duration=\"1.5\"/>",
+                &format!("<time duration=\"{bad}\"/>"),
+                1,
+            ),
+        )
+        .unwrap();
+        let o = run(&["--warn", "Blackboard.aml", "out"], p.path());
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(0), "{e}");
+        assert!(e.contains("warning[W305]"), "{e}");
+        assert!(e.contains(&format!("`time@duration` is {shown}")), "{e}");
+        assert!(e.contains("sfc.xml:"), "{e}");
+    }
+}

@@ -461,6 +461,8 @@ struct Building {
     resources_seen: bool,
     skill: Option<Name>,
     duration: Option<f64>,
+    /// A `time@duration` that is not a number of seconds ≥ 0: as written, and where.
+    bad_duration: Option<(String, Range<usize>)>,
     time_seen: bool,
     condition: Option<Span>,
     condition_done: bool,
@@ -507,6 +509,7 @@ impl Building {
             resources_seen: false,
             skill: None,
             duration: None,
+            bad_duration: None,
             time_seen: false,
             condition: None,
             condition_done: false,
@@ -547,6 +550,7 @@ impl Building {
         self.resources_seen = false;
         self.skill = None;
         self.duration = None;
+        self.bad_duration = None;
         self.time_seen = false;
         self.condition = None;
         self.condition_done = false;
@@ -1317,8 +1321,15 @@ impl Stream {
                         let mark = scratch.len();
                         let [d] = self.pick(t, ["duration"], &mut scratch)?;
                         b.duration = d
+                            .as_ref()
                             .and_then(|a| a.get(&scratch).trim().parse::<f64>().ok())
                             .filter(|d| d.is_finite() && *d >= 0.0);
+                        if b.duration.is_none()
+                            && let Some(a) = &d
+                        {
+                            b.bad_duration =
+                                Some((a.get(&scratch).trim().to_owned(), a.range.clone()));
+                        }
                         scratch.truncate(mark);
                     }
                     T::Variable => {
@@ -1948,6 +1959,19 @@ impl Stream {
                     );
                 }
             }
+        }
+        if let Some((text, at)) = &b.bad_duration {
+            diags.push(
+                Diagnostic::warning(
+                    Code::BadDuration,
+                    format!(
+                        "`time@duration` is `{text}`, not a number of seconds of at least 0 \
+                         (`2.75`): the step has no time (the picture draws it without one)"
+                    ),
+                )
+                .at(Span::new(file, at.clone()))
+                .element(label()),
+            );
         }
         Step {
             name: self.names.strings(b.val(&b.name).unwrap_or("")).0,
