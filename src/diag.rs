@@ -781,7 +781,7 @@ codes! {
     Ignored = "W304",
     /// A step's `time@duration` that is not a number of seconds of at least 0: the step has no
     /// time.
-    BadDuration = "W305",
+    BadDuration = "W309",
     /// Several POUs have an SFC body and none was named: the one used and the others.
     SeveralPous = "W305",
     /// A selection branch right of an unconditional one: it is never taken.

@@ -3251,8 +3251,62 @@ fn a_negative_or_unreadable_step_time_is_a_warning_at_the_attribute() {
         let o = run(&["--warn", "Blackboard.aml", "out"], p.path());
         let e = stderr(&o);
         assert_eq!(o.status.code(), Some(0), "{e}");
-        assert!(e.contains("warning[W305]"), "{e}");
+        assert!(e.contains("warning[W309]"), "{e}");
         assert!(e.contains(&format!("`time@duration` is {shown}")), "{e}");
         assert!(e.contains("sfc.xml:"), "{e}");
+    }
+}
+
+/// `Number` 0 is URScript's first standard digital input (`get_standard_digital_in(0)`), so it
+/// is read; a KRL program that would read it gets E209 saying KRL counts from 1.
+#[test]
+fn number_0_is_a_urscript_input_and_an_error_for_krl() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    for e in std::fs::read_dir(repo.join("fixtures/base/ur")).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), dir.path().join(e.file_name())).unwrap();
+    }
+    let bb = dir.path().join("Cell.aml");
+    let text = std::fs::read_to_string(&bb).unwrap();
+    let one =
+        "<Attribute Name=\"Number\" AttributeDataType=\"xs:integer\"><Value>1</Value></Attribute>";
+    assert!(text.contains(one));
+    std::fs::write(&bb, text.replacen(one, &one.replace(">1<", ">0<"), 1)).unwrap();
+    let o = run(&["Cell.aml", "Palletize"], dir.path());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let script = std::fs::read_to_string(dir.path().join("Palletize.script")).unwrap();
+    assert!(script.contains("get_standard_digital_in(0)"), "{script}");
+    // The same Number on a KUKA robot: a condition reading it is refused (E209), at Number 1
+    // it compiles.
+    for (number, ok) in [("0", false), ("1", true)] {
+        let p = project();
+        let bb = p.path().join("Blackboard.aml");
+        let text = std::fs::read_to_string(&bb).unwrap();
+        let skills = "<InternalElement Name=\"Skills\"";
+        assert!(text.contains(skills));
+        let signals = format!(
+            "<InternalElement Name=\"Signals\" ID=\"{{5a000000-0000-0000-0000-000000000001}}\"><ExternalInterface Name=\"Part_OK\" ID=\"{{5a000000-0000-0000-0000-000000000002}}\" RefBaseClassPath=\"AutomationMLInterfaceClassLib/AutomationMLBaseInterface/Communication/SignalInterface\"><Attribute Name=\"Number\" AttributeDataType=\"xs:integer\"><Value>{number}</Value></Attribute></ExternalInterface></InternalElement>"
+        );
+        std::fs::write(&bb, text.replacen(skills, &format!("{signals}{skills}"), 1)).unwrap();
+        let sfc = p.path().join("sfc.xml");
+        let s = std::fs::read_to_string(&sfc).unwrap();
+        let cond = "<xhtml:p>TRUE</xhtml:p>";
+        assert!(s.contains(cond), "the sample has a condition");
+        std::fs::write(&sfc, s.replacen(cond, "<xhtml:p>Part_OK</xhtml:p>", 1)).unwrap();
+        let o = run(&["Blackboard.aml", "out"], p.path());
+        let e = stderr(&o);
+        if ok {
+            assert_eq!(o.status.code(), Some(0), "{e}");
+            let src = std::fs::read_to_string(p.path().join("out.src")).unwrap();
+            assert!(src.contains("$IN[1]"), "{src}");
+        } else {
+            assert_eq!(o.status.code(), Some(1), "{e}");
+            assert!(
+                e.contains("error[E209]") && e.contains("KRL counts inputs and outputs from 1"),
+                "{e}"
+            );
+            assert!(!p.path().join("out.src").exists());
+        }
     }
 }

@@ -47,6 +47,7 @@ impl crate::bind::Rules for Krl {
     fn signal(&self, s: &Signal) -> Result<String, String> {
         let io = if s.output { "$OUT" } else { "$IN" };
         match &s.kind {
+            SignalKind::Bit(0) => Err(NUMBER_0.to_owned()),
             SignalKind::Bit(n) => Ok(format!("{io}[{n}]")),
             SignalKind::Group { .. } => Ok(s.name.text.to_string()),
             SignalKind::Address { text, .. } if text.contains('(') => Err(format!(
@@ -56,6 +57,38 @@ impl crate::bind::Rules for Krl {
         }
     }
 }
+
+/// `E209` for each signal of `Number` 0 on the resources of a KRL program (the program's own
+/// and those whose skills its steps run): KRL has no `$IN[0]`, and the I/O list would name one.
+/// `false` when there is one.
+fn numbers_from_1(input: &EmitInput, diags: &mut Diagnostics) -> bool {
+    let mut resources: Vec<usize> = input.bound.resource.into_iter().collect();
+    for st in input.bound.steps.iter().flatten() {
+        if !resources.contains(&st.resource) {
+            resources.push(st.resource);
+        }
+    }
+    let mut ok = true;
+    for r in resources {
+        for s in &input.blackboard.resources[r].signals {
+            if s.kind == SignalKind::Bit(0) {
+                ok = false;
+                diags.push(
+                    crate::diag::Diagnostic::error(
+                        crate::diag::Code::BadSignal,
+                        format!("signal `{}`: {NUMBER_0}", s.name.text),
+                    )
+                    .at(s.name.span.clone())
+                    .element(s.element.clone()),
+                );
+            }
+        }
+    }
+    ok
+}
+
+/// Why a signal of `Number` 0 is no KRL I/O (URScript counts from 0, KRL from 1).
+pub const NUMBER_0: &str = "Number 0 is no KRL input or output: KRL counts inputs and outputs from 1 ($IN[1]); Number 0 is for a URScript controller's standard digital I/O";
 
 impl Profile for Krl {
     fn files(&self) -> &'static [&'static str] {
@@ -81,6 +114,9 @@ impl Profile for Krl {
     }
 
     fn generate(&self, input: &EmitInput, diags: &mut Diagnostics) -> Option<Generated> {
+        if !numbers_from_1(input, diags) {
+            return None;
+        }
         let mut writer = Writer {
             input,
             out: Lines::new(input, flow::steps_estimate(input)),

@@ -925,11 +925,14 @@ impl Reader<'_> {
                 }
                 Some((v, span)) => match v.parse::<u32>() {
                     Ok(n) if (1..=MAX_IO).contains(&n) => n,
+                    // URScript counts its standard digital I/O from 0; KRL refuses 0 where a
+                    // program would use it (`E209`).
+                    Ok(0) if !integer => 0,
                     Ok(0) => {
                         bad(
                             self.diags,
                             span,
-                            "Number 0 is not an I/O index: KRL counts inputs and outputs from 1 ($IN[1])".to_owned(),
+                            "Number 0 cannot start a group: KRL counts inputs and outputs from 1 ($IN[1])".to_owned(),
                         );
                         1
                     }

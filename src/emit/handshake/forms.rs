@@ -217,6 +217,7 @@ impl<'a> Hand<'a> {
     /// How this language reads an input wire as a boolean value.
     pub(super) fn read(&self, s: &Signal) -> Result<String, String> {
         match (self.lang, &s.kind) {
+            (Language::Krl, SignalKind::Bit(0)) => Err(crate::emit::krl::NUMBER_0.to_owned()),
             (Language::Krl, SignalKind::Bit(n)) => Ok(self.bit(s, || format!("$IN[{n}]"))),
             (Language::Krl, SignalKind::Address { text, .. }) if !text.contains('(') => {
                 Ok(text.clone())
@@ -244,6 +245,7 @@ impl<'a> Hand<'a> {
     /// How this language sets an output wire to `value` (a boolean expression).
     pub(super) fn set(&self, s: &Signal, value: &str) -> Result<String, String> {
         match (self.lang, &s.kind) {
+            (Language::Krl, SignalKind::Bit(0)) => Err(crate::emit::krl::NUMBER_0.to_owned()),
             (Language::Krl, SignalKind::Bit(n)) => Ok(format!(
                 "{} = {value}",
                 self.bit(s, || format!("$OUT[{n}]"))
