@@ -1055,12 +1055,18 @@ fn a_planners_flock_makes_only_that_folder_wait() {
         root.display()
     ));
     let hold = |dir: &Path| {
+        use std::os::unix::process::CommandExt as _;
         // `-o`: the lock is flock's own, not its command's.
+        // Its own process group, ended whole below (killing flock alone left its `sleep`
+        // holding the test's stderr, and `cargo test | tee` waited 10 minutes for it).
         let mut c = Command::new("flock")
             .args(["-n", "-o"])
             .arg(dir)
             .args(["sh", "-c", "echo held; exec sleep 600"])
+            .stdin(Stdio::null())
             .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .process_group(0)
             .spawn()
             .expect("flock(1) from util-linux");
         let mut line = String::new();
@@ -1101,7 +1107,9 @@ fn a_planners_flock_makes_only_that_folder_wait() {
     let text = inproc::read_string(&ev);
     let p_waits = !compiled(&p);
     for f in &mut flocks {
-        let _ = f.kill();
+        if let Some(g) = rustix::process::Pid::from_raw(f.id() as i32) {
+            let _ = rustix::process::kill_process_group(g, rustix::process::Signal::KILL);
+        }
         let _ = f.wait();
     }
     let p_later = inproc::wait_until(Duration::from_secs(30), || compiled(&p));
