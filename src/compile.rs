@@ -652,8 +652,7 @@ fn check_outputs(cx: &mut Ctx, outputs: &[&Path], blackboard: &Path, template: O
     for &out in outputs {
         let out_real = real_or_parent(&cx.fs, out);
         for (input, at) in &inputs {
-            let same = paths::absolute(out) == paths::absolute(input)
-                || (out_real.is_some() && out_real == real_or_parent(&cx.fs, input));
+            let same = same_file(cx, out, &out_real, input);
             if !same || reported.iter().any(|(o, i)| o == out && i == input) {
                 continue;
             }
@@ -682,9 +681,7 @@ fn check_outputs(cx: &mut Ctx, outputs: &[&Path], blackboard: &Path, template: O
 fn check_picture(cx: &mut Ctx, picture: &Path, outputs: &[(PathBuf, OutputFile)]) {
     let pic_real = real_or_parent(&cx.fs, picture);
     for (out, _) in outputs {
-        let same = paths::absolute(out) == paths::absolute(picture)
-            || (pic_real.is_some() && pic_real == real_or_parent(&cx.fs, out));
-        if same {
+        if same_file(cx, picture, &pic_real, out) {
             cx.diags.push(Diagnostic::error(
                 Code::CannotWrite,
                 format!(
@@ -697,6 +694,13 @@ fn check_picture(cx: &mut Ctx, picture: &Path, outputs: &[(PathBuf, OutputFile)]
             return;
         }
     }
+}
+
+/// Whether `a` (whose [`real_or_parent`] is `a_real`) and `b` name one file: the same absolute
+/// path, or the same real one.
+fn same_file(cx: &Ctx, a: &Path, a_real: &Option<PathBuf>, b: &Path) -> bool {
+    paths::absolute(a) == paths::absolute(b)
+        || (a_real.is_some() && *a_real == real_or_parent(&cx.fs, b))
 }
 
 /// The real path of a file, or of its folder joined with its name when the file does not exist

@@ -368,6 +368,18 @@ pub struct Bound {
 }
 
 impl Bound {
+    /// The resources the program uses, each once: its own (whose signals the conditions read),
+    /// then those whose skills its steps run, in step order.
+    pub fn resources(&self) -> Vec<usize> {
+        let mut out: Vec<usize> = self.resource.into_iter().collect();
+        for st in self.steps.iter().flatten() {
+            if !out.contains(&st.resource) {
+                out.push(st.resource);
+            }
+        }
+        out
+    }
+
     /// The timer of step `i` when a condition reads its time: its position `k` in
     /// [`Bound::timers`] and its KRL number.
     pub fn timer_of(&self, i: usize) -> Option<(usize, u32)> {

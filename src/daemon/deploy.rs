@@ -234,10 +234,10 @@ pub fn expand(argv: &[String], ctx: &Context) -> Result<Vec<String>, String> {
                     } else {
                         crate::emit::IO_CONFIG
                     };
-                    let found = ctx.io.iter().find(|p| {
-                        p.file_name()
-                            .is_some_and(|n| n.to_string_lossy().ends_with(&format!(".{suffix}")))
-                    });
+                    let found = ctx
+                        .io
+                        .iter()
+                        .find(|p| crate::emit::commissioning_file(p) == Some(suffix));
                     match found {
                         Some(p) => s.push_str(&p.display().to_string()),
                         None => {

@@ -439,12 +439,13 @@ impl Job {
         c: &Compilation,
         deploy: Vec<super::deploy::Context>,
     ) -> Vec<super::deploy::Context> {
-        let bytes = |p: &PathBuf| {
-            c.outputs
-                .iter()
-                .find(|(o, _)| o == p)
-                .map(|(_, f)| f.text.as_bytes())
-        };
+        // By path: a cell of many controllers has many outputs.
+        let by_path: HashMap<&PathBuf, &[u8]> = c
+            .outputs
+            .iter()
+            .map(|(o, f)| (o, f.text.as_bytes()))
+            .collect();
+        let bytes = |p: &PathBuf| by_path.get(p).copied();
         let mut kept = Vec::with_capacity(deploy.len());
         for mut ctx in deploy {
             let files: Option<Vec<(&Path, &[u8])>> = ctx
@@ -845,11 +846,7 @@ impl Job {
                 }
             };
             // The I/O list and EIO fragment: `{io}`/`{eio}`, not program files.
-            let name = p.file_name().unwrap_or_default().to_string_lossy();
-            if [crate::emit::IO_LIST, crate::emit::IO_CONFIG]
-                .iter()
-                .any(|x| name.ends_with(&format!(".{x}")))
-            {
+            if crate::emit::commissioning_file(p).is_some() {
                 deploy[at].0.io.push(p.clone());
             } else {
                 deploy[at].0.outputs.push(p.clone());

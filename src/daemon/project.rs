@@ -174,27 +174,18 @@ impl Daemon {
     /// Starts keeping a root: locked, watched (or its nearest existing ancestor while it does
     /// not exist).
     pub(super) fn watch_root(&mut self, root: &Path) {
+        let refused = |why: String| Event::WatchDegraded {
+            root: Some(root.display().to_string()),
+            reason: why,
+            backend: Some("none"),
+        };
         if let Err(why) = self.locks.acquire(root) {
-            self.sink.emit(
-                None,
-                Event::WatchDegraded {
-                    root: Some(root.display().to_string()),
-                    reason: why,
-                    backend: Some("none"),
-                },
-            );
+            self.sink.emit(None, refused(why));
             return;
         }
         self.roots.insert(root.to_owned(), Root::default());
         if let Err(why) = self.locks.ensure(root) {
-            self.sink.emit(
-                None,
-                Event::WatchDegraded {
-                    root: Some(root.display().to_string()),
-                    reason: why,
-                    backend: Some("none"),
-                },
-            );
+            self.sink.emit(None, refused(why));
             self.roots.get_mut(root).expect("root").held_elsewhere = true;
             return;
         }

@@ -898,17 +898,7 @@ pub fn printable(s: &str) -> std::borrow::Cow<'_, str> {
     if !s.chars().any(char::is_control) {
         return std::borrow::Cow::Borrowed(s);
     }
-    std::borrow::Cow::Owned(
-        s.chars()
-            .map(|c| {
-                if c.is_control() {
-                    c.escape_default().to_string()
-                } else {
-                    c.to_string()
-                }
-            })
-            .collect(),
-    )
+    std::borrow::Cow::Owned(crate::paths::escaped(std::path::Path::new(s)))
 }
 
 fn aligned<const N: usize>(header: [&str; N], rows: &[[String; N]]) -> String {

@@ -100,12 +100,6 @@ pub fn rows<'a>(input: &'a EmitInput<'a>) -> Vec<Row<'a>> {
     }
     // The other signals of the resources whose skills the program runs (a gripper's valves):
     // its IRL code may set or read them.
-    let mut resources: Vec<usize> = Vec::new();
-    for st in input.bound.steps.iter().flatten() {
-        if !resources.contains(&st.resource) {
-            resources.push(st.resource);
-        }
-    }
     let conditions: std::collections::HashSet<*const Signal> = input
         .bound
         .resource
@@ -133,7 +127,7 @@ pub fn rows<'a>(input: &'a EmitInput<'a>) -> Vec<Row<'a>> {
     }
     let listed: std::collections::HashSet<*const Signal> =
         out.iter().map(|r| r.signal as *const Signal).collect();
-    for r in resources {
+    for r in input.bound.resources() {
         let res = &bb.resources[r];
         for sig in &res.signals {
             let at = sig as *const Signal;

@@ -62,14 +62,8 @@ impl crate::bind::Rules for Krl {
 /// and those whose skills its steps run): KRL has no `$IN[0]`, and the I/O list would name one.
 /// `false` when there is one.
 fn numbers_from_1(input: &EmitInput, diags: &mut Diagnostics) -> bool {
-    let mut resources: Vec<usize> = input.bound.resource.into_iter().collect();
-    for st in input.bound.steps.iter().flatten() {
-        if !resources.contains(&st.resource) {
-            resources.push(st.resource);
-        }
-    }
     let mut ok = true;
-    for r in resources {
+    for r in input.bound.resources() {
         for s in &input.blackboard.resources[r].signals {
             if s.kind == SignalKind::Bit(0) {
                 ok = false;

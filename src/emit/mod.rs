@@ -473,6 +473,17 @@ pub const IO_LIST: &str = "io.csv";
 /// A RAPID module's `EIO.cfg` fragment: `<program>.eio.cfg` ([`io::eio`]).
 pub const IO_CONFIG: &str = "eio.cfg";
 
+/// Which commissioning file `path` is ([`IO_LIST`] or [`IO_CONFIG`], by its name's end), or
+/// `None` for a program file.
+pub fn commissioning_file(path: &std::path::Path) -> Option<&'static str> {
+    let name = path.file_name()?.to_string_lossy();
+    [IO_LIST, IO_CONFIG].into_iter().find(|x| {
+        name.len() > x.len() + 1
+            && name.ends_with(x)
+            && name.as_bytes()[name.len() - x.len() - 1] == b'.'
+    })
+}
+
 /// The byte index of the first non-ASCII character. `is_ascii` reads words at a time; the place
 /// is looked for only when there is one (13 MB of program text for 100,000 steps).
 fn first_non_ascii(text: &str) -> Option<usize> {
