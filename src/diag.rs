@@ -660,6 +660,9 @@ codes! {
     /// A controller's `HandshakeTimeout` attribute that is not a number of seconds from 0 to a
     /// day (docs/CELLS.md).
     BadHandshakeTimeout = "E215",
+    /// A controller's `Points` attribute that is neither `named` nor `inline`
+    /// (docs/LANGUAGES.md, "Points").
+    BadPoints = "E216",
 
     /// No `pou` with an `SFC` body (or none of the name asked for).
     NoSfcBody = "E301",
@@ -771,6 +774,9 @@ codes! {
     /// A parameter's `Constraint` that cannot be checked (a bound that is not a number, no
     /// value in it): not checked.
     UnusableConstraint = "W209",
+    /// A KRL program's points written without KUKA's inline form, because the program sets
+    /// motion parameters itself (docs/LANGUAGES.md, "Points").
+    PointsNotInline = "W210",
     /// The start step is not marked `initialStep="true"`.
     StartNotInitial = "W301",
     /// A step's resource was inferred from its skill.

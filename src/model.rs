@@ -194,6 +194,9 @@ pub struct Resource {
     /// The `HandshakeTimeout` attribute's value and span: after how many seconds a wait on
     /// another controller of the cell shows on the pendant (docs/CELLS.md).
     pub handshake_timeout_attr: Option<(String, Span)>,
+    /// The `Points` attribute's value and span: how the program writes motions to literal
+    /// positions (`named`, the default: teachable points; `inline`: as the IRL code wrote them).
+    pub points_attr: Option<(String, Span)>,
     /// Child InternalElements named near a group skillpost reads but not as it (`Skils` for
     /// `Skills`): their name, place and the group's name. Not read; an error about what the
     /// group would hold names them.

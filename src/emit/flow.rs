@@ -112,6 +112,14 @@ pub fn push_step_title(
     }
 }
 
+/// The name of step `i` as the chart gives it (`""` for another element).
+pub fn step_name<'i>(input: &EmitInput<'i>, i: usize) -> &'i str {
+    match &input.sfc.elements[i].kind {
+        ElementKind::Step(st) => &st.name,
+        _ => "",
+    }
+}
+
 /// Appends `n` in decimal (what `write!(out, "{n}")` gives, without the formatting machinery:
 /// two numbers in every step's title).
 pub fn push_decimal(out: &mut String, mut n: u64) {

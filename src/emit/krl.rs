@@ -111,7 +111,9 @@ impl Profile for Krl {
         if !numbers_from_1(input, diags) {
             return None;
         }
+        let points = super::points::for_program(input, diags)?;
         let mut writer = Writer {
+            points,
             input,
             out: Lines::new(input, flow::steps_estimate(input)),
             number: 0,
@@ -136,10 +138,12 @@ impl Profile for Krl {
             declarations.extend(h.declarations());
             routines = h.routines();
         }
+        declarations.append(&mut writer.points.declarations);
         Some(Generated {
             steps: writer.out.out,
             declarations,
             routines,
+            data: Vec::new(),
         })
     }
 }
@@ -150,6 +154,8 @@ pub use crate::lang::BRANCH_VAR;
 /// Writes the program tree.
 struct Writer<'a> {
     input: &'a EmitInput<'a>,
+    /// The program's named points.
+    points: super::points::Points,
     out: Lines<'a>,
     number: usize,
     /// Whether a selection needed [`BRANCH_VAR`].
@@ -219,7 +225,8 @@ impl Writer<'_> {
                 self.number += 1;
                 self.out
                     .step_title(level, &[";FOLD "], input, *i, bs, self.number);
-                self.out.code(level, input.step_indent, &bs.code);
+                let code = self.points.step_code(flow::step_name(input, *i), &bs.code);
+                self.out.code(level, input.step_indent, &code);
                 self.line(level, ";ENDFOLD");
             }
             Block::Wait(t) => {

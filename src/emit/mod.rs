@@ -16,6 +16,7 @@ pub mod flow;
 pub mod handshake;
 pub mod io;
 pub mod krl;
+pub mod points;
 pub mod rapid;
 pub mod structured;
 pub mod urscript;
@@ -105,6 +106,9 @@ pub struct Generated {
     /// `{{definitions}}`, after the IRL definitions: the program's own routines (a cell's
     /// handshakes), one line each.
     pub routines: Vec<String>,
+    /// `{{definitions}}`, before the IRL definitions: the program's data (RAPID's and
+    /// URScript's named points), one line each.
+    pub data: Vec<String>,
 }
 
 /// One generated file: its extension (`src`, `dat`, `mod`, `script`) and its bytes.
@@ -375,6 +379,14 @@ pub fn emit_files(
         ));
         return None;
     }
+    if !generated.data.is_empty() && !has_block("definitions") {
+        // The program would move to points nothing declares.
+        diags.push(Diagnostic::error(
+            Code::BadTemplate,
+            "output template: the program's named points are declared where the IRL definitions go, but the template has no `{{definitions}}` line to write them (or give the controller `Points` = `inline`)".to_owned(),
+        ));
+        return None;
+    }
     if !generated.routines.is_empty() && !has_block("definitions") {
         // The program would call routines nothing defines.
         diags.push(Diagnostic::error(
@@ -404,10 +416,12 @@ pub fn emit_files(
                             .profile
                             .definition_rank(lines.first().map_or("", String::as_str))
                     });
-                    // Each definition, then the program's own routines, after an empty line.
-                    let blocks = defs
-                        .iter()
-                        .map(|&(irl, d)| &input.irls[irl].definitions[d].lines)
+                    // The program's data, each definition, then the program's own routines,
+                    // after an empty line.
+                    let blocks = Some(&generated.data)
+                        .filter(|d| !d.is_empty())
+                        .into_iter()
+                        .chain(defs.iter().map(|&(irl, d)| &input.irls[irl].definitions[d].lines))
                         .chain(Some(&generated.routines).filter(|r| !r.is_empty()));
                     for lines in blocks {
                         text.push_str(nl);

@@ -274,7 +274,7 @@ impl Profile for Rapid {
     }
 
     fn generate(&self, input: &EmitInput, diags: &mut Diagnostics) -> Option<Generated> {
-        Some(structured::generate(input, &DIALECT, diags))
+        structured::generate(input, &DIALECT, diags)
     }
 }
 

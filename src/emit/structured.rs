@@ -76,8 +76,10 @@ pub fn generate(
     input: &EmitInput,
     dialect: &Dialect,
     diags: &mut crate::diag::Diagnostics,
-) -> Generated {
+) -> Option<Generated> {
+    let points = super::points::for_program(input, diags)?;
     let mut w = Writer {
+        points,
         input,
         d: dialect,
         out: Lines::new(input, flow::steps_estimate(input)),
@@ -110,11 +112,12 @@ pub fn generate(
     if let Some(h) = &w.hand {
         declarations.extend(h.declarations());
     }
-    Generated {
+    Some(Generated {
         steps: w.out.out,
         declarations,
         routines: Vec::new(),
-    }
+        data: w.points.declarations,
+    })
 }
 
 /// Whether `b` leaves the loop it stands in (a branch ending in a leave, not inside a nested
@@ -154,6 +157,8 @@ struct States {
 
 struct Writer<'a> {
     input: &'a EmitInput<'a>,
+    /// The program's named points.
+    points: super::points::Points,
     d: &'a Dialect,
     out: Lines<'a>,
     number: usize,
@@ -270,7 +275,8 @@ impl Writer<'_> {
                     bs,
                     self.number,
                 );
-                self.out.code(level, input.step_indent, &bs.code);
+                let code = self.points.step_code(flow::step_name(input, *i), &bs.code);
+                self.out.code(level, input.step_indent, &code);
             }
             Block::Wait(t) => {
                 if let Some(c) = flow::condition(input, *t, self.d.ops) {

@@ -302,7 +302,7 @@ impl Profile for UrScript {
     }
 
     fn generate(&self, input: &EmitInput, diags: &mut Diagnostics) -> Option<Generated> {
-        Some(structured::generate(input, &DIALECT, diags))
+        structured::generate(input, &DIALECT, diags)
     }
 }
 

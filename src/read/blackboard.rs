@@ -731,6 +731,9 @@ impl Reader<'_> {
         let handshake_timeout_attr = caex_attr(r, "HandshakeTimeout")
             .and_then(|a| caex_value(self.file, a))
             .filter(|(v, _)| !v.trim().is_empty());
+        let points_attr = caex_attr(r, "Points")
+            .and_then(|a| caex_value(self.file, a))
+            .filter(|(v, _)| !v.trim().is_empty());
         const GROUPS: [&str; 5] = [
             "Skills",
             "FunctionDescription",
@@ -755,6 +758,7 @@ impl Reader<'_> {
             program_attr,
             timers_attr,
             handshake_timeout_attr,
+            points_attr,
             element: caex_element(r),
             id: r.attribute("ID").map(str::to_owned),
             skills,
@@ -769,7 +773,7 @@ impl Reader<'_> {
     /// `W208` for each attribute of resource `r` whose name is near, but not, one a resource's
     /// attributes skillpost reads (`Controler`): it would be ignored without a word.
     fn near_attributes(&mut self, r: Node) {
-        const READ: [&str; 8] = [
+        const READ: [&str; 9] = [
             "Controller",
             "Steuerung",
             "Program",
@@ -778,6 +782,7 @@ impl Reader<'_> {
             "Sprache",
             "Timers",
             "HandshakeTimeout",
+            "Points",
         ];
         for a in children(r, "Attribute") {
             let Some(name) = caex_name(a) else { continue };

@@ -329,8 +329,142 @@ pub fn check_krl(src: &str, dat: &str, program: &str, lf: bool) -> Result<(), St
         }
     }
     match state {
-        0 => Err(".dat has no DEFDAT".to_owned()),
-        1 => Err(".dat: DEFDAT without ENDDAT".to_owned()),
-        _ => Ok(()),
+        0 => return Err(".dat has no DEFDAT".to_owned()),
+        1 => return Err(".dat: DEFDAT without ENDDAT".to_owned()),
+        _ => {}
     }
+    check_points(src, dat, lf)
+}
+
+/// The `.dat`'s declarations by upper-case name: the type and the value's text. Every `DECL`
+/// is `DECL [GLOBAL] TYPE NAME=VALUE` (or without a value) with a KRL name, braces balanced in
+/// the value, each name declared once.
+fn dat_declarations(dat: &str, lf: bool) -> Result<std::collections::HashMap<String, (String, String)>, String> {
+    let mut out = std::collections::HashMap::new();
+    for (i, raw) in split_lines(dat, lf, ".dat")?.iter().enumerate() {
+        let n = i + 1;
+        let code = code_of(raw.trim()).map_err(|m| format!(".dat line {n}: {m}"))?;
+        let Some(rest) = code.strip_prefix("DECL ") else {
+            continue;
+        };
+        let rest = rest.trim_start();
+        let rest = rest.strip_prefix("GLOBAL ").unwrap_or(rest).trim_start();
+        let (ty, rest) = rest
+            .split_once(' ')
+            .ok_or_else(|| format!(".dat line {n}: `{code}` has no name"))?;
+        let (name, value) = match rest.split_once('=') {
+            Some((name, value)) => (name.trim(), value.trim()),
+            None => (rest.trim(), ""),
+        };
+        let name = name.split('[').next().unwrap_or(name).trim();
+        if !is_krl_name(name) {
+            return Err(format!(".dat line {n}: `{name}` is not a valid KRL name"));
+        }
+        let opens = value.matches('{').count();
+        if opens != value.matches('}').count() || (opens > 0 && !value.ends_with('}')) {
+            return Err(format!(".dat line {n}: the value of `{name}` is not one aggregate"));
+        }
+        if out
+            .insert(name.to_ascii_uppercase(), (ty.to_ascii_uppercase(), value.to_owned()))
+            .is_some()
+        {
+            return Err(format!(".dat line {n}: `{name}` declared twice"));
+        }
+    }
+    Ok(out)
+}
+
+/// The named points of a `.src` (docs/LANGUAGES.md, "Points"): every point a motion goes to
+/// (`PTP XName`, `LIN XName C_DIS`, `CIRC XAux, XTarget`) is declared in the `.dat` as an
+/// `E6POS` (an `E6AXIS` for `PTP`), with only numbers in it; the data an inline form makes
+/// active (`FDAT_ACT=FName`, `PDAT_ACT=PPDATn`, `LDAT_ACT=LCPDATn`) is declared as `FDAT`,
+/// `PDAT`, `LDAT`; an inline form's fold names its point in its title and its `%P` list and
+/// holds exactly `$BWDSTART`, the data, `BAS(…)` and the motion to `X` + that point.
+fn check_points(src: &str, dat: &str, lf: bool) -> Result<(), String> {
+    let decls = dat_declarations(dat, lf)?;
+    let declared = |name: &str, types: &[&str], n: usize| -> Result<(), String> {
+        match decls.get(&name.to_ascii_uppercase()) {
+            Some((ty, value)) if types.contains(&ty.as_str()) => {
+                if ty.starts_with("E6") {
+                    let inner = value.trim_start_matches('{').trim_end_matches('}');
+                    for item in inner.split(',') {
+                        let mut w = item.split_whitespace();
+                        let (Some(_), Some(v), None) = (w.next(), w.next(), w.next()) else {
+                            return Err(format!("point `{name}`: `{item}` is not `KEY number`"));
+                        };
+                        if v.parse::<f64>().is_err() {
+                            return Err(format!("point `{name}`: `{v}` is not a number"));
+                        }
+                    }
+                }
+                Ok(())
+            }
+            Some((ty, _)) => Err(format!(
+                ".src line {n}: `{name}` is a {ty} in the .dat, expected {types:?}"
+            )),
+            None => Err(format!(".src line {n}: `{name}` is not declared in the .dat")),
+        }
+    };
+    let lines = split_lines(src, lf, ".src")?;
+    let mut i = 0;
+    while i < lines.len() {
+        let n = i + 1;
+        let raw = lines[i].trim();
+        i += 1;
+        if raw.contains("%{PE}") && raw.contains("%CMOVE") {
+            // An inline form: its title, then its six lines.
+            let title = raw.strip_prefix(";FOLD ").ok_or(format!(".src line {n}: an inline form outside a ;FOLD"))?;
+            let mut words = title.split_whitespace();
+            let verb = words.next().unwrap_or("");
+            let point = if verb == "CIRC" {
+                words.nth(1)
+            } else {
+                words.next()
+            }
+            .unwrap_or("");
+            let params = title.split("%P ").nth(1).ok_or(format!(".src line {n}: no %P"))?;
+            let slot = if verb == "CIRC" { "3:" } else { "2:" };
+            if !params.split(", ").any(|p| p == format!("{slot}{point}")) {
+                return Err(format!(".src line {n}: the form's %P does not name its point `{point}`"));
+            }
+            let body: Vec<&str> = lines.get(i..i + 6).ok_or(format!(".src line {n}: a short inline form"))?.iter().map(|l| l.trim()).collect();
+            let (data, bas) = if verb == "PTP" { ("PDAT_ACT=P", "BAS(#PTP_PARAMS,") } else { ("LDAT_ACT=L", "BAS(#CP_PARAMS,") };
+            let ok = body[0] == "$BWDSTART=FALSE"
+                && body[1].starts_with(data)
+                && body[2] == format!("FDAT_ACT=F{point}")
+                && body[3].starts_with(bas)
+                && body[4].starts_with(&format!("{verb} "))
+                && body[4].contains(&format!("X{point}"))
+                && body[5] == ";ENDFOLD";
+            if !ok {
+                return Err(format!(".src line {n}: the inline form of `{point}` is not KUKA's: {body:?}"));
+            }
+            declared(&body[1][9..], if verb == "PTP" { &["PDAT"] } else { &["LDAT"] }, n + 2)?;
+            declared(&format!("F{point}"), &["FDAT"], n + 3)?;
+            continue;
+        }
+        let code = code_of(raw).map_err(|m| format!(".src line {n}: {m}"))?;
+        let mut w = code.split_whitespace();
+        let verb = w.next().unwrap_or("").to_ascii_uppercase();
+        if !matches!(verb.as_str(), "PTP" | "LIN" | "CIRC") {
+            continue;
+        }
+        let targets = code[verb.len()..].trim_start();
+        if targets.starts_with('{') || targets.starts_with('$') {
+            continue;
+        }
+        let names: Vec<&str> = targets
+            .split(',')
+            .map(|t| t.split_whitespace().next().unwrap_or(""))
+            .collect();
+        for name in names {
+            // KUKA's own points (`XHOME`, `XHOME1` …) are declared in `$config.dat`.
+            let kuka = name.to_ascii_uppercase().strip_prefix("XHOME").is_some_and(|d| d.bytes().all(|b| b.is_ascii_digit()));
+            if name.len() > 1 && name.starts_with(['X', 'x']) && !kuka {
+                let types: &[&str] = if verb == "PTP" { &["E6POS", "E6AXIS"] } else { &["E6POS"] };
+                declared(name, types, n)?;
+            }
+        }
+    }
+    Ok(())
 }

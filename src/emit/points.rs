@@ -1,0 +1,914 @@
+//! Teachable points (docs/LANGUAGES.md, "Points"): a motion whose target is a literal position
+//! becomes a motion to a named point, declared where the language keeps its points, so the
+//! technician can touch it up at the pendant.
+//!
+//! - KRL: `PTP {X 100, …}` → `DECL E6POS XPick={X 100,…}` in the `.dat` (`E6AXIS` for
+//!   `{A1 …}`), the motion KUKA's inline form (the fold with its `FDAT` and `PDAT`/`LDAT`) when
+//!   the program sets no motion parameters itself, else `PTP XPick`;
+//! - RAPID: `MoveL [[…],[…],[…],[…]], …` → `CONST robtarget pPick := […];` in the module
+//!   (`jointtarget jPick` for `MoveAbsJ`), the motion `MoveL pPick, …`;
+//! - URScript: `movel(p[…], …)` → `global pPick = p[…]` at the program's start (`qPick` for a
+//!   joint position `[…]`), the motion `movel(pPick, …)`.
+//!
+//! The IRL snippet stays as its author wrote it; only the emitted line changes. A point is named
+//! after its step (`Pick Part` → `PickPart`, a number added when a step has several: `Pick1`,
+//! `Pick2`), valid in the language and unique in the program (`_2` added).
+
+use std::borrow::Cow;
+use std::collections::HashSet;
+
+use crate::lang::Language;
+use crate::names::transliterate;
+
+/// How a KRL program's points are written.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KrlForm {
+    /// KUKA's inline form: Touch-Up and Change work at the pendant. The tool and base numbers
+    /// of its `FDAT`.
+    Inline { tool: u32, base: u32 },
+    /// `PTP XName` with the point in the `.dat`: the program's own velocity, acceleration,
+    /// approximation, tool and base stay in effect (an inline form sets its own).
+    Named,
+}
+
+/// Whether literal targets become named points at all (the resource's `Points` attribute).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    Named,
+    /// Literal targets stay in the motions (the output of earlier versions).
+    Literal,
+}
+
+/// The points of one program: their names and declarations, made while its steps are written.
+pub struct Points {
+    lang: Language,
+    krl: KrlForm,
+    mode: Mode,
+    /// Names taken, lower-case (KRL and RAPID ignore case; URScript's names are kept apart from
+    /// its keywords without regard to case too).
+    taken: HashSet<String>,
+    /// The longest base name (the language's limit less the prefix).
+    max: usize,
+    /// The declarations, in order: `.dat` lines (KRL), module data (RAPID), the program's first
+    /// lines (URScript).
+    pub declarations: Vec<String>,
+    /// KRL inline forms: `PDAT`s and `CPDAT`s numbered so far.
+    pdat: usize,
+    cpdat: usize,
+    /// Points named so far.
+    pub count: usize,
+}
+
+impl Points {
+    /// The points of a program in `lang`. `taken`: names the program already uses (its signals,
+    /// routines, the words of its IRL code), which no point may get.
+    pub fn new(
+        lang: Language,
+        mode: Mode,
+        krl: KrlForm,
+        taken: impl IntoIterator<Item = String>,
+    ) -> Self {
+        let max = match lang {
+            // `X` + name and `F` + name are KRL names of at most 24 characters.
+            Language::Krl => 23,
+            Language::Rapid => 31,
+            Language::UrScript => 62,
+        };
+        Points {
+            lang,
+            krl,
+            mode,
+            taken: taken.into_iter().map(|w| w.to_ascii_lowercase()).collect(),
+            max,
+            declarations: Vec::new(),
+            pdat: 0,
+            cpdat: 0,
+            count: 0,
+        }
+    }
+
+    /// Step `step`'s code with every literal target named. Lines are separated by `\n`.
+    pub fn step_code<'c>(&mut self, step: &str, code: &'c str) -> Cow<'c, str> {
+        if self.mode == Mode::Literal || !self.may_hold_literal(code) {
+            return Cow::Borrowed(code);
+        }
+        let motions: Vec<Option<Motion>> = code.split('\n').map(|l| self.parse(l)).collect();
+        let targets: usize = motions
+            .iter()
+            .flatten()
+            .map(|m| m.targets.len())
+            .sum();
+        if targets == 0 {
+            return Cow::Borrowed(code);
+        }
+        let base = base_name(step);
+        let mut k = 0;
+        let mut out = String::with_capacity(code.len() + 64 * targets);
+        for (line, motion) in code.split('\n').zip(motions) {
+            if !out.is_empty() {
+                out.push('\n');
+            }
+            let Some(m) = motion else {
+                out.push_str(line);
+                continue;
+            };
+            let names: Vec<String> = m
+                .targets
+                .iter()
+                .map(|_| {
+                    k += 1;
+                    self.name(&base, (targets > 1).then_some(k))
+                })
+                .collect();
+            self.write(line, &m, &names, &mut out);
+        }
+        Cow::Owned(out)
+    }
+
+    /// A cheap test before the lines are parsed (100,000 steps).
+    fn may_hold_literal(&self, code: &str) -> bool {
+        match self.lang {
+            Language::Krl => code.contains('{'),
+            Language::Rapid => code.contains("[["),
+            Language::UrScript => code.contains('['),
+        }
+    }
+
+    fn parse(&self, line: &str) -> Option<Motion> {
+        match self.lang {
+            Language::Krl => krl_motion(line),
+            Language::Rapid => rapid_motion(line),
+            Language::UrScript => ur_motion(line),
+        }
+    }
+
+    /// A unique name from `base` and the number of the point in its step.
+    fn name(&mut self, base: &str, k: Option<usize>) -> String {
+        let number = k.map(|k| k.to_string()).unwrap_or_default();
+        let mut stem: String = base.to_owned();
+        stem.truncate(self.max - number.len());
+        stem.push_str(&number);
+        let mut name = stem.clone();
+        let mut n = 1;
+        while !self.free(&name) {
+            n += 1;
+            let suffix = format!("_{n}");
+            let mut s = stem.clone();
+            s.truncate(self.max - suffix.len());
+            s.push_str(&suffix);
+            name = s;
+        }
+        for p in self.prefixes() {
+            self.taken.insert(format!("{p}{name}").to_ascii_lowercase());
+        }
+        self.count += 1;
+        name
+    }
+
+    /// The letters before a point's name in the names the language declares for it.
+    fn prefixes(&self) -> &'static [&'static str] {
+        match self.lang {
+            Language::Krl => &["x", "f"],
+            Language::Rapid => &["p", "j"],
+            Language::UrScript => &["p", "q"],
+        }
+    }
+
+    /// Whether `name` may be a point's: none of its declared names is taken or a keyword, and
+    /// it is not KUKA's own (`XHOME`, `XHOME1` … in `$config.dat`) or skillpost's (`skp_…`).
+    fn free(&self, name: &str) -> bool {
+        let upper = name.to_ascii_uppercase();
+        if upper.starts_with("SKP_") {
+            return false;
+        }
+        if self.lang == Language::Krl
+            && (upper == "HOME"
+                || upper
+                    .strip_prefix("HOME")
+                    .is_some_and(|d| d.bytes().all(|b| b.is_ascii_digit())))
+        {
+            return false;
+        }
+        self.prefixes().iter().all(|p| {
+            let full = format!("{p}{name}").to_ascii_lowercase();
+            !self.taken.contains(&full)
+                && match self.lang {
+                    Language::Krl => !crate::names::is_krl_keyword(&full),
+                    Language::Rapid => !["pers", "proc"].contains(&full.as_str()),
+                    Language::UrScript => true,
+                }
+        })
+    }
+
+    /// Writes the motion of `line` to the named points and declares them.
+    fn write(&mut self, line: &str, m: &Motion, names: &[String], out: &mut String) {
+        let indent = &line[..line.len() - line.trim_start().len()];
+        match self.lang {
+            Language::Krl => self.write_krl(indent, m, names, out),
+            Language::Rapid => {
+                for (t, n) in m.targets.iter().zip(names) {
+                    let (ty, p) = match t.kind {
+                        Kind::Cartesian => ("robtarget", "p"),
+                        Kind::Axis => ("jointtarget", "j"),
+                    };
+                    self.declarations
+                        .push(format!("CONST {ty} {p}{n} := {};", t.text));
+                }
+                out.push_str(&m.rewrite(line, |i| {
+                    let p = if m.targets[i].kind == Kind::Axis { "j" } else { "p" };
+                    format!("{p}{}", names[i])
+                }));
+            }
+            Language::UrScript => {
+                for (t, n) in m.targets.iter().zip(names) {
+                    let p = if t.kind == Kind::Axis { "q" } else { "p" };
+                    self.declarations
+                        .push(format!("global {p}{n} = {}", t.text));
+                }
+                out.push_str(&m.rewrite(line, |i| {
+                    let p = if m.targets[i].kind == Kind::Axis { "q" } else { "p" };
+                    format!("{p}{}", names[i])
+                }));
+            }
+        }
+    }
+
+    fn write_krl(&mut self, indent: &str, m: &Motion, names: &[String], out: &mut String) {
+        for (t, n) in m.targets.iter().zip(names) {
+            let ty = match t.kind {
+                Kind::Cartesian => "E6POS",
+                Kind::Axis => "E6AXIS",
+            };
+            self.declarations
+                .push(format!("DECL {ty} X{n}={}", t.text));
+        }
+        let points: Vec<String> = names.iter().map(|n| format!("X{n}")).collect();
+        let verb = m.verb.as_str();
+        let approx = m.rest.trim();
+        let motion = if approx.is_empty() {
+            format!("{verb} {}", points.join(", "))
+        } else {
+            format!("{verb} {} {approx}", points.join(", "))
+        };
+        let KrlForm::Inline { tool, base } = self.krl else {
+            out.push_str(indent);
+            out.push_str(&motion);
+            return;
+        };
+        if !krl_approximation(approx) {
+            // An inline form knows only its own approximation words.
+            out.push_str(indent);
+            out.push_str(&motion);
+            return;
+        }
+        // The target is the last point; a CIRC's auxiliary point comes first.
+        let target = names.last().expect("a motion has a target");
+        let cont = if approx.is_empty() { "" } else { " CONT" };
+        let (header, data_act, params) = if verb == "PTP" {
+            self.pdat += 1;
+            let d = format!("PDAT{}", self.pdat);
+            self.declarations.push(format!(
+                "DECL PDAT P{d}={{VEL 100,ACC 100,APO_DIST 100,APO_MODE #CDIS,GEAR_JERK 50,EXAX_IGN 0}}"
+            ));
+            (
+                format!(
+                    ";FOLD PTP {target}{cont} Vel=100 % {d} Tool[{tool}] Base[{base}];%{{PE}}%R 8.3.40,%MKUKATPBASIS,%CMOVE,%VPTP,%P 1:PTP, 2:{target}, 3:{approx}, 5:100, 7:{d}"
+                ),
+                format!("PDAT_ACT=P{d}"),
+                "BAS(#PTP_PARAMS,100)",
+            )
+        } else {
+            self.cpdat += 1;
+            let d = format!("CPDAT{}", self.cpdat);
+            self.declarations.push(format!(
+                "DECL LDAT L{d}={{VEL 2,ACC 100,APO_DIST 100,APO_FAC 50,AXIS_VEL 100,AXIS_ACC 100,ORI_TYP #VAR,CIRC_TYP #BASE,JERK_FAC 50,GEAR_JERK 50,EXAX_IGN 0}}"
+            ));
+            let header = if verb == "CIRC" {
+                let aux = &names[0];
+                format!(
+                    ";FOLD CIRC {aux} {target}{cont} Vel=2 m/s {d} Tool[{tool}] Base[{base}];%{{PE}}%R 8.3.40,%MKUKATPBASIS,%CMOVE,%VCIRC,%P 1:CIRC, 2:{aux}, 3:{target}, 4:{approx}, 6:2, 8:{d}"
+                )
+            } else {
+                format!(
+                    ";FOLD LIN {target}{cont} Vel=2 m/s {d} Tool[{tool}] Base[{base}];%{{PE}}%R 8.3.40,%MKUKATPBASIS,%CMOVE,%VLIN,%P 1:LIN, 2:{target}, 3:{approx}, 5:2, 7:{d}"
+                )
+            };
+            (header, format!("LDAT_ACT=L{d}"), "BAS(#CP_PARAMS,2)")
+        };
+        for n in names {
+            self.declarations.push(format!(
+                "DECL FDAT F{n}={{TOOL_NO {tool},BASE_NO {base},IPO_FRAME #BASE,POINT2[] \" \",TQ_STATE FALSE}}"
+            ));
+        }
+        for l in [
+            header.as_str(),
+            "$BWDSTART=FALSE",
+            &data_act,
+            &format!("FDAT_ACT=F{target}"),
+            params,
+            &motion,
+            ";ENDFOLD",
+        ] {
+            if !out.is_empty() && !out.ends_with('\n') {
+                out.push('\n');
+            }
+            out.push_str(indent);
+            out.push_str(l);
+        }
+    }
+}
+
+/// The points of the program `input` writes: how (the program resource's `Points` attribute,
+/// `E216` when it is neither `named` nor `inline`), for KRL in which form (`W210` when its code
+/// sets motion parameters), and the names its code already uses.
+pub fn for_program(
+    input: &super::EmitInput,
+    diags: &mut crate::diag::Diagnostics,
+) -> Option<Points> {
+    use crate::diag::{Code, Diagnostic};
+    let lang = input.profile.language();
+    let res = input.bound.resource.map(|r| &input.blackboard.resources[r]);
+    let mut mode = Mode::Named;
+    if let Some(r) = res
+        && let Some((v, span)) = &r.points_attr
+    {
+        mode = match v.trim().to_ascii_lowercase().as_str() {
+            "named" => Mode::Named,
+            "inline" => Mode::Literal,
+            _ => {
+                diags.push(
+                    Diagnostic::error(
+                        Code::BadPoints,
+                        format!(
+                            "`Points` is `{}`: it says how motions to literal positions are written, `named` (teachable points, the default) or `inline` (as the IRL code wrote them){}",
+                            v.trim(),
+                            crate::names::did_you_mean(v.trim(), ["named", "inline"])
+                        ),
+                    )
+                    .at(span.clone())
+                    .element(r.element.clone()),
+                );
+                return None;
+            }
+        };
+    }
+    // The words the program's code uses that a point's declared name could be.
+    let starts: &[u8] = match lang {
+        Language::Krl => b"xXfF",
+        Language::Rapid => b"pPjJ",
+        Language::UrScript => b"pPqQ",
+    };
+    let mut taken = HashSet::new();
+    let mut words = |text: &str| {
+        for w in text.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_')) {
+            if w.len() > 1 && starts.contains(&w.as_bytes()[0]) {
+                taken.insert(w.to_ascii_lowercase());
+            }
+        }
+    };
+    let definitions = || {
+        input
+            .bound
+            .definitions
+            .iter()
+            .flat_map(|&(i, d)| input.irls[i].definitions[d].lines.iter())
+    };
+    for l in definitions() {
+        words(l);
+    }
+    if mode == Mode::Named {
+        for b in input.bound.steps.iter().flatten() {
+            if b.code.contains(['{', '[']) {
+                words(&b.code);
+            }
+        }
+    }
+    if lang == Language::UrScript {
+        for w in super::urscript::KEYWORDS {
+            words(w);
+        }
+    }
+    let mut krl = KrlForm::Inline { tool: 0, base: 0 };
+    if lang == Language::Krl && mode == Mode::Named {
+        let steps = input
+            .bound
+            .steps
+            .iter()
+            .enumerate()
+            .filter_map(|(i, b)| b.as_ref().map(|b| (i, b.code.as_str())));
+        let defs = input.bound.definitions.iter().flat_map(|&(i, d)| {
+            let def = &input.irls[i].definitions[d];
+            def.lines.iter().map(move |l| (Err(def), l.as_str()))
+        });
+        let steps = steps.map(|(i, code)| (Ok(i), code));
+        let found = steps.chain(defs).find_map(|(step, code)| {
+            code.split('\n')
+                .find(|l| sets_motion(l))
+                .map(|l| (step, l.trim().to_owned()))
+        });
+        if let Some((step, statement)) = found {
+            krl = KrlForm::Named;
+            let has_literal = input
+                .bound
+                .steps
+                .iter()
+                .flatten()
+                .any(|b| b.code.split('\n').any(|l| krl_motion(l).is_some()));
+            if has_literal {
+                let (whence, at) = match step {
+                    Ok(i) => {
+                        let e = &input.sfc.elements[i];
+                        let name = match &e.kind {
+                            crate::model::ElementKind::Step(st) => transliterate(&st.name),
+                            _ => String::new(),
+                        };
+                        (
+                            format!("step {name}, localId {}", e.local_id),
+                            Some(e.span.clone()),
+                        )
+                    }
+                    Err(def) => (
+                        format!("IRL definition `{}`", def.name.text),
+                        Some(def.span.clone()),
+                    ),
+                };
+                let mut d = Diagnostic::warning(
+                    Code::PointsNotInline,
+                    format!(
+                        "program `{}`: points are declared in the .dat and moved to as `PTP XName`, not as KUKA inline forms: `{statement}` ({whence}) sets motion parameters, which an inline form would replace with its own velocity, tool and base; Touch-Up needs an inline form, the points' values in the .dat can still be changed",
+                        input.program
+                    ),
+                );
+                if let Some(at) = at {
+                    d = d.at(at);
+                }
+                diags.push(d);
+            }
+        }
+    }
+    Some(Points::new(lang, mode, krl, taken))
+}
+
+/// Whether a KRL line sets a motion parameter an inline form sets too: velocity, acceleration,
+/// approximation, tool, base, load, the interpolation frame, or the motion data (`BAS(…)`,
+/// `PDAT_ACT`, …). Comments are not read.
+fn sets_motion(line: &str) -> bool {
+    let code = line.split(';').next().unwrap_or("").to_ascii_uppercase();
+    if !code.contains(['$', 'B', '_']) {
+        return false;
+    }
+    [
+        "$VEL", "$ACC", "$APO", "$TOOL", "$BASE", "$LOAD", "$IPO_MODE", "$ORI_TYPE",
+        "$CIRC_TYPE", "PDAT_ACT", "LDAT_ACT", "FDAT_ACT",
+    ]
+    .iter()
+    .any(|w| code.contains(w))
+        || code.match_indices("BAS").any(|(i, _)| {
+            let before = code[..i].chars().next_back();
+            !before.is_some_and(|c| c.is_ascii_alphanumeric() || c == '_' || c == '$')
+                && code[i + 3..].trim_start().starts_with('(')
+        })
+}
+
+/// The approximation words a KRL inline form writes after its point (`C_PTP`, `C_DIS`, …); an
+/// empty text is exact positioning.
+fn krl_approximation(rest: &str) -> bool {
+    rest.split_whitespace()
+        .all(|w| ["C_PTP", "C_DIS", "C_VEL", "C_ORI"].contains(&w.to_ascii_uppercase().as_str()))
+        && rest.split_whitespace().count() <= 2
+}
+
+/// A point's name from its step's name: its words (transliterated, letters and digits) joined,
+/// each after the first starting upper-case (`Pick part` → `PickPart`); `P` first when it would
+/// not start with a letter; `P` for a step without a name.
+pub fn base_name(step: &str) -> String {
+    let mut name = String::new();
+    for word in transliterate(step).split(|c: char| !c.is_ascii_alphanumeric()) {
+        let mut chars = word.chars();
+        let Some(first) = chars.next() else { continue };
+        if name.is_empty() {
+            name.push(first);
+        } else {
+            name.push(first.to_ascii_uppercase());
+        }
+        name.extend(chars);
+    }
+    if !name.starts_with(|c: char| c.is_ascii_alphabetic()) {
+        name.insert(0, 'P');
+    }
+    name
+}
+
+/// Whether a target is a Cartesian position or one of the axes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    Cartesian,
+    Axis,
+}
+
+/// One literal target of a motion: where it stands in the line and its text as declared.
+#[derive(Debug)]
+struct Target {
+    range: std::ops::Range<usize>,
+    kind: Kind,
+    /// The value as the declaration writes it.
+    text: String,
+}
+
+/// A motion statement with literal targets.
+#[derive(Debug)]
+struct Motion {
+    /// KRL: `PTP`, `LIN` or `CIRC` (upper-case).
+    verb: String,
+    targets: Vec<Target>,
+    /// KRL: what follows the targets (the approximation).
+    rest: String,
+}
+
+impl Motion {
+    /// `line` with each target replaced by `name(i)`.
+    fn rewrite(&self, line: &str, name: impl Fn(usize) -> String) -> String {
+        let mut out = String::with_capacity(line.len());
+        let mut at = 0;
+        for (i, t) in self.targets.iter().enumerate() {
+            out.push_str(&line[at..t.range.start]);
+            out.push_str(&name(i));
+            at = t.range.end;
+        }
+        out.push_str(&line[at..]);
+        out
+    }
+}
+
+/// The index after the bracket group that opens at `open` (`{`/`[`), nested groups included.
+fn group_end(s: &str, open: usize) -> Option<usize> {
+    let (o, c) = match s.as_bytes()[open] {
+        b'{' => (b'{', b'}'),
+        b'[' => (b'[', b']'),
+        _ => return None,
+    };
+    let mut depth = 0usize;
+    for (i, b) in s.bytes().enumerate().skip(open) {
+        if b == b'"' {
+            return None;
+        }
+        if b == o {
+            depth += 1;
+        } else if b == c {
+            depth -= 1;
+            if depth == 0 {
+                return Some(i + 1);
+            }
+        }
+    }
+    None
+}
+
+/// A number as the languages write it: `-12`, `0.5`, `.5`, `1E-3`, `9E9`.
+fn is_number(s: &str) -> bool {
+    let s = s.trim();
+    let s = s.strip_prefix(['-', '+']).unwrap_or(s);
+    let (mantissa, exp) = match s.find(['e', 'E']) {
+        Some(i) => (&s[..i], Some(&s[i + 1..])),
+        None => (s, None),
+    };
+    let mut parts = mantissa.splitn(2, '.');
+    let int = parts.next().unwrap_or("");
+    let frac = parts.next().unwrap_or("");
+    let digits = |t: &str| t.bytes().all(|b| b.is_ascii_digit());
+    !(int.is_empty() && frac.is_empty())
+        && digits(int)
+        && digits(frac)
+        && exp.is_none_or(|e| {
+            let e = e.strip_prefix(['-', '+']).unwrap_or(e);
+            !e.is_empty() && digits(e)
+        })
+}
+
+/// A KRL motion to literal targets: `PTP {X 1, Y 2, …}`, `LIN {E6POS: X 1, …} C_DIS`,
+/// `CIRC {X …}, {X …}`, `PTP {A1 0, …}`. Every component a number.
+fn krl_motion(line: &str) -> Option<Motion> {
+    let code = line.trim_start();
+    let at = line.len() - code.len();
+    let word_end = code.find(|c: char| !c.is_ascii_alphabetic())?;
+    let verb = code[..word_end].to_ascii_uppercase();
+    if !matches!(verb.as_str(), "PTP" | "LIN" | "CIRC") {
+        return None;
+    }
+    let mut i = at + word_end;
+    let mut targets = Vec::new();
+    let wanted = if verb == "CIRC" { 2 } else { 1 };
+    while targets.len() < wanted {
+        let skip = line[i..].len() - line[i..].trim_start().len();
+        i += skip;
+        if !targets.is_empty() {
+            i += line[i..].strip_prefix(',').map(|_| 1)?;
+            i += line[i..].len() - line[i..].trim_start().len();
+        } else if skip == 0 {
+            return None;
+        }
+        if !line[i..].starts_with('{') {
+            return None;
+        }
+        let end = group_end(line, i)?;
+        let (kind, text) = krl_aggregate(&line[i + 1..end - 1])?;
+        if verb != "PTP" && kind == Kind::Axis {
+            return None;
+        }
+        targets.push(Target {
+            range: i..end,
+            kind,
+            text,
+        });
+        i = end;
+    }
+    let rest = &line[i..];
+    // A comment or anything else after the approximation: not a plain motion.
+    if rest.contains(';') || rest.contains(',') || rest.contains('{') {
+        return None;
+    }
+    if !rest.trim().is_empty() && !rest.starts_with(char::is_whitespace) {
+        return None;
+    }
+    Some(Motion {
+        verb,
+        targets,
+        rest: rest.trim().to_owned(),
+    })
+}
+
+/// A KRL aggregate of numbers: its kind and the text a `.dat` declares (`{X 1,Y 2,…}`).
+fn krl_aggregate(inner: &str) -> Option<(Kind, String)> {
+    let mut inner = inner.trim();
+    let mut ty = None;
+    if let Some((t, rest)) = inner.split_once(':') {
+        let t = t.trim().to_ascii_uppercase();
+        ty = Some(match t.as_str() {
+            "POS" | "E6POS" | "FRAME" => Kind::Cartesian,
+            "AXIS" | "E6AXIS" => Kind::Axis,
+            _ => return None,
+        });
+        inner = rest.trim();
+    }
+    let mut items = Vec::new();
+    let mut cartesian = false;
+    let mut axis = false;
+    for item in inner.split(',') {
+        let mut w = item.split_whitespace();
+        let (key, value) = (w.next()?, w.next()?);
+        if w.next().is_some() || !is_number(value) {
+            return None;
+        }
+        let k = key.to_ascii_uppercase();
+        match k.as_str() {
+            "X" | "Y" | "Z" | "A" | "B" | "C" | "S" | "T" => cartesian = true,
+            "A1" | "A2" | "A3" | "A4" | "A5" | "A6" => axis = true,
+            "E1" | "E2" | "E3" | "E4" | "E5" | "E6" => {}
+            _ => return None,
+        }
+        if items.iter().any(|(x, _): &(String, &str)| *x == k) {
+            return None;
+        }
+        items.push((k, value));
+    }
+    let kind = match (cartesian, axis, ty) {
+        (true, false, None | Some(Kind::Cartesian)) => Kind::Cartesian,
+        (false, true, None | Some(Kind::Axis)) => Kind::Axis,
+        _ => return None,
+    };
+    let body: Vec<String> = items.iter().map(|(k, v)| format!("{k} {v}")).collect();
+    Some((kind, format!("{{{}}}", body.join(","))))
+}
+
+/// RAPID's motion instructions whose first arguments are targets.
+const RAPID_MOVES: &[(&str, usize, Kind)] = &[
+    ("MoveL", 1, Kind::Cartesian),
+    ("MoveJ", 1, Kind::Cartesian),
+    ("MoveC", 2, Kind::Cartesian),
+    ("MoveAbsJ", 1, Kind::Axis),
+];
+
+/// A RAPID motion to literal targets: `MoveL [[x,y,z],[q1,…],[cf…],[e…]], v, z, tool;`,
+/// `MoveAbsJ [[j1,…,j6],[e…]], …;`.
+fn rapid_motion(line: &str) -> Option<Motion> {
+    let code = line.trim_start();
+    let at = line.len() - code.len();
+    let word_end = code.find(|c: char| !c.is_ascii_alphanumeric())?;
+    let word = &code[..word_end];
+    let &(verb, n, kind) = RAPID_MOVES
+        .iter()
+        .find(|(v, _, _)| v.eq_ignore_ascii_case(word))?;
+    let mut i = at + word_end;
+    let skip = line[i..].len() - line[i..].trim_start().len();
+    if skip == 0 {
+        return None;
+    }
+    i += skip;
+    let mut targets = Vec::new();
+    while targets.len() < n {
+        if !targets.is_empty() {
+            i += line[i..].strip_prefix(',').map(|_| 1)?;
+            i += line[i..].len() - line[i..].trim_start().len();
+        }
+        if !line[i..].starts_with("[[") {
+            return None;
+        }
+        let end = group_end(line, i)?;
+        let groups = number_groups(&line[i + 1..end - 1])?;
+        let sizes: Vec<usize> = groups.iter().map(Vec::len).collect();
+        let fits = match kind {
+            Kind::Cartesian => sizes == [3, 4, 4, 6],
+            Kind::Axis => sizes == [6, 6],
+        };
+        if !fits {
+            return None;
+        }
+        targets.push(Target {
+            range: i..end,
+            kind,
+            text: line[i..end].to_owned(),
+        });
+        i = end;
+    }
+    if !line[i..].trim_start().starts_with(',') {
+        return None;
+    }
+    Some(Motion {
+        verb: verb.to_owned(),
+        targets,
+        rest: String::new(),
+    })
+}
+
+/// `[a, b], [c]` → the numbers of each group; `None` unless every item is a number.
+fn number_groups(s: &str) -> Option<Vec<Vec<&str>>> {
+    let mut out = Vec::new();
+    let mut rest = s.trim();
+    while !rest.is_empty() {
+        let inner = rest.strip_prefix('[')?;
+        let close = inner.find(']')?;
+        let items: Vec<&str> = inner[..close].split(',').map(str::trim).collect();
+        if !items.iter().all(|x| is_number(x)) {
+            return None;
+        }
+        out.push(items);
+        rest = inner[close + 1..].trim_start();
+        if let Some(r) = rest.strip_prefix(',') {
+            rest = r.trim_start();
+            if rest.is_empty() {
+                return None;
+            }
+        } else if !rest.is_empty() {
+            return None;
+        }
+    }
+    Some(out)
+}
+
+/// URScript's motion functions and how many targets they take first.
+const UR_MOVES: &[(&str, usize)] = &[("movel", 1), ("movej", 1), ("movep", 1), ("movec", 2)];
+
+/// A URScript motion to literal targets: `movel(p[x, y, z, rx, ry, rz], a=…, v=…)`,
+/// `movej([q1, …, q6], …)`.
+fn ur_motion(line: &str) -> Option<Motion> {
+    let code = line.trim_start();
+    let at = line.len() - code.len();
+    let open = code.find('(')?;
+    let word = &code[..open];
+    let &(verb, n) = UR_MOVES.iter().find(|(v, _)| *v == word)?;
+    let mut i = at + open + 1;
+    let mut targets = Vec::new();
+    while targets.len() < n {
+        i += line[i..].len() - line[i..].trim_start().len();
+        if !targets.is_empty() {
+            i += line[i..].strip_prefix(',').map(|_| 1)?;
+            i += line[i..].len() - line[i..].trim_start().len();
+        }
+        let (start, kind) = if line[i..].starts_with("p[") {
+            (i + 1, Kind::Cartesian)
+        } else if line[i..].starts_with('[') && verb == "movej" && targets.is_empty() {
+            (i, Kind::Axis)
+        } else {
+            return None;
+        };
+        let end = group_end(line, start)?;
+        let groups = number_groups(&line[start..end])?;
+        if groups.len() != 1 || groups[0].len() != 6 {
+            return None;
+        }
+        targets.push(Target {
+            range: i..end,
+            kind,
+            text: line[i..end].to_owned(),
+        });
+        i = end;
+    }
+    let after = line[i..].trim_start();
+    if !(after.starts_with(',') || after.starts_with(')')) {
+        return None;
+    }
+    Some(Motion {
+        verb: verb.to_owned(),
+        targets,
+        rest: String::new(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn points(lang: Language, krl: KrlForm) -> Points {
+        Points::new(lang, Mode::Named, krl, Vec::new())
+    }
+
+    #[test]
+    fn a_krl_motion_to_a_literal_becomes_a_named_point() {
+        let mut p = points(Language::Krl, KrlForm::Named);
+        let code = "SetVelCP (0.5)\nPTP {X 100, Y 200, Z 300, A 0, B 90, C 0}";
+        assert_eq!(p.step_code("Pick part", code), "SetVelCP (0.5)\nPTP XPickPart");
+        assert_eq!(
+            p.declarations,
+            ["DECL E6POS XPickPart={X 100,Y 200,Z 300,A 0,B 90,C 0}"]
+        );
+        // The same step name again: a number keeps it unique.
+        assert_eq!(
+            p.step_code("Pick Part", "LIN {X 1, Y 2, Z 3, A 0, B 0, C 0} C_DIS"),
+            "LIN XPickPart_2 C_DIS"
+        );
+        // Axis positions; several points in one step are numbered.
+        assert_eq!(
+            p.step_code("Home", "PTP {A1 0, A2 -90, A3 90, A4 0, A5 0, A6 0}\nPTP {AXIS: A1 1}"),
+            "PTP XHome1_2\nPTP XHome2_2",
+            "HOME1 and HOME2 are KUKA's own points"
+        );
+        assert_eq!(p.declarations[2], "DECL E6AXIS XHome1_2={A1 0,A2 -90,A3 90,A4 0,A5 0,A6 0}");
+        assert_eq!(p.step_code("Home", "PTP {A1 0}"), "PTP XHome_2");
+        // `FOR` is a keyword: no point `Or`.
+        assert_eq!(p.step_code("or", "PTP {X 1}"), "PTP Xor_2");
+        // What is not a literal position stays as written.
+        for code in [
+            "PTP HOME",
+            "PTP {X 1, Y Y0}",
+            "PTP_REL {X 10}",
+            "LIN {A1 0}",
+            "PTP {X 1} ; a comment",
+            "PTP{X 1}",
+        ] {
+            assert_eq!(p.step_code("S", code), code);
+        }
+    }
+
+    #[test]
+    fn a_krl_inline_form_carries_its_data() {
+        let mut p = points(Language::Krl, KrlForm::Inline { tool: 0, base: 0 });
+        let out = p.step_code("Pick", "  LIN {X 1, Y 2, Z 3, A 0, B 0, C 0} C_DIS");
+        let lines: Vec<&str> = out.lines().collect();
+        assert!(lines[0].starts_with("  ;FOLD LIN Pick CONT Vel=2 m/s CPDAT1 Tool[0] Base[0];%{PE}"), "{out}");
+        assert!(lines[0].ends_with("%P 1:LIN, 2:Pick, 3:C_DIS, 5:2, 7:CPDAT1"), "{out}");
+        assert_eq!(&lines[1..], ["  $BWDSTART=FALSE", "  LDAT_ACT=LCPDAT1", "  FDAT_ACT=FPick", "  BAS(#CP_PARAMS,2)", "  LIN XPick C_DIS", "  ;ENDFOLD"]);
+        assert_eq!(p.declarations.len(), 3, "{:?}", p.declarations);
+        assert!(p.declarations[1].starts_with("DECL LDAT LCPDAT1={VEL 2,"));
+        assert!(p.declarations[2].starts_with("DECL FDAT FPick={TOOL_NO 0,BASE_NO 0,"));
+        let circ = p.step_code("Arc", "CIRC {X 1, Y 2, Z 3}, {X 4, Y 5, Z 6}");
+        assert!(circ.contains("%P 1:CIRC, 2:Arc1, 3:Arc2, 4:, 6:2, 8:CPDAT2"), "{circ}");
+        assert!(circ.contains("\nCIRC XArc1, XArc2\n"), "{circ}");
+    }
+
+    #[test]
+    fn rapid_and_urscript_targets_are_declared_by_name() {
+        let mut p = points(Language::Rapid, KrlForm::Named);
+        let line = "MoveL [[400, 0, 300], [0, 0, 1, 0], [0, 0, 0, 0], [9E9, 9E9, 9E9, 9E9, 9E9, 9E9]], v200, fine, tGripper;";
+        assert_eq!(p.step_code("Pick", line), "MoveL pPick, v200, fine, tGripper;");
+        assert_eq!(p.declarations, ["CONST robtarget pPick := [[400, 0, 300], [0, 0, 1, 0], [0, 0, 0, 0], [9E9, 9E9, 9E9, 9E9, 9E9, 9E9]];"]);
+        let j = "MoveAbsJ [[0, 0, 0, 0, 30, 0], [9E9, 9E9, 9E9, 9E9, 9E9, 9E9]], v500, fine, tool0;";
+        assert_eq!(p.step_code("Home", j), "MoveAbsJ jHome, v500, fine, tool0;");
+        let named = "MoveL RelTool(pHome, 1, 2, 3), v100, fine, tool0;";
+        assert_eq!(p.step_code("X", named), named);
+
+        let mut u = points(Language::UrScript, KrlForm::Named);
+        assert_eq!(
+            u.step_code("Pick", "movel(p[0.4, 0, 0.3, 0, 3.14, 0], a=1.2, v=0.25)"),
+            "movel(pPick, a=1.2, v=0.25)"
+        );
+        assert_eq!(u.step_code("Home", "movej([0, -1.57, 1.57, 0, 0, 0])"), "movej(qHome)");
+        assert_eq!(u.declarations, ["global pPick = p[0.4, 0, 0.3, 0, 3.14, 0]", "global qHome = [0, -1.57, 1.57, 0, 0, 0]"]);
+        assert_eq!(u.step_code("S", "movel(p[X, 1])"), "movel(p[X, 1])");
+    }
+
+    #[test]
+    fn names_fit_the_language_and_avoid_taken_words() {
+        let mut p = Points::new(Language::Krl, Mode::Named, KrlForm::Named, ["XGrip".to_owned()]);
+        assert_eq!(p.step_code("Grip", "PTP {X 1}"), "PTP XGrip_2");
+        let long = "a very long step name that goes on and on";
+        let out = p.step_code(long, "PTP {X 1}\nPTP {X 2}");
+        for l in out.lines() {
+            let name = l.strip_prefix("PTP ").unwrap();
+            assert!(crate::names::is_krl_name(name), "{name}");
+        }
+        assert_eq!(base_name("1. Übergabe"), "P1Uebergabe");
+        assert_eq!(base_name(""), "P");
+        let mut lit = Points::new(Language::Krl, Mode::Literal, KrlForm::Named, Vec::new());
+        assert_eq!(lit.step_code("S", "PTP {X 1}"), "PTP {X 1}");
+    }
+}
