@@ -321,14 +321,15 @@ impl Lang {
         out
     }
 
-    /// The flow base's IRL file in this language: RAPID's and URScript's moves instead of
-    /// KRL's (the syntax checks read every line; the interpreters do not read a step's code).
+    /// The flow base's IRL file in this language: RAPID's and URScript's moves to literal
+    /// positions instead of KRL's (they become named points; the syntax checks read every line,
+    /// the interpreters hold each motion to its point's declaration).
     fn irl(self, text: &str) -> String {
         let (lin, ptp) = match self {
             Lang::Krl => return text.to_owned(),
             Lang::Rapid => (
-                "MoveL RelTool(pHome, X, Y, Z \\Rx:=A \\Ry:=B \\Rz:=C), v100, fine, tool0;",
-                "MoveJ RelTool(pHome, X, Y, Z \\Rx:=A \\Ry:=B \\Rz:=C), v100, fine, tool0;",
+                "MoveL [[X, Y, Z], [quat(A, B, C)], [0, 0, 0, 0], [9E9, 9E9, 9E9, 9E9, 9E9, 9E9]], v100, fine, tool0;",
+                "MoveJ [[X, Y, Z], [quat(A, B, C)], [0, 0, 0, 0], [9E9, 9E9, 9E9, 9E9, 9E9, 9E9]], v100, fine, tool0;",
             ),
             Lang::UrScript => ("movel(p[X, Y, Z, A, B, C])", "movej(p[X, Y, Z, A, B, C])"),
         };
@@ -1110,6 +1111,39 @@ fn noticed(case: &str, program: &str, chart: &Chart, lang: Lang, text: String) -
         || fails(|| {
             check_compiled(case, &output, program, chart, 7, 100);
         })
+}
+
+/// A motion to a point nobody declares — its declaration dropped — is noticed in every
+/// language: by the KRL check (the `.dat`), by the RAPID and URScript readers.
+#[test]
+fn a_motion_to_an_undeclared_point_fails() {
+    let case = "flow-loop-early-exit";
+    for lang in [Lang::Krl, Lang::Rapid, Lang::UrScript] {
+        let (program, out, chart) = compile(case, lang);
+        let (file, decl) = match lang {
+            Lang::Krl => (&out.dat, "DECL E6POS X"),
+            Lang::Rapid => (&out.main, "CONST robtarget p"),
+            Lang::UrScript => (&out.main, "global p"),
+        };
+        let line = file
+            .lines()
+            .find(|l| l.trim_start().starts_with(decl))
+            .unwrap_or_else(|| panic!("{lang:?}: no point in\n{file}"))
+            .to_owned();
+        let dropped = file.replacen(&format!("{line}\n"), "", 1);
+        let output = match lang {
+            Lang::Krl => Output { lang, main: out.main.clone(), dat: dropped },
+            _ => Output { lang, main: dropped, dat: out.dat.clone() },
+        };
+        let caught = output.syntax(&program).is_err()
+            || fails(|| {
+                check_compiled(case, &output, &program, &chart, 7, 100);
+            });
+        assert!(caught, "{lang:?}: `{line}` dropped went unnoticed");
+        // The program as written runs.
+        assert!(out.syntax(&program).is_ok(), "{lang:?}");
+        check_compiled(case, &out, &program, &chart, 7, 100);
+    }
 }
 
 #[test]

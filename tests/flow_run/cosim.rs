@@ -511,6 +511,9 @@ fn read_dat(dat: &str) -> (HashMap<String, (u32, u32)>, HashMap<String, Val>) {
                 "INT" => Val::I(init.parse().unwrap()),
                 // A stop's message (`KrlMsg_T` and its kin) is not run here.
                 t if t.starts_with("KrlMsg") => return None,
+                // Named points and an inline form's data: the motions are not run here (the KRL
+                // check holds them to their declarations).
+                "E6POS" | "E6AXIS" | "FDAT" | "PDAT" | "LDAT" => return None,
                 other => panic!("DECL {other}"),
             };
             Some((name, v))

@@ -231,6 +231,8 @@ pub fn parse(text: &str, name: &str) -> Program {
 struct Threads {
     names: Vec<String>,
     counters: Vec<String>,
+    /// The named points declared so far: a motion may go only to one of them.
+    points: std::collections::HashSet<String>,
 }
 
 /// After `thread skp_clock():`: reads the clock thread (`while True:`, a line
@@ -376,11 +378,44 @@ fn block(
                 Some(Stmt::RunCounters)
             }
             "global" => match l[7..].split_once(" = ") {
+                // A named point (docs/LANGUAGES.md, "Points"): six numbers, declared once.
+                Some((var, e)) if e.starts_with("p[") || e.starts_with('[') => {
+                    let items: Vec<&str> = e
+                        .trim_start_matches('p')
+                        .strip_prefix('[')
+                        .and_then(|r| r.strip_suffix(']'))
+                        .unwrap_or_else(|| panic!("URScript: `{l}`"))
+                        .split(',')
+                        .collect();
+                    assert!(
+                        items.len() == 6 && items.iter().all(|x| x.trim().parse::<f64>().is_ok()),
+                        "URScript: a point of six numbers in `{l}`"
+                    );
+                    assert!(
+                        threads.points.insert(var.to_owned()),
+                        "URScript: point `{var}` declared twice"
+                    );
+                    continue;
+                }
                 Some((var, e)) if var.bytes().all(|c| c.is_ascii_alphanumeric() || c == b'_') => {
                     Some(Stmt::Assign(var.to_owned(), expr(e)))
                 }
                 _ => panic!("URScript: `{l}`"),
             },
+            "movel" | "movej" | "movep" | "movec" => {
+                // A motion to a named point needs its declaration before it.
+                let args = l[l.find('(').unwrap() + 1..].split(',');
+                for a in args.take(if first == "movec" { 2 } else { 1 }) {
+                    let a = a.trim().trim_end_matches(')');
+                    if a.bytes().all(|c| c.is_ascii_alphanumeric() || c == b'_') {
+                        assert!(
+                            threads.points.contains(a),
+                            "URScript: `{l}` moves to `{a}`, which no point declares"
+                        );
+                    }
+                }
+                None
+            }
             _ => match l.split_once(" = ") {
                 Some((var, e)) if var.bytes().all(|c| c.is_ascii_alphanumeric() || c == b'_') => {
                     Some(Stmt::Assign(var.to_owned(), expr(e)))
