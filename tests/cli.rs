@@ -1306,9 +1306,11 @@ fn a_robot_and_its_gripper_make_one_program() {
         assert_eq!(o.status.code(), Some(0), "{case}: {}", stderr(&o));
         let src = std::fs::read_to_string(t.path().join("Cell.src")).unwrap();
         assert!(
-            src.contains("GripClose (40)") && src.contains("LIN {X 8"),
+            src.contains("GripClose (40)") && src.contains("LIN XLIN"),
             "{case}: {src}"
         );
+        let dat = std::fs::read_to_string(t.path().join("Cell.dat")).unwrap();
+        assert!(dat.contains("DECL E6POS XLIN={X 8,"), "{case}: {dat}");
         let o = run(&["--validate", "-pB", "Blackboard.aml"], t.path());
         assert!(
             stdout(&o).contains(&format!("(Controller) runs on KUKA KR15-2 ({how})")),
@@ -2969,7 +2971,7 @@ fn an_unwritable_output_is_an_e604_diagnostic() {
     // After the compile's count of warnings not shown, the write's error.
     assert!(
         stderr(&o)
-            .strip_prefix("3 warnings; --warn shows them\n")
+            .strip_prefix("4 warnings; --warn shows them\n")
             .is_some_and(|e| e.starts_with("error[E604]: cannot write")),
         "{}",
         stderr(&o)

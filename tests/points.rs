@@ -136,6 +136,15 @@ fn points_inline_keeps_literal_positions_and_a_bad_value_is_an_error_at_the_attr
     assert!(err.contains("did you mean `named`?"), "{err}");
     assert!(err.contains("Blackboard.aml:6:"), "{err}");
     assert!(!p.join("demo.src").exists(), "nothing is written");
+
+    // `forms`: inline forms, whatever the code sets; no W210.
+    fs::write(&bb, &original).unwrap();
+    set_points(&bb, "KUKA KR15-2", "forms");
+    let err = ok(&compile(&p, "Blackboard.aml", "demo"));
+    assert!(!err.contains("W210"), "{err}");
+    let src = fs::read_to_string(p.join("demo.src")).unwrap();
+    assert_eq!(src.matches("%CMOVE").count(), 3, "{src}");
+    assert!(src.contains("SetVelCP (0.3)\n  ;FOLD PTP P2P_2 Vel=100 % PDAT2"), "{src}");
 }
 
 #[test]

@@ -49,6 +49,10 @@ pub struct Points {
     taken: HashSet<String>,
     /// The longest base name (the language's limit less the prefix).
     max: usize,
+    /// Names tried and found taken (for the test that naming is not quadratic).
+    tries: usize,
+    /// Per stem (lower-case), the last number `_n` given to it.
+    next: std::collections::HashMap<String, usize>,
     /// The declarations, in order: `.dat` lines (KRL), module data (RAPID), the program's first
     /// lines (URScript).
     pub declarations: Vec<String>,
@@ -80,6 +84,8 @@ impl Points {
             mode,
             taken: taken.into_iter().map(|w| w.to_ascii_lowercase()).collect(),
             max,
+            next: std::collections::HashMap::new(),
+            tries: 0,
             declarations: Vec::new(),
             pdat: 0,
             cpdat: 0,
@@ -149,8 +155,13 @@ impl Points {
         stem.truncate(self.max - number.len());
         stem.push_str(&number);
         let mut name = stem.clone();
-        let mut n = 1;
-        while !self.free(&name) {
+        // The next number to try after this stem (many steps of one name: not quadratic).
+        let mut n = self.next.get(&stem.to_ascii_lowercase()).copied().unwrap_or(1);
+        if n > 1 {
+            name.clear();
+        }
+        while name.is_empty() || !self.free(&name) {
+            self.tries += 1;
             n += 1;
             let suffix = format!("_{n}");
             let mut s = stem.clone();
@@ -161,6 +172,7 @@ impl Points {
         for p in self.prefixes() {
             self.taken.insert(format!("{p}{name}").to_ascii_lowercase());
         }
+        self.next.insert(stem.to_ascii_lowercase(), n);
         self.count += 1;
         name
     }
@@ -329,20 +341,25 @@ pub fn for_program(
     let lang = input.profile.language();
     let res = input.bound.resource.map(|r| &input.blackboard.resources[r]);
     let mut mode = Mode::Named;
+    let mut forms = false;
     if let Some(r) = res
         && let Some((v, span)) = &r.points_attr
     {
         mode = match v.trim().to_ascii_lowercase().as_str() {
             "named" => Mode::Named,
+            "forms" => {
+                forms = true;
+                Mode::Named
+            }
             "inline" => Mode::Literal,
             _ => {
                 diags.push(
                     Diagnostic::error(
                         Code::BadPoints,
                         format!(
-                            "`Points` is `{}`: it says how motions to literal positions are written, `named` (teachable points, the default) or `inline` (as the IRL code wrote them){}",
+                            "`Points` is `{}`: it says how motions to literal positions are written, `named` (teachable points, the default), `forms` (named points, in KRL always as inline forms) or `inline` (as the IRL code wrote them){}",
                             v.trim(),
-                            crate::names::did_you_mean(v.trim(), ["named", "inline"])
+                            crate::names::did_you_mean(v.trim(), ["named", "forms", "inline"])
                         ),
                     )
                     .at(span.clone())
@@ -389,7 +406,7 @@ pub fn for_program(
         }
     }
     let mut krl = KrlForm::Inline { tool: 0, base: 0 };
-    if lang == Language::Krl && mode == Mode::Named {
+    if lang == Language::Krl && mode == Mode::Named && !forms {
         let steps = input
             .bound
             .steps
@@ -907,6 +924,15 @@ mod tests {
             assert!(crate::names::is_krl_name(name), "{name}");
         }
         assert_eq!(base_name("1. Übergabe"), "P1Uebergabe");
+        // 20,000 steps of one name: unique names, found without trying every earlier one
+        // (200 million tries before).
+        let mut many = Points::new(Language::Rapid, Mode::Named, KrlForm::Named, Vec::new());
+        let mut seen = HashSet::new();
+        for _ in 0..20_000 {
+            let line = many.step_code("Move", "MoveJ [[1,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]], v1000, z50, tool0;");
+            assert!(seen.insert(line.into_owned().to_ascii_lowercase()));
+        }
+        assert!(many.tries < 3 * 20_000, "{} names tried", many.tries);
         assert_eq!(base_name(""), "P");
         let mut lit = Points::new(Language::Krl, Mode::Literal, KrlForm::Named, Vec::new());
         assert_eq!(lit.step_code("S", "PTP {X 1}"), "PTP {X 1}");
