@@ -660,6 +660,10 @@ codes! {
     /// A controller's `HandshakeTimeout` attribute that is not a number of seconds from 0 to a
     /// day (docs/CELLS.md).
     BadHandshakeTimeout = "E215",
+    /// A resource's tool, base or load attribute (`Tool`, `Base`, `ToolNumber`, `BaseNumber`,
+    /// `Load`, `Mass`, `CenterOfMass`) that cannot be used, or one its program's language has
+    /// no form for (docs/INPUTS.md, "Tool, base and load").
+    BadToolData = "E216",
 
     /// No `pou` with an `SFC` body (or none of the name asked for).
     NoSfcBody = "E301",
@@ -771,6 +775,9 @@ codes! {
     /// A parameter's `Constraint` that cannot be checked (a bound that is not a number, no
     /// value in it): not checked.
     UnusableConstraint = "W209",
+    /// A resource whose steps move without a tool, base or load from the blackboard: its
+    /// program keeps the controller's (docs/INPUTS.md, "Tool, base and load"); once per resource.
+    NoToolData = "W210",
     /// The start step is not marked `initialStep="true"`.
     StartNotInitial = "W301",
     /// A step's resource was inferred from its skill.

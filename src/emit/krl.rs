@@ -111,8 +111,10 @@ impl Profile for Krl {
         if !numbers_from_1(input, diags) {
             return None;
         }
+        let tools = super::tool::Tools::new(input, diags);
         let mut writer = Writer {
             input,
+            tools,
             out: Lines::new(input, flow::steps_estimate(input)),
             number: 0,
             uses_branch_var: false,
@@ -140,6 +142,7 @@ impl Profile for Krl {
             steps: writer.out.out,
             declarations,
             routines,
+            data: writer.tools.data,
         })
     }
 }
@@ -150,6 +153,8 @@ pub use crate::lang::BRANCH_VAR;
 /// Writes the program tree.
 struct Writer<'a> {
     input: &'a EmitInput<'a>,
+    /// The tool, base and load statements of the steps.
+    tools: super::tool::Tools,
     out: Lines<'a>,
     number: usize,
     /// Whether a selection needed [`BRANCH_VAR`].
@@ -219,6 +224,9 @@ impl Writer<'_> {
                 self.number += 1;
                 self.out
                     .step_title(level, &[";FOLD "], input, *i, bs, self.number);
+                if let Some(t) = self.tools.at(*i) {
+                    self.out.code(level, input.step_indent, t);
+                }
                 self.out.code(level, input.step_indent, &bs.code);
                 self.line(level, ";ENDFOLD");
             }

@@ -18,6 +18,7 @@ pub mod io;
 pub mod krl;
 pub mod rapid;
 pub mod structured;
+pub mod tool;
 pub mod urscript;
 
 use crate::bind::Bound;
@@ -105,6 +106,9 @@ pub struct Generated {
     /// `{{definitions}}`, after the IRL definitions: the program's own routines (a cell's
     /// handshakes), one line each.
     pub routines: Vec<String>,
+    /// `{{definitions}}`, before the IRL definitions: the program's data (RAPID's `tooldata`
+    /// and `wobjdata` of the blackboard's tools and bases, [`tool`]), one line each.
+    pub data: Vec<String>,
 }
 
 /// One generated file: its extension (`src`, `dat`, `mod`, `script`) and its bytes.
@@ -375,6 +379,17 @@ pub fn emit_files(
         ));
         return None;
     }
+    if !generated.data.is_empty() && !has_block("definitions") {
+        // The program would use data nothing declares.
+        diags.push(Diagnostic::error(
+            Code::BadTemplate,
+            format!(
+                "output template: the program needs the data of the blackboard's tools and bases ({}), but the template has no `{{{{definitions}}}}` line to write them",
+                generated.data.iter().filter(|l| !l.starts_with(['!', '#'])).cloned().collect::<Vec<_>>().join("; ")
+            ),
+        ));
+        return None;
+    }
     if !generated.routines.is_empty() && !has_block("definitions") {
         // The program would call routines nothing defines.
         diags.push(Diagnostic::error(
@@ -405,9 +420,13 @@ pub fn emit_files(
                             .definition_rank(lines.first().map_or("", String::as_str))
                     });
                     // Each definition, then the program's own routines, after an empty line.
-                    let blocks = defs
-                        .iter()
-                        .map(|&(irl, d)| &input.irls[irl].definitions[d].lines)
+                    let blocks = Some(&generated.data)
+                        .filter(|d| !d.is_empty())
+                        .into_iter()
+                        .chain(
+                            defs.iter()
+                                .map(|&(irl, d)| &input.irls[irl].definitions[d].lines),
+                        )
                         .chain(Some(&generated.routines).filter(|r| !r.is_empty()));
                     for lines in blocks {
                         text.push_str(nl);

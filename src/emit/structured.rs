@@ -77,8 +77,10 @@ pub fn generate(
     dialect: &Dialect,
     diags: &mut crate::diag::Diagnostics,
 ) -> Generated {
+    let tools = super::tool::Tools::new(input, diags);
     let mut w = Writer {
         input,
+        tools,
         d: dialect,
         out: Lines::new(input, flow::steps_estimate(input)),
         number: 0,
@@ -114,6 +116,7 @@ pub fn generate(
         steps: w.out.out,
         declarations,
         routines: Vec::new(),
+        data: w.tools.data,
     }
 }
 
@@ -154,6 +157,8 @@ struct States {
 
 struct Writer<'a> {
     input: &'a EmitInput<'a>,
+    /// The tool, base and load statements of the steps.
+    tools: super::tool::Tools,
     d: &'a Dialect,
     out: Lines<'a>,
     number: usize,
@@ -270,6 +275,9 @@ impl Writer<'_> {
                     bs,
                     self.number,
                 );
+                if let Some(t) = self.tools.at(*i) {
+                    self.out.code(level, input.step_indent, t);
+                }
                 self.out.code(level, input.step_indent, &bs.code);
             }
             Block::Wait(t) => {
