@@ -313,6 +313,6 @@ mod tests {
         assert!(t.is_empty());
         assert_eq!(m.len(), 5, "{m:?}");
         assert!(m[0].contains("did you mean `rx`"), "{}", m[0]);
-        assert!(m[2].contains("tools 1 to 16"), "{}", m[2]);
+        assert!(m[1].contains("tools 1 to 16"), "{}", m[1]);
     }
 }
