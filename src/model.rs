@@ -214,7 +214,8 @@ pub struct Tooling {
     pub base: Option<(Frame, Span)>,
     /// `BaseNumber`: one of the controller's own bases (KRL's `BASE_DATA[n]`), 1 to 32.
     pub base_number: Option<(u8, Span)>,
-    /// `Load` (`Payload`): what the resource's tool weighs on the flange, in kg.
+    /// `Load`: what the resource's tool weighs on the flange, in kg (a robot's `Payload` is its
+    /// rated payload, not read).
     pub load: Option<(f64, Span)>,
     /// `Mass`: what the resource weighs, in kg; a device's is its load when it has no `Load`
     /// (a robot's is its own weight, not a load).

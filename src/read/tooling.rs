@@ -1,6 +1,7 @@
 //! A resource's tool, base and load from its blackboard attributes (docs/INPUTS.md, "Tool, base
 //! and load"): `Tool`/`TCP` and `Base` as AutomationML frames, `ToolNumber` and `BaseNumber`
-//! (the controller's own tools and bases), `Load`/`Payload`, `Mass` and `CenterOfMass`.
+//! (the controller's own tools and bases), `Load`, `Mass` and `CenterOfMass`. A robot's `Payload`
+//! (its rated payload, as catalogues give it) and a robot's `Mass` (its own weight) are no load.
 //!
 //! A frame is AutomationML's `Frame` attribute type (`AutomationMLBaseAttributeTypeLib/Frame`,
 //! IEC 62714-3): sub-attributes `x`, `y`, `z` in metres and `rx`, `ry`, `rz` in degrees, rotated
@@ -19,14 +20,13 @@ use crate::model::{Frame, Tooling};
 use crate::names;
 
 /// The attribute names read here (each with its aliases), for the near-name warning `W208`.
-pub const NAMES: [&str; 9] = [
+pub const NAMES: [&str; 8] = [
     "Tool",
     "TCP",
     "ToolNumber",
     "Base",
     "BaseNumber",
     "Load",
-    "Payload",
     "Mass",
     "CenterOfMass",
 ];
@@ -53,7 +53,7 @@ pub fn read(file: FileId, r: Node, element: &str, diags: &mut Diagnostics) -> To
         tool_number: attr(&["ToolNumber"]).and_then(|a| rd.number(a, TOOLS, "tools")),
         base: attr(&["Base"]).and_then(|a| rd.frame(a, true)),
         base_number: attr(&["BaseNumber"]).and_then(|a| rd.number(a, BASES, "bases")),
-        load: attr(&["Load", "Payload"]).and_then(|a| rd.mass(a)),
+        load: attr(&["Load"]).and_then(|a| rd.mass(a)),
         mass: attr(&["Mass"]).and_then(|a| rd.mass(a)),
         center: attr(&["CenterOfMass"])
             .and_then(|a| rd.frame(a, false))
