@@ -640,9 +640,9 @@ fn warn_missing(
         let mut d = Diagnostic::warning(
             Code::NoToolData,
             format!(
-                "resource `{}`: its steps move, but the blackboard gives no {} for them: the program uses what the controller has in effect",
+                "resource `{}`: its steps move, but the blackboard gives {} for them: the program uses what the controller has in effect",
                 res_r.name.text,
-                join_and(&missing)
+                join_and(&missing.iter().map(|m| format!("no {m}")).collect::<Vec<_>>())
             ),
         )
         .at(res_r.name.span.clone())
@@ -661,10 +661,10 @@ fn warn_missing(
     }
 }
 
-fn join_and(items: &[&str]) -> String {
+fn join_and(items: &[String]) -> String {
     match items {
         [] => String::new(),
-        [a] => (*a).to_owned(),
+        [a] => a.clone(),
         [rest @ .., last] => format!("{} and {last}", rest.join(", ")),
     }
 }
