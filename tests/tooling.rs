@@ -22,8 +22,8 @@ fn stderr(o: &Output) -> String {
 fn project(base: &str, case: Option<&str>) -> tempfile::TempDir {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
     let t = tempfile::tempdir().unwrap();
-    let dirs = std::iter::once(root.join("base").join(base))
-        .chain(case.map(|c| root.join("ok").join(c)));
+    let dirs =
+        std::iter::once(root.join("base").join(base)).chain(case.map(|c| root.join("ok").join(c)));
     for dir in dirs {
         for e in std::fs::read_dir(dir).unwrap() {
             let e = e.unwrap();
@@ -78,7 +78,10 @@ fn a_moving_resource_without_tool_base_or_load_is_warned_once_and_its_program_is
         "{err}"
     );
     let src = std::fs::read_to_string(p.path().join("LoopExit.src")).unwrap();
-    assert!(tool_lines(&src).is_empty() && !src.contains("$LOAD"), "{src}");
+    assert!(
+        tool_lines(&src).is_empty() && !src.contains("$LOAD"),
+        "{src}"
+    );
     // Without --warn the warning is counted, not shown.
     let o = run(&["Blackboard.aml", "LoopExit"], p.path());
     assert_eq!(o.status.code(), Some(0));
@@ -107,12 +110,26 @@ fn each_step_moves_with_its_devices_tool_and_the_tool_changes_only_where_it_diff
     assert!(src.contains(";FOLD 3 Grip: Close @ Greifer G1 (localId 6)\r\n  ;tool of Greifer G1\r\n  $TOOL = {X 0, Y 0, Z 200"), "{src}");
     // The robot still has no base and no load: named once.
     let err = stderr(&o);
-    assert!(err.contains("gives no base (`Base` or `BaseNumber`) and no load"), "{err}");
+    assert!(
+        err.contains("gives no base (`Base` or `BaseNumber`) and no load"),
+        "{err}"
+    );
+    // `-pB` shows what was read, in the program's units.
+    let o = run(&["--validate", "-pB", "Blackboard.aml"], p.path());
+    let listing = String::from_utf8(o.stdout).unwrap();
+    assert!(
+        listing.contains("        (Tool) X 0, Y 0, Z 200, A 0, B 0, C 0 (mm, degrees)\n"),
+        "{listing}"
+    );
 
     // Without its own tool, the robot's moves use the only tool on its controller: the
     // gripper's, set once before the first step.
     let p = project("cell", None);
-    add_attributes(&p.path().join("Blackboard.aml"), "Greifer G1", &tool_z("0.2"));
+    add_attributes(
+        &p.path().join("Blackboard.aml"),
+        "Greifer G1",
+        &tool_z("0.2"),
+    );
     let o = run(&["Blackboard.aml", "Cell"], p.path());
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     let src = std::fs::read_to_string(p.path().join("Cell.src")).unwrap();
@@ -121,7 +138,12 @@ fn each_step_moves_with_its_devices_tool_and_the_tool_changes_only_where_it_diff
         ["$TOOL = {X 0, Y 0, Z 200, A 0, B 0, C 0}"],
         "{src}"
     );
-    assert!(src.contains(";FOLD 1 P2P: Move PTP @ KUKA KR15-2 (localId 3)\r\n  ;tool of Greifer G1\r\n"), "{src}");
+    assert!(
+        src.contains(
+            ";FOLD 1 P2P: Move PTP @ KUKA KR15-2 (localId 3)\r\n  ;tool of Greifer G1\r\n"
+        ),
+        "{src}"
+    );
 }
 
 #[test]
@@ -154,7 +176,11 @@ fn a_loop_sets_its_tool_again_at_its_first_step_each_round() {
         assert!(fold.contains(line), "{line} in\n{fold}");
     }
     // Set before the loop too, once per place where it may differ.
-    assert_eq!(src.matches("BAS(#BASE, 4)").count(), tool_lines(&src).len(), "{src}");
+    assert_eq!(
+        src.matches("BAS(#BASE, 4)").count(),
+        tool_lines(&src).len(),
+        "{src}"
+    );
 }
 
 #[test]
@@ -176,5 +202,8 @@ fn a_rapid_robot_moves_with_its_tool_frame_where_a_numbered_tool_stands_beside_i
         module.contains("PERS tooldata skp_tool1 := [TRUE, [[0, 0, 120], [1, 0, 0, 0]], [0.001, [0, 0, 0.001], [1, 0, 0, 0], 0, 0, 0]];"),
         "{module}"
     );
-    assert!(module.contains("    skp_tool := skp_tool1;\r\n"), "{module}");
+    assert!(
+        module.contains("    skp_tool := skp_tool1;\r\n"),
+        "{module}"
+    );
 }

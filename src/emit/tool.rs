@@ -334,9 +334,22 @@ impl Planner<'_, '_> {
         if let Some(res) = self.resolved.get(&r) {
             return res.clone();
         }
-        let res = resolve(self.input.blackboard, r, self.language, &mut |k, what, span| {
-            refuse(self.language, &mut self.refused, self.diags, self.input.blackboard, k, what, span)
-        });
+        let res = resolve(
+            self.input.blackboard,
+            r,
+            self.language,
+            &mut |k, what, span| {
+                refuse(
+                    self.language,
+                    &mut self.refused,
+                    self.diags,
+                    self.input.blackboard,
+                    k,
+                    what,
+                    span,
+                )
+            },
+        );
         self.resolved.insert(r, res.clone());
         res
     }
@@ -409,17 +422,28 @@ fn data(
                     c[2]
                 )
             };
-            let wobj = |f: Frame| format!("[FALSE, TRUE, \"\", {}, [[0, 0, 0], [1, 0, 0, 0]]]", rapid_pose(f));
+            let wobj = |f: Frame| {
+                format!(
+                    "[FALSE, TRUE, \"\", {}, [[0, 0, 0], [1, 0, 0, 0]]]",
+                    rapid_pose(f)
+                )
+            };
             if !rapid_tools.is_empty() {
                 out.push("! the tool the steps move with (skp_tool in the IRL's moves)".to_owned());
                 out.push(format!("PERS tooldata skp_tool := {};", tool(ZERO, None)));
                 for (n, (f, l, what)) in rapid_tools.iter().enumerate() {
                     out.push(format!("! {what}"));
-                    out.push(format!("PERS tooldata skp_tool{} := {};", n + 1, tool(*f, *l)));
+                    out.push(format!(
+                        "PERS tooldata skp_tool{} := {};",
+                        n + 1,
+                        tool(*f, *l)
+                    ));
                 }
             }
             if !rapid_wobjs.is_empty() {
-                out.push("! the base the steps move in (\\WObj:=skp_wobj in the IRL's moves)".to_owned());
+                out.push(
+                    "! the base the steps move in (\\WObj:=skp_wobj in the IRL's moves)".to_owned(),
+                );
                 out.push(format!("PERS wobjdata skp_wobj := {};", wobj(ZERO)));
                 for (n, (f, what)) in rapid_wobjs.iter().enumerate() {
                     out.push(format!("! {what}"));
@@ -429,7 +453,10 @@ fn data(
         }
         Language::UrScript => {
             if tools.at.values().any(|s| s.contains("skp_base = ")) {
-                out.push("# the base the steps move in (pose_trans(skp_base, p) in the IRL's moves)".to_owned());
+                out.push(
+                    "# the base the steps move in (pose_trans(skp_base, p) in the IRL's moves)"
+                        .to_owned(),
+                );
                 out.push(format!("skp_base = {}", ur_pose(ZERO)));
             }
         }
@@ -587,7 +614,14 @@ fn moves(language: Language, code: &str) -> bool {
             Language::UrScript => {
                 matches!(
                     word.as_str(),
-                    "movej" | "movel" | "movep" | "movec" | "servoj" | "servoc" | "speedj" | "speedl"
+                    "movej"
+                        | "movel"
+                        | "movep"
+                        | "movec"
+                        | "servoj"
+                        | "servoc"
+                        | "speedj"
+                        | "speedl"
                 ) && t[word.len()..].trim_start().starts_with('(')
             }
         }
@@ -619,8 +653,7 @@ fn warn_missing(
             .entry(r)
             .or_insert_with(|| resolve(bb, r, language, &mut |_, _, _| {}));
         // KRL's numbered tool brings its load (LOAD_DATA[n]).
-        let load_known = res.load.is_some()
-            || matches!(res.tool, Some((ToolSel::Number(_), _)));
+        let load_known = res.load.is_some() || matches!(res.tool, Some((ToolSel::Number(_), _)));
         let missing: Vec<&str> = [
             (res.tool.is_none(), "tool (`Tool` or `ToolNumber`)"),
             (res.base.is_none(), "base (`Base` or `BaseNumber`)"),
@@ -707,7 +740,10 @@ mod tests {
         assert!(moves(Language::Rapid, "MoveL p, v200, fine, tool0;"));
         assert!(moves(Language::Rapid, "MoveAbsJ j, v500, fine, tool0;"));
         assert!(!moves(Language::Rapid, "SetDO do1, 1;"));
-        assert!(moves(Language::UrScript, "movel(p[0, 0, 0, 0, 0, 0], a=1.2)"));
+        assert!(moves(
+            Language::UrScript,
+            "movel(p[0, 0, 0, 0, 0, 0], a=1.2)"
+        ));
         assert!(!moves(Language::UrScript, "movel_done = True"));
     }
 
@@ -721,7 +757,10 @@ mod tests {
             krl_frame_or_number("TOOL", ToolSel::Frame(f)),
             "$TOOL = {X 10, Y 0, Z 120, A 90, B 0, C 180}"
         );
-        assert_eq!(krl_frame_or_number("BASE", ToolSel::Number(3)), "BAS(#BASE, 3)");
+        assert_eq!(
+            krl_frame_or_number("BASE", ToolSel::Number(3)),
+            "BAS(#BASE, 3)"
+        );
         assert_eq!(rapid_pose(f), "[[10, 0, 120], [0, 0.707107, 0.707107, 0]]");
         assert_eq!(ur_pose(f), "p[0.01, 0, 0.12, 2.221441, 2.221441, 0]");
     }

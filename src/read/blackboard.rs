@@ -731,7 +731,7 @@ impl Reader<'_> {
         let handshake_timeout_attr = caex_attr(r, "HandshakeTimeout")
             .and_then(|a| caex_value(self.file, a))
             .filter(|(v, _)| !v.trim().is_empty());
-        let tooling = super::tooling::read(self.file, r, &caex_element(r), &mut self.diags);
+        let tooling = super::tooling::read(self.file, r, &caex_element(r), self.diags);
         const GROUPS: [&str; 5] = [
             "Skills",
             "FunctionDescription",

@@ -125,7 +125,10 @@ impl Reader<'_> {
             } else {
                 "a point: the attributes `x`, `y`, `z` (m) inside it"
             };
-            let hint = match (names::eq(&name, "Tool") || names::eq(&name, "TCP"), names::eq(&name, "Base")) {
+            let hint = match (
+                names::eq(&name, "Tool") || names::eq(&name, "TCP"),
+                names::eq(&name, "Base"),
+            ) {
                 (true, _) => "; one of the controller's own tools is `ToolNumber`",
                 (_, true) => "; one of the controller's own bases is `BaseNumber`",
                 _ => "",
@@ -218,7 +221,11 @@ impl Reader<'_> {
         match text.parse::<u8>() {
             Ok(n) if (1..=max).contains(&n) => Some((n, span)),
             _ => {
-                let array = if max == TOOLS { "TOOL_DATA" } else { "BASE_DATA" };
+                let array = if max == TOOLS {
+                    "TOOL_DATA"
+                } else {
+                    "BASE_DATA"
+                };
                 self.error(
                     span,
                     format!(
@@ -257,6 +264,41 @@ impl Reader<'_> {
             }
         }
     }
+}
+
+/// The `-pB` lines of a resource's tool, base and load (`(Tool) X 0, Y 0, Z 135, A 0, B 30, C 0`),
+/// as the model keeps them: mm, degrees, KUKA's A-B-C.
+pub fn listing(t: &Tooling) -> Vec<String> {
+    let n = |x: f64| crate::convert::format_number(x).unwrap_or_default();
+    let frame = |f: &Frame| {
+        let [x, y, z] = f.xyz.map(n);
+        let [a, b, c] = f.abc.map(n);
+        format!("X {x}, Y {y}, Z {z}, A {a}, B {b}, C {c} (mm, degrees)")
+    };
+    let mut out = Vec::new();
+    if let Some((f, _)) = &t.tool {
+        out.push(format!("(Tool) {}", frame(f)));
+    }
+    if let Some((k, _)) = &t.tool_number {
+        out.push(format!("(ToolNumber) {k}"));
+    }
+    if let Some((f, _)) = &t.base {
+        out.push(format!("(Base) {}", frame(f)));
+    }
+    if let Some((k, _)) = &t.base_number {
+        out.push(format!("(BaseNumber) {k}"));
+    }
+    if let Some((m, _)) = &t.load {
+        out.push(format!("(Load) {} kg", n(*m)));
+    }
+    if let Some((m, _)) = &t.mass {
+        out.push(format!("(Mass) {} kg", n(*m)));
+    }
+    if let Some((c, _)) = &t.center {
+        let [x, y, z] = c.map(n);
+        out.push(format!("(CenterOfMass) X {x}, Y {y}, Z {z} (mm)"));
+    }
+    out
 }
 
 fn list(names: &[&str]) -> String {
