@@ -516,7 +516,7 @@ fn resolve(
             _ => None,
         }
     };
-    let tool = pick(bb, r, "tool", &mut tool_of);
+    let tool = pick(bb, r, &mut tool_of);
     let mut base_of = |k: usize| -> Option<ToolSel> {
         let t = &bb.resources[k].tooling;
         match (language, t.base_number.clone(), t.base.clone()) {
@@ -529,7 +529,7 @@ fn resolve(
             _ => None,
         }
     };
-    let base = pick(bb, r, "base", &mut base_of);
+    let base = pick(bb, r, &mut base_of);
     let mut load_of = |k: usize| -> Option<crate::model::Load> {
         let t = &bb.resources[k].tooling;
         let mass = t
@@ -542,7 +542,7 @@ fn resolve(
             center: t.center.as_ref().map_or([0.0; 3], |(c, _)| *c),
         })
     };
-    let load = pick(bb, r, "load", &mut load_of);
+    let load = pick(bb, r, &mut load_of);
     let mut several = Vec::new();
     for (what, p) in [
         ("tool", tool.as_ref().err()),
@@ -566,7 +566,6 @@ fn resolve(
 fn pick<T: Copy>(
     bb: &Blackboard,
     r: usize,
-    _what: &str,
     own: &mut dyn FnMut(usize) -> Option<T>,
 ) -> Result<Option<(T, usize)>, Vec<usize>> {
     if let Some(t) = own(r) {
