@@ -663,6 +663,10 @@ codes! {
     /// A controller's `Points` attribute that is neither `named` nor `inline`
     /// (docs/LANGUAGES.md, "Points").
     BadPoints = "E216",
+    /// A resource's tool, base or load attribute (`Tool`, `Base`, `ToolNumber`, `BaseNumber`,
+    /// `Load`, `Mass`, `CenterOfMass`) that cannot be used, or one its program's language has
+    /// no form for (docs/INPUTS.md, "Tool, base and load").
+    BadToolData = "E217",
 
     /// No `pou` with an `SFC` body (or none of the name asked for).
     NoSfcBody = "E301",
@@ -777,6 +781,9 @@ codes! {
     /// A KRL program's points written without KUKA's inline form, because the program sets
     /// motion parameters itself (docs/LANGUAGES.md, "Points").
     PointsNotInline = "W210",
+    /// A resource whose steps move without a tool, base or load from the blackboard: its
+    /// program keeps the controller's (docs/INPUTS.md, "Tool, base and load"); once per resource.
+    NoToolData = "W211",
     /// The start step is not marked `initialStep="true"`.
     StartNotInitial = "W301",
     /// A step's resource was inferred from its skill.

@@ -197,10 +197,62 @@ pub struct Resource {
     /// The `Points` attribute's value and span: how the program writes motions to literal
     /// positions (`named`, the default: teachable points; `inline`: as the IRL code wrote them).
     pub points_attr: Option<(String, Span)>,
+    /// Its tool, base and load from the blackboard (docs/INPUTS.md, "Tool, base and load").
+    pub tooling: Tooling,
     /// Child InternalElements named near a group skillpost reads but not as it (`Skils` for
     /// `Skills`): their name, place and the group's name. Not read; an error about what the
     /// group would hold names them.
     pub misnamed: Vec<(String, Span, &'static str)>,
+}
+
+/// A resource's tool, base and load as its attributes give them (docs/INPUTS.md, "Tool, base
+/// and load"), each with the span of its attribute; read by `read::tooling`.
+#[derive(Debug, Clone, Default)]
+pub struct Tooling {
+    /// `Tool` (`TCP`): the tool centre point relative to the flange.
+    pub tool: Option<(Frame, Span)>,
+    /// `ToolNumber`: one of the controller's own tools (KRL's `TOOL_DATA[n]`), 1 to 16.
+    pub tool_number: Option<(u8, Span)>,
+    /// `Base`: the base (work object) relative to the robot's world.
+    pub base: Option<(Frame, Span)>,
+    /// `BaseNumber`: one of the controller's own bases (KRL's `BASE_DATA[n]`), 1 to 32.
+    pub base_number: Option<(u8, Span)>,
+    /// `Load`: what the resource's tool weighs on the flange, in kg (a robot's `Payload` is its
+    /// rated payload, not read).
+    pub load: Option<(f64, Span)>,
+    /// `Mass`: what the resource weighs, in kg; a device's is its load when it has no `Load`
+    /// (a robot's is its own weight, not a load).
+    pub mass: Option<(f64, Span)>,
+    /// `CenterOfMass`: where the load's centre of mass is relative to the flange, in mm.
+    pub center: Option<([f64; 3], Span)>,
+}
+
+impl Tooling {
+    /// Whether it gives anything at all.
+    pub fn is_empty(&self) -> bool {
+        self.tool.is_none()
+            && self.tool_number.is_none()
+            && self.base.is_none()
+            && self.base_number.is_none()
+            && self.load.is_none()
+            && self.mass.is_none()
+            && self.center.is_none()
+    }
+}
+
+/// A frame in the plan's terms: `x, y, z` in mm, `a, b, c` in degrees (KUKA's A about Z, then B
+/// about the new Y, then C about the new X).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Frame {
+    pub xyz: [f64; 3],
+    pub abc: [f64; 3],
+}
+
+/// A load: its mass in kg and its centre of mass relative to the flange in mm.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Load {
+    pub mass: f64,
+    pub center: [f64; 3],
 }
 
 /// Key → index of the first skill, function and signal of that key.

@@ -61,6 +61,9 @@ pub fn blackboard(
         if let Some(line) = controller_text(bb, ri) {
             let _ = writeln!(o, "        (Controller) {line}");
         }
+        for line in crate::read::tooling::listing(&r.tooling) {
+            let _ = writeln!(o, "        {line}");
+        }
         let mut skills: Vec<_> = r.skills.iter().collect();
         skills.sort_by(|a, b| a.name.key.cmp(&b.name.key));
         for s in skills {

@@ -157,6 +157,7 @@ cases! {
     cell_robot_gripper => "cell-robot-gripper",
     cell_sequences_mixed => "cell-sequences-mixed",
     cell_tell_at_once => "cell-tell-at-once",
+    cell_tool_base_load => "cell-tool-base-load",
     cell_two_robots_weld => "cell-two-robots-weld",
     cell_two_robots_wired => "cell-two-robots-wired",
     cell_two_sequences => "cell-two-sequences",

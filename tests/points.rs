@@ -90,6 +90,52 @@ fn every_motion_of_a_krl_program_goes_to_a_named_point_in_an_inline_form() {
     assert_eq!(fs::read_to_string(p.join("Cyclic.src")).unwrap(), src);
 }
 
+/// Adds attributes (XML) to the resource `name` of the blackboard.
+fn add_attributes(blackboard: &Path, name: &str, xml: &str) {
+    let text = fs::read_to_string(blackboard).unwrap();
+    let at = text.find(&format!("Name=\"{name}\"")).unwrap();
+    let end = at + text[at..].find('>').unwrap() + 1;
+    fs::write(blackboard, format!("{}{xml}{}", &text[..end], &text[end..])).unwrap();
+}
+
+/// A numbered tool and base (KUKA's `TOOL_DATA[3]`, `BASE_DATA[2]`) are the inline forms' own:
+/// `Tool[3] Base[2]` and `FDAT` `TOOL_NO 3, BASE_NO 2`, so a form's `BAS` sets what the program
+/// set. A tool given as a frame (`$TOOL = {…}`), which a form's `FDAT` cannot say, keeps the
+/// motions out of inline forms (`W210` naming the statement).
+#[test]
+fn inline_forms_carry_the_blackboards_numbered_tool_and_base_and_no_frame() {
+    let w = Workspace::new();
+    let p = w.ws().join("Cyclic");
+    copy_fixture_layers(&p, &["base/flow", "ok/flow-cyclic"]);
+    let bb = p.join("Blackboard.aml");
+    let original = fs::read_to_string(&bb).unwrap();
+    add_attributes(
+        &bb,
+        "KUKA KR15-2",
+        "<Attribute Name=\"ToolNumber\"><Value>3</Value></Attribute><Attribute Name=\"BaseNumber\"><Value>2</Value></Attribute>",
+    );
+    let err = ok(&compile(&p, "Blackboard.aml", "Cyclic"));
+    assert!(!err.contains("W210"), "{err}");
+    let src = fs::read_to_string(p.join("Cyclic.src")).unwrap();
+    assert!(src.contains("BAS(#TOOL, 3)") && src.contains("BAS(#BASE, 2)"), "{src}");
+    assert_eq!(src.matches("%CMOVE").count(), 3, "{src}");
+    assert_eq!(src.matches("Tool[3] Base[2];%{PE}").count(), 3, "{src}");
+    let decls = dat(&fs::read_to_string(p.join("Cyclic.dat")).unwrap());
+    assert!(decls["FCalibrate"].1.starts_with("{TOOL_NO 3,BASE_NO 2,"), "{decls:?}");
+
+    fs::write(&bb, &original).unwrap();
+    add_attributes(
+        &bb,
+        "KUKA KR15-2",
+        "<Attribute Name=\"Tool\"><Attribute Name=\"x\"><Value>0</Value></Attribute><Attribute Name=\"y\"><Value>0</Value></Attribute><Attribute Name=\"z\"><Value>0.12</Value></Attribute><Attribute Name=\"rx\"><Value>0</Value></Attribute><Attribute Name=\"ry\"><Value>0</Value></Attribute><Attribute Name=\"rz\"><Value>0</Value></Attribute></Attribute>",
+    );
+    let err = ok(&compile(&p, "Blackboard.aml", "Cyclic"));
+    assert!(err.contains("warning[W210]") && err.contains("`$TOOL = {"), "{err}");
+    let src = fs::read_to_string(p.join("Cyclic.src")).unwrap();
+    assert!(!src.contains("%CMOVE") && src.contains("  LIN XCalibrate\n"), "{src}");
+    assert!(src.find("$TOOL = {").unwrap() < src.find("LIN XCalibrate").unwrap());
+}
+
 #[test]
 fn a_program_that_sets_its_own_velocity_keeps_it_and_is_told_why_there_is_no_inline_form() {
     let w = Workspace::new();

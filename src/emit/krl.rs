@@ -111,10 +111,12 @@ impl Profile for Krl {
         if !numbers_from_1(input, diags) {
             return None;
         }
-        let points = super::points::for_program(input, diags)?;
+        let tools = super::tool::Tools::new(input, diags);
+        let points = super::points::for_program(input, &tools, diags)?;
         let mut writer = Writer {
             points,
             input,
+            tools,
             out: Lines::new(input, flow::steps_estimate(input)),
             number: 0,
             uses_branch_var: false,
@@ -143,7 +145,7 @@ impl Profile for Krl {
             steps: writer.out.out,
             declarations,
             routines,
-            data: Vec::new(),
+            data: writer.tools.data,
         })
     }
 }
@@ -156,6 +158,8 @@ struct Writer<'a> {
     input: &'a EmitInput<'a>,
     /// The program's named points.
     points: super::points::Points,
+    /// The tool, base and load statements of the steps.
+    tools: super::tool::Tools,
     out: Lines<'a>,
     number: usize,
     /// Whether a selection needed [`BRANCH_VAR`].
@@ -225,6 +229,9 @@ impl Writer<'_> {
                 self.number += 1;
                 self.out
                     .step_title(level, &[";FOLD "], input, *i, bs, self.number);
+                if let Some(t) = self.tools.at(*i) {
+                    self.out.code(level, input.step_indent, t);
+                }
                 let code = self.points.step_code(flow::step_name(input, *i), &bs.code);
                 self.out.code(level, input.step_indent, &code);
                 self.line(level, ";ENDFOLD");

@@ -19,6 +19,7 @@ pub mod krl;
 pub mod points;
 pub mod rapid;
 pub mod structured;
+pub mod tool;
 pub mod urscript;
 
 use crate::bind::Bound;
@@ -106,8 +107,9 @@ pub struct Generated {
     /// `{{definitions}}`, after the IRL definitions: the program's own routines (a cell's
     /// handshakes), one line each.
     pub routines: Vec<String>,
-    /// `{{definitions}}`, before the IRL definitions: the program's data (RAPID's and
-    /// URScript's named points), one line each.
+    /// `{{definitions}}`, before the IRL definitions: the program's data (RAPID's `tooldata`
+    /// and `wobjdata` of the blackboard's tools and bases, [`tool`]; RAPID's and URScript's
+    /// named points, [`points`]), one line each.
     pub data: Vec<String>,
 }
 
@@ -380,10 +382,13 @@ pub fn emit_files(
         return None;
     }
     if !generated.data.is_empty() && !has_block("definitions") {
-        // The program would move to points nothing declares.
+        // The program would use data nothing declares.
         diags.push(Diagnostic::error(
             Code::BadTemplate,
-            "output template: the program's named points are declared where the IRL definitions go, but the template has no `{{definitions}}` line to write them (or give the controller `Points` = `inline`)".to_owned(),
+            format!(
+                "output template: the program needs its data (the blackboard's tools and bases, its named points: {}), but the template has no `{{{{definitions}}}}` line to write them",
+                generated.data.iter().filter(|l| !l.starts_with(['!', '#'])).take(3).cloned().collect::<Vec<_>>().join("; ")
+            ),
         ));
         return None;
     }
@@ -416,12 +421,14 @@ pub fn emit_files(
                             .profile
                             .definition_rank(lines.first().map_or("", String::as_str))
                     });
-                    // The program's data, each definition, then the program's own routines,
-                    // after an empty line.
+                    // Each definition, then the program's own routines, after an empty line.
                     let blocks = Some(&generated.data)
                         .filter(|d| !d.is_empty())
                         .into_iter()
-                        .chain(defs.iter().map(|&(irl, d)| &input.irls[irl].definitions[d].lines))
+                        .chain(
+                            defs.iter()
+                                .map(|&(irl, d)| &input.irls[irl].definitions[d].lines),
+                        )
                         .chain(Some(&generated.routines).filter(|r| !r.is_empty()));
                     for lines in blocks {
                         text.push_str(nl);

@@ -335,6 +335,7 @@ impl Points {
 /// sets motion parameters), and the names its code already uses.
 pub fn for_program(
     input: &super::EmitInput,
+    tools: &super::tool::Tools,
     diags: &mut crate::diag::Diagnostics,
 ) -> Option<Points> {
     use crate::diag::{Code, Diagnostic};
@@ -406,6 +407,9 @@ pub fn for_program(
         }
     }
     let mut krl = KrlForm::Inline { tool: 0, base: 0 };
+    if let Ok(Some((tool, base))) = tools.krl_numbers() {
+        krl = KrlForm::Inline { tool, base };
+    }
     if lang == Language::Krl && mode == Mode::Named && !forms {
         let steps = input
             .bound
@@ -423,6 +427,17 @@ pub fn for_program(
                 .find(|l| sets_motion(l))
                 .map(|l| (step, l.trim().to_owned()))
         });
+        // The blackboard's tool, base and load, set by statements before the steps: an inline
+        // form's FDAT must say the same tool and base, and set no other load.
+        let found = found.map(|(step, statement)| (step.map_err(Some), statement));
+        let found = match tools.krl_numbers() {
+            Ok(None) => found,
+            Ok(Some((tool, base))) => {
+                krl = KrlForm::Inline { tool, base };
+                found
+            }
+            Err(statement) => found.or(Some((Err(None), statement))),
+        };
         if let Some((step, statement)) = found {
             krl = KrlForm::Named;
             let has_literal = input
@@ -444,9 +459,13 @@ pub fn for_program(
                             Some(e.span.clone()),
                         )
                     }
-                    Err(def) => (
+                    Err(Some(def)) => (
                         format!("IRL definition `{}`", def.name.text),
                         Some(def.span.clone()),
+                    ),
+                    Err(None) => (
+                        "the tool, base or load of the blackboard".to_owned(),
+                        None,
                     ),
                 };
                 let mut d = Diagnostic::warning(

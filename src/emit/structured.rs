@@ -77,10 +77,12 @@ pub fn generate(
     dialect: &Dialect,
     diags: &mut crate::diag::Diagnostics,
 ) -> Option<Generated> {
-    let points = super::points::for_program(input, diags)?;
+    let tools = super::tool::Tools::new(input, diags);
+    let points = super::points::for_program(input, &tools, diags)?;
     let mut w = Writer {
         points,
         input,
+        tools,
         d: dialect,
         out: Lines::new(input, flow::steps_estimate(input)),
         number: 0,
@@ -116,7 +118,11 @@ pub fn generate(
         steps: w.out.out,
         declarations,
         routines: Vec::new(),
-        data: w.points.declarations,
+        data: {
+            let mut data = w.tools.data;
+            data.append(&mut w.points.declarations);
+            data
+        },
     })
 }
 
@@ -159,6 +165,8 @@ struct Writer<'a> {
     input: &'a EmitInput<'a>,
     /// The program's named points.
     points: super::points::Points,
+    /// The tool, base and load statements of the steps.
+    tools: super::tool::Tools,
     d: &'a Dialect,
     out: Lines<'a>,
     number: usize,
@@ -275,6 +283,9 @@ impl Writer<'_> {
                     bs,
                     self.number,
                 );
+                if let Some(t) = self.tools.at(*i) {
+                    self.out.code(level, input.step_indent, t);
+                }
                 let code = self.points.step_code(flow::step_name(input, *i), &bs.code);
                 self.out.code(level, input.step_indent, &code);
             }

@@ -734,6 +734,7 @@ impl Reader<'_> {
         let points_attr = caex_attr(r, "Points")
             .and_then(|a| caex_value(self.file, a))
             .filter(|(v, _)| !v.trim().is_empty());
+        let tooling = super::tooling::read(self.file, r, &caex_element(r), self.diags);
         const GROUPS: [&str; 5] = [
             "Skills",
             "FunctionDescription",
@@ -759,6 +760,7 @@ impl Reader<'_> {
             timers_attr,
             handshake_timeout_attr,
             points_attr,
+            tooling,
             element: caex_element(r),
             id: r.attribute("ID").map(str::to_owned),
             skills,
@@ -773,7 +775,7 @@ impl Reader<'_> {
     /// `W208` for each attribute of resource `r` whose name is near, but not, one a resource's
     /// attributes skillpost reads (`Controler`): it would be ignored without a word.
     fn near_attributes(&mut self, r: Node) {
-        const READ: [&str; 9] = [
+        const OWN: [&str; 9] = [
             "Controller",
             "Steuerung",
             "Program",
@@ -784,13 +786,14 @@ impl Reader<'_> {
             "HandshakeTimeout",
             "Points",
         ];
+        let read: Vec<&str> = OWN.into_iter().chain(super::tooling::NAMES).collect();
         for a in children(r, "Attribute") {
             let Some(name) = caex_name(a) else { continue };
-            if READ.iter().any(|k| names::eq(k, name)) {
+            if read.iter().any(|k| names::eq(k, name)) {
                 continue;
             }
             let n = names::key(name).chars().count();
-            let near = READ
+            let near = read
                 .iter()
                 .map(|k| (names::edit_distance(name, k), *k))
                 .filter(|(d, _)| *d <= 2 && 2 * d < n)

@@ -7,6 +7,7 @@ pub mod irl;
 pub mod sfc;
 pub mod site;
 pub mod tape;
+pub mod tooling;
 pub mod xml;
 
 // Paths (`refURI` values, normalisation) are handled in [`crate::paths`].

@@ -117,6 +117,23 @@ fn timers_of(code: &str) -> Result<(), String> {
     Ok(())
 }
 
+/// Checks the tools and bases a code line selects: `BAS(#TOOL, n)` with `n` from 1 to 16 and
+/// `BAS(#BASE, n)` from 1 to 32 (a KSS 8 controller's `TOOL_DATA[16]` and `BASE_DATA[32]`).
+fn tools_of(code: &str) -> Result<(), String> {
+    let upper: String = code.to_ascii_uppercase().split_whitespace().collect();
+    for (what, max) in [("#TOOL,", 16), ("#BASE,", 32)] {
+        for (at, _) in upper.match_indices(&format!("BAS({what}")) {
+            let rest = &upper[at + 4 + what.len()..];
+            let n = rest.split_once(')').map(|(n, _)| n);
+            match n.and_then(|n| n.parse::<u32>().ok()) {
+                Some(n) if (1..=max).contains(&n) => {}
+                _ => return Err(format!("`BAS({what} n)` selects n from 1 to {max}")),
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Checks the structure of a generated `.src`/`.dat` pair for `program`: ASCII; CRLF (or LF)
 /// line endings on every line; header lines (`&...`) only before the first `DEF`; `DEF name( )`
 /// / `END` balanced and not nested, every statement inside one, the first `DEF` named like the
@@ -227,6 +244,7 @@ pub fn check_krl(src: &str, dat: &str, program: &str, lf: bool) -> Result<(), St
                     return Err(err("statement outside a DEF".into()));
                 }
                 timers_of(&code).map_err(&err)?;
+                tools_of(&code).map_err(&err)?;
                 let close = |blocks: &mut Vec<(&str, usize)>, opener: &str| match blocks.pop() {
                     Some((kw, _)) if kw == opener => Ok(()),
                     Some((kw, at)) => Err(err(format!(
