@@ -1310,7 +1310,7 @@ fn a_robot_and_its_gripper_make_one_program() {
             "{case}: {src}"
         );
         let dat = std::fs::read_to_string(t.path().join("Cell.dat")).unwrap();
-        assert!(dat.contains("DECL E6POS XLIN={X 8,"), "{case}: {dat}");
+        assert!(dat.contains("DECL E6POS XLIN={X 8, "), "{case}: {dat}");
         let o = run(&["--validate", "-pB", "Blackboard.aml"], t.path());
         assert!(
             stdout(&o).contains(&format!("(Controller) runs on KUKA KR15-2 ({how})")),

@@ -81,7 +81,7 @@ fn every_motion_of_a_krl_program_goes_to_a_named_point_in_an_inline_form() {
     }
     assert_eq!(forms, src.matches("%CMOVE").count());
     // The values are the chart's: Calibrate goes to X 10, Y 3.
-    assert_eq!(decls["XCalibrate"].1, "{X 10,Y 3,Z 0,A 0,B 0,C 0}");
+    assert_eq!(decls["XCalibrate"].1, "{X 10, Y 3, Z 0, A 0, B 0, C 0}");
     // No literal position is left in a motion.
     assert!(!src.contains("LIN {"), "{src}");
     // The same inputs give the same names and bytes.
@@ -153,8 +153,8 @@ fn a_program_that_sets_its_own_velocity_keeps_it_and_is_told_why_there_is_no_inl
     assert!(src.contains("  SetVelCP (0.3)\n  PTP XP2P_2\n"), "{src}");
     assert!(!src.contains("%CMOVE") && !src.contains("BAS(#"), "{src}");
     let decls = dat(&fs::read_to_string(p.join("demo.dat")).unwrap());
-    assert_eq!(decls["XP2P"], ("E6POS".into(), "{X 100,Y 200,Z 300,A 0,B 90,C 0}".into()));
-    assert_eq!(decls["XP2P_2"].1, "{X 6,Y 6,Z 6,A 0,B 0,C 0}");
+    assert_eq!(decls["XP2P"], ("E6POS".into(), "{X 100, Y 200, Z 300, A 0, B 90, C 0}".into()));
+    assert_eq!(decls["XP2P_2"].1, "{X 6, Y 6, Z 6, A 0, B 0, C 0}");
     assert_eq!(decls.len(), 3, "{decls:?}");
 }
 

@@ -44,9 +44,14 @@ pub struct Points {
     lang: Language,
     krl: KrlForm,
     mode: Mode,
-    /// Names taken, lower-case (KRL and RAPID ignore case; URScript's names are kept apart from
-    /// its keywords without regard to case too).
-    taken: HashSet<String>,
+    /// The points' names so far, lower-case (KRL and RAPID ignore case; URScript's are kept
+    /// apart without regard to case too).
+    names: HashSet<String>,
+    /// The words of the program's code a point's declared name (`XName`, `pName`) may not be,
+    /// lower-case.
+    words: HashSet<String>,
+    /// A buffer for the declared names `free` looks up.
+    scratch: String,
     /// The longest base name (the language's limit less the prefix).
     max: usize,
     /// Names tried and found taken (for the test that naming is not quadratic).
@@ -82,7 +87,9 @@ impl Points {
             lang,
             krl,
             mode,
-            taken: taken.into_iter().map(|w| w.to_ascii_lowercase()).collect(),
+            names: HashSet::new(),
+            words: taken.into_iter().map(|w| w.to_ascii_lowercase()).collect(),
+            scratch: String::new(),
             max,
             next: std::collections::HashMap::new(),
             tries: 0,
@@ -150,31 +157,40 @@ impl Points {
 
     /// A unique name from `base` and the number of the point in its step.
     fn name(&mut self, base: &str, k: Option<usize>) -> String {
-        let number = k.map(|k| k.to_string()).unwrap_or_default();
         let mut stem: String = base.to_owned();
-        stem.truncate(self.max - number.len());
-        stem.push_str(&number);
-        let mut name = stem.clone();
-        // The next number to try after this stem (many steps of one name: not quadratic).
-        let mut n = self.next.get(&stem.to_ascii_lowercase()).copied().unwrap_or(1);
-        if n > 1 {
-            name.clear();
+        if let Some(k) = k {
+            let number = k.to_string();
+            stem.truncate(self.max - number.len());
+            stem.push_str(&number);
         }
-        while name.is_empty() || !self.free(&name) {
+        let lower = stem.to_ascii_lowercase();
+        // A stem that was taken before goes on at its next number (many steps of one name:
+        // not quadratic); only stems taken twice are recorded.
+        let next = self.next.get(&lower).copied();
+        let mut n = match next {
+            Some(n) => n,
+            None if self.free(&stem, &lower) => {
+                self.names.insert(lower);
+                self.count += 1;
+                return stem;
+            }
+            None => 1,
+        };
+        loop {
             self.tries += 1;
             n += 1;
             let suffix = format!("_{n}");
-            let mut s = stem.clone();
-            s.truncate(self.max - suffix.len());
-            s.push_str(&suffix);
-            name = s;
+            let mut name = stem.clone();
+            name.truncate(self.max - suffix.len());
+            name.push_str(&suffix);
+            let name_lower = name.to_ascii_lowercase();
+            if self.free(&name, &name_lower) {
+                self.names.insert(name_lower);
+                self.next.insert(lower, n);
+                self.count += 1;
+                return name;
+            }
         }
-        for p in self.prefixes() {
-            self.taken.insert(format!("{p}{name}").to_ascii_lowercase());
-        }
-        self.next.insert(stem.to_ascii_lowercase(), n);
-        self.count += 1;
-        name
     }
 
     /// The letters before a point's name in the names the language declares for it.
@@ -186,30 +202,40 @@ impl Points {
         }
     }
 
-    /// Whether `name` may be a point's: none of its declared names is taken or a keyword, and
-    /// it is not KUKA's own (`XHOME`, `XHOME1` … in `$config.dat`) or skillpost's (`skp_…`).
-    fn free(&self, name: &str) -> bool {
-        let upper = name.to_ascii_uppercase();
-        if upper.starts_with("SKP_") {
+    /// Whether `name` may be a point's: not a point's already, none of its declared names a
+    /// word of the program's code or a keyword, and not KUKA's own (`XHOME`, `XHOME1` … in
+    /// `$config.dat`) or skillpost's (`skp_…`).
+    fn free(&mut self, name: &str, lower: &str) -> bool {
+        let b = name.as_bytes();
+        if b.len() >= 4 && b[..4].eq_ignore_ascii_case(b"skp_") {
             return false;
         }
         if self.lang == Language::Krl
-            && (upper == "HOME"
-                || upper
-                    .strip_prefix("HOME")
-                    .is_some_and(|d| d.bytes().all(|b| b.is_ascii_digit())))
+            && b.len() >= 4
+            && b[..4].eq_ignore_ascii_case(b"home")
+            && b[4..].iter().all(u8::is_ascii_digit)
         {
             return false;
         }
-        self.prefixes().iter().all(|p| {
-            let full = format!("{p}{name}").to_ascii_lowercase();
-            !self.taken.contains(&full)
-                && match self.lang {
-                    Language::Krl => !crate::names::is_krl_keyword(&full),
-                    Language::Rapid => !["pers", "proc"].contains(&full.as_str()),
-                    Language::UrScript => true,
-                }
-        })
+        if self.names.contains(lower) {
+            return false;
+        }
+        for p in self.prefixes() {
+            self.scratch.clear();
+            self.scratch.push_str(p);
+            self.scratch.push_str(lower);
+            let full = self.scratch.as_str();
+            let keyword = match self.lang {
+                // (No KRL keyword is longer than 16 characters.)
+                Language::Krl => full.len() <= 16 && crate::names::is_krl_keyword(full),
+                Language::Rapid => full == "pers" || full == "proc",
+                Language::UrScript => false,
+            };
+            if keyword || self.words.contains(full) {
+                return false;
+            }
+        }
+        true
     }
 
     /// Writes the motion of `line` to the named points and declares them.
@@ -489,21 +515,41 @@ pub fn for_program(
 /// approximation, tool, base, load, the interpolation frame, or the motion data (`BAS(…)`,
 /// `PDAT_ACT`, …). Comments are not read.
 fn sets_motion(line: &str) -> bool {
-    let code = line.split(';').next().unwrap_or("").to_ascii_uppercase();
-    if !code.contains(['$', 'B', '_']) {
-        return false;
+    let code = line.split(';').next().unwrap_or("").as_bytes();
+    let has = |needle: &[u8]| {
+        code.windows(needle.len())
+            .position(|w| w.eq_ignore_ascii_case(needle))
+    };
+    if code.contains(&b'$')
+        && [
+            &b"$VEL"[..],
+            b"$ACC",
+            b"$APO",
+            b"$TOOL",
+            b"$BASE",
+            b"$LOAD",
+            b"$IPO_MODE",
+            b"$ORI_TYPE",
+            b"$CIRC_TYPE",
+        ]
+        .iter()
+        .any(|w| has(w).is_some())
+    {
+        return true;
     }
-    [
-        "$VEL", "$ACC", "$APO", "$TOOL", "$BASE", "$LOAD", "$IPO_MODE", "$ORI_TYPE",
-        "$CIRC_TYPE", "PDAT_ACT", "LDAT_ACT", "FDAT_ACT",
-    ]
-    .iter()
-    .any(|w| code.contains(w))
-        || code.match_indices("BAS").any(|(i, _)| {
-            let before = code[..i].chars().next_back();
-            !before.is_some_and(|c| c.is_ascii_alphanumeric() || c == '_' || c == '$')
-                && code[i + 3..].trim_start().starts_with('(')
-        })
+    if code.contains(&b'_')
+        && [&b"PDAT_ACT"[..], b"LDAT_ACT", b"FDAT_ACT"]
+            .iter()
+            .any(|w| has(w).is_some())
+    {
+        return true;
+    }
+    // `BAS(` or `BAS (` as a word of its own.
+    code.windows(3).enumerate().any(|(i, w)| {
+        w.eq_ignore_ascii_case(b"BAS")
+            && (i == 0 || !(code[i - 1].is_ascii_alphanumeric() || b"_$".contains(&code[i - 1])))
+            && code[i + 3..].iter().find(|b| !b.is_ascii_whitespace()) == Some(&b'(')
+    })
 }
 
 /// The approximation words a KRL inline form writes after its point (`C_PTP`, `C_DIS`, …); an
@@ -647,10 +693,17 @@ fn krl_motion(line: &str) -> Option<Motion> {
             return None;
         }
         let end = group_end(line, i)?;
-        let (kind, text) = krl_aggregate(&line[i + 1..end - 1])?;
+        let kind = krl_aggregate(&line[i + 1..end - 1])?;
         if verb != "PTP" && kind == Kind::Axis {
             return None;
         }
+        // The declaration's value: the aggregate as written, without a type before `:` (the
+        // declaration gives the type).
+        let inner = &line[i + 1..end - 1];
+        let text = match inner.split_once(':') {
+            Some((_, rest)) => format!("{{{}}}", rest.trim()),
+            None => line[i..end].to_owned(),
+        };
         targets.push(Target {
             range: i..end,
             kind,
@@ -673,47 +726,48 @@ fn krl_motion(line: &str) -> Option<Motion> {
     })
 }
 
-/// A KRL aggregate of numbers: its kind and the text a `.dat` declares (`{X 1,Y 2,…}`).
-fn krl_aggregate(inner: &str) -> Option<(Kind, String)> {
+/// A KRL aggregate of numbers (its text between the braces): its kind. The `.dat` declares the
+/// aggregate as written (`{X 1, Y 2, …}`).
+fn krl_aggregate(inner: &str) -> Option<Kind> {
     let mut inner = inner.trim();
     let mut ty = None;
     if let Some((t, rest)) = inner.split_once(':') {
-        let t = t.trim().to_ascii_uppercase();
-        ty = Some(match t.as_str() {
-            "POS" | "E6POS" | "FRAME" => Kind::Cartesian,
-            "AXIS" | "E6AXIS" => Kind::Axis,
-            _ => return None,
+        let t = t.trim();
+        let is = |w: &str| t.eq_ignore_ascii_case(w);
+        ty = Some(if is("POS") || is("E6POS") || is("FRAME") {
+            Kind::Cartesian
+        } else if is("AXIS") || is("E6AXIS") {
+            Kind::Axis
+        } else {
+            return None;
         });
         inner = rest.trim();
     }
-    let mut items = Vec::new();
-    let mut cartesian = false;
-    let mut axis = false;
+    // Which keys were seen, one bit each: a key twice is no position.
+    const KEYS: [&str; 20] = [
+        "X", "Y", "Z", "A", "B", "C", "S", "T", "A1", "A2", "A3", "A4", "A5", "A6", "E1", "E2",
+        "E3", "E4", "E5", "E6",
+    ];
+    let mut seen = 0u32;
     for item in inner.split(',') {
-        let mut w = item.split_whitespace();
+        let mut w = item.split_ascii_whitespace();
         let (key, value) = (w.next()?, w.next()?);
         if w.next().is_some() || !is_number(value) {
             return None;
         }
-        let k = key.to_ascii_uppercase();
-        match k.as_str() {
-            "X" | "Y" | "Z" | "A" | "B" | "C" | "S" | "T" => cartesian = true,
-            "A1" | "A2" | "A3" | "A4" | "A5" | "A6" => axis = true,
-            "E1" | "E2" | "E3" | "E4" | "E5" | "E6" => {}
-            _ => return None,
-        }
-        if items.iter().any(|(x, _): &(String, &str)| *x == k) {
+        let k = KEYS.iter().position(|k| k.eq_ignore_ascii_case(key))?;
+        if seen & (1 << k) != 0 {
             return None;
         }
-        items.push((k, value));
+        seen |= 1 << k;
     }
-    let kind = match (cartesian, axis, ty) {
-        (true, false, None | Some(Kind::Cartesian)) => Kind::Cartesian,
-        (false, true, None | Some(Kind::Axis)) => Kind::Axis,
-        _ => return None,
-    };
-    let body: Vec<String> = items.iter().map(|(k, v)| format!("{k} {v}")).collect();
-    Some((kind, format!("{{{}}}", body.join(","))))
+    let cartesian = seen & 0xff != 0;
+    let axis = seen & (0x3f << 8) != 0;
+    match (cartesian, axis, ty) {
+        (true, false, None | Some(Kind::Cartesian)) => Some(Kind::Cartesian),
+        (false, true, None | Some(Kind::Axis)) => Some(Kind::Axis),
+        _ => None,
+    }
 }
 
 /// RAPID's motion instructions whose first arguments are targets.
@@ -865,7 +919,7 @@ mod tests {
         assert_eq!(p.step_code("Pick part", code), "SetVelCP (0.5)\nPTP XPickPart");
         assert_eq!(
             p.declarations,
-            ["DECL E6POS XPickPart={X 100,Y 200,Z 300,A 0,B 90,C 0}"]
+            ["DECL E6POS XPickPart={X 100, Y 200, Z 300, A 0, B 90, C 0}"]
         );
         // The same step name again: a number keeps it unique.
         assert_eq!(
@@ -878,10 +932,19 @@ mod tests {
             "PTP XHome1_2\nPTP XHome2_2",
             "HOME1 and HOME2 are KUKA's own points"
         );
-        assert_eq!(p.declarations[2], "DECL E6AXIS XHome1_2={A1 0,A2 -90,A3 90,A4 0,A5 0,A6 0}");
+        assert_eq!(p.declarations[2], "DECL E6AXIS XHome1_2={A1 0, A2 -90, A3 90, A4 0, A5 0, A6 0}");
         assert_eq!(p.step_code("Home", "PTP {A1 0}"), "PTP XHome_2");
         // `FOR` is a keyword: no point `Or`.
         assert_eq!(p.step_code("or", "PTP {X 1}"), "PTP Xor_2");
+        // Status and Turn, when the skill maps them, are the point's.
+        assert_eq!(
+            p.step_code("Turn", "PTP {X 1, Y 2, Z 3, A 0, B 0, C 0, S 2, T 35}"),
+            "PTP XTurn"
+        );
+        assert_eq!(
+            p.declarations.last().unwrap(),
+            "DECL E6POS XTurn={X 1, Y 2, Z 3, A 0, B 0, C 0, S 2, T 35}"
+        );
         // What is not a literal position stays as written.
         for code in [
             "PTP HOME",
