@@ -71,6 +71,11 @@ struct Args {
     /// Write LF line endings instead of CRLF
     #[arg(long)]
     lf: bool,
+    /// Split a program whose steps take more than N lines into parts the main program calls
+    /// (0: never); `LANG=N` for one language (krl, rapid, urscript); repeatable. Default: KRL
+    /// 5000, RAPID 5000, URScript 0
+    #[arg(long, value_name = "N|LANG=N", action = clap::ArgAction::Append)]
+    max_lines: Vec<String>,
     /// Use this output template instead of the built-in one of the program's language (see
     /// templates/krl.toml, rapid.toml, urscript.toml)
     #[arg(long, value_name = "FILE")]
@@ -285,9 +290,16 @@ fn run(a: Args) -> u8 {
         }
         _ => return usage("expected a blackboard and a program name"),
     };
+    let mut max_lines = crate::emit::split::Limits::default();
+    for m in &a.max_lines {
+        if let Err(why) = max_lines.set(m) {
+            return usage(&format!("--max-lines {m}: {why}"));
+        }
+    }
     let opts = Options {
         program,
         lf: a.lf,
+        max_lines,
         template: a.template.clone(),
         confine_to: None,
         pou: a.pou.clone(),

@@ -6,6 +6,8 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use crate::bind;
+
+mod parts;
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
 use crate::emit::{EmitInput, LanguageProfile as _, OutputFile, OutputTemplate};
 use crate::lang::Language;
@@ -45,6 +47,8 @@ pub struct Options {
     /// A picture of the plan (`--svg FILE`) written besides the outputs: like an output, it may
     /// not be a file the compile reads (`E605`).
     pub picture: Option<PathBuf>,
+    /// The longest program per language before it is split into parts (`--max-lines`).
+    pub max_lines: crate::emit::split::Limits,
 }
 
 /// The write-back to do after a successful compile.
@@ -132,6 +136,9 @@ pub struct Compilation {
     /// The blackboard's folder, held open since before the blackboard was read: [`apply`]
     /// writes through it (`None` where it could not be opened, e.g. a compile from memory).
     pub folder: Option<crate::write::Folder>,
+    /// Per program: the parts it was split into, for [`apply`] to remove those of an earlier,
+    /// longer compile (docs/LANGUAGES.md, "Long programs").
+    pub part_files: Vec<parts::PartFiles>,
 }
 
 /// The plan as an SVG timeline ([`crate::picture`]): one lane per controller of a cell (with
@@ -1012,6 +1019,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                         cell: cell
                             .as_ref()
                             .map(|c| crate::emit::handshake::CellView { cell: c, me: k }),
+                        max_lines: opts.max_lines.of(prog.language),
                     };
                     Some((input, template))
                 })
@@ -1022,8 +1030,11 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 let (Some(files), Some(name)) = (files, &prog.name) else {
                     continue;
                 };
+                out.part_files
+                    .push(parts::PartFiles::of(&cx.base, name, prog.language, &files));
                 for f in files {
-                    let path = cx.base.join(format!("{name}.{}", f.extension));
+                    let stem = f.stem.as_deref().unwrap_or(name);
+                    let path = cx.base.join(format!("{stem}.{}", f.extension));
                     outputs.push((path, f));
                     output_programs.push((
                         name.clone(),
@@ -1776,6 +1787,8 @@ pub struct Applied {
     /// Each output path and whether it was (re)written.
     pub outputs: Vec<(PathBuf, bool)>,
     pub write_back: Option<crate::write::WriteBackOutcome>,
+    /// Parts of a split program an earlier compile wrote and this one does not need, removed.
+    pub removed: Vec<PathBuf>,
 }
 
 /// How often, and how long apart at first (doubling), the write-back is tried again while
@@ -1841,8 +1854,12 @@ pub fn apply(c: &Compilation) -> std::io::Result<Applied> {
         ),
         None => None,
     };
+    // Parts an earlier compile wrote that this one does not: after the new files, so a
+    // failed write leaves the program as it was.
+    let removed = parts::remove_stale(&c.part_files, &route);
     Ok(Applied {
         outputs,
         write_back,
+        removed,
     })
 }
