@@ -404,6 +404,15 @@ fn run(a: Args) -> u8 {
                     ),
                 );
             }
+            for path in &applied.removed {
+                say(
+                    json,
+                    &format!(
+                        "removed {} (a part of the program an earlier compile wrote)",
+                        path.display()
+                    ),
+                );
+            }
             use crate::write::WriteBackOutcome as W;
             // Whenever the blackboard does not get the value, say so on stdout (a JSON object
             // with --format json): (cause, reason).
@@ -656,12 +665,19 @@ fn print_listings(
             }
         }
         if print('O') {
+            // Which part of a split program holds which steps.
+            let parts = crate::print::parts::of(c);
+            let with = |mut o: serde_json::Value| {
+                crate::print::parts::add_json(&mut o, &parts);
+                o
+            };
+            let text = |t: String| t + &crate::print::parts::text(&parts);
             match &cell {
-                Some(v) => emit(&|| crate::print::cell_order(sfc, v), &|| {
-                    json::cell_order(sfc, v)
+                Some(v) => emit(&|| text(crate::print::cell_order(sfc, v)), &|| {
+                    with(json::cell_order(sfc, v))
                 }),
-                None => emit(&|| crate::print::order(sfc, plan), &|| {
-                    json::order(sfc, plan)
+                None => emit(&|| text(crate::print::order(sfc, plan)), &|| {
+                    with(json::order(sfc, plan))
                 }),
             }
         }
