@@ -81,9 +81,13 @@ mod tests {
         .unwrap();
         std::fs::write(&dat, "DEFDAT P_2\n;mine\n").unwrap();
         let id = |p: &Path| p.to_path_buf();
-        // Another program's part, and a longer name, are not this one's.
-        assert!(!holds_marker(&src, "skillpost part 2 of P_"));
-        assert!(!holds_marker(&src, "skillpost part 2 of"));
+        // Part 2 of `P_A`, or part 22, is not part 2 of `P`.
+        std::fs::write(
+            &dat,
+            "DEFDAT P_2\n;skillpost part 2 of P_A\n;skillpost part 22 of P\n",
+        )
+        .unwrap();
+        assert!(!holds_marker(&dat, "skillpost part 2 of P"));
         let removed = remove_marked(&[src.clone(), dat.clone()], "skillpost part 2 of P", &id);
         assert_eq!(removed, Some(vec![src.clone()]));
         assert!(!src.exists() && dat.exists());

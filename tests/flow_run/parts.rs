@@ -304,10 +304,13 @@ fn a_20000_step_chart_split_runs_like_the_unsplit_program(lang: crate::Lang) {
                     },
                 );
             }
+            let t = std::time::Instant::now();
             rapid.check();
+            eprintln!("TIMING rapidchecker {:?}", t.elapsed());
         }
         crate::Lang::UrScript => crate::urscript_check::check_urscript(&main).unwrap(),
     }
+    let t = std::time::Instant::now();
     // Run like the unsplit program: the same actions, all 20,000 steps.
     let a = lang.read(whole.path(), "R").parse("R");
     let b = lang.read(dir, "R").parse("R");
@@ -330,6 +333,7 @@ fn a_20000_step_chart_split_runs_like_the_unsplit_program(lang: crate::Lang) {
         }
     }
     crate::ACTIONS_CAP.with(|c| c.set(crate::MAX_ACTIONS));
+    eprintln!("TIMING runs {:?}", t.elapsed());
 }
 
 #[test]
