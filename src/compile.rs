@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use crate::bind;
 
+mod definitions;
 mod parts;
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
 use crate::emit::{EmitInput, LanguageProfile as _, OutputFile, OutputTemplate};
@@ -566,88 +567,6 @@ impl<'a> Ctx<'a> {
 /// `.`/`..` are resolved) and, where the file system can tell, with symbolic links resolved, so
 /// `./X.src` and a link to `X.src` count. (The blackboard is the write-back's target, which is
 /// not an output; an *output* named like it is an error.)
-/// `E606` for a generated program that calls a routine one of the project's IRL files defines
-/// but does not hold it (the definition belongs to a resource of another controller, or the
-/// call comes from the output template): it would not load.
-fn check_definitions_held(
-    outputs: &[(PathBuf, OutputFile)],
-    sources: &Sources,
-    irls: &[irl::Irl],
-    programs: &[ProgramSpec],
-    bound: &[bind::Bound],
-    diags: &mut Diagnostics,
-) {
-    for (path, f) in outputs {
-        let Some((lang, crate::check::Unit::Program)) = crate::check::language_of(path) else {
-            continue;
-        };
-        let stem = path.file_stem().and_then(|s| s.to_str());
-        let Some(k) = programs.iter().position(|p| p.name.as_deref() == stem) else {
-            continue;
-        };
-        let held: HashSet<String> = bound[k]
-            .definitions
-            .iter()
-            .flat_map(|&(i, d)| bind::definitions::routines(lang, &irls[i].definitions[d]))
-            .map(|r: String| bind::definitions::key(lang, &r))
-            .collect();
-        for (routine, i, d) in bind::definitions::missing(lang, &f.text, irls, &held) {
-            let def = &irls[i].definitions[d];
-            let file = path
-                .file_name()
-                .map_or(String::new(), |n| n.to_string_lossy().into_owned());
-            diags.push(
-                Diagnostic::error(
-                    Code::BadProgram,
-                    format!(
-                        "the generated {file} calls `{routine}` but does not hold it: {} defines it (definition `{}`) for a resource whose steps this program does not run (a resource on another controller, or the call is in the output template); give the resource that calls it its own definition, or put the resource on this controller",
-                        sources.get(irls[i].file).display,
-                        def.name.text
-                    ),
-                )
-                .at(def.span.clone()),
-            );
-        }
-    }
-}
-
-/// `W308` at each definition of the loaded IRL files that no program holds (its routine is
-/// called by no program's code and no call is named like it), once per place.
-fn unused_definitions(diags: &mut Diagnostics, irls: &[irl::Irl], bound: &[bind::Bound]) {
-    let mut seen = std::collections::HashSet::new();
-    for (i, f) in irls.iter().enumerate() {
-        for (d, def) in f.definitions.iter().enumerate() {
-            if bound.iter().any(|b| b.definitions.contains(&(i, d)))
-                || !seen.insert((f.file, def.span.range.start))
-            {
-                continue;
-            }
-            let routines = bind::definitions::routines(f.language, def);
-            let what = match routines.as_slice() {
-                [] => "defines no routine that a program could call".to_owned(),
-                names => format!(
-                    "no program calls {}",
-                    names
-                        .iter()
-                        .map(|n| format!("`{n}`"))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            };
-            diags.push(
-                Diagnostic::warning(
-                    Code::UnusedDefinition,
-                    format!(
-                        "definition `{}` is not written into any program: {what}",
-                        def.name.text
-                    ),
-                )
-                .at(def.span.clone()),
-            );
-        }
-    }
-}
-
 fn check_outputs(cx: &mut Ctx, outputs: &[&Path], blackboard: &Path, template: Option<&Path>) {
     if outputs.is_empty() {
         return;
@@ -963,7 +882,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             }
             bound_programs.push(bound);
         }
-        unused_definitions(&mut cx.diags, &irls, &bound_programs);
+        definitions::unused_definitions(&mut cx.diags, &irls, &bound_programs);
         out.skill_steps = bound_programs
             .iter()
             .map(|b| b.steps.iter().filter(|s| s.is_some()).count())
@@ -1088,7 +1007,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         }
         if !cx.diags.has_errors() {
             check_generated(&outputs, &cx.sources, user_template, &mut cx.diags);
-            check_definitions_held(
+            definitions::check_definitions_held(
                 &outputs,
                 &cx.sources,
                 &irls,
