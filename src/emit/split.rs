@@ -136,9 +136,16 @@ fn declared(line: &str) -> Option<(&str, bool)> {
     (end > 0).then(|| (&name[..end], signal))
 }
 
-/// The identifiers of `text` (KRL and RAPID names are case-insensitive: lower-cased).
-fn words(text: &str, fold: bool) -> HashSet<String> {
+/// Which of `names` (lower-cased when `fold`: KRL and RAPID names are case-insensitive) stand
+/// in `text` as identifiers (outside strings). Only identifiers as long as one of `names` are
+/// looked up, through one reused buffer: a part's text is megabytes of step code.
+fn used_names(text: &str, names: &HashSet<String>, fold: bool) -> HashSet<String> {
+    let mut lengths = 0u128;
+    for n in names {
+        lengths |= 1u128 << n.len().min(127);
+    }
     let mut out = HashSet::new();
+    let mut buf = String::new();
     let b = text.as_bytes();
     let mut i = 0;
     while i < b.len() {
@@ -148,12 +155,17 @@ fn words(text: &str, fold: bool) -> HashSet<String> {
             while i < b.len() && (b[i].is_ascii_alphanumeric() || b[i] == b'_') {
                 i += 1;
             }
-            // Only the writer's names and the program's signals are looked up.
             let w = &text[start..i];
+            if lengths & (1u128 << w.len().min(127)) == 0 {
+                continue;
+            }
+            buf.clear();
+            buf.push_str(w);
             if fold {
-                out.insert(w.to_ascii_lowercase());
-            } else {
-                out.insert(w.to_owned());
+                buf.make_ascii_lowercase();
+            }
+            if names.contains(&buf) && !out.contains(&buf) {
+                out.insert(buf.clone());
             }
         } else if c == b'"' {
             // Strings hold no names.
@@ -249,8 +261,21 @@ pub fn split(
     let ext = input.profile.files()[0];
     let nl = input.newline;
     let base = input.steps_indent;
-    // The names the program's own routines use (KRL: held by every part's file).
-    let routine_words = words(&generated.routines.join("\n"), fold);
+    let key = |name: &str| {
+        if fold {
+            name.to_ascii_lowercase()
+        } else {
+            name.to_owned()
+        }
+    };
+    let declared_names: HashSet<String> = generated
+        .declarations
+        .iter()
+        .filter_map(|d| declared(d))
+        .map(|(n, _)| key(n))
+        .collect();
+    // The declared names the program's own routines use (KRL: held by every part's file).
+    let routine_words = used_names(&generated.routines.join("\n"), &declared_names, fold);
     let mut parts = Vec::new();
     let mut texts = Vec::new();
     let mut calls = String::new();
@@ -268,18 +293,14 @@ pub fn split(
                 ),
             ));
         }
-        let used = words(text, fold);
+        let used = used_names(text, &declared_names, fold);
         let mut params = Vec::new();
         let mut own = Vec::new();
         for d in &generated.declarations {
             let Some((name, signal)) = declared(d) else {
                 continue;
             };
-            let key = if fold {
-                name.to_ascii_lowercase()
-            } else {
-                name.to_owned()
-            };
+            let key = key(name);
             let by_routines = lang == Language::Krl && routine_words.contains(&key);
             if !used.contains(&key) && !by_routines {
                 continue;
@@ -410,7 +431,11 @@ fn urscript_functions(
             firsts.push((name.to_owned(), value.trim_end().to_owned()));
         }
     }
-    let used: HashSet<String> = texts.iter().flat_map(|t| words(&t.steps, false)).collect();
+    let names: HashSet<String> = firsts.iter().map(|(n, _)| n.clone()).collect();
+    let used: HashSet<String> = texts
+        .iter()
+        .flat_map(|t| used_names(&t.steps, &names, false))
+        .collect();
     let mut lines: Vec<String> = firsts
         .iter()
         .filter(|(n, _)| used.contains(n))
@@ -594,6 +619,16 @@ mod tests {
         );
         assert!(block_local("SKP_BRANCH") && block_local("skp_loop12") && block_local("skp_state"));
         assert!(!block_local("skp_loop") && !block_local("skp_tx1"));
+    }
+
+    #[test]
+    fn only_declared_names_outside_strings_are_found() {
+        let names: HashSet<String> = ["skp_tx1", "skp_branch"].map(String::from).into();
+        let text = "SKP_TX1 = NOT skp_tx1\nMsg = \"skp_branch\"\nskp_tx12 = 1\n";
+        let found = used_names(text, &names, true);
+        assert_eq!(found, ["skp_tx1".to_owned()].into());
+        // URScript: case counts.
+        assert!(used_names("SKP_TX1 = 1", &names, false).is_empty());
     }
 
     #[test]
