@@ -70,7 +70,6 @@ mod chart;
 #[path = "flow_run/cosim.rs"]
 mod cosim;
 #[path = "../benches/common/generator.rs"]
-#[allow(dead_code)]
 mod generator;
 #[path = "flow_run/krl.rs"]
 mod krl;

@@ -10,7 +10,7 @@
 //! this module only cuts that text and writes what each language needs around a part:
 //!
 //! - the variables a part shares with the main program are the same variables, passed by
-//!   reference (KRL `:OUT`, RAPID `INOUT`) or global (URScript), so a part runs exactly as its
+//!   reference (KRL `:OUT`, RAPID `VAR` parameters) or global (URScript), so a part runs exactly as its
 //!   blocks ran in the unsplit program;
 //! - the writer's own variables that live within one block (the selection's `skp_branch`, a
 //!   machine's `skp_state`, RAPID's loop flags) are declared in the part itself;
@@ -490,20 +490,26 @@ impl Split {
                         src.push_str(&l);
                         src.push_str(nl);
                     }
-                    let params: Vec<(&str, &str)> = t
+                    // (name, type, array): an array is passed whole, `name[]:OUT`.
+                    let params: Vec<(&str, &str, bool)> = t
                         .params
                         .iter()
                         .filter_map(|d| {
-                            let ty = d.split_whitespace().nth(1)?;
-                            Some((declared(d)?.0, ty))
+                            let mut w = d.split_whitespace();
+                            let ty = w.nth(1)?;
+                            let array = w.next()?.split('=').next()?.contains('[');
+                            Some((declared(d)?.0, ty, array))
                         })
                         .collect();
-                    let list: Vec<String> =
-                        params.iter().map(|(n, _)| format!("{n}:OUT")).collect();
+                    let brackets = |array: bool| if array { "[]" } else { "" };
+                    let list: Vec<String> = params
+                        .iter()
+                        .map(|(n, _, a)| format!("{n}{}:OUT", brackets(*a)))
+                        .collect();
                     src.push_str(&format!("DEF {}({})", p.routine, list.join(", ")));
                     src.push_str(nl);
-                    for (name, ty) in &params {
-                        src.push_str(&format!("DECL {ty} {name}"));
+                    for (name, ty, array) in &params {
+                        src.push_str(&format!("DECL {ty} {name}{}", brackets(*array)));
                         src.push_str(nl);
                     }
                     src.push_str(&format!(";{mark}: {main_file} calls it"));
@@ -551,7 +557,7 @@ impl Split {
                         .iter()
                         .filter_map(|d| {
                             let ty = d.split_whitespace().nth(1)?;
-                            Some(format!("INOUT {ty} {}", declared(d)?.0))
+                            Some(format!("VAR {ty} {}", declared(d)?.0))
                         })
                         .collect();
                     for l in [

@@ -1,6 +1,6 @@
 //! Following a split program's calls into its parts (docs/LANGUAGES.md, "Long programs"): the
 //! interpreters run one routine, so a call of a part is replaced by the part's statements. A part
-//! gets the main program's variables by reference (KRL `:OUT`, RAPID `INOUT`, URScript globals)
+//! gets the main program's variables by reference (KRL `:OUT`, RAPID `VAR` parameters, URScript globals)
 //! under their own names, so its statements mean in the main program what they mean in the part;
 //! what a part declares itself joins the main program's declarations (KRL: the `.dat`; RAPID:
 //! the `VAR`s of `PROC main()`).
@@ -30,10 +30,7 @@ fn body<'a>(lines: &[&'a str], start: usize, end: &str) -> (Vec<&'a str>, usize)
 fn callee<'a>(line: &'a str, is_part: &dyn Fn(&str) -> bool) -> Option<&'a str> {
     let t = line.split(';').next().unwrap_or("").trim();
     let t = if t.is_empty() { line.trim() } else { t };
-    let name: &str = t
-        .split(|c: char| c == '(' || c == ' ' || c == ';')
-        .next()
-        .unwrap_or("");
+    let name: &str = t.split(['(', ' ', ';']).next().unwrap_or("");
     (!name.is_empty() && is_part(name)).then_some(name)
 }
 
