@@ -2046,15 +2046,6 @@ const CELL_FIXTURES: &[CellFixture] = &[
         &["KUKA KR15-2", "ABB IRB 1200", "UR10e"],
     ),
     (
-        "split-cell",
-        &[
-            ("Mix_KUKA_KR15_2", Lang::Krl),
-            ("Mix_ABB_IRB_1200", Lang::Rapid),
-            ("Mix_UR10e", Lang::UrScript),
-        ],
-        &["KUKA KR15-2", "ABB IRB 1200", "UR10e"],
-    ),
-    (
         "cell-two-sequences",
         &[
             ("Cell_KUKA_KR15_2", Lang::Krl),
@@ -2094,6 +2085,16 @@ const CELL_FIXTURES: &[CellFixture] = &[
             ("Cell_KUKA_KR16_2", Lang::Krl),
         ],
         &["KUKA KR15-2", "KUKA KR16-2"],
+    ),
+    // A split cell (docs/LANGUAGES.md, "Long programs: parts"): its parts' calls followed.
+    (
+        "split-cell",
+        &[
+            ("Mix_KUKA_KR15_2", Lang::Krl),
+            ("Mix_ABB_IRB_1200", Lang::Rapid),
+            ("Mix_UR10e", Lang::UrScript),
+        ],
+        &["KUKA KR15-2", "ABB IRB 1200", "UR10e"],
     ),
 ];
 
