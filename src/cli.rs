@@ -71,6 +71,11 @@ struct Args {
     /// Write LF line endings instead of CRLF
     #[arg(long)]
     lf: bool,
+    /// Split a program whose steps take more than N lines into parts the main program calls
+    /// (0: never); `LANG=N` for one language (krl, rapid, urscript); repeatable. Default: KRL
+    /// 5000, RAPID 5000, URScript 0
+    #[arg(long, value_name = "N|LANG=N", action = clap::ArgAction::Append)]
+    max_lines: Vec<String>,
     /// Use this output template instead of the built-in one of the program's language (see
     /// templates/krl.toml, rapid.toml, urscript.toml)
     #[arg(long, value_name = "FILE")]
@@ -285,9 +290,16 @@ fn run(a: Args) -> u8 {
         }
         _ => return usage("expected a blackboard and a program name"),
     };
+    let mut max_lines = crate::emit::split::Limits::default();
+    for m in &a.max_lines {
+        if let Err(why) = max_lines.set(m) {
+            return usage(&format!("--max-lines {m}: {why}"));
+        }
+    }
     let opts = Options {
         program,
         lf: a.lf,
+        max_lines,
         template: a.template.clone(),
         confine_to: None,
         pou: a.pou.clone(),
@@ -388,6 +400,15 @@ fn run(a: Args) -> u8 {
                     &format!(
                         "{} {}",
                         if *written { "wrote" } else { "unchanged" },
+                        path.display()
+                    ),
+                );
+            }
+            for path in &applied.removed {
+                say(
+                    json,
+                    &format!(
+                        "removed {} (a part of the program an earlier compile wrote)",
                         path.display()
                     ),
                 );
@@ -644,12 +665,19 @@ fn print_listings(
             }
         }
         if print('O') {
+            // Which part of a split program holds which steps.
+            let parts = crate::print::parts::of(c);
+            let with = |mut o: serde_json::Value| {
+                crate::print::parts::add_json(&mut o, &parts);
+                o
+            };
+            let text = |t: String| t + &crate::print::parts::text(&parts);
             match &cell {
-                Some(v) => emit(&|| crate::print::cell_order(sfc, v), &|| {
-                    json::cell_order(sfc, v)
+                Some(v) => emit(&|| text(crate::print::cell_order(sfc, v)), &|| {
+                    with(json::cell_order(sfc, v))
                 }),
-                None => emit(&|| crate::print::order(sfc, plan), &|| {
-                    json::order(sfc, plan)
+                None => emit(&|| text(crate::print::order(sfc, plan)), &|| {
+                    with(json::order(sfc, plan))
                 }),
             }
         }

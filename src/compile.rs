@@ -6,6 +6,9 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use crate::bind;
+
+mod definitions;
+mod parts;
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
 use crate::emit::{EmitInput, LanguageProfile as _, OutputFile, OutputTemplate};
 use crate::lang::Language;
@@ -45,6 +48,8 @@ pub struct Options {
     /// A picture of the plan (`--svg FILE`) written besides the outputs: like an output, it may
     /// not be a file the compile reads (`E605`).
     pub picture: Option<PathBuf>,
+    /// The longest program per language before it is split into parts (`--max-lines`).
+    pub max_lines: crate::emit::split::Limits,
 }
 
 /// The write-back to do after a successful compile.
@@ -132,6 +137,9 @@ pub struct Compilation {
     /// The blackboard's folder, held open since before the blackboard was read: [`apply`]
     /// writes through it (`None` where it could not be opened, e.g. a compile from memory).
     pub folder: Option<crate::write::Folder>,
+    /// Per program: the parts it was split into, for [`apply`] to remove those of an earlier,
+    /// longer compile (docs/LANGUAGES.md, "Long programs").
+    pub part_files: Vec<parts::PartFiles>,
 }
 
 /// The plan as an SVG timeline ([`crate::picture`]): one lane per controller of a cell (with
@@ -559,88 +567,6 @@ impl<'a> Ctx<'a> {
 /// `.`/`..` are resolved) and, where the file system can tell, with symbolic links resolved, so
 /// `./X.src` and a link to `X.src` count. (The blackboard is the write-back's target, which is
 /// not an output; an *output* named like it is an error.)
-/// `E606` for a generated program that calls a routine one of the project's IRL files defines
-/// but does not hold it (the definition belongs to a resource of another controller, or the
-/// call comes from the output template): it would not load.
-fn check_definitions_held(
-    outputs: &[(PathBuf, OutputFile)],
-    sources: &Sources,
-    irls: &[irl::Irl],
-    programs: &[ProgramSpec],
-    bound: &[bind::Bound],
-    diags: &mut Diagnostics,
-) {
-    for (path, f) in outputs {
-        let Some((lang, crate::check::Unit::Program)) = crate::check::language_of(path) else {
-            continue;
-        };
-        let stem = path.file_stem().and_then(|s| s.to_str());
-        let Some(k) = programs.iter().position(|p| p.name.as_deref() == stem) else {
-            continue;
-        };
-        let held: HashSet<String> = bound[k]
-            .definitions
-            .iter()
-            .flat_map(|&(i, d)| bind::definitions::routines(lang, &irls[i].definitions[d]))
-            .map(|r: String| bind::definitions::key(lang, &r))
-            .collect();
-        for (routine, i, d) in bind::definitions::missing(lang, &f.text, irls, &held) {
-            let def = &irls[i].definitions[d];
-            let file = path
-                .file_name()
-                .map_or(String::new(), |n| n.to_string_lossy().into_owned());
-            diags.push(
-                Diagnostic::error(
-                    Code::BadProgram,
-                    format!(
-                        "the generated {file} calls `{routine}` but does not hold it: {} defines it (definition `{}`) for a resource whose steps this program does not run (a resource on another controller, or the call is in the output template); give the resource that calls it its own definition, or put the resource on this controller",
-                        sources.get(irls[i].file).display,
-                        def.name.text
-                    ),
-                )
-                .at(def.span.clone()),
-            );
-        }
-    }
-}
-
-/// `W308` at each definition of the loaded IRL files that no program holds (its routine is
-/// called by no program's code and no call is named like it), once per place.
-fn unused_definitions(diags: &mut Diagnostics, irls: &[irl::Irl], bound: &[bind::Bound]) {
-    let mut seen = std::collections::HashSet::new();
-    for (i, f) in irls.iter().enumerate() {
-        for (d, def) in f.definitions.iter().enumerate() {
-            if bound.iter().any(|b| b.definitions.contains(&(i, d)))
-                || !seen.insert((f.file, def.span.range.start))
-            {
-                continue;
-            }
-            let routines = bind::definitions::routines(f.language, def);
-            let what = match routines.as_slice() {
-                [] => "defines no routine that a program could call".to_owned(),
-                names => format!(
-                    "no program calls {}",
-                    names
-                        .iter()
-                        .map(|n| format!("`{n}`"))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            };
-            diags.push(
-                Diagnostic::warning(
-                    Code::UnusedDefinition,
-                    format!(
-                        "definition `{}` is not written into any program: {what}",
-                        def.name.text
-                    ),
-                )
-                .at(def.span.clone()),
-            );
-        }
-    }
-}
-
 fn check_outputs(cx: &mut Ctx, outputs: &[&Path], blackboard: &Path, template: Option<&Path>) {
     if outputs.is_empty() {
         return;
@@ -956,7 +882,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             }
             bound_programs.push(bound);
         }
-        unused_definitions(&mut cx.diags, &irls, &bound_programs);
+        definitions::unused_definitions(&mut cx.diags, &irls, &bound_programs);
         out.skill_steps = bound_programs
             .iter()
             .map(|b| b.steps.iter().filter(|s| s.is_some()).count())
@@ -1012,6 +938,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                         cell: cell
                             .as_ref()
                             .map(|c| crate::emit::handshake::CellView { cell: c, me: k }),
+                        max_lines: opts.max_lines.of(prog.language),
                     };
                     Some((input, template))
                 })
@@ -1022,8 +949,11 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 let (Some(files), Some(name)) = (files, &prog.name) else {
                     continue;
                 };
+                out.part_files
+                    .push(parts::PartFiles::of(&cx.base, name, prog.language, &files));
                 for f in files {
-                    let path = cx.base.join(format!("{name}.{}", f.extension));
+                    let stem = f.stem.as_deref().unwrap_or(name);
+                    let path = cx.base.join(format!("{stem}.{}", f.extension));
                     outputs.push((path, f));
                     output_programs.push((
                         name.clone(),
@@ -1077,7 +1007,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         }
         if !cx.diags.has_errors() {
             check_generated(&outputs, &cx.sources, user_template, &mut cx.diags);
-            check_definitions_held(
+            definitions::check_definitions_held(
                 &outputs,
                 &cx.sources,
                 &irls,
@@ -1776,6 +1706,8 @@ pub struct Applied {
     /// Each output path and whether it was (re)written.
     pub outputs: Vec<(PathBuf, bool)>,
     pub write_back: Option<crate::write::WriteBackOutcome>,
+    /// Parts of a split program an earlier compile wrote and this one does not need, removed.
+    pub removed: Vec<PathBuf>,
 }
 
 /// How often, and how long apart at first (doubling), the write-back is tried again while
@@ -1841,8 +1773,12 @@ pub fn apply(c: &Compilation) -> std::io::Result<Applied> {
         ),
         None => None,
     };
+    // Parts an earlier compile wrote that this one does not: after the new files, so a
+    // failed write leaves the program as it was.
+    let removed = parts::remove_stale(&c.part_files, &route);
     Ok(Applied {
         outputs,
         write_back,
+        removed,
     })
 }

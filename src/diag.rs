@@ -804,6 +804,8 @@ codes! {
     Unstructured = "W307",
     /// An IRL definition whose routine no program of the compile calls: it is not written.
     UnusedDefinition = "W308",
+    /// A part of a split program longer than the limit: one block of the top level is.
+    LongPart = "W310",
 }
 
 impl std::fmt::Display for Code {

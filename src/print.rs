@@ -5,6 +5,8 @@
 //! console output (`../shared/spec/reference/original-sample/`), with localIds everywhere; [`json`]
 //! gives the same listings as JSON objects for `--format json` (docs/JSON.md).
 
+pub mod parts;
+
 use std::fmt::Write as _;
 
 use crate::model::{Blackboard, ElementKind, Sfc, Signal, SignalKind, Value};

@@ -69,12 +69,16 @@ mod cell;
 mod chart;
 #[path = "flow_run/cosim.rs"]
 mod cosim;
+#[path = "../benches/common/generator.rs"]
+mod generator;
 #[path = "flow_run/krl.rs"]
 mod krl;
 #[path = "flow_run/machine.rs"]
 mod machine;
 #[path = "flow_run/mutate.rs"]
 mod mutate;
+#[path = "flow_run/parts.rs"]
+mod parts;
 #[path = "flow_run/rapid.rs"]
 mod rapid;
 #[path = "flow_run/urscript.rs"]
@@ -86,6 +90,16 @@ use chart::{Chart, ChartGen, Paths, chart_meaning};
 
 /// How many actions are compared at most (endless programs).
 const MAX_ACTIONS: usize = 40;
+
+thread_local! {
+    /// [`MAX_ACTIONS`], or more for a test that runs a long program through ([`max_actions`]).
+    static ACTIONS_CAP: std::cell::Cell<usize> = const { std::cell::Cell::new(MAX_ACTIONS) };
+}
+
+/// How many actions a run takes at most (this thread's; [`MAX_ACTIONS`] unless a test set more).
+fn max_actions() -> usize {
+    ACTIONS_CAP.with(std::cell::Cell::get)
+}
 
 /// Virtual time, in milliseconds (the same for the chart player and every interpreter): what
 /// an action takes, a wait's tick (a false condition is read again every tick), and how long a
@@ -352,16 +366,23 @@ impl Lang {
         std::fs::write(dir.join("kr15-2.irl"), self.irl(&irl)).unwrap();
     }
 
+    /// The program's files, a split program's calls of its parts followed ([`parts`]).
     fn read(self, dir: &Path, program: &str) -> Output {
         let read = |ext: &str| std::fs::read_to_string(dir.join(format!("{program}.{ext}")));
-        Output {
-            lang: self,
-            main: read(self.ext()).unwrap(),
-            dat: if self == Lang::Krl {
+        let (main, dat) = parts::follow(
+            self,
+            dir,
+            read(self.ext()).unwrap(),
+            if self == Lang::Krl {
                 read("dat").unwrap()
             } else {
                 String::new()
             },
+        );
+        Output {
+            lang: self,
+            main,
+            dat,
         }
     }
 }
@@ -2098,6 +2119,16 @@ const CELL_FIXTURES: &[CellFixture] = &[
             ("Cell_KUKA_KR16_2", Lang::Krl),
         ],
         &["KUKA KR15-2", "KUKA KR16-2"],
+    ),
+    // A split cell (docs/LANGUAGES.md, "Long programs: parts"): its parts' calls followed.
+    (
+        "split-cell",
+        &[
+            ("Mix_KUKA_KR15_2", Lang::Krl),
+            ("Mix_ABB_IRB_1200", Lang::Rapid),
+            ("Mix_UR10e", Lang::UrScript),
+        ],
+        &["KUKA KR15-2", "ABB IRB 1200", "UR10e"],
     ),
 ];
 

@@ -15,6 +15,9 @@
 //! tc6_valid = ["sfc.xml"]      # optional; SFC files that must validate against tc6_xml_v201.xsd
 //! stderr_contains = ["W204"]   # optional; text the compiler's stderr must contain
 //! stdout_contains = ["wrote"]  # optional; text the compiler's stdout must contain
+//! parts = ["P_1", "P_2"]      # optional: the files of a split program's parts (their stems;
+//!                              # the language of the program whose name they extend: KRL
+//!                              # .src + .dat, RAPID .mod), checked and snapshot like a program's
 //! cell = [                     # optional: a cell of several controllers (docs/CELLS.md), one
 //!   { program = "P_A" },       # program each (the written-back one first), each in its
 //!   { program = "P_B", language = "URScript" },  # language; snapshots named by program
@@ -62,6 +65,8 @@ struct CaseToml {
     stderr_contains: Vec<String>,
     #[serde(default)]
     stdout_contains: Vec<String>,
+    #[serde(default)]
+    parts: Vec<String>,
     #[serde(default)]
     cell: Vec<CellProgram>,
 }
@@ -183,6 +188,10 @@ cases! {
     mappings_overloads => "mappings-overloads",
     no_writeback_target => "no-writeback-target",
     reference_sample => "reference-sample",
+    split_cell => "split-cell",
+    split_krl => "split-krl",
+    split_rapid => "split-rapid",
+    split_urscript => "split-urscript",
     step_name_line_break => "step-name-line-break",
     subfolders => "subfolders",
     typed_values => "typed-values",
@@ -243,7 +252,7 @@ fn run_case(name: &str) {
     let original = fs::read(&bb).unwrap();
     let lf = case.args.iter().any(|a| a == "--lf");
     // Each program and its outputs, the main one (the write-back's) first.
-    let programs: Vec<(String, &[&str])> = if case.cell.is_empty() {
+    let mut programs: Vec<(String, &[&str])> = if case.cell.is_empty() {
         vec![(
             case.program.clone(),
             extensions(name, case.language.as_deref()),
@@ -254,6 +263,21 @@ fn run_case(name: &str) {
             .map(|c| (c.program.clone(), extensions(name, c.language.as_deref())))
             .collect()
     };
+    // The parts of split programs: a part's files are those of its program's language, without
+    // the commissioning files.
+    for part in &case.parts {
+        let (_, exts) = programs
+            .iter()
+            .filter(|(p, _)| part.starts_with(&format!("{p}_")))
+            .max_by_key(|(p, _)| p.len())
+            .unwrap_or_else(|| panic!("{name}: part `{part}` extends no program's name"));
+        let exts: &[&str] = match exts[0] {
+            "src" => &["src", "dat"],
+            "mod" => &["mod"],
+            other => panic!("{name}: a .{other} program has no part files"),
+        };
+        programs.push((part.clone(), exts));
+    }
     let outputs: Vec<(String, &str)> = programs
         .iter()
         .flat_map(|(p, exts)| exts.iter().map(move |e| (p.clone(), *e)))
@@ -323,7 +347,18 @@ fn run_case(name: &str) {
             }
             "mod" => {
                 check_rapid(name, &out_paths[at], &texts[at]);
-                check_eio(name, &texts[at], &texts[at + 1], &texts[at + 2]);
+                if exts.len() > 1 {
+                    // A split module's signals are read in its parts.
+                    let mut module = texts[at].clone();
+                    let mut k = 0;
+                    for (p, e) in &programs {
+                        if case.parts.contains(p) && p.starts_with(&format!("{program}_")) {
+                            module.push_str(&texts[k]);
+                        }
+                        k += e.len();
+                    }
+                    check_eio(name, &module, &texts[at + 1], &texts[at + 2]);
+                }
             }
             _ => check_script(name, &texts[at]),
         }
@@ -352,7 +387,7 @@ fn run_case(name: &str) {
     // Snapshots.
     for ((program, ext), text) in outputs.iter().zip(&texts) {
         // A cell's snapshots are named by program too.
-        let snapshot = if case.cell.is_empty() {
+        let snapshot = if case.cell.is_empty() && *program == case.program {
             format!("{name}__{ext}")
         } else {
             format!("{name}__{program}.{ext}")

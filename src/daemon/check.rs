@@ -412,6 +412,7 @@ fn project_row(spec: &ProjectSpec, config: &Config, me: &Process) -> Row {
         drop_warnings: true,
         bind_split_from: None,
         picture: None,
+        max_lines: spec.max_lines,
     };
     let c = compile::compile(&fs, &blackboard, &opts);
     let mut read = 0;

@@ -575,6 +575,7 @@ impl Job {
             drop_warnings: false,
             bind_split_from: None,
             picture: None,
+            max_lines: self.spec.max_lines,
         };
         let mut c = compile::compile(&fs, &blackboard, &opts);
         let mut inputs = fs.seen.into_inner().unwrap_or_else(|p| p.into_inner());

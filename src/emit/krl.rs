@@ -130,7 +130,13 @@ impl Profile for Krl {
             super::handshake::write(&mut writer.out, 0, h.init());
         }
         writer.hand = hand;
-        writer.blocks(input.body, 0);
+        // Each top-level block's start, and the end: where the program may be split.
+        let mut cuts = Vec::with_capacity(input.body.len() + 1);
+        for b in input.body {
+            cuts.push(writer.out.out.len());
+            writer.block(b, 0);
+        }
+        cuts.push(writer.out.out.len());
         if let Some(h) = &writer.hand {
             super::handshake::write(&mut writer.out, 0, h.finish());
         }
@@ -146,6 +152,7 @@ impl Profile for Krl {
             declarations,
             routines,
             data: writer.tools.data,
+            cuts,
         })
     }
 }

@@ -18,6 +18,7 @@ pub mod io;
 pub mod krl;
 pub mod points;
 pub mod rapid;
+pub mod split;
 pub mod structured;
 pub mod tool;
 pub mod urscript;
@@ -94,6 +95,9 @@ pub struct EmitInput<'a> {
     pub profile: &'static dyn Profile,
     /// For a program of a cell of several controllers: the cell, for the handshakes.
     pub cell: Option<handshake::CellView<'a>>,
+    /// The longest program, in lines of its steps, before it is split into parts
+    /// ([`split`]); 0: never split.
+    pub max_lines: usize,
 }
 
 /// What a profile's writer made: the text of the template's blocks, lines separated by the
@@ -111,13 +115,22 @@ pub struct Generated {
     /// and `wobjdata` of the blackboard's tools and bases, [`tool`]; RAPID's and URScript's
     /// named points, [`points`]), one line each.
     pub data: Vec<String>,
+    /// Where each block of the program tree's top level begins in `steps` (byte offsets), and
+    /// where the last one ends: the places a program may be split ([`split`]). Empty: the
+    /// writer recorded none, the program is never split.
+    pub cuts: Vec<usize>,
 }
 
 /// One generated file: its extension (`src`, `dat`, `mod`, `script`) and its bytes.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct OutputFile {
     pub extension: &'static str,
     pub text: String,
+    /// The file's name without the extension when it is not the program's: a part of a split
+    /// program (`P_2` of `P`, [`split`]).
+    pub stem: Option<String>,
+    /// In the program's main file of a split program: its parts, in the order it calls them.
+    pub parts: Vec<split::Part>,
 }
 
 /// An output template: the step indentation and one text per output file.
@@ -358,6 +371,7 @@ pub fn emit_files(
     diags: &mut Diagnostics,
 ) -> Option<Vec<OutputFile>> {
     let mut generated = input.profile.generate(input, diags)?;
+    let split = split::split(input, &mut generated, diags);
     let nl = input.newline;
     let comment = header_comment(&input.sfc.header);
     let inline = |line: &str| {
@@ -413,34 +427,13 @@ pub fn emit_files(
                     steps.insert_str(0, &text);
                     text = steps;
                 }
-                Some("definitions") => {
-                    let mut defs = input.bound.definitions.clone();
-                    defs.sort_by_key(|&(irl, d)| {
-                        let lines = &input.irls[irl].definitions[d].lines;
-                        input
-                            .profile
-                            .definition_rank(lines.first().map_or("", String::as_str))
-                    });
-                    // Each definition, then the program's own routines, after an empty line.
-                    let blocks = Some(&generated.data)
-                        .filter(|d| !d.is_empty())
-                        .into_iter()
-                        .chain(
-                            defs.iter()
-                                .map(|&(irl, d)| &input.irls[irl].definitions[d].lines),
-                        )
-                        .chain(Some(&generated.routines).filter(|r| !r.is_empty()));
-                    for lines in blocks {
-                        text.push_str(nl);
-                        for l in lines {
-                            if !l.is_empty() {
-                                text.push_str(indent);
-                            }
-                            text.push_str(l);
-                            text.push_str(nl);
-                        }
-                    }
-                }
+                Some("definitions") => definitions(
+                    input,
+                    &generated.data,
+                    &generated.routines,
+                    indent,
+                    &mut text,
+                ),
                 Some(_) => {
                     for d in &generated.declarations {
                         text.push_str(indent);
@@ -472,21 +465,82 @@ pub fn emit_files(
         out.push(OutputFile {
             extension: ext,
             text,
+            ..Default::default()
         });
+    }
+    if let Some(split) = split {
+        for f in split.files(input, &comment) {
+            if let Some(pos) = first_non_ascii(&f.text) {
+                diags.push(Diagnostic::error(
+                    Code::NonAscii,
+                    format!(
+                        "generated {}.{} would contain a non-ASCII character at byte {pos}; nothing was written",
+                        f.stem.as_deref().unwrap_or_default(),
+                        f.extension
+                    ),
+                ));
+                return None;
+            }
+            out.push(f);
+        }
+        if let Some(main) = out.first_mut() {
+            main.parts = split.parts;
+        }
     }
     // For commissioning: the signals to wire, and for RAPID their declarations.
     let rows = io::rows(input);
     out.push(OutputFile {
         extension: IO_LIST,
         text: io::csv(&rows, nl),
+        ..Default::default()
     });
     if input.profile.declares_signals() {
         out.push(OutputFile {
             extension: IO_CONFIG,
             text: io::eio(&rows, nl),
+            ..Default::default()
         });
     }
     Some(out)
+}
+
+/// The `{{definitions}}` block: the program's `data` (tools, bases, named points), each IRL
+/// definition the program holds, then its own `routines`, each after an empty line, every
+/// non-empty line after `indent`; appended to `text`.
+pub fn definitions(
+    input: &EmitInput,
+    data: &[String],
+    routines: &[String],
+    indent: &str,
+    text: &mut String,
+) {
+    let nl = input.newline;
+    let mut defs = input.bound.definitions.clone();
+    defs.sort_by_key(|&(irl, d)| {
+        let lines = &input.irls[irl].definitions[d].lines;
+        input
+            .profile
+            .definition_rank(lines.first().map_or("", String::as_str))
+    });
+    // The data, each definition, then the program's own routines, after an empty line.
+    let blocks = Some(data)
+        .filter(|d| !d.is_empty())
+        .into_iter()
+        .chain(
+            defs.iter()
+                .map(|&(irl, d)| input.irls[irl].definitions[d].lines.as_slice()),
+        )
+        .chain(Some(routines).filter(|r| !r.is_empty()));
+    for lines in blocks {
+        text.push_str(nl);
+        for l in lines {
+            if !l.is_empty() {
+                text.push_str(indent);
+            }
+            text.push_str(l);
+            text.push_str(nl);
+        }
+    }
 }
 
 /// The I/O list's "extension": `<program>.io.csv` ([`io::csv`]).

@@ -105,7 +105,14 @@ pub fn generate(
         h.check(diags);
         super::handshake::write(&mut w.out, 0, h.init());
     }
-    w.blocks(input.body, 0);
+    // Each top-level block's start, and the end: where the program may be split. (At the top
+    // level no loop is open and no state, so `sequence` puts no block under another.)
+    let mut cuts = Vec::with_capacity(input.body.len() + 1);
+    for b in input.body {
+        cuts.push(w.out.out.len());
+        w.block(b, 0);
+    }
+    cuts.push(w.out.out.len());
     if let Some(h) = &w.hand {
         super::handshake::write(&mut w.out, 0, h.finish());
     }
@@ -123,6 +130,7 @@ pub fn generate(
             data.append(&mut w.points.declarations);
             data
         },
+        cuts,
     })
 }
 

@@ -21,6 +21,7 @@
 pub mod atomic;
 pub mod folder;
 pub mod splice;
+pub mod stale;
 pub mod writeback;
 
 pub use atomic::{WriteOutcome, is_temporary, write_all_if_changed, write_if_changed};

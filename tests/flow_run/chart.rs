@@ -4,7 +4,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-use crate::{ACTION_MS, MAX_ACTIONS, Outcome, Phase, Rng, STUCK_MS, TICK_MS};
+use crate::{ACTION_MS, Outcome, Phase, Rng, STUCK_MS, TICK_MS};
 
 #[derive(Debug)]
 struct Node {
@@ -621,7 +621,7 @@ impl Player<'_> {
         let mut moves = 0usize;
         loop {
             moves += 1;
-            if self.actions.len() >= MAX_ACTIONS || moves > 100_000 {
+            if self.actions.len() >= crate::max_actions() || moves > 100_000 {
                 return Stop::Running;
             }
             let n = &c.nodes[&id];

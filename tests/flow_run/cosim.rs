@@ -1823,7 +1823,7 @@ pub fn compile_cell(
             } else {
                 String::new()
             };
-            Some((main, dat))
+            Some(crate::parts::follow(*lang, dir, main, dat))
         })
         .collect();
     let names: Vec<String> = (1..=langs.len()).map(|k| format!("R{k}")).collect();
@@ -2319,8 +2319,15 @@ pub fn fixture_cell(
             .find(|n| n.ends_with(".aml"))
             .unwrap(),
     };
+    // The case's own arguments too (`--max-lines` of a split cell).
+    let args: Vec<String> = toml
+        .get("args")
+        .and_then(|a| a.as_array())
+        .map(|a| a.iter().map(|v| v.as_str().unwrap().to_owned()).collect())
+        .unwrap_or_default();
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
         .args(["--lf", &bb_name, &program])
+        .args(&args)
         .current_dir(dir)
         .output()
         .unwrap();
@@ -2344,6 +2351,8 @@ pub fn fixture_cell(
                 Lang::Krl => std::fs::read_to_string(dir.join(format!("{p}.dat"))).unwrap(),
                 _ => String::new(),
             };
+            // A split program's calls of its parts followed.
+            let (main, dat) = crate::parts::follow(*lang, dir, main, dat);
             let ins = match lang {
                 Lang::Krl => parse(&krl_signals(&main, &dat)),
                 _ => parse_structured(&ur_constants(&main), *lang, &wires, k),

@@ -5,7 +5,7 @@
 use std::collections::HashMap;
 
 use crate::machine::{Timer, decimal};
-use crate::{ACTION_MS, Io, MAX_ACTIONS, Outcome, Phase, SIGNALS, STUCK_MS, TICK_MS};
+use crate::{ACTION_MS, Io, Outcome, Phase, SIGNALS, STUCK_MS, TICK_MS};
 
 /// What a KRL timer holds when the program starts: `$TIMER` keeps its value from before (here a
 /// stopped 1000 s), so a timer read without its reset is noticed.
@@ -543,7 +543,7 @@ impl<'a> Machine<'a> {
             assert!(self.steps < 1_000_000, "the interpreter runs away");
             let f = match s {
                 Stmt::Fold(name) => {
-                    if self.actions.len() >= MAX_ACTIONS {
+                    if self.actions.len() >= crate::max_actions() {
                         return Flow::Running;
                     }
                     if let Some((_, ch, _)) = &self.timed

@@ -10,7 +10,7 @@
 
 use std::collections::HashMap;
 
-use crate::{ACTION_MS, MAX_ACTIONS, Outcome, Phase, SIGNALS, STUCK_MS, TICK_MS};
+use crate::{ACTION_MS, Outcome, Phase, SIGNALS, STUCK_MS, TICK_MS};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Op {
@@ -346,7 +346,7 @@ impl<'a> Machine<'a> {
             assert!(self.steps < 1_000_000, "the interpreter runs away");
             let f = match s {
                 Stmt::Step(name) => {
-                    if self.actions.len() >= MAX_ACTIONS {
+                    if self.actions.len() >= crate::max_actions() {
                         return Flow::Running;
                     }
                     if let Some((_, ch)) = self.timed

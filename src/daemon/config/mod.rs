@@ -92,6 +92,8 @@ pub struct Config {
     pub lf: bool,
     /// The SFC POU of every project that does not name its own (`pou`, like `--pou`).
     pub pou: Option<String>,
+    /// The longest program per language before it is split (`max_lines`, like `--max-lines`).
+    pub max_lines: crate::emit::split::Limits,
     /// The deploy hook of every project that does not have its own (`on_success`).
     pub on_success: Option<super::deploy::Hook>,
     /// Every project that does not say otherwise draws its plan (`picture = true`).
@@ -136,6 +138,8 @@ pub struct ProjectSpec {
     pub lf: bool,
     /// The SFC POU to use, like `--pou`.
     pub pou: Option<String>,
+    /// The longest program per language before it is split, like `--max-lines`.
+    pub max_lines: crate::emit::split::Limits,
     /// What runs after a compile that wrote new outputs (docs/DAEMON.md, "Deploying").
     pub on_success: Option<super::deploy::Hook>,
     /// Write `<program>.svg`, the plan's timeline, beside the outputs.
@@ -154,6 +158,8 @@ pub struct RootSpec {
     pub lf: bool,
     /// The SFC POU of its projects (the root's, else the global one).
     pub pou: Option<String>,
+    /// The split limits of its projects (the root's, else the global ones).
+    pub max_lines: crate::emit::split::Limits,
     /// The deploy hook of its projects (the root's, else the global one).
     pub on_success: Option<super::deploy::Hook>,
     /// Its projects draw their plans (the root's setting, else the global one).
@@ -170,6 +176,7 @@ impl RootSpec {
             template: self.template.clone(),
             lf: self.lf,
             pou: self.pou.clone(),
+            max_lines: self.max_lines,
             on_success: self.on_success.clone(),
             picture: self.picture,
         }
@@ -406,6 +413,15 @@ fn parse_with(text: &str, file: &Path, files: bool) -> Result<Config, ConfigErro
     };
     // A project's or root's own settings, else the global ones.
     let pou = raw.pou.clone();
+    let max_lines = match &raw.max_lines {
+        Some(v) => split_limits(v, crate::emit::split::Limits::default())
+            .map_err(|m| at(Some(v.span()), m))?,
+        None => crate::emit::split::Limits::default(),
+    };
+    let own_limits = |v: &Option<Spanned<toml::Value>>| match v {
+        Some(v) => split_limits(v, max_lines).map_err(|m| at(Some(v.span()), m)),
+        None => Ok(max_lines),
+    };
     let settings = |t: &Option<Spanned<String>>,
                     le: &Option<Spanned<String>>,
                     program: &Option<Spanned<String>>|
@@ -531,6 +547,7 @@ fn parse_with(text: &str, file: &Path, files: bool) -> Result<Config, ConfigErro
             template,
             lf,
             pou: p.pou.clone().or_else(|| pou.clone()),
+            max_lines: own_limits(&p.max_lines)?,
             on_success: own_hook(&p.on_success, &p.deploy_timeout_s)?,
             picture: p.picture.unwrap_or(raw.picture),
         });
@@ -551,6 +568,7 @@ fn parse_with(text: &str, file: &Path, files: bool) -> Result<Config, ConfigErro
             template,
             lf,
             pou: r.pou.clone().or_else(|| pou.clone()),
+            max_lines: own_limits(&r.max_lines)?,
             on_success: own_hook(&r.on_success, &r.deploy_timeout_s)?,
             picture: r.picture.unwrap_or(raw.picture),
         });
@@ -567,6 +585,7 @@ fn parse_with(text: &str, file: &Path, files: bool) -> Result<Config, ConfigErro
         template,
         lf,
         pou,
+        max_lines,
         on_success,
         picture: raw.picture,
         projects,
@@ -680,6 +699,7 @@ pub fn merge(
                 template: config.template.clone(),
                 lf: config.lf,
                 pou: config.pou.clone(),
+                max_lines: config.max_lines,
                 on_success: config.on_success.clone(),
                 picture: config.picture,
                 ..ProjectSpec::default()
@@ -768,6 +788,7 @@ pub fn add_blackboard(config: &mut Config, blackboard: &Path) {
         template: config.template.clone(),
         lf: config.lf,
         pou: config.pou.clone(),
+        max_lines: config.max_lines,
         ..ProjectSpec::default()
     });
 }
@@ -879,6 +900,35 @@ fn line_column(text: &str, offset: usize) -> (usize, usize) {
     (line, column)
 }
 
+/// `max_lines`: a number of lines for every language (0 never splits), or a table of them by
+/// language (`{ krl = 3000, rapid = 0 }`), over `base`.
+fn split_limits(
+    value: &Spanned<toml::Value>,
+    base: crate::emit::split::Limits,
+) -> Result<crate::emit::split::Limits, String> {
+    let number = |k: &str, v: &toml::Value| -> Result<String, String> {
+        match v.as_integer() {
+            Some(n) if n >= 0 => Ok(n.to_string()),
+            _ => Err(format!(
+                "`max_lines`{k} is {v}, expected a number of lines (0 never splits)"
+            )),
+        }
+    };
+    let mut limits = base;
+    match value.get_ref() {
+        toml::Value::Table(t) => {
+            for (k, v) in t {
+                let n = number(&format!(".{k}"), v)?;
+                limits
+                    .set(&format!("{k}={n}"))
+                    .map_err(|m| format!("`max_lines.{k}`: {m}"))?;
+            }
+        }
+        v => limits.set(&number("", v)?)?,
+    }
+    Ok(limits)
+}
+
 /// `line_endings`: `"crlf"` (the default) or `"lf"`; true for LF.
 fn line_endings(value: &Spanned<String>) -> Result<bool, String> {
     match value.get_ref().as_str() {
@@ -898,6 +948,7 @@ struct RawConfig {
     template: Option<Spanned<String>>,
     line_endings: Option<Spanned<String>>,
     pou: Option<String>,
+    max_lines: Option<Spanned<toml::Value>>,
     settle_ms: Option<Spanned<i64>>,
     #[serde(default)]
     allow_outside: bool,
@@ -923,6 +974,7 @@ struct RawProject {
     template: Option<Spanned<String>>,
     line_endings: Option<Spanned<String>>,
     pou: Option<String>,
+    max_lines: Option<Spanned<toml::Value>>,
     on_success: Option<Spanned<Vec<String>>>,
     deploy_timeout_s: Option<Spanned<i64>>,
     picture: Option<bool>,
@@ -936,6 +988,7 @@ struct RawRoot {
     template: Option<Spanned<String>>,
     line_endings: Option<Spanned<String>>,
     pou: Option<String>,
+    max_lines: Option<Spanned<toml::Value>>,
     on_success: Option<Spanned<Vec<String>>>,
     deploy_timeout_s: Option<Spanned<i64>>,
     picture: Option<bool>,

@@ -61,6 +61,7 @@ path = "/srv/planning/projects"
             template: None,
             lf: false,
             pou: None,
+            max_lines: Default::default(),
             on_success: None,
             picture: false,
             projects: vec![
@@ -96,6 +97,7 @@ fn the_example_in_config_is_valid_and_sets_every_key() {
         "forget_after_s",
         "template",
         "line_endings",
+        "max_lines",
         // Commented out: a POU name that an example project lacks would fail it.
         "# pou",
         "[[project]]",
@@ -111,6 +113,50 @@ fn the_example_in_config_is_valid_and_sets_every_key() {
             text.contains(&format!("\n{key} = ")),
             "{key} is set in the example"
         );
+    }
+}
+
+#[test]
+fn max_lines_sets_the_split_limits_globally_and_per_project() {
+    use crate::emit::split::Limits;
+    let text = r#"
+max_lines = { krl = 3000, urscript = 800 }
+
+[[project]]
+path = "/srv/a"
+max_lines = { rapid = 0 }
+
+[[project]]
+path = "/srv/b"
+max_lines = 100
+
+[[root]]
+path = "/srv/cells"
+"#;
+    let c = parse(text, &file()).unwrap();
+    let global = Limits {
+        krl: Some(3000),
+        rapid: None,
+        urscript: Some(800),
+    };
+    assert_eq!(c.max_lines, global);
+    // A project's table changes the languages it names.
+    assert_eq!(
+        c.projects[0].max_lines,
+        Limits {
+            rapid: Some(0),
+            ..global
+        }
+    );
+    assert_eq!(c.projects[1].max_lines, Limits::all(100));
+    assert_eq!(c.roots[0].project("/srv/cells/x".into()).max_lines, global);
+    for (bad, says) in [
+        ("max_lines = -1", "expected a number of lines"),
+        ("max_lines = \"many\"", "expected a number of lines"),
+        ("max_lines = { cobol = 3 }", "no language"),
+    ] {
+        let e = err(bad);
+        assert!(e.to_string().contains(says), "{bad}: {e}");
     }
 }
 
@@ -679,6 +725,7 @@ fn merge_precedence() {
         template: None,
         lf: false,
         pou: None,
+        max_lines: Default::default(),
         on_success: None,
         picture: false,
         projects: vec![ProjectSpec {
