@@ -132,11 +132,15 @@ impl Profile for Krl {
         writer.hand = hand;
         // Each top-level block's start, and the end: where the program may be split.
         let mut cuts = Vec::with_capacity(input.body.len() + 1);
+        // And how many points were declared by then: a block's points are its own.
+        let mut point_cuts = Vec::with_capacity(input.body.len() + 1);
         for b in input.body {
             cuts.push(writer.out.out.len());
+            point_cuts.push(writer.points.declarations.len());
             writer.block(b, 0);
         }
         cuts.push(writer.out.out.len());
+        point_cuts.push(writer.points.declarations.len());
         if let Some(h) = &writer.hand {
             super::handshake::write(&mut writer.out, 0, h.finish());
         }
@@ -146,6 +150,8 @@ impl Profile for Krl {
             declarations.extend(h.declarations());
             routines = h.routines();
         }
+        // The points come last: `point_cuts` index the declarations.
+        let before = declarations.len();
         declarations.append(&mut writer.points.declarations);
         Some(Generated {
             steps: writer.out.out,
@@ -153,6 +159,7 @@ impl Profile for Krl {
             routines,
             data: writer.tools.data,
             cuts,
+            point_cuts: point_cuts.into_iter().map(|n| before + n).collect(),
         })
     }
 }

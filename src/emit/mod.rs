@@ -119,6 +119,10 @@ pub struct Generated {
     /// where the last one ends: the places a program may be split ([`split`]). Empty: the
     /// writer recorded none, the program is never split.
     pub cuts: Vec<usize>,
+    /// KRL: beside each of [`Generated::cuts`], where that block's named points (and their
+    /// inline forms' data) begin in `declarations`: a block declares its own points, so a part
+    /// holds a slice of them. Empty: the points are not the declarations'.
+    pub point_cuts: Vec<usize>,
 }
 
 /// One generated file: its extension (`src`, `dat`, `mod`, `script`) and its bytes.

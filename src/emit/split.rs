@@ -276,9 +276,19 @@ pub fn split(
             name.to_owned()
         }
     };
+    // KRL's points are found by their blocks ([`Generated::point_cuts`]), not by name.
+    let points = &generated.point_cuts;
+    let point_range = |r: &Range<usize>| -> Range<usize> {
+        if points.len() == cuts.len() {
+            points[r.start]..points[r.end]
+        } else {
+            0..0
+        }
+    };
     let declared_names: HashSet<String> = generated
         .declarations
         .iter()
+        .filter(|d| !is_point_data(d))
         .filter_map(|d| declared(d))
         .map(|(n, _)| key(n))
         .collect();
@@ -286,6 +296,9 @@ pub fn split(
     let mut by_name: std::collections::HashMap<String, Vec<usize>> =
         std::collections::HashMap::new();
     for (i, d) in generated.declarations.iter().enumerate() {
+        if is_point_data(d) {
+            continue;
+        }
         if let Some((n, _)) = declared(d) {
             by_name.entry(key(n)).or_default().push(i);
         }
@@ -329,14 +342,15 @@ pub fn split(
                 continue;
             };
             let by_routines = lang == Language::Krl && routine_words.contains(&key(name));
-            if signal || by_routines || block_local(name) || is_point_data(d) {
-                // A KRL part's points and their inline forms' data are its `.dat`'s: the
-                // technician touches them up there.
+            if signal || by_routines || block_local(name) {
                 own.push(d.clone());
             } else {
                 params.push(d.clone());
             }
         }
+        // A KRL part's points and their inline forms' data are its `.dat`'s: the technician
+        // touches them up there.
+        own.extend_from_slice(&generated.declarations[point_range(r)]);
         let routine = part_name(program, n, suffix, max_name);
         let stem = part_name(program, n, "", max_name - suffix.len());
         let file = match lang {
@@ -389,15 +403,13 @@ pub fn split(
     main.push_str(&steps[..first]);
     main.push_str(&calls);
     main.push_str(&steps[last..]);
+    // The main `.dat` keeps the points of the blocks it still holds, not the parts'.
+    let moved = point_range(&(ranges[0].start..ranges[ranges.len() - 1].end));
     if lang == Language::UrScript {
         urscript_functions(input, generated, &main, &parts, &texts);
     }
-    if lang == Language::Krl {
-        // The main `.dat` keeps the points its own text moves to, not the parts'.
-        let in_main = used_names(&main, &declared_names, fold);
-        generated
-            .declarations
-            .retain(|d| !is_point_data(d) || declared(d).is_some_and(|(n, _)| in_main.contains(&key(n))));
+    if !moved.is_empty() {
+        generated.declarations.drain(moved);
     }
     generated.steps = main;
     let routines = match lang {

@@ -131,6 +131,7 @@ pub fn generate(
             data
         },
         cuts,
+        point_cuts: Vec::new(),
     })
 }
 
