@@ -161,6 +161,7 @@ fn copy_project(dir: &Path) {
     for f in FILES {
         fs::copy(sample().join(f), dir.join(f)).unwrap();
     }
+    literal_points(dir);
 }
 
 fn src_of(project: &Path) -> PathBuf {
@@ -1957,4 +1958,15 @@ fn a_second_daemon_with_another_runtime_folder_is_refused_too() {
     d.wait_for("the first daemon goes on", WAIT, |e| {
         is_after(e, "compile-succeeded", &a, m)
     });
+}
+
+/// The daemon's tests read the compiled `.src` for the chart's values (`PTP {X 100, …}`): the
+/// robot keeps literal positions (`Points` = `inline`, docs/LANGUAGES.md "Points").
+pub fn literal_points(dir: &Path) {
+    let bb = dir.join("Blackboard.aml");
+    let text = fs::read_to_string(&bb).unwrap();
+    let at = text.find("Name=\"KUKA KR15-2\"").unwrap();
+    let end = at + text[at..].find('>').unwrap() + 1;
+    let attr = "<Attribute Name=\"Points\"><Value>inline</Value></Attribute>";
+    fs::write(&bb, format!("{}{attr}{}", &text[..end], &text[end..])).unwrap();
 }

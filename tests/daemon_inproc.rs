@@ -274,6 +274,7 @@ fn inputs_with_editor_like_names_are_tracked() {
     fs::write(p.join("Blackboard.aml"), bb).unwrap();
     fs::write(p.join("plan.tmp"), sample_text("sfc.xml")).unwrap();
     fs::write(p.join("robot.swp"), sample_text("kr15-2.irl")).unwrap();
+    inproc::literal_points(&p);
     let d = InProc::with_dirs(&[&p]);
     d.startup(&[&p]);
     for x in [501, 502] {

@@ -38,6 +38,7 @@ fn copy_project(dir: &Path) {
     for f in FILES {
         fs::copy(sample().join(f), dir.join(f)).unwrap();
     }
+    literal_points(dir);
 }
 
 /// Sets the first PTP's x in the project's SFC (originally 100).
@@ -999,4 +1000,15 @@ fn a_failed_deploy_is_a_warning_line_in_the_log() {
         1,
         "one warning line for the failed deploy:\n{log}"
     );
+}
+
+/// The daemon's tests read the compiled `.src` for the chart's values (`PTP {X 100, …}`): the
+/// robot keeps literal positions (`Points` = `inline`, docs/LANGUAGES.md "Points").
+pub fn literal_points(dir: &Path) {
+    let bb = dir.join("Blackboard.aml");
+    let text = fs::read_to_string(&bb).unwrap();
+    let at = text.find("Name=\"KUKA KR15-2\"").unwrap();
+    let end = at + text[at..].find('>').unwrap() + 1;
+    let attr = "<Attribute Name=\"Points\"><Value>inline</Value></Attribute>";
+    fs::write(&bb, format!("{}{attr}{}", &text[..end], &text[end..])).unwrap();
 }

@@ -68,6 +68,7 @@ pub fn copy_project(dir: &Path) {
     for f in FILES {
         fs::copy(sample().join(f), dir.join(f)).unwrap();
     }
+    literal_points(dir);
 }
 
 /// Copies the fixtures' folders `layers` (relative to `fixtures/`, e.g. `base/cell`) into `dir`
@@ -474,4 +475,15 @@ impl Drop for InProc {
             }
         }
     }
+}
+
+/// The daemon's tests read the compiled `.src` for the chart's values (`PTP {X 100, …}`): the
+/// robot keeps literal positions (`Points` = `inline`, docs/LANGUAGES.md "Points").
+pub fn literal_points(dir: &Path) {
+    let bb = dir.join("Blackboard.aml");
+    let text = fs::read_to_string(&bb).unwrap();
+    let at = text.find("Name=\"KUKA KR15-2\"").unwrap();
+    let end = at + text[at..].find('>').unwrap() + 1;
+    let attr = "<Attribute Name=\"Points\"><Value>inline</Value></Attribute>";
+    fs::write(&bb, format!("{}{attr}{}", &text[..end], &text[end..])).unwrap();
 }
