@@ -163,6 +163,7 @@ fn an_input_named_like_a_temporary_is_kept_and_compiled() {
         let bb = inproc::sample_text("Blackboard.aml")
             .replace("<Value>sfc.xml</Value>", &format!("<Value>{name}</Value>"));
         fs::write(p.join("Blackboard.aml"), bb).unwrap();
+        inproc::literal_points(&p);
         // A leftover of ours from a crash.
         let stale = p.join(".skillpost-a1B2c3.tmp");
         fs::write(&stale, "half a file").unwrap();
