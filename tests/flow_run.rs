@@ -1153,8 +1153,16 @@ fn a_motion_to_an_undeclared_point_fails() {
             .to_owned();
         let dropped = file.replacen(&format!("{line}\n"), "", 1);
         let output = match lang {
-            Lang::Krl => Output { lang, main: out.main.clone(), dat: dropped },
-            _ => Output { lang, main: dropped, dat: out.dat.clone() },
+            Lang::Krl => Output {
+                lang,
+                main: out.main.clone(),
+                dat: dropped,
+            },
+            _ => Output {
+                lang,
+                main: dropped,
+                dat: out.dat.clone(),
+            },
         };
         let caught = output.syntax(&program).is_err()
             || fails(|| {

@@ -1029,16 +1029,26 @@ mod krl_check {
         assert_eq!(check_krl(&named, &dat(pick), "prog", false), Ok(()));
         let e = check_krl(&named, &dat(""), "prog", false).unwrap_err();
         assert!(e.contains("`XPick` is not declared"), "{e}");
-        let e = check_krl(&named, &dat("DECL FDAT XPick={TOOL_NO 0}\r\n"), "prog", false).unwrap_err();
+        let e = check_krl(
+            &named,
+            &dat("DECL FDAT XPick={TOOL_NO 0}\r\n"),
+            "prog",
+            false,
+        )
+        .unwrap_err();
         assert!(e.contains("is a FDAT"), "{e}");
         let e = check_krl(&named, &dat("DECL E6POS XPick={X V}\r\n"), "prog", false).unwrap_err();
         assert!(e.contains("not a number"), "{e}");
         let e = check_krl(&named, &dat(&format!("{pick}{pick}")), "prog", false).unwrap_err();
         assert!(e.contains("declared twice"), "{e}");
         // KUKA's own home points are declared in $config.dat.
-        assert_eq!(check_krl(&src("  PTP XHOME1\r\n"), &dat(""), "prog", false), Ok(()));
+        assert_eq!(
+            check_krl(&src("  PTP XHOME1\r\n"), &dat(""), "prog", false),
+            Ok(())
+        );
         let form = ";FOLD PTP Pick Vel=100 % PDAT1 Tool[0] Base[0];%{PE}%R 8.3.40,%MKUKATPBASIS,%CMOVE,%VPTP,%P 1:PTP, 2:Pick, 3:, 5:100, 7:PDAT1\r\n$BWDSTART=FALSE\r\nPDAT_ACT=PPDAT1\r\nFDAT_ACT=FPick\r\nBAS(#PTP_PARAMS,100)\r\nPTP XPick\r\n;ENDFOLD\r\n";
-        let data = format!("{pick}DECL PDAT PPDAT1={{VEL 100}}\r\nDECL FDAT FPick={{TOOL_NO 0}}\r\n");
+        let data =
+            format!("{pick}DECL PDAT PPDAT1={{VEL 100}}\r\nDECL FDAT FPick={{TOOL_NO 0}}\r\n");
         assert_eq!(check_krl(&src(form), &dat(&data), "prog", false), Ok(()));
         let e = check_krl(&src(form), &dat(pick), "prog", false).unwrap_err();
         assert!(e.contains("`PPDAT1` is not declared"), "{e}");

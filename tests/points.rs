@@ -52,7 +52,11 @@ fn set_points(blackboard: &Path, name: &str, value: &str) {
     let at = text.find(&format!("Name=\"{name}\"")).unwrap();
     let end = at + text[at..].find('>').unwrap() + 1;
     let attr = format!("<Attribute Name=\"Points\"><Value>{value}</Value></Attribute>");
-    fs::write(blackboard, format!("{}{attr}{}", &text[..end], &text[end..])).unwrap();
+    fs::write(
+        blackboard,
+        format!("{}{attr}{}", &text[..end], &text[end..]),
+    )
+    .unwrap();
 }
 
 #[test]
@@ -70,7 +74,10 @@ fn every_motion_of_a_krl_program_goes_to_a_named_point_in_an_inline_form() {
         let title = format!(";FOLD LIN {step} Vel=2 m/s CPDAT");
         let at = src.find(&title).unwrap_or_else(|| panic!("{step}:\n{src}"));
         let form: Vec<&str> = src[at..].lines().take(7).map(str::trim).collect();
-        assert!(form[0].contains(&format!("%P 1:LIN, 2:{step}, 3:, 5:2, 7:CPDAT")), "{form:?}");
+        assert!(
+            form[0].contains(&format!("%P 1:LIN, 2:{step}, 3:, 5:2, 7:CPDAT")),
+            "{form:?}"
+        );
         let ldat = form[2].strip_prefix("LDAT_ACT=").unwrap();
         assert_eq!(form[3], format!("FDAT_ACT=F{step}"));
         assert_eq!(form[5], format!("LIN X{step}"));
@@ -117,11 +124,17 @@ fn inline_forms_carry_the_blackboards_numbered_tool_and_base_and_no_frame() {
     let err = ok(&compile(&p, "Blackboard.aml", "Cyclic"));
     assert!(!err.contains("W210"), "{err}");
     let src = fs::read_to_string(p.join("Cyclic.src")).unwrap();
-    assert!(src.contains("BAS(#TOOL, 3)") && src.contains("BAS(#BASE, 2)"), "{src}");
+    assert!(
+        src.contains("BAS(#TOOL, 3)") && src.contains("BAS(#BASE, 2)"),
+        "{src}"
+    );
     assert_eq!(src.matches("%CMOVE").count(), 3, "{src}");
     assert_eq!(src.matches("Tool[3] Base[2];%{PE}").count(), 3, "{src}");
     let decls = dat(&fs::read_to_string(p.join("Cyclic.dat")).unwrap());
-    assert!(decls["FCalibrate"].1.starts_with("{TOOL_NO 3,BASE_NO 2,"), "{decls:?}");
+    assert!(
+        decls["FCalibrate"].1.starts_with("{TOOL_NO 3,BASE_NO 2,"),
+        "{decls:?}"
+    );
 
     fs::write(&bb, &original).unwrap();
     add_attributes(
@@ -130,9 +143,15 @@ fn inline_forms_carry_the_blackboards_numbered_tool_and_base_and_no_frame() {
         "<Attribute Name=\"Tool\"><Attribute Name=\"x\"><Value>0</Value></Attribute><Attribute Name=\"y\"><Value>0</Value></Attribute><Attribute Name=\"z\"><Value>0.12</Value></Attribute><Attribute Name=\"rx\"><Value>0</Value></Attribute><Attribute Name=\"ry\"><Value>0</Value></Attribute><Attribute Name=\"rz\"><Value>0</Value></Attribute></Attribute>",
     );
     let err = ok(&compile(&p, "Blackboard.aml", "Cyclic"));
-    assert!(err.contains("warning[W210]") && err.contains("`$TOOL = {"), "{err}");
+    assert!(
+        err.contains("warning[W210]") && err.contains("`$TOOL = {"),
+        "{err}"
+    );
     let src = fs::read_to_string(p.join("Cyclic.src")).unwrap();
-    assert!(!src.contains("%CMOVE") && src.contains("  LIN XCalibrate\n"), "{src}");
+    assert!(
+        !src.contains("%CMOVE") && src.contains("  LIN XCalibrate\n"),
+        "{src}"
+    );
     assert!(src.find("$TOOL = {").unwrap() < src.find("LIN XCalibrate").unwrap());
 }
 
@@ -144,7 +163,10 @@ fn a_program_that_sets_its_own_velocity_keeps_it_and_is_told_why_there_is_no_inl
     let err = ok(&compile(&p, "Blackboard.aml", "demo"));
     // W210 names the statement and where it is.
     assert!(err.contains("warning[W210]"), "{err}");
-    assert!(err.contains("`$VEL.CP = VALUE`") && err.contains("SetVelCP"), "{err}");
+    assert!(
+        err.contains("`$VEL.CP = VALUE`") && err.contains("SetVelCP"),
+        "{err}"
+    );
     assert!(err.contains("kr15-2.irl:"), "{err}");
     let src = fs::read_to_string(p.join("demo.src")).unwrap();
     // The planner's velocity comes before the motion, and nothing after it replaces it.
@@ -153,7 +175,13 @@ fn a_program_that_sets_its_own_velocity_keeps_it_and_is_told_why_there_is_no_inl
     assert!(src.contains("  SetVelCP (0.3)\n  PTP XP2P_2\n"), "{src}");
     assert!(!src.contains("%CMOVE") && !src.contains("BAS(#"), "{src}");
     let decls = dat(&fs::read_to_string(p.join("demo.dat")).unwrap());
-    assert_eq!(decls["XP2P"], ("E6POS".into(), "{X 100, Y 200, Z 300, A 0, B 90, C 0}".into()));
+    assert_eq!(
+        decls["XP2P"],
+        (
+            "E6POS".into(),
+            "{X 100, Y 200, Z 300, A 0, B 90, C 0}".into()
+        )
+    );
     assert_eq!(decls["XP2P_2"].1, "{X 6, Y 6, Z 6, A 0, B 0, C 0}");
     assert_eq!(decls.len(), 3, "{decls:?}");
 }
@@ -169,8 +197,15 @@ fn points_inline_keeps_literal_positions_and_a_bad_value_is_an_error_at_the_attr
     let err = ok(&compile(&p, "Blackboard.aml", "demo"));
     assert!(!err.contains("W210"), "{err}");
     let src = fs::read_to_string(p.join("demo.src")).unwrap();
-    assert!(src.contains("  PTP {X 100, Y 200, Z 300, A 0, B 90, C 0}\n"), "{src}");
-    assert!(!fs::read_to_string(p.join("demo.dat")).unwrap().contains("E6POS"));
+    assert!(
+        src.contains("  PTP {X 100, Y 200, Z 300, A 0, B 90, C 0}\n"),
+        "{src}"
+    );
+    assert!(
+        !fs::read_to_string(p.join("demo.dat"))
+            .unwrap()
+            .contains("E6POS")
+    );
 
     fs::write(&bb, &original).unwrap();
     fs::remove_file(p.join("demo.src")).unwrap();
@@ -178,7 +213,10 @@ fn points_inline_keeps_literal_positions_and_a_bad_value_is_an_error_at_the_attr
     let o = compile(&p, "Blackboard.aml", "demo");
     assert_eq!(o.status.code(), Some(1));
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("error[E216]") && err.contains("`Points` is `nammed`"), "{err}");
+    assert!(
+        err.contains("error[E216]") && err.contains("`Points` is `nammed`"),
+        "{err}"
+    );
     assert!(err.contains("did you mean `named`?"), "{err}");
     assert!(err.contains("Blackboard.aml:6:"), "{err}");
     assert!(!p.join("demo.src").exists(), "nothing is written");
@@ -190,14 +228,29 @@ fn points_inline_keeps_literal_positions_and_a_bad_value_is_an_error_at_the_attr
     assert!(!err.contains("W210"), "{err}");
     let src = fs::read_to_string(p.join("demo.src")).unwrap();
     assert_eq!(src.matches("%CMOVE").count(), 3, "{src}");
-    assert!(src.contains("SetVelCP (0.3)\n  ;FOLD PTP P2P_2 Vel=100 % PDAT2"), "{src}");
+    assert!(
+        src.contains("SetVelCP (0.3)\n  ;FOLD PTP P2P_2 Vel=100 % PDAT2"),
+        "{src}"
+    );
 }
 
 #[test]
 fn rapid_and_urscript_programs_move_to_points_declared_before_their_use() {
     for (case, base, file, decl, motion) in [
-        ("abb-irb1200", "abb", "Palletize.mod", "CONST robtarget pPick := [[400, 0, 300],", "MoveL pPick, v200, fine, tGripper;"),
-        ("ur10e", "ur", "Palletize.script", "global pPick = p[0.4, 0, 0.3, 0, 3.141593, 0]", "movel(pPick, a=1.2, v=0.25)"),
+        (
+            "abb-irb1200",
+            "abb",
+            "Palletize.mod",
+            "CONST robtarget pPick := [[400, 0, 300],",
+            "MoveL pPick, v200, fine, tGripper;",
+        ),
+        (
+            "ur10e",
+            "ur",
+            "Palletize.script",
+            "global pPick = p[0.4, 0, 0.3, 0, 3.141593, 0]",
+            "movel(pPick, a=1.2, v=0.25)",
+        ),
     ] {
         let w = Workspace::new();
         let p = w.ws().join("P");
@@ -210,7 +263,9 @@ fn rapid_and_urscript_programs_move_to_points_declared_before_their_use() {
         ok(&compile(&p, &bb, "Palletize"));
         let text = fs::read_to_string(p.join(file)).unwrap();
         let d = text.find(decl).unwrap_or_else(|| panic!("{case}:\n{text}"));
-        let m = text.find(motion).unwrap_or_else(|| panic!("{case}:\n{text}"));
+        let m = text
+            .find(motion)
+            .unwrap_or_else(|| panic!("{case}:\n{text}"));
         assert!(d < m, "{case}: declared after its use");
         assert_eq!(text.matches(decl).count(), 1, "{case}");
     }

@@ -106,11 +106,7 @@ impl Points {
             return Cow::Borrowed(code);
         }
         let motions: Vec<Option<Motion>> = code.split('\n').map(|l| self.parse(l)).collect();
-        let targets: usize = motions
-            .iter()
-            .flatten()
-            .map(|m| m.targets.len())
-            .sum();
+        let targets: usize = motions.iter().flatten().map(|m| m.targets.len()).sum();
         if targets == 0 {
             return Cow::Borrowed(code);
         }
@@ -253,7 +249,11 @@ impl Points {
                         .push(format!("CONST {ty} {p}{n} := {};", t.text));
                 }
                 out.push_str(&m.rewrite(line, |i| {
-                    let p = if m.targets[i].kind == Kind::Axis { "j" } else { "p" };
+                    let p = if m.targets[i].kind == Kind::Axis {
+                        "j"
+                    } else {
+                        "p"
+                    };
                     format!("{p}{}", names[i])
                 }));
             }
@@ -264,7 +264,11 @@ impl Points {
                         .push(format!("global {p}{n} = {}", t.text));
                 }
                 out.push_str(&m.rewrite(line, |i| {
-                    let p = if m.targets[i].kind == Kind::Axis { "q" } else { "p" };
+                    let p = if m.targets[i].kind == Kind::Axis {
+                        "q"
+                    } else {
+                        "p"
+                    };
                     format!("{p}{}", names[i])
                 }));
             }
@@ -277,8 +281,7 @@ impl Points {
                 Kind::Cartesian => "E6POS",
                 Kind::Axis => "E6AXIS",
             };
-            self.declarations
-                .push(format!("DECL {ty} X{n}={}", t.text));
+            self.declarations.push(format!("DECL {ty} X{n}={}", t.text));
         }
         let points: Vec<String> = names.iter().map(|n| format!("X{n}")).collect();
         let verb = m.verb.as_str();
@@ -489,10 +492,7 @@ pub fn for_program(
                         format!("IRL definition `{}`", def.name.text),
                         Some(def.span.clone()),
                     ),
-                    Err(None) => (
-                        "the tool, base or load of the blackboard".to_owned(),
-                        None,
-                    ),
+                    Err(None) => ("the tool, base or load of the blackboard".to_owned(), None),
                 };
                 let mut d = Diagnostic::warning(
                     Code::PointsNotInline,
@@ -916,7 +916,10 @@ mod tests {
     fn a_krl_motion_to_a_literal_becomes_a_named_point() {
         let mut p = points(Language::Krl, KrlForm::Named);
         let code = "SetVelCP (0.5)\nPTP {X 100, Y 200, Z 300, A 0, B 90, C 0}";
-        assert_eq!(p.step_code("Pick part", code), "SetVelCP (0.5)\nPTP XPickPart");
+        assert_eq!(
+            p.step_code("Pick part", code),
+            "SetVelCP (0.5)\nPTP XPickPart"
+        );
         assert_eq!(
             p.declarations,
             ["DECL E6POS XPickPart={X 100, Y 200, Z 300, A 0, B 90, C 0}"]
@@ -928,11 +931,17 @@ mod tests {
         );
         // Axis positions; several points in one step are numbered.
         assert_eq!(
-            p.step_code("Home", "PTP {A1 0, A2 -90, A3 90, A4 0, A5 0, A6 0}\nPTP {AXIS: A1 1}"),
+            p.step_code(
+                "Home",
+                "PTP {A1 0, A2 -90, A3 90, A4 0, A5 0, A6 0}\nPTP {AXIS: A1 1}"
+            ),
             "PTP XHome1_2\nPTP XHome2_2",
             "HOME1 and HOME2 are KUKA's own points"
         );
-        assert_eq!(p.declarations[2], "DECL E6AXIS XHome1_2={A1 0, A2 -90, A3 90, A4 0, A5 0, A6 0}");
+        assert_eq!(
+            p.declarations[2],
+            "DECL E6AXIS XHome1_2={A1 0, A2 -90, A3 90, A4 0, A5 0, A6 0}"
+        );
         assert_eq!(p.step_code("Home", "PTP {A1 0}"), "PTP XHome_2");
         // `FOR` is a keyword: no point `Or`.
         assert_eq!(p.step_code("or", "PTP {X 1}"), "PTP Xor_2");
@@ -963,14 +972,33 @@ mod tests {
         let mut p = points(Language::Krl, KrlForm::Inline { tool: 0, base: 0 });
         let out = p.step_code("Pick", "  LIN {X 1, Y 2, Z 3, A 0, B 0, C 0} C_DIS");
         let lines: Vec<&str> = out.lines().collect();
-        assert!(lines[0].starts_with("  ;FOLD LIN Pick CONT Vel=2 m/s CPDAT1 Tool[0] Base[0];%{PE}"), "{out}");
-        assert!(lines[0].ends_with("%P 1:LIN, 2:Pick, 3:C_DIS, 5:2, 7:CPDAT1"), "{out}");
-        assert_eq!(&lines[1..], ["  $BWDSTART=FALSE", "  LDAT_ACT=LCPDAT1", "  FDAT_ACT=FPick", "  BAS(#CP_PARAMS,2)", "  LIN XPick C_DIS", "  ;ENDFOLD"]);
+        assert!(
+            lines[0].starts_with("  ;FOLD LIN Pick CONT Vel=2 m/s CPDAT1 Tool[0] Base[0];%{PE}"),
+            "{out}"
+        );
+        assert!(
+            lines[0].ends_with("%P 1:LIN, 2:Pick, 3:C_DIS, 5:2, 7:CPDAT1"),
+            "{out}"
+        );
+        assert_eq!(
+            &lines[1..],
+            [
+                "  $BWDSTART=FALSE",
+                "  LDAT_ACT=LCPDAT1",
+                "  FDAT_ACT=FPick",
+                "  BAS(#CP_PARAMS,2)",
+                "  LIN XPick C_DIS",
+                "  ;ENDFOLD"
+            ]
+        );
         assert_eq!(p.declarations.len(), 3, "{:?}", p.declarations);
         assert!(p.declarations[1].starts_with("DECL LDAT LCPDAT1={VEL 2,"));
         assert!(p.declarations[2].starts_with("DECL FDAT FPick={TOOL_NO 0,BASE_NO 0,"));
         let circ = p.step_code("Arc", "CIRC {X 1, Y 2, Z 3}, {X 4, Y 5, Z 6}");
-        assert!(circ.contains("%P 1:CIRC, 2:Arc1, 3:Arc2, 4:, 6:2, 8:CPDAT2"), "{circ}");
+        assert!(
+            circ.contains("%P 1:CIRC, 2:Arc1, 3:Arc2, 4:, 6:2, 8:CPDAT2"),
+            "{circ}"
+        );
         assert!(circ.contains("\nCIRC XArc1, XArc2\n"), "{circ}");
     }
 
@@ -978,9 +1006,18 @@ mod tests {
     fn rapid_and_urscript_targets_are_declared_by_name() {
         let mut p = points(Language::Rapid, KrlForm::Named);
         let line = "MoveL [[400, 0, 300], [0, 0, 1, 0], [0, 0, 0, 0], [9E9, 9E9, 9E9, 9E9, 9E9, 9E9]], v200, fine, tGripper;";
-        assert_eq!(p.step_code("Pick", line), "MoveL pPick, v200, fine, tGripper;");
-        assert_eq!(p.declarations, ["CONST robtarget pPick := [[400, 0, 300], [0, 0, 1, 0], [0, 0, 0, 0], [9E9, 9E9, 9E9, 9E9, 9E9, 9E9]];"]);
-        let j = "MoveAbsJ [[0, 0, 0, 0, 30, 0], [9E9, 9E9, 9E9, 9E9, 9E9, 9E9]], v500, fine, tool0;";
+        assert_eq!(
+            p.step_code("Pick", line),
+            "MoveL pPick, v200, fine, tGripper;"
+        );
+        assert_eq!(
+            p.declarations,
+            [
+                "CONST robtarget pPick := [[400, 0, 300], [0, 0, 1, 0], [0, 0, 0, 0], [9E9, 9E9, 9E9, 9E9, 9E9, 9E9]];"
+            ]
+        );
+        let j =
+            "MoveAbsJ [[0, 0, 0, 0, 30, 0], [9E9, 9E9, 9E9, 9E9, 9E9, 9E9]], v500, fine, tool0;";
         assert_eq!(p.step_code("Home", j), "MoveAbsJ jHome, v500, fine, tool0;");
         let named = "MoveL RelTool(pHome, 1, 2, 3), v100, fine, tool0;";
         assert_eq!(p.step_code("X", named), named);
@@ -990,14 +1027,28 @@ mod tests {
             u.step_code("Pick", "movel(p[0.4, 0, 0.3, 0, 3.14, 0], a=1.2, v=0.25)"),
             "movel(pPick, a=1.2, v=0.25)"
         );
-        assert_eq!(u.step_code("Home", "movej([0, -1.57, 1.57, 0, 0, 0])"), "movej(qHome)");
-        assert_eq!(u.declarations, ["global pPick = p[0.4, 0, 0.3, 0, 3.14, 0]", "global qHome = [0, -1.57, 1.57, 0, 0, 0]"]);
+        assert_eq!(
+            u.step_code("Home", "movej([0, -1.57, 1.57, 0, 0, 0])"),
+            "movej(qHome)"
+        );
+        assert_eq!(
+            u.declarations,
+            [
+                "global pPick = p[0.4, 0, 0.3, 0, 3.14, 0]",
+                "global qHome = [0, -1.57, 1.57, 0, 0, 0]"
+            ]
+        );
         assert_eq!(u.step_code("S", "movel(p[X, 1])"), "movel(p[X, 1])");
     }
 
     #[test]
     fn names_fit_the_language_and_avoid_taken_words() {
-        let mut p = Points::new(Language::Krl, Mode::Named, KrlForm::Named, ["XGrip".to_owned()]);
+        let mut p = Points::new(
+            Language::Krl,
+            Mode::Named,
+            KrlForm::Named,
+            ["XGrip".to_owned()],
+        );
         assert_eq!(p.step_code("Grip", "PTP {X 1}"), "PTP XGrip_2");
         let long = "a very long step name that goes on and on";
         let out = p.step_code(long, "PTP {X 1}\nPTP {X 2}");
@@ -1011,7 +1062,10 @@ mod tests {
         let mut many = Points::new(Language::Rapid, Mode::Named, KrlForm::Named, Vec::new());
         let mut seen = HashSet::new();
         for _ in 0..20_000 {
-            let line = many.step_code("Move", "MoveJ [[1,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]], v1000, z50, tool0;");
+            let line = many.step_code(
+                "Move",
+                "MoveJ [[1,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]], v1000, z50, tool0;",
+            );
             assert!(seen.insert(line.into_owned().to_ascii_lowercase()));
         }
         assert!(many.tries < 3 * 20_000, "{} names tried", many.tries);

@@ -184,9 +184,15 @@ fn used_names(text: &str, names: &HashSet<String>, fold: bool) -> HashSet<String
 /// Whether a KRL declaration is a named point or an inline form's data
 /// ([`super::points`]): a part holds its own in its `.dat`.
 fn is_point_data(line: &str) -> bool {
-    ["DECL E6POS ", "DECL E6AXIS ", "DECL FDAT ", "DECL PDAT ", "DECL LDAT "]
-        .iter()
-        .any(|p| line.starts_with(p))
+    [
+        "DECL E6POS ",
+        "DECL E6AXIS ",
+        "DECL FDAT ",
+        "DECL PDAT ",
+        "DECL LDAT ",
+    ]
+    .iter()
+    .any(|p| line.starts_with(p))
 }
 
 /// Whether `name` is one of the writer's variables that live within one block: set before the

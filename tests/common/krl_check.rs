@@ -357,7 +357,10 @@ pub fn check_krl(src: &str, dat: &str, program: &str, lf: bool) -> Result<(), St
 /// The `.dat`'s declarations by upper-case name: the type and the value's text. Every `DECL`
 /// is `DECL [GLOBAL] TYPE NAME=VALUE` (or without a value) with a KRL name, braces balanced in
 /// the value, each name declared once.
-fn dat_declarations(dat: &str, lf: bool) -> Result<std::collections::HashMap<String, (String, String)>, String> {
+fn dat_declarations(
+    dat: &str,
+    lf: bool,
+) -> Result<std::collections::HashMap<String, (String, String)>, String> {
     let mut out = std::collections::HashMap::new();
     for (i, raw) in split_lines(dat, lf, ".dat")?.iter().enumerate() {
         let n = i + 1;
@@ -380,10 +383,15 @@ fn dat_declarations(dat: &str, lf: bool) -> Result<std::collections::HashMap<Str
         }
         let opens = value.matches('{').count();
         if opens != value.matches('}').count() || (opens > 0 && !value.ends_with('}')) {
-            return Err(format!(".dat line {n}: the value of `{name}` is not one aggregate"));
+            return Err(format!(
+                ".dat line {n}: the value of `{name}` is not one aggregate"
+            ));
         }
         if out
-            .insert(name.to_ascii_uppercase(), (ty.to_ascii_uppercase(), value.to_owned()))
+            .insert(
+                name.to_ascii_uppercase(),
+                (ty.to_ascii_uppercase(), value.to_owned()),
+            )
             .is_some()
         {
             return Err(format!(".dat line {n}: `{name}` declared twice"));
@@ -420,7 +428,9 @@ fn check_points(src: &str, dat: &str, lf: bool) -> Result<(), String> {
             Some((ty, _)) => Err(format!(
                 ".src line {n}: `{name}` is a {ty} in the .dat, expected {types:?}"
             )),
-            None => Err(format!(".src line {n}: `{name}` is not declared in the .dat")),
+            None => Err(format!(
+                ".src line {n}: `{name}` is not declared in the .dat"
+            )),
         }
     };
     let lines = split_lines(src, lf, ".src")?;
@@ -431,7 +441,9 @@ fn check_points(src: &str, dat: &str, lf: bool) -> Result<(), String> {
         i += 1;
         if raw.contains("%{PE}") && raw.contains("%CMOVE") {
             // An inline form: its title, then its six lines.
-            let title = raw.strip_prefix(";FOLD ").ok_or(format!(".src line {n}: an inline form outside a ;FOLD"))?;
+            let title = raw
+                .strip_prefix(";FOLD ")
+                .ok_or(format!(".src line {n}: an inline form outside a ;FOLD"))?;
             let mut words = title.split_whitespace();
             let verb = words.next().unwrap_or("");
             let point = if verb == "CIRC" {
@@ -440,13 +452,27 @@ fn check_points(src: &str, dat: &str, lf: bool) -> Result<(), String> {
                 words.next()
             }
             .unwrap_or("");
-            let params = title.split("%P ").nth(1).ok_or(format!(".src line {n}: no %P"))?;
+            let params = title
+                .split("%P ")
+                .nth(1)
+                .ok_or(format!(".src line {n}: no %P"))?;
             let slot = if verb == "CIRC" { "3:" } else { "2:" };
             if !params.split(", ").any(|p| p == format!("{slot}{point}")) {
-                return Err(format!(".src line {n}: the form's %P does not name its point `{point}`"));
+                return Err(format!(
+                    ".src line {n}: the form's %P does not name its point `{point}`"
+                ));
             }
-            let body: Vec<&str> = lines.get(i..i + 6).ok_or(format!(".src line {n}: a short inline form"))?.iter().map(|l| l.trim()).collect();
-            let (data, bas) = if verb == "PTP" { ("PDAT_ACT=P", "BAS(#PTP_PARAMS,") } else { ("LDAT_ACT=L", "BAS(#CP_PARAMS,") };
+            let body: Vec<&str> = lines
+                .get(i..i + 6)
+                .ok_or(format!(".src line {n}: a short inline form"))?
+                .iter()
+                .map(|l| l.trim())
+                .collect();
+            let (data, bas) = if verb == "PTP" {
+                ("PDAT_ACT=P", "BAS(#PTP_PARAMS,")
+            } else {
+                ("LDAT_ACT=L", "BAS(#CP_PARAMS,")
+            };
             let ok = body[0] == "$BWDSTART=FALSE"
                 && body[1].starts_with(data)
                 && body[2] == format!("FDAT_ACT=F{point}")
@@ -455,9 +481,15 @@ fn check_points(src: &str, dat: &str, lf: bool) -> Result<(), String> {
                 && body[4].contains(&format!("X{point}"))
                 && body[5] == ";ENDFOLD";
             if !ok {
-                return Err(format!(".src line {n}: the inline form of `{point}` is not KUKA's: {body:?}"));
+                return Err(format!(
+                    ".src line {n}: the inline form of `{point}` is not KUKA's: {body:?}"
+                ));
             }
-            declared(&body[1][9..], if verb == "PTP" { &["PDAT"] } else { &["LDAT"] }, n + 2)?;
+            declared(
+                &body[1][9..],
+                if verb == "PTP" { &["PDAT"] } else { &["LDAT"] },
+                n + 2,
+            )?;
             declared(&format!("F{point}"), &["FDAT"], n + 3)?;
             continue;
         }
@@ -477,9 +509,16 @@ fn check_points(src: &str, dat: &str, lf: bool) -> Result<(), String> {
             .collect();
         for name in names {
             // KUKA's own points (`XHOME`, `XHOME1` …) are declared in `$config.dat`.
-            let kuka = name.to_ascii_uppercase().strip_prefix("XHOME").is_some_and(|d| d.bytes().all(|b| b.is_ascii_digit()));
+            let kuka = name
+                .to_ascii_uppercase()
+                .strip_prefix("XHOME")
+                .is_some_and(|d| d.bytes().all(|b| b.is_ascii_digit()));
             if name.len() > 1 && name.starts_with(['X', 'x']) && !kuka {
-                let types: &[&str] = if verb == "PTP" { &["E6POS", "E6AXIS"] } else { &["E6POS"] };
+                let types: &[&str] = if verb == "PTP" {
+                    &["E6POS", "E6AXIS"]
+                } else {
+                    &["E6POS"]
+                };
                 declared(name, types, n)?;
             }
         }

@@ -198,19 +198,34 @@ pub fn parse(text: &str, name: &str) -> Program {
             break;
         }
         // A named point (docs/LANGUAGES.md, "Points"): a target of numbers, declared once.
-        if let Some(point) = l.strip_prefix("CONST robtarget ").or_else(|| l.strip_prefix("CONST jointtarget ")) {
-            let (name, value) = point.split_once(" := ").unwrap_or_else(|| panic!("RAPID: `{l}`"));
-            let value = value.strip_suffix(';').unwrap_or_else(|| panic!("RAPID: `{l}` without `;`"));
+        if let Some(point) = l
+            .strip_prefix("CONST robtarget ")
+            .or_else(|| l.strip_prefix("CONST jointtarget "))
+        {
+            let (name, value) = point
+                .split_once(" := ")
+                .unwrap_or_else(|| panic!("RAPID: `{l}`"));
+            let value = value
+                .strip_suffix(';')
+                .unwrap_or_else(|| panic!("RAPID: `{l}` without `;`"));
             let numbers = value
-                .split(|c: char| c == '[' || c == ']' || c == ',')
+                .split(['[', ']', ','])
                 .map(str::trim)
                 .filter(|x| !x.is_empty());
             let count = numbers
-                .inspect(|x| assert!(x.parse::<f64>().is_ok(), "RAPID: `{x}` in the point `{name}`"))
+                .inspect(|x| {
+                    assert!(
+                        x.parse::<f64>().is_ok(),
+                        "RAPID: `{x}` in the point `{name}`"
+                    )
+                })
                 .count();
             let want = if l.contains("robtarget") { 17 } else { 12 };
             assert_eq!(count, want, "RAPID: `{l}`");
-            assert!(points.insert(name.to_owned()), "RAPID: point `{name}` declared twice");
+            assert!(
+                points.insert(name.to_owned()),
+                "RAPID: point `{name}` declared twice"
+            );
             continue;
         }
         let clock = l
@@ -221,11 +236,25 @@ pub fn parse(text: &str, name: &str) -> Program {
     }
     // A motion to a named point needs its declaration.
     for l in &lines[i..] {
-        let word = l.split(|c: char| !c.is_ascii_alphanumeric()).next().unwrap_or("");
+        let word = l
+            .split(|c: char| !c.is_ascii_alphanumeric())
+            .next()
+            .unwrap_or("");
         if ["MoveL", "MoveJ", "MoveC", "MoveAbsJ"].contains(&word) {
-            let target = l[word.len()..].trim_start().split(',').next().unwrap_or("").trim();
-            if target.bytes().all(|c| c.is_ascii_alphanumeric() || c == b'_') {
-                assert!(points.contains(target), "RAPID: `{l}` moves to `{target}`, which no point declares");
+            let target = l[word.len()..]
+                .trim_start()
+                .split(',')
+                .next()
+                .unwrap_or("")
+                .trim();
+            if target
+                .bytes()
+                .all(|c| c.is_ascii_alphanumeric() || c == b'_')
+            {
+                assert!(
+                    points.contains(target),
+                    "RAPID: `{l}` moves to `{target}`, which no point declares"
+                );
             }
         }
     }
