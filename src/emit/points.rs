@@ -239,38 +239,35 @@ impl Points {
         let indent = &line[..line.len() - line.trim_start().len()];
         match self.lang {
             Language::Krl => self.write_krl(indent, m, names, out),
-            Language::Rapid => {
-                for (t, n) in m.targets.iter().zip(names) {
-                    let (ty, p) = match t.kind {
-                        Kind::Cartesian => ("robtarget", "p"),
-                        Kind::Axis => ("jointtarget", "j"),
-                    };
-                    self.declarations
-                        .push(format!("CONST {ty} {p}{n} := {};", t.text));
+            Language::Rapid | Language::UrScript => {
+                // `pName` for a position, `jName` (RAPID) or `qName` (URScript) for the axes:
+                // the prefixes `free` keeps apart.
+                let [cartesian, axis] = [self.prefixes()[0], self.prefixes()[1]];
+                let declared: Vec<String> = m
+                    .targets
+                    .iter()
+                    .zip(names)
+                    .map(|(t, n)| {
+                        let p = if t.kind == Kind::Axis {
+                            axis
+                        } else {
+                            cartesian
+                        };
+                        format!("{p}{n}")
+                    })
+                    .collect();
+                for (t, d) in m.targets.iter().zip(&declared) {
+                    self.declarations.push(match (self.lang, t.kind) {
+                        (Language::Rapid, Kind::Cartesian) => {
+                            format!("CONST robtarget {d} := {};", t.text)
+                        }
+                        (Language::Rapid, Kind::Axis) => {
+                            format!("CONST jointtarget {d} := {};", t.text)
+                        }
+                        _ => format!("global {d} = {}", t.text),
+                    });
                 }
-                out.push_str(&m.rewrite(line, |i| {
-                    let p = if m.targets[i].kind == Kind::Axis {
-                        "j"
-                    } else {
-                        "p"
-                    };
-                    format!("{p}{}", names[i])
-                }));
-            }
-            Language::UrScript => {
-                for (t, n) in m.targets.iter().zip(names) {
-                    let p = if t.kind == Kind::Axis { "q" } else { "p" };
-                    self.declarations
-                        .push(format!("global {p}{n} = {}", t.text));
-                }
-                out.push_str(&m.rewrite(line, |i| {
-                    let p = if m.targets[i].kind == Kind::Axis {
-                        "q"
-                    } else {
-                        "p"
-                    };
-                    format!("{p}{}", names[i])
-                }));
+                out.push_str(&m.rewrite(line, |i| declared[i].clone()));
             }
         }
     }
