@@ -59,6 +59,12 @@ fuzz_target!(|data: &[u8]| {
         drop_warnings: data.len() % 5 == 0,
         bind_split_from: (data.len() % 7 == 0).then_some(1),
         picture: None,
+        // Now and then a limit small enough that the programs are split into parts.
+        max_lines: if data.len() % 11 == 0 {
+            skillpost::emit::split::Limits::all(20)
+        } else {
+            Default::default()
+        },
     };
     let c = compile(&fs, Path::new(BLACKBOARD), &opts);
     assert_eq!(c.files_read.first(), Some(&PathBuf::from(BLACKBOARD)));
