@@ -10,6 +10,7 @@ use std::process::ExitCode;
 use clap::Parser;
 
 mod check;
+mod simulate;
 
 use crate::compile::{self, Compilation, Options};
 use crate::diag::{self, Format};
@@ -104,6 +105,12 @@ enum Command {
     /// DEF/MODULE layout (KRL .src/.dat, RAPID .mod/.modx/.sys, URScript .script). Exit status
     /// 0 all pass, 1 a problem, 2 a file that cannot be read or whose language is not known
     Check(CheckArgs),
+    /// Run the cell's programs on the built-in interpreter before a robot does: compiles in
+    /// memory (writes no program), reports each run's timeline, cycle time and problems
+    /// (deadlocks, waits for inputs nothing sets, steps out of the chart's order), and the
+    /// steps and branches no run reached (see SIMULATE.md). Exit status 0 no problem, 1 a
+    /// problem, 2 inputs with errors
+    Simulate(simulate::SimulateArgs),
 }
 
 #[derive(Debug, clap::Args)]
@@ -209,6 +216,7 @@ fn run(a: Args) -> u8 {
         Some(Command::Watch(w)) => return watch(w),
         Some(Command::Status(s)) => return status_command(s),
         Some(Command::Check(c)) => return check::check_command(&c),
+        Some(Command::Simulate(s)) => return simulate::simulate_command(&s),
         None => {}
     }
     let fs = FsSource {

@@ -19,6 +19,8 @@
 //! - [`write`]: atomic output files and the byte-preserving blackboard write-back.
 //! - [`compile`]: the whole pipeline for one project: inputs in, outputs + diagnostics out.
 //! - [`daemon`]: `skillpost watch`, the long-running service over the same pipeline.
+//! - [`simulate`]: `skillpost simulate`: the cell's programs run together on a built-in
+//!   interpreter of the forms skillpost writes (after `compile`, before the drivers).
 //! - [`print`]: the `-pB`/`-pS`/`-pF`/`-pO` and `--info` listings.
 //! - [`picture`]: the plan as an SVG timeline (`--svg`, the daemon's `picture`).
 //! - [`diag`]: diagnostics, their codes and their rendering.
@@ -48,6 +50,7 @@ pub mod picture;
 pub mod plan;
 pub mod print;
 pub mod read;
+pub mod simulate;
 pub mod template;
 pub mod umask;
 pub mod value;

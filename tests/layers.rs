@@ -10,7 +10,7 @@ use std::path::Path;
 const ORDER: &[&str] = &[
     "names", "paths", "convert", "load", "excerpt", "diag", "cond", "value", "template", "lang",
     "check", "model", "read", "plan", "bind", "emit", "umask", "write", "picture", "compile",
-    "print", "daemon", "cli",
+    "simulate", "print", "daemon", "cli",
 ];
 
 fn module_of(rel: &Path) -> String {

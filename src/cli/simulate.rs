@@ -1,0 +1,125 @@
+//! `skillpost simulate` (docs/SIMULATE.md): compile in memory, run the cell's programs on the
+//! built-in interpreter, report. Exit status 0 no problem, 1 a problem, 2 inputs with errors
+//! (or a file that cannot be read or written).
+
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use crate::compile::{self, Options};
+use crate::diag::Format;
+use crate::load::FsSource;
+use crate::simulate::{self, Cell, Scenario, report};
+
+#[derive(Debug, clap::Args)]
+pub(super) struct SimulateArgs {
+    /// The blackboard (.aml)
+    #[arg(value_name = "BLACKBOARD")]
+    blackboard: PathBuf,
+    /// The program name, as for a compile (nothing is written)
+    #[arg(value_name = "PROGRAM")]
+    program: String,
+    /// A scenario file (TOML): inputs at the start, their changes, restarts, jitter, runs
+    #[arg(long, value_name = "FILE")]
+    scenario: Option<PathBuf>,
+    /// How many runs (default: the scenario's `runs`, else 20 random runs)
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    runs: Option<u64>,
+    /// The seed of the random numbers (the same seed gives the same runs)
+    #[arg(long, value_name = "S")]
+    seed: Option<u64>,
+    /// Write the first run's signals and wires as a Value Change Dump (GTKWave, Surfer)
+    #[arg(long, value_name = "FILE")]
+    vcd: Option<PathBuf>,
+    /// The report: text (stdout), or one JSON document (stdout)
+    #[arg(long, value_enum, default_value_t = SimFormat::Human)]
+    format: SimFormat,
+    /// The SFC POU to use (as for a compile)
+    #[arg(long, value_name = "NAME")]
+    pou: Option<String>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(super) enum SimFormat {
+    Human,
+    Json,
+}
+
+/// Whether `path` names a file the compile read (an output must never replace an input).
+fn is_input(c: &compile::Compilation, path: &Path) -> bool {
+    let canon = |p: &Path| std::fs::canonicalize(p).ok();
+    let target = canon(path);
+    c.files_read
+        .iter()
+        .any(|f| f == path || (target.is_some() && canon(f) == target))
+}
+
+pub(super) fn simulate_command(a: &SimulateArgs) -> u8 {
+    let fs = FsSource {
+        max_file_size: crate::load::DEFAULT_MAX_FILE_SIZE,
+    };
+    let opts = Options {
+        program: Some(a.program.clone()),
+        keep_model: true,
+        drop_warnings: true,
+        pou: a.pou.clone(),
+        // A part of a split program is only a file layout: the simulator runs the whole.
+        max_lines: crate::emit::split::Limits::all(0),
+        ..Options::default()
+    };
+    let c = compile::compile(&fs, &a.blackboard, &opts);
+    if c.has_errors() || c.io_failure {
+        super::report(&c.diagnostics, &c.sources, Format::Human, false);
+        eprintln!("error: nothing simulated: the inputs have errors");
+        return 2;
+    }
+    let (cell, programs) = match Cell::from_compilation(&c) {
+        Ok(x) => x,
+        Err(e) => {
+            eprintln!("error: nothing simulated: {}", e.0);
+            return 2;
+        }
+    };
+    let scenario = match &a.scenario {
+        Some(f) => match simulate::scenario::load(f, &cell) {
+            Ok(s) => s,
+            Err(e) => {
+                eprintln!("error: {e}");
+                return 2;
+            }
+        },
+        None => Scenario::random(),
+    };
+    let mut r = simulate::simulate(
+        cell,
+        &programs,
+        scenario,
+        a.runs.map(|n| n as usize),
+        a.seed,
+    );
+    r.scenario = a.scenario.as_ref().map(|s| s.display().to_string());
+    if let Some(v) = &a.vcd {
+        if is_input(&c, v) {
+            eprintln!(
+                "error: --vcd {}: that is an input of the compile; nothing written",
+                v.display()
+            );
+            return 2;
+        }
+        if let Err(e) = compile::write_beside(&c, v, report::vcd(&r).as_bytes()) {
+            eprintln!("error: cannot write {}: {e}", v.display());
+            return 2;
+        }
+    }
+    let text = match a.format {
+        SimFormat::Human => report::human(&r),
+        SimFormat::Json => {
+            let mut s = report::json(&r).to_string();
+            s.push('\n');
+            s
+        }
+    };
+    let mut out = std::io::stdout().lock();
+    let _ = out.write_all(text.as_bytes());
+    let _ = out.flush();
+    u8::from(r.problems() > 0)
+}

@@ -1,0 +1,1030 @@
+//! The machine: every controller's program at once, a discrete-event simulation. Each
+//! controller has its own clock; the one whose clock is earliest runs its next instruction
+//! (ties in controller order), so a read of a wire sees every write before it. Statements take
+//! no time; a step's motion takes the step's time; waits wait until what they read changes (an
+//! output of a partner, an input of the world, a timer that reaches a limit).
+//!
+//! KRL and RAPID run ahead of their motions (the advance run) until a statement that waits for
+//! them (`WAIT FOR`, `WAIT SEC`, RAPID's `\InPos`); a wire set while a motion still runs is a
+//! problem. URScript's moves return when the motion has ended.
+
+use std::collections::HashMap;
+
+use super::ir::{Clockish, Ins, Key, Op, Program, Settle, Val, X};
+use super::{Cell, Change, Problem, ProblemKind, Restart, Scenario, StepRun, When};
+
+/// URScript's control cycle on e-Series (500 Hz): what `sync()` takes.
+const SYNC_S: f64 = 0.002;
+
+#[derive(Debug, Clone, PartialEq)]
+enum State {
+    Running,
+    /// Waiting at a wait since `since`; `wake`: when a time limit or timer it reads is up.
+    Blocked {
+        since: f64,
+        wake: Option<f64>,
+    },
+    Ended,
+    /// Stopped until started again: by the program itself (`faulted` false) or by a fault
+    /// already reported.
+    Halted {
+        message: Option<String>,
+        faulted: bool,
+    },
+}
+
+#[derive(Debug, Clone)]
+struct Ctl {
+    pc: usize,
+    t: f64,
+    state: State,
+    motion_end: f64,
+    vars: HashMap<String, Val>,
+    /// URScript counters: value and since when it counts.
+    counters: HashMap<String, (f64, f64)>,
+    /// KRL timers: (ms at t0, t0, running).
+    timers: HashMap<u32, (f64, f64, bool)>,
+    clocks: HashMap<String, (f64, f64, bool)>,
+    outs: HashMap<Key, Val>,
+    /// The wait the program is at: its pc and since when (for `\MaxTime`).
+    wait_at: Option<(usize, f64)>,
+    note: Option<String>,
+    message: Option<String>,
+    /// The step whose motion runs, and its index in the timeline.
+    running: Option<usize>,
+    /// In a step's own code: what takes time there takes the step's time.
+    in_step: bool,
+}
+
+/// What one run produced.
+#[derive(Debug, Clone, Default)]
+pub struct Outcome {
+    pub timeline: Vec<StepRun>,
+    pub problems: Vec<Problem>,
+    /// Every change of a signal or wire: time, controller, key, value.
+    pub changes: Vec<(f64, usize, Key, Val)>,
+    /// Branches taken: controller, transition localId, time.
+    pub branches: Vec<(usize, u64, f64)>,
+    /// Every program ended.
+    pub ended: bool,
+    /// When the last program ended (its motion included), or when the run stopped.
+    pub end_time: f64,
+    /// The run stopped at its limit of steps of a chart that repeats.
+    pub repeats: bool,
+    pub statements: u64,
+    /// Programs started again: controller, time.
+    pub restarts: Vec<(usize, f64)>,
+}
+
+/// SplitMix64: a fixed, portable pseudo-random sequence.
+#[derive(Debug, Clone)]
+pub struct Rng(pub u64);
+
+impl Rng {
+    pub fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// A number in [0, 1).
+    pub fn unit(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// A change the world makes at a time.
+#[derive(Debug, Clone)]
+enum Event {
+    Input(usize, Vec<Key>, Val),
+    Restart(usize),
+}
+
+struct Run<'c> {
+    cell: &'c Cell,
+    programs: &'c [Program],
+    ctls: Vec<Ctl>,
+    world: HashMap<(usize, Key), Val>,
+    /// (controller, input key) → (controller, output key) that drives it.
+    wired: HashMap<(usize, Key), (usize, Key)>,
+    events: Vec<(f64, Event)>,
+    pending_after: Vec<(String, Event, bool)>,
+    out: Outcome,
+    rng: Rng,
+    jitter: f64,
+    default_step: f64,
+    /// Random runs: the world sets an input a program waits for when all programs wait.
+    answering: bool,
+    step_limit: usize,
+    time_limit: f64,
+    statement_limit: u64,
+}
+
+/// Runs the cell once under `scenario` (its inputs, changes, restarts, jitter), with `rng`.
+pub fn run(
+    cell: &Cell,
+    programs: &[Program],
+    scenario: &Scenario,
+    rng: Rng,
+    random: bool,
+) -> Outcome {
+    let mut wired = HashMap::new();
+    for w in &cell.wires {
+        wired.insert((w.to.0, w.to.1.clone()), (w.from.0, w.from.1.clone()));
+    }
+    let mut r = Run {
+        cell,
+        programs,
+        ctls: Vec::new(),
+        world: HashMap::new(),
+        wired,
+        events: Vec::new(),
+        pending_after: Vec::new(),
+        out: Outcome::default(),
+        rng,
+        jitter: scenario.jitter,
+        default_step: scenario.default_step_s,
+        answering: random,
+        step_limit: scenario.max_steps,
+        time_limit: scenario.max_time_s,
+        statement_limit: scenario.max_statements,
+    };
+    for (c, _) in cell.controllers.iter().enumerate() {
+        let delay = if random { r.rng.unit() * 0.5 } else { 0.0 };
+        let mut ctl = Ctl {
+            pc: 0,
+            t: delay,
+            state: State::Running,
+            motion_end: delay,
+            vars: HashMap::new(),
+            counters: HashMap::new(),
+            timers: HashMap::new(),
+            clocks: HashMap::new(),
+            outs: HashMap::new(),
+            wait_at: None,
+            note: None,
+            message: None,
+            running: None,
+            in_step: false,
+        };
+        reset_vars(&mut ctl, &programs[c]);
+        r.ctls.push(ctl);
+    }
+    // The world's inputs at the start.
+    for inp in &cell.inputs {
+        let v = if random {
+            if inp.integer {
+                Val::Num((r.rng.next() % 4) as f64)
+            } else {
+                Val::Bool(r.rng.next() & 1 == 1)
+            }
+        } else if inp.integer {
+            Val::Num(0.0)
+        } else {
+            Val::Bool(false)
+        };
+        r.set_world(inp.controller, &inp.key, &v, 0.0);
+    }
+    for (c, key, v) in &scenario.start {
+        r.set_world(*c, key, v, 0.0);
+    }
+    for Change {
+        when,
+        controller,
+        key,
+        value,
+    } in &scenario.changes
+    {
+        let e = Event::Input(*controller, key.clone(), value.clone());
+        match when {
+            When::At(t) => r.events.push((*t, e)),
+            When::After(step) => r.pending_after.push((step.clone(), e, false)),
+        }
+    }
+    for Restart { when, controller } in &scenario.restarts {
+        let e = Event::Restart(*controller);
+        match when {
+            When::At(t) => r.events.push((*t, e)),
+            When::After(step) => r.pending_after.push((step.clone(), e, false)),
+        }
+    }
+    r.main_loop();
+    r.out
+}
+
+fn reset_vars(ctl: &mut Ctl, p: &Program) {
+    ctl.vars.clear();
+    for (n, v) in &p.init {
+        ctl.vars.insert(n.clone(), v.clone());
+    }
+    ctl.counters.clear();
+    for n in &p.counters {
+        ctl.counters.insert(n.clone(), (0.0, ctl.t));
+    }
+    ctl.timers.clear();
+    ctl.clocks.clear();
+}
+
+/// Why an expression could not be evaluated.
+struct EvalError(String);
+
+impl Run<'_> {
+    fn main_loop(&mut self) {
+        loop {
+            if self.out.statements >= self.statement_limit {
+                self.limit(format!(
+                    "stopped after {} statements (the limit): the programs run on without end",
+                    self.statement_limit
+                ));
+                return;
+            }
+            if self.out.timeline.len() >= self.step_limit {
+                if self.cell.endless {
+                    self.out.repeats = true;
+                    self.out.end_time = self.now();
+                } else {
+                    self.limit(format!(
+                        "stopped after {} steps (the limit) before the programs ended",
+                        self.step_limit
+                    ));
+                }
+                return;
+            }
+            let next = (0..self.ctls.len())
+                .filter_map(|c| self.next_time(c).map(|t| (t, c)))
+                .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            let next_event = self.events.iter().map(|e| e.0).min_by(f64::total_cmp);
+            match (next, next_event) {
+                (Some((t, _)), Some(te)) if te <= t => self.fire_events(te),
+                (None, Some(te)) => self.fire_events(te),
+                (Some((t, c)), _) => {
+                    if t > self.time_limit {
+                        self.limit(format!(
+                            "stopped at {:.1} s (the time limit) before the programs ended",
+                            self.time_limit
+                        ));
+                        return;
+                    }
+                    self.exec(c);
+                }
+                (None, None) => {
+                    if self.answering && self.answer() {
+                        continue;
+                    }
+                    self.finish();
+                    return;
+                }
+            }
+        }
+    }
+
+    fn now(&self) -> f64 {
+        self.ctls
+            .iter()
+            .map(|c| c.t.max(c.motion_end))
+            .fold(0.0, f64::max)
+    }
+
+    fn limit(&mut self, what: String) {
+        self.out.end_time = self.now();
+        self.out.problems.push(Problem {
+            kind: ProblemKind::Limit,
+            time: self.out.end_time,
+            controller: None,
+            line: None,
+            local_id: None,
+            message: what,
+        });
+    }
+
+    fn next_time(&self, c: usize) -> Option<f64> {
+        let x = &self.ctls[c];
+        match &x.state {
+            State::Running => Some(x.t),
+            State::Blocked { wake, .. } => wake.map(|w| w.max(x.t)),
+            State::Ended | State::Halted { .. } => None,
+        }
+    }
+
+    /// Applies every world event at time `t`.
+    fn fire_events(&mut self, t: f64) {
+        let mut now = Vec::new();
+        self.events.retain(|(te, e)| {
+            if *te <= t {
+                now.push(e.clone());
+                false
+            } else {
+                true
+            }
+        });
+        for e in now {
+            match e {
+                Event::Input(c, k, v) => {
+                    self.set_world(c, &k, &v, t);
+                    self.wake_all(t);
+                }
+                Event::Restart(c) => self.restart(c, t),
+            }
+        }
+    }
+
+    /// A program started again from the top at `t`: a motion that runs is cut short, its
+    /// outputs keep their levels, its variables their first values.
+    fn restart(&mut self, c: usize, t: f64) {
+        let p = &self.programs[c];
+        let x = &mut self.ctls[c];
+        let now = t;
+        if let Some(i) = x.running.take()
+            && self.out.timeline[i].end > now
+        {
+            self.out.timeline[i].end = now;
+            self.out.timeline[i].cut = true;
+        }
+        x.t = now;
+        x.motion_end = now;
+        x.pc = 0;
+        x.state = State::Running;
+        x.wait_at = None;
+        x.note = None;
+        x.message = None;
+        x.in_step = false;
+        reset_vars(x, p);
+        self.out.restarts.push((c, now));
+        self.wake_all(now);
+    }
+
+    fn wake_all(&mut self, t: f64) {
+        for x in &mut self.ctls {
+            if matches!(x.state, State::Blocked { .. }) {
+                x.state = State::Running;
+                x.t = x.t.max(t);
+            }
+        }
+    }
+
+    /// All programs wait: the world (a random run) sets an input one of them waits for, a
+    /// moment later. `false` when no wait reads an input of the world.
+    fn answer(&mut self) -> bool {
+        let mut cands: Vec<(usize, Key, f64)> = Vec::new();
+        for (c, x) in self.ctls.iter().enumerate() {
+            if let State::Blocked { .. } = x.state
+                && let Some((Ins::Wait { cond, .. }, _)) = self.programs[c].ins.get(x.pc)
+            {
+                let mut keys = Vec::new();
+                cond.inputs(&mut keys);
+                for k in keys {
+                    if self.world.contains_key(&(c, k.clone())) {
+                        cands.push((c, k, x.t));
+                    }
+                }
+            }
+        }
+        if cands.is_empty() {
+            return false;
+        }
+        let (c, k, t) = cands[(self.rng.next() % cands.len() as u64) as usize].clone();
+        let old = self
+            .world
+            .get(&(c, k.clone()))
+            .cloned()
+            .unwrap_or(Val::Bool(false));
+        let v = match old {
+            Val::Bool(b) => Val::Bool(!b),
+            Val::Num(n) => Val::Num(((n as u64 + 1 + self.rng.next() % 3) % 4) as f64),
+            s => s,
+        };
+        let at = t + 0.1 + self.rng.unit();
+        self.events.push((at, Event::Input(c, vec![k], v)));
+        true
+    }
+
+    /// Sets an input of the world (a KRL group: each bit of the value).
+    fn set_world(&mut self, c: usize, keys: &[Key], v: &Val, t: f64) {
+        if keys.len() == 1 {
+            let old = self.world.insert((c, keys[0].clone()), v.clone());
+            if old.as_ref() != Some(v) || t == 0.0 {
+                self.out.changes.push((t, c, keys[0].clone(), v.clone()));
+            }
+            return;
+        }
+        let n = v.num().unwrap_or(0.0).max(0.0) as u64;
+        for (i, k) in keys.iter().enumerate() {
+            let b = Val::Bool(i < 64 && (n >> i) & 1 == 1);
+            let old = self.world.insert((c, k.clone()), b.clone());
+            if old.as_ref() != Some(&b) || t == 0.0 {
+                self.out.changes.push((t, c, k.clone(), b));
+            }
+        }
+    }
+
+    /// Nothing can move any more: ended, or a deadlock, or a wait for an input nothing sets.
+    fn finish(&mut self) {
+        self.out.end_time = self.now();
+        self.out.ended = self.ctls.iter().all(|x| x.state == State::Ended);
+        let names = |c: usize| self.cell.controllers[c].name.clone();
+        let mut waits = Vec::new();
+        for (c, x) in self.ctls.iter().enumerate() {
+            match &x.state {
+                State::Blocked { since, .. } => {
+                    let Some((Ins::Wait { cond, .. }, line)) = self.programs[c].ins.get(x.pc)
+                    else {
+                        continue;
+                    };
+                    let mut keys = Vec::new();
+                    cond.inputs(&mut keys);
+                    let partners: Vec<usize> = keys
+                        .iter()
+                        .filter_map(|k| self.wired.get(&(c, k.clone())).map(|w| w.0))
+                        .collect();
+                    waits.push((c, *since, *line, partners, keys));
+                }
+                State::Halted { faulted: true, .. } => {}
+                State::Halted { message, .. } => {
+                    let line = self.programs[c].ins.get(x.pc).map(|i| i.1);
+                    self.out.problems.push(Problem {
+                        kind: ProblemKind::Stopped,
+                        time: x.t,
+                        controller: Some(c),
+                        line,
+                        local_id: x.note.as_deref().and_then(super::ir::local_id_in),
+                        message: format!(
+                            "{} stopped at {:.2} s: {}",
+                            names(c),
+                            x.t,
+                            message
+                                .clone()
+                                .unwrap_or_else(|| "its program stopped itself".to_owned())
+                        ),
+                    });
+                }
+                _ => {}
+            }
+        }
+        if waits.is_empty() {
+            return;
+        }
+        let any_wire = waits.iter().any(|w| !w.3.is_empty());
+        for (c, since, line, partners, keys) in waits {
+            let x = &self.ctls[c];
+            let what = x
+                .note
+                .as_deref()
+                .map(|n| n.trim_start_matches("handshake:").trim().to_owned());
+            let message = if !partners.is_empty() {
+                let mut ps: Vec<String> = partners
+                    .iter()
+                    .map(|&p| {
+                        let state = match &self.ctls[p].state {
+                            State::Ended => "which has ended".to_owned(),
+                            State::Halted { .. } => "which has stopped".to_owned(),
+                            State::Blocked { .. } => format!(
+                                "which waits too (line {})",
+                                self.programs[p].ins.get(self.ctls[p].pc).map_or(0, |i| i.1)
+                            ),
+                            State::Running => "which runs".to_owned(),
+                        };
+                        format!("{} {state}", names(p))
+                    })
+                    .collect();
+                ps.dedup();
+                format!(
+                    "{} waits since {since:.2} s at line {line}{}: for {}",
+                    names(c),
+                    what.map(|w| format!(" ({w})")).unwrap_or_default(),
+                    ps.join(", ")
+                )
+            } else {
+                let inputs: Vec<String> = keys.iter().map(|k| self.cell.input_name(c, k)).collect();
+                format!(
+                    "{} waits for {}, which nothing sets, since {since:.2} s (line {line})",
+                    names(c),
+                    inputs.join(", ")
+                )
+            };
+            self.out.problems.push(Problem {
+                kind: if any_wire {
+                    ProblemKind::Deadlock
+                } else {
+                    ProblemKind::Stuck
+                },
+                time: since,
+                controller: Some(c),
+                line: Some(line),
+                local_id: x.note.as_deref().and_then(super::ir::local_id_in),
+                message,
+            });
+        }
+    }
+
+    fn step_time(&mut self, local_id: u64) -> f64 {
+        let base = self
+            .cell
+            .steps
+            .get(&local_id)
+            .and_then(|s| s.duration)
+            .unwrap_or(self.default_step);
+        if self.jitter > 0.0 {
+            (base * (1.0 + self.jitter * (2.0 * self.rng.unit() - 1.0))).max(0.0)
+        } else {
+            base
+        }
+    }
+
+    /// Runs controller `c`'s next instruction.
+    fn exec(&mut self, c: usize) {
+        self.out.statements += 1;
+        let programs = self.programs;
+        let Some((ins, line)) = programs[c].ins.get(self.ctls[c].pc) else {
+            self.ctls[c].state = State::Ended;
+            return;
+        };
+        let line = *line;
+        // A wait whose time is up looks again.
+        if let Some(wake) = self.wake_of(c)
+            && self.ctls[c].t < wake
+        {
+            self.ctls[c].t = wake;
+        }
+        self.ctls[c].state = State::Running;
+        match ins {
+            Ins::Step { local_id, name } => {
+                let dur = self.step_time(*local_id);
+                let x = &mut self.ctls[c];
+                let start = x.t.max(x.motion_end);
+                x.motion_end = start + dur;
+                if self.cell.controllers[c].blocking {
+                    x.t = start + dur;
+                }
+                let i = self.out.timeline.len();
+                x.running = Some(i);
+                self.out.timeline.push(StepRun {
+                    controller: c,
+                    local_id: *local_id,
+                    name: name.clone(),
+                    start,
+                    end: start + dur,
+                    cut: false,
+                });
+                self.check_order(i);
+                // Changes and restarts "after" this step: when its motion ends.
+                let key = crate::names::key(name);
+                let id = local_id.to_string();
+                for (after, e, done) in &mut self.pending_after {
+                    if !*done && (crate::names::key(after) == key || *after == id) {
+                        *done = true;
+                        self.events.push((start + dur, e.clone()));
+                    }
+                }
+                self.ctls[c].in_step = true;
+                self.ctls[c].pc += 1;
+            }
+            Ins::StepEnd => {
+                self.ctls[c].in_step = false;
+                self.ctls[c].pc += 1;
+            }
+            Ins::Motion | Ins::Unknown(_) => self.ctls[c].pc += 1,
+            Ins::Note(n) => {
+                self.ctls[c].note = Some(n.clone());
+                self.ctls[c].pc += 1;
+            }
+            Ins::Message(m) => {
+                self.ctls[c].message = Some(m.clone());
+                self.ctls[c].pc += 1;
+            }
+            Ins::Branch { transition, .. } => {
+                let t = self.ctls[c].t;
+                self.out.branches.push((c, *transition, t));
+                self.ctls[c].pc += 1;
+            }
+            Ins::Wait { cond, settle, max } => {
+                let x = &mut self.ctls[c];
+                if *settle == Settle::Yes && x.t < x.motion_end {
+                    x.t = x.motion_end;
+                    return;
+                }
+                let pc = x.pc;
+                let since = match x.wait_at {
+                    Some((p, s)) if p == pc => s,
+                    _ => {
+                        x.wait_at = Some((pc, x.t));
+                        x.t
+                    }
+                };
+                match self.eval(c, cond) {
+                    Err(e) => self.fault(c, line, e),
+                    Ok(v) if v.truth() => {
+                        if let Some((_, Some(flag))) = max {
+                            self.ctls[c].vars.insert(flag.clone(), Val::Bool(false));
+                        }
+                        let x = &mut self.ctls[c];
+                        x.wait_at = None;
+                        x.pc += 1;
+                    }
+                    Ok(_) => {
+                        let t = self.ctls[c].t;
+                        let deadline = max.as_ref().map(|(s, _)| since + s);
+                        if let Some(d) = deadline
+                            && t >= d
+                        {
+                            match max {
+                                Some((_, Some(flag))) => {
+                                    self.ctls[c].vars.insert(flag.clone(), Val::Bool(true));
+                                    let x = &mut self.ctls[c];
+                                    x.wait_at = None;
+                                    x.pc += 1;
+                                }
+                                _ => {
+                                    self.ctls[c].state = State::Halted {
+                                        message: Some(
+                                            "its wait's \\MaxTime ran out (ERR_WAIT_MAXTIME)"
+                                                .into(),
+                                        ),
+                                        faulted: false,
+                                    };
+                                }
+                            }
+                            return;
+                        }
+                        let mut wake = deadline;
+                        let mut th = Vec::new();
+                        cond.thresholds(&mut th);
+                        for (clock, k) in th {
+                            if let Some(w) = self.reaches(c, &clock, k)
+                                && w > t
+                            {
+                                wake = Some(wake.map_or(w, |d: f64| d.min(w)));
+                            }
+                        }
+                        let x = &mut self.ctls[c];
+                        x.state = State::Blocked { since, wake };
+                    }
+                }
+            }
+            Ins::Sleep(e, settle) => {
+                let x = &self.ctls[c];
+                if *settle == Settle::Yes && x.t < x.motion_end {
+                    self.ctls[c].t = x.motion_end;
+                    return;
+                }
+                match self.eval(c, e).map(|v| v.num()) {
+                    Ok(Some(s)) => {
+                        let x = &mut self.ctls[c];
+                        if !x.in_step {
+                            x.t += s.max(0.0);
+                        }
+                        x.pc += 1;
+                    }
+                    Ok(None) => self.fault(c, line, EvalError("a time that is no number".into())),
+                    Err(er) => self.fault(c, line, er),
+                }
+            }
+            Ins::Sync => {
+                let x = &mut self.ctls[c];
+                if !x.in_step {
+                    x.t += SYNC_S;
+                }
+                x.pc += 1;
+            }
+            Ins::SetOut(k, e) => match self.eval(c, e) {
+                Ok(v) => self.set_out(c, k.clone(), v, line),
+                Err(er) => self.fault(c, line, er),
+            },
+            Ins::SetOutAt(f, n, e) => match (self.eval(c, n), self.eval(c, e)) {
+                (Ok(n), Ok(v)) => {
+                    let k = format!("{f}({})", n.num().unwrap_or(-1.0) as i64);
+                    self.set_out(c, k, v, line);
+                }
+                (Err(er), _) | (_, Err(er)) => self.fault(c, line, er),
+            },
+            Ins::Assign(n, e) => match self.eval(c, e) {
+                Ok(v) => {
+                    let x = &mut self.ctls[c];
+                    if let Some(ct) = x.counters.get_mut(n) {
+                        *ct = (v.num().unwrap_or(0.0), x.t);
+                    } else {
+                        x.vars.insert(n.clone(), v);
+                    }
+                    x.pc += 1;
+                }
+                Err(er) => self.fault(c, line, er),
+            },
+            Ins::TimerSet(n, e) => match self.eval(c, e) {
+                Ok(v) => {
+                    let x = &mut self.ctls[c];
+                    let running = x.timers.get(n).is_some_and(|t| t.2);
+                    x.timers.insert(*n, (v.num().unwrap_or(0.0), x.t, running));
+                    x.pc += 1;
+                }
+                Err(er) => self.fault(c, line, er),
+            },
+            Ins::TimerStop(n, e) => match self.eval(c, e) {
+                Ok(v) => {
+                    let x = &mut self.ctls[c];
+                    let now = x.t;
+                    let cur = x.timers.get(n).copied().unwrap_or((0.0, now, false));
+                    let ms = if cur.2 {
+                        cur.0 + (now - cur.1) * 1000.0
+                    } else {
+                        cur.0
+                    };
+                    x.timers.insert(*n, (ms, now, !v.truth()));
+                    x.pc += 1;
+                }
+                Err(er) => self.fault(c, line, er),
+            },
+            Ins::ClockReset(n) | Ins::ClockStart(n) | Ins::ClockStop(n) => {
+                let x = &mut self.ctls[c];
+                let now = x.t;
+                let cur = x.clocks.get(n).copied().unwrap_or((0.0, now, false));
+                let s = if cur.2 { cur.0 + (now - cur.1) } else { cur.0 };
+                let v = match ins {
+                    Ins::ClockReset(_) => (0.0, now, cur.2),
+                    Ins::ClockStart(_) => (s, now, true),
+                    _ => (s, now, false),
+                };
+                x.clocks.insert(n.clone(), v);
+                x.pc += 1;
+            }
+            Ins::JumpIfNot(e, to) => match self.eval(c, e) {
+                Ok(v) => {
+                    let x = &mut self.ctls[c];
+                    x.pc = if v.truth() { x.pc + 1 } else { *to };
+                }
+                Err(er) => self.fault(c, line, er),
+            },
+            Ins::Jump(to) => self.ctls[c].pc = *to,
+            Ins::Halt => {
+                let x = &mut self.ctls[c];
+                x.state = State::Halted {
+                    message: x.message.clone(),
+                    faulted: false,
+                };
+                if let Some(i) = x.running.take() {
+                    let _ = i;
+                }
+            }
+            Ins::End => {
+                let x = &mut self.ctls[c];
+                x.t = x.t.max(x.motion_end);
+                x.state = State::Ended;
+            }
+        }
+    }
+
+    /// When a blocked controller's time limit is up (it looks again then).
+    fn wake_of(&self, c: usize) -> Option<f64> {
+        match &self.ctls[c].state {
+            State::Blocked { wake, .. } => *wake,
+            _ => None,
+        }
+    }
+
+    fn fault(&mut self, c: usize, line: u32, e: EvalError) {
+        let name = self.cell.controllers[c].name.clone();
+        let t = self.ctls[c].t;
+        self.out.problems.push(Problem {
+            kind: ProblemKind::Fault,
+            time: t,
+            controller: Some(c),
+            line: Some(line),
+            local_id: None,
+            message: format!("{name} cannot run line {line}: {}", e.0),
+        });
+        self.ctls[c].state = State::Halted {
+            message: Some(format!("a fault at line {line}")),
+            faulted: true,
+        };
+    }
+
+    fn set_out(&mut self, c: usize, k: Key, v: Val, line: u32) {
+        let t = self.ctls[c].t;
+        // A digital output holds a truth (RAPID writes it as 0 or 1).
+        let v = match v {
+            Val::Num(n) if n == 0.0 || n == 1.0 => Val::Bool(n == 1.0),
+            v => v,
+        };
+        let drives = self
+            .cell
+            .wires
+            .iter()
+            .any(|w| w.from.0 == c && w.from.1 == k);
+        if drives && self.ctls[c].motion_end > t + 1e-9 {
+            let step = self.ctls[c]
+                .running
+                .map(|i| self.out.timeline[i].name.clone())
+                .unwrap_or_default();
+            let wire = self
+                .cell
+                .wires
+                .iter()
+                .find(|w| w.from.0 == c && w.from.1 == k)
+                .map(|w| w.name.clone())
+                .unwrap_or_default();
+            self.out.problems.push(Problem {
+                kind: ProblemKind::WireInMotion,
+                time: t,
+                controller: Some(c),
+                line: Some(line),
+                local_id: self.ctls[c].running.map(|i| self.out.timeline[i].local_id),
+                message: format!(
+                    "{} sets wire {wire} at {t:.2} s while the motion of step {step} still runs (until {:.2} s)",
+                    self.cell.controllers[c].name, self.ctls[c].motion_end
+                ),
+            });
+        }
+        let old = self.ctls[c].outs.insert(k.clone(), v.clone());
+        if old.as_ref() != Some(&v) {
+            self.out.changes.push((t, c, k, v));
+        }
+        self.ctls[c].pc += 1;
+        self.wake_all(t);
+    }
+
+    /// A step of the timeline started before a step the chart puts before it had ended.
+    fn check_order(&mut self, i: usize) {
+        let s = &self.out.timeline[i];
+        let Some(preds) = self.cell.preds.get(&s.local_id) else {
+            return;
+        };
+        for p in preds {
+            if let Some(r) = self.out.timeline[..i]
+                .iter()
+                .rev()
+                .find(|r| r.local_id == *p && r.controller != s.controller)
+                && r.end > s.start + 1e-9
+                && r.start <= s.start
+            {
+                let names = &self.cell.controllers;
+                self.out.problems.push(Problem {
+                    kind: ProblemKind::Order,
+                    time: s.start,
+                    controller: Some(s.controller),
+                    line: None,
+                    local_id: Some(s.local_id),
+                    message: format!(
+                        "step {} (localId {}) on {} started at {:.2} s, before step {} (localId {}) on {}, which the chart puts before it, ended at {:.2} s",
+                        s.name,
+                        s.local_id,
+                        names[s.controller].name,
+                        s.start,
+                        r.name,
+                        r.local_id,
+                        names[r.controller].name,
+                        r.end
+                    ),
+                });
+            }
+        }
+    }
+
+    /// When `clock` reads `k` (seconds), if it counts.
+    fn reaches(&self, c: usize, clock: &Clockish, k: f64) -> Option<f64> {
+        let x = &self.ctls[c];
+        match clock {
+            Clockish::Timer(n) => {
+                let (ms, t0, running) = *x.timers.get(n)?;
+                running.then(|| t0 + (k * 1000.0 - ms) / 1000.0)
+            }
+            Clockish::Var(v) => {
+                let (base, t0) = *x.counters.get(v)?;
+                Some(t0 + (k - base))
+            }
+            Clockish::Clock(n) => {
+                let (s, t0, running) = *x.clocks.get(n)?;
+                running.then(|| t0 + (k - s))
+            }
+        }
+    }
+
+    fn input(&self, c: usize, k: &Key) -> Val {
+        if let Some((d, out)) = self.wired.get(&(c, k.clone())) {
+            return self.ctls[*d]
+                .outs
+                .get(out)
+                .cloned()
+                .unwrap_or(Val::Bool(false));
+        }
+        self.world
+            .get(&(c, k.clone()))
+            .cloned()
+            .unwrap_or(Val::Bool(false))
+    }
+
+    fn eval(&self, c: usize, e: &X) -> Result<Val, EvalError> {
+        let x = &self.ctls[c];
+        Ok(match e {
+            X::Const(v) => v.clone(),
+            X::Var(n) => {
+                if let Some((base, t0)) = x.counters.get(n) {
+                    Val::Num(base + (x.t - t0))
+                } else {
+                    x.vars
+                        .get(n)
+                        .cloned()
+                        .ok_or_else(|| EvalError(format!("`{n}` is read before it has a value")))?
+                }
+            }
+            X::In(k, numeric) => {
+                let v = self.input(c, k);
+                if *numeric {
+                    Val::Num(v.num().unwrap_or(0.0))
+                } else {
+                    v
+                }
+            }
+            X::Out(k, numeric) => {
+                let v = x.outs.get(k).cloned().unwrap_or(Val::Bool(false));
+                if *numeric {
+                    Val::Num(v.num().unwrap_or(0.0))
+                } else {
+                    v
+                }
+            }
+            X::InAt(f, n) => {
+                let n = self.eval(c, n)?.num().unwrap_or(-1.0) as i64;
+                self.input(c, &format!("{f}({n})"))
+            }
+            X::Group(bits) => {
+                let mut v = 0u64;
+                for (i, b) in bits.iter().enumerate() {
+                    if self.input(c, b).truth() {
+                        v |= 1 << i;
+                    }
+                }
+                Val::Num(v as f64)
+            }
+            X::Timer(n) => {
+                let (ms, t0, running) = x.timers.get(n).copied().unwrap_or((0.0, x.t, false));
+                Val::Num(if running {
+                    ms + (x.t - t0) * 1000.0
+                } else {
+                    ms
+                })
+            }
+            X::Clock(n) => {
+                let (s, t0, running) = x.clocks.get(n).copied().unwrap_or((0.0, x.t, false));
+                Val::Num(if running { s + (x.t - t0) } else { s })
+            }
+            X::Not(a) => match self.eval(c, a)? {
+                Val::Bool(b) => Val::Bool(!b),
+                v => return Err(EvalError(format!("NOT of the number {v}"))),
+            },
+            X::Neg(a) => match self.eval(c, a)?.num() {
+                Some(n) => Val::Num(-n),
+                None => return Err(EvalError("- of a text".into())),
+            },
+            X::Bin(op, a, b) => {
+                let (l, r) = (self.eval(c, a)?, self.eval(c, b)?);
+                bin(*op, &l, &r)?
+            }
+        })
+    }
+}
+
+fn bin(op: Op, l: &Val, r: &Val) -> Result<Val, EvalError> {
+    let nums = || match (l.num(), r.num()) {
+        (Some(a), Some(b)) => Ok((a, b)),
+        _ => Err(EvalError(format!("{l} {op:?} {r}: not numbers"))),
+    };
+    Ok(match op {
+        Op::Or | Op::And | Op::Xor => match (l, r) {
+            (Val::Bool(a), Val::Bool(b)) => Val::Bool(match op {
+                Op::Or => *a || *b,
+                Op::And => *a && *b,
+                _ => a != b,
+            }),
+            _ => return Err(EvalError(format!("{l} {op:?} {r}: not booleans"))),
+        },
+        Op::Eq | Op::Ne => {
+            let same = match (l, r) {
+                (Val::Str(a), Val::Str(b)) => a == b,
+                (Val::Bool(a), Val::Bool(b)) => a == b,
+                _ => {
+                    let (a, b) = nums()?;
+                    (a - b).abs() < 1e-9
+                }
+            };
+            Val::Bool(if op == Op::Eq { same } else { !same })
+        }
+        Op::Lt | Op::Gt | Op::Le | Op::Ge => {
+            let (a, b) = nums()?;
+            Val::Bool(match op {
+                Op::Lt => a < b,
+                Op::Gt => a > b,
+                Op::Le => a <= b,
+                _ => a >= b,
+            })
+        }
+        Op::Add | Op::Sub | Op::Mul | Op::Div => {
+            let (a, b) = nums()?;
+            Val::Num(match op {
+                Op::Add => a + b,
+                Op::Sub => a - b,
+                Op::Mul => a * b,
+                _ => a / b,
+            })
+        }
+    })
+}

@@ -1,0 +1,304 @@
+//! The scenario file (docs/SIMULATE.md): TOML with the inputs at the start, their changes, the
+//! restarts of controllers and the timing; names as in the blackboard, matched without regard
+//! to case. Every error names the file, line and column and, for a name, the nearest one.
+
+use std::collections::BTreeMap;
+use std::ops::Range;
+use std::path::Path;
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use super::ir::Val;
+use super::{Cell, Change, Restart, Scenario, When};
+
+/// The largest scenario file read (a FIFO or `/dev/zero` must not hang or fill memory).
+pub const MAX_SIZE: u64 = 1 << 20;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Raw {
+    runs: Option<Spanned<i64>>,
+    seed: Option<u64>,
+    jitter: Option<Spanned<f64>>,
+    default_step_s: Option<Spanned<f64>>,
+    max_time_s: Option<Spanned<f64>>,
+    max_steps: Option<Spanned<i64>>,
+    #[serde(default)]
+    inputs: BTreeMap<Spanned<String>, BTreeMap<Spanned<String>, Spanned<toml::Value>>>,
+    #[serde(default)]
+    change: Vec<RawChange>,
+    #[serde(default)]
+    restart: Vec<RawRestart>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawChange {
+    after: Option<Spanned<String>>,
+    at: Option<Spanned<f64>>,
+    resource: Spanned<String>,
+    signal: Spanned<toml::Value>,
+    value: Spanned<toml::Value>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRestart {
+    controller: Spanned<String>,
+    after: Option<Spanned<String>>,
+    at: Option<Spanned<f64>>,
+}
+
+/// A scenario that cannot be used: where and why.
+#[derive(Debug, Clone)]
+pub struct ScenarioError {
+    pub file: String,
+    pub line: Option<usize>,
+    pub column: Option<usize>,
+    pub message: String,
+}
+
+impl std::fmt::Display for ScenarioError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match (self.line, self.column) {
+            (Some(l), Some(c)) => write!(f, "{}:{l}:{c}: {}", self.file, self.message),
+            _ => write!(f, "{}: {}", self.file, self.message),
+        }
+    }
+}
+
+fn line_column(text: &str, at: usize) -> (usize, usize) {
+    let before = &text[..at.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let col = before[before.rfind('\n').map_or(0, |i| i + 1)..]
+        .chars()
+        .count()
+        + 1;
+    (line, col)
+}
+
+/// Reads scenario file `path` (at most [`MAX_SIZE`] bytes, never blocking on a FIFO).
+pub fn load(path: &Path, cell: &Cell) -> Result<Scenario, ScenarioError> {
+    let file = path.display().to_string();
+    let bytes = crate::load::read_limited(path, MAX_SIZE).map_err(|e| ScenarioError {
+        file: file.clone(),
+        line: None,
+        column: None,
+        message: format!("cannot read the scenario: {e}"),
+    })?;
+    let text = String::from_utf8(bytes).map_err(|e| ScenarioError {
+        file: file.clone(),
+        line: None,
+        column: None,
+        message: format!("the scenario is not UTF-8: {e}"),
+    })?;
+    parse(&text, &file, cell)
+}
+
+/// Parses scenario text as if read from `file`.
+pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioError> {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let at = |span: Option<Range<usize>>, message: String| {
+        let (line, column) = match span {
+            Some(s) => {
+                let (l, c) = line_column(text, s.start);
+                (Some(l), Some(c))
+            }
+            None => (None, None),
+        };
+        ScenarioError {
+            file: file.to_owned(),
+            line,
+            column,
+            message,
+        }
+    };
+    let raw: Raw = toml::from_str(text).map_err(|e| at(e.span(), e.message().trim().to_owned()))?;
+    let mut s = Scenario::with_file();
+    if let Some(r) = &raw.runs {
+        if !(1..=1_000_000).contains(r.get_ref()) {
+            return Err(at(Some(r.span()), "`runs` is 1 to 1,000,000".into()));
+        }
+        s.runs = *r.get_ref() as usize;
+    }
+    s.seed = raw.seed;
+    let fraction = |v: &Spanned<f64>, key: &str, max: f64| {
+        let x = *v.get_ref();
+        if x.is_finite() && (0.0..=max).contains(&x) {
+            Ok(x)
+        } else {
+            Err(at(
+                Some(v.span()),
+                format!("`{key}` is a number from 0 to {max}"),
+            ))
+        }
+    };
+    if let Some(j) = &raw.jitter {
+        s.jitter = fraction(j, "jitter", 1.0)?;
+    }
+    if let Some(d) = &raw.default_step_s {
+        s.default_step_s = fraction(d, "default_step_s", 86_400.0)?;
+    }
+    if let Some(d) = &raw.max_time_s {
+        s.max_time_s = fraction(d, "max_time_s", 1.0e7)?;
+    }
+    if let Some(m) = &raw.max_steps {
+        if !(1..=100_000_000).contains(m.get_ref()) {
+            return Err(at(Some(m.span()), "`max_steps` is 1 to 100,000,000".into()));
+        }
+        s.max_steps = *m.get_ref() as usize;
+    }
+    let resource = |name: &Spanned<String>| {
+        cell.resource(name.get_ref()).ok_or_else(|| {
+            at(
+                Some(name.span()),
+                format!(
+                    "no resource `{}` in the blackboard{}",
+                    name.get_ref(),
+                    crate::names::did_you_mean(
+                        name.get_ref(),
+                        cell.resources.iter().map(|r| r.name.as_str())
+                    )
+                ),
+            )
+        })
+    };
+    let signal = |r: usize, sig: &Spanned<toml::Value>| {
+        let res = &cell.resources[r];
+        let found = match sig.get_ref() {
+            toml::Value::String(n) => res.inputs.iter().position(|i| crate::names::eq(&i.name, n)),
+            toml::Value::Integer(k) => res.inputs.iter().position(|i| i.number == Some(*k)),
+            _ => None,
+        };
+        found.ok_or_else(|| {
+            let shown = match sig.get_ref() {
+                toml::Value::String(n) => format!("`{n}`"),
+                v => format!("number {v}"),
+            };
+            let near = match sig.get_ref() {
+                toml::Value::String(n) => crate::names::did_you_mean(
+                    n,
+                    res.inputs.iter().map(|i| i.name.as_str()),
+                ),
+                _ => String::new(),
+            };
+            let wired = match sig.get_ref() {
+                toml::Value::String(n) => res.wired.iter().any(|w| crate::names::eq(w, n)),
+                _ => false,
+            };
+            at(
+                Some(sig.span()),
+                if wired {
+                    format!(
+                        "{shown} of `{}` is a wire: another controller's program drives it, a scenario does not",
+                        res.name
+                    )
+                } else {
+                    format!("`{}` has no input {shown}{near}", res.name)
+                },
+            )
+        })
+    };
+    let value = |r: usize, k: usize, v: &Spanned<toml::Value>| {
+        let inp = &cell.resources[r].inputs[k];
+        match (v.get_ref(), inp.integer) {
+            (toml::Value::Boolean(b), false) => Ok(Val::Bool(*b)),
+            (toml::Value::Integer(i), true) => Ok(Val::Num(*i as f64)),
+            (toml::Value::Integer(i @ (0 | 1)), false) => Ok(Val::Bool(*i == 1)),
+            (_, integer) => Err(at(
+                Some(v.span()),
+                format!(
+                    "input `{}` takes {}",
+                    inp.name,
+                    if integer {
+                        "an integer"
+                    } else {
+                        "true or false"
+                    }
+                ),
+            )),
+        }
+    };
+    for (res, sigs) in &raw.inputs {
+        let r = resource(res)?;
+        for (name, v) in sigs {
+            let sig = Spanned::new(name.span(), toml::Value::String(name.get_ref().clone()));
+            let k = signal(r, &sig)?;
+            let inp = &cell.resources[r].inputs[k];
+            s.start
+                .push((inp.controller, inp.key.clone(), value(r, k, v)?));
+        }
+    }
+    let when =
+        |after: &Option<Spanned<String>>, at_: &Option<Spanned<f64>>, span: Range<usize>| match (
+            after, at_,
+        ) {
+            (Some(a), None) => {
+                let known = cell
+                    .step_names
+                    .iter()
+                    .any(|n| crate::names::eq(n, a.get_ref()))
+                    || cell.steps.keys().any(|id| id.to_string() == *a.get_ref());
+                if known {
+                    Ok(When::After(a.get_ref().clone()))
+                } else {
+                    Err(at(
+                        Some(a.span()),
+                        format!(
+                            "no step `{}` runs in this cell's programs{}",
+                            a.get_ref(),
+                            crate::names::did_you_mean(
+                                a.get_ref(),
+                                cell.step_names.iter().map(String::as_str)
+                            )
+                        ),
+                    ))
+                }
+            }
+            (None, Some(t)) if t.get_ref().is_finite() && *t.get_ref() >= 0.0 => {
+                Ok(When::At(*t.get_ref()))
+            }
+            (None, Some(t)) => Err(at(Some(t.span()), "`at` is seconds from 0 on".into())),
+            _ => Err(at(
+                Some(span),
+                "give either `after = \"STEP\"` or `at = SECONDS`".into(),
+            )),
+        };
+    for c in &raw.change {
+        let r = resource(&c.resource)?;
+        let k = signal(r, &c.signal)?;
+        let inp = &cell.resources[r].inputs[k];
+        let w = when(&c.after, &c.at, c.resource.span())?;
+        s.changes.push(Change {
+            when: w,
+            controller: inp.controller,
+            key: inp.key.clone(),
+            value: value(r, k, &c.value)?,
+        });
+    }
+    for rs in &raw.restart {
+        let Some(c) = cell
+            .controllers
+            .iter()
+            .position(|x| crate::names::eq(&x.name, rs.controller.get_ref()))
+        else {
+            return Err(at(
+                Some(rs.controller.span()),
+                format!(
+                    "no controller `{}` in this cell{}",
+                    rs.controller.get_ref(),
+                    crate::names::did_you_mean(
+                        rs.controller.get_ref(),
+                        cell.controllers.iter().map(|x| x.name.as_str())
+                    )
+                ),
+            ));
+        };
+        s.restarts.push(Restart {
+            when: when(&rs.after, &rs.at, rs.controller.span())?,
+            controller: c,
+        });
+    }
+    Ok(s)
+}
