@@ -48,6 +48,9 @@ struct Ctl {
     outs: HashMap<Key, Val>,
     /// The wait the program is at: its pc and since when (for `\MaxTime`).
     wait_at: Option<(usize, f64)>,
+    /// Since when it waits for what a wait's condition names (a watched wait that ran out of
+    /// time and the wait after it are one wait).
+    waiting_since: Option<f64>,
     note: Option<String>,
     message: Option<String>,
     /// The step whose motion runs, and its index in the timeline.
@@ -81,7 +84,7 @@ pub struct Outcome {
 pub struct Rng(pub u64);
 
 impl Rng {
-    pub fn next(&mut self) -> u64 {
+    pub fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -91,7 +94,7 @@ impl Rng {
 
     /// A number in [0, 1).
     pub fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
 }
 
@@ -100,6 +103,8 @@ impl Rng {
 enum Event {
     Input(usize, Vec<Key>, Val),
     Restart(usize),
+    /// A random run: the world changes input `k` of [`Cell::inputs`] now and then.
+    Flip(usize),
 }
 
 struct Run<'c> {
@@ -164,6 +169,7 @@ pub fn run(
             clocks: HashMap::new(),
             outs: HashMap::new(),
             wait_at: None,
+            waiting_since: None,
             note: None,
             message: None,
             running: None,
@@ -176,9 +182,9 @@ pub fn run(
     for inp in &cell.inputs {
         let v = if random {
             if inp.integer {
-                Val::Num((r.rng.next() % 4) as f64)
+                Val::Num((r.rng.next_u64() % 4) as f64)
             } else {
-                Val::Bool(r.rng.next() & 1 == 1)
+                Val::Bool(r.rng.next_u64() & 1 == 1)
             }
         } else if inp.integer {
             Val::Num(0.0)
@@ -189,6 +195,12 @@ pub fn run(
     }
     for (c, key, v) in &scenario.start {
         r.set_world(*c, key, v, 0.0);
+    }
+    if random {
+        for k in 0..cell.inputs.len() {
+            let gap = r.flip_gap();
+            r.events.push((gap, Event::Flip(k)));
+        }
     }
     for Change {
         when,
@@ -255,7 +267,14 @@ impl Run<'_> {
             let next = (0..self.ctls.len())
                 .filter_map(|c| self.next_time(c).map(|t| (t, c)))
                 .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            let next_event = self.events.iter().map(|e| e.0).min_by(f64::total_cmp);
+            // Nobody waits for the world: its own changes (a random run's) do not matter.
+            let world_matters = next.is_some() || self.waits_for_world();
+            let next_event = self
+                .events
+                .iter()
+                .filter(|e| world_matters || !matches!(e.1, Event::Flip(_)))
+                .map(|e| e.0)
+                .min_by(f64::total_cmp);
             match (next, next_event) {
                 (Some((t, _)), Some(te)) if te <= t => self.fire_events(te),
                 (None, Some(te)) => self.fire_events(te),
@@ -278,6 +297,42 @@ impl Run<'_> {
                 }
             }
         }
+    }
+
+    /// Whether a program waits for an input of the world (no wire drives it).
+    fn waits_for_world(&self) -> bool {
+        self.ctls.iter().enumerate().any(|(c, x)| {
+            matches!(x.state, State::Blocked { .. })
+                && match self.programs[c].ins.get(x.pc) {
+                    Some((Ins::Wait { cond, .. }, _)) => {
+                        let mut keys = Vec::new();
+                        cond.inputs(&mut keys);
+                        keys.iter()
+                            .any(|k| !self.wired.contains_key(&(c, k.clone())))
+                    }
+                    _ => false,
+                }
+        })
+    }
+
+    /// The time until a random run's world changes an input again: exponential, with a mean
+    /// of three steps' time (1 s without step times).
+    fn flip_gap(&mut self) -> f64 {
+        let mean = {
+            let times: Vec<f64> = self
+                .cell
+                .steps
+                .values()
+                .filter_map(|s| s.duration)
+                .collect();
+            if times.is_empty() {
+                1.0
+            } else {
+                3.0 * times.iter().sum::<f64>() / times.len() as f64
+            }
+        }
+        .max(0.05);
+        -mean * (1.0 - self.rng.unit()).ln()
     }
 
     fn now(&self) -> f64 {
@@ -326,6 +381,24 @@ impl Run<'_> {
                     self.wake_all(t);
                 }
                 Event::Restart(c) => self.restart(c, t),
+                Event::Flip(k) => {
+                    let inp = &self.cell.inputs[k];
+                    let (c, keys, integer) = (inp.controller, inp.key.clone(), inp.integer);
+                    let old = keys
+                        .first()
+                        .and_then(|k0| self.world.get(&(c, k0.clone())))
+                        .cloned()
+                        .unwrap_or(Val::Bool(false));
+                    let v = if integer || keys.len() > 1 {
+                        Val::Num((self.rng.next_u64() % 4) as f64)
+                    } else {
+                        Val::Bool(!old.truth())
+                    };
+                    self.set_world(c, &keys, &v, t);
+                    self.wake_all(t);
+                    let gap = self.flip_gap();
+                    self.events.push((t + gap, Event::Flip(k)));
+                }
             }
         }
     }
@@ -347,6 +420,7 @@ impl Run<'_> {
         x.pc = 0;
         x.state = State::Running;
         x.wait_at = None;
+        x.waiting_since = None;
         x.note = None;
         x.message = None;
         x.in_step = false;
@@ -375,7 +449,7 @@ impl Run<'_> {
                 let mut keys = Vec::new();
                 cond.inputs(&mut keys);
                 for k in keys {
-                    if self.world.contains_key(&(c, k.clone())) {
+                    if !self.wired.contains_key(&(c, k.clone())) && !k.ends_with("(?)") {
                         cands.push((c, k, x.t));
                     }
                 }
@@ -384,7 +458,7 @@ impl Run<'_> {
         if cands.is_empty() {
             return false;
         }
-        let (c, k, t) = cands[(self.rng.next() % cands.len() as u64) as usize].clone();
+        let (c, k, t) = cands[(self.rng.next_u64() % cands.len() as u64) as usize].clone();
         let old = self
             .world
             .get(&(c, k.clone()))
@@ -392,7 +466,7 @@ impl Run<'_> {
             .unwrap_or(Val::Bool(false));
         let v = match old {
             Val::Bool(b) => Val::Bool(!b),
-            Val::Num(n) => Val::Num(((n as u64 + 1 + self.rng.next() % 3) % 4) as f64),
+            Val::Num(n) => Val::Num(((n as u64 + 1 + self.rng.next_u64() % 3) % 4) as f64),
             s => s,
         };
         let at = t + 0.1 + self.rng.unit();
@@ -434,6 +508,7 @@ impl Run<'_> {
                     };
                     let mut keys = Vec::new();
                     cond.inputs(&mut keys);
+                    cond.outputs(&mut keys);
                     let partners: Vec<usize> = keys
                         .iter()
                         .filter_map(|k| self.wired.get(&(c, k.clone())).map(|w| w.0))
@@ -478,7 +553,7 @@ impl Run<'_> {
                     .map(|&p| {
                         let state = match &self.ctls[p].state {
                             State::Ended => "which has ended".to_owned(),
-                            State::Halted { .. } => "which has stopped".to_owned(),
+                            State::Halted { .. } => "which has stopped (start it again)".to_owned(),
                             State::Blocked { .. } => format!(
                                 "which waits too (line {})",
                                 self.programs[p].ins.get(self.ctls[p].pc).map_or(0, |i| i.1)
@@ -615,6 +690,10 @@ impl Run<'_> {
                 match self.eval(c, cond) {
                     Err(e) => self.fault(c, line, e),
                     Ok(v) if v.truth() => {
+                        // Held for what it names, not for a time limit: the waiting is over.
+                        if self.eval_untimed(c, cond) {
+                            self.ctls[c].waiting_since = None;
+                        }
                         if let Some((_, Some(flag))) = max {
                             self.ctls[c].vars.insert(flag.clone(), Val::Bool(false));
                         }
@@ -658,6 +737,7 @@ impl Run<'_> {
                             }
                         }
                         let x = &mut self.ctls[c];
+                        let since = *x.waiting_since.get_or_insert(since);
                         x.state = State::Blocked { since, wake };
                     }
                 }
@@ -893,7 +973,7 @@ impl Run<'_> {
             }
             Clockish::Clock(n) => {
                 let (s, t0, running) = *x.clocks.get(n)?;
-                running.then(|| t0 + (k - s))
+                running.then_some(t0 + (k - s))
             }
         }
     }
@@ -910,6 +990,33 @@ impl Run<'_> {
             .get(&(c, k.clone()))
             .cloned()
             .unwrap_or(Val::Bool(false))
+    }
+
+    /// Whether `e` holds with every comparison of a timer or counter taken as false.
+    fn eval_untimed(&self, c: usize, e: &X) -> bool {
+        fn strip(e: &X, counters: &HashMap<String, (f64, f64)>) -> X {
+            match e {
+                X::Bin(op, a, b) => {
+                    let timed = |x: &X| {
+                        matches!(x, X::Timer(_) | X::Clock(_))
+                            || matches!(x, X::Var(n) if counters.contains_key(n))
+                    };
+                    if matches!(op, Op::Ge | Op::Gt | Op::Le | Op::Lt) && (timed(a) || timed(b)) {
+                        X::Const(Val::Bool(false))
+                    } else {
+                        X::Bin(
+                            *op,
+                            Box::new(strip(a, counters)),
+                            Box::new(strip(b, counters)),
+                        )
+                    }
+                }
+                X::Not(a) => X::Not(Box::new(strip(a, counters))),
+                other => other.clone(),
+            }
+        }
+        let s = strip(e, &self.ctls[c].counters);
+        self.eval(c, &s).is_ok_and(|v| v.truth())
     }
 
     fn eval(&self, c: usize, e: &X) -> Result<Val, EvalError> {

@@ -127,6 +127,19 @@ impl X {
         }
     }
 
+    /// Every output of its own controller the expression reads back.
+    pub fn outputs(&self, out: &mut Vec<Key>) {
+        match self {
+            X::Out(k, _) => out.push(k.clone()),
+            X::Not(a) | X::Neg(a) => a.outputs(out),
+            X::Bin(_, a, b) => {
+                a.outputs(out);
+                b.outputs(out);
+            }
+            _ => {}
+        }
+    }
+
     /// The times a timer comparison in it flips: (timer, threshold in ms) for KRL `$TIMER[n] >=
     /// k`, (clock variable, seconds) for a URScript counter.
     pub fn thresholds(&self, out: &mut Vec<(Clockish, f64)>) {

@@ -116,6 +116,32 @@ fn read_dat(dat: &str, p: &mut Program) -> Signals {
     signals
 }
 
+/// The names a text declares with a type other than `BOOL`, `INT` and `REAL`.
+fn opaque_decls(text: &str) -> impl Iterator<Item = String> + '_ {
+    text.lines().filter_map(|l| {
+        let c = code(l);
+        let mut w = c.split_whitespace();
+        let mut first = w.next()?.to_ascii_uppercase();
+        if first == "GLOBAL" {
+            first = w.next()?.to_ascii_uppercase();
+        }
+        if first != "DECL" {
+            return None;
+        }
+        let ty = w.next()?.to_ascii_uppercase();
+        if ["BOOL", "INT", "REAL"].contains(&ty.as_str()) {
+            return None;
+        }
+        let name = w
+            .next()?
+            .split(['=', '[', ','].as_ref())
+            .next()?
+            .trim()
+            .to_ascii_uppercase();
+        Some(name)
+    })
+}
+
 struct Routine<'a> {
     params: Vec<String>,
     body: Vec<(Line, &'a str)>,
@@ -223,6 +249,8 @@ struct Reader<'a> {
     /// FOLDs open, and the depth of the step's FOLD while in one.
     folds: usize,
     step_fold: Option<usize>,
+    /// Variables of other types (`FRAME`, `E6POS`, structures): what sets them is a setting.
+    opaque: std::collections::HashSet<String>,
 }
 
 /// Reads a KRL program: `src` the main file, `dat` its data list.
@@ -263,6 +291,7 @@ pub fn read(src: &str, dat: &str, io: &super::ir::IoKeys) -> Program {
         msg: None,
         folds: 0,
         step_fold: None,
+        opaque: opaque_decls(src).chain(opaque_decls(dat)).collect(),
     };
     let body: Vec<(Line, &str)> = lines[main + 1..end.min(lines.len())].to_vec();
     r.block(&body);
@@ -287,6 +316,9 @@ impl Reader<'_> {
             Raw::Str(s) => X::Const(Val::Str(s.clone())),
             Raw::Name(n) => {
                 let u = n.to_ascii_uppercase();
+                if u.starts_with('$') && !self.io.ins.contains(&u) && !self.io.outs.contains(&u) {
+                    return Err(format!("the system variable `{n}`"));
+                }
                 match self.signals.get(&u) {
                     Some(bits) if bits.len() == 1 => {
                         if bits[0].starts_with("$OUT[") {
@@ -434,7 +466,9 @@ impl Reader<'_> {
                         },
                         line,
                     );
-                } else if comment.starts_with("handshake:") || comment.starts_with("selection ") {
+                } else if (comment.starts_with("handshake:") || comment.starts_with("selection "))
+                    && self.depth == 0
+                {
                     self.p.push(Ins::Note(comment.to_owned()), line);
                 }
                 continue;
@@ -802,7 +836,7 @@ impl Reader<'_> {
                 }
                 return;
             }
-            if lu.contains(['[', '.']) {
+            if lu.contains(['[', '.']) || self.opaque.contains(&lu) {
                 return;
             }
             match self.expr(rhs) {

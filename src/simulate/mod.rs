@@ -69,6 +69,8 @@ pub struct Input {
 #[derive(Debug, Clone)]
 pub struct Resource {
     pub name: String,
+    /// The controller that runs it (`None`: none of the cell's).
+    pub controller: Option<usize>,
     pub inputs: Vec<Input>,
     pub wired: Vec<String>,
 }
@@ -154,6 +156,8 @@ pub struct Scenario {
     pub start: Vec<(usize, Vec<Key>, Val)>,
     pub changes: Vec<Change>,
     pub restarts: Vec<Restart>,
+    /// Wires crossed (as wired on the shop floor): each pair's inputs swapped.
+    pub swaps: Vec<(usize, usize)>,
     /// Random inputs and timing (no scenario file).
     pub random: bool,
 }
@@ -177,6 +181,7 @@ impl Scenario {
             start: Vec::new(),
             changes: Vec::new(),
             restarts: Vec::new(),
+            swaps: Vec::new(),
             random: false,
         }
     }
@@ -383,6 +388,7 @@ impl Cell {
         for (r, res) in bb.resources.iter().enumerate() {
             let mut out = Resource {
                 name: res.name.text.to_string(),
+                controller: ctl_of(r),
                 inputs: Vec::new(),
                 wired: Vec::new(),
             };
@@ -542,13 +548,17 @@ fn limits(s: &mut Scenario, cell: &Cell, programs: &[Program]) {
 
 /// Runs the cell `runs` times (the scenario's count unless given), from `seed`.
 pub fn simulate(
-    cell: Cell,
+    mut cell: Cell,
     programs: &[Program],
     mut scenario: Scenario,
     runs: Option<usize>,
     seed: Option<u64>,
 ) -> Report {
     limits(&mut scenario, &cell, programs);
+    for &(a, b) in &scenario.swaps {
+        let ta = cell.wires[a].to.clone();
+        cell.wires[a].to = std::mem::replace(&mut cell.wires[b].to, ta);
+    }
     let runs = runs.unwrap_or(scenario.runs).max(1);
     let seed = seed.or(scenario.seed).unwrap_or(0x5EED);
     let mut report = Report::default();
@@ -557,7 +567,7 @@ pub fn simulate(
     let mut kept = 0usize;
     let mut seeds = engine::Rng(seed);
     for k in 0..runs {
-        let run_seed = if k == 0 { seed } else { seeds.next() };
+        let run_seed = if k == 0 { seed } else { seeds.next_u64() };
         let mut out = engine::run(
             &cell,
             programs,
@@ -588,15 +598,11 @@ pub fn simulate(
     for (c, p) in programs.iter().enumerate() {
         for (i, _) in &p.ins {
             match i {
-                ir::Ins::Step { local_id, name } => {
-                    if !all_steps.iter().any(|s| s.0 == *local_id) {
-                        all_steps.push((*local_id, name.clone()));
-                    }
+                ir::Ins::Step { local_id, name } if !all_steps.iter().any(|s| s.0 == *local_id) => {
+                    all_steps.push((*local_id, name.clone()));
                 }
-                ir::Ins::Branch { transition, .. } => {
-                    if !all_branches.contains(transition) {
-                        all_branches.push(*transition);
-                    }
+                ir::Ins::Branch { transition, .. } if !all_branches.contains(transition) => {
+                    all_branches.push(*transition);
                 }
                 _ => {}
             }

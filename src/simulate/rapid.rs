@@ -155,6 +155,8 @@ struct Reader<'a> {
     io: &'a IoKeys,
     procs: HashMap<String, Proc<'a>>,
     vars: std::collections::HashSet<String>,
+    /// Data of other types (`tooldata`, `robtarget`, …): what sets them is a setting.
+    opaque: std::collections::HashSet<String>,
     open: Vec<Open>,
     labels: HashMap<String, usize>,
     gotos: Vec<(usize, String)>,
@@ -227,6 +229,7 @@ pub fn read(text: &str, io: &IoKeys) -> Program {
         io,
         procs,
         vars,
+        opaque: opaque_data(text),
         open: Vec::new(),
         labels: HashMap::new(),
         gotos: Vec::new(),
@@ -245,6 +248,34 @@ pub fn read(text: &str, io: &IoKeys) -> Program {
         r.p.patch(g, to);
     }
     r.p
+}
+
+/// The names a module declares with a type other than `num`, `dnum`, `bool` and `clock`.
+fn opaque_data(text: &str) -> std::collections::HashSet<String> {
+    statements(text)
+        .into_iter()
+        .filter_map(|(_, s)| {
+            let mut w = s.split_whitespace();
+            let mut kind = w.next()?.to_ascii_uppercase();
+            if kind == "LOCAL" || kind == "TASK" {
+                kind = w.next()?.to_ascii_uppercase();
+            }
+            if !["VAR", "PERS", "CONST"].contains(&kind.as_str()) {
+                return None;
+            }
+            let ty = w.next()?.to_ascii_uppercase();
+            if ["NUM", "DNUM", "BOOL", "CLOCK"].contains(&ty.as_str()) {
+                return None;
+            }
+            let name = w
+                .next()?
+                .split([':', ';', '{'])
+                .next()?
+                .trim()
+                .to_ascii_uppercase();
+            Some(name)
+        })
+        .collect()
 }
 
 /// `VAR num x := 0;`, `PERS bool b := TRUE;`, `VAR num y;`: the name and its first value.
@@ -460,7 +491,9 @@ impl Reader<'_> {
                     },
                     line,
                 );
-            } else if comment.starts_with("handshake:") || comment.starts_with("selection ") {
+            } else if (comment.starts_with("handshake:") || comment.starts_with("selection "))
+                && self.depth == 0
+            {
                 self.p.push(Ins::Note(comment.to_owned()), line);
             }
             return;
@@ -533,13 +566,13 @@ impl Reader<'_> {
                 }
             }
             "ENDIF" | "ENDWHILE" | "ENDFOR" | "ENDTEST" => {
-                let fits = match (first.as_str(), self.open.last()) {
+                let fits = matches!(
+                    (first.as_str(), self.open.last()),
                     ("ENDIF", Some(Open::If { .. }))
-                    | ("ENDWHILE", Some(Open::While { .. }))
-                    | ("ENDFOR", Some(Open::For { .. }))
-                    | ("ENDTEST", Some(Open::Test { .. })) => true,
-                    _ => false,
-                };
+                        | ("ENDWHILE", Some(Open::While { .. }))
+                        | ("ENDFOR", Some(Open::For { .. }))
+                        | ("ENDTEST", Some(Open::Test { .. }))
+                );
                 if fits && let Some(o) = self.open.pop() {
                     self.close(o, line);
                 } else {
@@ -778,6 +811,9 @@ impl Reader<'_> {
             _ => {
                 if let Some((lhs, rhs)) = body.split_once(":=") {
                     let l = lhs.trim().to_ascii_uppercase();
+                    if self.opaque.contains(&l) {
+                        return;
+                    }
                     if l.contains(['.', '{', '[']) {
                         return self.unknown(s, line);
                     }

@@ -10,7 +10,7 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::ir::Val;
-use super::{Cell, Change, Restart, Scenario, When};
+use super::{Cell, Change, Input, Restart, Scenario, When};
 
 /// The largest scenario file read (a FIFO or `/dev/zero` must not hang or fill memory).
 pub const MAX_SIZE: u64 = 1 << 20;
@@ -30,6 +30,14 @@ struct Raw {
     change: Vec<RawChange>,
     #[serde(default)]
     restart: Vec<RawRestart>,
+    #[serde(default)]
+    swap: Vec<RawSwap>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSwap {
+    wires: Spanned<Vec<Spanned<String>>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -164,14 +172,36 @@ pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioEr
             )
         })
     };
-    let signal = |r: usize, sig: &Spanned<toml::Value>| {
+    let signal = |r: usize, sig: &Spanned<toml::Value>| -> Result<Input, ScenarioError> {
         let res = &cell.resources[r];
+        // An input the blackboard does not declare, by its number: KRL `$IN[n]`, URScript's
+        // standard digital input n.
+        if let toml::Value::Integer(k) = sig.get_ref()
+            && !res.inputs.iter().any(|i| i.number == Some(*k))
+            && let Some(c) = res.controller
+            && (1..=4096).contains(k)
+        {
+            let key = match cell.controllers[c].language {
+                crate::lang::Language::Krl => Some(format!("$IN[{k}]")),
+                crate::lang::Language::UrScript => Some(format!("get_standard_digital_in({k})")),
+                crate::lang::Language::Rapid => None,
+            };
+            if let Some(key) = key {
+                return Ok(Input {
+                    name: format!("input {k}"),
+                    number: Some(*k),
+                    controller: c,
+                    key: vec![key],
+                    integer: false,
+                });
+            }
+        }
         let found = match sig.get_ref() {
             toml::Value::String(n) => res.inputs.iter().position(|i| crate::names::eq(&i.name, n)),
             toml::Value::Integer(k) => res.inputs.iter().position(|i| i.number == Some(*k)),
             _ => None,
         };
-        found.ok_or_else(|| {
+        found.map(|k| res.inputs[k].clone()).ok_or_else(|| {
             let shown = match sig.get_ref() {
                 toml::Value::String(n) => format!("`{n}`"),
                 v => format!("number {v}"),
@@ -187,9 +217,19 @@ pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioEr
                 toml::Value::String(n) => res.wired.iter().any(|w| crate::names::eq(w, n)),
                 _ => false,
             };
+            let elsewhere = match sig.get_ref() {
+                toml::Value::String(n) => cell
+                    .resources
+                    .iter()
+                    .find(|o| o.inputs.iter().any(|i| crate::names::eq(&i.name, n)))
+                    .map(|o| format!("; `{}` has an input of that name", o.name)),
+                _ => None,
+            };
             at(
                 Some(sig.span()),
-                if wired {
+                if let (Some(e), false) = (&elsewhere, wired) {
+                    format!("`{}` has no input {shown}{e}", res.name)
+                } else if wired {
                     format!(
                         "{shown} of `{}` is a wire: another controller's program drives it, a scenario does not",
                         res.name
@@ -200,34 +240,34 @@ pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioEr
             )
         })
     };
-    let value = |r: usize, k: usize, v: &Spanned<toml::Value>| {
-        let inp = &cell.resources[r].inputs[k];
-        match (v.get_ref(), inp.integer) {
-            (toml::Value::Boolean(b), false) => Ok(Val::Bool(*b)),
-            (toml::Value::Integer(i), true) => Ok(Val::Num(*i as f64)),
-            (toml::Value::Integer(i @ (0 | 1)), false) => Ok(Val::Bool(*i == 1)),
-            (_, integer) => Err(at(
-                Some(v.span()),
-                format!(
-                    "input `{}` takes {}",
-                    inp.name,
-                    if integer {
-                        "an integer"
-                    } else {
-                        "true or false"
-                    }
-                ),
-            )),
-        }
+    let value = |inp: &Input, v: &Spanned<toml::Value>| match (v.get_ref(), inp.integer) {
+        (toml::Value::Boolean(b), false) => Ok(Val::Bool(*b)),
+        (toml::Value::Integer(i), true) => Ok(Val::Num(*i as f64)),
+        (toml::Value::Integer(i @ (0 | 1)), false) => Ok(Val::Bool(*i == 1)),
+        (_, integer) => Err(at(
+            Some(v.span()),
+            format!(
+                "input `{}` takes {}",
+                inp.name,
+                if integer {
+                    "an integer"
+                } else {
+                    "true or false"
+                }
+            ),
+        )),
     };
     for (res, sigs) in &raw.inputs {
         let r = resource(res)?;
         for (name, v) in sigs {
-            let sig = Spanned::new(name.span(), toml::Value::String(name.get_ref().clone()));
-            let k = signal(r, &sig)?;
-            let inp = &cell.resources[r].inputs[k];
+            // A key of digits is an input's number.
+            let raw = match name.get_ref().parse::<i64>() {
+                Ok(n) => toml::Value::Integer(n),
+                Err(_) => toml::Value::String(name.get_ref().clone()),
+            };
+            let inp = signal(r, &Spanned::new(name.span(), raw))?;
             s.start
-                .push((inp.controller, inp.key.clone(), value(r, k, v)?));
+                .push((inp.controller, inp.key.clone(), value(&inp, v)?));
         }
     }
     let when =
@@ -267,14 +307,13 @@ pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioEr
         };
     for c in &raw.change {
         let r = resource(&c.resource)?;
-        let k = signal(r, &c.signal)?;
-        let inp = &cell.resources[r].inputs[k];
+        let inp = signal(r, &c.signal)?;
         let w = when(&c.after, &c.at, c.resource.span())?;
         s.changes.push(Change {
             when: w,
             controller: inp.controller,
             key: inp.key.clone(),
-            value: value(r, k, &c.value)?,
+            value: value(&inp, &c.value)?,
         });
     }
     for rs in &raw.restart {
@@ -299,6 +338,38 @@ pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioEr
             when: when(&rs.after, &rs.at, rs.controller.span())?,
             controller: c,
         });
+    }
+    for sw in &raw.swap {
+        let names = sw.wires.get_ref();
+        let [a, b] = names.as_slice() else {
+            return Err(at(
+                Some(sw.wires.span()),
+                "`wires` names two wires (the blackboard's link names)".into(),
+            ));
+        };
+        let find = |n: &Spanned<String>| {
+            cell.wires
+                .iter()
+                .position(|w| crate::names::eq(&w.name, n.get_ref()))
+                .ok_or_else(|| {
+                    at(
+                        Some(n.span()),
+                        format!(
+                            "no wire `{}` in this cell{}",
+                            n.get_ref(),
+                            crate::names::did_you_mean(
+                                n.get_ref(),
+                                cell.wires.iter().map(|w| w.name.as_str())
+                            )
+                        ),
+                    )
+                })
+        };
+        let (x, y) = (find(a)?, find(b)?);
+        if x == y {
+            return Err(at(Some(b.span()), "a wire swapped with itself".into()));
+        }
+        s.swaps.push((x, y));
     }
     Ok(s)
 }

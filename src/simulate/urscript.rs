@@ -85,10 +85,13 @@ enum Open {
     },
 }
 
+/// A `def` of the program: its parameters and body lines.
+type Def = (Vec<String>, Vec<(Line, String)>);
+
 struct Reader<'a> {
     p: Program,
     _io: &'a IoKeys,
-    defs: HashMap<String, (Vec<String>, Vec<(Line, String)>)>,
+    defs: HashMap<String, Def>,
     open: Vec<Open>,
     depth: usize,
     /// In a step's own code (after its title comment).
@@ -317,7 +320,9 @@ impl Reader<'_> {
                         },
                         line,
                     );
-                } else if comment.starts_with("handshake:") || comment.starts_with("selection ") {
+                } else if (comment.starts_with("handshake:") || comment.starts_with("selection "))
+                    && self.depth == 0
+                {
                     self.p.push(Ins::Note(comment.to_owned()), line);
                 }
                 continue;
@@ -403,9 +408,7 @@ impl Reader<'_> {
             }
             "while" => {
                 let cond = c[5..].trim().trim_end_matches(':');
-                let x = self
-                    .expr(cond)
-                    .unwrap_or_else(|_| X::Const(Val::Bool(true)));
+                let x = self.expr(cond).unwrap_or(X::Const(Val::Bool(true)));
                 let start = self.p.ins.len();
                 let test = self.p.push(Ins::JumpIfNot(x, 0), line);
                 self.open.push(Open::While {
