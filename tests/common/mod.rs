@@ -279,3 +279,34 @@ pub fn leftovers_of(name: &str) -> Vec<PathBuf> {
     }
     found
 }
+
+/// A copy of `fixtures/ok/<name>` with its bases, in a temporary folder (as `ok_fixtures`
+/// builds it).
+pub fn fixture_project(name: &str) -> tempfile::TempDir {
+    fn copy_dir(from: &Path, to: &Path) {
+        for e in fs::read_dir(from).unwrap() {
+            let e = e.unwrap();
+            let target = to.join(e.file_name());
+            if e.file_type().unwrap().is_dir() {
+                fs::create_dir_all(&target).unwrap();
+                copy_dir(&e.path(), &target);
+            } else {
+                fs::copy(e.path(), &target).unwrap();
+            }
+        }
+    }
+    #[derive(serde::Deserialize)]
+    struct Case {
+        base: Option<Bases>,
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
+    let case_dir = root.join("ok").join(name);
+    let case: Case = toml::from_str(&fs::read_to_string(case_dir.join("case.toml")).unwrap())
+        .unwrap_or_else(|e| panic!("{name}: case.toml: {e}"));
+    let tmp = tempfile::tempdir().unwrap();
+    for base in case.base.iter().flat_map(Bases::list) {
+        copy_dir(&root.join("base").join(base), tmp.path());
+    }
+    copy_dir(&case_dir, tmp.path());
+    tmp
+}

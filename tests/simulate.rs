@@ -1,0 +1,485 @@
+//! `skillpost simulate` through the binary (docs/SIMULATE.md): the cell's programs run together on
+//! the built-in interpreter; the report's timeline, cycle time, problems and coverage, the
+//! Value Change Dump, the scenario file and its errors, and the exit statuses.
+
+mod common;
+
+use std::fs;
+use std::path::Path;
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+fn skillpost(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// `simulate` with a scenario written into the project, as JSON; the exit status.
+fn simulate(
+    dir: &Path,
+    bb: &str,
+    program: &str,
+    scenario: Option<&str>,
+    more: &[&str],
+) -> (i32, Value) {
+    let mut args = vec!["simulate", bb, program, "--format", "json"];
+    if let Some(s) = scenario {
+        fs::write(dir.join("scenario.toml"), s).unwrap();
+        args.extend(["--scenario", "scenario.toml"]);
+    }
+    args.extend(more);
+    let out = skillpost(dir, &args);
+    let code = out.status.code().unwrap();
+    let v = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "not JSON ({e}), exit {code}:\n{}\n{}",
+            text(&out.stdout),
+            text(&out.stderr)
+        )
+    });
+    (code, v)
+}
+
+/// Each controller's steps in the order they ran: (step, start, end).
+fn lanes(run: &Value) -> std::collections::BTreeMap<String, Vec<(String, f64, f64)>> {
+    let mut out: std::collections::BTreeMap<String, Vec<(String, f64, f64)>> = Default::default();
+    for s in run["timeline"].as_array().unwrap() {
+        out.entry(s["controller"].as_str().unwrap().to_owned())
+            .or_default()
+            .push((
+                s["step"].as_str().unwrap().to_owned(),
+                s["start_s"].as_f64().unwrap(),
+                s["end_s"].as_f64().unwrap(),
+            ));
+    }
+    out
+}
+
+fn names(steps: &[(String, f64, f64)]) -> Vec<&str> {
+    steps.iter().map(|s| s.0.as_str()).collect()
+}
+
+/// The cycle time the picture of the plan (`--svg`) states.
+fn picture_cycle(dir: &Path, bb: &str, program: &str) -> f64 {
+    let out = skillpost(dir, &[bb, program, "--svg", "plan.svg"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let svg = fs::read_to_string(dir.join("plan.svg")).unwrap();
+    let at = svg
+        .find("cycle time ")
+        .expect("the picture states a cycle time")
+        + 11;
+    svg[at..].split(' ').next().unwrap().parse().unwrap()
+}
+
+fn problems(run: &Value) -> Vec<(String, String)> {
+    run["problems"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            (
+                p["kind"].as_str().unwrap().to_owned(),
+                p["message"].as_str().unwrap().to_owned(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn a_mixed_cell_runs_in_the_charts_order_with_the_pictures_cycle_time() {
+    let p = common::fixture_project("cell-kuka-abb-ur");
+    let dir = p.path();
+    // Part_Present: the UR places while the KUKA retreats.
+    let (code, v) = simulate(
+        dir,
+        "Blackboard.aml",
+        "Mix",
+        Some("[inputs.\"ABB IRB 1200\"]\nPart_Present = true\n"),
+        &[],
+    );
+    let run = &v["runs"][0];
+    assert_eq!(code, 0, "{v:#}");
+    assert_eq!(problems(run), []);
+    let l = lanes(run);
+    assert_eq!(names(&l["KUKA KR15-2"]), ["Pick", "Grip", "Retreat"]);
+    assert_eq!(names(&l["ABB IRB 1200"]), ["Take"]);
+    assert_eq!(names(&l["UR10e"]), ["Place", "Release"]);
+    // Across controllers, the chart's order: Take after Grip, Place and Retreat after Take.
+    let grip = &l["KUKA KR15-2"][1];
+    let take = &l["ABB IRB 1200"][0];
+    assert!(take.1 >= grip.2, "Take {take:?} before Grip ended {grip:?}");
+    assert!(l["UR10e"][0].1 >= take.2 && l["KUKA KR15-2"][2].1 >= take.2);
+    let cycle = run["cycle_s"].as_f64().expect("every program ended");
+    let picture = picture_cycle(dir, "Blackboard.aml", "Mix");
+    assert!(
+        (cycle - picture).abs() < 1e-6,
+        "simulated {cycle} s, the picture {picture} s"
+    );
+
+    // No part: the ABB goes home, the UR does nothing, the KUKA does not retreat.
+    let (code, v) = simulate(
+        dir,
+        "Blackboard.aml",
+        "Mix",
+        Some("[inputs.\"ABB IRB 1200\"]\nPart_Present = false\n"),
+        &["--runs", "2"],
+    );
+    assert_eq!(code, 0, "{v:#}");
+    let l = lanes(&v["runs"][0]);
+    assert_eq!(names(&l["KUKA KR15-2"]), ["Pick", "Grip"]);
+    assert_eq!(names(&l["ABB IRB 1200"]), ["Take", "Home"]);
+    assert!(!l.contains_key("UR10e"));
+    // What no run reached: the other branch and its steps.
+    let never: Vec<&str> = v["coverage"]["steps_never_reached"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["step"].as_str().unwrap())
+        .collect();
+    assert_eq!(never, ["Retreat", "Place", "Release"]);
+    assert_eq!(
+        v["coverage"]["branches_never_reached"],
+        serde_json::json!([{"transition": 9, "selection": 8}])
+    );
+}
+
+#[test]
+fn random_runs_reach_every_step_and_branch_of_the_mixed_cell() {
+    let p = common::fixture_project("cell-kuka-abb-ur");
+    let (code, v) = simulate(
+        p.path(),
+        "Blackboard.aml",
+        "Mix",
+        None,
+        &["--runs", "30", "--seed", "7"],
+    );
+    assert_eq!(code, 0, "{v:#}");
+    assert_eq!(v["runs"].as_array().unwrap().len(), 30);
+    assert_eq!(v["coverage"]["steps_never_reached"], serde_json::json!([]));
+    assert_eq!(
+        v["coverage"]["branches_never_reached"],
+        serde_json::json!([])
+    );
+    // The same seed gives the same runs.
+    let (_, again) = simulate(
+        p.path(),
+        "Blackboard.aml",
+        "Mix",
+        None,
+        &["--runs", "30", "--seed", "7"],
+    );
+    assert_eq!(v["runs"], again["runs"]);
+}
+
+#[test]
+fn two_wires_swapped_are_a_deadlock_at_the_first_handshake_naming_both_controllers() {
+    let p = common::fixture_project("cell-two-robots-weld");
+    let dir = p.path();
+    let (code, v) = simulate(
+        dir,
+        "Blackboard.aml",
+        "Weld",
+        Some("[inputs.\"KUKA KR16-2\"]\nMore_Parts = false\n"),
+        &[],
+    );
+    assert_eq!(code, 0, "{v:#}");
+    let (code, v) = simulate(
+        dir,
+        "Blackboard.aml",
+        "Weld",
+        Some(
+            "[inputs.\"KUKA KR16-2\"]\nMore_Parts = false\n\n[[swap]]\nwires = [\"A to B 1\", \"A to B 2\"]\n",
+        ),
+        &[],
+    );
+    assert_eq!(code, 1, "{v:#}");
+    let run = &v["runs"][0];
+    let deadlocks: Vec<&Value> = run["problems"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["kind"] == "deadlock")
+        .collect();
+    let who: Vec<&str> = deadlocks
+        .iter()
+        .map(|p| p["controller"].as_str().unwrap())
+        .collect();
+    assert_eq!(who, ["KUKA KR15-2", "KUKA KR16-2"], "{run:#}");
+    // The first handshake: the KR16-2 waits for Grip (localId 5), the KR15-2 for Weld (7).
+    assert_eq!(deadlocks[1]["local_id"], 5);
+    assert_eq!(deadlocks[0]["local_id"], 7);
+    for d in &deadlocks {
+        let m = d["message"].as_str().unwrap();
+        assert!(m.contains("waits too"), "{m}");
+        assert!(d["line"].as_u64().is_some() && d["file"].as_str().unwrap().ends_with(".src"));
+    }
+    assert_eq!(names(&lanes(run)["KUKA KR15-2"]), ["Pick", "Grip"]);
+}
+
+#[test]
+fn a_restart_shows_the_start_barrier_and_a_restart_of_both_runs_the_chart_again() {
+    let p = common::fixture_project("cell-two-robots-weld");
+    let dir = p.path();
+    let one = "[inputs.\"KUKA KR16-2\"]\nMore_Parts = false\n\n[[restart]]\ncontroller = \"kuka kr16-2\"\nafter = \"Weld\"\n";
+    let (code, v) = simulate(dir, "Blackboard.aml", "Weld", Some(one), &[]);
+    assert_eq!(code, 1, "{v:#}");
+    let run = &v["runs"][0];
+    assert_eq!(run["restarts"][0]["controller"], "KUKA KR16-2");
+    assert_eq!(run["restarts"][0]["at_s"], 6.5);
+    let ps = problems(run);
+    // The partner stops with its message; the one started again waits at its start barrier.
+    assert_eq!(ps[0].0, "stopped", "{ps:?}");
+    assert!(ps[0].1.contains("KUKA KR16-2 started again"), "{ps:?}");
+    assert_eq!(ps[1].0, "deadlock");
+    assert!(
+        ps[1].1.contains("start barrier") && ps[1].1.contains("start it again"),
+        "{ps:?}"
+    );
+    // Started again too: the cell runs the chart from its start.
+    let both = format!("{one}\n[[restart]]\ncontroller = \"KUKA KR15-2\"\nat = 20\n");
+    let (code, v) = simulate(dir, "Blackboard.aml", "Weld", Some(&both), &[]);
+    assert_eq!(code, 0, "{v:#}");
+    let l = lanes(&v["runs"][0]);
+    assert_eq!(
+        names(&l["KUKA KR15-2"]),
+        ["Pick", "Grip", "Pick", "Grip", "PlaceA"]
+    );
+    assert_eq!(names(&l["KUKA KR16-2"]), ["Weld", "Weld", "RetreatB"]);
+    assert!(l["KUKA KR15-2"][2].1 >= 20.0);
+}
+
+#[test]
+fn the_value_change_dump_parses_and_holds_every_wire() {
+    let p = common::fixture_project("cell-kuka-abb-ur");
+    let dir = p.path();
+    let (code, _) = simulate(
+        dir,
+        "Blackboard.aml",
+        "Mix",
+        Some("[inputs.\"ABB IRB 1200\"]\nPart_Present = true\n"),
+        &["--vcd", "run.vcd"],
+    );
+    assert_eq!(code, 0);
+    let bytes = fs::read(dir.join("run.vcd")).unwrap();
+    let mut parser = vcd::Parser::new(&bytes[..]);
+    let header = parser.parse_header().expect("a VCD header");
+    let bb = fs::read_to_string(dir.join("Blackboard.aml")).unwrap();
+    let links: Vec<String> = bb
+        .split("<InternalLink Name=\"")
+        .skip(1)
+        .map(|s| s.split('"').next().unwrap().replace(' ', "_"))
+        .collect();
+    assert_eq!(links.len(), 19);
+    let mut ids = std::collections::HashMap::new();
+    for scope in ["KUKA_KR15_2", "ABB_IRB_1200", "UR10e"] {
+        for item in &header
+            .find_scope(&[scope])
+            .unwrap_or_else(|| panic!("scope {scope}"))
+            .items
+        {
+            if let vcd::ScopeItem::Var(v) = item {
+                ids.insert(v.reference.clone(), v.code);
+            }
+        }
+    }
+    for l in &links {
+        assert!(ids.contains_key(&format!("{l}_out")), "{l}_out missing");
+        assert!(ids.contains_key(&format!("{l}_in")), "{l}_in missing");
+    }
+    assert!(ids.contains_key("Part_Present"));
+    // Every wire changes during the run (the start barrier alone drives the run and ready
+    // wires), and its input follows its output.
+    let mut changed = std::collections::HashSet::new();
+    let (mut last_t, mut initial) = (0, false);
+    for cmd in parser {
+        match cmd.unwrap() {
+            vcd::Command::Timestamp(t) => {
+                assert!(t >= last_t);
+                last_t = t;
+            }
+            vcd::Command::Begin(vcd::SimulationCommand::Dumpvars) => initial = true,
+            vcd::Command::End(vcd::SimulationCommand::Dumpvars) => initial = false,
+            vcd::Command::ChangeScalar(id, vcd::Value::V1) if !initial => {
+                changed.insert(id);
+            }
+            _ => {}
+        }
+    }
+    let rose = links
+        .iter()
+        .filter(|l| changed.contains(&ids[&format!("{l}_in")]))
+        .count();
+    assert!(rose >= 10, "only {rose} wires rose");
+    assert_eq!(last_t, 7500, "the dump ends with the cycle");
+}
+
+#[test]
+fn scenario_errors_name_the_file_line_column_and_the_near_name_and_write_nothing() {
+    let p = common::fixture_project("cell-kuka-abb-ur");
+    let dir = p.path();
+    let before: Vec<_> = fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    let cases = [
+        (
+            "[inputs.\"ABB IRB 120\"]\nPart_Present = true\n",
+            "scenario.toml:1:9: no resource `ABB IRB 120` in the blackboard; did you mean `ABB IRB 1200`?",
+        ),
+        (
+            "[inputs.\"ABB IRB 1200\"]\nPart_Presnt = true\n",
+            "scenario.toml:2:1: `ABB IRB 1200` has no input `Part_Presnt`; did you mean `Part_Present`?",
+        ),
+        (
+            "[inputs.\"ABB IRB 1200\"]\nPart_Present = 3\n",
+            "scenario.toml:2:16: input `Part_Present` takes true or false",
+        ),
+        ("jiter = 0.1\n", "scenario.toml:1:1: unknown field `jiter`"),
+        (
+            "[[restart]]\ncontroller = \"UR10\"\nat = 1\n",
+            "no controller `UR10` in this cell; did you mean `UR10e`?",
+        ),
+        (
+            "[[change]]\nresource = \"UR10e\"\nsignal = \"From_ABB_1\"\nvalue = true\nat = 1\n",
+            "is a wire: another controller's program drives it",
+        ),
+        (
+            "[[change]]\nresource = \"ABB IRB 1200\"\nsignal = \"Part_Present\"\nvalue = true\nafter = \"Tak\"\n",
+            "no step `Tak` runs in this cell's programs; did you mean `Take`?",
+        ),
+        (
+            "[[swap]]\nwires = [\"KUKA to ABB 1\", \"KUKA to ABB 9\"]\n",
+            "no wire `KUKA to ABB 9` in this cell",
+        ),
+    ];
+    for (scenario, expected) in cases {
+        fs::write(dir.join("scenario.toml"), scenario).unwrap();
+        let out = skillpost(
+            dir,
+            &[
+                "simulate",
+                "Blackboard.aml",
+                "Mix",
+                "--scenario",
+                "scenario.toml",
+            ],
+        );
+        assert_eq!(out.status.code(), Some(2), "{scenario}");
+        let err = text(&out.stderr);
+        assert!(err.contains(expected), "{scenario}:\n{err}");
+        assert!(out.stdout.is_empty());
+    }
+    let after: Vec<_> = fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(
+        after.len(),
+        before.len() + 1,
+        "only the scenario was added: {after:?}"
+    );
+}
+
+#[cfg(unix)]
+#[test]
+fn a_scenario_that_is_a_fifo_or_endless_is_refused_at_once() {
+    let p = common::fixture_project("cell-kuka-abb-ur");
+    let dir = p.path();
+    let fifo = dir.join("fifo.toml");
+    assert!(
+        Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success(),
+        "mkfifo"
+    );
+    for s in ["fifo.toml", "/dev/zero"] {
+        let start = std::time::Instant::now();
+        let out = skillpost(dir, &["simulate", "Blackboard.aml", "Mix", "--scenario", s]);
+        assert_eq!(out.status.code(), Some(2), "{s}: {}", text(&out.stderr));
+        assert!(
+            text(&out.stderr).contains("cannot read the scenario"),
+            "{}",
+            text(&out.stderr)
+        );
+        assert!(start.elapsed() < std::time::Duration::from_secs(20));
+    }
+}
+
+#[test]
+fn inputs_with_errors_exit_2_and_a_wait_for_an_input_nothing_sets_is_told_apart() {
+    let p = common::fixture_project("abb-irb1200");
+    let dir = p.path();
+    let out = skillpost(dir, &["simulate", "Missing.aml", "Palletize"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr).contains("nothing simulated"),
+        "{}",
+        text(&out.stderr)
+    );
+    // No input set: the robot waits for its part, which nothing in the scenario gives it.
+    let (code, v) = simulate(dir, "Cell.aml", "Palletize", Some("runs = 1\n"), &[]);
+    assert_eq!(code, 1);
+    let ps = problems(&v["runs"][0]);
+    assert_eq!(ps.len(), 1, "{ps:?}");
+    assert_eq!(ps[0].0, "stuck");
+    assert!(
+        ps[0]
+            .1
+            .contains("waits for `Part_Present` on ABB IRB 1200, which nothing sets"),
+        "{ps:?}"
+    );
+    // No program was written.
+    assert!(!dir.join("Palletize.mod").exists());
+}
+
+#[test]
+fn programs_of_every_language_run_without_problems_under_random_inputs() {
+    for (fixture, bb, program) in [
+        ("reference-sample", None, None),
+        ("ur10e", None, None),
+        ("abb-irb1200", Some("Cell.aml"), Some("Palletize")),
+        ("flow-selection-three-way", None, None),
+        ("cell-sequences-mixed", None, None),
+    ] {
+        let p = common::fixture_project(fixture);
+        let dir = p.path();
+        let case: toml::Value =
+            toml::from_str(&fs::read_to_string(dir.join("case.toml")).unwrap()).unwrap();
+        let program = program
+            .map(str::to_owned)
+            .unwrap_or_else(|| case["program"].as_str().unwrap().to_owned());
+        let bb = bb.map(str::to_owned).unwrap_or_else(|| {
+            match case.get("blackboard").and_then(|b| b.as_str()) {
+                Some(b) => b.to_owned(),
+                None => fs::read_dir(dir)
+                    .unwrap()
+                    .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                    .find(|n| n.ends_with(".aml"))
+                    .unwrap(),
+            }
+        });
+        let (code, v) = simulate(dir, &bb, &program, None, &["--runs", "10"]);
+        assert_eq!(code, 0, "{fixture}: {v:#}");
+        // Every program ends, or (a chart that repeats) runs its rounds.
+        for run in v["runs"].as_array().unwrap() {
+            assert!(
+                run["ended"] == true || run["repeats"] == true,
+                "{fixture}: {run:#}"
+            );
+        }
+        assert!(
+            !v["runs"][0]["timeline"].as_array().unwrap().is_empty(),
+            "{fixture}"
+        );
+    }
+}
