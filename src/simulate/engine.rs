@@ -111,9 +111,10 @@ struct Run<'c> {
     cell: &'c Cell,
     programs: &'c [Program],
     ctls: Vec<Ctl>,
-    world: HashMap<(usize, Key), Val>,
-    /// (controller, input key) → (controller, output key) that drives it.
-    wired: HashMap<(usize, Key), (usize, Key)>,
+    /// Per controller: its inputs of the world by key.
+    world: Vec<HashMap<Key, Val>>,
+    /// Per controller: input key → (controller, output key) that drives it.
+    wired: Vec<HashMap<Key, (usize, Key)>>,
     events: Vec<(f64, Event)>,
     pending_after: Vec<(String, Event, bool)>,
     out: Outcome,
@@ -124,6 +125,10 @@ struct Run<'c> {
     answering: bool,
     step_limit: usize,
     time_limit: f64,
+    /// The mean time between two changes of one input in a random run.
+    flip_mean: f64,
+    /// The latest run of each step (by localId) in the timeline.
+    last_run: HashMap<u64, usize>,
     statement_limit: u64,
 }
 
@@ -135,15 +140,15 @@ pub fn run(
     rng: Rng,
     random: bool,
 ) -> Outcome {
-    let mut wired = HashMap::new();
+    let mut wired = vec![HashMap::new(); cell.controllers.len()];
     for w in &cell.wires {
-        wired.insert((w.to.0, w.to.1.clone()), (w.from.0, w.from.1.clone()));
+        wired[w.to.0].insert(w.to.1.clone(), (w.from.0, w.from.1.clone()));
     }
     let mut r = Run {
         cell,
         programs,
         ctls: Vec::new(),
-        world: HashMap::new(),
+        world: vec![HashMap::new(); cell.controllers.len()],
         wired,
         events: Vec::new(),
         pending_after: Vec::new(),
@@ -154,6 +159,19 @@ pub fn run(
         answering: random,
         step_limit: scenario.max_steps,
         time_limit: scenario.max_time_s,
+        flip_mean: {
+            let (n, sum) = cell
+                .steps
+                .values()
+                .filter_map(|s| s.duration)
+                .fold((0usize, 0.0), |(n, s), d| (n + 1, s + d));
+            if n == 0 {
+                1.0
+            } else {
+                (3.0 * sum / n as f64).max(0.05)
+            }
+        },
+        last_run: HashMap::new(),
         statement_limit: scenario.max_statements,
     };
     for (c, _) in cell.controllers.iter().enumerate() {
@@ -268,7 +286,9 @@ impl Run<'_> {
                 .filter_map(|c| self.next_time(c).map(|t| (t, c)))
                 .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
             // Nobody waits for the world: its own changes (a random run's) do not matter.
-            let world_matters = next.is_some() || self.waits_for_world();
+            let world_matters = next.is_some()
+                || self.events.iter().any(|e| !matches!(e.1, Event::Flip(_)))
+                || self.waits_for_world();
             let next_event = self
                 .events
                 .iter()
@@ -307,8 +327,7 @@ impl Run<'_> {
                     Some((Ins::Wait { cond, .. }, _)) => {
                         let mut keys = Vec::new();
                         cond.inputs(&mut keys);
-                        keys.iter()
-                            .any(|k| !self.wired.contains_key(&(c, k.clone())))
+                        keys.iter().any(|k| !self.wired[c].contains_key(k))
                     }
                     _ => false,
                 }
@@ -318,21 +337,7 @@ impl Run<'_> {
     /// The time until a random run's world changes an input again: exponential, with a mean
     /// of three steps' time (1 s without step times).
     fn flip_gap(&mut self) -> f64 {
-        let mean = {
-            let times: Vec<f64> = self
-                .cell
-                .steps
-                .values()
-                .filter_map(|s| s.duration)
-                .collect();
-            if times.is_empty() {
-                1.0
-            } else {
-                3.0 * times.iter().sum::<f64>() / times.len() as f64
-            }
-        }
-        .max(0.05);
-        -mean * (1.0 - self.rng.unit()).ln()
+        -self.flip_mean * (1.0 - self.rng.unit()).ln()
     }
 
     fn now(&self) -> f64 {
@@ -386,7 +391,7 @@ impl Run<'_> {
                     let (c, keys, integer) = (inp.controller, inp.key.clone(), inp.integer);
                     let old = keys
                         .first()
-                        .and_then(|k0| self.world.get(&(c, k0.clone())))
+                        .and_then(|k0| self.world[c].get(k0))
                         .cloned()
                         .unwrap_or(Val::Bool(false));
                     let v = if integer || keys.len() > 1 {
@@ -449,7 +454,7 @@ impl Run<'_> {
                 let mut keys = Vec::new();
                 cond.inputs(&mut keys);
                 for k in keys {
-                    if !self.wired.contains_key(&(c, k.clone())) && !k.ends_with("(?)") {
+                    if !self.wired[c].contains_key(&k) && !k.ends_with("(?)") {
                         cands.push((c, k, x.t));
                     }
                 }
@@ -459,11 +464,7 @@ impl Run<'_> {
             return false;
         }
         let (c, k, t) = cands[(self.rng.next_u64() % cands.len() as u64) as usize].clone();
-        let old = self
-            .world
-            .get(&(c, k.clone()))
-            .cloned()
-            .unwrap_or(Val::Bool(false));
+        let old = self.world[c].get(&k).cloned().unwrap_or(Val::Bool(false));
         let v = match old {
             Val::Bool(b) => Val::Bool(!b),
             Val::Num(n) => Val::Num(((n as u64 + 1 + self.rng.next_u64() % 3) % 4) as f64),
@@ -477,7 +478,7 @@ impl Run<'_> {
     /// Sets an input of the world (a KRL group: each bit of the value).
     fn set_world(&mut self, c: usize, keys: &[Key], v: &Val, t: f64) {
         if keys.len() == 1 {
-            let old = self.world.insert((c, keys[0].clone()), v.clone());
+            let old = self.world[c].insert(keys[0].clone(), v.clone());
             if old.as_ref() != Some(v) || t == 0.0 {
                 self.out.changes.push((t, c, keys[0].clone(), v.clone()));
             }
@@ -486,7 +487,7 @@ impl Run<'_> {
         let n = v.num().unwrap_or(0.0).max(0.0) as u64;
         for (i, k) in keys.iter().enumerate() {
             let b = Val::Bool(i < 64 && (n >> i) & 1 == 1);
-            let old = self.world.insert((c, k.clone()), b.clone());
+            let old = self.world[c].insert(k.clone(), b.clone());
             if old.as_ref() != Some(&b) || t == 0.0 {
                 self.out.changes.push((t, c, k.clone(), b));
             }
@@ -511,7 +512,7 @@ impl Run<'_> {
                     cond.outputs(&mut keys);
                     let partners: Vec<usize> = keys
                         .iter()
-                        .filter_map(|k| self.wired.get(&(c, k.clone())).map(|w| w.0))
+                        .filter_map(|k| self.wired[c].get(k).map(|w| w.0))
                         .collect();
                     waits.push((c, *since, *line, partners, keys));
                 }
@@ -643,6 +644,7 @@ impl Run<'_> {
                     cut: false,
                 });
                 self.check_order(i);
+                self.last_run.insert(*local_id, i);
                 // Changes and restarts "after" this step: when its motion ends.
                 let key = crate::names::key(name);
                 let id = local_id.to_string();
@@ -783,6 +785,8 @@ impl Run<'_> {
                     let x = &mut self.ctls[c];
                     if let Some(ct) = x.counters.get_mut(n) {
                         *ct = (v.num().unwrap_or(0.0), x.t);
+                    } else if let Some(old) = x.vars.get_mut(n) {
+                        *old = v;
                     } else {
                         x.vars.insert(n.clone(), v);
                     }
@@ -914,8 +918,19 @@ impl Run<'_> {
                 ),
             });
         }
-        let old = self.ctls[c].outs.insert(k.clone(), v.clone());
-        if old.as_ref() != Some(&v) {
+        let outs = &mut self.ctls[c].outs;
+        let changed = match outs.get_mut(&k) {
+            Some(old) if *old == v => false,
+            Some(old) => {
+                *old = v.clone();
+                true
+            }
+            None => {
+                outs.insert(k.clone(), v.clone());
+                true
+            }
+        };
+        if changed {
             self.out.changes.push((t, c, k, v));
         }
         self.ctls[c].pc += 1;
@@ -929,10 +944,8 @@ impl Run<'_> {
             return;
         };
         for p in preds {
-            if let Some(r) = self.out.timeline[..i]
-                .iter()
-                .rev()
-                .find(|r| r.local_id == *p && r.controller != s.controller)
+            if let Some(r) = self.last_run.get(p).map(|&k| &self.out.timeline[k])
+                && r.controller != s.controller
                 && r.end > s.start + 1e-9
                 && r.start <= s.start
             {
@@ -979,17 +992,14 @@ impl Run<'_> {
     }
 
     fn input(&self, c: usize, k: &Key) -> Val {
-        if let Some((d, out)) = self.wired.get(&(c, k.clone())) {
+        if let Some((d, out)) = self.wired[c].get(k) {
             return self.ctls[*d]
                 .outs
                 .get(out)
                 .cloned()
                 .unwrap_or(Val::Bool(false));
         }
-        self.world
-            .get(&(c, k.clone()))
-            .cloned()
-            .unwrap_or(Val::Bool(false))
+        self.world[c].get(k).cloned().unwrap_or(Val::Bool(false))
     }
 
     /// Whether `e` holds with every comparison of a timer or counter taken as false.

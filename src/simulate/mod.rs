@@ -168,6 +168,9 @@ pub const RANDOM_RUNS: usize = 20;
 pub const RANDOM_JITTER: f64 = 0.2;
 
 impl Scenario {
+    /// A day: the time limit of a run unless its steps take longer (then ten times that).
+    pub const DEFAULT_MAX_TIME: f64 = 86_400.0;
+
     /// The defaults of a scenario file.
     pub fn with_file() -> Scenario {
         Scenario {
@@ -175,7 +178,7 @@ impl Scenario {
             seed: None,
             jitter: 0.0,
             default_step_s: 0.0,
-            max_time_s: 86_400.0,
+            max_time_s: Scenario::DEFAULT_MAX_TIME,
             max_steps: 0,
             max_statements: 0,
             start: Vec::new(),
@@ -540,6 +543,20 @@ fn limits(s: &mut Scenario, cell: &Cell, programs: &[Program]) {
             (100 * steps).max(1000)
         };
     }
+    // The time limit: a day, or ten times the steps' time where that is longer.
+    if s.max_time_s == Scenario::DEFAULT_MAX_TIME {
+        let total: f64 = programs
+            .iter()
+            .flat_map(|p| &p.ins)
+            .filter_map(|i| match &i.0 {
+                ir::Ins::Step { local_id, .. } => cell.steps.get(local_id)?.duration,
+                _ => None,
+            })
+            .sum();
+        s.max_time_s = s
+            .max_time_s
+            .max(10.0 * (total + s.default_step_s * steps as f64));
+    }
     if s.max_statements == 0 {
         let ins: usize = programs.iter().map(|p| p.ins.len()).sum();
         s.max_statements = (2_000 * ins as u64).clamp(1_000_000, 200_000_000);
@@ -593,15 +610,17 @@ pub fn simulate(
         }
         report.runs.push((run_seed, out));
     }
+    // Every step and branch a program has, in program order, each once.
     let mut all_steps: Vec<(u64, String)> = Vec::new();
     let mut all_branches: Vec<u64> = Vec::new();
+    let (mut steps_in, mut branches_in) = (HashSet::new(), HashSet::new());
     for (c, p) in programs.iter().enumerate() {
         for (i, _) in &p.ins {
             match i {
-                ir::Ins::Step { local_id, name } if !all_steps.iter().any(|s| s.0 == *local_id) => {
+                ir::Ins::Step { local_id, name } if steps_in.insert(*local_id) => {
                     all_steps.push((*local_id, name.clone()));
                 }
-                ir::Ins::Branch { transition, .. } if !all_branches.contains(transition) => {
+                ir::Ins::Branch { transition, .. } if branches_in.insert(*transition) => {
                     all_branches.push(*transition);
                 }
                 _ => {}
