@@ -483,3 +483,27 @@ fn programs_of_every_language_run_without_problems_under_random_inputs() {
         );
     }
 }
+
+#[test]
+fn a_program_split_into_parts_runs_as_the_unsplit_one() {
+    let p = common::fixture_project("split-cell");
+    let dir = p.path();
+    let runs = |m: &str| {
+        let (code, v) = simulate(
+            dir,
+            "Blackboard.aml",
+            "Mix",
+            None,
+            &["--max-lines", m, "--runs", "8", "--seed", "3"],
+        );
+        assert_eq!(code, 0, "--max-lines {m}: {v:#}");
+        assert_eq!(v["not_simulated"], serde_json::json!([]), "--max-lines {m}");
+        v["runs"].clone()
+    };
+    let whole = runs("0");
+    assert_eq!(whole[0]["timeline"].as_array().unwrap().len(), 6);
+    // 20 lines: the KRL program in 3 parts and the RAPID one in 2 (the fixture's snapshot);
+    // 5: as small as the cuts go.
+    assert_eq!(runs("20"), whole);
+    assert_eq!(runs("5"), whole);
+}

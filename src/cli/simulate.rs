@@ -36,6 +36,10 @@ pub(super) struct SimulateArgs {
     /// The SFC POU to use (as for a compile)
     #[arg(long, value_name = "NAME")]
     pou: Option<String>,
+    /// Split long programs into parts as a compile with this option would (N, or LANG=N;
+    /// repeatable): the parts are run as the main program calls them
+    #[arg(long, value_name = "N|LANG=N", action = clap::ArgAction::Append)]
+    max_lines: Vec<String>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -57,13 +61,20 @@ pub(super) fn simulate_command(a: &SimulateArgs) -> u8 {
     let fs = FsSource {
         max_file_size: crate::load::DEFAULT_MAX_FILE_SIZE,
     };
+    let mut max_lines = crate::emit::split::Limits::default();
+    for m in &a.max_lines {
+        if let Err(why) = max_lines.set(m) {
+            eprintln!("error: --max-lines {m}: {why}");
+            return 2;
+        }
+    }
+    // The programs as a compile writes them, split into parts where it splits them.
     let opts = Options {
         program: Some(a.program.clone()),
         keep_model: true,
         drop_warnings: true,
         pou: a.pou.clone(),
-        // A part of a split program is only a file layout: the simulator runs the whole.
-        max_lines: crate::emit::split::Limits::all(0),
+        max_lines,
         ..Options::default()
     };
     let c = compile::compile(&fs, &a.blackboard, &opts);

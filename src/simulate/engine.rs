@@ -655,6 +655,8 @@ impl Run<'_> {
                     }
                 }
                 self.ctls[c].in_step = true;
+                // A wait in the step's own code is the step's.
+                self.ctls[c].note = Some(format!("in step {name} (localId {local_id})"));
                 self.ctls[c].pc += 1;
             }
             Ins::StepEnd => {

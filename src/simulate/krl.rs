@@ -466,7 +466,10 @@ impl Reader<'_> {
                         },
                         line,
                     );
-                } else if (comment.starts_with("handshake:") || comment.starts_with("selection "))
+                } else if (comment.starts_with("handshake:")
+                    || comment.starts_with("selection ")
+                    || comment.starts_with("transition ")
+                    || comment.starts_with("loop "))
                     && self.depth == 0
                 {
                     self.p.push(Ins::Note(comment.to_owned()), line);

@@ -12,8 +12,8 @@
 //! - [`scenario`]: the scenario file.
 //! - [`report`]: text, JSON and Value Change Dump.
 //!
-//! [`Cell::from_compilation`] takes what a compile made (its programs unsplit: a part is only
-//! a file layout) and [`simulate`] runs it as often as asked.
+//! [`Cell::from_compilation`] takes what a compile made (a split program's parts read after its
+//! main file, their routines called in place) and [`simulate`] runs it as often as asked.
 
 pub mod engine;
 pub mod ir;
@@ -311,8 +311,7 @@ fn key_of(lang: Language, output: bool, kind: &SignalKind) -> Vec<Key> {
 pub struct CellError(pub String);
 
 impl Cell {
-    /// The cell of a compile (without errors; its programs written unsplit) and each
-    /// controller's program read.
+    /// The cell of a compile (without errors) and each controller's program read.
     pub fn from_compilation(c: &Compilation) -> Result<(Cell, Vec<Program>), CellError> {
         let (Some(bb), Some(sfc), Some(plan)) = (&c.blackboard, &c.sfc, &c.plan) else {
             return Err(CellError("the compile kept no model".into()));
@@ -431,23 +430,26 @@ impl Cell {
         // The programs, read.
         let mut programs = Vec::new();
         for (k, ctl) in cell.controllers.iter().enumerate() {
-            let text_of = |ext: &str| {
-                c.outputs
+            // The main file, then its parts (a split program: each part's routine is called
+            // from the main program and read in its place).
+            let text_of = |ext: &str| -> String {
+                let files = c
+                    .outputs
                     .iter()
                     .zip(&c.output_programs)
-                    .find(|((_, o), (p, _))| {
-                        *p == ctl.program && o.stem.is_none() && o.extension == ext
-                    })
+                    .filter(|((_, o), (p, _))| *p == ctl.program && o.extension == ext);
+                let (main, parts): (Vec<_>, Vec<_>) =
+                    files.partition(|((_, o), _)| o.stem.is_none());
+                main.into_iter()
+                    .chain(parts)
                     .map(|((_, o), _)| o.text.as_str())
+                    .collect::<Vec<_>>()
+                    .join("\n")
             };
             let p = match ctl.language {
-                Language::Krl => krl::read(
-                    text_of("src").unwrap_or(""),
-                    text_of("dat").unwrap_or(""),
-                    &io[k],
-                ),
-                Language::Rapid => rapid::read(text_of("mod").unwrap_or(""), &io[k]),
-                Language::UrScript => urscript::read(text_of("script").unwrap_or(""), &io[k]),
+                Language::Krl => krl::read(&text_of("src"), &text_of("dat"), &io[k]),
+                Language::Rapid => rapid::read(&text_of("mod"), &io[k]),
+                Language::UrScript => urscript::read(&text_of("script"), &io[k]),
             };
             programs.push(p);
         }
