@@ -198,6 +198,37 @@ pub enum Event {
         reason: String,
         stderr: String,
     },
+    /// The simulation after a compile (`simulate` in the configuration; docs/SIMULATE.md)
+    /// found no problem in any run.
+    SimulationSucceeded {
+        /// The compile whose programs ran.
+        run_id: u64,
+        runs: usize,
+        duration_ms: u64,
+        /// The first run's cycle time (none when the chart repeats).
+        cycle_s: Option<f64>,
+        /// Steps and branches no run reached.
+        never_reached: usize,
+    },
+    /// The simulation found a problem (the outputs stand: the compile succeeded), or could not
+    /// run (`kind` `scenario`: the scenario file, located by `file`, `line`, `column`).
+    SimulationFailed {
+        run_id: u64,
+        runs: usize,
+        duration_ms: u64,
+        cycle_s: Option<f64>,
+        /// Problems over all runs.
+        problems: usize,
+        /// The first problem: its kind (`deadlock`, `stuck`, …), where and when.
+        kind: String,
+        message: String,
+        controller: Option<String>,
+        file: Option<String>,
+        line: Option<u64>,
+        column: Option<u64>,
+        local_id: Option<u64>,
+        time_s: Option<f64>,
+    },
     Reloaded {
         projects: usize,
         added: Vec<String>,
@@ -244,6 +275,8 @@ impl Event {
             Event::DeployStarted { .. } => "deploy-started",
             Event::DeploySucceeded { .. } => "deploy-succeeded",
             Event::DeployFailed { .. } => "deploy-failed",
+            Event::SimulationSucceeded { .. } => "simulation-succeeded",
+            Event::SimulationFailed { .. } => "simulation-failed",
             Event::Reloaded { .. } => "reloaded",
             Event::ReloadFailed { .. } => "reload-failed",
             Event::Stopped { .. } => "stopped",
@@ -257,7 +290,7 @@ impl Event {
             Event::WatchDegraded { .. } | Event::EventsDropped { .. } => Level::Warn,
             Event::Stopped { reason, .. } if reason == "timeout" => Level::Error,
             Event::Rescan { reason, .. } if reason != "startup" => Level::Warn,
-            Event::WriteBack { skipped: true, .. } => Level::Warn,
+            Event::WriteBack { skipped: true, .. } | Event::SimulationFailed { .. } => Level::Warn,
             Event::CompileFailed { .. }
             | Event::ReloadFailed { .. }
             | Event::DeployFailed { .. } => Level::Error,
@@ -1344,6 +1377,28 @@ mod tests {
                 reason: "x".into(),
                 stderr: "x".into(),
             },
+            Event::SimulationSucceeded {
+                run_id: 1,
+                runs: 1,
+                duration_ms: 1,
+                cycle_s: Some(1.5),
+                never_reached: 0,
+            },
+            Event::SimulationFailed {
+                run_id: 1,
+                runs: 1,
+                duration_ms: 1,
+                cycle_s: None,
+                problems: 1,
+                kind: "deadlock".into(),
+                message: "x".into(),
+                controller: s(),
+                file: s(),
+                line: Some(1),
+                column: None,
+                local_id: Some(5),
+                time_s: Some(2.5),
+            },
             Event::Reloaded {
                 projects: 1,
                 added: vec![],
@@ -1388,9 +1443,11 @@ mod tests {
             Event::DeployStarted { .. } => 14,
             Event::DeploySucceeded { .. } => 15,
             Event::DeployFailed { .. } => 16,
+            Event::SimulationSucceeded { .. } => 17,
+            Event::SimulationFailed { .. } => 18,
         };
         let seen: BTreeSet<usize> = every_event().iter().map(ordinal).collect();
-        assert_eq!(seen, (0..17).collect());
+        assert_eq!(seen, (0..19).collect());
     }
 
     /// The rows of docs/DAEMON.md's event table: (name, level, fields cell).

@@ -421,6 +421,42 @@ impl Job {
     }
 
     /// `deploy-failed` for a program whose hook is not run at all, and why.
+    /// Hands the compile's programs to the simulation (docs/SIMULATE.md, "In the daemon").
+    fn simulate(
+        &self,
+        c: &compile::Compilation,
+        sim: &super::config::Simulate,
+        inputs: &mut HashMap<PathBuf, Option<u64>>,
+    ) {
+        use crate::simulate::{Cell, Scenario, scenario};
+        let (cell, programs) = match Cell::from_compilation(c) {
+            Ok(x) => x,
+            Err(e) => {
+                tracing::warn!("{}: nothing simulated: {}", self.project(), e.0);
+                return;
+            }
+        };
+        let scenario = match sim {
+            super::config::Simulate::Runs(n) => Ok(Scenario {
+                runs: *n,
+                ..Scenario::random()
+            }),
+            super::config::Simulate::Scenario(f) => {
+                let path = self.key.join(f);
+                inputs.insert(path.clone(), hash_file(&path));
+                scenario::load(&path, &cell)
+            }
+        };
+        super::simulation::submit(super::simulation::Request {
+            project: self.project(),
+            run_id: self.run_id,
+            cell,
+            programs,
+            scenario,
+            sink: self.sink.clone(),
+        });
+    }
+
     fn not_deployed(&self, ctx: &super::deploy::Context, reason: String) {
         let controller = (!ctx.controller.is_empty()).then_some(ctx.controller.as_str());
         self.sink.emit(
@@ -570,8 +606,8 @@ impl Job {
             template: self.spec.template.clone(),
             confine_to: self.confine.then(|| self.key.clone()),
             pou: self.spec.pou.clone(),
-            // The chart and its plan only for the picture.
-            keep_model: self.spec.picture,
+            // The chart and its plan only for the picture and the simulation.
+            keep_model: self.spec.picture || self.spec.simulate.is_some(),
             drop_warnings: false,
             bind_split_from: None,
             picture: None,
@@ -909,6 +945,11 @@ impl Job {
             None => deploy,
         };
         let deploy = (!deploy.is_empty()).then_some(deploy);
+        // The simulation: on a thread of its own; its scenario file is an input (an edit of it
+        // compiles and simulates again).
+        if let Some(sim) = &self.spec.simulate {
+            self.simulate(&c, sim, &mut inputs);
+        }
         Outcome::Compiled {
             inputs,
             outputs: applied.outputs.iter().map(|(p, _)| p.clone()).collect(),

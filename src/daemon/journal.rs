@@ -195,6 +195,39 @@ pub fn log(project: Option<&str>, event: &Event) {
                 one_line(&Event::deploy_failure(reason, stderr)),
             );
         }
+        Event::SimulationSucceeded {
+            run_id,
+            runs,
+            cycle_s,
+            ..
+        } => {
+            tracing::info!(
+                project = name,
+                run_id,
+                "{name}: simulated {runs} run(s), no problem{}",
+                cycle_s.map_or_else(String::new, |c| format!("; cycle time {c:.2} s")),
+            );
+        }
+        Event::SimulationFailed {
+            run_id,
+            problems,
+            kind,
+            message,
+            file,
+            line,
+            ..
+        } => {
+            let at = match (file, line) {
+                (Some(f), Some(l)) => format!(" [{f}:{l}]"),
+                _ => String::new(),
+            };
+            tracing::warn!(
+                project = name,
+                run_id,
+                "{name}: simulation found {problems} problem(s), first {kind}: {}{at}",
+                one_line(message),
+            );
+        }
         Event::ReloadFailed {
             error,
             file,

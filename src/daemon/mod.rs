@@ -39,6 +39,7 @@ mod poll;
 mod project;
 mod route;
 pub mod settle;
+mod simulation;
 pub mod snapshot;
 pub mod state;
 mod stop;

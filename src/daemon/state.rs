@@ -97,6 +97,26 @@ pub struct ProjectState {
     /// The last deploy of each program (the deploy hook, `on_success`), in the order they ran.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub deploys: Vec<DeployState>,
+    /// The last simulation (`simulate` in the configuration).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simulation: Option<SimulationState>,
+}
+
+/// The last simulation of a project's programs.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct SimulationState {
+    /// `ok` or `failed`.
+    pub result: String,
+    /// When it ended (RFC 3339, UTC).
+    pub time: String,
+    /// The compile whose programs ran.
+    pub run_id: u64,
+    pub runs: usize,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cycle_s: Option<f64>,
+    /// The first problem: `kind: message [file:line]`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub problem: Option<String>,
 }
 
 /// The last deploy of one program of a project.
@@ -289,6 +309,62 @@ impl Tracker {
     /// Takes what concerns the state from an event as it is emitted (any thread): the
     /// compile results; and `stopped`, which writes the file one last time.
     pub fn observe(&self, project: Option<&str>, event: &Event) {
+        let simulation = match (project, event) {
+            (
+                Some(p),
+                Event::SimulationSucceeded {
+                    run_id,
+                    runs,
+                    cycle_s,
+                    ..
+                },
+            ) => Some((
+                p,
+                SimulationState {
+                    result: "ok".into(),
+                    time: now(),
+                    run_id: *run_id,
+                    runs: *runs,
+                    cycle_s: *cycle_s,
+                    problem: None,
+                },
+            )),
+            (
+                Some(p),
+                Event::SimulationFailed {
+                    run_id,
+                    runs,
+                    cycle_s,
+                    kind,
+                    message,
+                    file,
+                    line,
+                    ..
+                },
+            ) => Some((
+                p,
+                SimulationState {
+                    result: "failed".into(),
+                    time: now(),
+                    run_id: *run_id,
+                    runs: *runs,
+                    cycle_s: *cycle_s,
+                    problem: Some(match (file, line) {
+                        (Some(f), Some(l)) => format!("{kind}: {message} [{f}:{l}]"),
+                        _ => format!("{kind}: {message}"),
+                    }),
+                },
+            )),
+            _ => None,
+        };
+        if let Some((p, sim)) = simulation {
+            let mut st = self.lock();
+            if let Some(r) = st.results.get_mut(p) {
+                r.simulation = Some(sim);
+                st.dirty = true;
+            }
+            return;
+        }
         let deploy = match (project, event) {
             (
                 Some(p),
@@ -367,6 +443,7 @@ impl Tracker {
                 first_error: None,
                 waiting: None,
                 deploys: Vec::new(),
+                simulation: None,
             },
             (
                 Some(p),
@@ -392,6 +469,7 @@ impl Tracker {
                 waiting: None,
                 stale: Vec::new(),
                 deploys: Vec::new(),
+                simulation: None,
             },
             // A project folder that is not watched (missing, or kept by another daemon) is
             // waited for; `watching` ends the wait.
@@ -444,6 +522,8 @@ impl Tracker {
         // were.
         if let Some(b) = st.results.get_mut(&result.project) {
             result.deploys = std::mem::take(&mut b.deploys);
+            // So does the last simulation, until the next one says otherwise.
+            result.simulation = b.simulation.take();
         }
         let before = st.results.insert(result.project.clone(), result);
         let was = before.is_some_and(|b| b.result == "failed");
@@ -860,7 +940,37 @@ pub fn table(s: &Snapshot) -> String {
         .collect();
     out.push_str(&aligned(header, &rows));
     out.push_str(&deploy_table(s));
+    out.push_str(&simulation_table(s));
     out
+}
+
+/// The last simulation of each project that simulates (nothing when none does).
+fn simulation_table(s: &Snapshot) -> String {
+    let header = ["PROJECT", "SIMULATION", "WHEN", "CYCLE", "FIRST PROBLEM"];
+    let rows: Vec<[String; 5]> = s
+        .projects
+        .iter()
+        .filter_map(|p| {
+            let sim = p.simulation.as_ref()?;
+            Some([
+                p.project.clone(),
+                format!(
+                    "{} ({} run{})",
+                    sim.result,
+                    sim.runs,
+                    if sim.runs == 1 { "" } else { "s" }
+                ),
+                sim.time.clone(),
+                sim.cycle_s
+                    .map_or_else(|| "-".into(), |c| format!("{c:.2} s")),
+                sim.problem.clone().unwrap_or_default(),
+            ])
+        })
+        .collect();
+    if rows.is_empty() {
+        return String::new();
+    }
+    format!("\n{}", aligned(header, &rows))
 }
 
 /// The last deploy of each program, under the projects (nothing when no project deploys).

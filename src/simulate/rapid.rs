@@ -463,7 +463,11 @@ impl Reader<'_> {
         let up0 = s.to_ascii_uppercase();
         let marker = s.strip_prefix('!').is_some_and(|c| {
             let c = c.trim();
-            c.starts_with("handshake:") || c.starts_with("selection ") || branch_title(c).is_some()
+            c.starts_with("handshake:")
+                || c.starts_with("transition ")
+                || c.starts_with("loop ")
+                || c.starts_with("selection ")
+                || branch_title(c).is_some()
         });
         let block = up0.ends_with(" THEN")
             || up0.ends_with(" DO")

@@ -292,6 +292,8 @@ impl Reader<'_> {
             let marker = raw.strip_prefix('#').is_some_and(|c| {
                 let c = c.trim();
                 c.starts_with("handshake:")
+                    || c.starts_with("transition ")
+                    || c.starts_with("loop ")
                     || c.starts_with("selection ")
                     || branch_title(c).is_some()
             });

@@ -13,6 +13,8 @@
 //! deploy_timeout_s = 60                        # optional, 1..=3600
 //! max_deploys = 4                              # optional, 1..=64: hooks at once, all projects
 //! picture = true                               # optional: <program>.svg, the plan's timeline
+//! simulate = 20                                # optional: random runs after each compile, or
+//!                                              # a scenario file in the project ("shift.toml")
 //! [[project]]
 //! path = "cells/Zelle_A"
 //! blackboard = "Zelle_A.aml"   # optional
@@ -98,6 +100,8 @@ pub struct Config {
     pub on_success: Option<super::deploy::Hook>,
     /// Every project that does not say otherwise draws its plan (`picture = true`).
     pub picture: bool,
+    /// What every project that does not say otherwise simulates after a compile.
+    pub simulate: Option<Simulate>,
     /// Explicit projects, with the global `template`/`line_endings` already applied.
     pub projects: Vec<ProjectSpec>,
     /// Folders whose direct subfolders holding a blackboard are projects.
@@ -144,6 +148,50 @@ pub struct ProjectSpec {
     pub on_success: Option<super::deploy::Hook>,
     /// Write `<program>.svg`, the plan's timeline, beside the outputs.
     pub picture: bool,
+    /// Simulate the programs after a successful compile (docs/SIMULATE.md, "In the daemon").
+    pub simulate: Option<Simulate>,
+}
+
+/// What the daemon simulates after a compile (`simulate`).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Simulate {
+    /// So many random runs.
+    Runs(usize),
+    /// The scenario file, relative to the project folder.
+    Scenario(PathBuf),
+}
+
+/// The most runs `simulate = N` asks for (each compile's simulation stays short).
+pub const MAX_SIMULATE_RUNS: i64 = 10_000;
+
+/// `simulate = N` (0: none) or `simulate = "FILE"` (a file in the project folder).
+fn simulate_setting(v: &Spanned<toml::Value>) -> Result<Option<Simulate>, String> {
+    match v.get_ref() {
+        toml::Value::Integer(0) | toml::Value::Boolean(false) => Ok(None),
+        toml::Value::Integer(n) if (1..=MAX_SIMULATE_RUNS).contains(n) => {
+            Ok(Some(Simulate::Runs(*n as usize)))
+        }
+        toml::Value::String(f) => {
+            let path = Path::new(f.trim());
+            if f.trim().is_empty()
+                || path.is_absolute()
+                || path
+                    .components()
+                    .any(|c| !matches!(c, Component::Normal(_) | Component::CurDir))
+            {
+                Err(format!(
+                    "`simulate` names a scenario file in the project folder (`shift.toml`, \
+                     `sim/shift.toml`), not `{f}`"
+                ))
+            } else {
+                Ok(Some(Simulate::Scenario(path.to_path_buf())))
+            }
+        }
+        _ => Err(format!(
+            "`simulate` is a number of random runs (1 to {MAX_SIMULATE_RUNS}; 0: none) or a \
+             scenario file in the project folder"
+        )),
+    }
 }
 
 /// A `[[root]]` entry: its folder and what its projects get.
@@ -164,6 +212,8 @@ pub struct RootSpec {
     pub on_success: Option<super::deploy::Hook>,
     /// Its projects draw their plans (the root's setting, else the global one).
     pub picture: bool,
+    /// What its projects simulate (the root's setting, else the global one).
+    pub simulate: Option<Simulate>,
 }
 
 impl RootSpec {
@@ -179,6 +229,7 @@ impl RootSpec {
             max_lines: self.max_lines,
             on_success: self.on_success.clone(),
             picture: self.picture,
+            simulate: self.simulate.clone(),
         }
     }
 }
@@ -418,6 +469,14 @@ fn parse_with(text: &str, file: &Path, files: bool) -> Result<Config, ConfigErro
             .map_err(|m| at(Some(v.span()), m))?,
         None => crate::emit::split::Limits::default(),
     };
+    let simulate = match &raw.simulate {
+        Some(v) => simulate_setting(v).map_err(|m| at(Some(v.span()), m))?,
+        None => None,
+    };
+    let own_simulate = |v: &Option<Spanned<toml::Value>>| match v {
+        Some(v) => simulate_setting(v).map_err(|m| at(Some(v.span()), m)),
+        None => Ok(simulate.clone()),
+    };
     let own_limits = |v: &Option<Spanned<toml::Value>>| match v {
         Some(v) => split_limits(v, max_lines).map_err(|m| at(Some(v.span()), m)),
         None => Ok(max_lines),
@@ -550,6 +609,7 @@ fn parse_with(text: &str, file: &Path, files: bool) -> Result<Config, ConfigErro
             max_lines: own_limits(&p.max_lines)?,
             on_success: own_hook(&p.on_success, &p.deploy_timeout_s)?,
             picture: p.picture.unwrap_or(raw.picture),
+            simulate: own_simulate(&p.simulate)?,
         });
     }
 
@@ -571,6 +631,7 @@ fn parse_with(text: &str, file: &Path, files: bool) -> Result<Config, ConfigErro
             max_lines: own_limits(&r.max_lines)?,
             on_success: own_hook(&r.on_success, &r.deploy_timeout_s)?,
             picture: r.picture.unwrap_or(raw.picture),
+            simulate: own_simulate(&r.simulate)?,
         });
     }
 
@@ -588,6 +649,7 @@ fn parse_with(text: &str, file: &Path, files: bool) -> Result<Config, ConfigErro
         max_lines,
         on_success,
         picture: raw.picture,
+        simulate,
         projects,
         roots,
     };
@@ -702,6 +764,7 @@ pub fn merge(
                 max_lines: config.max_lines,
                 on_success: config.on_success.clone(),
                 picture: config.picture,
+                simulate: config.simulate.clone(),
                 ..ProjectSpec::default()
             });
         }
@@ -959,6 +1022,7 @@ struct RawConfig {
     deploy_timeout_s: Option<Spanned<i64>>,
     #[serde(default)]
     picture: bool,
+    simulate: Option<Spanned<toml::Value>>,
     #[serde(default)]
     project: Vec<RawProject>,
     #[serde(default)]
@@ -978,6 +1042,7 @@ struct RawProject {
     on_success: Option<Spanned<Vec<String>>>,
     deploy_timeout_s: Option<Spanned<i64>>,
     picture: Option<bool>,
+    simulate: Option<Spanned<toml::Value>>,
 }
 
 #[derive(Deserialize)]
@@ -992,6 +1057,7 @@ struct RawRoot {
     on_success: Option<Spanned<Vec<String>>>,
     deploy_timeout_s: Option<Spanned<i64>>,
     picture: Option<bool>,
+    simulate: Option<Spanned<toml::Value>>,
 }
 
 #[cfg(test)]

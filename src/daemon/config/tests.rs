@@ -64,6 +64,7 @@ path = "/srv/planning/projects"
             max_lines: Default::default(),
             on_success: None,
             picture: false,
+            simulate: None,
             projects: vec![
                 ProjectSpec {
                     path: "/srv/cells/Zelle_A".into(),
@@ -728,6 +729,7 @@ fn merge_precedence() {
         max_lines: Default::default(),
         on_success: None,
         picture: false,
+        simulate: None,
         projects: vec![ProjectSpec {
             path: "/srv/A".into(),
             blackboard: Some("A.aml".into()),
