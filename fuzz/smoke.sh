@@ -11,7 +11,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 secs=${FUZZ_SMOKE_SECONDS:-15}
-targets=(blackboard sfc irl template value splice compile cond)
+targets=(blackboard sfc irl template value splice compile cond simulate)
 export RUSTC_BOOTSTRAP=1
 build=(--codegen-units 16)
 

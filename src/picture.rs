@@ -583,7 +583,7 @@ const BOLD: [u16; 95] = [
 
 /// The width (px) of `s` at `size` px in DejaVu Sans, bold or not; a character beyond ASCII is
 /// taken as wide as the widest letters (a whole em from the general punctuation on).
-fn text_w(s: &str, size: f64, bold: bool) -> f64 {
+pub fn text_w(s: &str, size: f64, bold: bool) -> f64 {
     let table = if bold { &BOLD } else { &BOOK };
     let thousandths: u32 = s
         .chars()
@@ -603,7 +603,7 @@ fn text_w(s: &str, size: f64, bold: bool) -> f64 {
 }
 
 /// `&`, `<`, `>` and `"` as XML wants them.
-fn esc(s: &str) -> String {
+pub fn esc(s: &str) -> String {
     let mut o = String::with_capacity(s.len());
     for c in s.chars() {
         match c {
@@ -633,7 +633,7 @@ fn px(x: f64) -> String {
 }
 
 /// The tick step of the time axis: 1, 2 or 5 times a power of ten, about every 80 px.
-fn tick_step(scale: f64) -> f64 {
+pub fn tick_step(scale: f64) -> f64 {
     let raw = 80.0 / scale;
     let p = 10f64.powf(raw.log10().floor());
     [1.0, 2.0, 5.0, 10.0]

@@ -322,6 +322,53 @@ fn the_value_change_dump_parses_and_holds_every_wire() {
 }
 
 #[test]
+fn the_measured_picture_shows_each_step_the_restart_and_the_problem() {
+    let p = common::fixture_project("cell-two-robots-weld");
+    let dir = p.path();
+    let one = "[inputs.\"KUKA KR16-2\"]\nMore_Parts = false\n\n[[restart]]\ncontroller = \"KUKA KR16-2\"\nafter = \"Weld\"\n";
+    let (code, v) = simulate(
+        dir,
+        "Blackboard.aml",
+        "Weld",
+        Some(one),
+        &["--svg", "run.svg"],
+    );
+    assert_eq!(code, 1);
+    let svg = fs::read_to_string(dir.join("run.svg")).unwrap();
+    let doc = roxmltree::Document::parse(&svg).expect("the SVG is XML");
+    let texts: Vec<String> = doc
+        .descendants()
+        .filter(|n| n.has_tag_name("text"))
+        .map(|n| n.text().unwrap_or_default().to_owned())
+        .collect();
+    for s in v["runs"][0]["timeline"].as_array().unwrap() {
+        let label = format!("{} (id={})", s["step"].as_str().unwrap(), s["local_id"]);
+        assert!(texts.contains(&label), "{label} not in {texts:?}");
+    }
+    assert!(
+        texts.iter().any(|t| t.starts_with("deadlock at ")),
+        "{texts:?}"
+    );
+    assert!(texts.iter().any(|t| t.contains("KUKA KR16-2")));
+    assert!(svg.contains("started again at 6.5 s"));
+    // The cycle time of an undisturbed run, as the picture of the plan states it.
+    let (code, _) = simulate(
+        dir,
+        "Blackboard.aml",
+        "Weld",
+        Some("[inputs.\"KUKA KR16-2\"]\nMore_Parts = false\n"),
+        &["--svg", "run.svg"],
+    );
+    assert_eq!(code, 0);
+    let picture = picture_cycle(dir, "Blackboard.aml", "Weld");
+    let svg = fs::read_to_string(dir.join("run.svg")).unwrap();
+    assert!(
+        svg.contains(&format!("cycle time {picture} s")),
+        "{picture}"
+    );
+}
+
+#[test]
 fn scenario_errors_name_the_file_line_column_and_the_near_name_and_write_nothing() {
     let p = common::fixture_project("cell-kuka-abb-ur");
     let dir = p.path();

@@ -30,6 +30,10 @@ pub(super) struct SimulateArgs {
     /// Write the first run's signals and wires as a Value Change Dump (GTKWave, Surfer)
     #[arg(long, value_name = "FILE")]
     vcd: Option<PathBuf>,
+    /// Draw the first run as an SVG timeline, measured: a lane per controller, each step when
+    /// it ran, the restarts and problems, the cycle time
+    #[arg(long, value_name = "FILE")]
+    svg: Option<PathBuf>,
     /// The report: text (stdout), or one JSON document (stdout)
     #[arg(long, value_enum, default_value_t = SimFormat::Human)]
     format: SimFormat,
@@ -108,15 +112,24 @@ pub(super) fn simulate_command(a: &SimulateArgs) -> u8 {
         a.seed,
     );
     r.scenario = a.scenario.as_ref().map(|s| s.display().to_string());
-    if let Some(v) = &a.vcd {
+    let files = [
+        (
+            "--vcd",
+            a.vcd.as_ref(),
+            report::vcd as fn(&simulate::Report) -> String,
+        ),
+        ("--svg", a.svg.as_ref(), report::svg),
+    ];
+    for (option, path, render) in files {
+        let Some(v) = path else { continue };
         if is_input(&c, v) {
             eprintln!(
-                "error: --vcd {}: that is an input of the compile; nothing written",
+                "error: {option} {}: that is an input of the compile; nothing written",
                 v.display()
             );
             return 2;
         }
-        if let Err(e) = compile::write_beside(&c, v, report::vcd(&r).as_bytes()) {
+        if let Err(e) = compile::write_beside(&c, v, render(&r).as_bytes()) {
             eprintln!("error: cannot write {}: {e}", v.display());
             return 2;
         }

@@ -347,3 +347,220 @@ pub fn vcd(r: &Report) -> String {
     }
     s
 }
+
+/// The first run as an SVG timeline, measured (`--svg`): one lane per controller, a box per step
+/// from when it started to when its motion ended (its name and localId inside, or below it on
+/// the first line where it meets no other text, tied to it by a thin line), the restarts
+/// (orange), the problems (red, with their kind), a time axis in seconds and the cycle time.
+/// Text is text; the same report gives the same bytes.
+pub fn svg(r: &Report) -> String {
+    use crate::picture::{esc, text_w, tick_step};
+    const LEFT_MIN: f64 = 170.0;
+    const BOX_H: f64 = 30.0;
+    const LINE_H: f64 = 13.0;
+    const LABEL: f64 = 9.0;
+    const PAD: f64 = 10.0;
+    let Some((_, o)) = r.runs.first() else {
+        return String::new();
+    };
+    let end = o
+        .timeline
+        .iter()
+        .map(|s| s.end)
+        .chain(o.problems.iter().map(|p| p.time))
+        .fold(o.end_time, f64::max)
+        .max(0.001);
+    let scale = (1100.0 / end).clamp(4.0, 160.0);
+    let left = r
+        .cell
+        .controllers
+        .iter()
+        .map(|c| text_w(&c.name, 12.0, true) + 24.0)
+        .fold(LEFT_MIN, f64::max);
+    let x = |t: f64| left + t * scale;
+    // Per lane: each step's box, and its label line (None: inside the box).
+    let lanes = r.cell.controllers.len();
+    let mut lines: Vec<Vec<Vec<(f64, f64)>>> = vec![Vec::new(); lanes];
+    let mut placed: Vec<(usize, f64, f64, String, Option<usize>)> = Vec::new();
+    for s in &o.timeline {
+        let label = format!("{} (id={})", s.name, s.local_id);
+        let (x0, w) = (x(s.start), ((s.end - s.start) * scale).max(3.0));
+        let tw = text_w(&label, LABEL, false);
+        if tw + 6.0 <= w {
+            placed.push((s.controller, x0, w, label, None));
+            continue;
+        }
+        let taken = &mut lines[s.controller];
+        let k = (0..)
+            .find(|&k| {
+                taken.get(k).is_none_or(|l: &Vec<(f64, f64)>| {
+                    l.iter().all(|&(a, b)| x0 + tw + 8.0 <= a || b + 8.0 <= x0)
+                })
+            })
+            .unwrap_or(0);
+        if taken.len() <= k {
+            taken.resize(k + 1, Vec::new());
+        }
+        taken[k].push((x0, x0 + tw));
+        placed.push((s.controller, x0, w, label, Some(k)));
+    }
+    let lane_h: Vec<f64> = lines
+        .iter()
+        .map(|l| BOX_H + 2.0 * PAD + l.len() as f64 * LINE_H)
+        .collect();
+    let top = 50.0;
+    let mut lane_y = Vec::with_capacity(lanes);
+    let mut y = top;
+    for h in &lane_h {
+        lane_y.push(y);
+        y += h;
+    }
+    let axis_y = y + 6.0;
+    let height = axis_y + 40.0 + 14.0 * o.problems.len().min(20) as f64;
+    let width = x(end) + 40.0;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w:.0}\" height=\"{height:.0}\" viewBox=\"0 0 {w:.0} {height:.0}\" font-family=\"DejaVu Sans, Verdana, sans-serif\">",
+        w = width
+    );
+    let _ = writeln!(s, "<rect width=\"100%\" height=\"100%\" fill=\"#ffffff\"/>");
+    let programs: Vec<String> = r
+        .cell
+        .controllers
+        .iter()
+        .map(|c| format!("{} ({})", c.file, c.name))
+        .collect();
+    let head = match (cycle(o), o.repeats) {
+        (Some(c), _) => format!("cycle time {} s", secs3(c)),
+        (None, true) => "the chart repeats".to_owned(),
+        (None, false) => "the programs did not end".to_owned(),
+    };
+    let _ = writeln!(
+        s,
+        "<text x=\"12\" y=\"20\" font-size=\"13\" font-weight=\"bold\">{}</text>",
+        esc(&format!("Simulation, run 1: {}", programs.join(", ")))
+    );
+    let _ = writeln!(
+        s,
+        "<text x=\"12\" y=\"38\" font-size=\"12\">{}</text>",
+        esc(&format!("{head}; {} problem(s)", o.problems.len()))
+    );
+    for (k, c) in r.cell.controllers.iter().enumerate() {
+        let ly = lane_y[k];
+        let _ = writeln!(
+            s,
+            "<rect x=\"4\" y=\"{ly:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"{}\"/>",
+            width - 8.0,
+            lane_h[k] - 2.0,
+            if k % 2 == 0 { "#f5f7fa" } else { "#eef1f5" }
+        );
+        let _ = writeln!(
+            s,
+            "<text x=\"12\" y=\"{:.1}\" font-size=\"12\" font-weight=\"bold\">{}</text>",
+            ly + PAD + BOX_H / 2.0 + 4.0,
+            esc(&c.name)
+        );
+    }
+    for (c, x0, w, label, line) in &placed {
+        let by = lane_y[*c] + PAD;
+        let _ = writeln!(
+            s,
+            "<rect x=\"{x0:.1}\" y=\"{by:.1}\" width=\"{w:.1}\" height=\"{BOX_H}\" fill=\"#90caf9\" stroke=\"#1565c0\"/>"
+        );
+        match line {
+            None => {
+                let _ = writeln!(
+                    s,
+                    "<text x=\"{:.1}\" y=\"{:.1}\" font-size=\"{LABEL}\">{}</text>",
+                    x0 + 3.0,
+                    by + BOX_H / 2.0 + 3.0,
+                    esc(label)
+                );
+            }
+            Some(j) => {
+                let ty = by + BOX_H + LINE_H * (*j as f64 + 1.0);
+                let _ = writeln!(
+                    s,
+                    "<line x1=\"{:.1}\" y1=\"{:.1}\" x2=\"{:.1}\" y2=\"{:.1}\" stroke=\"#9e9e9e\" stroke-width=\"0.5\"/>",
+                    x0 + 1.0,
+                    by + BOX_H,
+                    x0 + 1.0,
+                    ty - LABEL + 1.0
+                );
+                let _ = writeln!(
+                    s,
+                    "<text x=\"{x0:.1}\" y=\"{ty:.1}\" font-size=\"{LABEL}\">{}</text>",
+                    esc(label)
+                );
+            }
+        }
+    }
+    for (c, t) in &o.restarts {
+        let (ly, h) = (lane_y[*c], lane_h[*c]);
+        let _ = writeln!(
+            s,
+            "<line x1=\"{x:.1}\" y1=\"{ly:.1}\" x2=\"{x:.1}\" y2=\"{:.1}\" stroke=\"#ef6c00\" stroke-width=\"2\" stroke-dasharray=\"4 2\"><title>started again at {} s</title></line>",
+            ly + h,
+            secs3(*t),
+            x = x(*t)
+        );
+    }
+    for (k, p) in o.problems.iter().take(20).enumerate() {
+        let (y0, y1) = match p.controller {
+            Some(c) => (lane_y[c], lane_y[c] + lane_h[c]),
+            None => (top, y),
+        };
+        let _ = writeln!(
+            s,
+            "<line x1=\"{px:.1}\" y1=\"{y0:.1}\" x2=\"{px:.1}\" y2=\"{y1:.1}\" stroke=\"#c62828\" stroke-width=\"2\"/>",
+            px = x(p.time)
+        );
+        let _ = writeln!(
+            s,
+            "<text x=\"12\" y=\"{:.1}\" font-size=\"{LABEL}\" fill=\"#c62828\">{}</text>",
+            axis_y + 34.0 + 14.0 * k as f64,
+            esc(&format!(
+                "{} at {} s: {}",
+                p.kind.name(),
+                secs3(p.time),
+                p.message
+            ))
+        );
+    }
+    // The axis.
+    let _ = writeln!(
+        s,
+        "<line x1=\"{left:.1}\" y1=\"{axis_y:.1}\" x2=\"{:.1}\" y2=\"{axis_y:.1}\" stroke=\"#212121\"/>",
+        x(end)
+    );
+    let step = tick_step(scale);
+    let mut t = 0.0;
+    while t <= end + 1e-9 {
+        let _ = writeln!(
+            s,
+            "<line x1=\"{px:.1}\" y1=\"{axis_y:.1}\" x2=\"{px:.1}\" y2=\"{:.1}\" stroke=\"#212121\"/><text x=\"{px:.1}\" y=\"{:.1}\" font-size=\"{LABEL}\" text-anchor=\"middle\">{} s</text>",
+            axis_y + 4.0,
+            axis_y + 15.0,
+            secs3(t),
+            px = x(t)
+        );
+        t += step;
+    }
+    if let Some(c) = cycle(o) {
+        let _ = writeln!(
+            s,
+            "<line x1=\"{px:.1}\" y1=\"{top:.1}\" x2=\"{px:.1}\" y2=\"{axis_y:.1}\" stroke=\"#212121\" stroke-dasharray=\"2 2\"/>",
+            px = x(c)
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+/// Seconds with at most 3 decimals, no trailing zeros.
+pub fn secs3(x: f64) -> String {
+    let s = format!("{x:.3}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" { "0".into() } else { s.into() }
+}
