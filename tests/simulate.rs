@@ -554,3 +554,53 @@ fn a_program_split_into_parts_runs_as_the_unsplit_one() {
     assert_eq!(runs("20"), whole);
     assert_eq!(runs("5"), whole);
 }
+
+#[test]
+fn the_text_report_gives_the_timeline_the_problem_with_its_place_and_what_was_not_simulated() {
+    let p = common::fixture_project("cell-two-robots-weld");
+    let dir = p.path();
+    fs::write(
+        dir.join("scenario.toml"),
+        "[inputs.\"KUKA KR16-2\"]\nMore_Parts = false\n\n[[swap]]\nwires = [\"A to B 1\", \"A to B 2\"]\n",
+    )
+    .unwrap();
+    let out = skillpost(
+        dir,
+        &[
+            "simulate",
+            "Blackboard.aml",
+            "Weld",
+            "--scenario",
+            "scenario.toml",
+        ],
+    );
+    assert_eq!(out.status.code(), Some(1));
+    let t = text(&out.stdout);
+    let lines: Vec<&str> = t.lines().collect();
+    assert!(lines[0].starts_with("simulate: 1 run of 2 controllers: KUKA KR15-2 (Weld_KUKA_KR15_2.src), KUKA KR16-2 (Weld_KUKA_KR16_2.src); scenario scenario.toml"), "{t}");
+    assert!(t.contains("run 1 (seed "), "{t}");
+    assert!(
+        t.contains("    0.00     1.50  KUKA KR15-2  Pick (localId 3)"),
+        "{t}"
+    );
+    assert!(
+        lines
+            .iter()
+            .any(|l| l.starts_with("  problem: deadlock at ")
+                && l.contains("(chart element localId 5)")
+                && l.ends_with("[Weld_KUKA_KR16_2.src:74]")),
+        "{t}"
+    );
+    assert_eq!(lines.last(), Some(&"2 problems"), "{t}");
+    // A statement the simulator does not know is listed once, with its place.
+    let irl = fs::read_to_string(dir.join("greifer.irl")).unwrap();
+    fs::write(
+        dir.join("greifer.irl"),
+        irl.replace("$OUT[7] = TRUE", "$OUT[7] = TRUE\n\t\t\t\tCONVEYOR_ON(3)"),
+    )
+    .unwrap();
+    let out = skillpost(dir, &["simulate", "Blackboard.aml", "Weld", "--runs", "3"]);
+    let t = text(&out.stdout);
+    assert!(t.contains("not simulated"), "{t}");
+    assert_eq!(t.matches(": CONVEYOR_ON(3)").count(), 1, "listed once: {t}");
+}

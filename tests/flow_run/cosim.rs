@@ -1812,6 +1812,7 @@ pub fn compile_cell(
     if !out.status.success() {
         return Err(String::from_utf8_lossy(&out.stderr).into_owned());
     }
+    product_simulator_agrees(dir);
     let programs = (1..=langs.len())
         .zip(langs)
         .map(|(k, lang)| {
@@ -1836,6 +1837,53 @@ pub fn compile_cell(
         langs: langs.to_vec(),
         wires,
     })
+}
+
+/// The product's simulator (`skillpost simulate`, docs/SIMULATE.md) runs the same cell 10
+/// times under random inputs and timing: no run may have a problem (a deadlock, a step out of
+/// the chart's order, a wire set while a motion ran, controllers deciding differently), and
+/// every run ends or runs the chart's rounds.
+fn product_simulator_agrees(dir: &std::path::Path) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_skillpost"))
+        .args([
+            "simulate",
+            "Blackboard.aml",
+            "Cell",
+            "--runs",
+            "10",
+            "--format",
+            "json",
+        ])
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "skillpost simulate in {}: not JSON ({e}): {}",
+            dir.display(),
+            String::from_utf8_lossy(&out.stderr)
+        )
+    });
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "skillpost simulate found a problem in {}: {:#}",
+        dir.display(),
+        report["runs"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .flat_map(|r| r["problems"].as_array().cloned().unwrap_or_default())
+            .take(3)
+            .collect::<Vec<_>>()
+    );
+    for run in report["runs"].as_array().unwrap() {
+        assert!(
+            run["ended"] == true || run["repeats"] == true,
+            "{}: {run:#}",
+            dir.display()
+        );
+    }
 }
 
 /// Runs a compiled cell `runs` times with random timing and inputs; the first failure, if any.
