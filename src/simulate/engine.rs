@@ -74,6 +74,8 @@ pub struct Outcome {
     pub end_time: f64,
     /// The run stopped at its limit of steps of a chart that repeats.
     pub repeats: bool,
+    /// A random run stopped at its limit of steps: its inputs kept a loop going.
+    pub capped: bool,
     pub statements: u64,
     /// Programs started again: controller, time.
     pub restarts: Vec<(usize, f64)>,
@@ -197,10 +199,10 @@ pub fn run(
         r.ctls.push(ctl);
     }
     // The world's inputs at the start.
-    for inp in &cell.inputs {
+    for (k, inp) in cell.inputs.iter().enumerate() {
         let v = if random {
-            if inp.integer {
-                Val::Num((r.rng.next_u64() % 4) as f64)
+            if inp.integer || inp.key.len() > 1 {
+                r.random_number(k)
             } else {
                 Val::Bool(r.rng.next_u64() & 1 == 1)
             }
@@ -271,9 +273,12 @@ impl Run<'_> {
                 return;
             }
             if self.out.timeline.len() >= self.step_limit {
+                self.out.end_time = self.now();
                 if self.cell.endless {
                     self.out.repeats = true;
-                    self.out.end_time = self.now();
+                } else if self.answering {
+                    // Random inputs kept a loop going: no fault of the programs.
+                    self.out.capped = true;
                 } else {
                     self.limit(format!(
                         "stopped after {} steps (the limit) before the programs ended",
@@ -319,6 +324,26 @@ impl Run<'_> {
         }
     }
 
+    /// The inputs `x` reads on controller `c`, a computed one (URScript
+    /// `get_standard_digital_in(From_A_1)`) by the number its argument has now.
+    fn keys_of(&self, c: usize, x: &X, out: &mut Vec<Key>) {
+        match x {
+            X::In(k, _) => out.push(k.clone()),
+            X::Group(ks) => out.extend(ks.iter().cloned()),
+            X::InAt(f, a) => {
+                if let Ok(n) = self.eval(c, a) {
+                    out.push(format!("{f}({})", n.num().unwrap_or(-1.0) as i64));
+                }
+            }
+            X::Not(a) | X::Neg(a) => self.keys_of(c, a, out),
+            X::Bin(_, a, b) => {
+                self.keys_of(c, a, out);
+                self.keys_of(c, b, out);
+            }
+            _ => {}
+        }
+    }
+
     /// Whether a program waits for an input of the world (no wire drives it).
     fn waits_for_world(&self) -> bool {
         self.ctls.iter().enumerate().any(|(c, x)| {
@@ -326,7 +351,7 @@ impl Run<'_> {
                 && match self.programs[c].ins.get(x.pc) {
                     Some((Ins::Wait { cond, .. }, _)) => {
                         let mut keys = Vec::new();
-                        cond.inputs(&mut keys);
+                        self.keys_of(c, cond, &mut keys);
                         keys.iter().any(|k| !self.wired[c].contains_key(k))
                     }
                     _ => false,
@@ -395,7 +420,7 @@ impl Run<'_> {
                         .cloned()
                         .unwrap_or(Val::Bool(false));
                     let v = if integer || keys.len() > 1 {
-                        Val::Num((self.rng.next_u64() % 4) as f64)
+                        self.random_number(k)
                     } else {
                         Val::Bool(!old.truth())
                     };
@@ -443,6 +468,19 @@ impl Run<'_> {
         }
     }
 
+    /// A random value of integer input `k` of [`Cell::inputs`]: 0, or a number the programs
+    /// compare it with, or one next to it (so a wait for `Count >= 5` can end).
+    fn random_number(&mut self, k: usize) -> Val {
+        let values = self.cell.input_values.get(k).map_or(&[][..], Vec::as_slice);
+        let n = values.len() as u64 * 3 + 1;
+        let pick = self.rng.next_u64() % n;
+        if pick == 0 {
+            return Val::Num(0.0);
+        }
+        let (i, d) = ((pick - 1) / 3, (pick - 1) % 3);
+        Val::Num((values[i as usize] + d as f64 - 1.0).max(0.0))
+    }
+
     /// All programs wait: the world (a random run) sets an input one of them waits for, a
     /// moment later. `false` when no wait reads an input of the world.
     fn answer(&mut self) -> bool {
@@ -452,7 +490,7 @@ impl Run<'_> {
                 && let Some((Ins::Wait { cond, .. }, _)) = self.programs[c].ins.get(x.pc)
             {
                 let mut keys = Vec::new();
-                cond.inputs(&mut keys);
+                self.keys_of(c, cond, &mut keys);
                 for k in keys {
                     if !self.wired[c].contains_key(&k) && !k.ends_with("(?)") {
                         cands.push((c, k, x.t));
@@ -508,7 +546,7 @@ impl Run<'_> {
                         continue;
                     };
                     let mut keys = Vec::new();
-                    cond.inputs(&mut keys);
+                    self.keys_of(c, cond, &mut keys);
                     cond.outputs(&mut keys);
                     let partners: Vec<usize> = keys
                         .iter()
@@ -541,7 +579,25 @@ impl Run<'_> {
         if waits.is_empty() {
             return;
         }
-        let any_wire = waits.iter().any(|w| !w.3.is_empty());
+        // Stuck: a program that waits for the world (nothing sets what it reads), and every
+        // program that waits for a stuck one. The others wait for each other, or for a partner
+        // that ended or stopped: a deadlock.
+        let mut stuck: Vec<usize> = waits
+            .iter()
+            .filter(|w| w.3.is_empty())
+            .map(|w| w.0)
+            .collect();
+        loop {
+            let more: Vec<usize> = waits
+                .iter()
+                .filter(|w| !stuck.contains(&w.0) && w.3.iter().any(|p| stuck.contains(p)))
+                .map(|w| w.0)
+                .collect();
+            if more.is_empty() {
+                break;
+            }
+            stuck.extend(more);
+        }
         for (c, since, line, partners, keys) in waits {
             let x = &self.ctls[c];
             let what = x
@@ -555,6 +611,10 @@ impl Run<'_> {
                         let state = match &self.ctls[p].state {
                             State::Ended => "which has ended".to_owned(),
                             State::Halted { .. } => "which has stopped (start it again)".to_owned(),
+                            State::Blocked { .. } if stuck.contains(&p) => format!(
+                                "which waits for what nothing sets (line {})",
+                                self.programs[p].ins.get(self.ctls[p].pc).map_or(0, |i| i.1)
+                            ),
                             State::Blocked { .. } => format!(
                                 "which waits too (line {})",
                                 self.programs[p].ins.get(self.ctls[p].pc).map_or(0, |i| i.1)
@@ -580,10 +640,10 @@ impl Run<'_> {
                 )
             };
             self.out.problems.push(Problem {
-                kind: if any_wire {
-                    ProblemKind::Deadlock
-                } else {
+                kind: if stuck.contains(&c) {
                     ProblemKind::Stuck
+                } else {
+                    ProblemKind::Deadlock
                 },
                 time: since,
                 controller: Some(c),

@@ -567,10 +567,15 @@ impl Reader<'_> {
                     });
                 }
                 Err(_) => {
+                    // Not read: listed, and the loop not run (never a loop without end).
                     self.unknown(c, line);
                     let start = self.p.ins.len();
-                    self.open.push(Open::Loop {
+                    let test = self
+                        .p
+                        .push(Ins::JumpIfNot(X::Const(Val::Bool(false)), 0), line);
+                    self.open.push(Open::While {
                         start,
+                        test,
                         exits: Vec::new(),
                     });
                 }
@@ -639,8 +644,14 @@ impl Reader<'_> {
                     None => {
                         self.unknown(c, line);
                         let start = self.p.ins.len();
-                        self.open.push(Open::Loop {
+                        let test = self
+                            .p
+                            .push(Ins::JumpIfNot(X::Const(Val::Bool(false)), 0), line);
+                        self.open.push(Open::For {
                             start,
+                            test,
+                            var: "SKP_UNREAD".into(),
+                            step: X::Const(Val::Num(0.0)),
                             exits: Vec::new(),
                         });
                     }

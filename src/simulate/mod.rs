@@ -88,6 +88,11 @@ pub struct Cell {
     pub resources: Vec<Resource>,
     /// Every input of the world, flat.
     pub inputs: Vec<Input>,
+    /// Every output a resource declares (not a wire's), flat: its name for the report.
+    pub outputs: Vec<Input>,
+    /// Per input of [`Cell::inputs`]: the numbers the programs compare it with (random runs
+    /// give integer inputs these, and their neighbours).
+    pub input_values: Vec<Vec<f64>>,
     /// The chart's steps by localId.
     pub steps: HashMap<u64, StepInfo>,
     /// The names of the steps the programs run (for `after = "STEP"`).
@@ -114,6 +119,11 @@ impl Cell {
                 if i.controller == c && i.key.iter().any(|k| k == key) {
                     return format!("`{}` on {}", i.name, r.name);
                 }
+            }
+        }
+        for o in &self.outputs {
+            if o.controller == c && o.key.iter().any(|k| k == key) {
+                return format!("`{}` (its own output)", o.name);
             }
         }
         format!("`{key}`")
@@ -403,6 +413,13 @@ impl Cell {
                 let key = key_of(lang, sig.output, &sig.kind);
                 if sig.output {
                     io[ctl].outs.extend(key.iter().cloned());
+                    cell.outputs.push(Input {
+                        name: sig.name.text.to_string(),
+                        number: None,
+                        controller: ctl,
+                        key,
+                        integer: sig.is_integer(),
+                    });
                     continue;
                 }
                 io[ctl].ins.extend(key.iter().cloned());
@@ -526,6 +543,59 @@ fn inputs_of(e: &crate::model::Element) -> Vec<u64> {
     }
 }
 
+/// Per input of the world: the numbers the programs compare it with (`Count >= 5`: 5).
+fn compared_values(cell: &Cell, programs: &[Program]) -> Vec<Vec<f64>> {
+    use ir::{Ins, X};
+    fn walk(x: &X, out: &mut Vec<(Vec<Key>, f64)>) {
+        match x {
+            X::Bin(_, a, b) => {
+                match (&**a, &**b) {
+                    (X::In(k, _), X::Const(v)) | (X::Const(v), X::In(k, _)) => {
+                        if let Some(n) = v.num() {
+                            out.push((vec![k.clone()], n));
+                        }
+                    }
+                    (X::Group(ks), X::Const(v)) | (X::Const(v), X::Group(ks)) => {
+                        if let Some(n) = v.num() {
+                            out.push((ks.clone(), n));
+                        }
+                    }
+                    _ => {}
+                }
+                walk(a, out);
+                walk(b, out);
+            }
+            X::Not(a) | X::Neg(a) => walk(a, out),
+            _ => {}
+        }
+    }
+    let mut found: Vec<Vec<(Vec<Key>, f64)>> = vec![Vec::new(); programs.len()];
+    for (c, p) in programs.iter().enumerate() {
+        for (i, _) in &p.ins {
+            if let Ins::Wait { cond: x, .. } | Ins::JumpIfNot(x, _) = i {
+                walk(x, &mut found[c]);
+            }
+        }
+    }
+    cell.inputs
+        .iter()
+        .map(|inp| {
+            let mut v: Vec<f64> = found
+                .get(inp.controller)
+                .into_iter()
+                .flatten()
+                .filter(|(k, _)| *k == inp.key)
+                .map(|(_, n)| *n)
+                .filter(|n| n.is_finite() && *n >= 0.0 && *n < 1e9)
+                .collect();
+            v.sort_by(f64::total_cmp);
+            v.dedup();
+            v.truncate(64);
+            v
+        })
+        .collect()
+}
+
 /// Limits of a run that the scenario does not set: proportional to the chart.
 fn limits(s: &mut Scenario, cell: &Cell, programs: &[Program]) {
     let steps: usize = programs
@@ -574,6 +644,7 @@ pub fn simulate(
     seed: Option<u64>,
 ) -> Report {
     limits(&mut scenario, &cell, programs);
+    cell.input_values = compared_values(&cell, programs);
     for &(a, b) in &scenario.swaps {
         let ta = cell.wires[a].to.clone();
         cell.wires[a].to = std::mem::replace(&mut cell.wires[b].to, ta);

@@ -595,11 +595,12 @@ impl Reader<'_> {
                         self.open.push(Open::While { start, test });
                     }
                     _ => {
+                        // Not read: listed, and the loop not run (never a loop without end).
                         self.unknown(s, line);
                         let start = self.p.ins.len();
                         let test = self
                             .p
-                            .push(Ins::JumpIfNot(X::Const(Val::Bool(true)), 0), line);
+                            .push(Ins::JumpIfNot(X::Const(Val::Bool(false)), 0), line);
                         self.open.push(Open::While { start, test });
                     }
                 }

@@ -55,6 +55,11 @@ pub fn human(r: &Report) -> String {
                 o.timeline.len(),
                 secs(o.end_time)
             ),
+            (None, false) if o.capped => format!(
+                "stopped after {} steps at {} s: the random inputs kept a loop going",
+                o.timeline.len(),
+                secs(o.end_time)
+            ),
             (None, false) => format!("did not end (stopped at {} s)", secs(o.end_time)),
         };
         let shown = k == 0 || !o.problems.is_empty();
@@ -183,6 +188,7 @@ pub fn json(r: &Report) -> Value {
                 "seed": seed,
                 "ended": o.ended,
                 "repeats": o.repeats,
+                "capped": o.capped,
                 "cycle_s": cycle(o),
                 "end_s": o.end_time,
                 "timeline": o.timeline.iter().map(|s| json!({

@@ -17,7 +17,7 @@ use super::ir::{
 
 pub const GRAMMAR: Grammar = Grammar {
     levels: &[
-        &[("or", Op::Or)],
+        &[("or", Op::Or), ("xor", Op::Xor)],
         &[("and", Op::And)],
         &[],
         &[
@@ -413,7 +413,14 @@ impl Reader<'_> {
             }
             "while" => {
                 let cond = c[5..].trim().trim_end_matches(':');
-                let x = self.expr(cond).unwrap_or(X::Const(Val::Bool(true)));
+                // A condition not read: listed, and the loop not run (never a loop without end).
+                let x = match self.expr(cond) {
+                    Ok(x) => x,
+                    Err(_) => {
+                        self.unknown(c, line);
+                        X::Const(Val::Bool(false))
+                    }
+                };
                 let start = self.p.ins.len();
                 let test = self.p.push(Ins::JumpIfNot(x, 0), line);
                 self.open.push(Open::While {
