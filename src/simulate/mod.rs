@@ -611,6 +611,9 @@ fn limits(s: &mut Scenario, cell: &Cell, programs: &[Program]) {
         s.max_steps = if cell.endless {
             // A chart that repeats: two rounds of every step, at least.
             2 * steps + 2
+        } else if s.random {
+            // Random inputs may keep a loop going: twenty rounds of every step are enough.
+            (20 * steps).max(500)
         } else {
             (100 * steps).max(1000)
         };

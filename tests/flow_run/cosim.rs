@@ -1839,7 +1839,7 @@ pub fn compile_cell(
     })
 }
 
-/// The product's simulator (`skillpost simulate`, docs/SIMULATE.md) runs the same cell 10
+/// The product's simulator (`skillpost simulate`, docs/SIMULATE.md) runs the same cell 5
 /// times under random inputs and timing: no run may have a problem (a deadlock, a step out of
 /// the chart's order, a wire set while a motion ran, controllers deciding differently), and
 /// every run ends, runs the chart's rounds or stops at its step limit (random inputs that keep
