@@ -23,28 +23,6 @@ mod cell;
 #[path = "common/generator.rs"]
 mod generator;
 
-/// Puts each step on one of `n` robots `R1`…, in runs of 1 to 20 steps.
-fn spread(sfc: &str, n: usize) -> String {
-    let marker = "<ressource name=\"KUKA KR15-2\"/>";
-    let mut out = String::with_capacity(sfc.len());
-    let (mut rest, mut seed, mut left, mut robot) = (sfc, 0x9E37_79B9_7F4A_7C15u64, 0u64, 0u64);
-    while let Some(at) = rest.find(marker) {
-        if left == 0 {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            left = 1 + seed % 20;
-            robot = (robot + 1 + (seed >> 8) % (n as u64 - 1)) % n as u64;
-        }
-        left -= 1;
-        out.push_str(&rest[..at]);
-        out.push_str(&format!("<ressource name=\"R{}\"/>", robot + 1));
-        rest = &rest[at + marker.len()..];
-    }
-    out.push_str(rest);
-    out
-}
-
 fn env(name: &str, default: usize) -> usize {
     std::env::var(name)
         .ok()
@@ -85,7 +63,7 @@ fn main() {
     std::fs::write(two.join(generator::BLACKBOARD_FILE), bb).unwrap();
     std::fs::copy(&project.irl, two.join(generator::IRL_FILE)).unwrap();
     let sfc = std::fs::read_to_string(&project.sfc).unwrap();
-    std::fs::write(two.join(generator::SFC_FILE), spread(&sfc, 2)).unwrap();
+    std::fs::write(two.join(generator::SFC_FILE), cell::spread(&sfc, 2)).unwrap();
 
     let opts = Options {
         program: Some("P".into()),

@@ -93,3 +93,26 @@ pub fn cell_blackboard(
     out.extend(lines[end + 1..].iter().map(|s| s.to_string()));
     out.join("\n")
 }
+
+/// Puts each step of a generated chart (`generator.rs`, on `KUKA KR15-2`) on one of `n` robots
+/// `R1`…, in runs of 1 to 20 steps (a fixed sequence).
+pub fn spread(sfc: &str, n: usize) -> String {
+    let marker = "<ressource name=\"KUKA KR15-2\"/>";
+    let mut out = String::with_capacity(sfc.len());
+    let (mut rest, mut seed, mut left, mut robot) = (sfc, 0x9E37_79B9_7F4A_7C15u64, 0u64, 0u64);
+    while let Some(at) = rest.find(marker) {
+        if left == 0 {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            left = 1 + seed % 20;
+            robot = (robot + 1 + (seed >> 8) % (n as u64 - 1)) % n as u64;
+        }
+        left -= 1;
+        out.push_str(&rest[..at]);
+        out.push_str(&format!("<ressource name=\"R{}\"/>", robot + 1));
+        rest = &rest[at + marker.len()..];
+    }
+    out.push_str(rest);
+    out
+}

@@ -559,32 +559,27 @@ pub fn branch_title(text: &str) -> Option<u64> {
         .and_then(|d| d.parse().ok())
 }
 
+/// What a comment of the writer's says after a step's title: a branch taken
+/// ([`Ins::Branch`]), what the program does next (a handshake, a selection, a transition, a
+/// loop: [`Ins::Note`]), or nothing. Such a comment also ends a step's own code.
+pub fn writer_comment(comment: &str) -> Option<Ins> {
+    if let Some(transition) = branch_title(comment) {
+        return Some(Ins::Branch {
+            selection: None,
+            transition,
+        });
+    }
+    ["handshake:", "selection ", "transition ", "loop "]
+        .iter()
+        .any(|p| comment.starts_with(p))
+        .then(|| Ins::Note(comment.to_owned()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    const KRL: Grammar = Grammar {
-        levels: &[
-            &[
-                ("==", Op::Eq),
-                ("<>", Op::Ne),
-                ("<=", Op::Le),
-                (">=", Op::Ge),
-                ("<", Op::Lt),
-                (">", Op::Gt),
-            ],
-            &[("OR", Op::Or)],
-            &[("EXOR", Op::Xor)],
-            &[("AND", Op::And)],
-            &[("+", Op::Add), ("-", Op::Sub)],
-            &[("*", Op::Mul), ("/", Op::Div)],
-        ],
-        not_level: 6,
-        not: "NOT",
-        fold_case: true,
-        trues: &["TRUE"],
-        falses: &["FALSE"],
-    };
+    use crate::simulate::krl::GRAMMAR as KRL;
 
     #[test]
     fn krl_comparisons_bind_loosest() {

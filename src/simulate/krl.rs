@@ -11,7 +11,7 @@
 use std::collections::HashMap;
 
 use super::ir::{
-    Grammar, Ins, Line, Op, Program, Raw, Settle, Val, X, branch_title, parse_expr, step_title,
+    Grammar, Ins, Line, Op, Program, Raw, Settle, Val, X, parse_expr, step_title, writer_comment,
 };
 
 pub const GRAMMAR: Grammar = Grammar {
@@ -458,21 +458,10 @@ impl Reader<'_> {
             }
             if let Some(comment) = t.strip_prefix(';') {
                 let comment = comment.trim();
-                if let Some(tr) = branch_title(comment) {
-                    self.p.push(
-                        Ins::Branch {
-                            selection: None,
-                            transition: tr,
-                        },
-                        line,
-                    );
-                } else if (comment.starts_with("handshake:")
-                    || comment.starts_with("selection ")
-                    || comment.starts_with("transition ")
-                    || comment.starts_with("loop "))
-                    && self.depth == 0
+                if let Some(ins) = writer_comment(comment)
+                    && (matches!(ins, Ins::Branch { .. }) || self.depth == 0)
                 {
-                    self.p.push(Ins::Note(comment.to_owned()), line);
+                    self.p.push(ins, line);
                 }
                 continue;
             }

@@ -10,8 +10,8 @@
 use std::collections::HashMap;
 
 use super::ir::{
-    Grammar, Ins, IoKeys, Line, Op, Program, Raw, Settle, Val, X, branch_title, parse_expr,
-    step_title,
+    Grammar, Ins, IoKeys, Line, Op, Program, Raw, Settle, Val, X, parse_expr, step_title,
+    writer_comment,
 };
 
 pub const GRAMMAR: Grammar = Grammar {
@@ -461,14 +461,10 @@ impl Reader<'_> {
 
     fn statement(&mut self, s: &str, line: Line) {
         let up0 = s.to_ascii_uppercase();
-        let marker = s.strip_prefix('!').is_some_and(|c| {
-            let c = c.trim();
-            c.starts_with("handshake:")
-                || c.starts_with("transition ")
-                || c.starts_with("loop ")
-                || c.starts_with("selection ")
-                || branch_title(c).is_some()
-        });
+        let marker = s
+            .strip_prefix('!')
+            .and_then(|c| writer_comment(c.trim()))
+            .is_some();
         let block = up0.ends_with(" THEN")
             || up0.ends_with(" DO")
             || [
@@ -487,21 +483,10 @@ impl Reader<'_> {
                 self.end_step(line);
                 self.p.push(Ins::Step { local_id: id, name }, line);
                 self.in_step = true;
-            } else if let Some(tr) = branch_title(comment) {
-                self.p.push(
-                    Ins::Branch {
-                        selection: None,
-                        transition: tr,
-                    },
-                    line,
-                );
-            } else if (comment.starts_with("handshake:")
-                || comment.starts_with("selection ")
-                || comment.starts_with("transition ")
-                || comment.starts_with("loop "))
-                && self.depth == 0
+            } else if let Some(ins) = writer_comment(comment)
+                && (matches!(ins, Ins::Branch { .. }) || self.depth == 0)
             {
-                self.p.push(Ins::Note(comment.to_owned()), line);
+                self.p.push(ins, line);
             }
             return;
         }

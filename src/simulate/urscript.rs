@@ -11,8 +11,8 @@
 use std::collections::HashMap;
 
 use super::ir::{
-    Grammar, Ins, IoKeys, Line, Op, Program, Raw, Settle, Val, X, branch_title, parse_expr,
-    step_title,
+    Grammar, Ins, IoKeys, Line, Op, Program, Raw, Settle, Val, X, parse_expr, step_title,
+    writer_comment,
 };
 
 pub const GRAMMAR: Grammar = Grammar {
@@ -289,14 +289,10 @@ impl Reader<'_> {
         while i < lines.len() {
             let (line, ref raw) = lines[i];
             i += 1;
-            let marker = raw.strip_prefix('#').is_some_and(|c| {
-                let c = c.trim();
-                c.starts_with("handshake:")
-                    || c.starts_with("transition ")
-                    || c.starts_with("loop ")
-                    || c.starts_with("selection ")
-                    || branch_title(c).is_some()
-            });
+            let marker = raw
+                .strip_prefix('#')
+                .and_then(|c| writer_comment(c.trim()))
+                .is_some();
             let c0 = code(raw);
             if marker
                 || ["if ", "elif ", "else:", "while ", "for "]
@@ -314,21 +310,10 @@ impl Reader<'_> {
                     self.end_step(line);
                     self.p.push(Ins::Step { local_id: id, name }, line);
                     self.in_step = true;
-                } else if let Some(tr) = branch_title(comment) {
-                    self.p.push(
-                        Ins::Branch {
-                            selection: None,
-                            transition: tr,
-                        },
-                        line,
-                    );
-                } else if (comment.starts_with("handshake:")
-                    || comment.starts_with("selection ")
-                    || comment.starts_with("transition ")
-                    || comment.starts_with("loop "))
-                    && self.depth == 0
+                } else if let Some(ins) = writer_comment(comment)
+                    && (matches!(ins, Ins::Branch { .. }) || self.depth == 0)
                 {
-                    self.p.push(Ins::Note(comment.to_owned()), line);
+                    self.p.push(ins, line);
                 }
                 continue;
             }
