@@ -2181,7 +2181,7 @@ fn cell_fixtures_keep_the_charts_order_whatever_the_timing() {
     for &(case, programs, controllers) in CELL_FIXTURES {
         let (chart, cell, robot_of) =
             cosim::fixture_cell(&dir.path().join(case), case, programs, controllers);
-        assert!(!cell.wires.from.is_empty(), "{case}: no wires read");
+        assert!(!cell.sim.wires.is_empty(), "{case}: no wires read");
         if let Err(e) = cosim::co_simulate(
             &chart,
             &cell,

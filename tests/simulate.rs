@@ -604,3 +604,110 @@ fn the_text_report_gives_the_timeline_the_problem_with_its_place_and_what_was_no
     assert!(t.contains("not simulated"), "{t}");
     assert_eq!(t.matches(": CONVEYOR_ON(3)").count(), 1, "listed once: {t}");
 }
+
+/// A shift of cycles: `cycles = 2` starts every program again after its END, each cycle in the
+/// chart's order (the second Take after the second Grip), without a problem; a controller's
+/// `[timing]` moves its start and stretches its motions, and the cycle time follows.
+#[test]
+fn cycles_run_the_chart_again_and_a_controllers_timing_stretches_its_motions() {
+    let p = common::fixture_project("cell-kuka-abb-ur");
+    let dir = p.path();
+    let inputs = "[inputs.\"ABB IRB 1200\"]\nPart_Present = true\n";
+    let (code, v) = simulate(dir, "Blackboard.aml", "Mix", Some(inputs), &[]);
+    assert_eq!(code, 0, "{v:#}");
+    let one = lanes(&v["runs"][0]);
+    let cycle = v["runs"][0]["cycle_s"].as_f64().unwrap();
+
+    let (code, v) = simulate(
+        dir,
+        "Blackboard.aml",
+        "Mix",
+        Some(&format!("cycles = 2\ncycle_pause_s = 0.5\n{inputs}")),
+        &[],
+    );
+    assert_eq!(code, 0, "{v:#}");
+    let run = &v["runs"][0];
+    let l = lanes(run);
+    assert_eq!(
+        names(&l["KUKA KR15-2"]),
+        ["Pick", "Grip", "Retreat", "Pick", "Grip", "Retreat"]
+    );
+    assert_eq!(names(&l["ABB IRB 1200"]), ["Take", "Take"]);
+    assert_eq!(names(&l["UR10e"]), ["Place", "Release", "Place", "Release"]);
+    assert_eq!(run["restarts"].as_array().unwrap().len(), 3, "{run:#}");
+    // The second Take waits for the second Grip.
+    assert!(l["ABB IRB 1200"][1].1 >= l["KUKA KR15-2"][4].2, "{l:?}");
+    assert!(run["cycle_s"].as_f64().unwrap() > 2.0 * cycle - 1e-9);
+
+    // The ABB's motions take twice their time, the KUKA starts at 0.5 s.
+    let (code, v) = simulate(
+        dir,
+        "Blackboard.aml",
+        "Mix",
+        Some(&format!(
+            "{inputs}[timing.\"ABB IRB 1200\"]\nmotion_factor = 2\n[timing.\"KUKA KR15-2\"]\nstart_s = 0.5\n"
+        )),
+        &[],
+    );
+    assert_eq!(code, 0, "{v:#}");
+    let l = lanes(&v["runs"][0]);
+    let (take0, take) = (&one["ABB IRB 1200"][0], &l["ABB IRB 1200"][0]);
+    assert!(
+        ((take.2 - take.1) - 2.0 * (take0.2 - take0.1)).abs() < 1e-9,
+        "{take0:?} {take:?}"
+    );
+    assert!((l["KUKA KR15-2"][0].1 - 0.5).abs() < 1e-9, "{l:?}");
+    assert!(v["runs"][0]["cycle_s"].as_f64().unwrap() > cycle + 0.5);
+
+    // Timing errors are located, with the near name.
+    for (bad, want) in [
+        (
+            "[timing.\"ABB IRB 120\"]\nstart_s = 1\n",
+            "t.toml:1:9: no controller `ABB IRB 120` in this cell; did you mean `ABB IRB 1200`?",
+        ),
+        (
+            "[timing.\"UR10e\"]\nmotion_factor = 0\n",
+            "t.toml:2:17: `motion_factor` is more than 0",
+        ),
+        ("cycles = 0\n", "t.toml:1:10: `cycles` is 1 to 1,000,000"),
+    ] {
+        fs::write(dir.join("t.toml"), bad).unwrap();
+        let out = skillpost(
+            dir,
+            &["simulate", "Blackboard.aml", "Mix", "--scenario", "t.toml"],
+        );
+        assert_eq!(out.status.code(), Some(2), "{bad}");
+        assert!(
+            text(&out.stderr).contains(want),
+            "{bad}: {}",
+            text(&out.stderr)
+        );
+    }
+}
+
+/// A chart that waits for the robot's own output (the flow base's `Gripper_Closed`, declared
+/// as an output): stuck without it; forced in the scenario, as from the pendant's I/O display,
+/// the program runs to its end.
+#[test]
+fn an_output_named_in_the_scenario_is_forced() {
+    let p = common::fixture_project("flow-guarded-sequence");
+    let dir = p.path();
+    let inputs =
+        "[inputs.\"KUKA KR15-2\"]\nPart_OK = true\nMagazine_Empty = false\nRelease = true\n";
+    let (code, v) = simulate(dir, "Blackboard.aml", "GuardedSequence", Some(inputs), &[]);
+    assert_eq!(code, 1, "{v:#}");
+    let ps = problems(&v["runs"][0]);
+    assert!(
+        ps.len() == 1 && ps[0].0 == "stuck" && ps[0].1.contains("Gripper_Closed"),
+        "{ps:?}"
+    );
+    let (code, v) = simulate(
+        dir,
+        "Blackboard.aml",
+        "GuardedSequence",
+        Some(&format!("{inputs}Gripper_Closed = true\n")),
+        &[],
+    );
+    assert_eq!(code, 0, "{v:#}");
+    assert_eq!(v["runs"][0]["ended"], true, "{v:#}");
+}

@@ -57,6 +57,17 @@ struct Ctl {
     running: Option<usize>,
     /// In a step's own code: what takes time there takes the step's time.
     in_step: bool,
+    /// Its motions' pace and what a statement takes ([`super::Timing`]).
+    factor: f64,
+    statement_s: f64,
+    /// Cycles still to run after this one (the operator starts it again after its END).
+    cycles_left: usize,
+    /// Since when a wait's message shows on the pendant.
+    shown: Option<f64>,
+    /// The last wait ended by its time limit, not by what it waits for.
+    timed_out: bool,
+    /// The localId of the step it started last in this cycle.
+    last_step: Option<u64>,
 }
 
 /// What one run produced.
@@ -77,8 +88,10 @@ pub struct Outcome {
     /// A random run stopped at its limit of steps: its inputs kept a loop going.
     pub capped: bool,
     pub statements: u64,
-    /// Programs started again: controller, time.
+    /// Programs started again (by the scenario, or for their next cycle): controller, time.
     pub restarts: Vec<(usize, f64)>,
+    /// Messages of waits on the pendant: controller, shown, taken away.
+    pub messages: Vec<(usize, f64, f64)>,
 }
 
 /// SplitMix64: a fixed, portable pseudo-random sequence.
@@ -132,6 +145,9 @@ struct Run<'c> {
     /// The latest run of each step (by localId) in the timeline.
     last_run: HashMap<u64, usize>,
     statement_limit: u64,
+    /// Per controller: the localIds of its own steps.
+    own_steps: Vec<std::collections::HashSet<u64>>,
+    cycle_pause: f64,
 }
 
 /// Runs the cell once under `scenario` (its inputs, changes, restarts, jitter), with `rng`.
@@ -175,9 +191,27 @@ pub fn run(
         },
         last_run: HashMap::new(),
         statement_limit: scenario.max_statements,
+        own_steps: programs
+            .iter()
+            .map(|p| {
+                p.ins
+                    .iter()
+                    .filter_map(|i| match &i.0 {
+                        Ins::Step { local_id, .. } => Some(*local_id),
+                        _ => None,
+                    })
+                    .collect()
+            })
+            .collect(),
+        cycle_pause: scenario.cycle_pause_s.max(0.0),
     };
     for (c, _) in cell.controllers.iter().enumerate() {
-        let delay = if random { r.rng.unit() * 0.5 } else { 0.0 };
+        let timing = scenario.timing.get(&c).cloned().unwrap_or_default();
+        let delay = match timing.start_s {
+            Some(s) => s.max(0.0),
+            None if random => r.rng.unit() * 0.5,
+            None => 0.0,
+        };
         let mut ctl = Ctl {
             pc: 0,
             t: delay,
@@ -194,6 +228,12 @@ pub fn run(
             message: None,
             running: None,
             in_step: false,
+            factor: timing.motion_factor.max(0.0),
+            statement_s: timing.statement_s.max(0.0),
+            cycles_left: scenario.cycles.max(1) - 1,
+            shown: None,
+            timed_out: false,
+            last_step: None,
         };
         reset_vars(&mut ctl, &programs[c]);
         r.ctls.push(ctl);
@@ -437,8 +477,18 @@ impl Run<'_> {
     /// outputs keep their levels, its variables their first values.
     fn restart(&mut self, c: usize, t: f64) {
         let p = &self.programs[c];
-        let x = &mut self.ctls[c];
         let now = t;
+        // Motions the advance run queued that have not begun never run; the one that runs is
+        // cut short.
+        if self
+            .out
+            .timeline
+            .iter()
+            .any(|s| s.controller == c && s.start > now + 1e-12)
+        {
+            self.drop_queued(c, now);
+        }
+        let x = &mut self.ctls[c];
         if let Some(i) = x.running.take()
             && self.out.timeline[i].end > now
         {
@@ -454,9 +504,45 @@ impl Run<'_> {
         x.note = None;
         x.message = None;
         x.in_step = false;
+        x.timed_out = false;
+        x.last_step = None;
+        // A reset takes the program's messages away (KRL `Clear_P_Reset`; RAPID and URScript
+        // show none while stopped).
+        if let Some(since) = x.shown.take() {
+            self.out.messages.push((c, since, now));
+        }
         reset_vars(x, p);
         self.out.restarts.push((c, now));
         self.wake_all(now);
+    }
+
+    /// Takes controller `c`'s steps that begin after `now` out of the timeline (the indices
+    /// the run keeps into it follow).
+    fn drop_queued(&mut self, c: usize, now: f64) {
+        let mut new_index = Vec::with_capacity(self.out.timeline.len());
+        let mut kept = 0usize;
+        for s in &self.out.timeline {
+            if s.controller == c && s.start > now + 1e-12 {
+                new_index.push(None);
+            } else {
+                new_index.push(Some(kept));
+                kept += 1;
+            }
+        }
+        let mut k = 0;
+        self.out.timeline.retain(|_| {
+            k += 1;
+            new_index[k - 1].is_some()
+        });
+        for x in &mut self.ctls {
+            x.running = x.running.and_then(|i| new_index[i]);
+        }
+        // The running step of `c` is its last one begun.
+        self.ctls[c].running = self.out.timeline.iter().rposition(|s| s.controller == c);
+        self.last_run.clear();
+        for (i, s) in self.out.timeline.iter().enumerate() {
+            self.last_run.insert(s.local_id, i);
+        }
     }
 
     fn wake_all(&mut self, t: f64) {
@@ -513,8 +599,22 @@ impl Run<'_> {
         true
     }
 
-    /// Sets an input of the world (a KRL group: each bit of the value).
+    /// Sets an input of the world (a KRL group: each bit of the value). An output the scenario
+    /// names is forced, as from the pendant's I/O display.
     fn set_world(&mut self, c: usize, keys: &[Key], v: &Val, t: f64) {
+        if keys.len() == 1
+            && self
+                .cell
+                .outputs
+                .iter()
+                .any(|o| o.controller == c && o.key == keys)
+        {
+            let old = self.ctls[c].outs.insert(keys[0].clone(), v.clone());
+            if old.as_ref() != Some(v) || t == 0.0 {
+                self.out.changes.push((t, c, keys[0].clone(), v.clone()));
+            }
+            return;
+        }
         if keys.len() == 1 {
             let old = self.world[c].insert(keys[0].clone(), v.clone());
             if old.as_ref() != Some(v) || t == 0.0 {
@@ -677,6 +777,32 @@ impl Run<'_> {
             return;
         };
         let line = *line;
+        let pc_before = self.ctls[c].pc;
+        let takes_time = matches!(
+            ins,
+            Ins::SetOut(..)
+                | Ins::SetOutAt(..)
+                | Ins::Assign(..)
+                | Ins::TimerSet(..)
+                | Ins::TimerStop(..)
+                | Ins::ClockReset(_)
+                | Ins::ClockStart(_)
+                | Ins::ClockStop(_)
+                | Ins::JumpIfNot(..)
+                | Ins::Jump(_)
+                | Ins::Wait { .. }
+                | Ins::Show(_)
+                | Ins::Clear
+        );
+        self.exec_one(c, ins, line);
+        let x = &mut self.ctls[c];
+        if takes_time && x.pc != pc_before && x.state == State::Running && !x.in_step {
+            x.t += x.statement_s;
+        }
+    }
+
+    /// [`Run::exec`]'s work: the instruction `ins` at `line` of controller `c`.
+    fn exec_one(&mut self, c: usize, ins: &Ins, line: super::ir::Line) {
         // A wait whose time is up looks again.
         if let Some(wake) = self.wake_of(c)
             && self.ctls[c].t < wake
@@ -686,7 +812,21 @@ impl Run<'_> {
         self.ctls[c].state = State::Running;
         match ins {
             Ins::Step { local_id, name } => {
-                let dur = self.step_time(*local_id);
+                let dur = self.step_time(*local_id) * self.ctls[c].factor;
+                if let Some(since) = self.ctls[c].shown {
+                    let t = self.ctls[c].t;
+                    self.problem_at(
+                        c,
+                        ProblemKind::Message,
+                        line,
+                        Some(*local_id),
+                        format!(
+                            "{} started step {name} at {t:.2} s while a wait's message shown since {since:.2} s was still on the pendant",
+                            self.cell.controllers[c].name
+                        ),
+                    );
+                }
+                self.ctls[c].last_step = Some(*local_id);
                 let x = &mut self.ctls[c];
                 let start = x.t.max(x.motion_end);
                 x.motion_end = start + dur;
@@ -725,11 +865,41 @@ impl Run<'_> {
             }
             Ins::Motion | Ins::Unknown(_) => self.ctls[c].pc += 1,
             Ins::Note(n) => {
+                self.check_tell(c, n, line);
                 self.ctls[c].note = Some(n.clone());
                 self.ctls[c].pc += 1;
             }
             Ins::Message(m) => {
                 self.ctls[c].message = Some(m.clone());
+                self.ctls[c].pc += 1;
+            }
+            Ins::Show(text) => {
+                let x = &self.ctls[c];
+                let (t, name) = (x.t, &self.cell.controllers[c].name);
+                let why = if let Some(since) = x.shown {
+                    Some(format!(
+                        "{name} showed a second wait message at {t:.2} s while the one shown since {since:.2} s was still on the pendant"
+                    ))
+                } else if !x.timed_out {
+                    Some(format!(
+                        "{name} showed the wait message \"{text}\" at {t:.2} s although its wait had not lasted its time"
+                    ))
+                } else {
+                    None
+                };
+                if let Some(why) = why {
+                    self.problem_at(c, ProblemKind::Message, line, None, why);
+                }
+                let x = &mut self.ctls[c];
+                x.shown = Some(x.t);
+                x.pc += 1;
+            }
+            Ins::Clear => {
+                let x = &mut self.ctls[c];
+                if let Some(since) = x.shown.take() {
+                    let t = x.t;
+                    self.out.messages.push((c, since, t));
+                }
                 self.ctls[c].pc += 1;
             }
             Ins::Branch { transition, .. } => {
@@ -755,9 +925,11 @@ impl Run<'_> {
                     Err(e) => self.fault(c, line, e),
                     Ok(v) if v.truth() => {
                         // Held for what it names, not for a time limit: the waiting is over.
-                        if self.eval_untimed(c, cond) {
+                        let untimed = self.eval_untimed(c, cond);
+                        if untimed {
                             self.ctls[c].waiting_since = None;
                         }
+                        self.ctls[c].timed_out = !untimed;
                         if let Some((_, Some(flag))) = max {
                             self.ctls[c].vars.insert(flag.clone(), Val::Bool(false));
                         }
@@ -775,6 +947,7 @@ impl Run<'_> {
                                 Some((_, Some(flag))) => {
                                     self.ctls[c].vars.insert(flag.clone(), Val::Bool(true));
                                     let x = &mut self.ctls[c];
+                                    x.timed_out = true;
                                     x.wait_at = None;
                                     x.pc += 1;
                                 }
@@ -912,9 +1085,28 @@ impl Run<'_> {
                 }
             }
             Ins::End => {
+                if let Some(since) = self.ctls[c].shown {
+                    let t = self.ctls[c].t;
+                    self.problem_at(
+                        c,
+                        ProblemKind::Message,
+                        line,
+                        None,
+                        format!(
+                            "{} ended at {t:.2} s while a wait's message shown since {since:.2} s was still on the pendant",
+                            self.cell.controllers[c].name
+                        ),
+                    );
+                }
                 let x = &mut self.ctls[c];
                 x.t = x.t.max(x.motion_end);
                 x.state = State::Ended;
+                // The next cycle: the operator starts it again once the robot stands.
+                if x.cycles_left > 0 {
+                    x.cycles_left -= 1;
+                    let at = x.t + self.cycle_pause * self.rng.unit();
+                    self.events.push((at, Event::Restart(c)));
+                }
             }
         }
     }
@@ -924,6 +1116,66 @@ impl Run<'_> {
         match &self.ctls[c].state {
             State::Blocked { wake, .. } => *wake,
             _ => None,
+        }
+    }
+
+    fn problem_at(
+        &mut self,
+        c: usize,
+        kind: ProblemKind,
+        line: u32,
+        local_id: Option<u64>,
+        message: String,
+    ) {
+        let time = self.ctls[c].t;
+        self.out.problems.push(Problem {
+            kind,
+            time,
+            controller: Some(c),
+            line: Some(line),
+            local_id,
+            message,
+        });
+    }
+
+    /// A tell that a step is done (the writer's `handshake: tell R2 that step 'Grip' (localId
+    /// 5) is done`) must come before the teller's next step: a partner that waits for the step
+    /// would otherwise wait for that one too.
+    fn check_tell(&mut self, c: usize, note: &str, line: u32) {
+        let Some(rest) = note.strip_prefix("handshake: tell ") else {
+            return;
+        };
+        let Some((_, step)) = rest.split_once(" that step '") else {
+            return;
+        };
+        if !step.contains(") is done") {
+            return;
+        }
+        let Some(id) = super::ir::local_id_in(step) else {
+            return;
+        };
+        let last = self.ctls[c].last_step;
+        if self.own_steps[c].contains(&id) && last != Some(id) {
+            let name = step.split('\'').next().unwrap_or_default().to_owned();
+            let after = last
+                .and_then(|l| {
+                    self.out
+                        .timeline
+                        .iter()
+                        .rev()
+                        .find(|s| s.local_id == l && s.controller == c)
+                })
+                .map_or_else(|| "none".to_owned(), |s| s.name.clone());
+            self.problem_at(
+                c,
+                ProblemKind::LateTell,
+                line,
+                Some(id),
+                format!(
+                    "{} tells that step {name} (localId {id}) is done only after its step {after} started: a partner that waits for {name} waits for {after} too",
+                    self.cell.controllers[c].name
+                ),
+            );
         }
     }
 

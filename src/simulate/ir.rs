@@ -232,6 +232,11 @@ pub enum Ins {
     ClockStop(String),
     /// The message a stop or wait shows (a `Msg_Txt` set, `ErrWrite`, `popup`).
     Message(String),
+    /// The message of a wait that lasts appears on the pendant (KRL `Set_KrlMsg(#WAITING …)`,
+    /// RAPID `TPWrite`, the writer's URScript `textmsg` at a long wait's start) and is taken
+    /// away (`Clr_KrlMsg`, `TPErase`, the `textmsg` at its end).
+    Show(String),
+    Clear,
     JumpIfNot(X, usize),
     Jump(usize),
     /// The program stops until it is started again (KRL `HALT`, RAPID `EXIT`/`Stop`,

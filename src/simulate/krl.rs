@@ -775,6 +775,13 @@ impl Reader<'_> {
                 && let Some(m) = self.msg.clone()
             {
                 self.p.push(Ins::Message(m), line);
+            } else if up.contains("#WAITING") {
+                // A wait's message (KSS: `Set_KrlMsg(#WAITING, …)` shows a wait message until
+                // `Clr_KrlMsg` takes it away).
+                self.p
+                    .push(Ins::Show(self.msg.clone().unwrap_or_default()), line);
+            } else if up.contains("CLR_KRLMSG(") {
+                self.p.push(Ins::Clear, line);
             }
             return;
         }

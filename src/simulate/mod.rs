@@ -103,6 +103,9 @@ pub struct Cell {
     pub selection_of: HashMap<u64, u64>,
     /// The chart repeats (a sequence without an end step, or an endless loop).
     pub endless: bool,
+    /// Per controller: the keys of its signals and wires (what its program's reader takes
+    /// for an input or an output).
+    pub io: Vec<IoKeys>,
 }
 
 impl Cell {
@@ -170,6 +173,33 @@ pub struct Scenario {
     pub swaps: Vec<(usize, usize)>,
     /// Random inputs and timing (no scenario file).
     pub random: bool,
+    /// Cycles each program runs: after its END the operator starts it again, after a pause of
+    /// up to `cycle_pause_s` (at random), until it has run this many.
+    pub cycles: usize,
+    pub cycle_pause_s: f64,
+    /// Per controller: its start, the pace of its motions, the time a statement takes.
+    pub timing: HashMap<usize, Timing>,
+}
+
+/// How one controller keeps time (a scenario's `[timing.<controller>]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Timing {
+    /// When its program starts (seconds); `None`: at 0 (a random run: up to 0.5 s).
+    pub start_s: Option<f64>,
+    /// Each motion takes this many times its step's time (2: as at 50 % override).
+    pub motion_factor: f64,
+    /// What each statement besides motions and waits takes (seconds).
+    pub statement_s: f64,
+}
+
+impl Default for Timing {
+    fn default() -> Timing {
+        Timing {
+            start_s: None,
+            motion_factor: 1.0,
+            statement_s: 0.0,
+        }
+    }
 }
 
 /// Runs without a scenario file.
@@ -196,6 +226,9 @@ impl Scenario {
             restarts: Vec::new(),
             swaps: Vec::new(),
             random: false,
+            cycles: 1,
+            cycle_pause_s: 0.0,
+            timing: HashMap::new(),
         }
     }
 
@@ -240,6 +273,12 @@ pub enum ProblemKind {
     Fault,
     /// The run reached a limit before the programs ended.
     Limit,
+    /// A wait's message on the pendant shown before its wait had lasted its time, shown twice,
+    /// or still shown when the program went on to a step or ended.
+    Message,
+    /// A program told a partner that a step was done only after it had started another step:
+    /// the partner waits for that one too.
+    LateTell,
 }
 
 impl ProblemKind {
@@ -253,6 +292,8 @@ impl ProblemKind {
             ProblemKind::Stopped => "stopped",
             ProblemKind::Fault => "fault",
             ProblemKind::Limit => "limit",
+            ProblemKind::Message => "message",
+            ProblemKind::LateTell => "late-tell",
         }
     }
 }
@@ -463,13 +504,14 @@ impl Cell {
                     .collect::<Vec<_>>()
                     .join("\n")
             };
-            let p = match ctl.language {
-                Language::Krl => krl::read(&text_of("src"), &text_of("dat"), &io[k]),
-                Language::Rapid => rapid::read(&text_of("mod"), &io[k]),
-                Language::UrScript => urscript::read(&text_of("script"), &io[k]),
+            let main = match ctl.language {
+                Language::Krl => text_of("src"),
+                Language::Rapid => text_of("mod"),
+                Language::UrScript => text_of("script"),
             };
-            programs.push(p);
+            programs.push(read_program(ctl.language, &main, &text_of("dat"), &io[k]));
         }
+        cell.io = io;
         // The chart.
         let by_id: HashMap<u64, usize> = sfc
             .elements
@@ -532,6 +574,24 @@ impl Cell {
         }
         cell.step_names = names.into_iter().collect();
         Ok((cell, programs))
+    }
+}
+
+impl Cell {
+    /// Controller `k`'s program read from its text (KRL: the `.src` and the `.dat`; a split
+    /// program's parts after its main file): a program as it stands on the controller, touched
+    /// up or changed by hand, simulated in place of the one the compile wrote.
+    pub fn read_program(&self, k: usize, main: &str, dat: &str) -> Program {
+        let io = self.io.get(k).cloned().unwrap_or_default();
+        read_program(self.controllers[k].language, main, dat, &io)
+    }
+}
+
+fn read_program(language: Language, main: &str, dat: &str, io: &IoKeys) -> Program {
+    match language {
+        Language::Krl => krl::read(main, dat, io),
+        Language::Rapid => rapid::read(main, io),
+        Language::UrScript => urscript::read(main, io),
     }
 }
 
@@ -638,6 +698,22 @@ fn limits(s: &mut Scenario, cell: &Cell, programs: &[Program]) {
     }
 }
 
+/// One run of the cell under `scenario` (its swaps aside) from `seed`, with the limits the
+/// scenario leaves open set from the programs, and its decisions checked: what each of
+/// [`simulate`]'s runs does, for a caller that makes up a scenario for every run.
+pub fn run_once(
+    cell: &Cell,
+    programs: &[Program],
+    scenario: &Scenario,
+    seed: u64,
+) -> engine::Outcome {
+    let mut s = scenario.clone();
+    limits(&mut s, cell, programs);
+    let mut out = engine::run(cell, programs, &s, engine::Rng(seed), s.random);
+    decisions(cell, &mut out);
+    out
+}
+
 /// Runs the cell `runs` times (the scenario's count unless given), from `seed`.
 pub fn simulate(
     mut cell: Cell,
@@ -683,6 +759,7 @@ pub fn simulate(
             out.timeline = Vec::new();
             out.changes = Vec::new();
             out.branches = Vec::new();
+            out.messages = Vec::new();
         }
         report.runs.push((run_seed, out));
     }
@@ -719,14 +796,23 @@ pub fn simulate(
     report
 }
 
-/// Controllers that took different branches at one selection, in the same round.
+/// Controllers that took different branches at one selection, in the same round of the same
+/// start (each start of a program, for its next cycle or after a fault, begins its rounds
+/// again).
 fn decisions(cell: &Cell, out: &mut engine::Outcome) {
-    // selection → controller → transitions taken, in order.
-    let mut taken: HashMap<u64, HashMap<usize, Vec<(u64, f64)>>> = HashMap::new();
+    /// Per controller: the transitions it took, in order, and when.
+    type Taken = HashMap<usize, Vec<(u64, f64)>>;
+    // (selection, start) → what each controller took there.
+    let mut taken: HashMap<(u64, usize), Taken> = HashMap::new();
     for &(c, t, time) in &out.branches {
         if let Some(&sel) = cell.selection_of.get(&t) {
+            let start = out
+                .restarts
+                .iter()
+                .filter(|r| r.0 == c && r.1 <= time)
+                .count();
             taken
-                .entry(sel)
+                .entry((sel, start))
                 .or_default()
                 .entry(c)
                 .or_default()
@@ -735,7 +821,7 @@ fn decisions(cell: &Cell, out: &mut engine::Outcome) {
     }
     let mut sels: Vec<_> = taken.into_iter().collect();
     sels.sort_by_key(|s| s.0);
-    for (sel, by) in sels {
+    for ((sel, _), by) in sels {
         let mut ctls: Vec<_> = by.into_iter().collect();
         ctls.sort_by_key(|c| c.0);
         let Some((first_c, first)) = ctls.first().cloned() else {

@@ -782,6 +782,16 @@ impl Reader<'_> {
             "CLKSTOP" => {
                 self.p.push(Ins::ClockStop(rest.to_ascii_uppercase()), line);
             }
+            // The writer's message of a wait that lasts (`TPWrite "… waits for …"`), taken
+            // away by `TPErase`; any other line on the FlexPendant is a setting.
+            "TPWRITE" if rest.contains("waits for") => {
+                let (plain, _) = Self::args(rest);
+                let text = plain.first().map_or("", |p| p.trim_matches('"')).to_owned();
+                self.p.push(Ins::Show(text), line);
+            }
+            "TPERASE" => {
+                self.p.push(Ins::Clear, line);
+            }
             "ERRWRITE" => {
                 let (plain, _) = Self::args(rest);
                 let text: Vec<&str> = plain.iter().map(|p| p.trim_matches('"')).collect();

@@ -200,6 +200,7 @@ pub fn json(r: &Report) -> Value {
                     "cut": s.cut,
                 })).collect::<Vec<_>>(),
                 "restarts": o.restarts.iter().map(|(c, t)| json!({"controller": ctl(*c), "at_s": t})).collect::<Vec<_>>(),
+                "messages": o.messages.iter().map(|(c, a, b)| json!({"controller": ctl(*c), "shown_s": a, "taken_s": b})).collect::<Vec<_>>(),
                 "problems": o.problems.iter().map(|p| json!({
                     "kind": p.kind.name(),
                     "time_s": p.time,

@@ -24,6 +24,10 @@ struct Raw {
     default_step_s: Option<Spanned<f64>>,
     max_time_s: Option<Spanned<f64>>,
     max_steps: Option<Spanned<i64>>,
+    cycles: Option<Spanned<i64>>,
+    cycle_pause_s: Option<Spanned<f64>>,
+    #[serde(default)]
+    timing: BTreeMap<Spanned<String>, RawTiming>,
     #[serde(default)]
     inputs: BTreeMap<Spanned<String>, BTreeMap<Spanned<String>, Spanned<toml::Value>>>,
     #[serde(default)]
@@ -32,6 +36,14 @@ struct Raw {
     restart: Vec<RawRestart>,
     #[serde(default)]
     swap: Vec<RawSwap>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTiming {
+    start_s: Option<Spanned<f64>>,
+    motion_factor: Option<Spanned<f64>>,
+    statement_s: Option<Spanned<f64>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -157,6 +169,54 @@ pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioEr
         }
         s.max_steps = *m.get_ref() as usize;
     }
+    if let Some(n) = &raw.cycles {
+        if !(1..=1_000_000).contains(n.get_ref()) {
+            return Err(at(Some(n.span()), "`cycles` is 1 to 1,000,000".into()));
+        }
+        s.cycles = *n.get_ref() as usize;
+    }
+    if let Some(p) = &raw.cycle_pause_s {
+        s.cycle_pause_s = fraction(p, "cycle_pause_s", 86_400.0)?;
+    }
+    let controller = |name: &Spanned<String>| {
+        cell.controllers
+            .iter()
+            .position(|x| crate::names::eq(&x.name, name.get_ref()))
+            .ok_or_else(|| {
+                at(
+                    Some(name.span()),
+                    format!(
+                        "no controller `{}` in this cell{}",
+                        name.get_ref(),
+                        crate::names::did_you_mean(
+                            name.get_ref(),
+                            cell.controllers.iter().map(|x| x.name.as_str())
+                        )
+                    ),
+                )
+            })
+    };
+    for (name, t) in &raw.timing {
+        let c = controller(name)?;
+        let mut timing = super::Timing::default();
+        if let Some(v) = &t.start_s {
+            timing.start_s = Some(fraction(v, "start_s", 86_400.0)?);
+        }
+        if let Some(v) = &t.motion_factor {
+            let f = fraction(v, "motion_factor", 1000.0)?;
+            if f == 0.0 {
+                return Err(at(
+                    Some(v.span()),
+                    "`motion_factor` is more than 0 (1: the chart's times)".into(),
+                ));
+            }
+            timing.motion_factor = f;
+        }
+        if let Some(v) = &t.statement_s {
+            timing.statement_s = fraction(v, "statement_s", 10.0)?;
+        }
+        s.timing.insert(c, timing);
+    }
     let resource = |name: &Spanned<String>| {
         cell.resource(name.get_ref()).ok_or_else(|| {
             at(
@@ -201,7 +261,28 @@ pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioEr
             toml::Value::Integer(k) => res.inputs.iter().position(|i| i.number == Some(*k)),
             _ => None,
         };
-        found.map(|k| res.inputs[k].clone()).ok_or_else(|| {
+        // An output of the resource's controller that drives no wire: forced, as a technician
+        // forces one from the pendant's I/O display (a gripper's feedback the blackboard
+        // declares as an output).
+        let forced = || match (sig.get_ref(), res.controller) {
+            (toml::Value::String(n), Some(c)) => cell
+                .outputs
+                .iter()
+                .find(|o| {
+                    o.controller == c
+                        && crate::names::eq(&o.name, n)
+                        && !cell
+                            .wires
+                            .iter()
+                            .any(|w| w.from.0 == c && o.key.first() == Some(&w.from.1))
+                })
+                .cloned(),
+            _ => None,
+        };
+        found
+            .map(|k| res.inputs[k].clone())
+            .or_else(forced)
+            .ok_or_else(|| {
             let shown = match sig.get_ref() {
                 toml::Value::String(n) => format!("`{n}`"),
                 v => format!("number {v}"),
@@ -317,23 +398,7 @@ pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioEr
         });
     }
     for rs in &raw.restart {
-        let Some(c) = cell
-            .controllers
-            .iter()
-            .position(|x| crate::names::eq(&x.name, rs.controller.get_ref()))
-        else {
-            return Err(at(
-                Some(rs.controller.span()),
-                format!(
-                    "no controller `{}` in this cell{}",
-                    rs.controller.get_ref(),
-                    crate::names::did_you_mean(
-                        rs.controller.get_ref(),
-                        cell.controllers.iter().map(|x| x.name.as_str())
-                    )
-                ),
-            ));
-        };
+        let c = controller(&rs.controller)?;
         s.restarts.push(Restart {
             when: when(&rs.after, &rs.at, rs.controller.span())?,
             controller: c,

@@ -457,6 +457,16 @@ impl Reader<'_> {
                 }
                 _ => self.unknown(c, line),
             },
+            // The writer's log lines of a wait that lasts: at its start and at its end.
+            "textmsg" if c.contains("\"skillpost: ") => {
+                let a = self.call_args(c);
+                let text = a.first().map_or("", |s| s.trim_matches('"'));
+                if text.ends_with(": the wait has ended") {
+                    self.p.push(Ins::Clear, line);
+                } else {
+                    self.p.push(Ins::Show(text.to_owned()), line);
+                }
+            }
             "popup" => {
                 let a = self.call_args(c);
                 let text = a.first().map_or("", |s| s.trim_matches('"')).to_owned();
