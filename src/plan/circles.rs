@@ -20,17 +20,29 @@ pub fn close_circles(sfc: &mut Sfc) -> usize {
     for (i, e) in sfc.elements.iter().enumerate() {
         ids.entry(e.local_id).or_insert(i);
     }
-    // Successors, with the connection's place in the consumer's inputs.
-    let mut succ: Vec<Vec<usize>> = vec![Vec::new(); n];
+    // Successors, flat: element `p`'s are `succ[start[p]..start[p + 1]]` (one allocation for
+    // the chart, not one per element: 100,000 steps).
+    let mut edges: Vec<(usize, usize)> = Vec::with_capacity(n + n / 4);
     for (i, e) in sfc.elements.iter().enumerate() {
         for (r, _) in &e.inputs {
-            if let Some(&p) = ids.get(r)
-                && !succ[p].contains(&i)
-            {
-                succ[p].push(i);
+            if let Some(&p) = ids.get(r) {
+                edges.push((p, i));
             }
         }
     }
+    drop(ids);
+    // By producer, each producer's consumers in the order they came (a stable sort), each once.
+    edges.sort_by_key(|e| e.0);
+    edges.dedup();
+    let mut start = vec![0usize; n + 1];
+    for &(p, _) in &edges {
+        start[p + 1] += 1;
+    }
+    for k in 0..n {
+        start[k + 1] += start[k];
+    }
+    let succ_of: Vec<usize> = edges.iter().map(|e| e.1).collect();
+    let succ = |p: usize| &succ_of[start[p]..start[p + 1]];
     let roots: Vec<usize> = (0..n)
         .filter(|&i| match &sfc.elements[i].kind {
             ElementKind::Step(st) => st.initial || matches!(sfc.elements[i].inputs, Inputs::None),
@@ -47,7 +59,7 @@ pub fn close_circles(sfc: &mut Sfc) -> usize {
         let mut stack: Vec<(usize, usize)> = vec![(root, 0)];
         color[root] = 1;
         while let Some(&mut (u, ref mut k)) = stack.last_mut() {
-            if let Some(&v) = succ[u].get(*k) {
+            if let Some(&v) = succ(u).get(*k) {
                 *k += 1;
                 match color[v] {
                     0 => {
@@ -68,7 +80,7 @@ pub fn close_circles(sfc: &mut Sfc) -> usize {
     for (u, v) in back {
         let target = match &sfc.elements[v].kind {
             ElementKind::Step(_) => v,
-            ElementKind::SelectionConvergence => match succ[v].as_slice() {
+            ElementKind::SelectionConvergence => match succ(v) {
                 [s] if sfc.elements[*s].kind.is_step() => *s,
                 _ => continue,
             },
