@@ -197,7 +197,23 @@ const KRL_KEYWORDS: &[&str] = &[
 
 /// Whether `name` is a KRL keyword.
 pub fn is_krl_keyword(name: &str) -> bool {
-    KRL_KEYWORDS.iter().any(|k| k.eq_ignore_ascii_case(name))
+    // Upper-cased on the stack and looked up in the sorted list (a point's name is tried
+    // against it for each of 100,000 steps).
+    static SORTED: std::sync::OnceLock<Vec<String>> = std::sync::OnceLock::new();
+    let sorted = SORTED.get_or_init(|| {
+        let mut v: Vec<String> = KRL_KEYWORDS.iter().map(|k| k.to_ascii_uppercase()).collect();
+        v.sort_unstable();
+        v
+    });
+    let mut buf = [0u8; 32];
+    let Some(upper) = buf.get_mut(..name.len()) else {
+        return false;
+    };
+    upper.copy_from_slice(name.as_bytes());
+    upper.make_ascii_uppercase();
+    sorted
+        .binary_search_by(|k| k.as_bytes().cmp(upper))
+        .is_ok()
 }
 
 /// Transliterates text for a KRL comment: German umlauts and ß spelled out, other non-ASCII

@@ -435,7 +435,7 @@ pub fn for_program(
     }
     if mode == Mode::Named {
         for b in input.bound.steps.iter().flatten() {
-            if b.code.contains(['{', '[']) {
+            if b.code.bytes().any(|c| c == b'{' || c == b'[') {
                 words(&b.code);
             }
         }
@@ -762,10 +762,6 @@ fn krl_aggregate(inner: &str) -> Option<Kind> {
         inner = rest.trim();
     }
     // Which keys were seen, one bit each: a key twice is no position.
-    const KEYS: [&str; 20] = [
-        "X", "Y", "Z", "A", "B", "C", "S", "T", "A1", "A2", "A3", "A4", "A5", "A6", "E1", "E2",
-        "E3", "E4", "E5", "E6",
-    ];
     let mut seen = 0u32;
     for item in inner.split(',') {
         let mut w = item.split_ascii_whitespace();
@@ -773,7 +769,7 @@ fn krl_aggregate(inner: &str) -> Option<Kind> {
         if w.next().is_some() || !is_number(value) {
             return None;
         }
-        let k = KEYS.iter().position(|k| k.eq_ignore_ascii_case(key))?;
+        let k = key_index(key)?;
         if seen & (1 << k) != 0 {
             return None;
         }
@@ -784,6 +780,25 @@ fn krl_aggregate(inner: &str) -> Option<Kind> {
     match (cartesian, axis, ty) {
         (true, false, None | Some(Kind::Cartesian)) => Some(Kind::Cartesian),
         (false, true, None | Some(Kind::Axis)) => Some(Kind::Axis),
+        _ => None,
+    }
+}
+
+/// A component's bit in [`krl_aggregate`]: `X Y Z A B C S T` are 0–7 (a position), `A1`–`A6`
+/// 8–13 and `E1`–`E6` 14–19 (the axes).
+fn key_index(key: &str) -> Option<usize> {
+    match *key.as_bytes() {
+        [c] => b"XYZABCST"
+            .iter()
+            .position(|k| k.eq_ignore_ascii_case(&c)),
+        [c, d @ b'1'..=b'6'] => {
+            let n = usize::from(d - b'1');
+            match c.to_ascii_uppercase() {
+                b'A' => Some(8 + n),
+                b'E' => Some(14 + n),
+                _ => None,
+            }
+        }
         _ => None,
     }
 }
