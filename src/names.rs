@@ -201,7 +201,10 @@ pub fn is_krl_keyword(name: &str) -> bool {
     // against it for each of 100,000 steps).
     static SORTED: std::sync::OnceLock<Vec<String>> = std::sync::OnceLock::new();
     let sorted = SORTED.get_or_init(|| {
-        let mut v: Vec<String> = KRL_KEYWORDS.iter().map(|k| k.to_ascii_uppercase()).collect();
+        let mut v: Vec<String> = KRL_KEYWORDS
+            .iter()
+            .map(|k| k.to_ascii_uppercase())
+            .collect();
         v.sort_unstable();
         v
     });
@@ -211,9 +214,7 @@ pub fn is_krl_keyword(name: &str) -> bool {
     };
     upper.copy_from_slice(name.as_bytes());
     upper.make_ascii_uppercase();
-    sorted
-        .binary_search_by(|k| k.as_bytes().cmp(upper))
-        .is_ok()
+    sorted.binary_search_by(|k| k.as_bytes().cmp(upper)).is_ok()
 }
 
 /// Transliterates text for a KRL comment: German umlauts and ß spelled out, other non-ASCII

@@ -192,3 +192,34 @@ fn random_runs_are_simulated_and_a_wrong_setting_is_a_configuration_error() {
         );
     }
 }
+
+/// A scenario file that is a symbolic link leading out of the project folder is not read (the
+/// project's writers could point the daemon at any file its user may read): the simulation
+/// fails with the reason, the outputs stand.
+#[test]
+fn a_scenario_linked_out_of_the_project_is_not_read() {
+    let w = Workspace::new();
+    let p = weld_cell(&w, "weld");
+    let outside = w.root.join("outside.toml");
+    fs::write(&outside, "[inputs.\"KUKA KR16-2\"]\nMore_Parts = false\n").unwrap();
+    std::os::unix::fs::symlink(&outside, p.join("linked.toml")).unwrap();
+    let mark = 0;
+    let (d, _state) = start(&w, &p, "\"linked.toml\"");
+    let evs = d.wait_for("the refused scenario", WAIT, |e| {
+        is_after(e, "simulation-failed", &p, mark)
+    });
+    let bad = evs
+        .iter()
+        .find(|e| is_after(e, "simulation-failed", &p, mark))
+        .unwrap();
+    assert_eq!(bad["kind"], "scenario", "{bad:#}");
+    assert!(
+        bad["message"]
+            .as_str()
+            .unwrap()
+            .contains("leads out of the project folder"),
+        "{bad:#}"
+    );
+    assert!(p.join("Weld_KUKA_KR15_2.src").exists());
+    d.stop(WAIT);
+}

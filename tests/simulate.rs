@@ -711,3 +711,76 @@ fn an_output_named_in_the_scenario_is_forced() {
     assert_eq!(code, 0, "{v:#}");
     assert_eq!(v["runs"][0]["ended"], true, "{v:#}");
 }
+
+/// A wait on a partner that lasts longer than the controller's `HandshakeTimeout` (10 s by
+/// default) shows its message on the pendant and takes it away when the wait ends: with the
+/// KUKA's motions a thousand times slower its partners wait minutes, and the report lists each
+/// message, shown after the wait began and taken away before the waiting program's next step;
+/// at the chart's pace no wait lasts that long and no message shows.
+#[test]
+fn a_wait_that_lasts_shows_its_message_and_takes_it_away() {
+    let p = common::fixture_project("cell-kuka-abb-ur");
+    let dir = p.path();
+    let inputs = "[inputs.\"ABB IRB 1200\"]\nPart_Present = true\n";
+    let (code, v) = simulate(dir, "Blackboard.aml", "Mix", Some(inputs), &[]);
+    assert_eq!(code, 0, "{v:#}");
+    assert_eq!(v["runs"][0]["messages"], serde_json::json!([]), "{v:#}");
+
+    let (code, v) = simulate(
+        dir,
+        "Blackboard.aml",
+        "Mix",
+        Some(&format!(
+            "{inputs}[timing.\"KUKA KR15-2\"]\nmotion_factor = 1000\n"
+        )),
+        &[],
+    );
+    assert_eq!(code, 0, "{v:#}");
+    let run = &v["runs"][0];
+    let messages = run["messages"].as_array().unwrap();
+    assert!(!messages.is_empty(), "{run:#}");
+    let l = lanes(run);
+    for m in messages {
+        let who = m["controller"].as_str().unwrap();
+        assert_ne!(who, "KUKA KR15-2", "{m}");
+        let (shown, taken) = (
+            m["shown_s"].as_f64().unwrap(),
+            m["taken_s"].as_f64().unwrap(),
+        );
+        assert!(shown >= 10.0 && taken > shown, "{m}");
+        // Taken away before the program's next step.
+        let next = l[who].iter().find(|s| s.1 >= shown);
+        assert!(next.is_none_or(|s| s.1 >= taken), "{m} {next:?}");
+    }
+}
+
+/// Random runs answer a wait for an input the blackboard does not declare: the tutorial's
+/// welder waits in its step's code for its weld source (`WaitDI di_WeldDone, 1;`), which random
+/// input changes never touch. Every run ends (the world sets the input when every program
+/// waits) instead of running to the time limit while the declared inputs keep changing.
+#[test]
+fn random_runs_answer_a_wait_for_an_undeclared_input() {
+    let tmp = tempfile::tempdir().unwrap();
+    let step5 = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/tutorial/step5");
+    for e in fs::read_dir(&step5).unwrap() {
+        let e = e.unwrap();
+        fs::copy(e.path(), tmp.path().join(e.file_name())).unwrap();
+    }
+    let (code, v) = simulate(
+        tmp.path(),
+        "Blackboard.aml",
+        "Cell",
+        None,
+        &["--runs", "20"],
+    );
+    assert_eq!(code, 0, "{v:#}");
+    assert_eq!(v["problems"], 0, "{v:#}");
+    assert_eq!(v["runs"][0]["ended"], true, "{v:#}");
+    let welds = v["runs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["ended"] == true)
+        .count();
+    assert_eq!(welds, 20, "{v:#}");
+}

@@ -444,7 +444,21 @@ impl Job {
             super::config::Simulate::Scenario(f) => {
                 let path = self.key.join(f);
                 inputs.insert(path.clone(), hash_file(&path));
-                scenario::load(&path, &cell)
+                // The setting names a file in the project folder; a symbolic link there that
+                // leads out of it is not followed (the daemon may read what its user may, the
+                // project's writers not).
+                let real = |p: &Path| std::fs::canonicalize(p).ok();
+                match (real(&path), real(&self.key)) {
+                    (Some(file), Some(root)) if !file.starts_with(&root) => {
+                        Err(scenario::ScenarioError {
+                            file: path.display().to_string(),
+                            line: None,
+                            column: None,
+                            message: "the scenario file is a symbolic link that leads out of the project folder: not read".into(),
+                        })
+                    }
+                    _ => scenario::load(&path, &cell),
+                }
             }
         };
         super::simulation::submit(super::simulation::Request {

@@ -788,9 +788,7 @@ fn krl_aggregate(inner: &str) -> Option<Kind> {
 /// 8–13 and `E1`–`E6` 14–19 (the axes).
 fn key_index(key: &str) -> Option<usize> {
     match *key.as_bytes() {
-        [c] => b"XYZABCST"
-            .iter()
-            .position(|k| k.eq_ignore_ascii_case(&c)),
+        [c] => b"XYZABCST".iter().position(|k| k.eq_ignore_ascii_case(&c)),
         [c, d @ b'1'..=b'6'] => {
             let n = usize::from(d - b'1');
             match c.to_ascii_uppercase() {
@@ -950,7 +948,9 @@ mod tests {
         for n in ["-12", "0.5", ".5", "5.", "1E-3", "9E9", "+3", " 7 ", "1e+2"] {
             assert!(is_number(n), "{n}");
         }
-        for n in ["", "-", ".", "1E", "1e+", "1.2.3", "12a", "E5", "--1", "0x1F", "1 2"] {
+        for n in [
+            "", "-", ".", "1E", "1e+", "1.2.3", "12a", "E5", "--1", "0x1F", "1 2",
+        ] {
             assert!(!is_number(n), "{n}");
         }
     }

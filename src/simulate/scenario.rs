@@ -178,24 +178,24 @@ pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioEr
     if let Some(p) = &raw.cycle_pause_s {
         s.cycle_pause_s = fraction(p, "cycle_pause_s", 86_400.0)?;
     }
-    let controller = |name: &Spanned<String>| {
-        cell.controllers
+    // A name of `names` (a controller's, a wire's), or the error with the nearest one.
+    let one_of = |what: &str, names: &[&str], n: &Spanned<String>| {
+        names
             .iter()
-            .position(|x| crate::names::eq(&x.name, name.get_ref()))
+            .position(|x| crate::names::eq(x, n.get_ref()))
             .ok_or_else(|| {
                 at(
-                    Some(name.span()),
+                    Some(n.span()),
                     format!(
-                        "no controller `{}` in this cell{}",
-                        name.get_ref(),
-                        crate::names::did_you_mean(
-                            name.get_ref(),
-                            cell.controllers.iter().map(|x| x.name.as_str())
-                        )
+                        "no {what} `{}` in this cell{}",
+                        n.get_ref(),
+                        crate::names::did_you_mean(n.get_ref(), names.iter().copied())
                     ),
                 )
             })
     };
+    let controller_names: Vec<&str> = cell.controllers.iter().map(|x| x.name.as_str()).collect();
+    let controller = |n: &Spanned<String>| one_of("controller", &controller_names, n);
     for (name, t) in &raw.timing {
         let c = controller(name)?;
         let mut timing = super::Timing::default();
@@ -404,6 +404,7 @@ pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioEr
             controller: c,
         });
     }
+    let wire_names: Vec<&str> = cell.wires.iter().map(|w| w.name.as_str()).collect();
     for sw in &raw.swap {
         let names = sw.wires.get_ref();
         let [a, b] = names.as_slice() else {
@@ -412,24 +413,7 @@ pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioEr
                 "`wires` names two wires (the blackboard's link names)".into(),
             ));
         };
-        let find = |n: &Spanned<String>| {
-            cell.wires
-                .iter()
-                .position(|w| crate::names::eq(&w.name, n.get_ref()))
-                .ok_or_else(|| {
-                    at(
-                        Some(n.span()),
-                        format!(
-                            "no wire `{}` in this cell{}",
-                            n.get_ref(),
-                            crate::names::did_you_mean(
-                                n.get_ref(),
-                                cell.wires.iter().map(|w| w.name.as_str())
-                            )
-                        ),
-                    )
-                })
-        };
+        let find = |n: &Spanned<String>| one_of("wire", &wire_names, n);
         let (x, y) = (find(a)?, find(b)?);
         if x == y {
             return Err(at(Some(b.span()), "a wire swapped with itself".into()));

@@ -4,7 +4,10 @@
 use super::{Event, Ins, Key, Run, State, Val, reset_vars};
 
 impl Run<'_> {
-    /// Whether a program waits for an input of the world (no wire drives it).
+    /// Whether a program waits for an input of the world that a random run's world changes
+    /// now and then (one the blackboard declares; no wire drives it). A wait for one it does
+    /// not declare (`WaitDI di_WeldDone` in a step's code) is answered when every program
+    /// waits ([`Run::answer`]), not by waiting for the other inputs to change.
     pub(super) fn waits_for_world(&self) -> bool {
         self.ctls.iter().enumerate().any(|(c, x)| {
             matches!(x.state, State::Blocked { .. })
@@ -12,7 +15,14 @@ impl Run<'_> {
                     Some((Ins::Wait { cond, .. }, _)) => {
                         let mut keys = Vec::new();
                         self.keys_of(c, cond, &mut keys);
-                        keys.iter().any(|k| !self.wired[c].contains_key(k))
+                        keys.iter().any(|k| {
+                            !self.wired[c].contains_key(k)
+                                && self
+                                    .cell
+                                    .inputs
+                                    .iter()
+                                    .any(|i| i.controller == c && i.key.contains(k))
+                        })
                     }
                     _ => false,
                 }
