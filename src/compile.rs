@@ -311,13 +311,7 @@ impl<'a> Ctx<'a> {
     /// Whether `path` stays inside `root`: by its text, and, where the file system can tell,
     /// with symbolic links resolved (a link inside the folder pointing out of it leaves it).
     fn inside(&self, path: &Path, root: &Path) -> bool {
-        if !paths::absolute(path).starts_with(root) {
-            return false;
-        }
-        match (self.fs.real_path(path), self.fs.real_path(root)) {
-            (Some(real), Some(real_root)) => real.starts_with(real_root),
-            _ => true,
-        }
+        paths::stays_inside(path, root, |p| self.fs.real_path(p))
     }
 
     /// Resolves a `refURI` and loads the file; errors are located at the reference.

@@ -115,17 +115,18 @@ pub fn to_krl_name(text: &str) -> String {
     name
 }
 
-/// KRL keywords that cannot name a signal (compared case-insensitively).
+/// KRL keywords that cannot name a signal (compared case-insensitively). Upper-case and sorted
+/// by bytes: [`is_krl_keyword`] searches it (held by a test).
 const KRL_KEYWORDS: &[&str] = &[
     "AND",
     "ANIN",
     "ANOUT",
+    "BOOL",
+    "BRAKE",
     "B_AND",
     "B_EXOR",
     "B_NOT",
     "B_OR",
-    "BOOL",
-    "BRAKE",
     "CASE",
     "CAST_FROM",
     "CAST_TO",
@@ -152,9 +153,9 @@ const KRL_KEYWORDS: &[&str] = &[
     "ENDWHILE",
     "ENUM",
     "EXIT",
+    "EXOR",
     "EXT",
     "EXTFCT",
-    "EXOR",
     "FALSE",
     "FOR",
     "GLOBAL",
@@ -197,24 +198,17 @@ const KRL_KEYWORDS: &[&str] = &[
 
 /// Whether `name` is a KRL keyword.
 pub fn is_krl_keyword(name: &str) -> bool {
-    // Upper-cased on the stack and looked up in the sorted list (a point's name is tried
-    // against it for each of 100,000 steps).
-    static SORTED: std::sync::OnceLock<Vec<String>> = std::sync::OnceLock::new();
-    let sorted = SORTED.get_or_init(|| {
-        let mut v: Vec<String> = KRL_KEYWORDS
-            .iter()
-            .map(|k| k.to_ascii_uppercase())
-            .collect();
-        v.sort_unstable();
-        v
-    });
+    // Upper-cased on the stack and looked up in the list, which is upper-case and sorted by
+    // bytes (a point's name is tried against it for each of 100,000 steps).
     let mut buf = [0u8; 32];
     let Some(upper) = buf.get_mut(..name.len()) else {
         return false;
     };
     upper.copy_from_slice(name.as_bytes());
     upper.make_ascii_uppercase();
-    sorted.binary_search_by(|k| k.as_bytes().cmp(upper)).is_ok()
+    KRL_KEYWORDS
+        .binary_search_by(|k| k.as_bytes().cmp(upper))
+        .is_ok()
 }
 
 /// Transliterates text for a KRL comment: German umlauts and ß spelled out, other non-ASCII
@@ -267,6 +261,21 @@ pub fn transliterate(text: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_krl_keywords_are_upper_case_and_sorted() {
+        assert!(
+            KRL_KEYWORDS
+                .iter()
+                .all(|k| k.bytes().all(|b| !b.is_ascii_lowercase()))
+        );
+        assert!(
+            KRL_KEYWORDS
+                .windows(2)
+                .all(|w| w[0].as_bytes() < w[1].as_bytes())
+        );
+        assert!(is_krl_keyword("b_and") && is_krl_keyword("Wait") && !is_krl_keyword("Weld"));
+    }
 
     #[test]
     fn the_nearest_name_is_suggested_only_when_it_is_near() {

@@ -125,6 +125,20 @@ pub fn absolute(p: &Path) -> PathBuf {
     }
 }
 
+/// Whether `path` stays inside `root`: by its text, and, where `real` (the file system's
+/// resolution, `canonicalize`) can tell, with symbolic links resolved: a link inside the folder
+/// that points out of it leaves it. A path `real` cannot resolve (not there yet) is judged by
+/// its text.
+pub fn stays_inside(path: &Path, root: &Path, real: impl Fn(&Path) -> Option<PathBuf>) -> bool {
+    if !absolute(path).starts_with(root) {
+        return false;
+    }
+    match (real(path), real(root)) {
+        (Some(real), Some(real_root)) => real.starts_with(real_root),
+        _ => true,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

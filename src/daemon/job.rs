@@ -447,17 +447,16 @@ impl Job {
                 // The setting names a file in the project folder; a symbolic link there that
                 // leads out of it is not followed (the daemon may read what its user may, the
                 // project's writers not).
-                let real = |p: &Path| std::fs::canonicalize(p).ok();
-                match (real(&path), real(&self.key)) {
-                    (Some(file), Some(root)) if !file.starts_with(&root) => {
-                        Err(scenario::ScenarioError {
-                            file: path.display().to_string(),
-                            line: None,
-                            column: None,
-                            message: "the scenario file is a symbolic link that leads out of the project folder: not read".into(),
-                        })
-                    }
-                    _ => scenario::load(&path, &cell),
+                let root = crate::paths::absolute(&self.key);
+                if crate::paths::stays_inside(&path, &root, |p| std::fs::canonicalize(p).ok()) {
+                    scenario::load(&path, &cell)
+                } else {
+                    Err(scenario::ScenarioError {
+                        file: path.display().to_string(),
+                        line: None,
+                        column: None,
+                        message: "the scenario file is a symbolic link that leads out of the project folder: not read".into(),
+                    })
                 }
             }
         };

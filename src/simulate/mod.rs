@@ -109,6 +109,14 @@ pub struct Cell {
 }
 
 impl Cell {
+    /// Controller `k`'s program read from its text (KRL: the `.src` and the `.dat`; a split
+    /// program's parts after its main file): a program as it stands on the controller, touched
+    /// up or changed by hand, simulated in place of the one the compile wrote.
+    pub fn read_program(&self, k: usize, main: &str, dat: &str) -> Program {
+        let io = self.io.get(k).cloned().unwrap_or_default();
+        read_program(self.controllers[k].language, main, dat, &io)
+    }
+
     pub fn resource(&self, name: &str) -> Option<usize> {
         self.resources
             .iter()
@@ -577,16 +585,6 @@ impl Cell {
     }
 }
 
-impl Cell {
-    /// Controller `k`'s program read from its text (KRL: the `.src` and the `.dat`; a split
-    /// program's parts after its main file): a program as it stands on the controller, touched
-    /// up or changed by hand, simulated in place of the one the compile wrote.
-    pub fn read_program(&self, k: usize, main: &str, dat: &str) -> Program {
-        let io = self.io.get(k).cloned().unwrap_or_default();
-        read_program(self.controllers[k].language, main, dat, &io)
-    }
-}
-
 fn read_program(language: Language, main: &str, dat: &str, io: &IoKeys) -> Program {
     match language {
         Language::Krl => krl::read(main, dat, io),
@@ -709,7 +707,12 @@ pub fn run_once(
 ) -> engine::Outcome {
     let mut s = scenario.clone();
     limits(&mut s, cell, programs);
-    let mut out = engine::run(cell, programs, &s, engine::Rng(seed), s.random);
+    run_checked(cell, programs, &s, seed)
+}
+
+/// One run under a scenario whose limits are set, and its decisions checked.
+fn run_checked(cell: &Cell, programs: &[Program], s: &Scenario, seed: u64) -> engine::Outcome {
+    let mut out = engine::run(cell, programs, s, engine::Rng(seed), s.random);
     decisions(cell, &mut out);
     out
 }
@@ -737,14 +740,7 @@ pub fn simulate(
     let mut seeds = engine::Rng(seed);
     for k in 0..runs {
         let run_seed = if k == 0 { seed } else { seeds.next_u64() };
-        let mut out = engine::run(
-            &cell,
-            programs,
-            &scenario,
-            engine::Rng(run_seed),
-            scenario.random,
-        );
-        decisions(&cell, &mut out);
+        let mut out = run_checked(&cell, programs, &scenario, run_seed);
         for s in &out.timeline {
             seen_steps.insert(s.local_id);
         }

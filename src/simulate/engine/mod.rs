@@ -123,6 +123,8 @@ impl Rng {
 #[derive(Debug, Clone)]
 enum Event {
     Input(usize, Vec<Key>, Val),
+    /// An output the scenario forces (as from the pendant's I/O display).
+    Force(usize, Key, Val),
     Restart(usize),
     /// A random run: the world changes input `k` of [`Cell::inputs`] now and then.
     Flip(usize),
@@ -260,7 +262,10 @@ pub fn run(
         r.set_world(inp.controller, &inp.key, &v, 0.0);
     }
     for (c, key, v) in &scenario.start {
-        r.set_world(*c, key, v, 0.0);
+        match r.forced(*c, key) {
+            Some(k) => r.force(*c, k, v, 0.0),
+            None => r.set_world(*c, key, v, 0.0),
+        }
     }
     if random {
         for k in 0..cell.inputs.len() {
@@ -275,7 +280,10 @@ pub fn run(
         value,
     } in &scenario.changes
     {
-        let e = Event::Input(*controller, key.clone(), value.clone());
+        let e = match r.forced(*controller, key) {
+            Some(k) => Event::Force(*controller, k.clone(), value.clone()),
+            None => Event::Input(*controller, key.clone(), value.clone()),
+        };
         match when {
             When::At(t) => r.events.push((*t, e)),
             When::After(step) => r.pending_after.push((step.clone(), e, false)),
@@ -427,22 +435,24 @@ impl Run<'_> {
         };
         let line = *line;
         let pc_before = self.ctls[c].pc;
-        let takes_time = matches!(
-            ins,
-            Ins::SetOut(..)
-                | Ins::SetOutAt(..)
-                | Ins::Assign(..)
-                | Ins::TimerSet(..)
-                | Ins::TimerStop(..)
-                | Ins::ClockReset(_)
-                | Ins::ClockStart(_)
-                | Ins::ClockStop(_)
-                | Ins::JumpIfNot(..)
-                | Ins::Jump(_)
-                | Ins::Wait { .. }
-                | Ins::Show(_)
-                | Ins::Clear
-        );
+        // What a statement takes (a scenario's `statement_s`; none by default).
+        let takes_time = self.ctls[c].statement_s > 0.0
+            && matches!(
+                ins,
+                Ins::SetOut(..)
+                    | Ins::SetOutAt(..)
+                    | Ins::Assign(..)
+                    | Ins::TimerSet(..)
+                    | Ins::TimerStop(..)
+                    | Ins::ClockReset(_)
+                    | Ins::ClockStart(_)
+                    | Ins::ClockStop(_)
+                    | Ins::JumpIfNot(..)
+                    | Ins::Jump(_)
+                    | Ins::Wait { .. }
+                    | Ins::Show(_)
+                    | Ins::Clear
+            );
         self.exec_one(c, ins, line);
         let x = &mut self.ctls[c];
         if takes_time && x.pc != pc_before && x.state == State::Running && !x.in_step {
@@ -775,34 +785,22 @@ impl Run<'_> {
             Val::Num(n) if n == 0.0 || n == 1.0 => Val::Bool(n == 1.0),
             v => v,
         };
-        let drives = self
+        let wire = self
             .cell
             .wires
             .iter()
-            .any(|w| w.from.0 == c && w.from.1 == k);
-        if drives && self.ctls[c].motion_end > t + 1e-9 {
-            let step = self.ctls[c]
-                .running
-                .map(|i| self.out.timeline[i].name.clone())
-                .unwrap_or_default();
-            let wire = self
-                .cell
-                .wires
-                .iter()
-                .find(|w| w.from.0 == c && w.from.1 == k)
-                .map(|w| w.name.clone())
-                .unwrap_or_default();
-            self.out.problems.push(Problem {
-                kind: ProblemKind::WireInMotion,
-                time: t,
-                controller: Some(c),
-                line: Some(line),
-                local_id: self.ctls[c].running.map(|i| self.out.timeline[i].local_id),
-                message: format!(
-                    "{} sets wire {wire} at {t:.2} s while the motion of step {step} still runs (until {:.2} s)",
-                    self.cell.controllers[c].name, self.ctls[c].motion_end
-                ),
-            });
+            .find(|w| w.from.0 == c && w.from.1 == k);
+        if let Some(wire) = wire
+            && self.ctls[c].motion_end > t + 1e-9
+        {
+            let running = self.ctls[c].running.map(|i| &self.out.timeline[i]);
+            let step = running.map(|s| s.name.clone()).unwrap_or_default();
+            let local_id = running.map(|s| s.local_id);
+            let message = format!(
+                "{} sets wire {} at {t:.2} s while the motion of step {step} still runs (until {:.2} s)",
+                self.cell.controllers[c].name, wire.name, self.ctls[c].motion_end
+            );
+            self.problem_at(c, ProblemKind::WireInMotion, line, local_id, message);
         }
         let outs = &mut self.ctls[c].outs;
         let changed = match outs.get_mut(&k) {

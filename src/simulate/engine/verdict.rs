@@ -201,16 +201,11 @@ impl Run<'_> {
     }
 
     pub(super) fn fault(&mut self, c: usize, line: u32, e: EvalError) {
-        let name = self.cell.controllers[c].name.clone();
-        let t = self.ctls[c].t;
-        self.out.problems.push(Problem {
-            kind: ProblemKind::Fault,
-            time: t,
-            controller: Some(c),
-            line: Some(line),
-            local_id: None,
-            message: format!("{name} cannot run line {line}: {}", e.0),
-        });
+        let message = format!(
+            "{} cannot run line {line}: {}",
+            self.cell.controllers[c].name, e.0
+        );
+        self.problem_at(c, ProblemKind::Fault, line, None, message);
         self.ctls[c].state = State::Halted {
             message: Some(format!("a fault at line {line}")),
             faulted: true,

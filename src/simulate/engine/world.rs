@@ -52,6 +52,10 @@ impl Run<'_> {
                     self.set_world(c, &k, &v, t);
                     self.wake_all(t);
                 }
+                Event::Force(c, k, v) => {
+                    self.force(c, &k, &v, t);
+                    self.wake_all(t);
+                }
                 Event::Restart(c) => self.restart(c, t),
                 Event::Flip(k) => {
                     let inp = &self.cell.inputs[k];
@@ -201,22 +205,32 @@ impl Run<'_> {
         true
     }
 
-    /// Sets an input of the world (a KRL group: each bit of the value). An output the scenario
-    /// names is forced, as from the pendant's I/O display.
-    pub(super) fn set_world(&mut self, c: usize, keys: &[Key], v: &Val, t: f64) {
-        if keys.len() == 1
-            && self
+    /// The output of controller `c` that a scenario's `keys` name (decided once, when the
+    /// scenario is set up; the world's own inputs are never outputs).
+    pub(super) fn forced<'k>(&self, c: usize, keys: &'k [Key]) -> Option<&'k Key> {
+        match keys {
+            [k] if self
                 .cell
                 .outputs
                 .iter()
-                .any(|o| o.controller == c && o.key == keys)
-        {
-            let old = self.ctls[c].outs.insert(keys[0].clone(), v.clone());
-            if old.as_ref() != Some(v) || t == 0.0 {
-                self.out.changes.push((t, c, keys[0].clone(), v.clone()));
+                .any(|o| o.controller == c && o.key == keys) =>
+            {
+                Some(k)
             }
-            return;
+            _ => None,
         }
+    }
+
+    /// Forces output `k` of controller `c`, as from the pendant's I/O display.
+    pub(super) fn force(&mut self, c: usize, k: &Key, v: &Val, t: f64) {
+        let old = self.ctls[c].outs.insert(k.clone(), v.clone());
+        if old.as_ref() != Some(v) || t == 0.0 {
+            self.out.changes.push((t, c, k.clone(), v.clone()));
+        }
+    }
+
+    /// Sets an input of the world (a KRL group: each bit of the value).
+    pub(super) fn set_world(&mut self, c: usize, keys: &[Key], v: &Val, t: f64) {
         if keys.len() == 1 {
             let old = self.world[c].insert(keys[0].clone(), v.clone());
             if old.as_ref() != Some(v) || t == 0.0 {
