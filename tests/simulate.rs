@@ -784,3 +784,46 @@ fn random_runs_answer_a_wait_for_an_undeclared_input() {
         .count();
     assert_eq!(welds, 20, "{v:#}");
 }
+
+/// A wait for a step's time beyond a limit (`S.t > T#1500ms`) ends one tick of the controller's
+/// clock after the limit, in every language: KRL's `$TIMER` counts whole milliseconds, a RAPID
+/// clock is read to the millisecond, a URScript counter grows once a control cycle. (A wait
+/// that woke at the limit itself, found the comparison false and looked no more was reported
+/// stuck.)
+#[test]
+fn a_wait_for_a_step_time_beyond_a_limit_ends_just_after_it_in_every_language() {
+    for (fixture, bb, program, line, step, next, tick) in [
+        ("flow-step-time", "Blackboard.aml", "StepTime", 83, "Grip", "Retreat", 0.001),
+        ("abb-irb1200", "Cell.aml", "Palletize", 55, "Pick", "Grip", 0.001),
+        ("ur10e", "Cell.aml", "Palletize", 55, "Pick", "Grip", 0.002),
+    ] {
+        let p = common::fixture_project(fixture);
+        let dir = p.path();
+        let sfc = dir.join("sfc.xml");
+        let mut lines: Vec<String> = fs::read_to_string(&sfc)
+            .unwrap()
+            .lines()
+            .map(str::to_owned)
+            .collect();
+        let l = &mut lines[line - 1];
+        let at = l.find("<xhtml:p>").unwrap() + 9;
+        let end = l.find("</xhtml:p>").unwrap();
+        l.replace_range(at..end, &format!("{step}.t &gt; T#1500ms"));
+        fs::write(&sfc, lines.join("\n")).unwrap();
+        let (_, v) = simulate(dir, bb, program, Some("[inputs]\n"), &[]);
+        let run = &v["runs"][0];
+        let steps = lanes(run).into_values().next().unwrap();
+        let at = |name: &str| {
+            steps
+                .iter()
+                .find(|s| s.0 == name)
+                .unwrap_or_else(|| panic!("{fixture}: {name} never runs: {run:#}"))
+                .1
+        };
+        let waited = at(next) - at(step);
+        assert!(
+            (waited - (1.5 + tick)).abs() < 1e-6,
+            "{fixture}: {next} {waited} s after {step} began: {run:#}"
+        );
+    }
+}

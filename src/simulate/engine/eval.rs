@@ -3,8 +3,25 @@
 
 use std::collections::HashMap;
 
-use super::{Clockish, Op, Run, Val, X};
+use super::{Clockish, Op, Run, SYNC_S, Val, X};
 use crate::simulate::ir::Key;
+
+/// A clock's reading in steps of `res` (what the controller shows: whole milliseconds, whole
+/// control cycles), the last step it has passed. The tolerance keeps a reading taken at the
+/// very time of a step (a wake at a threshold) from falling a step short by rounding.
+fn steps_of(x: f64, res: f64) -> f64 {
+    (x / res + 1e-6).floor() * res
+}
+
+/// The smallest step a clock advances by, in the unit [`Run::reaches`] takes: KRL's `$TIMER`
+/// counts whole milliseconds, a RAPID clock is read to the millisecond (`ClkRead` without
+/// `\HighRes`), a URScript counter grows by `get_steptime()` once a control cycle.
+pub(super) fn resolution(clock: &Clockish) -> f64 {
+    match clock {
+        Clockish::Timer(_) | Clockish::Clock(_) => 0.001,
+        Clockish::Var(_) => SYNC_S,
+    }
+}
 
 impl Run<'_> {
     /// When `clock` reads `k` (seconds), if it counts.
@@ -70,7 +87,7 @@ impl Run<'_> {
             X::Const(v) => v.clone(),
             X::Var(n) => {
                 if let Some((base, t0)) = x.counters.get(n) {
-                    Val::Num(base + (x.t - t0))
+                    Val::Num(base + steps_of(x.t - t0, SYNC_S))
                 } else {
                     x.vars
                         .get(n)
@@ -110,14 +127,18 @@ impl Run<'_> {
             X::Timer(n) => {
                 let (ms, t0, running) = x.timers.get(n).copied().unwrap_or((0.0, x.t, false));
                 Val::Num(if running {
-                    ms + (x.t - t0) * 1000.0
+                    steps_of(ms + (x.t - t0) * 1000.0, 1.0)
                 } else {
                     ms
                 })
             }
             X::Clock(n) => {
                 let (s, t0, running) = x.clocks.get(n).copied().unwrap_or((0.0, x.t, false));
-                Val::Num(if running { s + (x.t - t0) } else { s })
+                Val::Num(if running {
+                    steps_of((s + (x.t - t0)) * 1000.0, 1.0) / 1000.0
+                } else {
+                    s
+                })
             }
             X::Not(a) => match self.eval(c, a)? {
                 Val::Bool(b) => Val::Bool(!b),

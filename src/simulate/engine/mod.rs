@@ -20,7 +20,7 @@ mod world;
 use eval::EvalError;
 
 /// URScript's control cycle on e-Series (500 Hz): what `sync()` takes.
-const SYNC_S: f64 = 0.002;
+pub(super) const SYNC_S: f64 = 0.002;
 
 #[derive(Debug, Clone, PartialEq)]
 enum State {
@@ -625,11 +625,15 @@ impl Run<'_> {
                         let mut wake = deadline;
                         let mut th = Vec::new();
                         cond.thresholds(&mut th);
+                        // A comparison flips when the clock reads its limit (`>=`, `<`) or
+                        // one step past it (`>`, `<=`): both are times to look again.
                         for (clock, k) in th {
-                            if let Some(w) = self.reaches(c, &clock, k)
-                                && w > t
-                            {
-                                wake = Some(wake.map_or(w, |d: f64| d.min(w)));
+                            for k in [k, k + eval::resolution(&clock)] {
+                                if let Some(w) = self.reaches(c, &clock, k)
+                                    && w > t
+                                {
+                                    wake = Some(wake.map_or(w, |d: f64| d.min(w)));
+                                }
                             }
                         }
                         let x = &mut self.ctls[c];
