@@ -1,33 +1,23 @@
 //! The emitted control flow, checked by running it, in every robot language (KRL, RAPID,
 //! URScript): every `fixtures/ok/flow-*` case is compiled with the binary, and the generated
-//! program is executed by a small interpreter of its language under many input sequences. The
-//! robot's actions (the steps executed, in order: KRL's step FOLDs, RAPID's `! step` and
-//! URScript's `# step` lines) must be what the chart means: an independent token player runs the
-//! SFC graph itself (IEC 61131-3: a transition fires when its condition holds; a selection takes
-//! its first branch, left to right, whose condition holds; simultaneous branches run one after
-//! another, left to right; a jump continues at its target step).
+//! program is run by the product's simulator (`skillpost::simulate`, docs/SIMULATE.md: its
+//! readers of the three languages and its machine) under many input sequences
+//! (`flow_run/sim.rs` makes each a scenario). The robot's actions (the steps run, in order)
+//! must be what the chart means: an independent token player runs the SFC graph itself
+//! (IEC 61131-3: a transition fires when its condition holds; a selection takes its first
+//! branch, left to right, whose condition holds; simultaneous branches run one after another,
+//! left to right; a jump continues at its target step).
 //!
-//! - KRL (`flow_run/krl.rs`): statements, `IF`, `LOOP`/`EXIT`, `REPEAT`/`UNTIL`, `SWITCH`,
-//!   `WAIT FOR`, `WAIT SEC`, `$IN`/`$OUT`, `SIGNAL` groups, the timers `$TIMER`/`$TIMER_STOP`,
-//!   KRL's own operator precedence.
-//! - RAPID (`flow_run/rapid.rs`): `WaitUntil`, `WaitTime`, `IF`/`ELSEIF`/`ELSE`, `WHILE` with
-//!   flags, `VAR` declarations, clocks (`ClkReset`/`ClkStart`/`ClkRead`), the RAPID kernel's
-//!   expression grammar and priorities (strictly: `NOT` only at the start of an expression, no
-//!   chained comparisons, a `signaldi` is a number).
-//! - URScript (`flow_run/urscript.rs`): `def`/`end`, `if`/`elif`/`else`, `while`/`break`,
-//!   `sync()`, the step-time counters a thread advances, Python-like precedence; and every
-//!   generated script passes the block-structure
-//!   check of `common/urscript.rs`. Every generated RAPID module passes `rapidchecker` when it
-//!   is installed (random and retargeted charts: a sample).
+//! Every generated KRL program passes the structure check of `common/krl_check.rs`, every
+//! script the block check of `common/urscript.rs`, and every RAPID module `rapidchecker` when
+//! it is installed (random and retargeted charts: a sample).
 //!
-//! The languages share the machine of `flow_run/machine.rs` (RAPID and URScript) and everything
-//! else: the chart player and the random chart generator (`flow_run/chart.rs`), the input
-//! sequences and the comparisons. A project is switched to a language by its resource's
-//! `Language` attribute; the test rewrites the flow base's blackboard so every signal is readable
-//! in that language (RAPID: an `Address` `di_<Name>`/`do_<Name>`/`gi_<Name>`; URScript: standard
-//! digital I/O by `Number`, the integer group and the `$CYCFLAG` flag through register calls),
-//! and the IRL's motion templates so every line is in the language (the interpreters treat a
-//! step's code lines as opaque; the syntax checks read them).
+//! The chart player and the random chart generator are `flow_run/chart.rs`. A project is
+//! switched to a language by its resource's `Language` attribute; the test rewrites the flow
+//! base's blackboard so every signal is readable in that language (RAPID: an `Address`
+//! `di_<Name>`/`do_<Name>`/`gi_<Name>`; URScript: standard digital I/O by `Number`, the integer
+//! group and the `$CYCFLAG` flag through register calls), and the IRL's motion templates so
+//! every line is in the language.
 //!
 //! Besides the fixtures, 150 random structured charts (guarded sequences, selections with empty
 //! and unconditional branches, simultaneous branches, loops left by one branch or two that join,
@@ -36,20 +26,27 @@
 //! retargeted jump, and charts holding every form of condition are compiled and run the same
 //! way, in each language. The chart player reads the conditions with a reader of its own
 //! (independent of the project's ST parser), checked against their meaning written out in
-//! Rust. Tests with mutated programs show that each check can fail.
+//! Rust. Tests with mutated programs show that each check can fail: the simulator reports a
+//! fault (a value of the wrong type, a variable read before it has a value, a motion to a
+//! point the program does not declare), or the actions differ from the chart's.
 //!
-//! Inputs change only when the robot acts: phase `k` of an input sequence holds while `k`
-//! actions have run (the last phase holds after). A wait whose condition is false with inputs
-//! that cannot change any more is "stuck"; both sides must get stuck at the same place. Endless
-//! programs are compared over their first actions.
+//! Inputs change only when the robot acts: phase `k` of an input sequence holds once `k`
+//! actions have run (the last phase holds after; the scenario's `after_steps`). A wait whose
+//! condition is false with inputs that cannot change any more is "stuck"; both sides must get
+//! stuck at the same place. Endless programs are compared over their first actions. A second
+//! run of each sequence has inputs that change every few milliseconds at random and statements
+//! that take a millisecond, so a signal changes between a wait and the test after it: the
+//! program must still follow the chart's paths.
 //!
-//! Time is virtual and the same on both sides: an action takes [`ACTION_MS`] and nothing but
-//! waiting takes time; a wait (a transition's, or a selection's for any branch) whose condition
-//! is false advances the clock by [`TICK_MS`] and reads it again, and is stuck when it has not
-//! held after [`STUCK_MS`] (at once when it reads no time: the inputs cannot change). A step's
-//! time `S.t` is the time since the step last became active (when the transition before it
-//! fired, before its action); the interpreters run KRL's `$TIMER`s, RAPID's clocks and
-//! URScript's step-time counters on that clock.
+//! Time is virtual and the same on both sides: an action takes [`ACTION_MS`] (every step's
+//! time) and nothing but waiting takes time; a wait whose condition is false reads it again
+//! every [`TICK_MS`] (the scenario's `poll`). The player calls a wait stuck when it has not
+//! held after [`STUCK_MS`] (at once when it reads no time: the inputs cannot change); the
+//! simulator when nothing it reads can change it any more (no step time in a random chart
+//! waits longer than 1.5 s). A step's time `S.t` is the time since the step last became active
+//! (when the transition before it fired, before its action); the simulator runs KRL's
+//! `$TIMER`s, RAPID's clocks and URScript's step-time counters on that clock, each in the
+//! steps its controller counts in (1 ms; a URScript counter 2 ms).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -71,18 +68,12 @@ mod chart;
 mod cosim;
 #[path = "../benches/common/generator.rs"]
 mod generator;
-#[path = "flow_run/krl.rs"]
-mod krl;
-#[path = "flow_run/machine.rs"]
-mod machine;
 #[path = "flow_run/mutate.rs"]
 mod mutate;
 #[path = "flow_run/parts.rs"]
 mod parts;
-#[path = "flow_run/rapid.rs"]
-mod rapid;
-#[path = "flow_run/urscript.rs"]
-mod urscript;
+#[path = "flow_run/sim.rs"]
+mod sim;
 #[path = "flow_run/wire.rs"]
 mod wire;
 
@@ -112,19 +103,11 @@ const STUCK_MS: i64 = 10_000;
 // The world: signal values per phase
 // ---------------------------------------------------------------------------------------------
 
-/// How KRL reads a signal.
-#[derive(Clone, Copy)]
-enum Io {
-    Bit(&'static str),
-    Group(u32, u32),
-}
-
-/// One signal of the flow base (fixtures/base/flow/Blackboard.aml) and how each language reads
-/// it.
+/// One signal of the flow base (fixtures/base/flow/Blackboard.aml) and how RAPID and URScript
+/// read it (KRL: as the base declares it).
 struct Sig {
     name: &'static str,
     integer: bool,
-    krl: Io,
     /// RAPID: the configured signal name (`Address`).
     rapid: &'static str,
     /// URScript: the call that reads it (`Number` for standard digital I/O, else `Address`).
@@ -135,42 +118,36 @@ const SIGNALS: &[Sig] = &[
     Sig {
         name: "Part_OK",
         integer: false,
-        krl: Io::Bit("$IN[1]"),
         rapid: "di_Part_OK",
         ur: "get_standard_digital_in(1)",
     },
     Sig {
         name: "Magazine_Empty",
         integer: false,
-        krl: Io::Bit("$IN[2]"),
         rapid: "di_Magazine_Empty",
         ur: "get_standard_digital_in(2)",
     },
     Sig {
         name: "Release",
         integer: false,
-        krl: Io::Bit("$IN[3]"),
         rapid: "di_Release",
         ur: "get_standard_digital_in(3)",
     },
     Sig {
         name: "Variant",
         integer: true,
-        krl: Io::Group(9, 4),
         rapid: "gi_Variant",
         ur: "read_input_integer_register(9)",
     },
     Sig {
         name: "Gripper_Closed",
         integer: false,
-        krl: Io::Bit("$OUT[5]"),
         rapid: "do_Gripper_Closed",
         ur: "get_standard_digital_out(5)",
     },
     Sig {
         name: "Door_Closed",
         integer: false,
-        krl: Io::Bit("$CYCFLAG[3]"),
         rapid: "di_Door_Closed",
         ur: "read_input_boolean_register(3)",
     },
@@ -238,33 +215,23 @@ enum Lang {
     UrScript,
 }
 
-/// A generated program: its main file (and KRL's `.dat`).
+/// A generated program: its main file (and KRL's `.dat`), and the cell the library's compile
+/// of its project sees (what the product's simulator runs it on; `None`: a text only checked).
 struct Output {
     lang: Lang,
     main: String,
     dat: String,
+    cell: Option<std::sync::Arc<skillpost::simulate::Cell>>,
 }
 
-/// A program ready to run.
-enum Runnable {
-    Krl(Vec<krl::Stmt>, String),
-    Structured(machine::Program),
-}
-
-impl Runnable {
-    fn run(&self, seq: &[Phase], flicker: bool) -> (Vec<String>, Outcome) {
-        match self {
-            Runnable::Krl(program, dat) => krl::krl_run_with(program, dat, seq, flicker),
-            Runnable::Structured(p) => machine::run(p, seq, flicker),
-        }
-    }
-
-    /// [`Runnable::run`] with time as the controller reads it: a wait reads its condition
-    /// every `tick` milliseconds (RAPID: at its `\PollRate`), and the inputs change at a time.
-    fn run_timed(&self, seq: &[Phase], tick: i64, change: &machine::Change) -> Vec<String> {
-        match self {
-            Runnable::Krl(program, dat) => krl::krl_run_timed(program, dat, seq, tick, change),
-            Runnable::Structured(p) => machine::run_timed(p, seq, tick, change),
+impl Output {
+    /// Another text of the program, on the same cell.
+    fn with(&self, main: String, dat: String) -> Output {
+        Output {
+            lang: self.lang,
+            main,
+            dat,
+            cell: self.cell.clone(),
         }
     }
 }
@@ -383,6 +350,7 @@ impl Lang {
             lang: self,
             main,
             dat,
+            cell: Some(sim::cell(dir, "Blackboard.aml", program)),
         }
     }
 }
@@ -398,12 +366,10 @@ impl Output {
         }
     }
 
-    fn parse(&self, program: &str) -> Runnable {
-        match self.lang {
-            Lang::Krl => Runnable::Krl(krl::parse_program(&self.main), self.dat.clone()),
-            Lang::Rapid => Runnable::Structured(rapid::parse(&self.main, program)),
-            Lang::UrScript => Runnable::Structured(urscript::parse(&self.main, program)),
-        }
+    /// The program as the product's simulator reads it.
+    fn parse(&self) -> sim::Runnable {
+        let cell = self.cell.clone().expect("a program of a project");
+        sim::Runnable::new(cell, self.lang, &self.main, &self.dat)
     }
 }
 
@@ -557,14 +523,13 @@ fn compile(case: &str, lang: Lang) -> (String, Output, Chart) {
 fn check_compiled(
     case: &str,
     output: &Output,
-    program: &str,
     chart: &Chart,
     seed: u64,
     count: usize,
 ) -> BTreeMap<String, usize> {
     let lang = output.lang;
     let text = &output.main;
-    let runnable = output.parse(program);
+    let runnable = output.parse();
     let mut seen = BTreeMap::new();
     let all = sequences(seed, count);
     for (k, seq) in all.iter().enumerate() {
@@ -609,15 +574,8 @@ fn check_compiled(
 }
 
 fn run_case(case: &str, lang: Lang) {
-    let (program, output, chart) = compile(case, lang);
-    let seen = check_compiled(
-        case,
-        &output,
-        &program,
-        &chart,
-        0x5eed ^ case.len() as u64,
-        400,
-    );
+    let (_, output, chart) = compile(case, lang);
+    let seen = check_compiled(case, &output, &chart, 0x5eed ^ case.len() as u64, 400);
     println!("{case} ({lang:?}): {seen:?}");
 }
 
@@ -763,7 +721,7 @@ fn run_random(
     }
     rapid.add_sampled(what, &output, seed as usize, 10);
     let chart = Chart::read(&sfc);
-    let seen = check_compiled(what, &output, "R", &chart, seed, 60);
+    let seen = check_compiled(what, &output, &chart, seed, 60);
     (output, seen)
 }
 
@@ -827,22 +785,12 @@ fn step_timer(lang: Lang) -> &'static str {
     }
 }
 
-/// How often each controller reads a wait's condition, in milliseconds: KRL every interpreter
-/// cycle (12 ms on KR C4), URScript every control cycle (`sync()`; 8 ms on CB3, 2 ms on
-/// e-Series: the slower), RAPID at its `\PollRate` (the reader takes it from the program).
-fn poll_ms(lang: Lang) -> i64 {
-    match lang {
-        Lang::Krl => 12,
-        Lang::Rapid => 100,
-        Lang::UrScript => 8,
-    }
-}
-
 /// A step-time window of 150 ms takes the same branch in every language
 /// (`fixtures/ok/flow-step-time`: after `Grip`, `Grip.t < T#150ms AND Part_OK` lifts, a
 /// timeout retreats). `Part_OK` comes on at a time after `Grip` began (its action takes 100
-/// ms, then the selection waits), each controller reading the condition at its own rate:
-/// whenever it comes before 140 ms (the window less RAPID's 40 ms poll rate) all three lift,
+/// ms, then the selection waits), each controller reading the condition at its own rate (the
+/// simulator's `poll = "controller"`: KRL's interpreter cycle of 12 ms, RAPID the wait's
+/// `\PollRate`, URScript's control cycle of 2 ms): whenever it comes before 140 ms (the window less RAPID's 40 ms poll rate) all three lift,
 /// from 150 ms on all three retreat. RAPID's default rate of 100 ms would read at 100 ms and
 /// 200 ms and retreat for a part that came at 120 ms (checked too, so the test can fail).
 #[test]
@@ -853,19 +801,13 @@ fn a_150_ms_step_time_window_takes_the_same_branch_in_every_language() {
         let at = actions.iter().position(|a| a == "Grip").expect("Grip runs");
         actions.get(at + 1).cloned().unwrap_or_default()
     };
-    let change = |delay: i64| machine::Change {
-        after: "Grip".to_owned(),
-        delay,
-        phase: part.clone(),
-    };
     for lang in [Lang::Krl, Lang::Rapid, Lang::UrScript] {
-        let (program, output, _) = compile("flow-step-time", lang);
-        let run = output.parse(&program);
+        let (_, output, _) = compile("flow-step-time", lang);
+        let run = output.parse();
         for delay in [
             0, 40, 99, 100, 101, 110, 120, 130, 139, 140, 150, 151, 200, 1000,
         ] {
-            let actions =
-                run.run_timed(std::slice::from_ref(&quiet), poll_ms(lang), &change(delay));
+            let actions = run.run_timed(&quiet, "Grip", delay, &part);
             let expect = if delay <= 140 { "Lift" } else { "Retreat" };
             assert_eq!(
                 after_grip(&actions),
@@ -875,17 +817,9 @@ fn a_150_ms_step_time_window_takes_the_same_branch_in_every_language() {
             );
         }
         if lang == Lang::Rapid {
-            let slow = Output {
-                lang,
-                main: output.main.replace("\\PollRate:=0.04", ""),
-                dat: String::new(),
-            };
+            let slow = output.with(output.main.replace("\\PollRate:=0.04", ""), String::new());
             assert_ne!(slow.main, output.main);
-            let actions = slow.parse(&program).run_timed(
-                std::slice::from_ref(&quiet),
-                poll_ms(lang),
-                &change(120),
-            );
+            let actions = slow.parse().run_timed(&quiet, "Grip", 120, &part);
             assert_eq!(after_grip(&actions), "Retreat", "{actions:?}");
         }
     }
@@ -1021,7 +955,6 @@ fn retargeted_jumps(lang: Lang, timed: bool) -> (BTreeSet<u64>, BTreeMap<String,
                 check_compiled(
                     &format!("retargeted chart {seed}"),
                     &output,
-                    "R",
                     &chart,
                     seed,
                     40,
@@ -1122,15 +1055,11 @@ fn drop_line(text: &str, line: &str) -> String {
 
 /// Runs a mutated program of the fixture against its chart; `true` when the suite notices
 /// (the syntax check, the reader or a run fails).
-fn noticed(case: &str, program: &str, chart: &Chart, lang: Lang, text: String) -> bool {
-    let output = Output {
-        lang,
-        main: text,
-        dat: String::new(),
-    };
+fn noticed(case: &str, program: &str, chart: &Chart, base: &Output, text: String) -> bool {
+    let output = base.with(text, String::new());
     output.syntax(program).is_err()
         || fails(|| {
-            check_compiled(case, &output, program, chart, 7, 100);
+            check_compiled(case, &output, chart, 7, 100);
         })
 }
 
@@ -1153,25 +1082,17 @@ fn a_motion_to_an_undeclared_point_fails() {
             .to_owned();
         let dropped = file.replacen(&format!("{line}\n"), "", 1);
         let output = match lang {
-            Lang::Krl => Output {
-                lang,
-                main: out.main.clone(),
-                dat: dropped,
-            },
-            _ => Output {
-                lang,
-                main: dropped,
-                dat: out.dat.clone(),
-            },
+            Lang::Krl => out.with(out.main.clone(), dropped),
+            _ => out.with(dropped, out.dat.clone()),
         };
         let caught = output.syntax(&program).is_err()
             || fails(|| {
-                check_compiled(case, &output, &program, &chart, 7, 100);
+                check_compiled(case, &output, &chart, 7, 100);
             });
         assert!(caught, "{lang:?}: `{line}` dropped went unnoticed");
         // The program as written runs.
         assert!(out.syntax(&program).is_ok(), "{lang:?}");
-        check_compiled(case, &out, &program, &chart, 7, 100);
+        check_compiled(case, &out, &chart, 7, 100);
     }
 }
 
@@ -1180,35 +1101,23 @@ fn a_wrong_urscript_program_fails() {
     let case = "flow-loop-early-exit";
     let (program, out, chart) = compile(case, Lang::UrScript);
     let text = out.main.clone();
-    assert!(!noticed(
-        case,
-        &program,
-        &chart,
-        Lang::UrScript,
-        text.clone()
-    ));
+    assert!(!noticed(case, &program, &chart, &out, text.clone()));
     // A `break` dropped: still a well-formed script, but it goes round again instead of
     // leaving.
     let no_break = drop_line(&text, "break");
     urscript_check::check_urscript(&no_break).unwrap();
-    assert!(noticed(case, &program, &chart, Lang::UrScript, no_break));
+    assert!(noticed(case, &program, &chart, &out, no_break));
     // A selection whose branches do not cover every case (`Part_OK`, `NOT Part_OK AND
     // Release`): the program waits for either and records which.
     let case = "flow-selection-two-way";
     let (program, out, chart) = compile(case, Lang::UrScript);
     let text = out.main.clone();
-    assert!(!noticed(
-        case,
-        &program,
-        &chart,
-        Lang::UrScript,
-        text.clone()
-    ));
+    assert!(!noticed(case, &program, &chart, &out, text.clone()));
     // A parenthesis dropped.
     let at = text.find("((").unwrap();
     let unbalanced = format!("{}{}", &text[..at], &text[at + 1..]);
     assert!(urscript_check::check_urscript(&unbalanced).is_err());
-    assert!(noticed(case, &program, &chart, Lang::UrScript, unbalanced));
+    assert!(noticed(case, &program, &chart, &out, unbalanced));
     // An `end` swapped with the line after it: the branch is run inside the loop that
     // chooses it.
     let lines: Vec<&str> = text.lines().collect();
@@ -1222,7 +1131,7 @@ fn a_wrong_urscript_program_fails() {
         case,
         &program,
         &chart,
-        Lang::UrScript,
+        &out,
         swapped.join("\n") + "\n"
     ));
     // An `end` dropped, a loop's head dropped (its `end` then closes nothing), an `elif`
@@ -1237,25 +1146,25 @@ fn a_wrong_rapid_program_fails() {
     let case = "flow-loop-early-exit";
     let (program, out, chart) = compile(case, Lang::Rapid);
     let text = out.main.clone();
-    assert!(!noticed(case, &program, &chart, Lang::Rapid, text.clone()));
+    assert!(!noticed(case, &program, &chart, &out, text.clone()));
     // The loop's flag not cleared: it goes round again instead of leaving.
     let stays = drop_line(&text, "skp_loop1 := FALSE;");
-    assert!(noticed(case, &program, &chart, Lang::Rapid, stays));
+    assert!(noticed(case, &program, &chart, &out, stays));
     // A selection whose branches do not cover every case (`Part_OK`, `NOT Part_OK AND
     // Release`): the program waits for either and records which.
     let case = "flow-selection-two-way";
     let (program, out, chart) = compile(case, Lang::Rapid);
     let text = out.main.clone();
-    assert!(!noticed(case, &program, &chart, Lang::Rapid, text.clone()));
+    assert!(!noticed(case, &program, &chart, &out, text.clone()));
     // The wrong branch recorded.
     let wrong = text.replacen("skp_branch := 2;", "skp_branch := 1;", 1);
     assert_ne!(wrong, text);
-    assert!(noticed(case, &program, &chart, Lang::Rapid, wrong));
+    assert!(noticed(case, &program, &chart, &out, wrong));
     // A parenthesis pair dropped: `NOT` inside an expression is a syntax error in RAPID.
     // (`a OR ((NOT b) AND c)` written `a OR NOT ((b) AND c)`.)
     let bare = text.replacen(" OR ((NOT ", " OR NOT ((", 1);
     assert_ne!(bare, text);
-    assert!(noticed(case, &program, &chart, Lang::Rapid, bare));
+    assert!(noticed(case, &program, &chart, &out, bare));
     // A wait for several conditions as the writer wrote it before: `WaitUntil (a) OR (b);`
     // is RAPID, but `rapidchecker` reads `WaitUntil (a)` as a call and refuses the rest.
     let old = text
@@ -1269,6 +1178,7 @@ fn a_wrong_rapid_program_fails() {
             lang: Lang::Rapid,
             main: old,
             dat: String::new(),
+            cell: None,
         },
     );
     if let Some(r) = rapid.run() {
@@ -1286,7 +1196,7 @@ fn a_wrong_rapid_program_fails() {
         case,
         &program,
         &chart,
-        Lang::Rapid,
+        &out,
         swapped.join("\n") + "\n"
     ));
 }
@@ -1294,14 +1204,10 @@ fn a_wrong_rapid_program_fails() {
 /// Runs a KRL `.src` of the fixture (with its `.dat`) against its chart; `true` when the
 /// suite notices (the KRL check or a run fails).
 fn krl_noticed(case: &str, program: &str, chart: &Chart, out: &Output, main: String) -> bool {
-    let output = Output {
-        lang: Lang::Krl,
-        main,
-        dat: out.dat.clone(),
-    };
+    let output = out.with(main, out.dat.clone());
     output.syntax(program).is_err()
         || fails(|| {
-            check_compiled(case, &output, program, chart, 7, 100);
+            check_compiled(case, &output, chart, 7, 100);
         })
 }
 
@@ -1349,16 +1255,16 @@ fn a_wrong_program_with_states_fails() {
     ] {
         let (program, out, chart) = compile(case, lang);
         let text = out.main.clone();
-        assert!(!noticed(case, &program, &chart, lang, text.clone()));
+        assert!(!noticed(case, &program, &chart, &out, text.clone()));
         assert!(text.contains(set), "{text}");
         assert!(noticed(
             case,
             &program,
             &chart,
-            lang,
+            &out,
             text.replacen(set, wrong, 1)
         ));
-        assert!(noticed(case, &program, &chart, lang, drop_line(&text, set)));
+        assert!(noticed(case, &program, &chart, &out, drop_line(&text, set)));
     }
 }
 
@@ -1489,7 +1395,7 @@ fn a_wrong_step_time_fails() {
             if lang == Lang::Krl {
                 krl_noticed("step time loop", "R", &chart, &out, main)
             } else {
-                noticed("step time loop", "R", &chart, lang, main)
+                noticed("step time loop", "R", &chart, &out, main)
             }
         };
         assert!(!run(out.main.clone()), "{lang:?}:\n{}", out.main);
@@ -1642,7 +1548,7 @@ fn conditions(lang: Lang) {
         let case = format!("conditions {conds:?}");
         rapid.add(&case, &output);
         let chart = Chart::read(&sfc);
-        let seen = check_compiled(&case, &output, "R", &chart, 3 + k as u64, 400);
+        let seen = check_compiled(&case, &output, &chart, 3 + k as u64, 400);
         println!("{case} ({lang:?}): {seen:?}");
         // The selections always take a branch: every run reaches the waits.
         assert!(!seen.contains_key("Running"), "{case}: {seen:?}");
@@ -1708,7 +1614,7 @@ fn wired_conditions(lang: Lang) {
             panic!("{case} ({lang:?}): {e}\n{}", output.main);
         }
         rapid.add(&case, &output);
-        let seen = check_compiled(&case, &output, "R", &chart, 3 + k as u64, 400);
+        let seen = check_compiled(&case, &output, &chart, 3 + k as u64, 400);
         assert!(!seen.contains_key("Running"), "{case}: {seen:?}");
     }
     rapid.check();
@@ -1766,84 +1672,8 @@ fn random_charts_with_wired_conditions_are_the_same_programs() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// The readers' precedence and the URScript check
+// The URScript check
 // ---------------------------------------------------------------------------------------------
-
-fn precedence_phase() -> Phase {
-    let mut p: Phase = SIGNALS.iter().map(|s| (s.name, 0)).collect();
-    p.insert("Part_OK", 1);
-    p.insert("Variant", 3);
-    p
-}
-
-/// RAPID's priorities (comparisons, then `AND`, then `OR`/`XOR`/`NOT`), and what RAPID's
-/// grammar refuses: a condition without the emitted parentheses fails or means something else.
-#[test]
-fn the_rapid_reader_uses_rapid_priorities() {
-    let p = precedence_phase();
-    let t = |s: &str| machine::truth(&rapid::expr(s), &p, true);
-    assert!(t("gi_Variant = 3 AND di_Part_OK = 1"));
-    assert!(t("NOT di_Release = 1"));
-    assert!(t("di_Part_OK = 1 OR di_Release = 1 AND FALSE"));
-    assert!(!t("(di_Part_OK = 1 OR di_Release = 1) AND FALSE"));
-    assert!(t("(di_Part_OK = 1) XOR (di_Release = 1)"));
-    assert!(t("-gi_Variant < -2"));
-    for bad in [
-        "di_Part_OK = 1 AND NOT di_Release = 1",
-        "NOT di_Part_OK = 1 OR di_Release = 1",
-        "di_Part_OK AND TRUE",
-        "gi_Variant = 3 = TRUE",
-        "(di_Part_OK = 1",
-        "di_Part_OK = 1 di_Release = 1",
-        "di_Unknown = 1",
-    ] {
-        assert!(
-            fails(|| {
-                t(bad);
-            }),
-            "`{bad}` is no RAPID condition"
-        );
-    }
-}
-
-/// URScript's (Python-like) precedence: `not` binds weaker than comparisons.
-#[test]
-fn the_urscript_reader_uses_urscript_precedence() {
-    let p = precedence_phase();
-    let t = |s: &str| machine::truth(&urscript::expr(s), &p, false);
-    assert!(!t("not read_input_integer_register(9) == 3"));
-    assert!(t(
-        "read_input_integer_register(9) == 3 and get_standard_digital_in(1)"
-    ));
-    assert!(t(
-        "get_standard_digital_in(1) or get_standard_digital_in(3) and False"
-    ));
-    assert!(!t(
-        "(get_standard_digital_in(1) or get_standard_digital_in(3)) and False"
-    ));
-    assert!(t(
-        "not get_standard_digital_in(3) and get_standard_digital_in(1)"
-    ));
-    assert!(t(
-        "get_standard_digital_in(1) xor get_standard_digital_in(3)"
-    ));
-    for bad in [
-        "get_standard_digital_in(1) xor get_standard_digital_in(3) or True",
-        "get_standard_digital_in(1) and get_standard_digital_in(3) xor True",
-        "get_standard_digital_in(1) == 1",
-        "read_input_integer_register(9) == 3 == True",
-        "get_standard_digital_in(1) and not",
-        "get_standard_digital_in(7)",
-        "(get_standard_digital_in(1)",
-    ] {
-        assert!(
-            fails(|| {
-                t(bad);
-            }),
-            "`{bad}` is no URScript condition here"
-        );
-    }
-}
 
 /// The block-structure check accepts URScript and refuses what is not.
 #[test]
@@ -1946,6 +1776,7 @@ fn cells_keep_the_charts_order_whatever_the_timing() {
                     lang: *lang,
                     main: main.clone(),
                     dat: dat.clone(),
+                    cell: None,
                 };
                 if let Err(e) = output.syntax(&name) {
                     panic!("seed {seed}: {name}: {e}\n{main}");
@@ -2029,6 +1860,7 @@ fn cells_with_states_keep_the_charts_order_whatever_the_timing() {
                     lang: *lang,
                     main: main.clone(),
                     dat: dat.clone(),
+                    cell: None,
                 };
                 if let Err(e) = output.syntax(&name) {
                     panic!("seed {seed}: {name}: {e}\n{main}");

@@ -793,8 +793,24 @@ fn random_runs_answer_a_wait_for_an_undeclared_input() {
 #[test]
 fn a_wait_for_a_step_time_beyond_a_limit_ends_just_after_it_in_every_language() {
     for (fixture, bb, program, line, step, next, tick) in [
-        ("flow-step-time", "Blackboard.aml", "StepTime", 83, "Grip", "Retreat", 0.001),
-        ("abb-irb1200", "Cell.aml", "Palletize", 55, "Pick", "Grip", 0.001),
+        (
+            "flow-step-time",
+            "Blackboard.aml",
+            "StepTime",
+            83,
+            "Grip",
+            "Retreat",
+            0.001,
+        ),
+        (
+            "abb-irb1200",
+            "Cell.aml",
+            "Palletize",
+            55,
+            "Pick",
+            "Grip",
+            0.001,
+        ),
         ("ur10e", "Cell.aml", "Palletize", 55, "Pick", "Grip", 0.002),
     ] {
         let p = common::fixture_project(fixture);
@@ -825,5 +841,107 @@ fn a_wait_for_a_step_time_beyond_a_limit_ends_just_after_it_in_every_language() 
             (waited - (1.5 + tick)).abs() < 1e-6,
             "{fixture}: {next} {waited} s after {step} began: {run:#}"
         );
+    }
+}
+
+/// A step's code that moves to a point the program does not declare (`PTP XService` in an
+/// IRL definition, the point kept in another file) is a fault at that line, named as written;
+/// KSS's own home position (`XHOME`, declared in `$config.dat`) is not.
+#[test]
+fn a_motion_to_a_point_the_program_does_not_declare_is_a_fault_at_its_line() {
+    let p = common::fixture_project("flow-step-time");
+    let dir = p.path();
+    let irl = fs::read_to_string(dir.join("kr15-2.irl")).unwrap();
+    let lin = "\t\t\tLIN {X, Y, Z, A, B, C}\n";
+    assert!(irl.contains(lin));
+    let with = |extra: &str| {
+        fs::write(
+            dir.join("kr15-2.irl"),
+            irl.replacen(lin, &format!("{lin}\t\t\t{extra}\n"), 1),
+        )
+        .unwrap();
+        simulate(dir, "Blackboard.aml", "StepTime", Some("[inputs]\n"), &[])
+    };
+    let (code, v) = with("PTP XService");
+    assert_eq!(code, 1, "{v:#}");
+    let run = &v["runs"][0];
+    let faults: Vec<_> = problems(run)
+        .into_iter()
+        .filter(|(kind, _)| kind == "fault")
+        .collect();
+    assert_eq!(faults.len(), 1, "{run:#}");
+    assert!(
+        faults[0]
+            .1
+            .contains("`XService`, which the program does not declare"),
+        "{faults:?}"
+    );
+    let p0 = &run["problems"][0];
+    let line = p0["line"].as_u64().expect("the fault's line") as usize;
+    let src = fs::read_to_string(dir.join("StepTime.src")).unwrap_or_default();
+    // (The simulation writes nothing: the line is the one a compile writes.)
+    assert!(src.is_empty(), "simulate wrote StepTime.src");
+    let out = skillpost(dir, &["--lf", "Blackboard.aml", "StepTime"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let src = fs::read_to_string(dir.join("StepTime.src")).unwrap();
+    assert_eq!(
+        src.lines().nth(line - 1).map(str::trim),
+        Some("PTP XService"),
+        "{p0:#}"
+    );
+    let (code, v) = with("PTP XHOME");
+    assert_eq!(code, 0, "{v:#}");
+}
+
+/// How often a wait reads its condition (`poll`) decides a step-time window: after `Grip`,
+/// `Grip.t < T#150ms AND Part_OK` lifts, else a timeout retreats. `Part_OK` comes 120 ms after
+/// `Grip` began (its motion takes 100 ms): read at once, or every 12 ms (KRL's interpreter
+/// cycle, `poll = "controller"`), the part is in time; read every 100 ms, the wait first sees
+/// it at 200 ms and retreats. A change `after_steps = 1` (when the first step's motion ends)
+/// comes in time too; a wrong `poll` is refused at its place.
+#[test]
+fn a_waits_polling_rate_and_a_change_after_a_count_of_steps_decide_a_step_time_window() {
+    let p = common::fixture_project("flow-step-time");
+    let dir = p.path();
+    let after_grip = |scenario: &str| {
+        let (code, v) = simulate(dir, "Blackboard.aml", "StepTime", Some(scenario), &[]);
+        assert_eq!(code, 0, "{v:#}");
+        let steps = lanes(&v["runs"][0]).into_values().next().unwrap();
+        let at = steps.iter().position(|s| s.0 == "Grip").expect("Grip runs");
+        steps[at + 1].0.clone()
+    };
+    let timing = "[timing.\"KUKA KR15-2\"]\nmotion_factor = 0.1\n";
+    // Approach 0-0.1 s, Grip 0.1-0.2 s: the part at 0.22 s.
+    let part = "[[change]]\nat = 0.22\nresource = \"KUKA KR15-2\"\nsignal = \"Part_OK\"\nvalue = true\n";
+    assert_eq!(after_grip(&format!("{timing}{part}")), "Lift");
+    assert_eq!(
+        after_grip(&format!("{timing}poll = \"controller\"\n{part}")),
+        "Lift"
+    );
+    assert_eq!(after_grip(&format!("{timing}poll = 0.1\n{part}")), "Retreat");
+    let counted = "[[change]]\nafter_steps = 1\nresource = \"KUKA KR15-2\"\nsignal = \"Part_OK\"\nvalue = true\n";
+    assert_eq!(after_grip(&format!("{timing}{counted}")), "Lift");
+    for (bad, want) in [
+        (
+            format!("{timing}poll = \"fast\"\n"),
+            "scenario.toml:3:8: `poll` is seconds",
+        ),
+        (
+            counted.replace("after_steps = 1", "after_steps = 0"),
+            "scenario.toml:2:15: `after_steps` is 1 to",
+        ),
+        (
+            counted.replace("after_steps = 1", "after_steps = 1\nat = 2"),
+            "give one of `after = \"STEP\"`, `after_steps = N` or `at = SECONDS`",
+        ),
+    ] {
+        fs::write(dir.join("scenario.toml"), &bad).unwrap();
+        let out = skillpost(
+            dir,
+            &["simulate", "Blackboard.aml", "StepTime", "--scenario", "scenario.toml"],
+        );
+        assert_eq!(out.status.code(), Some(2), "{bad}");
+        let err = text(&out.stderr);
+        assert!(err.contains(want), "{bad}\n{err}");
     }
 }

@@ -198,8 +198,10 @@ pub enum Ins {
     /// The end of a step's own code: what it did (a `WAIT SEC`, a `sleep`) took the step's
     /// time, not more.
     StepEnd,
-    /// A motion statement: part of its step's motion (the step's time covers it).
-    Motion,
+    /// A motion statement: part of its step's motion (the step's time covers it). The
+    /// points it names (not a literal position, not a system variable), as written: each
+    /// must be declared ([`Program::declared`]).
+    Motion(Vec<String>),
     /// A comment of the writer's (`handshake: …`, `selection localId 8: …`): what the program
     /// does next, for the report.
     Note(String),
@@ -209,11 +211,13 @@ pub enum Ins {
         transition: u64,
     },
     /// Waits until the condition holds. `max`: RAPID's `\MaxTime` (seconds) and its
-    /// `\TimeFlag` variable.
+    /// `\TimeFlag` variable; `poll`: RAPID's `\PollRate` (seconds), how often the controller
+    /// reads the condition when a scenario asks for the controller's own rates.
     Wait {
         cond: X,
         settle: Settle,
         max: Option<(f64, Option<String>)>,
+        poll: Option<f64>,
     },
     /// Time passes (seconds); `settle`: the motions before end first (KRL `WAIT SEC`, RAPID
     /// `WaitTime \InPos`).
@@ -263,6 +267,25 @@ pub struct Program {
     pub unknown: Vec<(String, Line)>,
     /// Language-specific: RAPID and KRL compare names without regard to case.
     pub fold_case: bool,
+    /// Every name the program's files declare as data (KRL `DECL`, RAPID `VAR`/`PERS`/
+    /// `CONST`, URScript variables it assigns and routine parameters): a motion to a point
+    /// not among them stops the program.
+    pub declared: std::collections::HashSet<String>,
+}
+
+/// The point a motion's argument names (`XGrip`, `pTake`, `p_pick`), as written; `None` for
+/// a literal position, a computed one (`Offs(p, 0, 0, 10)`), a system variable (`$POS_ACT`)
+/// or RAPID's `*`.
+pub fn point_name(arg: &str) -> Option<String> {
+    let a = arg.trim();
+    let mut chars = a.chars();
+    let first = chars.next()?;
+    if !(first.is_ascii_alphabetic() || first == '_')
+        || !chars.all(|c| c.is_ascii_alphanumeric() || c == '_')
+    {
+        return None;
+    }
+    Some(a.to_owned())
 }
 
 impl Program {
@@ -610,6 +633,101 @@ mod tests {
             branch_title("branch 2 (transition localId 17): NOT Part_Present"),
             Some(17)
         );
+    }
+
+    /// An expression tree written out: `(a OR (b AND FALSE))`.
+    fn shape(e: &Raw) -> String {
+        match e {
+            Raw::Num(n) => n.to_string(),
+            Raw::Bool(b) => b.to_string(),
+            Raw::Str(s) => format!("{s:?}"),
+            Raw::Name(n) => n.clone(),
+            Raw::Index(a, i) => format!("{a}[{}]", shape(i)),
+            Raw::Call(f, args) => {
+                format!(
+                    "{f}({})",
+                    args.iter().map(shape).collect::<Vec<_>>().join(", ")
+                )
+            }
+            Raw::Not(a) => format!("(not {})", shape(a)),
+            Raw::Neg(a) => format!("(-{})", shape(a)),
+            Raw::Bin(op, a, b) => format!("({} {op:?} {})", shape(a), shape(b)),
+        }
+    }
+
+    /// RAPID's priorities, weakest first: `OR`/`XOR`, `AND`, `NOT` (on a comparison),
+    /// comparisons, `+`/`-`, `*`/`/`.
+    #[test]
+    fn rapid_expressions_use_rapid_priorities() {
+        use crate::simulate::rapid::GRAMMAR as RAPID;
+        for (text, want) in [
+            (
+                "gi_Variant = 3 AND di_Part_OK = 1",
+                "((gi_Variant Eq 3) And (di_Part_OK Eq 1))",
+            ),
+            ("NOT di_Release = 1", "(not (di_Release Eq 1))"),
+            (
+                "di_Part_OK = 1 OR di_Release = 1 AND FALSE",
+                "((di_Part_OK Eq 1) Or ((di_Release Eq 1) And false))",
+            ),
+            (
+                "(di_Part_OK = 1 OR di_Release = 1) AND FALSE",
+                "(((di_Part_OK Eq 1) Or (di_Release Eq 1)) And false)",
+            ),
+            (
+                "(di_Part_OK = 1) XOR (di_Release = 1)",
+                "((di_Part_OK Eq 1) Xor (di_Release Eq 1))",
+            ),
+            ("-gi_Variant < -2", "((-gi_Variant) Lt (-2))"),
+            (
+                "ClkRead(skp_clock1) > 0.35",
+                "(ClkRead(skp_clock1) Gt 0.35)",
+            ),
+        ] {
+            let e = parse_expr(text, &RAPID).unwrap_or_else(|e| panic!("{text}: {e:?}"));
+            assert_eq!(shape(&e), want, "{text}");
+        }
+        for bad in ["(di_Part_OK = 1", "di_Part_OK = 1 di_Release = 1", "NOT"] {
+            assert!(parse_expr(bad, &RAPID).is_err(), "`{bad}` is read");
+        }
+    }
+
+    /// URScript's (Python's) precedence: `not` binds weaker than comparisons, tighter than
+    /// `and`.
+    #[test]
+    fn urscript_expressions_use_python_precedence() {
+        use crate::simulate::urscript::GRAMMAR as UR;
+        for (text, want) in [
+            (
+                "not read_input_integer_register(9) == 3",
+                "(not (read_input_integer_register(9) Eq 3))",
+            ),
+            (
+                "read_input_integer_register(9) == 3 and get_standard_digital_in(1)",
+                "((read_input_integer_register(9) Eq 3) And get_standard_digital_in(1))",
+            ),
+            (
+                "get_standard_digital_in(1) or get_standard_digital_in(3) and False",
+                "(get_standard_digital_in(1) Or (get_standard_digital_in(3) And false))",
+            ),
+            (
+                "not get_standard_digital_in(3) and get_standard_digital_in(1)",
+                "((not get_standard_digital_in(3)) And get_standard_digital_in(1))",
+            ),
+            (
+                "skp_time1 > 0.35 or get_standard_digital_in(3)",
+                "((skp_time1 Gt 0.35) Or get_standard_digital_in(3))",
+            ),
+        ] {
+            let e = parse_expr(text, &UR).unwrap_or_else(|e| panic!("{text}: {e:?}"));
+            assert_eq!(shape(&e), want, "{text}");
+        }
+        for bad in [
+            "get_standard_digital_in(1) and not",
+            "(get_standard_digital_in(1)",
+        ] {
+            assert!(parse_expr(bad, &UR).is_err(), "`{bad}` is read");
+        }
     }
 
     #[test]

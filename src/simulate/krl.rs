@@ -11,7 +11,8 @@
 use std::collections::HashMap;
 
 use super::ir::{
-    Grammar, Ins, Line, Op, Program, Raw, Settle, Val, X, parse_expr, step_title, writer_comment,
+    Grammar, Ins, Line, Op, Program, Raw, Settle, Val, X, parse_expr, point_name, step_title,
+    writer_comment,
 };
 
 pub const GRAMMAR: Grammar = Grammar {
@@ -41,6 +42,12 @@ const MOTIONS: &[&str] = &[
     "PTP", "LIN", "CIRC", "SPTP", "SLIN", "SCIRC", "PTP_REL", "LIN_REL", "CIRC_REL", "SPTP_REL",
     "SLIN_REL", "SPL", "SLIN_REL",
 ];
+
+/// `XHOME`, `XHOME1` …: the home positions the KSS declares in `$config.dat`.
+fn is_home(name: &str) -> bool {
+    name.strip_prefix("XHOME")
+        .is_some_and(|n| n.bytes().all(|b| b.is_ascii_digit()))
+}
 
 /// A `.dat`'s `SIGNAL` (bits, least significant first) by upper-cased name.
 type Signals = HashMap<String, Vec<String>>;
@@ -295,6 +302,8 @@ pub fn read(src: &str, dat: &str, io: &super::ir::IoKeys) -> Program {
     };
     let body: Vec<(Line, &str)> = lines[main + 1..end.min(lines.len())].to_vec();
     r.block(&body);
+    r.p.declared = r.opaque.clone();
+    r.p.declared.extend(r.p.init.iter().map(|(n, _)| n.clone()));
     let end_line = lines.get(end).map_or(1, |l| l.0);
     // Blocks left open: the program's END closes them as far as jumps go.
     while let Some(o) = r.open.pop() {
@@ -737,6 +746,7 @@ impl Reader<'_> {
                                     cond,
                                     settle: Settle::Yes,
                                     max: None,
+                                    poll: None,
                                 },
                                 line,
                             );
@@ -757,7 +767,17 @@ impl Reader<'_> {
             "DECL" | "BAS" | "INTERRUPT" | "GLOBAL" | "PDAT_ACT" | "FDAT_ACT" | "LDAT_ACT"
             | "TRIGGER" | "BRAKE" | "CONTINUE" => {}
             _ if MOTIONS.contains(&first) => {
-                self.p.push(Ins::Motion, line);
+                // `LIN XGrip`, `CIRC XAux, XEnd C_DIS`, `PTP {A1 0}`, `PTP $POS_ACT`.
+                let n = if first.contains("CIRC") { 2 } else { 1 };
+                let points = c[first.len()..]
+                    .split(|ch: char| ch == ',' || ch.is_whitespace())
+                    .filter(|w| !w.is_empty())
+                    .take(n)
+                    .filter_map(point_name)
+                    // KSS's own home positions, declared in `$config.dat`.
+                    .filter(|w| !is_home(&w.to_ascii_uppercase()))
+                    .collect();
+                self.p.push(Ins::Motion(points), line);
             }
             _ if c.ends_with(':') && !c.contains(' ') => {
                 self.labels

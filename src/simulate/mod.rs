@@ -147,6 +147,9 @@ pub enum When {
     At(f64),
     /// When the motion of this step (name or localId) ends, the first time it runs.
     After(String),
+    /// When the motion of the n-th step the change's (restart's) controller runs ends,
+    /// counted from the run's start over every cycle and restart.
+    AfterSteps(usize),
 }
 
 #[derive(Debug, Clone)]
@@ -187,6 +190,9 @@ pub struct Scenario {
     pub cycle_pause_s: f64,
     /// Per controller: its start, the pace of its motions, the time a statement takes.
     pub timing: HashMap<usize, Timing>,
+    /// Random runs: the mean time between two changes of one input (`None`: three steps'
+    /// time, 1 s without step times).
+    pub change_every_s: Option<f64>,
 }
 
 /// How one controller keeps time (a scenario's `[timing.<controller>]`).
@@ -198,6 +204,21 @@ pub struct Timing {
     pub motion_factor: f64,
     /// What each statement besides motions and waits takes (seconds).
     pub statement_s: f64,
+    /// How often a wait reads its condition.
+    pub poll: Poll,
+}
+
+/// How often a controller's waits read their conditions (a scenario's `poll`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Poll {
+    /// At once when what a wait reads changes (the picture's timing).
+    #[default]
+    Exact,
+    /// At the wait's start and every so many seconds after.
+    Every(f64),
+    /// At the controller's own rate: KRL's interpreter cycle (12 ms), RAPID's `\PollRate` of
+    /// the wait (0.1 s without), URScript's control cycle (2 ms).
+    Controller,
 }
 
 impl Default for Timing {
@@ -206,6 +227,7 @@ impl Default for Timing {
             start_s: None,
             motion_factor: 1.0,
             statement_s: 0.0,
+            poll: Poll::Exact,
         }
     }
 }
@@ -237,6 +259,7 @@ impl Scenario {
             cycles: 1,
             cycle_pause_s: 0.0,
             timing: HashMap::new(),
+            change_every_s: None,
         }
     }
 
@@ -602,7 +625,7 @@ fn inputs_of(e: &crate::model::Element) -> Vec<u64> {
 }
 
 /// Per input of the world: the numbers the programs compare it with (`Count >= 5`: 5).
-fn compared_values(cell: &Cell, programs: &[Program]) -> Vec<Vec<f64>> {
+pub fn compared_values(cell: &Cell, programs: &[Program]) -> Vec<Vec<f64>> {
     use ir::{Ins, X};
     fn walk(x: &X, out: &mut Vec<(Vec<Key>, f64)>) {
         match x {

@@ -10,8 +10,8 @@
 use std::collections::HashMap;
 
 use super::ir::{
-    Grammar, Ins, IoKeys, Line, Op, Program, Raw, Settle, Val, X, parse_expr, step_title,
-    writer_comment,
+    Grammar, Ins, IoKeys, Line, Op, Program, Raw, Settle, Val, X, parse_expr, point_name,
+    step_title, writer_comment,
 };
 
 pub const GRAMMAR: Grammar = Grammar {
@@ -238,6 +238,8 @@ pub fn read(text: &str, io: &IoKeys) -> Program {
     };
     let body = st[a..b.min(st.len())].to_vec();
     r.block(&body);
+    r.p.declared = r.opaque.clone();
+    r.p.declared.extend(r.vars.iter().cloned());
     let end_line = st.get(b).map_or(1, |s| s.0);
     while let Some(o) = r.open.pop() {
         r.close(o, end_line);
@@ -711,9 +713,21 @@ impl Reader<'_> {
                     .get("MAXTIME")
                     .and_then(|v| v.parse::<f64>().ok())
                     .map(|t| (t, opts.get("TIMEFLAG").map(|f| f.to_ascii_uppercase())));
+                let poll = opts
+                    .get("POLLRATE")
+                    .and_then(|v| v.parse::<f64>().ok())
+                    .filter(|p| *p > 0.0);
                 match plain.first().map(|c| self.expr(c)) {
                     Some(Ok(cond)) => {
-                        self.p.push(Ins::Wait { cond, settle, max }, line);
+                        self.p.push(
+                            Ins::Wait {
+                                cond,
+                                settle,
+                                max,
+                                poll,
+                            },
+                            line,
+                        );
                     }
                     _ => self.unknown(s, line),
                 }
@@ -737,6 +751,7 @@ impl Reader<'_> {
                                 cond: X::Bin(Op::Eq, Box::new(read), Box::new(v)),
                                 settle: Settle::No,
                                 max,
+                                poll: None,
                             },
                             line,
                         );
@@ -804,7 +819,16 @@ impl Reader<'_> {
                 }
             }
             _ if first.starts_with("MOVE") || first.starts_with("SEARCH") => {
-                self.p.push(Ins::Motion, line);
+                // `MoveL pTake, v200, fine, tool0;`, `MoveC pVia, pTo, …`; a search's
+                // arguments are others.
+                let n = match first.as_str() {
+                    f if f.starts_with("SEARCH") => 0,
+                    f if f.starts_with("MOVEC") => 2,
+                    _ => 1,
+                };
+                let (plain, _) = Self::args(rest);
+                let points = plain.iter().take(n).filter_map(|a| point_name(a)).collect();
+                self.p.push(Ins::Motion(points), line);
             }
             _ if SETTINGS.contains(&first.as_str()) => {}
             _ if up.ends_with(':') && !up.contains(' ') => {

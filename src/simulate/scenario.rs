@@ -44,6 +44,7 @@ struct RawTiming {
     start_s: Option<Spanned<f64>>,
     motion_factor: Option<Spanned<f64>>,
     statement_s: Option<Spanned<f64>>,
+    poll: Option<Spanned<toml::Value>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -56,6 +57,7 @@ struct RawSwap {
 #[serde(deny_unknown_fields)]
 struct RawChange {
     after: Option<Spanned<String>>,
+    after_steps: Option<Spanned<i64>>,
     at: Option<Spanned<f64>>,
     resource: Spanned<String>,
     signal: Spanned<toml::Value>,
@@ -67,6 +69,7 @@ struct RawChange {
 struct RawRestart {
     controller: Spanned<String>,
     after: Option<Spanned<String>>,
+    after_steps: Option<Spanned<i64>>,
     at: Option<Spanned<f64>>,
 }
 
@@ -215,6 +218,24 @@ pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioEr
         if let Some(v) = &t.statement_s {
             timing.statement_s = fraction(v, "statement_s", 10.0)?;
         }
+        if let Some(v) = &t.poll {
+            let rate = match v.get_ref() {
+                toml::Value::String(s) if s == "controller" => Some(super::Poll::Controller),
+                toml::Value::Float(p) if p.is_finite() && (0.001..=10.0).contains(p) => {
+                    Some(super::Poll::Every(*p))
+                }
+                toml::Value::Integer(p) if (1..=10).contains(p) => {
+                    Some(super::Poll::Every(*p as f64))
+                }
+                _ => None,
+            };
+            timing.poll = rate.ok_or_else(|| {
+                at(
+                    Some(v.span()),
+                    "`poll` is seconds from 0.001 to 10 (how often a wait reads its condition), or \"controller\" (each controller's own rate)".into(),
+                )
+            })?;
+        }
         s.timing.insert(c, timing);
     }
     let resource = |name: &Spanned<String>| {
@@ -351,45 +372,60 @@ pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioEr
                 .push((inp.controller, inp.key.clone(), value(&inp, v)?));
         }
     }
-    let when =
-        |after: &Option<Spanned<String>>, at_: &Option<Spanned<f64>>, span: Range<usize>| match (
-            after, at_,
-        ) {
-            (Some(a), None) => {
-                let known = cell
-                    .step_names
-                    .iter()
-                    .any(|n| crate::names::eq(n, a.get_ref()))
-                    || cell.steps.keys().any(|id| id.to_string() == *a.get_ref());
-                if known {
-                    Ok(When::After(a.get_ref().clone()))
-                } else {
-                    Err(at(
-                        Some(a.span()),
-                        format!(
-                            "no step `{}` runs in this cell's programs{}",
+    let when = |after: &Option<Spanned<String>>,
+                after_steps: &Option<Spanned<i64>>,
+                at_: &Option<Spanned<f64>>,
+                span: Range<usize>| match (after, at_) {
+        (None, None) if after_steps.is_some() => {
+            let n = after_steps.as_ref().unwrap();
+            if (1..=100_000_000).contains(n.get_ref()) {
+                Ok(When::AfterSteps(*n.get_ref() as usize))
+            } else {
+                Err(at(
+                    Some(n.span()),
+                    "`after_steps` is 1 to 100,000,000 (the controller's steps run)".into(),
+                ))
+            }
+        }
+        _ if after_steps.is_some() => Err(at(
+            Some(span),
+            "give one of `after = \"STEP\"`, `after_steps = N` or `at = SECONDS`".into(),
+        )),
+        (Some(a), None) => {
+            let known = cell
+                .step_names
+                .iter()
+                .any(|n| crate::names::eq(n, a.get_ref()))
+                || cell.steps.keys().any(|id| id.to_string() == *a.get_ref());
+            if known {
+                Ok(When::After(a.get_ref().clone()))
+            } else {
+                Err(at(
+                    Some(a.span()),
+                    format!(
+                        "no step `{}` runs in this cell's programs{}",
+                        a.get_ref(),
+                        crate::names::did_you_mean(
                             a.get_ref(),
-                            crate::names::did_you_mean(
-                                a.get_ref(),
-                                cell.step_names.iter().map(String::as_str)
-                            )
-                        ),
-                    ))
-                }
+                            cell.step_names.iter().map(String::as_str)
+                        )
+                    ),
+                ))
             }
-            (None, Some(t)) if t.get_ref().is_finite() && *t.get_ref() >= 0.0 => {
-                Ok(When::At(*t.get_ref()))
-            }
-            (None, Some(t)) => Err(at(Some(t.span()), "`at` is seconds from 0 on".into())),
-            _ => Err(at(
-                Some(span),
-                "give either `after = \"STEP\"` or `at = SECONDS`".into(),
-            )),
-        };
+        }
+        (None, Some(t)) if t.get_ref().is_finite() && *t.get_ref() >= 0.0 => {
+            Ok(When::At(*t.get_ref()))
+        }
+        (None, Some(t)) => Err(at(Some(t.span()), "`at` is seconds from 0 on".into())),
+        _ => Err(at(
+            Some(span),
+            "give one of `after = \"STEP\"`, `after_steps = N` or `at = SECONDS`".into(),
+        )),
+    };
     for c in &raw.change {
         let r = resource(&c.resource)?;
         let inp = signal(r, &c.signal)?;
-        let w = when(&c.after, &c.at, c.resource.span())?;
+        let w = when(&c.after, &c.after_steps, &c.at, c.resource.span())?;
         s.changes.push(Change {
             when: w,
             controller: inp.controller,
@@ -400,7 +436,7 @@ pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioEr
     for rs in &raw.restart {
         let c = controller(&rs.controller)?;
         s.restarts.push(Restart {
-            when: when(&rs.after, &rs.at, rs.controller.span())?,
+            when: when(&rs.after, &rs.after_steps, &rs.at, rs.controller.span())?,
             controller: c,
         });
     }

@@ -11,8 +11,8 @@
 use std::collections::HashMap;
 
 use super::ir::{
-    Grammar, Ins, IoKeys, Line, Op, Program, Raw, Settle, Val, X, parse_expr, step_title,
-    writer_comment,
+    Grammar, Ins, IoKeys, Line, Op, Program, Raw, Settle, Val, X, parse_expr, point_name,
+    step_title, writer_comment,
 };
 
 pub const GRAMMAR: Grammar = Grammar {
@@ -138,6 +138,37 @@ fn opens(c: &str) -> bool {
 }
 
 /// Reads program text `text`.
+/// The names a script assigns (`global p_pick = p[…]`, `x = 1`) or takes as a routine's
+/// parameters: what a motion may name.
+fn assigned(text: &str) -> std::collections::HashSet<String> {
+    let mut out = std::collections::HashSet::new();
+    for l in text.lines() {
+        let c = code(l.trim());
+        let c = ["global ", "local "]
+            .iter()
+            .find_map(|k| c.strip_prefix(k))
+            .unwrap_or(c);
+        if let Some(head) = c.strip_prefix("def ").or_else(|| c.strip_prefix("thread ")) {
+            if let Some((_, ps)) = head.split_once('(') {
+                for p in ps.trim_end_matches(':').trim_end_matches(')').split(',') {
+                    if let Some(n) = point_name(p.split('=').next().unwrap_or("")) {
+                        out.insert(n);
+                    }
+                }
+            }
+            continue;
+        }
+        if let Some((lhs, rhs)) = c.split_once('=')
+            && !rhs.starts_with('=')
+            && !lhs.ends_with(['!', '<', '>'])
+            && let Some(n) = point_name(lhs)
+        {
+            out.insert(n);
+        }
+    }
+    out
+}
+
 pub fn read(text: &str, io: &IoKeys) -> Program {
     let lines: Vec<(Line, String)> = text
         .lines()
@@ -189,6 +220,7 @@ pub fn read(text: &str, io: &IoKeys) -> Program {
         }
         i += 1;
     }
+    p.declared = assigned(text);
     let mut r = Reader {
         p,
         _io: io,
@@ -339,6 +371,7 @@ impl Reader<'_> {
                                 cond: X::Not(Box::new(x)),
                                 settle: Settle::No,
                                 max: None,
+                                poll: None,
                             },
                             line,
                         );
@@ -474,7 +507,19 @@ impl Reader<'_> {
             }
             "global" | "local" => self.statement(c[first.len()..].trim(), line),
             _ if MOTIONS.contains(&first) => {
-                self.p.push(Ins::Motion, line);
+                // `movel(p_pick, a=1.2, v=0.25)`, `movec(p_via, p_to, …)`, `movel(p[…])`.
+                let n = match first {
+                    "movec" => 2,
+                    "movej" | "movel" | "movep" => 1,
+                    _ => 0,
+                };
+                let points = self
+                    .call_args(c)
+                    .iter()
+                    .take(n)
+                    .filter_map(|a| point_name(a))
+                    .collect();
+                self.p.push(Ins::Motion(points), line);
             }
             _ if SETTINGS.contains(&first) => {}
             _ if WRITES.contains(&first) => {

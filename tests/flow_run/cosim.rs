@@ -479,6 +479,7 @@ fn run_scenario(
                 start_s: Some((rng.next() % 200) as f64 / 1000.0),
                 motion_factor: [0.1, 1.0, 3.0, 10.0][(rng.next() % 4) as usize],
                 statement_s: [1e-6, 1e-4, 1e-3][(rng.next() % 3) as usize],
+                ..Timing::default()
             },
         );
     }

@@ -11,7 +11,7 @@
 use std::collections::HashMap;
 
 use super::ir::{Clockish, Ins, Key, Op, Program, Settle, Val, X};
-use super::{Cell, Change, Problem, ProblemKind, Restart, Scenario, StepRun, When};
+use super::{Cell, Change, Poll, Problem, ProblemKind, Restart, Scenario, StepRun, When};
 
 mod eval;
 mod verdict;
@@ -21,6 +21,10 @@ use eval::EvalError;
 
 /// URScript's control cycle on e-Series (500 Hz): what `sync()` takes.
 pub(super) const SYNC_S: f64 = 0.002;
+/// KRL's interpreter cycle on a KR C4 (12 ms): how often a `WAIT FOR` reads its condition.
+const KRL_CYCLE_S: f64 = 0.012;
+/// RAPID's `WaitUntil` without `\PollRate` reads its condition every 0.1 s.
+const RAPID_POLL_S: f64 = 0.1;
 
 #[derive(Debug, Clone, PartialEq)]
 enum State {
@@ -74,6 +78,10 @@ struct Ctl {
     timed_out: bool,
     /// The localId of the step it started last in this cycle.
     last_step: Option<u64>,
+    /// How often its waits read their conditions.
+    poll: Poll,
+    /// Steps it has started since the run began (every cycle and restart).
+    steps_run: usize,
 }
 
 /// What one run produced.
@@ -140,6 +148,8 @@ struct Run<'c> {
     wired: Vec<HashMap<Key, (usize, Key)>>,
     events: Vec<(f64, Event)>,
     pending_after: Vec<(String, Event, bool)>,
+    /// Changes and restarts after a controller's n-th step: controller, n, what.
+    pending_count: Vec<(usize, usize, Event)>,
     out: Outcome,
     rng: Rng,
     jitter: f64,
@@ -178,6 +188,7 @@ pub fn run(
         wired,
         events: Vec::new(),
         pending_after: Vec::new(),
+        pending_count: Vec::new(),
         out: Outcome::default(),
         rng,
         jitter: scenario.jitter,
@@ -185,7 +196,9 @@ pub fn run(
         answering: random,
         step_limit: scenario.max_steps,
         time_limit: scenario.max_time_s,
-        flip_mean: {
+        flip_mean: if let Some(m) = scenario.change_every_s {
+            m.max(1e-6)
+        } else {
             let (n, sum) = cell
                 .steps
                 .values()
@@ -242,6 +255,8 @@ pub fn run(
             shown: None,
             timed_out: false,
             last_step: None,
+            poll: timing.poll,
+            steps_run: 0,
         };
         reset_vars(&mut ctl, &programs[c]);
         r.ctls.push(ctl);
@@ -284,17 +299,10 @@ pub fn run(
             Some(k) => Event::Force(*controller, k.clone(), value.clone()),
             None => Event::Input(*controller, key.clone(), value.clone()),
         };
-        match when {
-            When::At(t) => r.events.push((*t, e)),
-            When::After(step) => r.pending_after.push((step.clone(), e, false)),
-        }
+        r.schedule(when, *controller, e);
     }
     for Restart { when, controller } in &scenario.restarts {
-        let e = Event::Restart(*controller);
-        match when {
-            When::At(t) => r.events.push((*t, e)),
-            When::After(step) => r.pending_after.push((step.clone(), e, false)),
-        }
+        r.schedule(when, *controller, Event::Restart(*controller));
     }
     r.main_loop();
     r.out
@@ -314,6 +322,37 @@ fn reset_vars(ctl: &mut Ctl, p: &Program) {
 }
 
 impl Run<'_> {
+    /// Puts a scenario's change or restart of controller `c` in its place.
+    fn schedule(&mut self, when: &When, c: usize, e: Event) {
+        match when {
+            When::At(t) => self.events.push((*t, e)),
+            When::After(step) => self.pending_after.push((step.clone(), e, false)),
+            When::AfterSteps(n) => self.pending_count.push((c, *n, e)),
+        }
+    }
+
+    /// When controller `c`, at a wait since `since`, reads its condition next at or after `t`:
+    /// `t` itself, or (a scenario's `poll`) the next instant of its polling.
+    fn poll_at(&self, c: usize, since: f64, t: f64) -> f64 {
+        let x = &self.ctls[c];
+        let period = match x.poll {
+            Poll::Exact => return t,
+            Poll::Every(p) => p,
+            Poll::Controller => match self.cell.controllers[c].language {
+                crate::lang::Language::Krl => KRL_CYCLE_S,
+                crate::lang::Language::UrScript => SYNC_S,
+                crate::lang::Language::Rapid => match self.programs[c].ins.get(x.pc) {
+                    Some((Ins::Wait { poll: Some(p), .. }, _)) => *p,
+                    _ => RAPID_POLL_S,
+                },
+            },
+        };
+        if period <= 0.0 || t <= since {
+            return t.max(since);
+        }
+        since + ((t - since) / period - 1e-9).ceil() * period
+    }
+
     fn main_loop(&mut self) {
         loop {
             if self.out.statements >= self.statement_limit {
@@ -513,6 +552,13 @@ impl Run<'_> {
                         self.events.push((start + dur, e.clone()));
                     }
                 }
+                self.ctls[c].steps_run += 1;
+                let n = self.ctls[c].steps_run;
+                for (at_c, at_n, e) in &self.pending_count {
+                    if *at_c == c && *at_n == n {
+                        self.events.push((start + dur, e.clone()));
+                    }
+                }
                 self.ctls[c].in_step = true;
                 // A wait in the step's own code is the step's.
                 self.ctls[c].note = Some(format!("in step {name} (localId {local_id})"));
@@ -522,7 +568,27 @@ impl Run<'_> {
                 self.ctls[c].in_step = false;
                 self.ctls[c].pc += 1;
             }
-            Ins::Motion | Ins::Unknown(_) => self.ctls[c].pc += 1,
+            Ins::Motion(points) => {
+                let p = &self.programs[c];
+                let key = |n: &String| {
+                    if p.fold_case {
+                        n.to_ascii_uppercase()
+                    } else {
+                        n.clone()
+                    }
+                };
+                match points.iter().find(|n| !p.declared.contains(&key(n))) {
+                    Some(n) => self.fault(
+                        c,
+                        line,
+                        EvalError(format!(
+                            "its motion goes to `{n}`, which the program does not declare (declared elsewhere, in `$config.dat` or a system module? the simulator reads only the program's own files)"
+                        )),
+                    ),
+                    None => self.ctls[c].pc += 1,
+                }
+            }
+            Ins::Unknown(_) => self.ctls[c].pc += 1,
             Ins::Note(n) => {
                 self.check_tell(c, n, line);
                 self.ctls[c].note = Some(n.clone());
@@ -566,7 +632,9 @@ impl Run<'_> {
                 self.out.branches.push((c, *transition, t));
                 self.ctls[c].pc += 1;
             }
-            Ins::Wait { cond, settle, max } => {
+            Ins::Wait {
+                cond, settle, max, ..
+            } => {
                 let x = &mut self.ctls[c];
                 if *settle == Settle::Yes && x.t < x.motion_end {
                     x.t = x.motion_end;
@@ -636,6 +704,7 @@ impl Run<'_> {
                                 }
                             }
                         }
+                        let wake = wake.map(|w| self.poll_at(c, since, w));
                         let x = &mut self.ctls[c];
                         let since = *x.waiting_since.get_or_insert(since);
                         x.state = State::Blocked { since, wake };

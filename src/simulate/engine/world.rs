@@ -151,11 +151,18 @@ impl Run<'_> {
         }
     }
 
+    /// Wakes every waiting program at `t` to read its condition again (a polling one at its
+    /// next poll).
     pub(super) fn wake_all(&mut self, t: f64) {
-        for x in &mut self.ctls {
-            if matches!(x.state, State::Blocked { .. }) {
+        for c in 0..self.ctls.len() {
+            if matches!(self.ctls[c].state, State::Blocked { .. }) {
+                let at = match self.ctls[c].wait_at {
+                    Some((_, since)) => self.poll_at(c, since, t),
+                    None => t,
+                };
+                let x = &mut self.ctls[c];
                 x.state = State::Running;
-                x.t = x.t.max(t);
+                x.t = x.t.max(at);
             }
         }
     }
