@@ -945,3 +945,22 @@ fn a_waits_polling_rate_and_a_change_after_a_count_of_steps_decide_a_step_time_w
         assert!(err.contains(want), "{bad}\n{err}");
     }
 }
+
+/// A polling wait whose step-time limit falls, by a rounding of the clock, a hair after one of
+/// its reads looks again at the next read: it neither spins at that instant until the
+/// statement limit nor misses the limit (motions at 30 %: the limits fall between reads).
+#[test]
+fn a_polling_wait_for_a_step_time_reads_on_past_its_limit() {
+    let p = common::fixture_project("flow-step-time");
+    let dir = p.path();
+    for poll in ["0.01", "0.012", "0.04"] {
+        let scenario = format!("[timing.\"KUKA KR15-2\"]\nmotion_factor = 0.3\npoll = {poll}\n");
+        let (code, v) = simulate(dir, "Blackboard.aml", "StepTime", Some(&scenario), &[]);
+        assert_eq!(code, 0, "poll {poll}: {v:#}");
+        let steps = names(&lanes(&v["runs"][0]).into_values().next().unwrap())
+            .into_iter()
+            .map(str::to_owned)
+            .collect::<Vec<_>>();
+        assert_eq!(steps, ["Approach", "Grip", "Retreat", "Settle"], "poll {poll}");
+    }
+}

@@ -332,7 +332,8 @@ impl Run<'_> {
     }
 
     /// When controller `c`, at a wait since `since`, reads its condition next at or after `t`:
-    /// `t` itself, or (a scenario's `poll`) the next instant of its polling.
+    /// `t` itself, or (a scenario's `poll`) the next instant of its polling after its last
+    /// read (its clock now), never that read again.
     fn poll_at(&self, c: usize, since: f64, t: f64) -> f64 {
         let x = &self.ctls[c];
         let period = match x.poll {
@@ -350,7 +351,14 @@ impl Run<'_> {
         if period <= 0.0 || t <= since {
             return t.max(since);
         }
-        since + ((t - since) / period - 1e-9).ceil() * period
+        let k = ((t - since) / period - 1e-9).ceil().max(0.0);
+        let at = since + k * period;
+        // (A time a rounding puts on the instant of the last read: the next one.)
+        if at <= x.t + 1e-12 && t > x.t {
+            since + (k + 1.0) * period
+        } else {
+            at
+        }
     }
 
     fn main_loop(&mut self) {
