@@ -176,6 +176,47 @@ pub fn read_limited(path: &Path, max: u64) -> std::io::Result<Vec<u8>> {
     Ok(buf)
 }
 
+/// [`read_limited`] of a file that must lie inside the folder `root`: a symbolic link that
+/// leads out of it is refused. The place checked is the file opened, not its name looked up
+/// again (on Linux, what `/proc/self/fd` says the open file is), so a link swapped between a
+/// check and the read cannot lead the read out.
+pub fn read_limited_inside(path: &Path, max: u64, root: &Path) -> std::io::Result<Vec<u8>> {
+    use std::io::{Error, ErrorKind};
+    let (mut file, meta) = open_within(path, max)?;
+    let real = opened_path(&file).or_else(|| std::fs::canonicalize(path).ok());
+    if let (Some(real), Ok(real_root)) = (real, std::fs::canonicalize(root))
+        && !real.starts_with(&real_root)
+    {
+        return Err(Error::new(
+            ErrorKind::PermissionDenied,
+            "is a symbolic link that leads out of the project folder: not read",
+        ));
+    }
+    let mut buf = Vec::with_capacity(meta.len() as usize + 1);
+    (&mut file).take(max + 1).read_to_end(&mut buf)?;
+    if buf.len() as u64 > max {
+        return Err(Error::new(
+            ErrorKind::InvalidData,
+            format!("is larger than the limit of {max} bytes"),
+        ));
+    }
+    Ok(buf)
+}
+
+/// Where an open file is (Linux: `/proc/self/fd`); `None` elsewhere.
+fn opened_path(file: &std::fs::File) -> Option<std::path::PathBuf> {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        std::fs::read_link(format!("/proc/self/fd/{}", file.as_raw_fd())).ok()
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = file;
+        None
+    }
+}
+
 /// The content hash files are compared by (the daemon's "changed since the compile read it",
 /// the streamed SFC read again for its diagnostics): of bytes in memory ([`hash_bytes`]), of a
 /// file read in pieces ([`hash_file`]) or of a stream ([`ContentHash`]), alike for the same
@@ -346,6 +387,25 @@ pub fn strip_bom(bytes: &mut Vec<u8>) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A file inside the folder, or a link to one inside, is read; a link that leads out of it
+    /// is refused, the file it leads to untouched.
+    #[cfg(unix)]
+    #[test]
+    fn a_read_inside_a_folder_refuses_a_link_that_leads_out() {
+        let d = tempfile::tempdir().unwrap();
+        let root = d.path().join("project");
+        std::fs::create_dir(&root).unwrap();
+        std::fs::write(root.join("s.toml"), "inside").unwrap();
+        std::fs::write(d.path().join("secret"), "outside").unwrap();
+        std::os::unix::fs::symlink(root.join("s.toml"), root.join("in.toml")).unwrap();
+        std::os::unix::fs::symlink(d.path().join("secret"), root.join("out.toml")).unwrap();
+        let read = |n: &str| read_limited_inside(&root.join(n), 100, &root);
+        assert_eq!(read("s.toml").unwrap(), b"inside");
+        assert_eq!(read("in.toml").unwrap(), b"inside");
+        let e = read("out.toml").unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::PermissionDenied, "{e}");
+    }
 
     /// Each prefix of `PREFIX_STEP` bytes and its multiples has the hash of those bytes,
     /// however the bytes come; the whole has the hash of all of them.

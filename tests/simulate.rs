@@ -399,6 +399,10 @@ fn scenario_errors_name_the_file_line_column_and_the_near_name_and_write_nothing
             "is a wire: another controller's program drives it",
         ),
         (
+            "[[change]]\nresource = \"ABB IRB 1200\"\nsignal = \"To_KUKA_1\"\nvalue = true\nat = 1\n",
+            "scenario.toml:3:10: `To_KUKA_1` of `ABB IRB 1200` is an output that drives a wire to another controller: its program sets it, a scenario cannot force it",
+        ),
+        (
             "[[change]]\nresource = \"ABB IRB 1200\"\nsignal = \"Part_Present\"\nvalue = true\nafter = \"Tak\"\n",
             "no step `Tak` runs in this cell's programs; did you mean `Take`?",
         ),

@@ -103,8 +103,26 @@ fn line_column(text: &str, at: usize) -> (usize, usize) {
 
 /// Reads scenario file `path` (at most [`MAX_SIZE`] bytes, never blocking on a FIFO).
 pub fn load(path: &Path, cell: &Cell) -> Result<Scenario, ScenarioError> {
+    load_from(path, cell, crate::load::read_limited(path, MAX_SIZE))
+}
+
+/// [`load`] of a scenario that must lie in the project folder `root` (the daemon's): a
+/// symbolic link that leads out of it is not read.
+pub fn load_inside(path: &Path, root: &Path, cell: &Cell) -> Result<Scenario, ScenarioError> {
+    load_from(
+        path,
+        cell,
+        crate::load::read_limited_inside(path, MAX_SIZE, root),
+    )
+}
+
+fn load_from(
+    path: &Path,
+    cell: &Cell,
+    read: std::io::Result<Vec<u8>>,
+) -> Result<Scenario, ScenarioError> {
     let file = path.display().to_string();
-    let bytes = crate::load::read_limited(path, MAX_SIZE).map_err(|e| ScenarioError {
+    let bytes = read.map_err(|e| ScenarioError {
         file: file.clone(),
         line: None,
         column: None,
@@ -319,6 +337,18 @@ pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioEr
                 toml::Value::String(n) => res.wired.iter().any(|w| crate::names::eq(w, n)),
                 _ => false,
             };
+            // An output of the resource's controller that drives a wire.
+            let drives = match (sig.get_ref(), res.controller) {
+                (toml::Value::String(n), Some(c)) => cell.outputs.iter().any(|o| {
+                    o.controller == c
+                        && crate::names::eq(&o.name, n)
+                        && cell
+                            .wires
+                            .iter()
+                            .any(|w| w.from.0 == c && o.key.first() == Some(&w.from.1))
+                }),
+                _ => false,
+            };
             let elsewhere = match sig.get_ref() {
                 toml::Value::String(n) => cell
                     .resources
@@ -329,7 +359,12 @@ pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioEr
             };
             at(
                 Some(sig.span()),
-                if let (Some(e), false) = (&elsewhere, wired) {
+                if drives {
+                    format!(
+                        "{shown} of `{}` is an output that drives a wire to another controller: its program sets it, a scenario cannot force it",
+                        res.name
+                    )
+                } else if let (Some(e), false) = (&elsewhere, wired) {
                     format!("`{}` has no input {shown}{e}", res.name)
                 } else if wired {
                     format!(

@@ -327,17 +327,7 @@ impl Job {
                 // The setting names a file in the project folder; a symbolic link there that
                 // leads out of it is not followed (the daemon may read what its user may, the
                 // project's writers not).
-                let root = crate::paths::absolute(&self.key);
-                if crate::paths::stays_inside(&path, &root, |p| std::fs::canonicalize(p).ok()) {
-                    scenario::load(&path, &cell)
-                } else {
-                    Err(scenario::ScenarioError {
-                        file: path.display().to_string(),
-                        line: None,
-                        column: None,
-                        message: "the scenario file is a symbolic link that leads out of the project folder: not read".into(),
-                    })
-                }
+                scenario::load_inside(&path, &self.key, &cell)
             }
         };
         super::simulation::submit(super::simulation::Request {
