@@ -916,13 +916,17 @@ fn a_waits_polling_rate_and_a_change_after_a_count_of_steps_decide_a_step_time_w
     };
     let timing = "[timing.\"KUKA KR15-2\"]\nmotion_factor = 0.1\n";
     // Approach 0-0.1 s, Grip 0.1-0.2 s: the part at 0.22 s.
-    let part = "[[change]]\nat = 0.22\nresource = \"KUKA KR15-2\"\nsignal = \"Part_OK\"\nvalue = true\n";
+    let part =
+        "[[change]]\nat = 0.22\nresource = \"KUKA KR15-2\"\nsignal = \"Part_OK\"\nvalue = true\n";
     assert_eq!(after_grip(&format!("{timing}{part}")), "Lift");
     assert_eq!(
         after_grip(&format!("{timing}poll = \"controller\"\n{part}")),
         "Lift"
     );
-    assert_eq!(after_grip(&format!("{timing}poll = 0.1\n{part}")), "Retreat");
+    assert_eq!(
+        after_grip(&format!("{timing}poll = 0.1\n{part}")),
+        "Retreat"
+    );
     let counted = "[[change]]\nafter_steps = 1\nresource = \"KUKA KR15-2\"\nsignal = \"Part_OK\"\nvalue = true\n";
     assert_eq!(after_grip(&format!("{timing}{counted}")), "Lift");
     for (bad, want) in [
@@ -942,7 +946,13 @@ fn a_waits_polling_rate_and_a_change_after_a_count_of_steps_decide_a_step_time_w
         fs::write(dir.join("scenario.toml"), &bad).unwrap();
         let out = skillpost(
             dir,
-            &["simulate", "Blackboard.aml", "StepTime", "--scenario", "scenario.toml"],
+            &[
+                "simulate",
+                "Blackboard.aml",
+                "StepTime",
+                "--scenario",
+                "scenario.toml",
+            ],
         );
         assert_eq!(out.status.code(), Some(2), "{bad}");
         let err = text(&out.stderr);
@@ -965,6 +975,10 @@ fn a_polling_wait_for_a_step_time_reads_on_past_its_limit() {
             .into_iter()
             .map(str::to_owned)
             .collect::<Vec<_>>();
-        assert_eq!(steps, ["Approach", "Grip", "Retreat", "Settle"], "poll {poll}");
+        assert_eq!(
+            steps,
+            ["Approach", "Grip", "Retreat", "Settle"],
+            "poll {poll}"
+        );
     }
 }

@@ -199,8 +199,8 @@ pub enum Ins {
     /// time, not more.
     StepEnd,
     /// A motion statement: part of its step's motion (the step's time covers it). The
-    /// points it names (not a literal position, not a system variable), as written: each
-    /// must be declared ([`Program::declared`]).
+    /// points it names (not a literal position, not a system variable), as written, that the
+    /// program does not declare ([`Program::undeclared_points`]): a fault when it runs.
     Motion(Vec<String>),
     /// A comment of the writer's (`handshake: …`, `selection localId 8: …`): what the program
     /// does next, for the report.
@@ -297,6 +297,23 @@ impl Program {
         }
         self.ins.push((i, line));
         self.ins.len() - 1
+    }
+
+    /// Keeps in each motion only the points [`Program::declared`] does not hold (compared as
+    /// the language compares names): what a reader does once it has read the whole program.
+    pub fn undeclared_points(&mut self) {
+        let (declared, fold) = (&self.declared, self.fold_case);
+        for (i, _) in &mut self.ins {
+            if let Ins::Motion(points) = i {
+                points.retain(|n| {
+                    !if fold {
+                        declared.contains(&n.to_ascii_uppercase())
+                    } else {
+                        declared.contains(n)
+                    }
+                });
+            }
+        }
     }
 
     pub fn patch(&mut self, at: usize, to: usize) {

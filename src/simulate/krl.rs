@@ -304,6 +304,7 @@ pub fn read(src: &str, dat: &str, io: &super::ir::IoKeys) -> Program {
     r.block(&body);
     r.p.declared = r.opaque.clone();
     r.p.declared.extend(r.p.init.iter().map(|(n, _)| n.clone()));
+    r.p.undeclared_points();
     let end_line = lines.get(end).map_or(1, |l| l.0);
     // Blocks left open: the program's END closes them as far as jumps go.
     while let Some(o) = r.open.pop() {

@@ -240,6 +240,7 @@ pub fn read(text: &str, io: &IoKeys) -> Program {
     r.block(&body);
     r.p.declared = r.opaque.clone();
     r.p.declared.extend(r.vars.iter().cloned());
+    r.p.undeclared_points();
     let end_line = st.get(b).map_or(1, |s| s.0);
     while let Some(o) = r.open.pop() {
         r.close(o, end_line);

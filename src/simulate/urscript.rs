@@ -235,6 +235,7 @@ pub fn read(text: &str, io: &IoKeys) -> Program {
         r.close(o, end_line);
     }
     r.p.push(Ins::End, end_line);
+    r.p.undeclared_points();
     r.p
 }
 

@@ -576,16 +576,8 @@ impl Run<'_> {
                 self.ctls[c].in_step = false;
                 self.ctls[c].pc += 1;
             }
-            Ins::Motion(points) => {
-                let p = &self.programs[c];
-                let key = |n: &String| {
-                    if p.fold_case {
-                        n.to_ascii_uppercase()
-                    } else {
-                        n.clone()
-                    }
-                };
-                match points.iter().find(|n| !p.declared.contains(&key(n))) {
+            Ins::Motion(undeclared) => {
+                match undeclared.first() {
                     Some(n) => self.fault(
                         c,
                         line,
