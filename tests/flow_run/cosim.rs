@@ -161,21 +161,7 @@ fn sim_cell(
             max_lines.set(&w[1]).unwrap();
         }
     }
-    let opts = skillpost::compile::Options {
-        program: Some(program.to_owned()),
-        keep_model: true,
-        drop_warnings: true,
-        max_lines,
-        ..Default::default()
-    };
-    let c =
-        skillpost::compile::compile(&skillpost::load::FsSource::default(), &dir.join(bb), &opts);
-    assert!(
-        !c.has_errors(),
-        "{}: the library's compile failed",
-        dir.display()
-    );
-    let (sim, _) = SimCell::from_compilation(&c).unwrap();
+    let sim = crate::sim::compile_cell(dir, bb, program, max_lines);
     let to_test: Vec<usize> = sim
         .controllers
         .iter()

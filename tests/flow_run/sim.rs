@@ -33,13 +33,19 @@ pub fn phase_value(integer: bool, v: i64) -> Val {
     }
 }
 
-/// The cell the library's compile of the project in `dir` sees (program `program`), every
-/// step's time one action.
-pub fn cell(dir: &std::path::Path, bb: &str, program: &str) -> Arc<SimCell> {
+/// The cell the library's compile of the project in `dir` sees (blackboard `bb`, program
+/// `program`, split at `max_lines` as the binary's `--max-lines` would).
+pub fn compile_cell(
+    dir: &std::path::Path,
+    bb: &str,
+    program: &str,
+    max_lines: skillpost::emit::split::Limits,
+) -> SimCell {
     let opts = skillpost::compile::Options {
         program: Some(program.to_owned()),
         keep_model: true,
         drop_warnings: true,
+        max_lines,
         ..Default::default()
     };
     let c =
@@ -49,7 +55,12 @@ pub fn cell(dir: &std::path::Path, bb: &str, program: &str) -> Arc<SimCell> {
         "{}: the library's compile failed",
         dir.display()
     );
-    let (mut sim, _) = SimCell::from_compilation(&c).unwrap();
+    SimCell::from_compilation(&c).unwrap().0
+}
+
+/// [`compile_cell`] of a single program, every step's time one action.
+pub fn cell(dir: &std::path::Path, bb: &str, program: &str) -> Arc<SimCell> {
+    let mut sim = compile_cell(dir, bb, program, Default::default());
     for s in sim.steps.values_mut() {
         s.duration = Some(ACTION_MS as f64 / 1000.0);
     }
