@@ -400,6 +400,117 @@ impl Job {
         kept
     }
 
+    /// New bytes in some program's files: what a deploy hook gets (the event loop runs it, if
+    /// the project has one), once per such program with that program's files. The picture
+    /// is no program: never deployed, and no reason to.
+    fn deploy_contexts(
+        &self,
+        c: &Compilation,
+        outputs: &[(PathBuf, bool)],
+        picture: Option<&PathBuf>,
+        program: &str,
+        blackboard: &Path,
+    ) -> Vec<super::deploy::Context> {
+        let mut deploy: Vec<(super::deploy::Context, bool)> = Vec::new();
+        for (k, (p, w)) in outputs.iter().enumerate() {
+            if Some(p) == picture {
+                continue;
+            }
+            let (prog, controller) = match c.output_programs.get(k) {
+                Some((prog, ctl)) => (prog.clone(), ctl.clone()),
+                None => (program.to_owned(), c.controller.clone().unwrap_or_default()),
+            };
+            let at = match deploy.iter().position(|(d, _)| d.program == prog) {
+                Some(at) => at,
+                None => {
+                    let ctx = super::deploy::Context {
+                        outputs: Vec::new(),
+                        main: PathBuf::new(),
+                        blackboard: blackboard.to_path_buf(),
+                        project: self.key.clone(),
+                        program: prog,
+                        controller,
+                        snapshot: None,
+                        io: Vec::new(),
+                    };
+                    deploy.push((ctx, false));
+                    deploy.len() - 1
+                }
+            };
+            // The I/O list and EIO fragment: `{io}`/`{eio}`, not program files.
+            if crate::emit::commissioning_file(p).is_some() {
+                deploy[at].0.io.push(p.clone());
+            } else {
+                deploy[at].0.outputs.push(p.clone());
+            }
+            deploy[at].1 |= *w;
+        }
+        // Only the programs with new bytes; each one's main file: its .src/.mod/.script.
+        deploy
+            .into_iter()
+            .filter(|(_, written)| *written)
+            .map(|(mut d, _)| {
+                d.main = d
+                    .outputs
+                    .iter()
+                    .find(|p| {
+                        p.extension().is_some_and(|e| {
+                            ["src", "mod", "script"]
+                                .iter()
+                                .any(|x| e.to_string_lossy().eq_ignore_ascii_case(x))
+                        })
+                    })
+                    .or(d.outputs.first())
+                    .cloned()
+                    .unwrap_or_default();
+                d
+            })
+            .collect()
+    }
+
+    /// The plan's picture, an output like the others (atomic, only when changed), beside the
+    /// main output, added to `outputs`: its path, or the warning why it was not written (the
+    /// programs stand).
+    fn draw_picture(
+        &self,
+        c: &Compilation,
+        program: &str,
+        inputs: &HashMap<PathBuf, Option<u64>>,
+        outputs: &mut Vec<(PathBuf, bool)>,
+    ) -> (Option<PathBuf>, Option<serde_json::Value>) {
+        let Some(main) = outputs.first().map(|(p, _)| p.clone()) else {
+            return (None, None);
+        };
+        let path = main.with_file_name(format!("{program}.svg"));
+        let result = if inputs.contains_key(&path) {
+            Err(format!(
+                "{} is an input of the compile: the picture is not written over it",
+                path.display()
+            ))
+        } else {
+            match compile::picture(c, program) {
+                Some(svg) => compile::write_beside(c, &path, svg.as_bytes())
+                    .map(|o| o == crate::write::WriteOutcome::Written)
+                    .map_err(|e| format!("cannot write the picture {}: {e}", path.display())),
+                None => Err("no plan to draw".to_owned()),
+            }
+        };
+        match result {
+            Ok(written) => {
+                outputs.push((path.clone(), written));
+                (Some(path), None)
+            }
+            Err(why) => (
+                None,
+                Some(serde_json::json!({
+                    "severity": "warning",
+                    "code": Code::CannotWrite.as_str(),
+                    "message": why,
+                })),
+            ),
+        }
+    }
+
     pub(super) fn run(self) -> Outcome {
         let project = self.project();
         // Only when an input's bytes changed (or a new blackboard appeared): reads, `touch`,
@@ -612,42 +723,12 @@ impl Job {
                 };
             }
         };
-        // The plan's picture, an output like the others (atomic, only when changed), beside the
-        // main output; a picture that cannot be written is a warning, the programs stand.
         let mut applied = applied;
-        let mut picture_warning = None;
-        let mut picture_path = None;
-        if self.spec.picture
-            && let Some(main) = applied.outputs.first().map(|(p, _)| p.clone())
-        {
-            let path = main.with_file_name(format!("{}.svg", program.name));
-            let result = if inputs.contains_key(&path) {
-                Err(format!(
-                    "{} is an input of the compile: the picture is not written over it",
-                    path.display()
-                ))
-            } else {
-                match compile::picture(&c, &program.name) {
-                    Some(svg) => compile::write_beside(&c, &path, svg.as_bytes())
-                        .map(|o| o == crate::write::WriteOutcome::Written)
-                        .map_err(|e| format!("cannot write the picture {}: {e}", path.display())),
-                    None => Err("no plan to draw".to_owned()),
-                }
-            };
-            match result {
-                Ok(written) => {
-                    picture_path = Some(path.clone());
-                    applied.outputs.push((path, written));
-                }
-                Err(why) => {
-                    picture_warning = Some(serde_json::json!({
-                        "severity": "warning",
-                        "code": Code::CannotWrite.as_str(),
-                        "message": why,
-                    }))
-                }
-            }
-        }
+        let (picture_path, picture_warning) = if self.spec.picture {
+            self.draw_picture(&c, &program.name, &inputs, &mut applied.outputs)
+        } else {
+            (None, None)
+        };
         let warnings: Vec<_> = renamed
             .into_iter()
             .chain(picture_warning)
@@ -733,67 +814,13 @@ impl Job {
                 },
             );
         }
-        // New bytes in some program's files: what a deploy hook gets (the event loop runs it, if
-        // the project has one), once per such program with that program's files. The picture
-        // is no program: never deployed, and no reason to.
-        let mut deploy: Vec<(super::deploy::Context, bool)> = Vec::new();
-        for (k, (p, w)) in applied.outputs.iter().enumerate() {
-            if Some(p) == picture_path.as_ref() {
-                continue;
-            }
-            let (prog, controller) = match c.output_programs.get(k) {
-                Some((prog, ctl)) => (prog.clone(), ctl.clone()),
-                None => (
-                    program.name.clone(),
-                    c.controller.clone().unwrap_or_default(),
-                ),
-            };
-            let at = match deploy.iter().position(|(d, _)| d.program == prog) {
-                Some(at) => at,
-                None => {
-                    let ctx = super::deploy::Context {
-                        outputs: Vec::new(),
-                        main: PathBuf::new(),
-                        blackboard: blackboard.clone(),
-                        project: self.key.clone(),
-                        program: prog,
-                        controller,
-                        snapshot: None,
-                        io: Vec::new(),
-                    };
-                    deploy.push((ctx, false));
-                    deploy.len() - 1
-                }
-            };
-            // The I/O list and EIO fragment: `{io}`/`{eio}`, not program files.
-            if crate::emit::commissioning_file(p).is_some() {
-                deploy[at].0.io.push(p.clone());
-            } else {
-                deploy[at].0.outputs.push(p.clone());
-            }
-            deploy[at].1 |= *w;
-        }
-        // Only the programs with new bytes; each one's main file: its .src/.mod/.script.
-        let deploy: Vec<super::deploy::Context> = deploy
-            .into_iter()
-            .filter(|(_, written)| *written)
-            .map(|(mut d, _)| {
-                d.main = d
-                    .outputs
-                    .iter()
-                    .find(|p| {
-                        p.extension().is_some_and(|e| {
-                            ["src", "mod", "script"]
-                                .iter()
-                                .any(|x| e.to_string_lossy().eq_ignore_ascii_case(x))
-                        })
-                    })
-                    .or(d.outputs.first())
-                    .cloned()
-                    .unwrap_or_default();
-                d
-            })
-            .collect();
+        let deploy = self.deploy_contexts(
+            &c,
+            &applied.outputs,
+            picture_path.as_ref(),
+            &program.name,
+            &blackboard,
+        );
         // A cell's programs (several controllers) only to a hook that tells them apart.
         let mut controllers: Vec<&str> = c
             .output_programs
