@@ -165,6 +165,17 @@ impl Runnable {
             let seed =
                 seq.len() as u64 * 7919 + seq.iter().flat_map(|p| p.values()).sum::<i64>() as u64;
             let out = simulate::run_once(&cell, std::slice::from_ref(&self.program), &s, seed);
+            let faults: Vec<&str> = out
+                .problems
+                .iter()
+                .filter(|p| p.kind.name() == "fault")
+                .map(|p| p.message.as_str())
+                .collect();
+            assert!(
+                faults.is_empty(),
+                "{:?} (flickering inputs): the simulator finds {faults:?}",
+                self.lang
+            );
             let actions = out.timeline.iter().map(|s| s.name.clone()).collect();
             let outcome = if out.ended {
                 Outcome::Done
