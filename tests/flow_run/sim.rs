@@ -148,14 +148,18 @@ impl Runnable {
     }
 
     /// Runs under the input sequence `seq` (phase `k` once `k` actions have run); with
-    /// `flicker`, under inputs that change every few milliseconds at random instead, each
-    /// statement taking a millisecond, so a signal changes between a wait and the test after
-    /// it.
+    /// `flicker`, under inputs that change every 10 ms or so at random instead (each of them;
+    /// one of the six every 2 ms or so), each statement taking a millisecond, so a signal often
+    /// changes between a wait and the test after it; for at most a quarter second per action.
     pub fn run(&self, seq: &[Phase], flicker: bool) -> (Vec<String>, Outcome) {
         let mut s = self.base(Poll::Every(TICK_MS as f64 / 1000.0));
         if flicker {
             s.random = true;
-            s.change_every_s = Some(0.004);
+            s.change_every_s = Some(0.01);
+            // Long enough for the first actions (each 0.1 s, a wait seldom longer); a run whose
+            // wait the world cannot answer (a step time past its window) stops here, its changes
+            // do not go on for the default day.
+            s.max_time_s = 0.25 * crate::max_actions() as f64;
             if let Some(t) = s.timing.get_mut(&0) {
                 t.statement_s = 0.001;
             }
