@@ -106,17 +106,9 @@ pub fn load(path: &Path, cell: &Cell) -> Result<Scenario, ScenarioError> {
     load_from(path, cell, crate::load::read_limited(path, MAX_SIZE))
 }
 
-/// [`load`] of a scenario that must lie in the project folder `root` (the daemon's): a
-/// symbolic link that leads out of it is not read.
-pub fn load_inside(path: &Path, root: &Path, cell: &Cell) -> Result<Scenario, ScenarioError> {
-    load_from(
-        path,
-        cell,
-        crate::load::read_limited_inside(path, MAX_SIZE, root),
-    )
-}
-
-fn load_from(
+/// [`load`] of bytes read already (the daemon reads them confined to the project folder and
+/// hashes what it read): `read` is the read's result.
+pub fn load_from(
     path: &Path,
     cell: &Cell,
     read: std::io::Result<Vec<u8>>,
@@ -300,27 +292,27 @@ pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioEr
             toml::Value::Integer(k) => res.inputs.iter().position(|i| i.number == Some(*k)),
             _ => None,
         };
-        // An output of the resource's controller that drives no wire: forced, as a technician
-        // forces one from the pendant's I/O display (a gripper's feedback the blackboard
-        // declares as an output).
-        let forced = || match (sig.get_ref(), res.controller) {
+        // The output of the resource's controller it names, and whether that drives a wire. One
+        // that drives none is forced, as a technician forces one from the pendant's I/O display
+        // (a gripper's feedback the blackboard declares as an output).
+        let output = match (sig.get_ref(), res.controller) {
             (toml::Value::String(n), Some(c)) => cell
                 .outputs
                 .iter()
-                .find(|o| {
-                    o.controller == c
-                        && crate::names::eq(&o.name, n)
-                        && !cell
-                            .wires
-                            .iter()
-                            .any(|w| w.from.0 == c && o.key.first() == Some(&w.from.1))
-                })
-                .cloned(),
+                .find(|o| o.controller == c && crate::names::eq(&o.name, n))
+                .map(|o| {
+                    let drives = cell
+                        .wires
+                        .iter()
+                        .any(|w| w.from.0 == c && o.key.first() == Some(&w.from.1));
+                    (o, drives)
+                }),
             _ => None,
         };
+        let drives = output.is_some_and(|(_, d)| d);
         found
             .map(|k| res.inputs[k].clone())
-            .or_else(forced)
+            .or_else(|| output.filter(|(_, d)| !d).map(|(o, _)| o.clone()))
             .ok_or_else(|| {
             let shown = match sig.get_ref() {
                 toml::Value::String(n) => format!("`{n}`"),
@@ -335,18 +327,6 @@ pub fn parse(text: &str, file: &str, cell: &Cell) -> Result<Scenario, ScenarioEr
             };
             let wired = match sig.get_ref() {
                 toml::Value::String(n) => res.wired.iter().any(|w| crate::names::eq(w, n)),
-                _ => false,
-            };
-            // An output of the resource's controller that drives a wire.
-            let drives = match (sig.get_ref(), res.controller) {
-                (toml::Value::String(n), Some(c)) => cell.outputs.iter().any(|o| {
-                    o.controller == c
-                        && crate::names::eq(&o.name, n)
-                        && cell
-                            .wires
-                            .iter()
-                            .any(|w| w.from.0 == c && o.key.first() == Some(&w.from.1))
-                }),
                 _ => false,
             };
             let elsewhere = match sig.get_ref() {
