@@ -69,7 +69,9 @@ pub fn cell(dir: &std::path::Path, bb: &str, program: &str) -> Arc<SimCell> {
 
 /// A program read by the product's reader, ready to run on its cell.
 pub struct Runnable {
-    cell: Arc<SimCell>,
+    /// The cell, with the numbers the program compares its inputs with (what a flickering
+    /// run's world gives them).
+    cell: SimCell,
     program: Program,
     lang: Lang,
     /// Each flow base signal the cell has: the signal, its keys.
@@ -79,6 +81,8 @@ pub struct Runnable {
 impl Runnable {
     pub fn new(cell: Arc<SimCell>, lang: Lang, main: &str, dat: &str) -> Runnable {
         let program = cell.read_program(0, main, dat);
+        let mut cell = Arc::unwrap_or_clone(cell);
+        cell.input_values = simulate::compared_values(&cell, std::slice::from_ref(&program));
         let signals = SIGNALS
             .iter()
             .filter_map(|s| {
@@ -163,12 +167,9 @@ impl Runnable {
             if let Some(t) = s.timing.get_mut(&0) {
                 t.statement_s = 0.001;
             }
-            let mut cell = (*self.cell).clone();
-            cell.input_values =
-                simulate::compared_values(&cell, std::slice::from_ref(&self.program));
             let seed =
                 seq.len() as u64 * 7919 + seq.iter().flat_map(|p| p.values()).sum::<i64>() as u64;
-            let out = simulate::run_once(&cell, std::slice::from_ref(&self.program), &s, seed);
+            let out = self.run_scenario(&s, seed);
             let faults: Vec<&str> = out
                 .problems
                 .iter()
