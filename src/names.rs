@@ -200,6 +200,10 @@ const KRL_KEYWORDS: &[&str] = &[
 pub fn is_krl_keyword(name: &str) -> bool {
     // Upper-cased on the stack and looked up in the list, which is upper-case and sorted by
     // bytes (a point's name is tried against it for each of 100,000 steps).
+    // Keywords are letters and `_` (a point's name with a digit is none: 100,000 of them).
+    if !name.bytes().all(|b| b.is_ascii_alphabetic() || b == b'_') {
+        return false;
+    }
     let mut buf = [0u8; 32];
     let Some(upper) = buf.get_mut(..name.len()) else {
         return false;
@@ -268,6 +272,12 @@ mod tests {
             KRL_KEYWORDS
                 .iter()
                 .all(|k| k.bytes().all(|b| !b.is_ascii_lowercase()))
+        );
+        // `is_krl_keyword` rejects a name with anything else at once.
+        assert!(
+            KRL_KEYWORDS
+                .iter()
+                .all(|k| k.bytes().all(|b| b.is_ascii_uppercase() || b == b'_'))
         );
         assert!(
             KRL_KEYWORDS

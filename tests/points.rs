@@ -270,3 +270,34 @@ fn rapid_and_urscript_programs_move_to_points_declared_before_their_use() {
         assert_eq!(text.matches(decl).count(), 1, "{case}");
     }
 }
+
+/// A point named after a long step is cut to the language's length: KRL names are at most 24
+/// characters (KUKA System Software 8.x, operating and programming instructions for system
+/// integrators, "Names"). Before, a step's only point kept the whole name
+/// (`XCalibrateTheGripperAgainstTheFixture`, which the controller refuses).
+#[test]
+fn a_point_named_after_a_long_step_fits_the_languages_names() {
+    let w = Workspace::new();
+    let p = w.ws().join("Cyclic");
+    copy_fixture_layers(&p, &["base/flow", "ok/flow-cyclic"]);
+    let sfc = p.join("sfc.xml");
+    let text = fs::read_to_string(&sfc).unwrap();
+    fs::write(
+        &sfc,
+        text.replace(
+            "name=\"Calibrate\"",
+            "name=\"Calibrate the gripper against the fixture\"",
+        ),
+    )
+    .unwrap();
+    ok(&compile(&p, "Blackboard.aml", "Cyclic"));
+    let decls = dat(&fs::read_to_string(p.join("Cyclic.dat")).unwrap());
+    let long: Vec<&String> = decls.keys().filter(|n| n.len() > 24).collect();
+    assert!(long.is_empty(), "names longer than 24 characters: {long:?}");
+    assert_eq!(
+        decls["XCalibrateTheGripperAgai"].1,
+        "{X 10, Y 3, Z 0, A 0, B 0, C 0}"
+    );
+    let src = fs::read_to_string(p.join("Cyclic.src")).unwrap();
+    assert!(src.contains("LIN XCalibrateTheGripperAgai\n"), "{src}");
+}

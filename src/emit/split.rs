@@ -144,15 +144,39 @@ fn used_names(text: &str, names: &HashSet<String>, fold: bool) -> HashSet<String
     for n in names {
         lengths |= 1u128 << n.len().min(127);
     }
+    // Each byte's class: what may start a name, what may go on with one, a quote.
+    const START: u8 = 1;
+    const GOES_ON: u8 = 2;
+    const QUOTE: u8 = 4;
+    const CLASS: [u8; 256] = {
+        let mut t = [0u8; 256];
+        let mut c = 0;
+        while c < 256 {
+            let b = c as u8;
+            t[c] = if b.is_ascii_alphabetic() || b == b'_' {
+                START | GOES_ON
+            } else if b.is_ascii_digit() {
+                GOES_ON
+            } else if b == b'"' {
+                QUOTE
+            } else {
+                0
+            };
+            c += 1;
+        }
+        t
+    };
     let mut out = HashSet::new();
     let mut buf = String::new();
     let b = text.as_bytes();
     let mut i = 0;
     while i < b.len() {
         let c = b[i];
-        if c.is_ascii_alphabetic() || c == b'_' {
+        let class = CLASS[usize::from(c)];
+        if class & START != 0 {
             let start = i;
-            while i < b.len() && (b[i].is_ascii_alphanumeric() || b[i] == b'_') {
+            i += 1;
+            while i < b.len() && CLASS[usize::from(b[i])] & GOES_ON != 0 {
                 i += 1;
             }
             let w = &text[start..i];
@@ -167,7 +191,7 @@ fn used_names(text: &str, names: &HashSet<String>, fold: bool) -> HashSet<String
             if names.contains(&buf) && !out.contains(&buf) {
                 out.insert(buf.clone());
             }
-        } else if c == b'"' {
+        } else if class == QUOTE {
             // Strings hold no names.
             i += 1;
             while i < b.len() && b[i] != b'"' && b[i] != b'\n' {

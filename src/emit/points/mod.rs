@@ -15,14 +15,15 @@
 //! `Pick2`), valid in the language and unique in the program (`_2` added).
 
 use std::borrow::Cow;
-use std::collections::HashSet;
+
+use foldhash::{HashMap, HashSet};
 
 use crate::lang::Language;
 use crate::names::transliterate;
 
 mod motion;
 
-use motion::{Kind, Motion, krl_motion, rapid_motion, ur_motion};
+use motion::{Kind, Motion, Target, krl_motion, rapid_motion, ur_motion};
 
 /// How a KRL program's points are written.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -54,14 +55,17 @@ pub struct Points {
     /// The words of the program's code a point's declared name (`XName`, `pName`) may not be,
     /// lower-case.
     words: HashSet<String>,
-    /// A buffer for the declared names `free` looks up.
-    scratch: String,
     /// The longest base name (the language's limit less the prefix).
     max: usize,
     /// Names tried and found taken (for the test that naming is not quadratic).
     tries: usize,
     /// Per stem (lower-case), the last number `_n` given to it.
-    next: std::collections::HashMap<String, usize>,
+    next: HashMap<String, usize>,
+    /// The motions of the step being written, with the start and length of their lines (kept
+    /// between steps for its allocation).
+    motions: Vec<(usize, usize, Motion)>,
+    /// A buffer for the base name of the step being written.
+    base: String,
     /// The declarations, in order: `.dat` lines (KRL), module data (RAPID), the program's first
     /// lines (URScript).
     pub declarations: Vec<String>,
@@ -70,6 +74,11 @@ pub struct Points {
     cpdat: usize,
     /// Points named so far.
     pub count: usize,
+}
+
+/// How many digits `n` has in decimal.
+fn decimal_len(n: usize) -> usize {
+    n.checked_ilog10().map_or(1, |d| d as usize + 1)
 }
 
 impl Points {
@@ -91,12 +100,13 @@ impl Points {
             lang,
             krl,
             mode,
-            names: HashSet::new(),
+            names: HashSet::default(),
             words: taken.into_iter().map(|w| w.to_ascii_lowercase()).collect(),
-            scratch: String::new(),
             max,
-            next: std::collections::HashMap::new(),
+            next: HashMap::default(),
             tries: 0,
+            motions: Vec::new(),
+            base: String::new(),
             declarations: Vec::new(),
             pdat: 0,
             cpdat: 0,
@@ -109,32 +119,40 @@ impl Points {
         if self.mode == Mode::Literal || !self.may_hold_literal(code) {
             return Cow::Borrowed(code);
         }
-        let motions: Vec<Option<Motion>> = code.split('\n').map(|l| self.parse(l)).collect();
-        let targets: usize = motions.iter().flatten().map(|m| m.targets.len()).sum();
+        let mut motions = std::mem::take(&mut self.motions);
+        motions.clear();
+        let mut start = 0;
+        for line in code.split('\n') {
+            if let Some(m) = self.parse(line) {
+                motions.push((start, line.len(), m));
+            }
+            start += line.len() + 1;
+        }
+        let targets: usize = motions.iter().map(|(_, _, m)| m.targets().len()).sum();
         if targets == 0 {
+            self.motions = motions;
             return Cow::Borrowed(code);
         }
-        let base = base_name(step);
+        let mut base = std::mem::take(&mut self.base);
+        push_base_name(step, &mut base);
         let mut k = 0;
         let mut out = String::with_capacity(code.len() + 64 * targets);
-        for (line, motion) in code.split('\n').zip(motions) {
-            if !out.is_empty() {
-                out.push('\n');
+        let mut at = 0;
+        for (start, len, m) in &motions {
+            // The lines before, as written.
+            out.push_str(&code[at..*start]);
+            let line = &code[*start..start + len];
+            let mut names = [String::new(), String::new()];
+            for name in names.iter_mut().take(m.targets().len()) {
+                k += 1;
+                *name = self.name(&base, (targets > 1).then_some(k));
             }
-            let Some(m) = motion else {
-                out.push_str(line);
-                continue;
-            };
-            let names: Vec<String> = m
-                .targets
-                .iter()
-                .map(|_| {
-                    k += 1;
-                    self.name(&base, (targets > 1).then_some(k))
-                })
-                .collect();
-            self.write(line, &m, &names, &mut out);
+            self.write(line, m, &names[..m.targets().len()], &mut out);
+            at = start + len;
         }
+        out.push_str(&code[at..]);
+        self.base = base;
+        self.motions = motions;
         Cow::Owned(out)
     }
 
@@ -157,19 +175,19 @@ impl Points {
 
     /// A unique name from `base` and the number of the point in its step.
     fn name(&mut self, base: &str, k: Option<usize>) -> String {
-        let mut stem: String = base.to_owned();
+        let mut stem = String::with_capacity(self.max + 1);
+        // (`base` is ASCII.)
+        stem.push_str(&base[..base.len().min(self.max)]);
         if let Some(k) = k {
-            let number = k.to_string();
-            stem.truncate(self.max - number.len());
-            stem.push_str(&number);
+            stem.truncate(self.max - decimal_len(k));
+            super::flow::push_decimal(&mut stem, k as u64);
         }
         let lower = stem.to_ascii_lowercase();
         // A stem that was taken before goes on at its next number (many steps of one name:
         // not quadratic); only stems taken twice are recorded.
-        let next = self.next.get(&lower).copied();
-        let mut n = match next {
-            Some(n) => n,
-            None if self.free(&stem, &lower) => {
+        let mut n = match self.next.get(lower.as_str()) {
+            Some(&n) => n,
+            None if self.free(&lower) => {
                 self.names.insert(lower);
                 self.count += 1;
                 return stem;
@@ -179,14 +197,20 @@ impl Points {
         loop {
             self.tries += 1;
             n += 1;
-            let suffix = format!("_{n}");
-            let mut name = stem.clone();
-            name.truncate(self.max - suffix.len());
-            name.push_str(&suffix);
+            let keep = stem.len().min(self.max - 1 - decimal_len(n));
+            let mut name = String::with_capacity(self.max + 1);
+            name.push_str(&stem[..keep]);
+            name.push('_');
+            super::flow::push_decimal(&mut name, n as u64);
             let name_lower = name.to_ascii_lowercase();
-            if self.free(&name, &name_lower) {
+            if self.free(&name_lower) {
                 self.names.insert(name_lower);
-                self.next.insert(lower, n);
+                match self.next.get_mut(lower.as_str()) {
+                    Some(last) => *last = n,
+                    None => {
+                        self.next.insert(lower, n);
+                    }
+                }
                 self.count += 1;
                 return name;
             }
@@ -194,25 +218,24 @@ impl Points {
     }
 
     /// The letters before a point's name in the names the language declares for it.
-    fn prefixes(&self) -> &'static [&'static str] {
+    fn prefixes(&self) -> &'static [u8; 2] {
         match self.lang {
-            Language::Krl => &["x", "f"],
-            Language::Rapid => &["p", "j"],
-            Language::UrScript => &["p", "q"],
+            Language::Krl => b"xf",
+            Language::Rapid => b"pj",
+            Language::UrScript => b"pq",
         }
     }
 
-    /// Whether `name` may be a point's: not a point's already, none of its declared names a
-    /// word of the program's code or a keyword, and not KUKA's own (`XHOME`, `XHOME1` … in
-    /// `$config.dat`) or skillpost's (`skp_…`).
-    fn free(&mut self, name: &str, lower: &str) -> bool {
-        let b = name.as_bytes();
-        if b.len() >= 4 && b[..4].eq_ignore_ascii_case(b"skp_") {
+    /// Whether the name whose lower-case form is `lower` may be a point's: not a point's
+    /// already, none of its declared names a word of the program's code or a keyword, and not
+    /// KUKA's own (`XHOME`, `XHOME1` … in `$config.dat`) or skillpost's (`skp_…`).
+    fn free(&self, lower: &str) -> bool {
+        let b = lower.as_bytes();
+        if b.starts_with(b"skp_") {
             return false;
         }
         if self.lang == Language::Krl
-            && b.len() >= 4
-            && b[..4].eq_ignore_ascii_case(b"home")
+            && b.starts_with(b"home")
             && b[4..].iter().all(u8::is_ascii_digit)
         {
             return false;
@@ -220,18 +243,24 @@ impl Points {
         if self.names.contains(lower) {
             return false;
         }
-        for p in self.prefixes() {
-            self.scratch.clear();
-            self.scratch.push_str(p);
-            self.scratch.push_str(lower);
-            let full = self.scratch.as_str();
+        // The declared names, `x` + name …, on the stack (a name is at most 62 bytes).
+        let mut buf = [0u8; 80];
+        let Some(rest) = buf.get_mut(1..=b.len()) else {
+            return false;
+        };
+        rest.copy_from_slice(b);
+        for &p in self.prefixes() {
+            buf[0] = p;
+            let Ok(full) = std::str::from_utf8(&buf[..=b.len()]) else {
+                return false;
+            };
             let keyword = match self.lang {
                 // (No KRL keyword is longer than 16 characters.)
                 Language::Krl => full.len() <= 16 && crate::names::is_krl_keyword(full),
                 Language::Rapid => full == "pers" || full == "proc",
                 Language::UrScript => false,
             };
-            if keyword || self.words.contains(full) {
+            if keyword || (!self.words.is_empty() && self.words.contains(full)) {
                 return false;
             }
         }
@@ -242,67 +271,96 @@ impl Points {
     fn write(&mut self, line: &str, m: &Motion, names: &[String], out: &mut String) {
         let indent = &line[..line.len() - line.trim_start().len()];
         match self.lang {
-            Language::Krl => self.write_krl(indent, m, names, out),
+            Language::Krl => self.write_krl(line, indent, m, names, out),
             Language::Rapid | Language::UrScript => {
                 // `pName` for a position, `jName` (RAPID) or `qName` (URScript) for the axes:
                 // the prefixes `free` keeps apart.
-                let [cartesian, axis] = [self.prefixes()[0], self.prefixes()[1]];
-                let declared: Vec<String> = m
-                    .targets
-                    .iter()
-                    .zip(names)
-                    .map(|(t, n)| {
-                        let p = if t.kind == Kind::Axis {
-                            axis
-                        } else {
-                            cartesian
-                        };
-                        format!("{p}{n}")
+                let [cartesian, axis] = *self.prefixes();
+                let prefix = |t: &Target| {
+                    char::from(if t.kind == Kind::Axis {
+                        axis
+                    } else {
+                        cartesian
                     })
-                    .collect();
-                for (t, d) in m.targets.iter().zip(&declared) {
-                    self.declarations.push(match (self.lang, t.kind) {
-                        (Language::Rapid, Kind::Cartesian) => {
-                            format!("CONST robtarget {d} := {};", t.text)
-                        }
-                        (Language::Rapid, Kind::Axis) => {
-                            format!("CONST jointtarget {d} := {};", t.text)
-                        }
-                        _ => format!("global {d} = {}", t.text),
+                };
+                let mut at = 0;
+                for (t, n) in m.targets().iter().zip(names) {
+                    let head = match (self.lang, t.kind) {
+                        (Language::Rapid, Kind::Cartesian) => "CONST robtarget ",
+                        (Language::Rapid, Kind::Axis) => "CONST jointtarget ",
+                        _ => "global ",
+                    };
+                    let mut d = String::with_capacity(head.len() + n.len() + 6 + t.value_len());
+                    d.push_str(head);
+                    d.push(prefix(t));
+                    d.push_str(n);
+                    d.push_str(if self.lang == Language::Rapid {
+                        " := "
+                    } else {
+                        " = "
                     });
+                    t.push_value(line, &mut d);
+                    if self.lang == Language::Rapid {
+                        d.push(';');
+                    }
+                    self.declarations.push(d);
+                    out.push_str(&line[at..t.range.start]);
+                    out.push(prefix(t));
+                    out.push_str(n);
+                    at = t.range.end;
                 }
-                out.push_str(&m.rewrite(line, |i| declared[i].clone()));
+                out.push_str(&line[at..]);
             }
         }
     }
 
-    fn write_krl(&mut self, indent: &str, m: &Motion, names: &[String], out: &mut String) {
-        for (t, n) in m.targets.iter().zip(names) {
+    fn write_krl(
+        &mut self,
+        line: &str,
+        indent: &str,
+        m: &Motion,
+        names: &[String],
+        out: &mut String,
+    ) {
+        for (t, n) in m.targets().iter().zip(names) {
             let ty = match t.kind {
-                Kind::Cartesian => "E6POS",
-                Kind::Axis => "E6AXIS",
+                Kind::Cartesian => "DECL E6POS X",
+                Kind::Axis => "DECL E6AXIS X",
             };
-            self.declarations.push(format!("DECL {ty} X{n}={}", t.text));
+            let mut d = String::with_capacity(ty.len() + n.len() + 1 + t.value_len());
+            d.push_str(ty);
+            d.push_str(n);
+            d.push('=');
+            t.push_value(line, &mut d);
+            self.declarations.push(d);
         }
-        let points: Vec<String> = names.iter().map(|n| format!("X{n}")).collect();
         let verb = m.verb;
-        let approx = m.rest.trim();
-        let motion = if approx.is_empty() {
-            format!("{verb} {}", points.join(", "))
-        } else {
-            format!("{verb} {} {approx}", points.join(", "))
+        let approx = &line[m.rest.clone()];
+        // `PTP XName`, `CIRC XAux, XTarget C_DIS`.
+        let push_motion = |out: &mut String| {
+            out.push_str(verb);
+            for (i, n) in names.iter().enumerate() {
+                out.push_str(if i == 0 { " X" } else { ", X" });
+                out.push_str(n);
+            }
+            if !approx.is_empty() {
+                out.push(' ');
+                out.push_str(approx);
+            }
         };
         let KrlForm::Inline { tool, base } = self.krl else {
             out.push_str(indent);
-            out.push_str(&motion);
+            push_motion(out);
             return;
         };
         if !krl_approximation(approx) {
             // An inline form knows only its own approximation words.
             out.push_str(indent);
-            out.push_str(&motion);
+            push_motion(out);
             return;
         }
+        let mut motion = String::new();
+        push_motion(&mut motion);
         // The target is the last point; a CIRC's auxiliary point comes first.
         let target = names.last().expect("a motion has a target");
         let cont = if approx.is_empty() { "" } else { " CONT" };
@@ -401,29 +459,27 @@ pub fn for_program(
         };
     }
     // The words the program's code uses that a point's declared name could be.
-    let starts: &[u8] = match lang {
-        Language::Krl => b"xXfF",
-        Language::Rapid => b"pPjJ",
-        Language::UrScript => b"pPqQ",
+    let starts: [(u8, u8); 2] = match lang {
+        Language::Krl => [(b'x', b'X'), (b'f', b'F')],
+        Language::Rapid => [(b'p', b'P'), (b'j', b'J')],
+        Language::UrScript => [(b'p', b'P'), (b'q', b'Q')],
     };
-    let mut taken = HashSet::new();
+    let mut taken = std::collections::HashSet::new();
     // The words (letters, digits, `_`) of more than one character that begin with one of
-    // `starts`; one pass over the bytes (every step's code, 100,000 steps).
+    // `starts`: each such letter found (memchr), then its word (every step's code, 100,000
+    // steps).
     let mut words = |text: &str| {
         let b = text.as_bytes();
-        let word = |c: u8| c.is_ascii_alphanumeric() || c == b'_';
-        let mut i = 0;
-        while i < b.len() {
-            if !word(b[i]) {
-                i += 1;
-                continue;
-            }
-            let start = i;
-            while i < b.len() && word(b[i]) {
-                i += 1;
-            }
-            if i - start > 1 && starts.contains(&b[start]) {
-                taken.insert(text[start..i].to_ascii_lowercase());
+        let word = |c: &u8| c.is_ascii_alphanumeric() || *c == b'_';
+        for (lower, upper) in starts {
+            for start in memchr::memchr2_iter(lower, upper, b) {
+                if start > 0 && word(&b[start - 1]) {
+                    continue;
+                }
+                let len = b[start..].iter().take_while(|c| word(c)).count();
+                if len > 1 {
+                    taken.insert(text[start..start + len].to_ascii_lowercase());
+                }
             }
         }
     };
@@ -559,8 +615,9 @@ fn sets_motion(line: &str) -> bool {
         return true;
     }
     // `BAS(` or `BAS (` as a word of its own.
-    code.windows(3).enumerate().any(|(i, w)| {
-        w.eq_ignore_ascii_case(b"BAS")
+    memchr::memchr2_iter(b'b', b'B', code).any(|i| {
+        code.get(i..i + 3)
+            .is_some_and(|w| w.eq_ignore_ascii_case(b"BAS"))
             && (i == 0 || !(code[i - 1].is_ascii_alphanumeric() || b"_$".contains(&code[i - 1])))
             && code[i + 3..].iter().find(|b| !b.is_ascii_whitespace()) == Some(&b'(')
     })
@@ -579,7 +636,20 @@ fn krl_approximation(rest: &str) -> bool {
 /// not start with a letter; `P` for a step without a name.
 pub fn base_name(step: &str) -> String {
     let mut name = String::new();
-    for word in transliterate(step).split(|c: char| !c.is_ascii_alphanumeric()) {
+    push_base_name(step, &mut name);
+    name
+}
+
+/// [`base_name`] into `name` (cleared first).
+fn push_base_name(step: &str, name: &mut String) {
+    name.clear();
+    let text = if step.is_ascii() {
+        // (What `transliterate` changes in ASCII, control characters, separates words anyway.)
+        Cow::Borrowed(step)
+    } else {
+        Cow::Owned(transliterate(step))
+    };
+    for word in text.split(|c: char| !c.is_ascii_alphanumeric()) {
         let mut chars = word.chars();
         let Some(first) = chars.next() else { continue };
         if name.is_empty() {
@@ -587,12 +657,11 @@ pub fn base_name(step: &str) -> String {
         } else {
             name.push(first.to_ascii_uppercase());
         }
-        name.extend(chars);
+        name.push_str(chars.as_str());
     }
     if !name.starts_with(|c: char| c.is_ascii_alphabetic()) {
         name.insert(0, 'P');
     }
-    name
 }
 
 #[cfg(test)]
@@ -668,6 +737,33 @@ mod tests {
             "PTP{X 1}",
         ] {
             assert_eq!(p.step_code("S", code), code);
+        }
+    }
+
+    #[test]
+    fn statements_that_set_motion_parameters_are_found() {
+        for l in [
+            "$VEL.CP = 0.5",
+            "  $apo.cdis=10",
+            "BAS(#TOOL, 3)",
+            "bas (#CP_PARAMS,2)",
+            "x=1 BAS  (#INITMOV,0)",
+            "PDAT_ACT=PPDAT1",
+            "lin_ldat_act=1 LDAT_ACT=L1",
+        ] {
+            assert!(sets_motion(l), "{l}");
+        }
+        for l in [
+            "PTP XPick",
+            "SetVelCP (0.5) ; $VEL.CP",
+            "BASE_NO = 2",
+            "MY_BAS(#TOOL)",
+            "$BAS(1)",
+            "BAS",
+            "BASIS(1)",
+            "WAIT FOR $IN[1]",
+        ] {
+            assert!(!sets_motion(l), "{l}");
         }
     }
 
@@ -760,11 +856,16 @@ mod tests {
             let name = l.strip_prefix("PTP ").unwrap();
             assert!(crate::names::is_krl_name(name), "{name}");
         }
+        // One point of a long step name is cut to the language's length too.
+        let one = p.step_code(long, "PTP {X 1}");
+        let name = one.strip_prefix("PTP ").unwrap();
+        assert!(crate::names::is_krl_name(name), "{name}");
+        assert_eq!(name, "XaVeryLongStepNameThatGo");
         assert_eq!(base_name("1. Übergabe"), "P1Uebergabe");
         // 20,000 steps of one name: unique names, found without trying every earlier one
         // (200 million tries before).
         let mut many = Points::new(Language::Rapid, Mode::Named, KrlForm::Named, Vec::new());
-        let mut seen = HashSet::new();
+        let mut seen = std::collections::HashSet::new();
         for _ in 0..20_000 {
             let line = many.step_code(
                 "Move",

@@ -2,6 +2,8 @@
 //! stands in the line, whether it is a position or axes, and its text as a declaration writes
 //! it. `super` names the targets and declares them.
 
+use std::ops::Range;
+
 /// Whether a target is a Cartesian position or one of the axes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Kind {
@@ -9,37 +11,69 @@ pub(super) enum Kind {
     Axis,
 }
 
-/// One literal target of a motion: where it stands in the line and its text as declared.
-#[derive(Debug)]
+/// One literal target of a motion: where it stands in the line and its value as declared.
+#[derive(Clone, Debug)]
 pub(super) struct Target {
-    pub(super) range: std::ops::Range<usize>,
+    pub(super) range: Range<usize>,
     pub(super) kind: Kind,
-    /// The value as the declaration writes it.
-    pub(super) text: String,
+    /// The value as the declaration writes it: `line[value]`, in braces when `braces` (a KRL
+    /// aggregate written with its type, `{E6POS: X 1}`, is declared as `{X 1}`).
+    pub(super) value: Range<usize>,
+    pub(super) braces: bool,
 }
 
-/// A motion statement with literal targets.
+impl Target {
+    /// Appends the value as the declaration writes it.
+    pub(super) fn push_value(&self, line: &str, out: &mut String) {
+        if self.braces {
+            out.push('{');
+        }
+        out.push_str(&line[self.value.clone()]);
+        if self.braces {
+            out.push('}');
+        }
+    }
+
+    /// How long [`Target::push_value`] makes it.
+    pub(super) fn value_len(&self) -> usize {
+        self.value.len() + 2 * usize::from(self.braces)
+    }
+}
+
+/// A motion statement with literal targets (at most two: `CIRC`, `MoveC`, `movec`).
 #[derive(Debug)]
 pub(super) struct Motion {
     /// KRL: `PTP`, `LIN` or `CIRC` (upper-case).
     pub(super) verb: &'static str,
-    pub(super) targets: Vec<Target>,
-    /// KRL: what follows the targets (the approximation).
-    pub(super) rest: String,
+    targets: [Target; 2],
+    count: usize,
+    /// KRL: what follows the targets (the approximation), trimmed: `line[rest]`.
+    pub(super) rest: Range<usize>,
 }
 
 impl Motion {
-    /// `line` with each target replaced by `name(i)`.
-    pub(super) fn rewrite(&self, line: &str, name: impl Fn(usize) -> String) -> String {
-        let mut out = String::with_capacity(line.len());
-        let mut at = 0;
-        for (i, t) in self.targets.iter().enumerate() {
-            out.push_str(&line[at..t.range.start]);
-            out.push_str(&name(i));
-            at = t.range.end;
+    fn new(verb: &'static str) -> Self {
+        let none = Target {
+            range: 0..0,
+            kind: Kind::Cartesian,
+            value: 0..0,
+            braces: false,
+        };
+        Motion {
+            verb,
+            targets: [none.clone(), none],
+            count: 0,
+            rest: 0..0,
         }
-        out.push_str(&line[at..]);
-        out
+    }
+
+    pub(super) fn targets(&self) -> &[Target] {
+        &self.targets[..self.count]
+    }
+
+    fn push(&mut self, t: Target) {
+        self.targets[self.count] = t;
+        self.count += 1;
     }
 }
 
@@ -69,7 +103,11 @@ fn group_end(s: &str, open: usize) -> Option<usize> {
 
 /// A number as the languages write it: `-12`, `0.5`, `.5`, `1E-3`, `9E9`.
 pub(super) fn is_number(s: &str) -> bool {
-    let b = s.trim().as_bytes();
+    number(s.trim().as_bytes())
+}
+
+/// [`is_number`] of bytes without white space around them.
+fn number(b: &[u8]) -> bool {
     let mut i = usize::from(matches!(b.first(), Some(b'-' | b'+')));
     let digits = |i: &mut usize| {
         let start = *i;
@@ -99,68 +137,95 @@ pub(super) fn is_number(s: &str) -> bool {
 /// A KRL motion to literal targets: `PTP {X 1, Y 2, …}`, `LIN {E6POS: X 1, …} C_DIS`,
 /// `CIRC {X …}, {X …}`, `PTP {A1 0, …}`. Every component a number.
 pub(super) fn krl_motion(line: &str) -> Option<Motion> {
-    let code = line.trim_start();
-    let at = line.len() - code.len();
-    let word_end = code.find(|c: char| !c.is_ascii_alphabetic())?;
-    let word = &code[..word_end];
+    let b = line.as_bytes();
+    let at = b.iter().position(|c| !c.is_ascii_whitespace())?;
+    let word_end = at + b[at..].iter().position(|c| !c.is_ascii_alphabetic())?;
+    let word = &b[at..word_end];
     let verb = ["PTP", "LIN", "CIRC"]
         .into_iter()
-        .find(|v| word.eq_ignore_ascii_case(v))?;
-    let mut i = at + word_end;
-    let mut targets = Vec::new();
+        .find(|v| word.eq_ignore_ascii_case(v.as_bytes()))?;
+    let skip_space = |i: usize| {
+        i + b[i..]
+            .iter()
+            .take_while(|c| c.is_ascii_whitespace())
+            .count()
+    };
+    let mut i = word_end;
+    let mut motion = Motion::new(verb);
     let wanted = if verb == "CIRC" { 2 } else { 1 };
-    while targets.len() < wanted {
-        let skip = line[i..].len() - line[i..].trim_start().len();
-        i += skip;
-        if !targets.is_empty() {
-            i += line[i..].strip_prefix(',').map(|_| 1)?;
-            i += line[i..].len() - line[i..].trim_start().len();
-        } else if skip == 0 {
+    for n in 0..wanted {
+        let skip = skip_space(i);
+        if n > 0 {
+            if b.get(skip) != Some(&b',') {
+                return None;
+            }
+            i = skip_space(skip + 1);
+        } else if skip == i {
             return None;
+        } else {
+            i = skip;
         }
-        if !line[i..].starts_with('{') {
+        if b.get(i) != Some(&b'{') {
             return None;
         }
         let end = group_end(line, i)?;
-        let kind = krl_aggregate(&line[i + 1..end - 1])?;
+        let inner = &line[i + 1..end - 1];
+        let (kind, typed) = krl_aggregate(inner)?;
         if verb != "PTP" && kind == Kind::Axis {
             return None;
         }
         // The declaration's value: the aggregate as written, without a type before `:` (the
         // declaration gives the type).
-        let inner = &line[i + 1..end - 1];
-        let text = match inner.split_once(':') {
-            Some((_, rest)) => format!("{{{}}}", rest.trim()),
-            None => line[i..end].to_owned(),
+        let (value, braces) = match typed {
+            Some(values) => (
+                trimmed(line, i + 1 + values.start..i + 1 + values.end),
+                true,
+            ),
+            None => (i..end, false),
         };
-        targets.push(Target {
+        motion.push(Target {
             range: i..end,
             kind,
-            text,
+            value,
+            braces,
         });
         i = end;
     }
-    let rest = &line[i..];
+    let rest = &b[i..];
     // A comment or anything else after the approximation: not a plain motion.
-    if rest.contains(';') || rest.contains(',') || rest.contains('{') {
+    if rest.iter().any(|c| matches!(c, b';' | b',' | b'{')) {
         return None;
     }
-    if !rest.trim().is_empty() && !rest.starts_with(char::is_whitespace) {
+    let rest_range = trimmed(line, i..line.len());
+    if !rest_range.is_empty() && !rest[0].is_ascii_whitespace() {
         return None;
     }
-    Some(Motion {
-        verb,
-        targets,
-        rest: rest.trim().to_owned(),
-    })
+    motion.rest = rest_range;
+    Some(motion)
 }
 
-/// A KRL aggregate of numbers (its text between the braces): its kind. The `.dat` declares the
-/// aggregate as written (`{X 1, Y 2, …}`).
-fn krl_aggregate(inner: &str) -> Option<Kind> {
-    let mut inner = inner.trim();
+/// `range` without the ASCII white space at its ends.
+fn trimmed(line: &str, range: Range<usize>) -> Range<usize> {
+    let b = &line.as_bytes()[range.clone()];
+    let start = b.iter().take_while(|c| c.is_ascii_whitespace()).count();
+    let end = b.len()
+        - b[start..]
+            .iter()
+            .rev()
+            .take_while(|c| c.is_ascii_whitespace())
+            .count();
+    range.start + start..range.start + end
+}
+
+/// A KRL aggregate of numbers (its text between the braces): its kind, and where its values
+/// start when it names its type (`E6POS: X 1, …`: the declaration gives the type). The `.dat`
+/// declares the aggregate as written (`{X 1, Y 2, …}`).
+fn krl_aggregate(whole: &str) -> Option<(Kind, Option<Range<usize>>)> {
+    let mut inner = whole;
     let mut ty = None;
+    let mut values = None;
     if let Some((t, rest)) = inner.split_once(':') {
+        values = Some(t.len() + 1..whole.len());
         let t = t.trim();
         let is = |w: &str| t.eq_ignore_ascii_case(w);
         ty = Some(if is("POS") || is("E6POS") || is("FRAME") {
@@ -170,14 +235,25 @@ fn krl_aggregate(inner: &str) -> Option<Kind> {
         } else {
             return None;
         });
-        inner = rest.trim();
+        inner = rest;
     }
     // Which keys were seen, one bit each: a key twice is no position.
     let mut seen = 0u32;
-    for item in inner.split(',') {
-        let mut w = item.split_ascii_whitespace();
-        let (key, value) = (w.next()?, w.next()?);
-        if w.next().is_some() || !is_number(value) {
+    for item in inner.as_bytes().split(|&c| c == b',') {
+        // `key value`, white space around them.
+        let mut i = 0;
+        let mut word = || {
+            while item.get(i).is_some_and(u8::is_ascii_whitespace) {
+                i += 1;
+            }
+            let start = i;
+            while item.get(i).is_some_and(|c| !c.is_ascii_whitespace()) {
+                i += 1;
+            }
+            &item[start..i]
+        };
+        let (key, value, more) = (word(), word(), word());
+        if key.is_empty() || value.is_empty() || !more.is_empty() || !number(value) {
             return None;
         }
         let k = key_index(key)?;
@@ -188,17 +264,18 @@ fn krl_aggregate(inner: &str) -> Option<Kind> {
     }
     let cartesian = seen & 0xff != 0;
     let axis = seen & (0x3f << 8) != 0;
-    match (cartesian, axis, ty) {
-        (true, false, None | Some(Kind::Cartesian)) => Some(Kind::Cartesian),
-        (false, true, None | Some(Kind::Axis)) => Some(Kind::Axis),
-        _ => None,
-    }
+    let kind = match (cartesian, axis, ty) {
+        (true, false, None | Some(Kind::Cartesian)) => Kind::Cartesian,
+        (false, true, None | Some(Kind::Axis)) => Kind::Axis,
+        _ => return None,
+    };
+    Some((kind, values))
 }
 
 /// A component's bit in [`krl_aggregate`]: `X Y Z A B C S T` are 0–7 (a position), `A1`–`A6`
 /// 8–13 and `E1`–`E6` 14–19 (the axes).
-fn key_index(key: &str) -> Option<usize> {
-    match *key.as_bytes() {
+fn key_index(key: &[u8]) -> Option<usize> {
+    match *key {
         [c] => b"XYZABCST".iter().position(|k| k.eq_ignore_ascii_case(&c)),
         [c, d @ b'1'..=b'6'] => {
             let n = usize::from(d - b'1');
@@ -236,9 +313,9 @@ pub(super) fn rapid_motion(line: &str) -> Option<Motion> {
         return None;
     }
     i += skip;
-    let mut targets = Vec::new();
-    while targets.len() < n {
-        if !targets.is_empty() {
+    let mut motion = Motion::new(verb);
+    for k in 0..n {
+        if k > 0 {
             i += line[i..].strip_prefix(',').map(|_| 1)?;
             i += line[i..].len() - line[i..].trim_start().len();
         }
@@ -255,21 +332,18 @@ pub(super) fn rapid_motion(line: &str) -> Option<Motion> {
         if !fits {
             return None;
         }
-        targets.push(Target {
+        motion.push(Target {
             range: i..end,
             kind,
-            text: line[i..end].to_owned(),
+            value: i..end,
+            braces: false,
         });
         i = end;
     }
     if !line[i..].trim_start().starts_with(',') {
         return None;
     }
-    Some(Motion {
-        verb,
-        targets,
-        rest: String::new(),
-    })
+    Some(motion)
 }
 
 /// `[a, b], [c]` → the numbers of each group; `None` unless every item is a number.
@@ -309,16 +383,16 @@ pub(super) fn ur_motion(line: &str) -> Option<Motion> {
     let word = &code[..open];
     let &(verb, n) = UR_MOVES.iter().find(|(v, _)| *v == word)?;
     let mut i = at + open + 1;
-    let mut targets = Vec::new();
-    while targets.len() < n {
+    let mut motion = Motion::new(verb);
+    for k in 0..n {
         i += line[i..].len() - line[i..].trim_start().len();
-        if !targets.is_empty() {
+        if k > 0 {
             i += line[i..].strip_prefix(',').map(|_| 1)?;
             i += line[i..].len() - line[i..].trim_start().len();
         }
         let (start, kind) = if line[i..].starts_with("p[") {
             (i + 1, Kind::Cartesian)
-        } else if line[i..].starts_with('[') && verb == "movej" && targets.is_empty() {
+        } else if line[i..].starts_with('[') && verb == "movej" && k == 0 {
             (i, Kind::Axis)
         } else {
             return None;
@@ -328,10 +402,11 @@ pub(super) fn ur_motion(line: &str) -> Option<Motion> {
         if groups.len() != 1 || groups[0].len() != 6 {
             return None;
         }
-        targets.push(Target {
+        motion.push(Target {
             range: i..end,
             kind,
-            text: line[i..end].to_owned(),
+            value: i..end,
+            braces: false,
         });
         i = end;
     }
@@ -339,9 +414,5 @@ pub(super) fn ur_motion(line: &str) -> Option<Motion> {
     if !(after.starts_with(',') || after.starts_with(')')) {
         return None;
     }
-    Some(Motion {
-        verb,
-        targets,
-        rest: String::new(),
-    })
+    Some(motion)
 }
