@@ -149,7 +149,11 @@ impl Word {
 
 /// The first word of `code` (letters, digits, `_`, `$`), upper case, and the text after it.
 fn first_word(code: &str) -> (Word, &str) {
-    let end = code.find(|c: char| !is_word_char(c)).unwrap_or(code.len());
+    // (A byte that is not ASCII is no word character, as its character is none.)
+    let end = code
+        .bytes()
+        .position(|c| !(c.is_ascii_alphanumeric() || c == b'_' || c == b'$'))
+        .unwrap_or(code.len());
     let mut w = Word {
         buf: [0; 16],
         len: 0,

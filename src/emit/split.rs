@@ -140,6 +140,10 @@ fn declared(line: &str) -> Option<(&str, bool)> {
 /// in `text` as identifiers (outside strings). Only identifiers as long as one of `names` are
 /// looked up, through one reused buffer: a part's text is megabytes of step code.
 fn used_names(text: &str, names: &HashSet<String>, fold: bool) -> HashSet<String> {
+    if names.is_empty() {
+        // (A program of only points and steps: nothing to look for in megabytes of text.)
+        return HashSet::new();
+    }
     let mut lengths = 0u128;
     for n in names {
         lengths |= 1u128 << n.len().min(127);
@@ -380,7 +384,12 @@ pub fn split(
         }
         // A KRL part's points and their inline forms' data are its `.dat`'s: the technician
         // touches them up there.
-        own.extend_from_slice(&generated.declarations[point_range(r)]);
+        // (Moved, not copied: the main `.dat` loses them below.)
+        own.extend(
+            generated.declarations[point_range(r)]
+                .iter_mut()
+                .map(std::mem::take),
+        );
         let routine = part_name(program, n, suffix, max_name);
         let stem = part_name(program, n, "", max_name - suffix.len());
         let file = match lang {

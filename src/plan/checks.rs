@@ -283,8 +283,11 @@ pub fn start_end(
     // The networks with a marked initial step, in the document order of their first one.
     let mut marked_nets: Vec<usize> = Vec::new();
     let mut has_initial = vec![false; el.len()];
-    for (i, e) in el.iter().enumerate() {
-        if initial(sfc, g, i) && !has_initial[net[i]] {
+    // The marked initial steps, found once (each a step's data to look at: 100,000 steps).
+    let initials: Vec<usize> = (0..el.len()).filter(|&i| initial(sfc, g, i)).collect();
+    for &i in &initials {
+        let e = &el[i];
+        if !has_initial[net[i]] {
             has_initial[net[i]] = true;
             marked_nets.push(net[i]);
             if marked_nets.len() > super::MAX_SEQUENCES {
@@ -307,14 +310,14 @@ pub fn start_end(
         }
     }
     if marked_nets.len() < 2 {
-        return one_sequence(sfc, g, &targeted, &|_| true, diags).map(|se| vec![se]);
+        return one_sequence(sfc, g, &targeted, &initials, &|_| true, diags).map(|se| vec![se]);
     }
     // Several sequences: each network's own start and end. A step in a network without an
     // initial step is never run.
     let mut out = Vec::with_capacity(marked_nets.len());
     let mut ok = true;
     for &n in &marked_nets {
-        match one_sequence(sfc, g, &targeted, &|i| net[i] == n, diags) {
+        match one_sequence(sfc, g, &targeted, &initials, &|i| net[i] == n, diags) {
             Some(se) => out.push(se),
             None => ok = false,
         }
@@ -390,21 +393,35 @@ fn one_sequence(
     sfc: &Sfc,
     g: &Graph,
     targeted: &[bool],
+    initials: &[usize],
     mine: &dyn Fn(usize) -> bool,
     diags: &mut Diagnostics,
 ) -> Option<(usize, Option<usize>)> {
     let el = &sfc.elements;
-    let has_jumps =
-        (0..el.len()).any(|i| mine(i) && matches!(el[i].kind, ElementKind::JumpStep(_)));
-    let no_pred: Vec<usize> = (0..el.len())
-        .filter(|&i| mine(i) && el[i].kind.is_step() && g.preds(i).is_empty())
-        .collect();
+    // One pass over the chart: whether it has jumps, its steps without a predecessor and
+    // those without a successor.
+    let mut has_jumps = false;
+    let (mut no_pred, mut ends) = (Vec::new(), Vec::new());
+    for (i, e) in el.iter().enumerate() {
+        match e.kind {
+            ElementKind::JumpStep(_) if mine(i) => has_jumps = true,
+            ElementKind::Step(_) if mine(i) => {
+                if g.preds(i).is_empty() {
+                    no_pred.push(i);
+                }
+                if g.succs(i).is_empty() {
+                    ends.push(i);
+                }
+            }
+            _ => {}
+        }
+    }
     let untargeted: Vec<usize> = no_pred.iter().copied().filter(|&i| !targeted[i]).collect();
     // The start is the step marked initialStep="true" (docs/INPUTS.md): the one marked step without
     // a predecessor (the original also marks its end step), else the one marked step (a chart
     // drawn as a closed circle); else the one step without a predecessor that no jump leads to.
     let initial = |i: &usize| initial(sfc, g, *i);
-    let marked: Vec<usize> = (0..el.len()).filter(|i| mine(*i) && initial(i)).collect();
+    let marked: Vec<usize> = initials.iter().copied().filter(|&i| mine(i)).collect();
     let marked_free: Vec<usize> = untargeted.iter().copied().filter(initial).collect();
     let starts = match (marked_free.as_slice(), marked.as_slice()) {
         ([_], _) | ([], [_]) => {
@@ -437,9 +454,6 @@ fn one_sequence(
         _ if untargeted.is_empty() => no_pred,
         _ => untargeted,
     };
-    let ends: Vec<usize> = (0..el.len())
-        .filter(|&i| mine(i) && el[i].kind.is_step() && g.succs(i).is_empty())
-        .collect();
     let mut ok = true;
     let start = match starts.as_slice() {
         [] => {

@@ -5,8 +5,6 @@
 //! jumpStep naming the step, connected to where the connection came from (`Sfc::closed` keeps
 //! what was changed). A cycle that passes through no step stays, for the cycle check.
 
-use std::collections::HashMap;
-
 use crate::diag::Span;
 use crate::model::{Closed, Element, ElementKind, Inputs, Name, Sfc};
 
@@ -16,16 +14,18 @@ use crate::model::{Closed, Element, ElementKind, Inputs, Name, Sfc};
 /// or into a selection convergence whose one successor is a step.
 pub fn close_circles(sfc: &mut Sfc) -> usize {
     let n = sfc.elements.len();
-    let mut ids: HashMap<u64, usize> = HashMap::with_capacity(n);
+    let mut ids = super::graph::Ids::new(sfc);
     for (i, e) in sfc.elements.iter().enumerate() {
-        ids.entry(e.local_id).or_insert(i);
+        if ids.get(e.local_id).is_none() {
+            ids.insert(e.local_id, i);
+        }
     }
     // Successors, flat: element `p`'s are `succ[start[p]..start[p + 1]]` (one allocation for
     // the chart, not one per element: 100,000 steps).
     let mut edges: Vec<(usize, usize)> = Vec::with_capacity(n + n / 4);
     for (i, e) in sfc.elements.iter().enumerate() {
         for (r, _) in &e.inputs {
-            if let Some(&p) = ids.get(r) {
+            if let Some(p) = ids.get(*r) {
                 edges.push((p, i));
             }
         }

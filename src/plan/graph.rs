@@ -71,25 +71,28 @@ impl Graph {
 
 /// Finds elements by localId: a direct table when the ids are dense (as planning tools write
 /// them), a hash map otherwise.
-enum Ids {
+pub(super) enum Ids {
     Dense(Vec<u32>),
-    Sparse(HashMap<u64, usize>),
+    Sparse(foldhash::HashMap<u64, usize>),
 }
 
 impl Ids {
     const NONE: u32 = u32::MAX;
 
-    fn new(sfc: &Sfc) -> Self {
+    pub(super) fn new(sfc: &Sfc) -> Self {
         let n = sfc.elements.len();
         let max = sfc.elements.iter().map(|e| e.local_id).max().unwrap_or(0);
         if n < Self::NONE as usize && max < (4 * n as u64 + 1024) {
             Ids::Dense(vec![Self::NONE; max as usize + 1])
         } else {
-            Ids::Sparse(HashMap::with_capacity(n))
+            Ids::Sparse(foldhash::HashMap::with_capacity_and_hasher(
+                n,
+                Default::default(),
+            ))
         }
     }
 
-    fn get(&self, id: u64) -> Option<usize> {
+    pub(super) fn get(&self, id: u64) -> Option<usize> {
         match self {
             Ids::Dense(t) => t
                 .get(id as usize)
@@ -100,7 +103,7 @@ impl Ids {
         }
     }
 
-    fn insert(&mut self, id: u64, i: usize) {
+    pub(super) fn insert(&mut self, id: u64, i: usize) {
         match self {
             Ids::Dense(t) => t[id as usize] = i as u32,
             Ids::Sparse(m) => {

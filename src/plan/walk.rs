@@ -2,7 +2,7 @@
 //! simultaneous and selection branches, loops closed by jumps (see `ARCHITECTURE.md`, "The
 //! program tree").
 
-use std::collections::HashMap;
+use foldhash::HashMap;
 
 use super::{Block, Branch, BranchEnd, Graph, MAX_NESTING, State, gotos, visit};
 use crate::diag::{Code, Diagnostic, Diagnostics};
@@ -141,20 +141,35 @@ impl Dominators {
             }
             idom[v] = new;
         }
-        let mut children: Vec<Vec<usize>> = vec![Vec::new(); n];
+        // Each element's children in the tree, flat: `v`'s are `child[first[v]..first[v + 1]]`
+        // (one allocation, not one per element: 100,000 steps).
+        let mut first = vec![0usize; n + 1];
         for v in 0..n {
             if idom[v] != NONE && v != start {
-                children[idom[v]].push(v);
+                first[idom[v] + 1] += 1;
             }
         }
+        for v in 0..n {
+            first[v + 1] += first[v];
+        }
+        let mut child = vec![0usize; first[n]];
+        let mut fill = first.clone();
+        for v in 0..n {
+            if idom[v] != NONE && v != start {
+                child[fill[idom[v]]] = v;
+                fill[idom[v]] += 1;
+            }
+        }
+        drop(fill);
+        let children = |v: usize| &child[first[v]..first[v + 1]];
         let (mut enter, mut exit) = (vec![NONE; n], vec![NONE; n]);
         let mut clock = 0;
         let mut stack = vec![(start, 0usize)];
         enter[start] = 0;
         while let Some((v, k)) = stack.pop() {
-            if k < children[v].len() {
+            if k < children(v).len() {
                 stack.push((v, k + 1));
-                let c = children[v][k];
+                let c = children(v)[k];
                 clock += 1;
                 enter[c] = clock;
                 stack.push((c, 0));
@@ -255,7 +270,7 @@ fn walk_once(
     for t in jumps.iter().flatten() {
         targeted[*t] = !entries[*t];
     }
-    let mut jumps_to: HashMap<usize, Vec<usize>> = HashMap::new();
+    let mut jumps_to: HashMap<usize, Vec<usize>> = HashMap::default();
     for (j, t) in jumps.iter().enumerate() {
         if let Some(t) = t
             && !entries[*t]
@@ -334,7 +349,7 @@ fn branch_contexts(sfc: &Sfc, g: &Graph, start: usize) -> Vec<u32> {
     let el = &sfc.elements;
     let mut ctx = vec![u32::MAX; el.len()];
     // Each context: its parent and the (divergence, branch) that opened it.
-    let mut known: HashMap<(u32, usize, usize), u32> = HashMap::new();
+    let mut known: HashMap<(u32, usize, usize), u32> = HashMap::default();
     let mut parent: Vec<u32> = vec![0];
     let mut todo = vec![(start, 0u32)];
     while let Some((i, c)) = todo.pop() {
@@ -579,7 +594,8 @@ impl Walker<'_> {
         let here = self.branch_of[first];
         let mut states = vec![State { entry: first, body }];
         let mut ends = vec![end];
-        let mut number: HashMap<usize, usize> = HashMap::from([(first, 0)]);
+        let mut number: HashMap<usize, usize> = HashMap::default();
+        number.insert(first, 0);
         let mut queue: std::collections::VecDeque<usize> = next.into_iter().collect();
         while let Some(entry) = queue.pop_front() {
             if number.contains_key(&entry) {

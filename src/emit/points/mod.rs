@@ -585,12 +585,13 @@ pub fn for_program(
 /// approximation, tool, base, load, the interpolation frame, or the motion data (`BAS(…)`,
 /// `PDAT_ACT`, …). Comments are not read.
 fn sets_motion(line: &str) -> bool {
-    let code = line.split(';').next().unwrap_or("").as_bytes();
+    let line = line.as_bytes();
+    let code = &line[..memchr::memchr(b';', line).unwrap_or(line.len())];
     let has = |needle: &[u8]| {
         code.windows(needle.len())
             .position(|w| w.eq_ignore_ascii_case(needle))
     };
-    if code.contains(&b'$')
+    if memchr::memchr(b'$', code).is_some()
         && [
             &b"$VEL"[..],
             b"$ACC",
@@ -607,7 +608,7 @@ fn sets_motion(line: &str) -> bool {
     {
         return true;
     }
-    if code.contains(&b'_')
+    if memchr::memchr(b'_', code).is_some()
         && [&b"PDAT_ACT"[..], b"LDAT_ACT", b"FDAT_ACT"]
             .iter()
             .any(|w| has(w).is_some())

@@ -79,22 +79,24 @@ impl Motion {
 
 /// The index after the bracket group that opens at `open` (`{`/`[`), nested groups included.
 fn group_end(s: &str, open: usize) -> Option<usize> {
-    let (o, c) = match s.as_bytes()[open] {
+    let b = s.as_bytes();
+    let (o, c) = match b[open] {
         b'{' => (b'{', b'}'),
         b'[' => (b'[', b']'),
         _ => return None,
     };
     let mut depth = 0usize;
-    for (i, b) in s.bytes().enumerate().skip(open) {
-        if b == b'"' {
+    for i in memchr::memchr3_iter(o, c, b'"', &b[open..]) {
+        let x = b[open + i];
+        if x == b'"' {
             return None;
         }
-        if b == o {
+        if x == o {
             depth += 1;
-        } else if b == c {
+        } else {
             depth -= 1;
             if depth == 0 {
-                return Some(i + 1);
+                return Some(open + i + 1);
             }
         }
     }
@@ -239,21 +241,33 @@ fn krl_aggregate(whole: &str) -> Option<(Kind, Option<Range<usize>>)> {
     }
     // Which keys were seen, one bit each: a key twice is no position.
     let mut seen = 0u32;
-    for item in inner.as_bytes().split(|&c| c == b',') {
-        // `key value`, white space around them.
-        let mut i = 0;
-        let mut word = || {
-            while item.get(i).is_some_and(u8::is_ascii_whitespace) {
-                i += 1;
-            }
-            let start = i;
-            while item.get(i).is_some_and(|c| !c.is_ascii_whitespace()) {
-                i += 1;
-            }
-            &item[start..i]
-        };
-        let (key, value, more) = (word(), word(), word());
-        if key.is_empty() || value.is_empty() || !more.is_empty() || !number(value) {
+    // Items `key value`, separated by commas, white space around them: one pass over the
+    // bytes (every motion of every step).
+    let b = inner.as_bytes();
+    let n = b.len();
+    let space = |c: u8| c.is_ascii_whitespace();
+    let mut i = 0;
+    loop {
+        while i < n && space(b[i]) {
+            i += 1;
+        }
+        let key_start = i;
+        while i < n && !space(b[i]) && b[i] != b',' {
+            i += 1;
+        }
+        let key = &b[key_start..i];
+        while i < n && space(b[i]) {
+            i += 1;
+        }
+        let value_start = i;
+        while i < n && !space(b[i]) && b[i] != b',' {
+            i += 1;
+        }
+        let value = &b[value_start..i];
+        while i < n && space(b[i]) {
+            i += 1;
+        }
+        if key.is_empty() || value.is_empty() || !number(value) {
             return None;
         }
         let k = key_index(key)?;
@@ -261,6 +275,14 @@ fn krl_aggregate(whole: &str) -> Option<(Kind, Option<Range<usize>>)> {
             return None;
         }
         seen |= 1 << k;
+        if i == n {
+            break;
+        }
+        // A third word, or the next item.
+        if b[i] != b',' {
+            return None;
+        }
+        i += 1;
     }
     let cartesian = seen & 0xff != 0;
     let axis = seen & (0x3f << 8) != 0;
