@@ -140,7 +140,7 @@ fn main() {
             let mut by_stage: Vec<(&'static str, Vec<Duration>)> = Vec::new();
             for _ in 0..iters {
                 let (_, c) = compile_once(bb);
-                for (k, (stage, d)) in c.timings.iter().enumerate() {
+                for (k, (stage, d, _)) in c.timings.iter().enumerate() {
                     if by_stage.len() <= k {
                         by_stage.push((stage, Vec::new()));
                     }

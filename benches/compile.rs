@@ -770,7 +770,7 @@ fn compile_and_apply(bb: &Path) -> Applied {
         write,
         outputs,
         c.diagnostics.len(),
-        c.timings.clone(),
+        c.timings.iter().map(|(s, d, _)| (*s, *d)).collect(),
     )
 }
 

@@ -204,6 +204,17 @@ pub fn main(args: impl IntoIterator<Item = OsString>) -> ExitCode {
     ExitCode::from(run(args))
 }
 
+/// A line of `SKILLPOST_TIMINGS=1`: the stage, its time, the process's peak memory by then.
+fn timing_line(stage: &str, d: std::time::Duration, peak_kib: Option<u64>) -> String {
+    let peak = peak_kib.map_or(String::new(), |k| {
+        format!("   peak {:>6.1} MiB", k as f64 / 1024.0)
+    });
+    format!(
+        "timing: {stage:<16} {:>8.1} ms{peak}",
+        d.as_secs_f64() * 1000.0
+    )
+}
+
 fn usage(msg: &str) -> u8 {
     eprintln!(
         "error: {msg}\n\nUsage: skillpost [OPTIONS] <BLACKBOARD> <PROGRAM>\n       skillpost --validate [OPTIONS] <BLACKBOARD> [<PROGRAM>]\n       skillpost --sfc [OPTIONS] <SFC>\n       skillpost --info [<BLACKBOARD>]\n\nFor more information, try '--help'."
@@ -325,8 +336,8 @@ fn run(a: Args) -> u8 {
         hint_for_a_folder(&mut c.diagnostics, blackboard, Input::Blackboard);
     }
     if std::env::var_os("SKILLPOST_TIMINGS").is_some() {
-        for (stage, d) in &c.timings {
-            eprintln!("timing: {stage:<16} {:>8.1} ms", d.as_secs_f64() * 1000.0);
+        for (stage, d, peak) in &c.timings {
+            eprintln!("{}", timing_line(stage, *d, *peak));
         }
     }
     print_listings(&c, &print, a.format, &mut stdout);
@@ -398,7 +409,12 @@ fn run(a: Args) -> u8 {
         }
         return status(&c, "Input validation successful!", a.format);
     }
+    let written_in = std::time::Instant::now();
     let result = compile::apply(&c);
+    if std::env::var_os("SKILLPOST_TIMINGS").is_some() {
+        let line = timing_line("write", written_in.elapsed(), compile::peak_kib());
+        eprintln!("{line}");
+    }
     match result {
         Ok(applied) => {
             let json = a.format == Format::Json;

@@ -125,7 +125,7 @@ pub struct Compilation {
     /// The program's language (`None` when no SFC could be read).
     pub language: Option<Language>,
     /// Wall time per stage, in order (`read-blackboard`, `read-sfc`, `plan`, `bind`, `emit`).
-    pub timings: Vec<(&'static str, std::time::Duration)>,
+    pub timings: Vec<(&'static str, std::time::Duration, Option<u64>)>,
     /// The resource whose controller runs the program (docs/CELLS.md).
     pub controller: Option<String>,
     /// Per output (same order): its program's name and its controller's (docs/CELLS.md).
@@ -658,9 +658,12 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         _ => Path::new("."),
     });
     let mut clock = std::time::Instant::now();
+    // The process's peak memory after each stage, only when the timings are printed.
+    let peak = std::env::var_os("SKILLPOST_TIMINGS").is_some();
     let mut lap = |out: &mut Compilation, stage: &'static str| {
         let now = std::time::Instant::now();
-        out.timings.push((stage, now - clock));
+        out.timings
+            .push((stage, now - clock, peak.then(peak_kib).flatten()));
         clock = now;
     };
 
@@ -1733,6 +1736,19 @@ fn write_back_retrying(
 /// Writes the outputs (atomically, only when their bytes change), then the write-back, into
 /// the folder the blackboard was read from ([`Compilation::folder`]); nothing when that folder
 /// is no longer at its name ([`folder_replaced`]).
+/// The process's peak resident memory so far in KiB (Linux: `VmHWM` of `/proc/self/status`;
+/// `None` elsewhere).
+pub fn peak_kib() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    line["VmHWM:".len()..]
+        .trim()
+        .strip_suffix("kB")?
+        .trim()
+        .parse()
+        .ok()
+}
+
 pub fn apply(c: &Compilation) -> std::io::Result<Applied> {
     if let Some(why) = folder_replaced(c) {
         return Err(std::io::Error::other(why));

@@ -76,6 +76,51 @@ fn compile_writes_outputs_and_reports_them() {
     assert!(bb.contains("<Value>Demo_1.src</Value>"));
 }
 
+/// `SKILLPOST_TIMINGS=1` (docs/COMMAND-LINE.md): each stage's time and, on Linux, the
+/// process's peak memory by then, the write last; the run itself is unchanged.
+#[test]
+fn timings_name_each_stage_its_time_and_the_peak_memory() {
+    let p = project();
+    let o = bin()
+        .args(["Blackboard.aml", "Demo_1"])
+        .current_dir(p.path())
+        .env("SKILLPOST_TIMINGS", "1")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(p.path().join("Demo_1.src").exists());
+    let err = stderr(&o);
+    let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("timing: ")).collect();
+    let stages: Vec<&str> = lines
+        .iter()
+        .map(|l| l["timing: ".len()..].split_whitespace().next().unwrap())
+        .collect();
+    for s in ["read-sfc", "plan", "bind", "emit", "check"] {
+        assert!(stages.contains(&s), "{s} missing: {err}");
+    }
+    assert_eq!(stages.last(), Some(&"write"), "{err}");
+    let mut last_peak = 0.0;
+    for l in &lines {
+        assert!(l.contains(" ms"), "{l}");
+        if cfg!(target_os = "linux") {
+            let (_, peak) = l.split_once(" peak ").unwrap_or_else(|| panic!("{l}"));
+            let mib: f64 = peak
+                .trim()
+                .strip_suffix(" MiB")
+                .unwrap()
+                .trim()
+                .parse()
+                .unwrap();
+            // A peak never goes down, and a compile takes more than a MiB.
+            assert!(mib >= last_peak && mib > 1.0, "{l}");
+            last_peak = mib;
+        }
+    }
+    // Without the variable, no timing.
+    let quiet = run(&["Blackboard.aml", "Demo_1"], p.path());
+    assert!(!stderr(&quiet).contains("timing: "), "{}", stderr(&quiet));
+}
+
 #[test]
 fn lf_option_writes_lf_only() {
     let p = project();

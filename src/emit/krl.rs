@@ -247,7 +247,7 @@ impl Writer<'_> {
                     self.out.code(level, input.step_indent, t);
                 }
                 let code = self.points.step_code(flow::step_name(input, *i), &bs.code);
-                self.out.code(level, input.step_indent, &code);
+                self.out.code(level, input.step_indent, code);
                 self.line(level, ";ENDFOLD");
             }
             Block::Wait(t) => {

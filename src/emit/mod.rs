@@ -472,7 +472,7 @@ pub fn emit_files(
             ..Default::default()
         });
     }
-    if let Some(split) = split {
+    if let Some(mut split) = split {
         for f in split.files(input, &comment) {
             if let Some(pos) = first_non_ascii(&f.text) {
                 diags.push(Diagnostic::error(

@@ -431,17 +431,27 @@ pub fn split(
             blocks: r.clone(),
         });
         texts.push(PartText {
-            steps: text.to_owned(),
+            // Taken out of the program's text below.
+            steps: String::new(),
             params,
             own,
         });
     }
-    let first = cuts[ranges[0].start];
     let last = cuts[ranges[ranges.len() - 1].end];
-    let mut main = String::with_capacity(first + calls.len() + (steps.len() - last));
-    main.push_str(&steps[..first]);
+    // The parts' texts are taken from the end of the program's text, which shrinks as they
+    // are: the program is not held twice (100,000 steps).
+    let suffix = steps[last..].to_owned();
+    let mut main = std::mem::take(&mut generated.steps);
+    main.truncate(last);
+    for (t, r) in texts.iter_mut().zip(&ranges).rev() {
+        let start = cuts[r.start];
+        t.steps = main[start..].to_owned();
+        main.truncate(start);
+        main.shrink_to_fit();
+    }
+    main.reserve(calls.len() + suffix.len());
     main.push_str(&calls);
-    main.push_str(&steps[last..]);
+    main.push_str(&suffix);
     // The main `.dat` keeps the points of the blocks it still holds, not the parts'.
     let moved = point_range(&(ranges[0].start..ranges[ranges.len() - 1].end));
     if lang == Language::UrScript {
@@ -553,12 +563,15 @@ fn urscript_functions(
 impl Split {
     /// The parts' own files (KRL: `.src` and `.dat` each; RAPID: a module each; URScript:
     /// none, its parts are functions of the script). `comment`: the header comment.
-    pub fn files(&self, input: &EmitInput, comment: &str) -> Vec<OutputFile> {
+    /// Each part's text is dropped once its files are made (100,000 steps: the program's text
+    /// is not held twice).
+    pub fn files(&mut self, input: &EmitInput, comment: &str) -> Vec<OutputFile> {
         let lang = input.profile.language();
         let nl = input.newline;
         let program = input.program;
         let mut out = Vec::new();
-        for (k, (p, t)) in self.parts.iter().zip(&self.texts).enumerate() {
+        let texts = std::mem::take(&mut self.texts);
+        for (k, (p, t)) in self.parts.iter().zip(texts).enumerate() {
             let n = k + 1;
             let stem = p.file.rsplit_once('.').map_or(p.file.as_str(), |s| s.0);
             let mark = marker(n, program);
@@ -610,7 +623,8 @@ impl Split {
                         stem: Some(stem.to_owned()),
                         ..Default::default()
                     });
-                    let mut dat = String::new();
+                    let own: usize = t.own.iter().map(|d| d.len() + nl.len()).sum();
+                    let mut dat = String::with_capacity(own + 512);
                     for l in [
                         "&ACCESS RVP".to_owned(),
                         "&REL 1".to_owned(),

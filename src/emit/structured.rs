@@ -296,7 +296,7 @@ impl Writer<'_> {
                     self.out.code(level, input.step_indent, t);
                 }
                 let code = self.points.step_code(flow::step_name(input, *i), &bs.code);
-                self.out.code(level, input.step_indent, &code);
+                self.out.code(level, input.step_indent, code);
             }
             Block::Wait(t) => {
                 if let Some(c) = flow::condition(input, *t, self.d.ops) {

@@ -64,8 +64,13 @@ pub struct Points {
     /// The motions of the step being written, with the start and length of their lines (kept
     /// between steps for its allocation).
     motions: Vec<(usize, usize, Motion)>,
-    /// A buffer for the base name of the step being written.
+    /// Buffers kept from step to step: the base name of the step being written, a name's stem
+    /// and its lower-case form, the names of a motion's points, the step's code as written.
     base: String,
+    stem: String,
+    lower: String,
+    names_buf: [String; 2],
+    out: String,
     /// The declarations, in order: `.dat` lines (KRL), module data (RAPID), the program's first
     /// lines (URScript).
     pub declarations: Vec<String>,
@@ -107,6 +112,10 @@ impl Points {
             tries: 0,
             motions: Vec::new(),
             base: String::new(),
+            stem: String::new(),
+            lower: String::new(),
+            names_buf: [String::new(), String::new()],
+            out: String::new(),
             declarations: Vec::new(),
             pdat: 0,
             cpdat: 0,
@@ -115,9 +124,9 @@ impl Points {
     }
 
     /// Step `step`'s code with every literal target named. Lines are separated by `\n`.
-    pub fn step_code<'c>(&mut self, step: &str, code: &'c str) -> Cow<'c, str> {
+    pub fn step_code<'s>(&'s mut self, step: &str, code: &'s str) -> &'s str {
         if self.mode == Mode::Literal || !self.may_hold_literal(code) {
-            return Cow::Borrowed(code);
+            return code;
         }
         let mut motions = std::mem::take(&mut self.motions);
         motions.clear();
@@ -131,21 +140,23 @@ impl Points {
         let targets: usize = motions.iter().map(|(_, _, m)| m.targets().len()).sum();
         if targets == 0 {
             self.motions = motions;
-            return Cow::Borrowed(code);
+            return code;
         }
+        // Buffers kept from step to step (100,000 steps: no allocation of their own).
         let mut base = std::mem::take(&mut self.base);
         push_base_name(step, &mut base);
+        let mut out = std::mem::take(&mut self.out);
+        out.clear();
+        let mut names = std::mem::take(&mut self.names_buf);
         let mut k = 0;
-        let mut out = String::with_capacity(code.len() + 64 * targets);
         let mut at = 0;
         for (start, len, m) in &motions {
             // The lines before, as written.
             out.push_str(&code[at..*start]);
             let line = &code[*start..start + len];
-            let mut names = [String::new(), String::new()];
             for name in names.iter_mut().take(m.targets().len()) {
                 k += 1;
-                *name = self.name(&base, (targets > 1).then_some(k));
+                self.name(&base, (targets > 1).then_some(k), name);
             }
             self.write(line, m, &names[..m.targets().len()], &mut out);
             at = start + len;
@@ -153,7 +164,9 @@ impl Points {
         out.push_str(&code[at..]);
         self.base = base;
         self.motions = motions;
-        Cow::Owned(out)
+        self.names_buf = names;
+        self.out = out;
+        &self.out
     }
 
     /// A cheap test before the lines are parsed (100,000 steps).
@@ -173,24 +186,32 @@ impl Points {
         }
     }
 
-    /// A unique name from `base` and the number of the point in its step.
-    fn name(&mut self, base: &str, k: Option<usize>) -> String {
-        let mut stem = String::with_capacity(self.max + 1);
+    /// A unique name from `base` and the number of the point in its step, into `name`.
+    fn name(&mut self, base: &str, k: Option<usize>, name: &mut String) {
+        let mut stem = std::mem::take(&mut self.stem);
+        stem.clear();
         // (`base` is ASCII.)
         stem.push_str(&base[..base.len().min(self.max)]);
         if let Some(k) = k {
             stem.truncate(self.max - decimal_len(k));
             super::flow::push_decimal(&mut stem, k as u64);
         }
-        let lower = stem.to_ascii_lowercase();
+        let mut lower = std::mem::take(&mut self.lower);
+        lower.clear();
+        lower.push_str(&stem);
+        lower.make_ascii_lowercase();
         // A stem that was taken before goes on at its next number (many steps of one name:
         // not quadratic); only stems taken twice are recorded.
         let mut n = match self.next.get(lower.as_str()) {
             Some(&n) => n,
             None if self.free(&lower) => {
-                self.names.insert(lower);
+                self.names.insert(lower.clone());
                 self.count += 1;
-                return stem;
+                name.clear();
+                name.push_str(&stem);
+                self.stem = stem;
+                self.lower = lower;
+                return;
             }
             None => 1,
         };
@@ -198,21 +219,23 @@ impl Points {
             self.tries += 1;
             n += 1;
             let keep = stem.len().min(self.max - 1 - decimal_len(n));
-            let mut name = String::with_capacity(self.max + 1);
+            name.clear();
             name.push_str(&stem[..keep]);
             name.push('_');
-            super::flow::push_decimal(&mut name, n as u64);
+            super::flow::push_decimal(name, n as u64);
             let name_lower = name.to_ascii_lowercase();
             if self.free(&name_lower) {
                 self.names.insert(name_lower);
                 match self.next.get_mut(lower.as_str()) {
                     Some(last) => *last = n,
                     None => {
-                        self.next.insert(lower, n);
+                        self.next.insert(lower.clone(), n);
                     }
                 }
                 self.count += 1;
-                return name;
+                self.stem = stem;
+                self.lower = lower;
+                return;
             }
         }
     }
@@ -495,7 +518,7 @@ pub fn for_program(
     }
     if mode == Mode::Named {
         for b in input.bound.steps.iter().flatten() {
-            if b.code.bytes().any(|c| c == b'{' || c == b'[') {
+            if memchr::memchr2(b'{', b'[', b.code.as_bytes()).is_some() {
                 words(&b.code);
             }
         }
@@ -587,11 +610,22 @@ pub fn for_program(
 fn sets_motion(line: &str) -> bool {
     let line = line.as_bytes();
     let code = &line[..memchr::memchr(b';', line).unwrap_or(line.len())];
+    // Every statement sets its parameters with `$`, `_` or `BAS`: most lines have none of them
+    // (one pass over every line of every step).
+    let (mut dollar, mut underscore, mut b) = (false, false, false);
+    for &c in code {
+        dollar |= c == b'$';
+        underscore |= c == b'_';
+        b |= (c | 0x20) == b'b';
+    }
+    if !(dollar || underscore || b) {
+        return false;
+    }
     let has = |needle: &[u8]| {
         code.windows(needle.len())
             .position(|w| w.eq_ignore_ascii_case(needle))
     };
-    if memchr::memchr(b'$', code).is_some()
+    if dollar
         && [
             &b"$VEL"[..],
             b"$ACC",
@@ -608,7 +642,7 @@ fn sets_motion(line: &str) -> bool {
     {
         return true;
     }
-    if memchr::memchr(b'_', code).is_some()
+    if underscore
         && [&b"PDAT_ACT"[..], b"LDAT_ACT", b"FDAT_ACT"]
             .iter()
             .any(|w| has(w).is_some())
@@ -616,7 +650,7 @@ fn sets_motion(line: &str) -> bool {
         return true;
     }
     // `BAS(` or `BAS (` as a word of its own.
-    memchr::memchr2_iter(b'b', b'B', code).any(|i| {
+    b && memchr::memchr2_iter(b'b', b'B', code).any(|i| {
         code.get(i..i + 3)
             .is_some_and(|w| w.eq_ignore_ascii_case(b"BAS"))
             && (i == 0 || !(code[i - 1].is_ascii_alphanumeric() || b"_$".contains(&code[i - 1])))
@@ -872,7 +906,7 @@ mod tests {
                 "Move",
                 "MoveJ [[1,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]], v1000, z50, tool0;",
             );
-            assert!(seen.insert(line.into_owned().to_ascii_lowercase()));
+            assert!(seen.insert(line.to_ascii_lowercase()));
         }
         assert!(many.tries < 3 * 20_000, "{} names tried", many.tries);
         assert_eq!(base_name(""), "P");
