@@ -3,7 +3,12 @@
 //! ```text
 //! cargo bench --bench cells                         # 10,000 steps, 1 and 4 controllers
 //! SKILLPOST_BENCH_ITERS=21 cargo bench --bench cells
+//! SKILLPOST_BENCH_KEEP=/tmp/cells cargo bench --bench cells   # keep the projects (`one`, `four`)
 //! ```
+//!
+//! The kept projects compile with the CLI (`skillpost Blackboard.aml out` in each folder), so
+//! the two can be compared by instruction counts (`valgrind --tool=callgrind`), which the
+//! machine's load does not move.
 //!
 //! The same generated chart (`benches/common/generator.rs`: 10,000 skill steps with simultaneous
 //! branches, selections and a loop around the whole) is compiled on one controller and on four
@@ -55,9 +60,13 @@ fn main() {
         looped: true,
     };
     let tmp = tempfile::tempdir().unwrap();
-    let one = tmp.path().join("one");
+    let root = match std::env::var_os("SKILLPOST_BENCH_KEEP") {
+        Some(d) => std::path::PathBuf::from(d),
+        None => tmp.path().to_path_buf(),
+    };
+    let one = root.join("one");
     let project = generator::write_project(&one, &spec).unwrap();
-    let four = tmp.path().join("four");
+    let four = root.join("four");
     std::fs::create_dir_all(&four).unwrap();
     let single = generator::blackboard_text(generator::SFC_FILE, generator::IRL_FILE);
     let bb = cell::cell_blackboard(
