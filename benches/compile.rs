@@ -879,7 +879,7 @@ fn stages(bb_path: &Path) -> (Vec<Duration>, Vec<(&'static str, String)>) {
         steps_indent: template.steps_indent(),
         profile,
         cell: None,
-        max_lines: 0,
+        max_lines: skillpost::emit::split::Limits::default().of(Language::Krl),
     };
     let files: Vec<OutputFile> =
         skillpost::emit::emit_files(&input, &template, &mut diags).expect("emit");

@@ -390,6 +390,36 @@ fn declared_name<'t>(after: &'t str, keyword: &str) -> Option<&'t str> {
     it.next()
 }
 
+/// The first name a declaration declares: `first` is its first word (`DECL` or a type),
+/// `after` the text after it. After `DECL` come `GLOBAL` or `CONST`, then the type; the name
+/// ends at `=`, `[`, `,`, `(` or white space. `None` when there is none.
+fn declared_variable<'t>(first: &str, after: &'t str) -> Option<&'t str> {
+    // Bytes, not upper-cased words: every declaration of every `.dat` passes here (100,000
+    // points).
+    let word_end = |s: &str| {
+        s.bytes()
+            .position(|c| !(c.is_ascii_alphanumeric() || c == b'_' || c == b'$'))
+            .unwrap_or(s.len())
+    };
+    let mut rest = after;
+    if first == "DECL" {
+        loop {
+            let w = &rest[..word_end(rest)];
+            if !(w.eq_ignore_ascii_case("GLOBAL") || w.eq_ignore_ascii_case("CONST")) {
+                break;
+            }
+            rest = rest[w.len()..].trim_start();
+        }
+        // The type.
+        rest = rest[word_end(rest)..].trim_start();
+    }
+    let end = rest
+        .bytes()
+        .position(|c| matches!(c, b'=' | b'[' | b',' | b'(') || c.is_ascii_whitespace())
+        .unwrap_or(rest.len());
+    Some(&rest[..end]).filter(|n| !n.is_empty())
+}
+
 fn krl(unit: Unit, text: &str) -> Checked {
     let mut b = Blocks::new();
     let mut folds: Vec<usize> = Vec::new();
@@ -443,6 +473,22 @@ fn krl(unit: Unit, text: &str) -> Checked {
         }
         // Declarations: before the first statement of their routine.
         let declaration = w == "DECL" || (KRL_TYPES.contains(&w) && !code.contains('='));
+        // The name a declaration declares: a KRL name too (a point named after a long step
+        // once was not, and the controller refuses the whole data list).
+        if declaration
+            && let Some(name) = declared_variable(w, after)
+            && !is_krl_name(name)
+        {
+            problem!(
+                b,
+                line,
+                col,
+                format!(
+                    "`{name}` is no KRL name (a letter or `_`, then letters, digits or `_`, at \
+                     most 24 characters)"
+                ),
+            );
+        }
         let in_routine = b.in_any(&["DEF", "DEFFCT"]);
         if declaration && in_routine && executed {
             problem!(
@@ -790,6 +836,15 @@ mod tests {
             [
                 "1:1: `Move-It` is no KRL name (a letter or `_`, then letters, digits or `_`, at most 24 characters)",
                 "3:1: `ThisNameIsFarTooLongForKrl_1` is no KRL name (a letter or `_`, then letters, digits or `_`, at most 24 characters)"
+            ]
+        );
+        // What a declaration declares is a KRL name too.
+        let dat = "DEFDAT P\nDECL E6POS XPick={X 1, Y 2}\nDECL GLOBAL CONST INT n=1\nINT i, j\nDECL REAL v[10]\nSIGNAL skp_rx $IN[1] TO $IN[4]\nDECL E6POS XAVeryLongStepNameThatGoesOnAndOn={X 1}\nDECL INT 1st\nDECL FDAT FPick={TOOL_NO 1}\nENDDAT\n";
+        assert_eq!(
+            msgs(Language::Krl, Unit::Data, dat),
+            [
+                "7:1: `XAVeryLongStepNameThatGoesOnAndOn` is no KRL name (a letter or `_`, then letters, digits or `_`, at most 24 characters)",
+                "8:1: `1st` is no KRL name (a letter or `_`, then letters, digits or `_`, at most 24 characters)"
             ]
         );
     }
