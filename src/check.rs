@@ -456,27 +456,16 @@ fn krl(unit: Unit, text: &str) -> Checked {
         }
         let w = word.as_str();
         let toplevel = b.stack.is_empty();
-        // Names: of a routine or a data list, a KRL name.
-        if let kw @ ("DEF" | "DEFFCT" | "DEFDAT") = w
-            && let Some(name) = declared_name(after, kw)
-            && !is_krl_name(name)
-        {
-            problem!(
-                b,
-                line,
-                col,
-                format!(
-                    "`{name}` is no KRL name (a letter or `_`, then letters, digits or `_`, at \
-                     most 24 characters)"
-                ),
-            );
-        }
         // Declarations: before the first statement of their routine.
         let declaration = w == "DECL" || (KRL_TYPES.contains(&w) && !code.contains('='));
-        // The name a declaration declares: a KRL name too (a point named after a long step
-        // once was not, and the controller refuses the whole data list).
-        if declaration
-            && let Some(name) = declared_variable(w, after)
+        // Names: of a routine, a data list or what a declaration declares, a KRL name (a point
+        // named after a long step once was not, and the controller refuses the data list).
+        let name = match w {
+            kw @ ("DEF" | "DEFFCT" | "DEFDAT") => declared_name(after, kw),
+            _ if declaration => declared_variable(w, after),
+            _ => None,
+        };
+        if let Some(name) = name
             && !is_krl_name(name)
         {
             problem!(
