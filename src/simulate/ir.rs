@@ -254,6 +254,23 @@ pub enum Ins {
 /// A statement's place in the program text: its line (1-based).
 pub type Line = u32;
 
+/// How many lines the readers put in the places of calls (a routine's body for each call, the
+/// calls in it too, eight deep), all calls together: 64 for each line of the program, and
+/// 10,000 more. A program whose routines call each other many times over (a fuzzer's: a
+/// routine holding the calls of the main program) grew exponentially before; a call past the
+/// limit is read as a statement not understood.
+pub fn inline_limit(source_lines: usize) -> usize {
+    source_lines.saturating_mul(64).saturating_add(10_000)
+}
+
+/// What a call past [`inline_limit`] is read as.
+pub fn not_inlined(call: &str, limit: usize) -> Ins {
+    Ins::Unknown(format!(
+        "{}: not read, the calls of this program's routines would put more than {limit} lines in their places",
+        call.trim()
+    ))
+}
+
 /// A program read: instructions, each with its line; variables and their first values.
 #[derive(Debug, Clone, Default)]
 pub struct Program {

@@ -251,6 +251,10 @@ struct Reader<'a> {
     labels: HashMap<String, usize>,
     gotos: Vec<(usize, String)>,
     depth: usize,
+    /// Lines put in the places of calls so far, and the most there may be
+    /// ([`super::ir::inline_limit`]).
+    inlined: usize,
+    inline_limit: usize,
     /// The message text last set (`skp_msg.Msg_Txt[] = "…"`).
     msg: Option<String>,
     /// FOLDs open, and the depth of the step's FOLD while in one.
@@ -295,6 +299,8 @@ pub fn read(src: &str, dat: &str, io: &super::ir::IoKeys) -> Program {
         labels: HashMap::new(),
         gotos: Vec::new(),
         depth: 0,
+        inlined: 0,
+        inline_limit: super::ir::inline_limit(lines.len()),
         msg: None,
         folds: 0,
         step_fold: None,
@@ -895,6 +901,12 @@ impl Reader<'_> {
                 let r = &self.routines[&name];
                 (r.params.clone(), r.body.clone())
             };
+            if self.inlined + body.len() > self.inline_limit {
+                let ins = super::ir::not_inlined(c, self.inline_limit);
+                self.p.push(ins, line);
+                return;
+            }
+            self.inlined += body.len();
             for (p, a) in params.iter().zip(&args) {
                 if let Ok(x) = self.expr(a) {
                     self.p.push(Ins::Assign(p.clone(), x), line);
@@ -920,6 +932,23 @@ impl Reader<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Routines that call each other many times over (a fuzzer found one: 46 s to read) are put
+    /// in the places of their calls only up to a limit; the rest is a statement not understood.
+    #[test]
+    fn routines_calling_each_other_many_times_over_are_read_in_bounded_time() {
+        let calls = "  A()\n".repeat(12);
+        let src = format!("DEF P( )\n{calls}END\nDEF A( )\n{calls}END\n");
+        let p = read(&src, "DEFDAT P\nENDDAT\n", &Default::default());
+        // 12 calls eight deep would be 12^8 = 430 million bodies.
+        assert!(p.ins.len() < 200_000, "{} instructions", p.ins.len());
+        assert!(
+            p.ins
+                .iter()
+                .any(|(i, _)| matches!(i, Ins::Unknown(t) if t.contains("not read"))),
+            "the calls past the limit are not understood"
+        );
+    }
 
     #[test]
     fn a_main_program_with_a_routine_and_signals() {

@@ -161,6 +161,10 @@ struct Reader<'a> {
     labels: HashMap<String, usize>,
     gotos: Vec<(usize, String)>,
     depth: usize,
+    /// Lines put in the places of calls so far, and the most there may be
+    /// ([`super::ir::inline_limit`]).
+    inlined: usize,
+    inline_limit: usize,
     /// In a step's own code (after its title comment).
     in_step: bool,
 }
@@ -234,6 +238,8 @@ pub fn read(text: &str, io: &IoKeys) -> Program {
         labels: HashMap::new(),
         gotos: Vec::new(),
         depth: 0,
+        inlined: 0,
+        inline_limit: super::ir::inline_limit(text.lines().count()),
         in_step: false,
     };
     let body = st[a..b.min(st.len())].to_vec();
@@ -861,6 +867,12 @@ impl Reader<'_> {
                         let p = &self.procs[&first];
                         (p.params.clone(), p.body.clone())
                     };
+                    if self.inlined + body.len() > self.inline_limit {
+                        let ins = super::ir::not_inlined(s, self.inline_limit);
+                        self.p.push(ins, line);
+                        return;
+                    }
+                    self.inlined += body.len();
                     for (p, a) in params.iter().zip(&plain) {
                         if let Ok(x) = self.expr(a) {
                             self.vars.insert(p.clone());

@@ -94,6 +94,10 @@ struct Reader<'a> {
     defs: HashMap<String, Def>,
     open: Vec<Open>,
     depth: usize,
+    /// Lines put in the places of calls so far, and the most there may be
+    /// ([`super::ir::inline_limit`]).
+    inlined: usize,
+    inline_limit: usize,
     /// In a step's own code (after its title comment).
     in_step: bool,
 }
@@ -227,6 +231,8 @@ pub fn read(text: &str, io: &IoKeys) -> Program {
         defs,
         open: Vec::new(),
         depth: 0,
+        inlined: 0,
+        inline_limit: super::ir::inline_limit(text.lines().count()),
         in_step: false,
     };
     r.block(body);
@@ -563,6 +569,12 @@ impl Reader<'_> {
                 if self.defs.contains_key(first) && self.depth < 8 {
                     let args = self.call_args(c);
                     let (params, body) = self.defs[first].clone();
+                    if self.inlined + body.len() > self.inline_limit {
+                        let ins = super::ir::not_inlined(c, self.inline_limit);
+                        self.p.push(ins, line);
+                        return;
+                    }
+                    self.inlined += body.len();
                     for (p, a) in params.iter().zip(&args) {
                         if let Ok(x) = self.expr(a) {
                             self.p.push(Ins::Assign(p.clone(), x), line);
