@@ -147,13 +147,17 @@ impl Word {
     }
 }
 
+/// Where the word `s` starts with ends (letters, digits, `_`, `$`; [`is_word_char`] on bytes: a
+/// byte that is not ASCII is no word character, as its character is none).
+fn word_end(s: &str) -> usize {
+    s.bytes()
+        .position(|c| !(c.is_ascii_alphanumeric() || c == b'_' || c == b'$'))
+        .unwrap_or(s.len())
+}
+
 /// The first word of `code` (letters, digits, `_`, `$`), upper case, and the text after it.
 fn first_word(code: &str) -> (Word, &str) {
-    // (A byte that is not ASCII is no word character, as its character is none.)
-    let end = code
-        .bytes()
-        .position(|c| !(c.is_ascii_alphanumeric() || c == b'_' || c == b'$'))
-        .unwrap_or(code.len());
+    let end = word_end(code);
     let mut w = Word {
         buf: [0; 16],
         len: 0,
@@ -396,11 +400,6 @@ fn declared_name<'t>(after: &'t str, keyword: &str) -> Option<&'t str> {
 fn declared_variable<'t>(first: &str, after: &'t str) -> Option<&'t str> {
     // Bytes, not upper-cased words: every declaration of every `.dat` passes here (100,000
     // points).
-    let word_end = |s: &str| {
-        s.bytes()
-            .position(|c| !(c.is_ascii_alphanumeric() || c == b'_' || c == b'$'))
-            .unwrap_or(s.len())
-    };
     let mut rest = after;
     if first == "DECL" {
         loop {

@@ -254,21 +254,38 @@ pub enum Ins {
 /// A statement's place in the program text: its line (1-based).
 pub type Line = u32;
 
-/// How many lines the readers put in the places of calls (a routine's body for each call, the
+/// How many lines a reader puts in the places of calls (a routine's body for each call, the
 /// calls in it too, eight deep), all calls together: 64 for each line of the program, and
 /// 10,000 more. A program whose routines call each other many times over (a fuzzer's: a
 /// routine holding the calls of the main program) grew exponentially before; a call past the
 /// limit is read as a statement not understood.
-pub fn inline_limit(source_lines: usize) -> usize {
-    source_lines.saturating_mul(64).saturating_add(10_000)
+pub struct InlineBudget {
+    used: usize,
+    limit: usize,
 }
 
-/// What a call past [`inline_limit`] is read as.
-pub fn not_inlined(call: &str, limit: usize) -> Ins {
-    Ins::Unknown(format!(
-        "{}: not read, the calls of this program's routines would put more than {limit} lines in their places",
-        call.trim()
-    ))
+impl InlineBudget {
+    /// The budget of a program of `source_lines` lines.
+    pub fn new(source_lines: usize) -> Self {
+        InlineBudget {
+            used: 0,
+            limit: source_lines.saturating_mul(64).saturating_add(10_000),
+        }
+    }
+
+    /// Takes `lines` for the body of `call`; past the limit, nothing is taken and the
+    /// statement the call is read as instead.
+    pub fn take(&mut self, lines: usize, call: &str) -> Result<(), Ins> {
+        if self.used + lines > self.limit {
+            return Err(Ins::Unknown(format!(
+                "{}: not read, the calls of this program's routines would put more than {} lines in their places",
+                call.trim(),
+                self.limit
+            )));
+        }
+        self.used += lines;
+        Ok(())
+    }
 }
 
 /// A program read: instructions, each with its line; variables and their first values.

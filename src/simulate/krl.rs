@@ -251,10 +251,8 @@ struct Reader<'a> {
     labels: HashMap<String, usize>,
     gotos: Vec<(usize, String)>,
     depth: usize,
-    /// Lines put in the places of calls so far, and the most there may be
-    /// ([`super::ir::inline_limit`]).
-    inlined: usize,
-    inline_limit: usize,
+    /// The lines calls may still put in their places.
+    inlined: super::ir::InlineBudget,
     /// The message text last set (`skp_msg.Msg_Txt[] = "…"`).
     msg: Option<String>,
     /// FOLDs open, and the depth of the step's FOLD while in one.
@@ -299,8 +297,7 @@ pub fn read(src: &str, dat: &str, io: &super::ir::IoKeys) -> Program {
         labels: HashMap::new(),
         gotos: Vec::new(),
         depth: 0,
-        inlined: 0,
-        inline_limit: super::ir::inline_limit(lines.len()),
+        inlined: super::ir::InlineBudget::new(lines.len()),
         msg: None,
         folds: 0,
         step_fold: None,
@@ -901,12 +898,10 @@ impl Reader<'_> {
                 let r = &self.routines[&name];
                 (r.params.clone(), r.body.clone())
             };
-            if self.inlined + body.len() > self.inline_limit {
-                let ins = super::ir::not_inlined(c, self.inline_limit);
+            if let Err(ins) = self.inlined.take(body.len(), c) {
                 self.p.push(ins, line);
                 return;
             }
-            self.inlined += body.len();
             for (p, a) in params.iter().zip(&args) {
                 if let Ok(x) = self.expr(a) {
                     self.p.push(Ins::Assign(p.clone(), x), line);

@@ -161,10 +161,8 @@ struct Reader<'a> {
     labels: HashMap<String, usize>,
     gotos: Vec<(usize, String)>,
     depth: usize,
-    /// Lines put in the places of calls so far, and the most there may be
-    /// ([`super::ir::inline_limit`]).
-    inlined: usize,
-    inline_limit: usize,
+    /// The lines calls may still put in their places.
+    inlined: super::ir::InlineBudget,
     /// In a step's own code (after its title comment).
     in_step: bool,
 }
@@ -238,8 +236,7 @@ pub fn read(text: &str, io: &IoKeys) -> Program {
         labels: HashMap::new(),
         gotos: Vec::new(),
         depth: 0,
-        inlined: 0,
-        inline_limit: super::ir::inline_limit(text.lines().count()),
+        inlined: super::ir::InlineBudget::new(text.lines().count()),
         in_step: false,
     };
     let body = st[a..b.min(st.len())].to_vec();
@@ -867,12 +864,10 @@ impl Reader<'_> {
                         let p = &self.procs[&first];
                         (p.params.clone(), p.body.clone())
                     };
-                    if self.inlined + body.len() > self.inline_limit {
-                        let ins = super::ir::not_inlined(s, self.inline_limit);
+                    if let Err(ins) = self.inlined.take(body.len(), s) {
                         self.p.push(ins, line);
                         return;
                     }
-                    self.inlined += body.len();
                     for (p, a) in params.iter().zip(&plain) {
                         if let Ok(x) = self.expr(a) {
                             self.vars.insert(p.clone());

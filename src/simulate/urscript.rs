@@ -94,10 +94,8 @@ struct Reader<'a> {
     defs: HashMap<String, Def>,
     open: Vec<Open>,
     depth: usize,
-    /// Lines put in the places of calls so far, and the most there may be
-    /// ([`super::ir::inline_limit`]).
-    inlined: usize,
-    inline_limit: usize,
+    /// The lines calls may still put in their places.
+    inlined: super::ir::InlineBudget,
     /// In a step's own code (after its title comment).
     in_step: bool,
 }
@@ -231,8 +229,7 @@ pub fn read(text: &str, io: &IoKeys) -> Program {
         defs,
         open: Vec::new(),
         depth: 0,
-        inlined: 0,
-        inline_limit: super::ir::inline_limit(text.lines().count()),
+        inlined: super::ir::InlineBudget::new(text.lines().count()),
         in_step: false,
     };
     r.block(body);
@@ -569,12 +566,10 @@ impl Reader<'_> {
                 if self.defs.contains_key(first) && self.depth < 8 {
                     let args = self.call_args(c);
                     let (params, body) = self.defs[first].clone();
-                    if self.inlined + body.len() > self.inline_limit {
-                        let ins = super::ir::not_inlined(c, self.inline_limit);
+                    if let Err(ins) = self.inlined.take(body.len(), c) {
                         self.p.push(ins, line);
                         return;
                     }
-                    self.inlined += body.len();
                     for (p, a) in params.iter().zip(&args) {
                         if let Ok(x) = self.expr(a) {
                             self.p.push(Ins::Assign(p.clone(), x), line);
