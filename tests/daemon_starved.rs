@@ -6,7 +6,6 @@
 mod inproc;
 
 use std::fs;
-use std::io::Write as _;
 use std::time::Duration;
 
 use inproc::*;
@@ -31,24 +30,17 @@ fn a_compile_that_ran_out_of_descriptors_is_tried_again() {
     d.wait_for("the first compile", WAIT, |e| {
         is_for(e, "compile-succeeded", &a)
     });
-    // The edit's bytes and handle first, then every other descriptor taken.
-    let text = sfc_with_x(777);
-    let mut sfc = fs::OpenOptions::new()
-        .write(true)
-        .truncate(true)
-        .open(a.join("sfc.xml"))
-        .unwrap();
+    // The edit is written beside the workspace first and renamed over the chart once every
+    // descriptor is taken: the daemon sees one complete new file (an in-place save would show it
+    // an empty file first, which it rightly takes for a save in progress, not for a shortage).
+    let staged = w.root.join("sfc.xml.new");
+    fs::write(&staged, sfc_with_x(777)).unwrap();
     let mut filler = Vec::new();
     while let Ok(f) = fs::File::open("/dev/null") {
         filler.push(f);
     }
     let mark = d.mark();
-    sfc.write_all(text.as_bytes()).unwrap();
-    drop(sfc);
-    // The one descriptor the close freed, taken again at once.
-    while let Ok(f) = fs::File::open("/dev/null") {
-        filler.push(f);
-    }
+    fs::rename(&staged, a.join("sfc.xml")).unwrap();
     let evs = d.wait_for("the retry", Duration::from_secs(30), |e| {
         is_after(e, "compile-retrying", &a, mark) || is_after(e, "compile-failed", &a, mark)
     });
