@@ -252,6 +252,12 @@ fn compiles_go_on_while_a_hook_hangs_and_the_newest_waiting_hook_runs_after_it()
         "one hook at a time\n{}",
         dump(&evs)
     );
+    // The programs of a compile go to the hook's queue once the inputs have been quiet for the
+    // quiet period after it; on a slow machine an earlier edit's may already wait there. No
+    // event says when the last one is queued: the gate opens after ten quiet periods, so that
+    // the newest is the one waiting (opened earlier, the waiting one runs and the newest after
+    // it: three hooks, also right, but not what this test is about).
+    sleep(Duration::from_millis(10 * SETTLE_MS));
     fs::write(&gate, "").unwrap();
     let evs = d.wait_for("the second hook's end", WAIT, |e| {
         is_for(e, "deploy-succeeded", &a) && e["run_id"].as_u64() > Some(1)
