@@ -103,6 +103,56 @@ struct Open {
     closed_else: bool,
 }
 
+/// The lines of `text` as [`str::lines`] gives them (split at `\n`, a `\r` before it cut, no
+/// empty line after a final line break), the breaks found by `memchr` over the whole text: a
+/// program of 100,000 steps has a million lines, and `str::lines` searches each anew.
+fn lines(text: &str) -> impl Iterator<Item = &str> {
+    let mut breaks = memchr::memchr_iter(b'\n', text.as_bytes());
+    let mut start = 0;
+    std::iter::from_fn(move || match breaks.next() {
+        Some(i) => {
+            let line = &text[start..i];
+            start = i + 1;
+            Some(line.strip_suffix('\r').unwrap_or(line))
+        }
+        None if start < text.len() => {
+            let line = &text[start..];
+            start = text.len();
+            Some(line)
+        }
+        None => None,
+    })
+}
+
+/// Whether an ASCII byte is white space as [`char::is_whitespace`] has it (the vertical tab
+/// too, which [`u8::is_ascii_whitespace`] leaves out).
+fn is_space(c: u8) -> bool {
+    matches!(c, b'\t' | b'\n' | 0x0b | 0x0c | b'\r' | b' ')
+}
+
+/// `s` without its leading white space, as [`str::trim_start`]; ASCII white space is skipped
+/// byte by byte, the rest (rare) left to `trim_start`.
+fn trim_start(s: &str) -> &str {
+    let n = s.bytes().position(|c| !is_space(c)).unwrap_or(s.len());
+    let rest = &s[n..];
+    if rest.as_bytes().first().is_some_and(|c| !c.is_ascii()) {
+        rest.trim_start()
+    } else {
+        rest
+    }
+}
+
+/// `s` without its trailing white space, as [`str::trim_end`] (ASCII byte by byte, as above).
+fn trim_end(s: &str) -> &str {
+    let n = s.bytes().rposition(|c| !is_space(c)).map_or(0, |i| i + 1);
+    let rest = &s[..n];
+    if rest.as_bytes().last().is_some_and(|c| !c.is_ascii()) {
+        rest.trim_end()
+    } else {
+        rest
+    }
+}
+
 /// The code of a line without its comment (`comment` outside `"strings"`), and where the code
 /// starts (1-based column).
 fn code_of(line: &str, comment: char) -> (&str, usize) {
@@ -124,9 +174,14 @@ fn code_of(line: &str, comment: char) -> (&str, usize) {
         at = i + 1;
     }
     let code = &line[..end];
-    let trimmed = code.trim_start();
-    let column = code[..code.len() - trimmed.len()].chars().count() + 1;
-    (trimmed.trim_end(), column)
+    let trimmed = trim_start(code);
+    let indent = &code[..code.len() - trimmed.len()];
+    let column = if indent.is_ascii() {
+        indent.len()
+    } else {
+        indent.chars().count()
+    } + 1;
+    (trim_end(trimmed), column)
 }
 
 /// The first word, upper case (letters, digits, `_`, `$`).
@@ -162,13 +217,12 @@ fn first_word(code: &str) -> (Word, &str) {
         buf: [0; 16],
         len: 0,
     };
-    if end <= 16 {
-        for (i, b) in code.as_bytes()[..end].iter().enumerate() {
-            w.buf[i] = b.to_ascii_uppercase();
-        }
+    if let Some(buf) = w.buf.get_mut(..end) {
+        buf.copy_from_slice(&code.as_bytes()[..end]);
+        buf.make_ascii_uppercase();
         w.len = end;
     }
-    (w, code[end..].trim_start())
+    (w, trim_start(&code[end..]))
 }
 
 /// Whether the last word of `code` is `word` (any case).
@@ -425,15 +479,15 @@ fn krl(unit: Unit, text: &str) -> Checked {
     const LOOPS: &[&str] = &["LOOP", "WHILE", "FOR", "REPEAT"];
     // In the routine open now: an executable statement was seen (declarations come first).
     let mut executed = false;
-    for (n, raw) in text.lines().enumerate() {
+    for (n, raw) in lines(text).enumerate() {
         if b.stopped {
             break;
         }
         let line = n + 1;
         // Folds are comments: `;FOLD` … `;ENDFOLD`.
-        let t = raw.trim_start();
+        let t = trim_start(raw);
         if let Some(rest) = t.strip_prefix(';') {
-            let (w, _) = first_word(rest.trim_start());
+            let (w, _) = first_word(trim_start(rest));
             let w = w.as_str();
             if w == "FOLD" {
                 if b.too_deep(folds.len(), line, 1) {
@@ -565,7 +619,7 @@ fn krl(unit: Unit, text: &str) -> Checked {
 fn rapid(unit: Unit, text: &str) -> Checked {
     let mut b = Blocks::new();
     const ROUTINES: &[&str] = &["PROC", "FUNC", "TRAP"];
-    for (n, raw) in text.lines().enumerate() {
+    for (n, raw) in lines(text).enumerate() {
         if b.stopped {
             break;
         }
@@ -658,7 +712,7 @@ fn rapid(unit: Unit, text: &str) -> Checked {
 
 fn urscript(text: &str) -> Checked {
     let mut b = Blocks::new();
-    for (n, raw) in text.lines().enumerate() {
+    for (n, raw) in lines(text).enumerate() {
         if b.stopped {
             break;
         }
@@ -744,6 +798,38 @@ mod tests {
             .into_iter()
             .map(|p| format!("{}:{}: {}", p.line, p.column, p.message))
             .collect()
+    }
+
+    /// The byte-wise line splitting and trimming give what `str::lines` and `str::trim_*` give,
+    /// for line breaks of every kind and white space beyond ASCII (a `.src` a user checks with
+    /// `skillpost check` may hold any).
+    #[test]
+    fn the_fast_lines_and_trims_equal_the_standard_ones() {
+        let texts = [
+            "",
+            "\n",
+            "a",
+            "a\n",
+            "a\r\nb\rc\n\r\n",
+            "x\r",
+            "\r\n\r\n",
+            "  \u{a0} x \u{3000}\n\u{2003}y\t\r\n \u{85}",
+            "\u{b}z\u{c}\n\t\n",
+        ];
+        for t in texts {
+            assert_eq!(
+                lines(t).collect::<Vec<_>>(),
+                t.lines().collect::<Vec<_>>(),
+                "{t:?}"
+            );
+            for l in t.split('\n').chain(t.lines()) {
+                assert_eq!(trim_start(l), l.trim_start(), "{l:?}");
+                assert_eq!(trim_end(l), l.trim_end(), "{l:?}");
+            }
+        }
+        // The column counts characters of the indentation.
+        assert_eq!(code_of("\u{3000}\u{3000}PTP P1 ; x", ';'), ("PTP P1", 3));
+        assert_eq!(code_of("\t  WAIT SEC 1", ';'), ("WAIT SEC 1", 4));
     }
 
     #[test]
