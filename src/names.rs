@@ -219,6 +219,10 @@ pub fn is_krl_keyword(name: &str) -> bool {
 /// letters reduced to their base letter where known, anything else `?`. Control characters
 /// (line breaks) become spaces so a comment stays one line.
 pub fn transliterate(text: &str) -> String {
+    // Printable ASCII stays as it is (most text: copied whole).
+    if text.bytes().all(|b| (0x20..0x7f).contains(&b)) {
+        return text.to_owned();
+    }
     let mut out = String::with_capacity(text.len());
     for c in text.chars() {
         if c.is_ascii() {
@@ -358,5 +362,7 @@ mod tests {
     fn transliteration() {
         assert_eq!(transliterate("Schweißen Überkopf"), "Schweissen Ueberkopf");
         assert_eq!(transliterate("a\r\nb"), "a  b");
+        // DEL is a control character too; printable ASCII stays.
+        assert_eq!(transliterate("a\u{7f}b ~{}"), "a b ~{}");
     }
 }

@@ -7,6 +7,10 @@ use super::*;
 
 /// `text` with no quote or backslash (inside a string literal of any of the three languages).
 pub(super) fn clean(t: &str) -> String {
+    // Most texts have neither: copied whole (every handshake cleans several).
+    if memchr::memchr2(b'"', b'\\', t.as_bytes()).is_none() {
+        return t.to_owned();
+    }
     t.chars()
         .map(|c| match c {
             '"' => '\'',
@@ -56,10 +60,15 @@ fn rapid_whole(cond: &str) -> std::borrow::Cow<'_, str> {
 /// A message for KRL's `Msg_Txt` and RAPID's lines (80 characters): `text`, or where it is
 /// longer `short`, cut at 80; both cleaned.
 pub(super) fn fit(text: &str, short: &str) -> String {
-    if text.chars().count() <= 80 {
+    // At most 80 bytes is at most 80 characters: counted only when longer.
+    if text.len() <= 80 || text.chars().count() <= 80 {
         return clean(text);
     }
-    clean(short).chars().take(80).collect()
+    let short = clean(short);
+    if short.len() <= 80 {
+        return short;
+    }
+    short.chars().take(80).collect()
 }
 
 /// Milliseconds as seconds, as short as the value allows (`10`, `0.05`).
@@ -570,5 +579,23 @@ impl<'a> Hand<'a> {
             ]);
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn messages_are_cleaned_and_cut_at_80_characters() {
+        assert_eq!(clean(r#"a "b" c\d"#), "a 'b' c/d");
+        assert_eq!(clean("plain"), "plain");
+        let long = "ä".repeat(50);
+        // 100 bytes but 50 characters: whole.
+        assert_eq!(fit(&long, "short"), long);
+        let longer = "x\"".repeat(50);
+        assert_eq!(fit(&longer, "the \"short\" one"), "the 'short' one");
+        let both = "é".repeat(100);
+        assert_eq!(fit(&both, &both).chars().count(), 80);
     }
 }
