@@ -9,6 +9,7 @@
 //! emission order: left to right by the x of each branch head, ties in document order; for
 //! selections that order is their priority.
 
+mod analysis;
 pub mod cell;
 mod checks;
 mod circles;
