@@ -102,12 +102,15 @@ pub fn complete(bound: &mut Bound, irls: &[Irl], files: &[usize], lang: Language
         }
     }
     let mut candidates: Vec<((usize, usize), Vec<String>)> = Vec::new();
+    // Looked up once per definition of the files (4,000 of them: a scan of the list each was
+    // quadratic).
+    let held: HashSet<(usize, usize)> = bound.definitions.iter().copied().collect();
     for &i in files {
         if irls[i].language != lang {
             continue;
         }
         for (d, def) in irls[i].definitions.iter().enumerate() {
-            if bound.definitions.contains(&(i, d)) {
+            if held.contains(&(i, d)) {
                 continue;
             }
             let names: Vec<String> = routines(lang, def).iter().map(|r| key(lang, r)).collect();
