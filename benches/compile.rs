@@ -47,6 +47,8 @@ use skillpost::plan;
 use skillpost::read::irl::Irl;
 use skillpost::read::{blackboard::read_blackboard, irl::read_irl, sfc::read_sfc, xml};
 
+#[path = "common/floor.rs"]
+mod floor;
 #[path = "common/generator.rs"]
 mod generator;
 
@@ -688,28 +690,8 @@ fn floor(text: &str) -> Duration {
 }
 
 fn stream_floor(text: &str) -> Duration {
-    use quick_xml::events::Event;
     let t = Instant::now();
-    let mut reader = quick_xml::Reader::from_str(text);
-    let mut attributes = 0usize;
-    loop {
-        match reader
-            .read_event()
-            .expect("the generated SFC is well-formed")
-        {
-            Event::Start(e) | Event::Empty(e) => {
-                for a in e.attributes() {
-                    black_box(a.expect("well-formed attributes"));
-                    attributes += 1;
-                }
-            }
-            Event::Eof => break,
-            ev => {
-                black_box(ev);
-            }
-        }
-    }
-    black_box(attributes);
+    floor::quick_xml_pass(text).expect("the generated SFC is well-formed");
     t.elapsed()
 }
 
