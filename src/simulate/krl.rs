@@ -894,14 +894,15 @@ impl Reader<'_> {
                         .collect()
                 })
                 .unwrap_or_default();
+            // Refused before the body is copied.
+            if let Err(ins) = self.inlined.take(self.routines[&name].body.len(), c) {
+                self.p.push(ins, line);
+                return;
+            }
             let (params, body) = {
                 let r = &self.routines[&name];
                 (r.params.clone(), r.body.clone())
             };
-            if let Err(ins) = self.inlined.take(body.len(), c) {
-                self.p.push(ins, line);
-                return;
-            }
             for (p, a) in params.iter().zip(&args) {
                 if let Ok(x) = self.expr(a) {
                     self.p.push(Ins::Assign(p.clone(), x), line);

@@ -860,14 +860,15 @@ impl Reader<'_> {
                 // A call of a PROC of the module.
                 if self.procs.contains_key(&first) && self.depth < 8 {
                     let (plain, _) = Self::args(rest);
+                    // Refused before the body is copied.
+                    if let Err(ins) = self.inlined.take(self.procs[&first].body.len(), s) {
+                        self.p.push(ins, line);
+                        return;
+                    }
                     let (params, body) = {
                         let p = &self.procs[&first];
                         (p.params.clone(), p.body.clone())
                     };
-                    if let Err(ins) = self.inlined.take(body.len(), s) {
-                        self.p.push(ins, line);
-                        return;
-                    }
                     for (p, a) in params.iter().zip(&plain) {
                         if let Ok(x) = self.expr(a) {
                             self.vars.insert(p.clone());

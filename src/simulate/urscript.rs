@@ -565,11 +565,12 @@ impl Reader<'_> {
                 // A call of a def of the program.
                 if self.defs.contains_key(first) && self.depth < 8 {
                     let args = self.call_args(c);
-                    let (params, body) = self.defs[first].clone();
-                    if let Err(ins) = self.inlined.take(body.len(), c) {
+                    // Refused before the body is copied.
+                    if let Err(ins) = self.inlined.take(self.defs[first].1.len(), c) {
                         self.p.push(ins, line);
                         return;
                     }
+                    let (params, body) = self.defs[first].clone();
                     for (p, a) in params.iter().zip(&args) {
                         if let Ok(x) = self.expr(a) {
                             self.p.push(Ins::Assign(p.clone(), x), line);
