@@ -9,23 +9,23 @@ use std::hint::black_box;
 use quick_xml::events::Event;
 
 /// Reads `text` with quick-xml: the number of elements and attributes, or the first error.
-pub fn quick_xml_pass(text: &str) -> Result<(usize, usize), String> {
+pub fn quick_xml_pass(text: &str) -> Result<(usize, usize), quick_xml::Error> {
     let mut reader = quick_xml::Reader::from_str(text);
     let (mut elements, mut attributes) = (0usize, 0usize);
     loop {
-        match reader.read_event().map_err(|e| e.to_string())? {
-            Event::Start(e) | Event::Empty(e) => {
+        match reader.read_event() {
+            Ok(Event::Start(e) | Event::Empty(e)) => {
                 elements += 1;
                 for a in e.attributes() {
-                    black_box(a.map_err(|e| e.to_string())?);
+                    black_box(a?);
                     attributes += 1;
                 }
             }
-            Event::Eof => break,
-            ev => {
+            Ok(Event::Eof) => return Ok((elements, attributes)),
+            Ok(ev) => {
                 black_box(ev);
             }
+            Err(e) => return Err(e),
         }
     }
-    Ok(black_box((elements, attributes)))
 }
