@@ -17,6 +17,9 @@ pub type FileId = usize;
 #[derive(Debug, Default)]
 pub struct Sources {
     files: Vec<SourceFile>,
+    /// The first file read from each path: [`Sources::find`] without a scan of every file (a
+    /// project of thousands of IRL files looked each one up in all before).
+    by_path: std::collections::HashMap<PathBuf, FileId>,
 }
 
 /// One file's text as it was read (a UTF-8 byte order mark is stripped, `bom` records it).
@@ -53,6 +56,8 @@ impl SourceFile {
 impl Sources {
     /// Adds a file and returns its id.
     pub fn add(&mut self, path: PathBuf, display: String, text: String, bom: bool) -> FileId {
+        let id = self.files.len();
+        self.by_path.entry(path.clone()).or_insert(id);
         self.files.push(SourceFile {
             path,
             display,
@@ -177,7 +182,7 @@ impl Sources {
 
     /// Finds a file already read from `path`.
     pub fn find(&self, path: &Path) -> Option<FileId> {
-        self.files.iter().position(|f| f.path == path)
+        self.by_path.get(path).copied()
     }
 
     /// `path` as diagnostics show it: the name of the file read from it, else the path itself

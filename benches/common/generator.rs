@@ -754,6 +754,14 @@ pub const DIMENSIONS: &[(&str, &str)] = &[
         "IRL function-calls and definitions, each called by its own function of one skill (16 steps)",
     ),
     (
+        "files",
+        "IRL files, each read by its own function of one skill (16 steps)",
+    ),
+    (
+        "chain",
+        "IRL definitions each called by the one before, the first by `SetVelCP` (16 steps)",
+    ),
+    (
         "signals",
         "signals of the resource; the first condition reads up to 300, the others the last ones (16 steps)",
     ),
@@ -788,6 +796,8 @@ pub fn write_shape(dir: &Path, dim: &str, n: usize) -> Option<io::Result<Project
     let mut later = None::<usize>;
     let mut skills = 0;
     let mut extra = String::new();
+    // The IRL files of the "files" dimension, one per function (copies of the one IRL file).
+    let mut irl_files: Vec<String> = Vec::new();
     let anchor_skills =
         "        </InternalElement>\n        <InternalElement Name=\"FunctionDescription\"";
     let anchor_functions = "{00000000-0000-0000-0000-000000000009}\">\n";
@@ -815,9 +825,9 @@ pub fn write_shape(dir: &Path, dim: &str, n: usize) -> Option<io::Result<Project
         t.push_str("          </InternalElement>\n");
         t
     };
-    let function = |name: &str, command: &str, k: usize| {
+    let function = |name: &str, command: &str, k: usize, file: &str| {
         format!(
-            "          <InternalElement Name=\"{name}\" ID=\"{}\"><ExternalInterface Name=\"FunctionDataInterface\" ID=\"{}\" RefBaseClassPath=\"IWB StateModelInterfaceLib/FunctionLogic\"><Attribute Name=\"Name\"><Value>{command}</Value></Attribute><Attribute Name=\"refURI\"><Value>{IRL_FILE}</Value></Attribute></ExternalInterface></InternalElement>\n",
+            "          <InternalElement Name=\"{name}\" ID=\"{}\"><ExternalInterface Name=\"FunctionDataInterface\" ID=\"{}\" RefBaseClassPath=\"IWB StateModelInterfaceLib/FunctionLogic\"><Attribute Name=\"Name\"><Value>{command}</Value></Attribute><Attribute Name=\"refURI\"><Value>{file}</Value></Attribute></ExternalInterface></InternalElement>\n",
             id(0xF0, k),
             id(0xF1, k)
         )
@@ -864,7 +874,7 @@ pub fn write_shape(dir: &Path, dim: &str, n: usize) -> Option<io::Result<Project
             }
             insert(&mut bb, anchor_resources, true, &t);
         }
-        "functions" | "irl" => {
+        "functions" | "irl" | "files" => {
             let names: Vec<String> = (0..n).map(|k| format!("Function {k}")).collect();
             let mut t = String::new();
             let (mut calls, mut defs) = (String::new(), String::new());
@@ -883,13 +893,40 @@ pub fn write_shape(dir: &Path, dim: &str, n: usize) -> Option<io::Result<Project
                 } else {
                     "SetVelCP".to_owned()
                 };
-                t.push_str(&function(f, &command, k));
+                let file = if dim == "files" {
+                    irl_files.push(format!("irl/f{k}.irl"));
+                    irl_files.last().unwrap().as_str()
+                } else {
+                    IRL_FILE
+                };
+                t.push_str(&function(f, &command, k, file));
             }
             insert(&mut bb, anchor_functions, false, &t);
             insert(&mut bb, anchor_skills, true, &many(&names));
             irl = irl.replace("\t</src>", &format!("{calls}\t</src>"));
             irl = irl.replace("\t</def>", &format!("{defs}\t</def>"));
             skills = 1;
+        }
+        "chain" => {
+            // `SetVelCP` calls `Helper0`, each `HelperK` calls the next; written last first,
+            // so that each one is found through the one taken before it.
+            let mut defs = String::new();
+            for k in (0..n).rev() {
+                let next = if k + 1 < n {
+                    format!("\t\t\t\tHelper{}()\n", k + 1)
+                } else {
+                    String::new()
+                };
+                let _ = write!(
+                    defs,
+                    "\t\t<definition name=\"Helper{k}\">\n\t\t\tDEF Helper{k}()\n{next}\t\t\t\t$OUT[1] = TRUE\n\t\t\tEND\n\t\t</definition>\n"
+                );
+            }
+            irl = irl.replace(
+                "\t\t\t\t$VEL.CP = VALUE\n",
+                "\t\t\t\t$VEL.CP = VALUE\n\t\t\t\tHelper0()\n",
+            );
+            irl = irl.replace("\t</def>", &format!("{defs}\t</def>"));
         }
         "signals" => {
             let mut t = String::new();
@@ -936,7 +973,12 @@ pub fn write_shape(dir: &Path, dim: &str, n: usize) -> Option<io::Result<Project
         let sfc = dir.join(SFC_FILE);
         let irl_path = dir.join(IRL_FILE);
         fs::write(&blackboard, bb)?;
-        fs::write(&irl_path, irl)?;
+        fs::write(&irl_path, &irl)?;
+        for f in &irl_files {
+            let path = dir.join(f);
+            fs::create_dir_all(path.parent().expect("a file in a folder"))?;
+            fs::write(path, &irl)?;
+        }
         let mut w = BufWriter::with_capacity(1 << 20, fs::File::create(&sfc)?);
         let mut g = Gen::new(&mut w);
         g.skills = skills;

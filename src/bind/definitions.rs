@@ -8,7 +8,7 @@
 //! to case): a RAPID procedure call has no parentheses (`ArcSeam 10;`), and a word that only
 //! names a variable of the same name brings in a routine that is not needed, which is harmless.
 
-use std::collections::HashSet;
+use std::collections::{BTreeSet, HashMap, HashSet};
 
 use crate::lang::Language;
 use crate::read::irl::{Irl, IrlDefinition};
@@ -76,6 +76,11 @@ pub fn key(lang: Language, name: &str) -> String {
     }
 }
 
+/// Whether `name` stands in `hay` as a word.
+fn has_word(hay: &[u8], name: &str) -> bool {
+    words_at(hay, name).next().is_some()
+}
+
 /// Where `name` stands in `hay` as a word (not part of a longer name).
 fn words_at<'h>(hay: &'h [u8], name: &'h str) -> impl Iterator<Item = usize> + 'h {
     let word = |b: u8| b.is_ascii_alphanumeric() || b == b'_';
@@ -83,11 +88,6 @@ fn words_at<'h>(hay: &'h [u8], name: &'h str) -> impl Iterator<Item = usize> + '
         let end = at + name.len();
         (at == 0 || !word(hay[at - 1])) && hay.get(end).is_none_or(|&b| !word(b))
     })
-}
-
-/// Whether `name` stands in `hay` as a word.
-fn has_word(hay: &[u8], name: &str) -> bool {
-    words_at(hay, name).next().is_some()
 }
 
 /// Puts into `bound` every definition of the IRL files `files` (of the program's language) whose
@@ -122,7 +122,8 @@ pub fn complete(bound: &mut Bound, irls: &[Irl], files: &[usize], lang: Language
     if candidates.is_empty() {
         return;
     }
-    // The code as the language compares names, searched for each routine's name as a word.
+    // The code as the language compares names (KRL and RAPID folded to lower case), searched
+    // once for each name a candidate defines.
     let fold = |text: &str, hay: &mut String| match lang {
         Language::UrScript => hay.push_str(text),
         _ => hay.extend(text.chars().map(|c| c.to_ascii_lowercase())),
@@ -138,17 +139,57 @@ pub fn complete(bound: &mut Bound, irls: &[Irl], files: &[usize], lang: Language
             hay.push('\n');
         }
     }
-    while let Some(k) = candidates.iter().position(|(_, names)| {
-        names
-            .iter()
-            .any(|n| !defined.contains(n) && has_word(hay.as_bytes(), n))
-    }) {
-        let ((i, d), names) = candidates.remove(k);
-        defined.extend(names);
-        bound.definitions.push((i, d));
-        for l in &irls[i].definitions[d].lines {
-            fold(l, &mut hay);
-            hay.push('\n');
+    // Each name to the candidates that define it; the names the code calls so far.
+    let mut by_name: HashMap<&str, Vec<usize>> = HashMap::new();
+    for (k, (_, names)) in candidates.iter().enumerate() {
+        for n in names {
+            by_name.entry(n.as_str()).or_default().push(k);
+        }
+    }
+    let mut called: HashSet<&str> = HashSet::new();
+    // The candidates that may be taken: each one that defines a called name, until it is
+    // looked at. A candidate is taken when it defines a called name no definition taken before
+    // defines, the first such one in `files`' order; one that defines only names already
+    // defined is dropped here, and comes back when another of its names is called.
+    let mut maybe: BTreeSet<usize> = BTreeSet::new();
+    for (&n, ks) in &by_name {
+        if !defined.contains(n) && has_word(hay.as_bytes(), n) {
+            called.insert(n);
+            maybe.extend(ks.iter().copied());
+        }
+    }
+    drop(hay);
+    let mut taken = vec![false; candidates.len()];
+    let mut words = String::new();
+    while let Some(k) = maybe.pop_first() {
+        let ((i, d), names) = &candidates[k];
+        if taken[k]
+            || !names
+                .iter()
+                .any(|n| called.contains(n.as_str()) && !defined.contains(n))
+        {
+            continue;
+        }
+        taken[k] = true;
+        defined.extend(names.iter().cloned());
+        bound.definitions.push((*i, *d));
+        // Only the new definition's own lines can call a name not called before.
+        for l in &irls[*i].definitions[*d].lines {
+            words.clear();
+            fold(l, &mut words);
+            let word = |b: u8| b.is_ascii_alphanumeric() || b == b'_';
+            for w in words.as_bytes().split(|&b| !word(b)) {
+                // Only ASCII bytes are in a word, so it is UTF-8 (and not empty when a name).
+                let Ok(w) = std::str::from_utf8(w) else {
+                    continue;
+                };
+                if let Some((&n, ks)) = by_name.get_key_value(w)
+                    && !called.contains(n)
+                {
+                    called.insert(n);
+                    maybe.extend(ks.iter().copied().filter(|&k| !taken[k]));
+                }
+            }
         }
     }
 }

@@ -8,7 +8,11 @@ use super::*;
 /// [`crate::load::WHOLE_FILES_BUDGET`] together.
 pub(super) struct Recorder<'a> {
     pub(super) fs: &'a dyn FileSource,
+    /// The paths asked for, in the order first asked.
     pub(super) read: std::cell::RefCell<Vec<PathBuf>>,
+    /// The same paths as a set: a project of thousands of IRL files must not search the list
+    /// once per read.
+    pub(super) seen: std::cell::RefCell<std::collections::HashSet<PathBuf>>,
     /// Bytes read whole so far.
     pub(super) whole: std::cell::Cell<u64>,
 }
@@ -34,9 +38,10 @@ impl FileSource for Recorder<'_> {
 
 impl Recorder<'_> {
     pub(super) fn record(&self, path: &Path) {
-        let mut r = self.read.borrow_mut();
-        if !r.iter().any(|p| p == path) {
-            r.push(path.to_owned());
+        let mut seen = self.seen.borrow_mut();
+        if !seen.contains(path) {
+            seen.insert(path.to_owned());
+            self.read.borrow_mut().push(path.to_owned());
         }
     }
 }
@@ -57,6 +62,7 @@ impl<'a> Ctx<'a> {
             fs: Recorder {
                 fs,
                 read: Default::default(),
+                seen: Default::default(),
                 whole: Default::default(),
             },
             sources: Sources::default(),

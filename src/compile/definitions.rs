@@ -62,36 +62,73 @@ pub(super) fn unused_definitions(
     irls: &[irl::Irl],
     bound: &[bind::Bound],
 ) {
-    let mut seen = std::collections::HashSet::new();
+    let held: HashSet<(usize, usize)> = bound
+        .iter()
+        .flat_map(|b| b.definitions.iter().copied())
+        .collect();
+    // Each routine a held definition defines, by language and name as the language compares
+    // names: a definition left out for another of the same routine says which one was taken.
+    let mut taken: std::collections::HashMap<(crate::lang::Language, String), (usize, usize)> =
+        std::collections::HashMap::new();
+    for &(i, d) in &held {
+        let lang = irls[i].language;
+        for r in bind::definitions::routines(lang, &irls[i].definitions[d]) {
+            let k = (lang, bind::definitions::key(lang, &r));
+            let at = taken.entry(k).or_insert((i, d));
+            *at = (*at).min((i, d));
+        }
+    }
+    let mut seen = HashSet::new();
     for (i, f) in irls.iter().enumerate() {
         for (d, def) in f.definitions.iter().enumerate() {
-            if bound.iter().any(|b| b.definitions.contains(&(i, d)))
-                || !seen.insert((f.file, def.span.range.start))
-            {
+            if held.contains(&(i, d)) || !seen.insert((f.file, def.span.range.start)) {
                 continue;
             }
             let routines = bind::definitions::routines(f.language, def);
-            let what = match routines.as_slice() {
-                [] => "defines no routine that a program could call".to_owned(),
-                names => format!(
-                    "no program calls {}",
-                    names
-                        .iter()
-                        .map(|n| format!("`{n}`"))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            };
-            diags.push(
-                Diagnostic::warning(
+            let other = routines.iter().find_map(|r| {
+                let k = (f.language, bind::definitions::key(f.language, r));
+                taken.get(&k).map(|&at| (r, at))
+            });
+            let mut w = match (routines.as_slice(), other) {
+                ([], _) => Diagnostic::warning(
                     Code::UnusedDefinition,
                     format!(
-                        "definition `{}` is not written into any program: {what}",
+                        "definition `{}` is not written into any program: it defines no routine that a program could call",
                         def.name.text
                     ),
-                )
-                .at(def.span.clone()),
-            );
+                ),
+                (_, Some((r, (oi, od)))) => {
+                    let o = &irls[oi].definitions[od];
+                    // The routine as the definition taken spells it.
+                    let k = bind::definitions::key(f.language, r);
+                    let spelt = bind::definitions::routines(f.language, o)
+                        .into_iter()
+                        .find(|n| bind::definitions::key(f.language, n) == k)
+                        .unwrap_or_else(|| r.clone());
+                    Diagnostic::warning(
+                        Code::UnusedDefinition,
+                        format!(
+                            "definition `{}` is not written into any program: `{r}` is defined again here, and the programs hold the first definition of it (definition `{}`); rename one of the two routines if both are meant",
+                            def.name.text, o.name.text
+                        ),
+                    )
+                    .related(o.span.clone(), format!("`{spelt}` is taken from here"))
+                }
+                (names, None) => Diagnostic::warning(
+                    Code::UnusedDefinition,
+                    format!(
+                        "definition `{}` is not written into any program: no program calls {}",
+                        def.name.text,
+                        names
+                            .iter()
+                            .map(|n| format!("`{n}`"))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                ),
+            };
+            w = w.at(def.span.clone());
+            diags.push(w);
         }
     }
 }
