@@ -8,7 +8,7 @@
 //! to case): a RAPID procedure call has no parentheses (`ArcSeam 10;`), and a word that only
 //! names a variable of the same name brings in a routine that is not needed, which is harmless.
 
-use std::collections::{BTreeSet, HashMap, HashSet};
+use std::collections::{BTreeSet, HashSet};
 
 use crate::lang::Language;
 use crate::read::irl::{Irl, IrlDefinition};
@@ -140,22 +140,42 @@ pub fn complete(bound: &mut Bound, irls: &[Irl], files: &[usize], lang: Language
         }
     }
     // Each name to the candidates that define it; the names the code calls so far.
-    let mut by_name: HashMap<&str, Vec<usize>> = HashMap::new();
+    let mut by_name: foldhash::HashMap<&str, Vec<usize>> = foldhash::HashMap::default();
     for (k, (_, names)) in candidates.iter().enumerate() {
         for n in names {
             by_name.entry(n.as_str()).or_default().push(k);
         }
     }
-    let mut called: HashSet<&str> = HashSet::new();
+    let mut called: foldhash::HashSet<&str> = foldhash::HashSet::default();
     // The candidates that may be taken: each one that defines a called name, until it is
     // looked at. A candidate is taken when it defines a called name no definition taken before
     // defines, the first such one in `files`' order; one that defines only names already
     // defined is dropped here, and comes back when another of its names is called.
     let mut maybe: BTreeSet<usize> = BTreeSet::new();
-    for (&n, ks) in &by_name {
-        if !defined.contains(n) && has_word(hay.as_bytes(), n) {
-            called.insert(n);
-            maybe.extend(ks.iter().copied());
+    let word = |b: u8| b.is_ascii_alphanumeric() || b == b'_';
+    // The names the code calls. A few are each searched for (a `memmem` pass over the code is
+    // cheaper than taking it apart into words); many, as a library of helpers has, by one pass
+    // over the code's words, each looked up (a search each cost 30 instructions a step for
+    // each name).
+    if by_name.len() <= 8 {
+        for (&n, ks) in &by_name {
+            if !defined.contains(n) && has_word(hay.as_bytes(), n) {
+                called.insert(n);
+                maybe.extend(ks.iter().copied());
+            }
+        }
+    } else {
+        for w in hay.as_bytes().split(|&b| !word(b)) {
+            let Ok(w) = std::str::from_utf8(w) else {
+                continue;
+            };
+            if let Some((&n, ks)) = by_name.get_key_value(w)
+                && !defined.contains(n)
+                && !called.contains(n)
+            {
+                called.insert(n);
+                maybe.extend(ks.iter().copied());
+            }
         }
     }
     drop(hay);
@@ -177,7 +197,6 @@ pub fn complete(bound: &mut Bound, irls: &[Irl], files: &[usize], lang: Language
         for l in &irls[*i].definitions[*d].lines {
             words.clear();
             fold(l, &mut words);
-            let word = |b: u8| b.is_ascii_alphanumeric() || b == b'_';
             for w in words.as_bytes().split(|&b| !word(b)) {
                 // Only ASCII bytes are in a word, so it is UTF-8 (and not empty when a name).
                 let Ok(w) = std::str::from_utf8(w) else {
