@@ -83,11 +83,15 @@ fn has_word(hay: &[u8], name: &str) -> bool {
 
 /// Where `name` stands in `hay` as a word (not part of a longer name).
 fn words_at<'h>(hay: &'h [u8], name: &'h str) -> impl Iterator<Item = usize> + 'h {
-    let word = |b: u8| b.is_ascii_alphanumeric() || b == b'_';
     memchr::memmem::find_iter(hay, name.as_bytes()).filter(move |&at| {
         let end = at + name.len();
-        (at == 0 || !word(hay[at - 1])) && hay.get(end).is_none_or(|&b| !word(b))
+        (at == 0 || !is_word_byte(hay[at - 1])) && hay.get(end).is_none_or(|&b| !is_word_byte(b))
     })
+}
+
+/// A byte a name is made of: what bounds a name as a word.
+fn is_word_byte(b: u8) -> bool {
+    b.is_ascii_alphanumeric() || b == b'_'
 }
 
 /// Puts into `bound` every definition of the IRL files `files` (of the program's language) whose
@@ -152,7 +156,7 @@ pub fn complete(bound: &mut Bound, irls: &[Irl], files: &[usize], lang: Language
     // defines, the first such one in `files`' order; one that defines only names already
     // defined is dropped here, and comes back when another of its names is called.
     let mut maybe: BTreeSet<usize> = BTreeSet::new();
-    let word = |b: u8| b.is_ascii_alphanumeric() || b == b'_';
+    let mut taken = vec![false; candidates.len()];
     // The names the code calls. A few are each searched for (a `memmem` pass over the code is
     // cheaper than taking it apart into words); many, as a library of helpers has, by one pass
     // over the code's words, each looked up (a search each cost 30 instructions a step for
@@ -165,22 +169,10 @@ pub fn complete(bound: &mut Bound, irls: &[Irl], files: &[usize], lang: Language
             }
         }
     } else {
-        for w in hay.as_bytes().split(|&b| !word(b)) {
-            let Ok(w) = std::str::from_utf8(w) else {
-                continue;
-            };
-            if let Some((&n, ks)) = by_name.get_key_value(w)
-                && !defined.contains(n)
-                && !called.contains(n)
-            {
-                called.insert(n);
-                maybe.extend(ks.iter().copied());
-            }
-        }
+        mark_called(hay.as_bytes(), &by_name, &taken, &mut called, &mut maybe);
     }
     drop(hay);
-    let mut taken = vec![false; candidates.len()];
-    let mut words = String::new();
+    let mut line = String::new();
     while let Some(k) = maybe.pop_first() {
         let ((i, d), names) = &candidates[k];
         if taken[k]
@@ -195,20 +187,32 @@ pub fn complete(bound: &mut Bound, irls: &[Irl], files: &[usize], lang: Language
         bound.definitions.push((*i, *d));
         // Only the new definition's own lines can call a name not called before.
         for l in &irls[*i].definitions[*d].lines {
-            words.clear();
-            fold(l, &mut words);
-            for w in words.as_bytes().split(|&b| !word(b)) {
-                // Only ASCII bytes are in a word, so it is UTF-8 (and not empty when a name).
-                let Ok(w) = std::str::from_utf8(w) else {
-                    continue;
-                };
-                if let Some((&n, ks)) = by_name.get_key_value(w)
-                    && !called.contains(n)
-                {
-                    called.insert(n);
-                    maybe.extend(ks.iter().copied().filter(|&k| !taken[k]));
-                }
-            }
+            line.clear();
+            fold(l, &mut line);
+            mark_called(line.as_bytes(), &by_name, &taken, &mut called, &mut maybe);
+        }
+    }
+}
+
+/// Marks each name of `by_name` that stands in `text` as a word (`text` folded as the language
+/// compares names) as called, and the candidates not yet taken that define it as ones that may
+/// be taken.
+fn mark_called<'n>(
+    text: &[u8],
+    by_name: &foldhash::HashMap<&'n str, Vec<usize>>,
+    taken: &[bool],
+    called: &mut foldhash::HashSet<&'n str>,
+    maybe: &mut BTreeSet<usize>,
+) {
+    for w in text.split(|&b| !is_word_byte(b)) {
+        // Only ASCII bytes are in a word, so it is UTF-8.
+        let Ok(w) = std::str::from_utf8(w) else {
+            continue;
+        };
+        if let Some((&n, ks)) = by_name.get_key_value(w)
+            && called.insert(n)
+        {
+            maybe.extend(ks.iter().copied().filter(|&k| !taken[k]));
         }
     }
 }

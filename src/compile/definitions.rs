@@ -89,7 +89,7 @@ pub(super) fn unused_definitions(
                 let k = (f.language, bind::definitions::key(f.language, r));
                 taken.get(&k).map(|&at| (r, at))
             });
-            let mut w = match (routines.as_slice(), other) {
+            let w = match (routines.as_slice(), other) {
                 ([], _) => Diagnostic::warning(
                     Code::UnusedDefinition,
                     format!(
@@ -127,8 +127,7 @@ pub(super) fn unused_definitions(
                     ),
                 ),
             };
-            w = w.at(def.span.clone());
-            diags.push(w);
+            diags.push(w.at(def.span.clone()));
         }
     }
 }
