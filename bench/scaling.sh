@@ -18,11 +18,11 @@ GEN=$PWD/target/release/examples/generate
 SCALE=${SCALE:-1}
 # Base size (1x) per dimension: big enough that the start-up does not hide the growth.
 declare -A BASE=(
-  [steps]=1000 [vars]=2000 [skills]=250 [resources]=1000 [functions]=250 [irl]=250 [files]=250 [chain]=250
+  [steps]=1000 [vars]=2000 [skills]=250 [resources]=1000 [functions]=250 [irl]=250 [files]=250 [chain]=250 [unused]=250
   [signals]=1000 [cond]=20 [width]=250 [depth]=8 [loops]=250 [nest]=2000
   [loopnest]=8 [markup]=2000 [jumps]=150 [overlap]=150
 )
-DIMS=${DIMS:-"steps vars skills resources functions irl files chain signals cond width depth loops nest loopnest markup jumps overlap"}
+DIMS=${DIMS:-"steps vars skills resources functions irl files chain unused signals cond width depth loops nest loopnest markup jumps overlap"}
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 count() { # dim n -> instructions

@@ -127,6 +127,13 @@ fn irl_definitions_calling_definitions() {
 }
 
 #[test]
+fn irl_definitions_no_program_calls() {
+    // Each routine of the library was compared with every one listed before it, to list it
+    // once: 32,000 took 3.28 s against 0.04 s for 2,000 (release; now 0.60 s in a test build).
+    check("unused", 2000, 32000);
+}
+
+#[test]
 fn signals() {
     check("signals", 2000, 32000);
 }

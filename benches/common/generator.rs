@@ -761,6 +761,7 @@ pub const DIMENSIONS: &[(&str, &str)] = &[
         "chain",
         "IRL definitions each called by the one before, the first by `SetVelCP` (16 steps)",
     ),
+    ("unused", "IRL definitions no program calls (16 steps)"),
     (
         "signals",
         "signals of the resource; the first condition reads up to 300, the others the last ones (16 steps)",
@@ -926,6 +927,17 @@ pub fn write_shape(dir: &Path, dim: &str, n: usize) -> Option<io::Result<Project
                 "\t\t\t\t$VEL.CP = VALUE\n",
                 "\t\t\t\t$VEL.CP = VALUE\n\t\t\t\tHelper0()\n",
             );
+            irl = irl.replace("\t</def>", &format!("{defs}\t</def>"));
+        }
+        "unused" => {
+            // A library of helpers the steps do not call: each is looked for in the programs.
+            let mut defs = String::new();
+            for k in 0..n {
+                let _ = write!(
+                    defs,
+                    "\t\t<definition name=\"Unused{k}\">\n\t\t\tDEF Unused{k}()\n\t\t\t\t$OUT[1] = TRUE\n\t\t\tEND\n\t\t</definition>\n"
+                );
+            }
             irl = irl.replace("\t</def>", &format!("{defs}\t</def>"));
         }
         "signals" => {
