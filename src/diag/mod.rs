@@ -3,291 +3,25 @@
 //! A [`Diagnostic`] carries a [`FileId`] and a byte range into that file's text; line and column
 //! are computed only when a diagnostic is rendered (see [`Sources::line_col`]). The readers never
 //! stop at the first problem: they push into a [`Diagnostics`] sink and go on.
+//!
+//! Layout: this file holds [`Diagnostic`], the [`Diagnostics`] sink and the [`Code`] list;
+//! [`sources`] the texts diagnostics point into ([`Sources`]: files, line and column, the lines
+//! kept of a file read as a stream); [`render`](mod@render) how they are shown (human, short,
+//! JSON; [`Located`]).
 
-use std::fmt::Write as _;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
+mod render;
+mod sources;
+
+pub use render::{Format, Located, render};
+pub use sources::{SourceFile, Sources};
+
 /// Index of a file in [`Sources`].
 pub type FileId = usize;
-
-/// Every text the compiler read, so diagnostics can point into it.
-#[derive(Debug, Default)]
-pub struct Sources {
-    files: Vec<SourceFile>,
-    /// The first file read from each path: [`Sources::find`] without a scan of every file (a
-    /// project of thousands of IRL files looked each one up in all before).
-    by_path: std::collections::HashMap<PathBuf, FileId>,
-}
-
-/// One file's text as it was read (a UTF-8 byte order mark is stripped, `bom` records it).
-#[derive(Debug)]
-pub struct SourceFile {
-    /// The path the file was read from.
-    pub path: PathBuf,
-    /// The path as shown in diagnostics (relative to the working directory where possible).
-    pub display: String,
-    /// The text after the BOM.
-    pub text: String,
-    /// Whether the file started with a UTF-8 BOM.
-    pub bom: bool,
-    /// Byte offsets of line starts, computed on the first diagnostic that needs them.
-    line_starts: std::sync::OnceLock<Vec<usize>>,
-    /// Set while the text is not kept (a streamed file): its length and content hash.
-    dropped: Option<(usize, u64)>,
-    /// For a file whose text is not kept: the lines that diagnostics point into.
-    excerpts: Option<crate::excerpt::Excerpts>,
-    /// For a streamed file: [`crate::load::ContentHash::prefixes`] of the bytes read.
-    prefixes: Vec<u64>,
-}
-
-impl SourceFile {
-    fn line_starts(&self) -> &[usize] {
-        self.line_starts.get_or_init(|| {
-            std::iter::once(0)
-                .chain(memchr::memchr_iter(b'\n', self.text.as_bytes()).map(|i| i + 1))
-                .collect()
-        })
-    }
-}
-
-impl Sources {
-    /// Adds a file and returns its id.
-    pub fn add(&mut self, path: PathBuf, display: String, text: String, bom: bool) -> FileId {
-        let id = self.files.len();
-        self.by_path.entry(path.clone()).or_insert(id);
-        self.files.push(SourceFile {
-            path,
-            display,
-            text,
-            bom,
-            dropped: None,
-            excerpts: None,
-            prefixes: Vec::new(),
-            line_starts: std::sync::OnceLock::new(),
-        });
-        self.files.len() - 1
-    }
-
-    /// The file with this id.
-    pub fn get(&self, id: FileId) -> &SourceFile {
-        &self.files[id]
-    }
-
-    /// Adds a file whose text is read as a stream and not kept (the SFC): no text until
-    /// [`Sources::streamed`] records what was read and [`Sources::restore_text`] puts the same
-    /// bytes back for diagnostics that point into it.
-    pub fn add_streamed(&mut self, path: PathBuf, display: String) -> FileId {
-        let id = self.add(path, display, String::new(), false);
-        self.files[id].dropped = Some((0, 0));
-        id
-    }
-
-    /// A streamed file was read to its end: whether it had a byte-order mark, its length and
-    /// [`crate::load::hash_bytes`] of its bytes (the mark included), and of each prefix of
-    /// [`crate::load::PREFIX_STEP`] bytes and its multiples.
-    pub fn streamed(&mut self, id: FileId, bom: bool, len: usize, hash: u64, prefixes: Vec<u64>) {
-        let f = &mut self.files[id];
-        f.bom = bom;
-        f.dropped = Some((len, hash));
-        f.prefixes = prefixes;
-    }
-
-    /// Whether the file's text is not there (streamed, or dropped) and not put back.
-    pub fn is_dropped(&self, id: FileId) -> bool {
-        self.files[id].dropped.is_some()
-    }
-
-    /// Whether the file's text is not there and neither are the lines its diagnostics need.
-    pub fn needs_lines(&self, id: FileId) -> bool {
-        self.files[id].dropped.is_some() && self.files[id].excerpts.is_none()
-    }
-
-    /// The pieces of lines kept for a file whose text is not (see [`Sources::set_excerpts`]).
-    pub fn excerpts(&self, id: FileId) -> Option<&crate::excerpt::Excerpts> {
-        self.files[id].excerpts.as_ref()
-    }
-
-    /// Whether the file has the byte-order mark (known once it was read).
-    pub fn bom(&self, id: FileId) -> bool {
-        self.files[id].bom
-    }
-
-    /// Gives a file whose text is not kept the lines its diagnostics point into, read again
-    /// ([`crate::excerpt::Collector`]): `true` when the bytes read were the same as the first
-    /// time (length and hash), else the file stays without them.
-    pub fn set_excerpts(&mut self, id: FileId, c: crate::excerpt::Collected) -> bool {
-        let f = &mut self.files[id];
-        match f.dropped {
-            Some((len, hash)) if c.len == len && c.hash == hash => {
-                f.excerpts = Some(c.excerpts);
-                true
-            }
-            _ => false,
-        }
-    }
-
-    /// Like [`Sources::set_excerpts`] for lines read from only the first `k` prefixes of
-    /// [`crate::load::PREFIX_STEP`] bytes, whose hash is `prefix`: `true` when that prefix is
-    /// the one read the first time (the file was at least that long and had the same bytes
-    /// there), else the file stays without them.
-    pub fn set_excerpts_prefix(
-        &mut self,
-        id: FileId,
-        excerpts: crate::excerpt::Excerpts,
-        k: usize,
-        prefix: u64,
-    ) -> bool {
-        let f = &mut self.files[id];
-        match (f.dropped, k.checked_sub(1).and_then(|i| f.prefixes.get(i))) {
-            (Some(_), Some(&h)) if h == prefix => {
-                f.excerpts = Some(excerpts);
-                true
-            }
-            _ => false,
-        }
-    }
-
-    /// Puts a streamed file's text back from the file's bytes `raw`, read again: `true` when
-    /// they are the bytes that were read (same length and hash), else the file stays without
-    /// text. Bytes that are not UTF-8 are put back with replacement characters (their
-    /// diagnostic points at the first bad byte, which keeps its offset).
-    pub fn restore_text(&mut self, id: FileId, mut raw: Vec<u8>) -> bool {
-        let f = &mut self.files[id];
-        match f.dropped {
-            Some((len, hash)) if raw.len() == len && crate::load::hash_bytes(&raw) == hash => {
-                let bom = crate::load::strip_bom(&mut raw);
-                if bom != f.bom {
-                    return false;
-                }
-                f.text = match String::from_utf8(raw) {
-                    Ok(t) => t,
-                    Err(e) => String::from_utf8_lossy(e.as_bytes()).into_owned(),
-                };
-                f.dropped = None;
-                f.excerpts = None;
-                f.line_starts = std::sync::OnceLock::new();
-                true
-            }
-            _ => false,
-        }
-    }
-
-    /// All files, in the order they were read.
-    pub fn iter(&self) -> impl Iterator<Item = &SourceFile> {
-        self.files.iter()
-    }
-
-    /// Finds a file already read from `path`.
-    pub fn find(&self, path: &Path) -> Option<FileId> {
-        self.by_path.get(path).copied()
-    }
-
-    /// `path` as diagnostics show it: the name of the file read from it, else the path itself
-    /// (a diagnostic without a place names its file as those with one do).
-    pub fn display_of(&self, path: &Path) -> String {
-        match self.find(path) {
-            Some(id) => self.files[id].display.clone(),
-            None => path.display().to_string(),
-        }
-    }
-
-    /// 1-based line and column (in characters) of a byte offset.
-    pub fn line_col(&self, id: FileId, offset: usize) -> (usize, usize) {
-        let f = &self.files[id];
-        if let Some(x) = &f.excerpts {
-            // Every place a diagnostic names was kept (`Diagnostics::snap`).
-            return x.line_col(offset).unwrap_or((1, 1));
-        }
-        let offset = offset.min(f.text.len());
-        let starts = f.line_starts();
-        let line = match starts.binary_search(&offset) {
-            Ok(l) => l,
-            Err(l) => l - 1,
-        };
-        let start = starts[line];
-        let col = f
-            .text
-            .get(start..offset)
-            .map(|s| s.chars().count())
-            .unwrap_or(offset - start);
-        (line + 1, col + 1)
-    }
-
-    /// Byte offset of a 1-based line and column (as roxmltree reports them).
-    pub fn offset_of(&self, id: FileId, line: usize, col: usize) -> usize {
-        let f = &self.files[id];
-        let Some(&start) = f.line_starts().get(line.saturating_sub(1)) else {
-            return f.text.len();
-        };
-        let rest = &f.text[start..];
-        rest.char_indices()
-            .nth(col.saturating_sub(1))
-            .map(|(i, _)| start + i)
-            .unwrap_or(f.text.len())
-    }
-}
-
-/// The innermost start tag still open at byte `upto` of an XML text (`<` and the name), read
-/// without a parser: comments, CDATA sections, processing instructions and declarations are
-/// skipped, quoted attribute values may hold `>`. For the text before a syntax error, which
-/// the parser found well-formed.
-fn unclosed_start_tag(text: &str, upto: usize) -> Option<Range<usize>> {
-    let b = text.as_bytes();
-    let upto = upto.min(b.len());
-    let find =
-        |from: usize, pat: &str| text.get(from..).and_then(|t| t.find(pat)).map(|i| from + i);
-    let mut open: Vec<Range<usize>> = Vec::new();
-    let mut i = 0;
-    while i < upto {
-        if b[i] != b'<' {
-            i += 1;
-            continue;
-        }
-        let rest = &text[i..];
-        let skip = |pat: &str| find(i, pat).map(|e| e + pat.len());
-        i = if rest.starts_with("<!--") {
-            skip("-->")?
-        } else if rest.starts_with("<![CDATA[") {
-            skip("]]>")?
-        } else if rest.starts_with("<?") {
-            skip("?>")?
-        } else if rest.starts_with("<!") {
-            skip(">")?
-        } else if rest.starts_with("</") {
-            open.pop();
-            skip(">")?
-        } else {
-            let name_end = i
-                + 1
-                + rest[1..]
-                    .find(|c: char| c.is_whitespace() || c == '/' || c == '>')
-                    .unwrap_or(rest.len() - 1);
-            // The end of the tag: the first `>` outside quotes.
-            let mut j = name_end;
-            let mut quote = None;
-            while j < b.len() {
-                match (quote, b[j]) {
-                    (None, q @ (b'"' | b'\'')) => quote = Some(q),
-                    (Some(q), c) if c == q => quote = None,
-                    (None, b'>') => break,
-                    _ => {}
-                }
-                j += 1;
-            }
-            if j >= b.len() {
-                return None;
-            }
-            if b[j - 1] != b'/' {
-                open.push(i..name_end);
-            }
-            j + 1
-        };
-    }
-    open.pop()
-}
 
 /// How bad a diagnostic is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize)]
@@ -812,354 +546,63 @@ impl std::fmt::Display for Code {
     }
 }
 
-/// How diagnostics are printed (`--format`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
-pub enum Format {
-    /// `error[CODE]: message`, the place, the source line and a marker.
-    #[default]
-    Human,
-    /// One line each: `file:line:column: error[CODE]: message`.
-    Short,
-    /// One JSON object per line.
-    Json,
-}
-
-/// A diagnostic with its place resolved to file name, line and column: what JSON output and the
-/// daemon's events carry.
-#[derive(Debug, Clone, Serialize, PartialEq)]
-pub struct Located {
-    pub severity: Severity,
-    pub code: &'static str,
-    pub message: String,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub file: Option<String>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub line: Option<usize>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub column: Option<usize>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub element: Option<String>,
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub notes: Vec<String>,
-}
-
-impl Diagnostic {
-    /// Resolves the place to file, line and column.
-    pub fn locate(&self, sources: &Sources) -> Located {
-        let (file, line, column) = match &self.span {
-            Some(s) => {
-                let (l, c) = sources.line_col(s.file, s.range.start);
-                (Some(sources.get(s.file).display.clone()), Some(l), Some(c))
+/// The innermost start tag still open at byte `upto` of an XML text (`<` and the name), read
+/// without a parser: comments, CDATA sections, processing instructions and declarations are
+/// skipped, quoted attribute values may hold `>`. For the text before a syntax error, which
+/// the parser found well-formed.
+fn unclosed_start_tag(text: &str, upto: usize) -> Option<Range<usize>> {
+    let b = text.as_bytes();
+    let upto = upto.min(b.len());
+    let find =
+        |from: usize, pat: &str| text.get(from..).and_then(|t| t.find(pat)).map(|i| from + i);
+    let mut open: Vec<Range<usize>> = Vec::new();
+    let mut i = 0;
+    while i < upto {
+        if b[i] != b'<' {
+            i += 1;
+            continue;
+        }
+        let rest = &text[i..];
+        let skip = |pat: &str| find(i, pat).map(|e| e + pat.len());
+        i = if rest.starts_with("<!--") {
+            skip("-->")?
+        } else if rest.starts_with("<![CDATA[") {
+            skip("]]>")?
+        } else if rest.starts_with("<?") {
+            skip("?>")?
+        } else if rest.starts_with("<!") {
+            skip(">")?
+        } else if rest.starts_with("</") {
+            open.pop();
+            skip(">")?
+        } else {
+            let name_end = i
+                + 1
+                + rest[1..]
+                    .find(|c: char| c.is_whitespace() || c == '/' || c == '>')
+                    .unwrap_or(rest.len() - 1);
+            // The end of the tag: the first `>` outside quotes.
+            let mut j = name_end;
+            let mut quote = None;
+            while j < b.len() {
+                match (quote, b[j]) {
+                    (None, q @ (b'"' | b'\'')) => quote = Some(q),
+                    (Some(q), c) if c == q => quote = None,
+                    (None, b'>') => break,
+                    _ => {}
+                }
+                j += 1;
             }
-            None => (
-                self.path.as_ref().map(|p| sources.display_of(p)),
-                None,
-                None,
-            ),
+            if j >= b.len() {
+                return None;
+            }
+            if b[j - 1] != b'/' {
+                open.push(i..name_end);
+            }
+            j + 1
         };
-        let mut notes = self.notes.clone();
-        for (span, msg) in &self.related {
-            let (l, c) = sources.line_col(span.file, span.range.start);
-            notes.push(format!(
-                "{}:{}:{}: {}",
-                sources.get(span.file).display,
-                l,
-                c,
-                msg
-            ));
-        }
-        Located {
-            severity: self.severity,
-            code: self.code.as_str(),
-            message: self.message.clone(),
-            file,
-            line,
-            column,
-            element: self.element.clone(),
-            notes,
-        }
     }
-}
-
-/// Renders diagnostics in the chosen format. Warnings are left out unless `warnings` is set.
-pub fn render(
-    diags: &[Diagnostic],
-    sources: &Sources,
-    format: Format,
-    warnings: bool,
-    color: bool,
-) -> String {
-    let mut out = String::new();
-    let shown = diags
-        .iter()
-        .filter(|d| warnings || d.severity == Severity::Error);
-    match format {
-        Format::Json => {
-            for d in shown {
-                let l = d.locate(sources);
-                out.push_str(&serde_json::to_string(&l).expect("a Located always serialises"));
-                out.push('\n');
-            }
-        }
-        Format::Short => {
-            for d in shown {
-                let l = d.locate(sources);
-                let place = match (&l.file, l.line, l.column) {
-                    (Some(f), Some(line), Some(col)) => format!("{f}:{line}:{col}: "),
-                    (Some(f), _, _) => format!("{f}: "),
-                    _ => String::new(),
-                };
-                let elem = l
-                    .element
-                    .as_ref()
-                    .map(|e| format!(" [{e}]"))
-                    .unwrap_or_default();
-                let _ = writeln!(
-                    out,
-                    "{place}{}[{}]: {}{elem}",
-                    severity_word(l.severity),
-                    l.code,
-                    l.message
-                );
-            }
-        }
-        Format::Human => {
-            use codespan_reporting::diagnostic as cs;
-            use codespan_reporting::term;
-            let files = RenderFiles::new(sources);
-            let config = term::Config::default();
-            let mut buf: Vec<u8> = Vec::new();
-            for d in shown {
-                let mut c = match d.severity {
-                    Severity::Error => cs::Diagnostic::error(),
-                    Severity::Warning => cs::Diagnostic::warning(),
-                }
-                .with_code(d.code.as_str())
-                .with_message(&d.message);
-                let mut labels = Vec::new();
-                if let Some(s) = &d.span {
-                    let end = s.range.end.max(s.range.start);
-                    let label = cs::Label::primary(s.file, files.range(s.file, s.range.start..end));
-                    labels.push(match &d.element {
-                        Some(e) => label.with_message(e.clone()),
-                        None => label,
-                    });
-                }
-                for (s, m) in &d.related {
-                    labels.push(
-                        cs::Label::secondary(s.file, files.range(s.file, s.range.clone()))
-                            .with_message(m),
-                    );
-                }
-                let mut notes = d.notes.clone();
-                if d.span.is_none() {
-                    if let Some(p) = &d.path {
-                        notes.insert(0, format!("file: {}", sources.display_of(p)));
-                    }
-                    if let Some(e) = &d.element {
-                        notes.push(format!("element: {e}"));
-                    }
-                }
-                c = c.with_labels(labels).with_notes(notes);
-                let r = if color {
-                    let mut w = term::termcolor::Ansi::new(&mut buf);
-                    term::emit_to_write_style(&mut w, &config, &files, &c)
-                } else {
-                    let mut w = term::termcolor::NoColor::new(&mut buf);
-                    term::emit_to_write_style(&mut w, &config, &files, &c)
-                };
-                if r.is_err() {
-                    // A span outside its file (a bug, never input): fall back to the message.
-                    use std::io::Write as _;
-                    let _ = writeln!(
-                        buf,
-                        "{}[{}]: {}",
-                        severity_word(d.severity),
-                        d.code,
-                        d.message
-                    );
-                }
-            }
-            out.push_str(&String::from_utf8_lossy(&buf));
-        }
-    }
-    out
-}
-
-/// The files as the renderer sees them. A file whose text is not kept shows the pieces of its
-/// lines that were read again ([`crate::excerpt`]) one after another: to the renderer each piece
-/// is a line of its own (a long line may have two), shown with its real line number and
-/// columns; offsets into such a file go through [`RenderFiles::range`].
-struct RenderFiles<'a> {
-    sources: &'a Sources,
-    /// Per file with pieces: their texts joined by line breaks, and per piece where it starts
-    /// in that text and the line index the renderer knows it by.
-    joined: Vec<Option<Joined>>,
-}
-
-/// The pieces of a file as one text.
-struct Joined {
-    text: String,
-    starts: Vec<usize>,
-    /// Grows by one from a piece to the piece of the next line, and by three across a gap (or
-    /// between two pieces of one line), so the renderer marks the gap (`·`) instead of asking
-    /// for a line that was not kept.
-    index: Vec<usize>,
-}
-
-impl<'a> RenderFiles<'a> {
-    fn new(sources: &'a Sources) -> Self {
-        let joined = sources
-            .files
-            .iter()
-            .map(|f| {
-                let x = f.excerpts.as_ref()?;
-                let mut j = Joined {
-                    text: String::new(),
-                    starts: Vec::with_capacity(x.pieces().len()),
-                    index: Vec::with_capacity(x.pieces().len()),
-                };
-                let mut prev: Option<(usize, usize)> = None;
-                for e in x.pieces() {
-                    j.starts.push(j.text.len());
-                    j.text.push_str(&e.text);
-                    j.text.push('\n');
-                    let index = match prev {
-                        None => 0,
-                        Some((line, index)) if e.line == line + 1 => index + 1,
-                        Some((_, index)) => index + 3,
-                    };
-                    j.index.push(index);
-                    prev = Some((e.line, index));
-                }
-                Some(j)
-            })
-            .collect();
-        RenderFiles { sources, joined }
-    }
-
-    /// The pieces of `file`, if its text is not kept.
-    fn pieces(&self, file: FileId) -> Option<(&[crate::excerpt::Excerpt], &Joined)> {
-        let x = self.sources.files[file].excerpts.as_ref()?;
-        Some((x.pieces(), self.joined[file].as_ref()?))
-    }
-
-    /// The piece the renderer knows by line index `index`.
-    fn piece_of(&self, file: FileId, index: usize) -> Option<(&crate::excerpt::Excerpt, usize)> {
-        let (pieces, j) = self.pieces(file)?;
-        let i = j.index.binary_search(&index).ok()?;
-        Some((&pieces[i], i))
-    }
-
-    /// A range of the file as a range of what [`codespan_reporting::files::Files::source`]
-    /// gives (`Diagnostics::snap` put it inside one piece).
-    fn range(&self, file: FileId, r: Range<usize>) -> Range<usize> {
-        let Some((pieces, j)) = self.pieces(file) else {
-            return r;
-        };
-        let x = self.sources.files[file]
-            .excerpts
-            .as_ref()
-            .expect("has pieces");
-        match x.find_index(r.start) {
-            Some(i) => {
-                let start = j.starts[i] + (r.start - pieces[i].start);
-                start..start + (r.end - r.start)
-            }
-            None => 0..0,
-        }
-    }
-}
-
-impl<'a> codespan_reporting::files::Files<'a> for RenderFiles<'a> {
-    type FileId = FileId;
-    type Name = &'a str;
-    type Source = &'a str;
-
-    fn name(&'a self, id: FileId) -> Result<&'a str, codespan_reporting::files::Error> {
-        Ok(self.sources.files[id].display.as_str())
-    }
-
-    fn source(&'a self, id: FileId) -> Result<&'a str, codespan_reporting::files::Error> {
-        Ok(match &self.joined[id] {
-            Some(j) => j.text.as_str(),
-            None => self.sources.files[id].text.as_str(),
-        })
-    }
-
-    /// For a file of pieces: the piece's index.
-    fn line_index(
-        &'a self,
-        id: FileId,
-        byte_index: usize,
-    ) -> Result<usize, codespan_reporting::files::Error> {
-        if let Some((_, j)) = self.pieces(id) {
-            let i = j
-                .starts
-                .partition_point(|&s| s <= byte_index)
-                .saturating_sub(1);
-            return Ok(j.index.get(i).copied().unwrap_or(0));
-        }
-        let starts = self.sources.files[id].line_starts();
-        Ok(starts
-            .partition_point(|&s| s <= byte_index)
-            .saturating_sub(1))
-    }
-
-    fn line_number(
-        &'a self,
-        id: FileId,
-        line_index: usize,
-    ) -> Result<usize, codespan_reporting::files::Error> {
-        Ok(match self.pieces(id) {
-            Some(_) => self.piece_of(id, line_index).map_or(0, |(e, _)| e.line) + 1,
-            None => line_index + 1,
-        })
-    }
-
-    fn column_number(
-        &'a self,
-        id: FileId,
-        line_index: usize,
-        byte_index: usize,
-    ) -> Result<usize, codespan_reporting::files::Error> {
-        let source = self.source(id)?;
-        let range = self.line_range(id, line_index)?;
-        let col0 = self.piece_of(id, line_index).map_or(0, |(e, _)| e.col0);
-        let before = source
-            .get(range.start..byte_index.clamp(range.start, range.end))
-            .map_or(0, |s| s.chars().count());
-        Ok(col0 + before + 1)
-    }
-
-    fn line_range(
-        &'a self,
-        id: FileId,
-        line_index: usize,
-    ) -> Result<Range<usize>, codespan_reporting::files::Error> {
-        use codespan_reporting::files::Error;
-        if let Some((_, j)) = self.pieces(id) {
-            let (_, i) = self.piece_of(id, line_index).ok_or(Error::LineTooLarge {
-                given: line_index,
-                max: j.index.last().copied().unwrap_or(0),
-            })?;
-            return Ok(j.starts[i]..j.starts.get(i + 1).copied().unwrap_or(j.text.len()));
-        }
-        let f = &self.sources.files[id];
-        let (starts, len) = (f.line_starts(), f.text.len());
-        let start = *starts.get(line_index).ok_or(Error::LineTooLarge {
-            given: line_index,
-            max: starts.len().saturating_sub(1),
-        })?;
-        Ok(start..starts.get(line_index + 1).copied().unwrap_or(len))
-    }
-}
-
-fn severity_word(s: Severity) -> &'static str {
-    match s {
-        Severity::Error => "error",
-        Severity::Warning => "warning",
-    }
+    open.pop()
 }
 
 #[cfg(test)]
@@ -1168,7 +611,7 @@ mod tests {
 
     #[test]
     fn every_code_is_documented_once() {
-        let doc = include_str!("../docs/DIAGNOSTICS.md");
+        let doc = include_str!("../../docs/DIAGNOSTICS.md");
         let mut seen = std::collections::HashSet::new();
         for c in Code::ALL {
             assert!(seen.insert(c.as_str()), "code {} used twice", c.as_str());
