@@ -94,6 +94,26 @@ fn is_word_byte(b: u8) -> bool {
     b.is_ascii_alphanumeric() || b == b'_'
 }
 
+/// The words of `text` (runs of [`is_word_byte`]), each with where it starts.
+fn words(text: &[u8]) -> impl Iterator<Item = (usize, &[u8])> {
+    let mut i = 0;
+    std::iter::from_fn(move || {
+        while i < text.len() && !is_word_byte(text[i]) {
+            i += 1;
+        }
+        let start = i;
+        while i < text.len() && is_word_byte(text[i]) {
+            i += 1;
+        }
+        (i > start).then(|| (start, &text[start..i]))
+    })
+}
+
+/// Up to this many names, each is searched for in the code (a `memmem` pass is cheaper than
+/// taking the code apart into words); more, as a library of helpers has, are found by one pass
+/// over the code's words, each looked up.
+const FEW_NAMES: usize = 8;
+
 /// Puts into `bound` every definition of the IRL files `files` (of the program's language) whose
 /// routine the program's code calls, directly or through a definition already in, after the
 /// ones its calls named. Of two definitions of one routine the first (in `files`' order) is
@@ -157,11 +177,9 @@ pub fn complete(bound: &mut Bound, irls: &[Irl], files: &[usize], lang: Language
     // defined is dropped here, and comes back when another of its names is called.
     let mut maybe: BTreeSet<usize> = BTreeSet::new();
     let mut taken = vec![false; candidates.len()];
-    // The names the code calls. A few are each searched for (a `memmem` pass over the code is
-    // cheaper than taking it apart into words); many, as a library of helpers has, by one pass
-    // over the code's words, each looked up (a search each cost 30 instructions a step for
-    // each name).
-    if by_name.len() <= 8 {
+    // The names the code calls ([`FEW_NAMES`]; with many, a search each cost 30 instructions a
+    // step for each name).
+    if by_name.len() <= FEW_NAMES {
         for (&n, ks) in &by_name {
             if !defined.contains(n) && has_word(hay.as_bytes(), n) {
                 called.insert(n);
@@ -204,7 +222,7 @@ fn mark_called<'n>(
     called: &mut foldhash::HashSet<&'n str>,
     maybe: &mut BTreeSet<usize>,
 ) {
-    for w in text.split(|&b| !is_word_byte(b)) {
+    for (_, w) in words(text) {
         // Only ASCII bytes are in a word, so it is UTF-8.
         let Ok(w) = std::str::from_utf8(w) else {
             continue;
@@ -262,31 +280,20 @@ pub fn missing(
         }
     };
     let mut found = vec![false; wanted.len()];
-    if wanted.len() <= 8 {
-        // A few names: each searched for (memmem is faster than reading the words).
+    if wanted.len() <= FEW_NAMES {
         for (k, w) in wanted.iter().enumerate() {
             let mut code = Code::new(comment);
             found[k] = words_at(hay, &w.0).any(|at| code.at(hay, at));
         }
     } else {
-        // Many: one pass over the words, each looked up.
         let index: foldhash::HashMap<&[u8], usize> = wanted
             .iter()
             .enumerate()
             .map(|(k, w)| (w.0.as_bytes(), k))
             .collect();
         let mut code = Code::new(comment);
-        let mut i = 0;
-        while i < hay.len() {
-            if !is_word_byte(hay[i]) {
-                i += 1;
-                continue;
-            }
-            let start = i;
-            while i < hay.len() && is_word_byte(hay[i]) {
-                i += 1;
-            }
-            if let Some(&k) = index.get(&hay[start..i])
+        for (start, w) in words(hay) {
+            if let Some(&k) = index.get(w)
                 && !found[k]
                 && code.at(hay, start)
             {
