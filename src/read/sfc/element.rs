@@ -8,10 +8,10 @@ use quick_xml::events::BytesStart;
 use super::Stream;
 use super::named::{Named, PieceMap, map_offset, named_expression};
 use super::tag::{Open, Tag};
-use super::wired::{Formal, PendingWired};
+use super::wired::{Formal, PendingWired, WireNode};
 
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Span};
-use crate::model::{Condition, FileHeader, Name, Sfc, Step, Variable};
+use crate::model::{Condition, Element, ElementKind, FileHeader, Name, Sfc, Step, Variable};
 use crate::read::tape::{Batch, Rec};
 
 /// A picked attribute's value, kept in a scratch string: where it is there, its raw value's byte
@@ -616,6 +616,163 @@ impl Stream {
             values: std::mem::take(&mut self.values),
             closed: Vec::new(),
             macros: pou.macros,
+        })
+    }
+
+    /// Starts building the element `tag` at `depth`: its attributes.
+    pub(super) fn begin(
+        &mut self,
+        b: &mut Building,
+        t: &Tagged,
+        tag: Tag,
+        name: &str,
+        tag_span: Span,
+        depth: usize,
+    ) -> Result<(), Box<Diagnostic>> {
+        b.reset(tag, name, tag_span, depth);
+        let mut scratch = std::mem::take(&mut b.scratch);
+        let picked = self.pick(
+            t,
+            [
+                "localId",
+                "name",
+                "initialStep",
+                "targetName",
+                "negated",
+                "typeName",
+                "edge",
+            ],
+            &mut scratch,
+        );
+        b.scratch = scratch;
+        let [id, n, initial, target, negated, type_name, edge] = picked?;
+        b.local_id = id;
+        b.name = n;
+        b.initial = initial;
+        b.target = target;
+        b.negated = negated.is_some_and(|a| a.get(&b.scratch).trim() == "true");
+        b.type_name = type_name.map(|a| a.get(&b.scratch).trim().to_owned());
+        b.edge = edge
+            .map(|a| a.get(&b.scratch).trim().to_owned())
+            .filter(|e| e != "none" && !e.is_empty());
+        Ok(())
+    }
+
+    /// The element is complete: check it and turn it into the model.
+    pub(super) fn finish(&mut self, b: &mut Building, diags: &mut Diagnostics) -> Option<Element> {
+        let file = self.file;
+        let kind = match b.tag {
+            Tag::Step => ElementKind::Step(Box::new(self.step(b, diags))),
+            Tag::Transition => ElementKind::Transition(self.condition(b, diags)),
+            Tag::SimultaneousDivergence => ElementKind::SimultaneousDivergence,
+            Tag::SimultaneousConvergence => ElementKind::SimultaneousConvergence,
+            Tag::SelectionDivergence => ElementKind::SelectionDivergence,
+            Tag::SelectionConvergence => ElementKind::SelectionConvergence,
+            Tag::JumpStep => {
+                let target = b
+                    .target
+                    .as_ref()
+                    .filter(|a| !a.get(&b.scratch).trim().is_empty())
+                    .map(|a| {
+                        Box::new(
+                            self.names
+                                .name(a.get(&b.scratch), Span::new(file, a.range.clone())),
+                        )
+                    });
+                if target.is_none() {
+                    diags.push(
+                        Diagnostic::error(
+                            Code::BadJump,
+                            "jumpStep without `targetName`: name the step to jump to",
+                        )
+                        .at(b.span.clone())
+                        .element(b.id_label()),
+                    );
+                }
+                ElementKind::JumpStep(target)
+            }
+            Tag::MacroStep => ElementKind::MacroStep,
+            _ if matches!(
+                b.tag_name(),
+                "inVariable"
+                    | "inOutVariable"
+                    | "outVariable"
+                    | "leftPowerRail"
+                    | "rightPowerRail"
+                    | "contact"
+                    | "coil"
+                    | "block"
+            ) =>
+            {
+                // A part a wired condition may be drawn from (docs/INPUTS.md): kept aside.
+                if let Some(Ok(id)) = b.val(&b.local_id).map(|v| v.trim().parse::<u64>()) {
+                    self.wire_nodes.push(WireNode {
+                        local_id: id,
+                        tag: b.tag_name().to_owned(),
+                        span: b.span.clone(),
+                        text: b.wire_text.take(),
+                        negated: b.negated,
+                        edge: b.edge.take(),
+                        type_name: b.type_name.take(),
+                        inputs: std::mem::take(&mut b.inputs),
+                        formal: std::mem::take(&mut b.formal),
+                    });
+                }
+                return None;
+            }
+            _ => {
+                // Reported once per kind and chart (see `report_ignored`).
+                let tag = b.tag_name();
+                let n = self.ignored.iter().filter(|i| i.0 == tag).count() + 1;
+                let label = match b.val(&b.local_id) {
+                    Some(v) => format!("localId {}", v.trim()),
+                    None => format!("{tag} no. {n} of the SFC body"),
+                };
+                self.ignored.push((tag.to_owned(), b.span.clone(), label));
+                return None;
+            }
+        };
+        let local_id = match b
+            .local_id
+            .as_ref()
+            .map(|a| (a.get(&b.scratch).trim().parse::<u64>(), a))
+        {
+            Some((Ok(id), _)) => id,
+            Some((Err(_), a)) => {
+                diags.push(
+                    Diagnostic::error(
+                        Code::BadLocalId,
+                        format!(
+                            "`{}` has localId `{}`, which is not a number from 0 to {}",
+                            b.tag_name(),
+                            a.get(&b.scratch),
+                            u64::MAX
+                        ),
+                    )
+                    .at(Span::new(file, a.range.clone())),
+                );
+                return None;
+            }
+            None => {
+                diags.push(
+                    Diagnostic::error(
+                        Code::BadLocalId,
+                        format!("`{}` without localId", b.tag_name()),
+                    )
+                    .at(b.span.clone()),
+                );
+                return None;
+            }
+        };
+        for d in b.bad_inputs.drain(..) {
+            diags.push(d.element(format!("localId {local_id}")));
+        }
+        Some(Element {
+            local_id,
+            kind,
+            span: b.span.clone(),
+            x: b.x.unwrap_or(0.0),
+            inputs: b.inputs.as_slice().into(),
         })
     }
 }
