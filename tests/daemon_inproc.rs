@@ -26,16 +26,21 @@ fn codes(e: &serde_json::Value) -> Vec<String> {
         .unwrap_or_default()
 }
 
-/// Edits `project`'s SFC to x and waits for the compile that has it.
+/// Edits `project`'s SFC to x and waits for the compile that has it. (A compile that was already
+/// running when the edit came may succeed after it with the old SFC; the daemon compiles again
+/// after it, and that compile has the edit.)
 fn edit_and_expect(d: &InProc, project: &Path, x: u32) {
     let mark = d.mark();
     fs::write(project.join("sfc.xml"), sfc_with_x(x)).unwrap();
+    let want = ptp_with_x(x);
     d.wait_for(
         &format!("recompile of {} with x {x}", project.display()),
         WAIT,
-        |e| is_after(e, "compile-succeeded", project, mark),
+        |e| {
+            is_after(e, "compile-succeeded", project, mark)
+                && read_string(&src_of(project)).contains(&want)
+        },
     );
-    assert!(read_string(&src_of(project)).contains(&ptp_with_x(x)));
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -412,10 +412,16 @@ impl Daemon {
             let Some(p) = self.projects.get_mut(&k) else {
                 continue;
             };
-            // A file still open for writing: wait (bounded by the cap of the burst).
+            // A file still open for writing: wait (bounded by the cap of the burst). A change
+            // is not always followed by a close: `truncate(2)` by path changes a file that
+            // nobody opened, and a close can be lost with a watch renewed in that instant. So
+            // a file that a read lease shows nobody has open for writing is written, whatever
+            // the events said; where leases cannot tell, the time bound stays.
             let cap = max_wait_of(settle_of(&self.config));
-            p.writing
-                .retain(|_, since| now.duration_since(*since) < cap * 5);
+            p.writing.retain(|path, since| {
+                now.duration_since(*since) < cap * 5
+                    && crate::write::writeback::lease::open_for_writing(path) != Some(false)
+            });
             if !p.writing.is_empty() {
                 p.sched.postpone(now);
                 continue;

@@ -92,8 +92,13 @@ impl Daemon {
             // input: a file is tracked by what the last compile read, whatever its name.
             let noise = watch::is_noise(path);
             if !noise {
+                // A project folder known before this event came or went. One that
+                // `route_roots` adds now was just watched: renewing its watch at once (as
+                // `folder_event` does for a folder created again) would lose the events of the
+                // files being written into it meanwhile.
+                let known = structural && self.projects.contains_key(path);
                 self.route_roots(path, now);
-                if structural && self.projects.contains_key(path) {
+                if known {
                     self.folder_event(path, now);
                 }
             }
