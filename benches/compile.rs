@@ -862,6 +862,7 @@ fn stages(bb_path: &Path) -> (Vec<Duration>, Vec<(&'static str, String)>) {
         profile,
         cell: None,
         max_lines: skillpost::emit::split::Limits::default().of(Language::Krl),
+        read_ahead_from: bind::PARALLEL_FROM,
     };
     let files: Vec<OutputFile> =
         skillpost::emit::emit_files(&input, &template, &mut diags).expect("emit");

@@ -51,8 +51,9 @@ pub struct Options {
     /// Keep no warnings (the command line without `--warn` shows none): none is built, and the
     /// SFC is not read again to locate them. The daemon keeps them (its events count them).
     pub drop_warnings: bool,
-    /// Steps from which the binder renders on two threads, and a cell's programs are written
-    /// two at a time (`None`: [`bind::PARALLEL_FROM`]). For the tests, which compare the ways.
+    /// Steps from which the binder renders on two threads, a cell's programs are written two at
+    /// a time, and a program's steps are read ahead of its writer on a second thread (`None`:
+    /// [`bind::PARALLEL_FROM`]). For the tests, which compare the ways.
     #[doc(hidden)]
     pub bind_split_from: Option<usize>,
     /// A picture of the plan (`--svg FILE`) written besides the outputs: like an output, it may
@@ -534,6 +535,12 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                             .as_ref()
                             .map(|c| crate::emit::handshake::CellView { cell: c, me: k }),
                         max_lines: opts.max_lines.of(prog.language),
+                        // A cell's programs are written two at a time: both cores are busy.
+                        read_ahead_from: if programs.len() == 1 {
+                            opts.bind_split_from.unwrap_or(bind::PARALLEL_FROM)
+                        } else {
+                            usize::MAX
+                        },
                     };
                     Some((input, template))
                 })

@@ -4,7 +4,9 @@
 //! one thread gives: compared through `compile` over every fixture (split at every chart of two
 //! steps or more) and a generated 3,000-step project with errors and warnings in both halves.
 //! The same switch writes a cell's programs two at a time (docs/CELLS.md): the cell fixtures, with
-//! their bases, are compared the same way.
+//! their bases, are compared the same way. And it reads a program's steps (their motions, the
+//! points' base names, the titles) on a second thread ahead of the writer (`emit::ahead`): every
+//! fixture's program is written so at the switch's 1 and compared with the one thread's.
 
 use std::path::{Path, PathBuf};
 

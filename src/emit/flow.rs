@@ -85,6 +85,21 @@ pub fn push_step_title(
     for p in prefix {
         out.push_str(p);
     }
+    let at = out.len();
+    push_decimal(out, number as u64);
+    push_title_tail(out, input, i, bs);
+    let title = &out[at..];
+    if !is_clean(title) {
+        let clean = transliterate(title);
+        out.truncate(at);
+        out.push_str(&clean);
+    }
+}
+
+/// What follows the number in a step's title ([`push_step_title`]), as the chart gives it:
+/// ` name: skill @ resource (localId n)`. When it [`is_clean`], the title is the number and
+/// it (the step's title read ahead of the writer, [`super::ahead`]).
+pub fn push_title_tail(out: &mut String, input: &EmitInput, i: usize, bs: &BoundStep) {
     let e = &input.sfc.elements[i];
     let name = match &e.kind {
         ElementKind::Step(st) => &*st.name,
@@ -92,8 +107,6 @@ pub fn push_step_title(
     };
     let res = &input.blackboard.resources[bs.resource];
     let skill = &res.skills[bs.skill];
-    let at = out.len();
-    push_decimal(out, number as u64);
     out.push(' ');
     out.push_str(name);
     out.push_str(": ");
@@ -103,13 +116,12 @@ pub fn push_step_title(
     out.push_str(" (localId ");
     push_decimal(out, e.local_id);
     out.push(')');
-    let title = &out[at..];
+}
+
+/// Whether a title is ASCII on one line already (else it is transliterated).
+pub fn is_clean(title: &str) -> bool {
     // (`is_ascii` goes a word at a time.)
-    if !title.is_ascii() || memchr::memchr2(b'\r', b'\n', title.as_bytes()).is_some() {
-        let clean = transliterate(title);
-        out.truncate(at);
-        out.push_str(&clean);
-    }
+    title.is_ascii() && memchr::memchr2(b'\r', b'\n', title.as_bytes()).is_none()
 }
 
 /// The name of step `i` as the chart gives it (`""` for another element).

@@ -123,6 +123,7 @@ impl Profile for Krl {
             hand: None,
             states: std::collections::HashMap::new(),
             labels: 0,
+            ahead: None,
         };
         let hand = super::handshake::Hand::new(input);
         if let Some(h) = &hand {
@@ -134,11 +135,19 @@ impl Profile for Krl {
         let mut cuts = Vec::with_capacity(input.body.len() + 1);
         // And how many points were declared by then: a block's points are its own.
         let mut point_cuts = Vec::with_capacity(input.body.len() + 1);
-        for b in input.body {
-            cuts.push(writer.out.out.len());
-            point_cuts.push(writer.points.declarations.len());
-            writer.block(b, 0);
-        }
+        let steps = input.bound.steps.iter().flatten().count();
+        std::thread::scope(|s| {
+            if steps >= input.read_ahead_from {
+                writer.ahead = super::ahead::start(s, input, Language::Krl);
+            }
+            for b in input.body {
+                cuts.push(writer.out.out.len());
+                point_cuts.push(writer.points.declarations.len());
+                writer.block(b, 0);
+            }
+            // Its thread ends with the steps it has read.
+            writer.ahead = None;
+        });
         cuts.push(writer.out.out.len());
         point_cuts.push(writer.points.declarations.len());
         if let Some(h) = &writer.hand {
@@ -184,6 +193,8 @@ struct Writer<'a> {
     states: std::collections::HashMap<usize, usize>,
     /// Label numbers used so far (machines nest in simultaneous branches).
     labels: usize,
+    /// The steps' code read on a second thread (a long program).
+    ahead: Option<super::ahead::Ahead>,
 }
 
 /// The label number `n` (states of a [`Block::Machine`] and the place after each machine).
@@ -241,12 +252,27 @@ impl Writer<'_> {
                     return;
                 };
                 self.number += 1;
-                self.out
-                    .step_title(level, &[";FOLD "], input, *i, bs, self.number);
+                let found = self.ahead.as_mut().and_then(|a| a.find(*i));
+                let read = found.zip(self.ahead.as_ref().map(|a| a.batch()));
+                match read.and_then(|(k, b)| b.title(k)) {
+                    Some(tail) => {
+                        self.out.indent(level);
+                        self.out.out.push_str(";FOLD ");
+                        flow::push_decimal(&mut self.out.out, self.number as u64);
+                        self.out.out.push_str(tail);
+                        self.out.out.push_str(self.out.newline);
+                    }
+                    None => self
+                        .out
+                        .step_title(level, &[";FOLD "], input, *i, bs, self.number),
+                }
                 if let Some(t) = self.tools.at(*i) {
                     self.out.code(level, input.step_indent, t);
                 }
-                let code = self.points.step_code(flow::step_name(input, *i), &bs.code);
+                let code = match read {
+                    Some((k, b)) => self.points.step_code_read(&bs.code, &b.read, k),
+                    None => self.points.step_code(flow::step_name(input, *i), &bs.code),
+                };
                 self.out.code(level, input.step_indent, code);
                 self.line(level, ";ENDFOLD");
             }

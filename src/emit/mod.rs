@@ -12,6 +12,7 @@
 //! [`structured::Dialect`]), a `templates/<lang>.toml` whose keys are `step_indent` and the
 //! profile's files, and a [`Language`] variant.
 
+pub mod ahead;
 pub mod flow;
 pub mod handshake;
 pub mod io;
@@ -98,6 +99,9 @@ pub struct EmitInput<'a> {
     /// The longest program, in lines of its steps, before it is split into parts
     /// ([`split`]); 0: never split.
     pub max_lines: usize,
+    /// Steps from which the steps' code is read on a second thread, ahead of the writer
+    /// ([`ahead`]); `usize::MAX`: never (a cell's programs, written two at a time).
+    pub read_ahead_from: usize,
 }
 
 /// What a profile's writer made: the text of the template's blocks, lines separated by the

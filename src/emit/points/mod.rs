@@ -125,65 +125,63 @@ impl Points {
 
     /// Step `step`'s code with every literal target named. Lines are separated by `\n`.
     pub fn step_code<'s>(&'s mut self, step: &str, code: &'s str) -> &'s str {
-        if self.mode == Mode::Literal || !self.may_hold_literal(code) {
+        if self.mode == Mode::Literal || !may_hold_literal(self.lang, code) {
             return code;
         }
         let mut motions = std::mem::take(&mut self.motions);
         motions.clear();
-        let mut start = 0;
-        for line in code.split('\n') {
-            if let Some(m) = self.parse(line) {
-                motions.push((start, line.len(), m));
-            }
-            start += line.len() + 1;
-        }
-        let targets: usize = motions.iter().map(|(_, _, m)| m.targets().len()).sum();
-        if targets == 0 {
+        read_motions(self.lang, code, &mut motions);
+        if motions.is_empty() {
             self.motions = motions;
             return code;
         }
         // Buffers kept from step to step (100,000 steps: no allocation of their own).
         let mut base = std::mem::take(&mut self.base);
         push_base_name(step, &mut base);
+        self.rewrite(code, &motions, &base);
+        self.base = base;
+        self.motions = motions;
+        &self.out
+    }
+
+    /// [`Points::step_code`] of item `k` of `read`, read ahead of the writer (on another
+    /// thread): the same text.
+    pub fn step_code_read<'s>(&'s mut self, code: &'s str, read: &ReadAhead, k: usize) -> &'s str {
+        let item = &read.items[k];
+        if self.mode == Mode::Literal || item.motions.is_empty() {
+            return code;
+        }
+        self.rewrite(
+            code,
+            &read.motions[item.motions.clone()],
+            &read.bases[item.base.clone()],
+        );
+        &self.out
+    }
+
+    /// `code` with the targets of `motions` (each with its line's start and length) named
+    /// after `base`, into `self.out`.
+    fn rewrite(&mut self, code: &str, motions: &[(usize, usize, Motion)], base: &str) {
+        let targets: usize = motions.iter().map(|(_, _, m)| m.targets().len()).sum();
         let mut out = std::mem::take(&mut self.out);
         out.clear();
         let mut names = std::mem::take(&mut self.names_buf);
         let mut k = 0;
         let mut at = 0;
-        for (start, len, m) in &motions {
+        for (start, len, m) in motions {
             // The lines before, as written.
             out.push_str(&code[at..*start]);
             let line = &code[*start..start + len];
             for name in names.iter_mut().take(m.targets().len()) {
                 k += 1;
-                self.name(&base, (targets > 1).then_some(k), name);
+                self.name(base, (targets > 1).then_some(k), name);
             }
             self.write(line, m, &names[..m.targets().len()], &mut out);
             at = start + len;
         }
         out.push_str(&code[at..]);
-        self.base = base;
-        self.motions = motions;
         self.names_buf = names;
         self.out = out;
-        &self.out
-    }
-
-    /// A cheap test before the lines are parsed (100,000 steps).
-    fn may_hold_literal(&self, code: &str) -> bool {
-        match self.lang {
-            Language::Krl => code.contains('{'),
-            Language::Rapid => code.contains("[["),
-            Language::UrScript => code.contains('['),
-        }
-    }
-
-    fn parse(&self, line: &str) -> Option<Motion> {
-        match self.lang {
-            Language::Krl => krl_motion(line),
-            Language::Rapid => rapid_motion(line),
-            Language::UrScript => ur_motion(line),
-        }
     }
 
     /// A unique name from `base` and the number of the point in its step, into `name`.
@@ -673,6 +671,80 @@ pub fn base_name(step: &str) -> String {
     let mut name = String::new();
     push_base_name(step, &mut name);
     name
+}
+
+/// A cheap test before the lines are read (100,000 steps): whether `code` may hold a literal
+/// target in `lang`.
+fn may_hold_literal(lang: Language, code: &str) -> bool {
+    match lang {
+        Language::Krl => code.contains('{'),
+        Language::Rapid => code.contains("[["),
+        Language::UrScript => code.contains('['),
+    }
+}
+
+/// The motions to literal targets among `code`'s lines (separated by `\n`), each with its
+/// line's start and length, appended to `motions`.
+fn read_motions(lang: Language, code: &str, motions: &mut Vec<(usize, usize, Motion)>) {
+    let mut start = 0;
+    for line in code.split('\n') {
+        let m = match lang {
+            Language::Krl => krl_motion(line),
+            Language::Rapid => rapid_motion(line),
+            Language::UrScript => ur_motion(line),
+        };
+        if let Some(m) = m {
+            motions.push((start, line.len(), m));
+        }
+        start += line.len() + 1;
+    }
+}
+
+/// What can be read of steps' code before their points are named, which needs no state of the
+/// program: each step's motions to literal targets and the base of their names. A long
+/// program's steps are read so on a second thread, ahead of the writer, which names the points
+/// in order ([`Points::step_code_read`]).
+#[derive(Default)]
+pub struct ReadAhead {
+    pub items: Vec<ReadItem>,
+    motions: Vec<(usize, usize, Motion)>,
+    bases: String,
+    scratch: String,
+}
+
+/// One step of a [`ReadAhead`].
+pub struct ReadItem {
+    /// The step's element.
+    pub step: usize,
+    motions: std::ops::Range<usize>,
+    base: std::ops::Range<usize>,
+}
+
+impl ReadAhead {
+    /// Reads step `i` (named `name`, with `code`) into a new item, for a program in `lang`.
+    pub fn read(&mut self, lang: Language, i: usize, name: &str, code: &str) {
+        let m0 = self.motions.len();
+        let b0 = self.bases.len();
+        if may_hold_literal(lang, code) {
+            read_motions(lang, code, &mut self.motions);
+            if self.motions.len() > m0 {
+                push_base_name(name, &mut self.scratch);
+                self.bases.push_str(&self.scratch);
+            }
+        }
+        self.items.push(ReadItem {
+            step: i,
+            motions: m0..self.motions.len(),
+            base: b0..self.bases.len(),
+        });
+    }
+
+    /// Empties it, keeping its allocations.
+    pub fn clear(&mut self) {
+        self.items.clear();
+        self.motions.clear();
+        self.bases.clear();
+    }
 }
 
 /// [`base_name`] into `name` (cleared first).
