@@ -833,28 +833,37 @@ pub(super) fn inline_text<'s>(
     text: impl FnOnce() -> std::borrow::Cow<'s, str>,
 ) {
     if b.inline.is_some() && in_inline(b, stack) {
-        let t = text();
         let inline = b.inline.get_or_insert_default();
-        b.inline_map
-            .push((inline.len(), raw.start, t.len() == raw.len()));
-        inline.push_str(&t);
-    } else if b.wire_text.is_some() && in_wire_text(b, stack) {
-        let t = text();
-        if let Some((w, map)) = &mut b.wire_text {
-            map.push((w.len(), raw.start, t.len() == raw.len()));
-            w.push_str(&t);
-        }
+        push_piece(inline, &mut b.inline_map, raw, &text());
+    } else if b.wire_text.is_some()
+        && in_wire_text(b, stack)
+        && let Some((w, map)) = &mut b.wire_text
+    {
+        push_piece(w, map, raw, &text());
     }
 }
 
+/// Appends `t`, read from the file at `raw`, to a text assembled from pieces, and to `map`
+/// where the piece came from (byte for byte when `t` is as long as its source: no reference or
+/// line end was resolved in it; [`map_offset`](super::named::map_offset)).
+pub(super) fn push_piece(
+    text: &mut String,
+    map: &mut Vec<(usize, usize, bool)>,
+    raw: Range<usize>,
+    t: &str,
+) {
+    map.push((text.len(), raw.start, t.len() == raw.len()));
+    text.push_str(t);
+}
+
 /// Whether the stack is inside an FBD/LD element's `expression` or `variable`.
-pub(super) fn in_wire_text(b: &Building, stack: &Open) -> bool {
+fn in_wire_text(b: &Building, stack: &Open) -> bool {
     let rel = &stack.tags[b.depth.min(stack.len())..];
     matches!(rel.first(), Some((Tag::Expression | Tag::WireVariable, _)))
 }
 
 /// Whether the stack is inside the element's `condition/inline`.
-pub(super) fn in_inline(b: &Building, stack: &Open) -> bool {
+fn in_inline(b: &Building, stack: &Open) -> bool {
     let rel = &stack.tags[b.depth.min(stack.len())..];
     rel.len() >= 2 && rel[0].0 == Tag::Condition && rel[1].0 == Tag::Inline
 }

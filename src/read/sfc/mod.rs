@@ -38,10 +38,7 @@ mod named;
 mod tag;
 mod wired;
 
-use element::{
-    Building, IwbState, Tagged, Val, VarAttrs, end_inside, in_inline, in_wire_text, inline_text,
-    report_ignored,
-};
+use element::{Building, IwbState, Tagged, Val, VarAttrs, end_inside, inline_text, report_ignored};
 use named::{Named, Outer, ReadingNamed, named_text};
 pub(crate) use tag::Tag;
 use tag::{Open, PathKind};
@@ -495,34 +492,17 @@ impl Stream {
                             },
                             Err(e) => return Ok(Err(self.syntax_error(at, e.to_string()))),
                         };
-                        if let Some(c) = ch
-                            && !building
-                            && let Some(ReadingNamed {
-                                st: Some((d, body, map)),
-                                ..
-                            }) = &mut named
-                            && stack.len() >= *d
-                        {
-                            map.push((body.len(), at, false));
-                            body.push(c);
-                        }
-                        if let Some(c) = ch
-                            && building
-                            && b.wire_text.is_some()
-                            && in_wire_text(&b, &stack)
-                            && let Some((w, map)) = &mut b.wire_text
-                        {
-                            map.push((w.len(), at, false));
-                            w.push(c);
-                        }
-                        if let Some(c) = ch
-                            && building
-                            && b.inline.is_some()
-                            && in_inline(&b, &stack)
-                        {
-                            let inline = b.inline.as_mut().expect("checked");
-                            b.inline_map.push((inline.len(), at, false));
-                            inline.push(c);
+                        // A character given by reference: a piece of the text it stands in,
+                        // as a text would be.
+                        if let Some(c) = ch {
+                            let mut buf = [0u8; 4];
+                            let piece: &str = c.encode_utf8(&mut buf);
+                            let text = || std::borrow::Cow::Borrowed(piece);
+                            if building {
+                                inline_text(&mut b, &stack, at..batch.end(rec), text);
+                            } else {
+                                named_text(&mut named, &stack, at..batch.end(rec), text);
+                            }
                         }
                         continue;
                     }

@@ -131,9 +131,7 @@ pub(super) fn named_text<'s>(
     }) = named
         && stack.len() >= *d
     {
-        let t = text();
-        map.push((body.len(), raw.start, t.len() == raw.len()));
-        body.push_str(&t);
+        super::element::push_piece(body, map, raw, &text());
     }
 }
 

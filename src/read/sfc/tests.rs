@@ -165,3 +165,21 @@ fn truncated_file_is_a_syntax_error() {
         d[0].message
     );
 }
+
+/// A named transition's ST body takes the characters its references stand for, each located at
+/// its reference in the file (as the inline conditions of `transition_conditions`).
+#[test]
+fn a_named_transitions_body_takes_its_references() {
+    let text = "<project xmlns=\"http://www.plcopen.org/xml/tc6_0201\"><types><pous><pou name=\"P\" pouType=\"program\">\
+         <transitions><transition name=\"T\"><body><ST><xhtml:p xmlns:xhtml=\"x\">a &lt; b &amp;&#x26; c</xhtml:p></ST></body></transition></transitions>\
+         <body><SFC><transition localId=\"2\"><condition><reference name=\"T\"/></condition></transition>\
+         </SFC></body></pou></pous></types></project>";
+    let (sfc, d) = read(text);
+    assert!(sfc.is_some());
+    assert_eq!(d.len(), 1, "{d:?}");
+    assert_eq!(d[0].code, Code::BadCondition);
+    assert!(d[0].message.contains("`a < b && c`"), "{}", d[0].message);
+    // The second `&` (the first is a complete AND, the second lacks an operand): `&#x26;`.
+    let at = d[0].span.as_ref().unwrap().range.start;
+    assert!(text[at..].starts_with("&#x26; c"), "{:?}", &text[at..]);
+}
