@@ -3,15 +3,16 @@
 //! What can be read of a step before its points are named needs no state of the program: its
 //! code's motions to literal targets and the base of their names ([`ReadAhead`]), and its
 //! title after its number ([`super::flow::push_title_tail`]). That is about a third of writing
-//! a step (KRL: the motion's parse, the title). The
-//! program's points are named in the order the steps are written, which only the writer knows
-//! as it goes; so a second thread reads the steps in program order ([`crate::plan::visit`]),
-//! batch by batch, and the writer takes each step's reading when it writes the step. A step
-//! the writer does not find so (a branch it never writes, a step written in an order of its
-//! own) it reads itself: the text is the same either way, only slower.
+//! a step (KRL: the motion's parse, the title). The program's points are named in the order the
+//! steps are written, which only the writer knows as it goes; so a second thread reads the steps
+//! in program order ([`crate::plan::visit`]), batch by batch, and the writer takes each step's
+//! reading when it writes the step. A step the writer does not find so (a branch it never
+//! writes, a step written in an order of its own, a thread that is behind) it reads itself: the
+//! text is the same either way.
 //!
 //! Memory stays flat: at most [`QUEUE`] batches of [`BATCH`] steps are read ahead, and emptied
-//! batches go back to the reading thread.
+//! batches go back to the reading thread. When the writer is done, the thread stops at its next
+//! batch.
 
 use std::ops::Range;
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
