@@ -59,6 +59,18 @@ impl<'a> Lines<'a> {
         self.out.push_str(self.newline);
     }
 
+    /// [`Lines::step_title`] from the title after its number, read ahead of the writer
+    /// ([`push_title_tail`], when it [`is_clean`]): the same line.
+    pub fn step_title_read(&mut self, level: usize, prefix: &[&str], number: usize, tail: &str) {
+        self.indent(level);
+        for p in prefix {
+            self.out.push_str(p);
+        }
+        push_decimal(&mut self.out, number as u64);
+        self.out.push_str(tail);
+        self.out.push_str(self.newline);
+    }
+
     /// A step's code: each non-empty line at `level` after `step_indent`.
     pub fn code(&mut self, level: usize, step_indent: &str, code: &str) {
         for line in code.split('\n') {

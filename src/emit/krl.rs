@@ -255,13 +255,9 @@ impl Writer<'_> {
                 let found = self.ahead.as_mut().and_then(|a| a.find(*i));
                 let read = found.zip(self.ahead.as_ref().map(|a| a.batch()));
                 match read.and_then(|(k, b)| b.title(k)) {
-                    Some(tail) => {
-                        self.out.indent(level);
-                        self.out.out.push_str(";FOLD ");
-                        flow::push_decimal(&mut self.out.out, self.number as u64);
-                        self.out.out.push_str(tail);
-                        self.out.out.push_str(self.out.newline);
-                    }
+                    Some(tail) => self
+                        .out
+                        .step_title_read(level, &[";FOLD "], self.number, tail),
                     None => self
                         .out
                         .step_title(level, &[";FOLD "], input, *i, bs, self.number),

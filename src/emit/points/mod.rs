@@ -61,12 +61,11 @@ pub struct Points {
     tries: usize,
     /// Per stem (lower-case), the last number `_n` given to it.
     next: HashMap<String, usize>,
-    /// The motions of the step being written, with the start and length of their lines (kept
-    /// between steps for its allocation).
-    motions: Vec<(usize, usize, Motion)>,
-    /// Buffers kept from step to step: the base name of the step being written, a name's stem
-    /// and its lower-case form, the names of a motion's points, the step's code as written.
-    base: String,
+    /// The step being written, read here when it was not read ahead (kept between steps for
+    /// its allocations).
+    read: ReadAhead,
+    /// Buffers kept from step to step: a name's stem and its lower-case form, the names of a
+    /// motion's points, the step's code as written.
     stem: String,
     lower: String,
     names_buf: [String; 2],
@@ -110,8 +109,7 @@ impl Points {
             max,
             next: HashMap::default(),
             tries: 0,
-            motions: Vec::new(),
-            base: String::new(),
+            read: ReadAhead::default(),
             stem: String::new(),
             lower: String::new(),
             names_buf: [String::new(), String::new()],
@@ -125,23 +123,19 @@ impl Points {
 
     /// Step `step`'s code with every literal target named. Lines are separated by `\n`.
     pub fn step_code<'s>(&'s mut self, step: &str, code: &'s str) -> &'s str {
-        if self.mode == Mode::Literal || !may_hold_literal(self.lang, code) {
+        if self.mode == Mode::Literal {
             return code;
         }
-        let mut motions = std::mem::take(&mut self.motions);
-        motions.clear();
-        read_motions(self.lang, code, &mut motions);
-        if motions.is_empty() {
-            self.motions = motions;
-            return code;
+        // Read here as it would have been ahead: one way of reading a step.
+        let mut read = std::mem::take(&mut self.read);
+        read.clear();
+        read.read(self.lang, 0, step, code);
+        let named = !read.items[0].motions.is_empty();
+        if named {
+            self.rewrite(code, &read.motions, &read.bases);
         }
-        // Buffers kept from step to step (100,000 steps: no allocation of their own).
-        let mut base = std::mem::take(&mut self.base);
-        push_base_name(step, &mut base);
-        self.rewrite(code, &motions, &base);
-        self.base = base;
-        self.motions = motions;
-        &self.out
+        self.read = read;
+        if named { &self.out } else { code }
     }
 
     /// [`Points::step_code`] of item `k` of `read`, read ahead of the writer (on another
@@ -709,7 +703,6 @@ pub struct ReadAhead {
     pub items: Vec<ReadItem>,
     motions: Vec<(usize, usize, Motion)>,
     bases: String,
-    scratch: String,
 }
 
 /// One step of a [`ReadAhead`].
@@ -728,8 +721,7 @@ impl ReadAhead {
         if may_hold_literal(lang, code) {
             read_motions(lang, code, &mut self.motions);
             if self.motions.len() > m0 {
-                push_base_name(name, &mut self.scratch);
-                self.bases.push_str(&self.scratch);
+                push_base_name(name, &mut self.bases);
             }
         }
         self.items.push(ReadItem {
@@ -747,9 +739,9 @@ impl ReadAhead {
     }
 }
 
-/// [`base_name`] into `name` (cleared first).
-fn push_base_name(step: &str, name: &mut String) {
-    name.clear();
+/// [`base_name`] appended to `out`.
+fn push_base_name(step: &str, out: &mut String) {
+    let start = out.len();
     let text = if step.is_ascii() {
         // (What `transliterate` changes in ASCII, control characters, separates words anyway.)
         Cow::Borrowed(step)
@@ -759,15 +751,15 @@ fn push_base_name(step: &str, name: &mut String) {
     for word in text.split(|c: char| !c.is_ascii_alphanumeric()) {
         let mut chars = word.chars();
         let Some(first) = chars.next() else { continue };
-        if name.is_empty() {
-            name.push(first);
+        if out.len() == start {
+            out.push(first);
         } else {
-            name.push(first.to_ascii_uppercase());
+            out.push(first.to_ascii_uppercase());
         }
-        name.push_str(chars.as_str());
+        out.push_str(chars.as_str());
     }
-    if !name.starts_with(|c: char| c.is_ascii_alphabetic()) {
-        name.insert(0, 'P');
+    if !out[start..].starts_with(|c: char| c.is_ascii_alphabetic()) {
+        out.insert(start, 'P');
     }
 }
 
