@@ -180,9 +180,13 @@ pub(crate) struct Producer<R> {
     failed: Option<std::io::Error>,
     done: bool,
     batch_bytes: usize,
-    /// The names of the open elements, one after another, and where each starts.
+    /// The names of the open elements, one after another, and where each starts, with whether
+    /// it keeps text ([`Tag::keeps_text`]).
     open: String,
-    open_starts: Vec<usize>,
+    open_starts: Vec<(usize, bool)>,
+    /// How many open elements keep text: while none does, text that is only white space is not
+    /// recorded.
+    keeping: usize,
     /// The first bytes were looked at (for a byte-order mark).
     started: bool,
 }
@@ -210,6 +214,7 @@ impl<R: BufRead> Producer<R> {
             batch_bytes: batch_bytes.max(1),
             open: String::new(),
             open_starts: Vec::new(),
+            keeping: 0,
             started: false,
         }
     }
@@ -357,6 +362,19 @@ impl<R: BufRead> Producer<R> {
         let mut error_at = 0;
         loop {
             let at = pos;
+            if self.keeping == 0 {
+                // White space up to the next markup, reference or end, where no open element
+                // keeps text: not recorded (the reader would pass over it).
+                let bytes = text.as_bytes();
+                let mut i = at;
+                while i < bytes.len() && is_whitespace(bytes[i]) {
+                    i += 1;
+                }
+                if i > at && bytes.get(i).is_none_or(|&c| c == b'<' || c == b'&') {
+                    pos = i;
+                    continue;
+                }
+            }
             let (ev, end) = match plain_event(text, at) {
                 Some((ev, end)) => (Ok(ev), end),
                 None => {
@@ -420,7 +438,9 @@ impl<R: BufRead> Producer<R> {
                     rec.local = u16::try_from(len - local.len()).unwrap_or(u16::MAX);
                     if matches!(ev, Event::Start(_)) {
                         rec.kind = Kind::Start;
-                        self.open_starts.push(self.open.len());
+                        let keeps = rec.tag.keeps_text();
+                        self.keeping += usize::from(keeps);
+                        self.open_starts.push((self.open.len(), keeps));
                         self.open.push_str(&content[..len]);
                     } else {
                         rec.kind = Kind::Empty;
@@ -431,7 +451,8 @@ impl<R: BufRead> Producer<R> {
                     let name = e.name();
                     let found: &str = name.as_ref();
                     let err = match self.open_starts.pop() {
-                        Some(start) => {
+                        Some((start, keeps)) => {
+                            self.keeping -= usize::from(keeps);
                             let expected = &self.open[start..];
                             let err = (expected != found).then(|| {
                                 quick_xml::errors::IllFormedError::MismatchedEndTag {
@@ -514,23 +535,33 @@ fn plain_event(text: &str, at: usize) -> Option<(Event<'_>, usize)> {
             if next == b'!' || next == b'?' {
                 return None;
             }
-            // The `>` outside quotes, from the `<` (quick-xml's `ElementParser`, which reads
-            // end tags too).
-            let mut quote = 0u8;
-            let mut close = None;
-            for i in memchr::memchr3_iter(b'>', b'\'', b'"', &b[at..]) {
-                let c = b[at + i];
-                if quote == 0 {
-                    if c == b'>' {
-                        close = Some(at + i);
-                        break;
-                    }
-                    quote = c;
-                } else if c == quote {
-                    quote = 0;
-                }
+            // The name, up to white space or the `>` (a quote: below).
+            let mut i = at + 1;
+            while let Some(&c) = b.get(i)
+                && !is_whitespace(c)
+                && !matches!(c, b'>' | b'"' | b'\'')
+            {
+                i += 1;
             }
-            let close = close?;
+            let name_end = i;
+            // The `>` outside quotes, from there (quick-xml's `ElementParser`, which reads end
+            // tags too, and takes a quote anywhere after the `<`). A tag is short: a byte loop
+            // outside quotes, and `memchr` for a value's closing quote only past a few bytes.
+            let close = loop {
+                let c = *b.get(i)?;
+                if c == b'>' {
+                    break i;
+                }
+                if c == b'"' || c == b'\'' {
+                    let from = i + 1;
+                    let head = b.get(from..(from + 8).min(b.len()))?;
+                    i = match head.iter().position(|&q| q == c) {
+                        Some(k) => from + k,
+                        None => from + 8 + memchr::memchr(c, b.get(from + 8..)?)?,
+                    };
+                }
+                i += 1;
+            };
             let ev = if next == b'/' {
                 // The name without the white space after it.
                 let content = &text[at + 2..close];
@@ -539,18 +570,22 @@ fn plain_event(text: &str, at: usize) -> Option<(Event<'_>, usize)> {
                     None => content,
                 };
                 Event::End(BytesEnd::new(name))
-            } else if close - at >= 2 && b[close - 1] == b'/' {
-                let content = &text[at + 1..close - 1];
-                Event::Empty(BytesStart::from_content(
-                    content,
-                    name_len(content.as_bytes()),
-                ))
             } else {
-                let content = &text[at + 1..close];
-                Event::Start(BytesStart::from_content(
-                    content,
-                    name_len(content.as_bytes()),
-                ))
+                let empty = close - at >= 2 && b[close - 1] == b'/';
+                let content = &text[at + 1..close - usize::from(empty)];
+                // The name ends at the first white space of the content (quick-xml's
+                // `name_len`): where the loop stopped, unless at a quote.
+                let len = if b[name_end] == b'"' || b[name_end] == b'\'' {
+                    name_len(content.as_bytes())
+                } else {
+                    (name_end - at - 1).min(content.len())
+                };
+                let e = BytesStart::from_content(content, len);
+                if empty {
+                    Event::Empty(e)
+                } else {
+                    Event::Start(e)
+                }
             };
             Some((ev, close + 1))
         }
@@ -848,6 +883,8 @@ fn quick_xml_text(input: &[u8]) -> String {
         return out;
     }
     let mut reader = quick_xml::Reader::from_reader(input);
+    // Whether each open element keeps text ([`Tag::keeps_text`]).
+    let mut open: Vec<bool> = Vec::new();
     loop {
         let at = reader.buffer_position() as usize;
         let ev = match reader.read_event() {
@@ -874,6 +911,10 @@ fn quick_xml_text(input: &[u8]) -> String {
                 (kind, content, local_part(&content[..len]))
             }
             Event::End(_) => (Kind::End, "", ""),
+            // White space where no open element keeps text is left out.
+            Event::Text(t) if !open.contains(&true) && { t as &str }.bytes().all(is_whitespace) => {
+                continue;
+            }
             Event::Text(t) => (Kind::Text, t, ""),
             Event::CData(t) => (Kind::CData, t, ""),
             Event::GeneralRef(r) => (Kind::GeneralRef, r, ""),
@@ -881,7 +922,15 @@ fn quick_xml_text(input: &[u8]) -> String {
             Event::Eof => (Kind::Eof, "", ""),
             _ => continue,
         };
-        out.push_str(&record_line(kind, Tag::of(name), at, end, text, name));
+        let tag = Tag::of(name);
+        match kind {
+            Kind::Start => open.push(tag.keeps_text()),
+            Kind::End => {
+                open.pop();
+            }
+            _ => {}
+        }
+        out.push_str(&record_line(kind, tag, at, end, text, name));
         if kind == Kind::Eof {
             return out;
         }

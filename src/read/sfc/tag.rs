@@ -90,6 +90,19 @@ impl Tag {
             _ => Tag::Other,
         }
     }
+
+    /// Whether text inside this element may be read (into a condition): an inline condition,
+    /// an FBD/LD element's `expression` or `variable`, a POU's named transitions. Every element
+    /// inside which the reader takes text (`inline_text`, `named_text`) has one of these among
+    /// its ancestors or is one; elsewhere text is not read, so the producer leaves out text that
+    /// is only white space there (the lines' indentation between tags, a quarter of a plan's
+    /// events).
+    pub(crate) fn keeps_text(self) -> bool {
+        matches!(
+            self,
+            Tag::Inline | Tag::Expression | Tag::WireVariable | Tag::Transitions
+        )
+    }
 }
 
 /// The open elements: their tags, and their local names one after another in `text` (for

@@ -183,3 +183,66 @@ fn a_named_transitions_body_takes_its_references() {
     let at = d[0].span.as_ref().unwrap().range.start;
     assert!(text[at..].starts_with("&#x26; c"), "{:?}", &text[at..]);
 }
+
+/// White space between two pieces of a condition's text is part of the condition, wherever the
+/// reader takes text (an inline condition, a named transition's ST body, a wired network's
+/// `expression`), though the reader's tape leaves out white space elsewhere: `NOT Stop` is not
+/// the name `NOTStop`.
+#[test]
+fn white_space_between_pieces_of_a_condition_is_kept() {
+    let pieces = "<![CDATA[NOT]]> <![CDATA[Stop]]>";
+    let pou = |transitions: &str, sfc: &str| {
+        format!(
+            "<project xmlns=\"http://www.plcopen.org/xml/tc6_0201\">\n <types>\n  <pous>\n   <pou name=\"P\" pouType=\"program\">\n    {transitions}\n    <body>\n     <SFC>\n      {sfc}\n     </SFC>\n    </body>\n   </pou>\n  </pous>\n </types>\n</project>\n"
+        )
+    };
+    let names = |text: &str| {
+        let (sfc, d) = read(text);
+        assert!(d.is_empty(), "{d:?}");
+        let sfc = sfc.expect("read");
+        let c = sfc
+            .elements
+            .iter()
+            .find_map(|e| match &e.kind {
+                ElementKind::Transition(Some(c)) => Some(c.clone()),
+                _ => None,
+            })
+            .expect("a condition");
+        c.expr
+            .names()
+            .iter()
+            .map(|(n, _)| n.to_string())
+            .collect::<Vec<_>>()
+    };
+    let inline = pou(
+        "",
+        &format!(
+            "<transition localId=\"2\">\n       <condition>\n        <inline>\n         <ST> {pieces} </ST>\n        </inline>\n       </condition>\n      </transition>"
+        ),
+    );
+    let named = pou(
+        &format!(
+            "<transitions>\n     <transition name=\"T\">\n      <body>\n       <ST> {pieces} </ST>\n      </body>\n     </transition>\n    </transitions>"
+        ),
+        "<transition localId=\"2\">\n       <condition>\n        <reference name=\"T\"/>\n       </condition>\n      </transition>",
+    );
+    let wired = pou(
+        "",
+        &format!(
+            "<transition localId=\"2\">\n       <condition>\n        <connectionPointIn><connection refLocalId=\"13\"/></connectionPointIn>\n       </condition>\n      </transition>\n      <inVariable localId=\"13\">\n       <connectionPointOut/>\n       <expression> {pieces} </expression>\n      </inVariable>"
+        ),
+    );
+    for (what, text) in [("inline", inline), ("named", named), ("wired", wired)] {
+        assert_eq!(names(&text), ["Stop"], "{what}:\n{text}");
+    }
+    // A contact's `variable` holds one name: `Part OK` is not one, `PartOK` would be.
+    let contact = pou(
+        "",
+        "<transition localId=\"2\">\n       <condition>\n        <connectionPointIn><connection refLocalId=\"12\"/></connectionPointIn>\n       </condition>\n      </transition>\n      <leftPowerRail localId=\"11\">\n       <connectionPointOut formalParameter=\"\"/>\n      </leftPowerRail>\n      <contact localId=\"12\">\n       <connectionPointIn><connection refLocalId=\"11\"/></connectionPointIn>\n       <variable><![CDATA[Part]]> <![CDATA[OK]]></variable>\n      </contact>",
+    );
+    let (_, d) = read(&contact);
+    assert!(
+        d.iter().any(|d| d.message.contains("Part OK")),
+        "{d:?}\n{contact}"
+    );
+}
