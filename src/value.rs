@@ -247,7 +247,7 @@ impl ListParser<'_> {
                     self.i = open;
                     return Err(self.err("`(` without its `)`"));
                 }
-                Some(_) => {
+                Some(&first) => {
                     let start = self.i;
                     let mut in_str = false;
                     while let Some(&c) = self.s.get(self.i) {
@@ -261,15 +261,17 @@ impl ListParser<'_> {
                         }
                         self.i += 1;
                     }
-                    let item = self.text[start..self.i].trim();
-                    if item.is_empty() {
+                    let item = &self.text[start..self.i];
+                    // An item that starts with a printable ASCII byte is not empty (only a
+                    // value that is kept is trimmed: a check allocates and trims nothing).
+                    if !first.is_ascii_graphic() && item.trim().is_empty() {
                         // Whitespace that `skip_ws` leaves (e.g. a vertical tab) is still
                         // whitespace: `(a, \u{b})` has an empty item like `(a, )`.
                         self.i = start;
                         return Err(self.err("empty list item"));
                     }
                     if self.build {
-                        items.push(Value::Scalar(item.to_owned()));
+                        items.push(Value::Scalar(item.trim().to_owned()));
                     }
                 }
             }
