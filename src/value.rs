@@ -602,6 +602,17 @@ mod tests {
         // Found by fuzzing: an item of whitespace `skip_ws` does not skip is still empty.
         assert_eq!(parse_value("( \"\"`,\u{b}\r )").unwrap_err().0, 6);
         assert_eq!(check_value("( \"\"`,\u{b}\r )").unwrap_err().0, 6);
+        // Non-ASCII white space too; an item that only starts with it is not empty. The check
+        // and the parse agree.
+        for (v, err) in [
+            ("(a, \u{a0})", Some(4)),
+            ("(a, \u{2003}\u{a0} )", Some(4)),
+            ("(a, \u{a0}b)", None),
+            ("(\u{e4}, b)", None),
+        ] {
+            assert_eq!(check_value(v).err().map(|e| e.0), err, "{v:?}");
+            assert_eq!(parse_value(v).err().map(|e| e.0), err, "{v:?}");
+        }
     }
 
     #[test]
