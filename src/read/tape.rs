@@ -12,6 +12,7 @@
 //! to be filled again.
 
 use std::io::{BufRead, Read};
+use std::ops::Range;
 use std::sync::mpsc::{Receiver, SyncSender};
 
 use quick_xml::events::Event;
@@ -350,16 +351,9 @@ impl<R: BufRead> Producer<R> {
         // Offsets into the piece: it is shorter than 4 GiB (`fill`).
         debug_assert!(u32::try_from(text.len()).is_ok());
         let off = |i: usize| i as u32;
-        // Where `s`, a part of the piece, lies in it.
-        let range = |s: &str| {
-            let start = (s.as_ptr() as usize).wrapping_sub(text.as_ptr() as usize);
-            (off(start), off(start + s.len()))
-        };
         let mut stop = stop;
         // Where the next event starts.
         let mut pos = 0;
-        // Where quick-xml reported its error (when it read the event).
-        let mut error_at = 0;
         loop {
             let at = pos;
             if self.keeping == 0 {
@@ -376,7 +370,7 @@ impl<R: BufRead> Producer<R> {
                 }
             }
             let (ev, end) = match plain_event(text, at) {
-                Some((ev, end)) => (Ok(ev), end),
+                Some(plain) => plain,
                 None => {
                     // Anything else is quick-xml's, one event from its `<` or `&`.
                     let mut reader = quick_xml::Reader::from_str(&text[at..]);
@@ -384,38 +378,40 @@ impl<R: BufRead> Producer<R> {
                     config.check_end_names = false;
                     config.allow_unmatched_ends = true;
                     let ev = reader.read_event();
-                    error_at = at + reader.error_position() as usize;
-                    (ev, at + reader.buffer_position() as usize)
+                    let end = at + reader.buffer_position() as usize;
+                    match ev {
+                        Ok(ev) => (Ev::of(&ev, text), end),
+                        Err(e) => {
+                            // An event that runs to the end of the piece.
+                            let at_cut = runs_to_end(
+                                &e,
+                                at,
+                                end,
+                                text.len(),
+                                matches!(stop, Some(Stop::NotUtf8)),
+                            );
+                            if at_cut && !final_piece {
+                                return Piece::Cut(at);
+                            }
+                            self.done = true;
+                            b.stop = if at_cut && stop.is_some() {
+                                // The file stops being UTF-8 or readable inside this event.
+                                stop.take()
+                            } else {
+                                let error_at = at + reader.error_position() as usize;
+                                Some(match e {
+                                    quick_xml::Error::Io(e) => {
+                                        Stop::Io(std::io::Error::new(e.kind(), e.to_string()))
+                                    }
+                                    e => Stop::Syntax(base + error_at, e.to_string()),
+                                })
+                            };
+                            return Piece::Parsed;
+                        }
+                    }
                 }
             };
             pos = end;
-            // An event that runs to the end of the piece.
-            let at_cut = match &ev {
-                Ok(_) => end >= text.len(),
-                Err(e) => runs_to_end(e, at, end, text.len(), matches!(stop, Some(Stop::NotUtf8))),
-            };
-            let ev = match ev {
-                // (A text is never cut: it ends at the `<` where the piece is cut.)
-                Err(_) if at_cut && !final_piece => return Piece::Cut(at),
-                // The file stops being UTF-8 or readable inside this event.
-                Ok(Event::Text(_)) | Err(_) if at_cut && stop.is_some() => {
-                    self.done = true;
-                    b.stop = stop.take();
-                    return Piece::Parsed;
-                }
-                Ok(Event::Eof) if !final_piece => return Piece::Parsed,
-                Ok(ev) => ev,
-                Err(e) => {
-                    self.done = true;
-                    b.stop = Some(match e {
-                        quick_xml::Error::Io(e) => {
-                            Stop::Io(std::io::Error::new(e.kind(), e.to_string()))
-                        }
-                        e => Stop::Syntax(base + error_at, e.to_string()),
-                    });
-                    return Piece::Parsed;
-                }
-            };
             let mut rec = Rec {
                 kind: Kind::Eof,
                 tag: Tag::Other,
@@ -427,29 +423,34 @@ impl<R: BufRead> Producer<R> {
                 name_len: 0,
             };
             match ev {
-                Event::Start(ref e) | Event::Empty(ref e) => {
-                    let content: &str = e;
-                    // The name is the start of the content.
-                    let len = e.name().as_ref().len().min(content.len());
-                    let local = local_part(&content[..len]);
-                    rec.tag = Tag::of(local);
-                    (rec.text, rec.text_end) = range(content);
-                    rec.name_len = off(len);
-                    rec.local = u16::try_from(len - local.len()).unwrap_or(u16::MAX);
-                    if matches!(ev, Event::Start(_)) {
+                Ev::Tag {
+                    empty,
+                    content,
+                    name_len,
+                    local,
+                } => {
+                    let name = &text[content.start..content.start + name_len];
+                    let local = match local {
+                        Some(l) => l,
+                        None => name_len - local_part(name).len(),
+                    };
+                    rec.tag = Tag::of(&name[local..]);
+                    (rec.text, rec.text_end) = (off(content.start), off(content.end));
+                    rec.name_len = off(name_len);
+                    rec.local = u16::try_from(local).unwrap_or(u16::MAX);
+                    if empty {
+                        rec.kind = Kind::Empty;
+                    } else {
                         rec.kind = Kind::Start;
                         let keeps = rec.tag.keeps_text();
                         self.keeping += usize::from(keeps);
                         self.open_starts.push((self.open.len(), keeps));
-                        self.open.push_str(&content[..len]);
-                    } else {
-                        rec.kind = Kind::Empty;
+                        self.open.push_str(name);
                     }
                 }
-                Event::End(ref e) => {
+                Ev::End(name) => {
                     rec.kind = Kind::End;
-                    let name = e.name();
-                    let found: &str = name.as_ref();
+                    let found = &text[name];
                     let err = match self.open_starts.pop() {
                         Some((start, keeps)) => {
                             self.keeping -= usize::from(keeps);
@@ -477,28 +478,35 @@ impl<R: BufRead> Producer<R> {
                         return Piece::Parsed;
                     }
                 }
-                Event::Text(ref t) => {
+                // (A text is never cut: it ends at the `<` where the piece is cut.) The file
+                // stops being UTF-8 or readable inside this text.
+                Ev::Text(_) if end >= text.len() && stop.is_some() => {
+                    self.done = true;
+                    b.stop = stop.take();
+                    return Piece::Parsed;
+                }
+                Ev::Text(raw) => {
                     rec.kind = Kind::Text;
-                    (rec.text, rec.text_end) = range(t);
+                    (rec.text, rec.text_end) = (off(raw.start), off(raw.end));
                 }
-                Event::CData(ref t) => {
+                Ev::CData(raw) => {
                     rec.kind = Kind::CData;
-                    (rec.text, rec.text_end) = range(t);
+                    (rec.text, rec.text_end) = (off(raw.start), off(raw.end));
                 }
-                Event::GeneralRef(ref r) => {
+                Ev::GeneralRef(raw) => {
                     rec.kind = Kind::GeneralRef;
-                    (rec.text, rec.text_end) = range(r);
+                    (rec.text, rec.text_end) = (off(raw.start), off(raw.end));
                 }
-                Event::DocType(_) => rec.kind = Kind::DocType,
-                Event::Eof => {
+                Ev::DocType => rec.kind = Kind::DocType,
+                Ev::Eof if !final_piece => return Piece::Parsed,
+                Ev::Eof => {
                     self.done = true;
                     b.stop = stop.take();
                     if b.stop.is_some() {
                         return Piece::Parsed;
                     }
                 }
-                // Declarations, comments, processing instructions.
-                _ => continue,
+                Ev::Skip => continue,
             }
             debug_assert!(
                 rec.text_end as usize <= text.len(),
@@ -513,21 +521,72 @@ impl<R: BufRead> Producer<R> {
     }
 }
 
+/// One event of a piece, as offsets into it.
+enum Ev {
+    /// A start or empty tag: its content (name and attributes), the length of its name, and
+    /// where the local name starts in it (`None`: not known, looked for).
+    Tag {
+        empty: bool,
+        content: Range<usize>,
+        name_len: usize,
+        local: Option<usize>,
+    },
+    /// An end tag's name.
+    End(Range<usize>),
+    /// The raw content of a text, a CDATA section, a reference.
+    Text(Range<usize>),
+    CData(Range<usize>),
+    GeneralRef(Range<usize>),
+    DocType,
+    Eof,
+    /// Declarations, comments, processing instructions.
+    Skip,
+}
+
+impl Ev {
+    /// quick-xml's event `ev`, read from `text` (each part of it lies in `text`).
+    fn of(ev: &Event<'_>, text: &str) -> Ev {
+        // Where `s`, a part of `text`, lies in it.
+        let range = |s: &str| {
+            let start = (s.as_ptr() as usize).wrapping_sub(text.as_ptr() as usize);
+            start..start + s.len()
+        };
+        match ev {
+            Event::Start(e) | Event::Empty(e) => {
+                let content: &str = e;
+                Ev::Tag {
+                    empty: matches!(ev, Event::Empty(_)),
+                    content: range(content),
+                    // The name is the start of the content.
+                    name_len: e.name().as_ref().len().min(content.len()),
+                    local: None,
+                }
+            }
+            Event::End(e) => Ev::End(range(e.name().as_ref())),
+            Event::Text(t) => Ev::Text(range(t)),
+            Event::CData(t) => Ev::CData(range(t)),
+            Event::GeneralRef(r) => Ev::GeneralRef(range(r)),
+            Event::DocType(_) => Ev::DocType,
+            Event::Eof => Ev::Eof,
+            _ => Ev::Skip,
+        }
+    }
+}
+
 /// The event of `text` at `at` as quick-xml reads it (without end-name checks and with
 /// unmatched ends allowed), and where it ends, for the events most of an SFC is made of: a
 /// start, empty or end tag closed in `text`, a text without references, the end. `None` for
 /// everything else (`<!`, `<?`, `&`, a tag not closed): quick-xml reads those.
 ///
 /// quick-xml checks the UTF-8 of every event again, which the producer did once for the whole
-/// piece: this was ~15 % of the producer's instructions. `tests/tape.rs` and the `sfc` fuzz
-/// target hold the events to quick-xml's over the whole text.
-fn plain_event(text: &str, at: usize) -> Option<(Event<'_>, usize)> {
-    use quick_xml::events::{BytesEnd, BytesStart, BytesText};
-    // (quick-xml's own: the name ends at the first white space.)
-    use quick_xml::utils::name_len;
+/// piece (this was ~15 % of the producer's instructions), and its events are moved and read
+/// again for their names; here one pass over a tag finds its name, local name and end.
+/// `tests/tape.rs` and the `sfc` fuzz target hold the events to quick-xml's over the whole
+/// text.
+fn plain_event(text: &str, at: usize) -> Option<(Ev, usize)> {
     let b = text.as_bytes();
     let Some(&first) = b.get(at) else {
-        return Some((Event::Eof, at));
+        return Some((Ev::Eof, at));
     };
     match first {
         b'<' => {
@@ -535,12 +594,16 @@ fn plain_event(text: &str, at: usize) -> Option<(Event<'_>, usize)> {
             if next == b'!' || next == b'?' {
                 return None;
             }
-            // The name, up to white space or the `>` (a quote: below).
+            // The name, up to white space or the `>` (a quote: below), and the last `:` in it.
             let mut i = at + 1;
+            let mut colon = None;
             while let Some(&c) = b.get(i)
                 && !is_whitespace(c)
                 && !matches!(c, b'>' | b'"' | b'\'')
             {
+                if c == b':' {
+                    colon = Some(i);
+                }
                 i += 1;
             }
             let name_end = i;
@@ -564,27 +627,32 @@ fn plain_event(text: &str, at: usize) -> Option<(Event<'_>, usize)> {
             };
             let ev = if next == b'/' {
                 // The name without the white space after it.
-                let content = &text[at + 2..close];
-                let name = match content.bytes().rposition(|c| !is_whitespace(c)) {
-                    Some(last) => &content[..=last],
-                    None => content,
-                };
-                Event::End(BytesEnd::new(name))
+                let mut last = close;
+                while last > at + 2 && is_whitespace(b[last - 1]) {
+                    last -= 1;
+                }
+                Ev::End(at + 2..last)
             } else {
                 let empty = close - at >= 2 && b[close - 1] == b'/';
-                let content = &text[at + 1..close - usize::from(empty)];
-                // The name ends at the first white space of the content (quick-xml's
-                // `name_len`): where the loop stopped, unless at a quote.
-                let len = if b[name_end] == b'"' || b[name_end] == b'\'' {
-                    name_len(content.as_bytes())
+                let content = at + 1..close - usize::from(empty);
+                if b[name_end] == b'"' || b[name_end] == b'\'' {
+                    // The name ends at the first white space of the content (quick-xml's
+                    // `name_len`), after the quote.
+                    Ev::Tag {
+                        empty,
+                        name_len: quick_xml::utils::name_len(&b[content.clone()]),
+                        content,
+                        local: None,
+                    }
                 } else {
-                    (name_end - at - 1).min(content.len())
-                };
-                let e = BytesStart::from_content(content, len);
-                if empty {
-                    Event::Empty(e)
-                } else {
-                    Event::Start(e)
+                    // (Without the `/` of an empty tag, which is not a `:`.)
+                    let name_len = (name_end - at - 1).min(content.len());
+                    Ev::Tag {
+                        empty,
+                        content,
+                        name_len,
+                        local: Some(colon.map_or(0, |c| c - at)),
+                    }
                 }
             };
             Some((ev, close + 1))
@@ -592,7 +660,7 @@ fn plain_event(text: &str, at: usize) -> Option<(Event<'_>, usize)> {
         b'&' => None,
         _ => {
             let end = memchr::memchr2(b'<', b'&', &b[at..]).map_or(b.len(), |i| at + i);
-            Some((Event::Text(BytesText::from_escaped(&text[at..end])), end))
+            Some((Ev::Text(at..end), end))
         }
     }
 }

@@ -204,7 +204,7 @@ fn white_space_between_pieces_of_a_condition_is_kept() {
             .elements
             .iter()
             .find_map(|e| match &e.kind {
-                ElementKind::Transition(Some(c)) => Some(c.clone()),
+                ElementKind::Transition(Some(c)) => Some(c),
                 _ => None,
             })
             .expect("a condition");
