@@ -262,8 +262,8 @@ impl ListParser<'_> {
                         self.i += 1;
                     }
                     let item = &self.text[start..self.i];
-                    // An item that starts with a printable ASCII byte is not empty (only a
-                    // value that is kept is trimmed: a check allocates and trims nothing).
+                    // An item that starts with a printable ASCII byte is not empty; any other
+                    // is trimmed to tell.
                     if !first.is_ascii_graphic() && item.trim().is_empty() {
                         // Whitespace that `skip_ws` leaves (e.g. a vertical tab) is still
                         // whitespace: `(a, \u{b})` has an empty item like `(a, )`.

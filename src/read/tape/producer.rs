@@ -209,7 +209,9 @@ impl<R: BufRead> Producer<R> {
             let at = pos;
             if self.keeping == 0 {
                 // White space up to the next markup, reference or end, where no open element
-                // keeps text: not recorded (the reader would pass over it).
+                // keeps text: not recorded (the reader would pass over it). A byte loop, as for
+                // an end tag's name below: quick-xml's `trim_xml_start`/`_end` over a slice cost
+                // more (docs/PERFORMANCE.md, "What was tried and not kept").
                 let bytes = text.as_bytes();
                 let mut i = at;
                 while i < bytes.len() && is_whitespace(bytes[i]) {

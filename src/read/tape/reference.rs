@@ -4,7 +4,7 @@
 use std::io::BufRead;
 
 use quick_xml::events::Event;
-use quick_xml::utils::is_whitespace;
+use quick_xml::utils::trim_xml_start;
 
 use super::producer::{BOM, Producer};
 use super::{Batch, Kind, Stop, Tag, local_part};
@@ -92,7 +92,7 @@ fn quick_xml_text(input: &[u8]) -> String {
             }
             Event::End(_) => (Kind::End, "", ""),
             // White space where no open element keeps text is left out.
-            Event::Text(t) if !open.contains(&true) && { t as &str }.bytes().all(is_whitespace) => {
+            Event::Text(t) if !open.contains(&true) && trim_xml_start(t).is_empty() => {
                 continue;
             }
             Event::Text(t) => (Kind::Text, t, ""),
