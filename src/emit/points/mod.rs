@@ -22,6 +22,7 @@ use crate::lang::Language;
 use crate::names::transliterate;
 
 mod motion;
+mod taken;
 
 use motion::{Kind, Motion, Target, krl_motion, rapid_motion, ur_motion};
 
@@ -51,7 +52,7 @@ pub struct Points {
     mode: Mode,
     /// The points' names so far, lower-case (KRL and RAPID ignore case; URScript's are kept
     /// apart without regard to case too).
-    names: HashSet<String>,
+    names: taken::Names,
     /// The words of the program's code a point's declared name (`XName`, `pName`) may not be,
     /// lower-case.
     words: HashSet<String>,
@@ -64,10 +65,11 @@ pub struct Points {
     /// The step being written, read here when it was not read ahead (kept between steps for
     /// its allocations).
     read: ReadAhead,
-    /// Buffers kept from step to step: a name's stem and its lower-case form, the names of a
-    /// motion's points, the step's code as written.
+    /// Buffers kept from step to step: a name's stem and its lower-case form, a numbered
+    /// name's lower-case form, the names of a motion's points, the step's code as written.
     stem: String,
     lower: String,
+    numbered: String,
     names_buf: [String; 2],
     out: String,
     /// The declarations, in order: `.dat` lines (KRL), module data (RAPID), the program's first
@@ -104,7 +106,7 @@ impl Points {
             lang,
             krl,
             mode,
-            names: HashSet::default(),
+            names: taken::Names::new(),
             words: taken.into_iter().map(|w| w.to_ascii_lowercase()).collect(),
             max,
             next: HashMap::default(),
@@ -112,6 +114,7 @@ impl Points {
             read: ReadAhead::default(),
             stem: String::new(),
             lower: String::new(),
+            numbered: String::new(),
             names_buf: [String::new(), String::new()],
             out: String::new(),
             declarations: Vec::new(),
@@ -197,7 +200,7 @@ impl Points {
         let mut n = match self.next.get(lower.as_str()) {
             Some(&n) => n,
             None if self.free(&lower) => {
-                self.names.insert(lower.clone());
+                self.names.insert(&lower);
                 self.count += 1;
                 name.clear();
                 name.push_str(&stem);
@@ -215,9 +218,17 @@ impl Points {
             name.push_str(&stem[..keep]);
             name.push('_');
             super::flow::push_decimal(name, n as u64);
-            let name_lower = name.to_ascii_lowercase();
-            if self.free(&name_lower) {
-                self.names.insert(name_lower);
+            // (`stem` is ASCII: its lower-case form cut at the same place.)
+            let mut numbered = std::mem::take(&mut self.numbered);
+            numbered.clear();
+            numbered.push_str(&lower[..keep]);
+            numbered.push_str(&name[keep..]);
+            let free = self.free(&numbered);
+            if free {
+                self.names.insert(&numbered);
+            }
+            self.numbered = numbered;
+            if free {
                 match self.next.get_mut(lower.as_str()) {
                     Some(last) => *last = n,
                     None => {
@@ -508,9 +519,12 @@ pub fn for_program(
     for l in definitions() {
         words(l);
     }
+    // Steps that may move to a literal position: about as many points.
+    let mut literal = 0;
     if mode == Mode::Named {
         for b in input.bound.steps.iter().flatten() {
             if memchr::memchr2(b'{', b'[', b.code.as_bytes()).is_some() {
+                literal += 1;
                 words(&b.code);
             }
         }
@@ -537,9 +551,7 @@ pub fn for_program(
         });
         let steps = steps.map(|(i, code)| (Ok(i), code));
         let found = steps.chain(defs).find_map(|(step, code)| {
-            code.split('\n')
-                .find(|l| sets_motion(l))
-                .map(|l| (step, l.trim().to_owned()))
+            first_setting_motion(code).map(|l| (step, l.trim().to_owned()))
         });
         // The blackboard's tool, base and load, set by statements before the steps: an inline
         // form's FDAT must say the same tool and base, and set no other load.
@@ -593,7 +605,28 @@ pub fn for_program(
             }
         }
     }
-    Some(Points::new(lang, mode, krl, taken))
+    let mut points = Points::new(lang, mode, krl, taken);
+    points.names.reserve(literal);
+    points.declarations.reserve(literal);
+    Some(points)
+}
+
+/// The first of `code`'s lines (separated by `\n`) that [`sets_motion`]: only the lines that
+/// hold a `$`, `_` or `(` are read (every step's code, 100,000 steps).
+fn first_setting_motion(code: &str) -> Option<&str> {
+    let b = code.as_bytes();
+    let mut from = 0;
+    while let Some(k) = memchr::memchr3(b'$', b'_', b'(', &b[from..]) {
+        let at = from + k;
+        let start = memchr::memrchr(b'\n', &b[..at]).map_or(0, |i| i + 1);
+        let end = memchr::memchr(b'\n', &b[at..]).map_or(b.len(), |i| at + i);
+        let line = &code[start..end];
+        if sets_motion(line) {
+            return Some(line);
+        }
+        from = end;
+    }
+    None
 }
 
 /// Whether a KRL line sets a motion parameter an inline form sets too: velocity, acceleration,
@@ -602,22 +635,16 @@ pub fn for_program(
 fn sets_motion(line: &str) -> bool {
     let line = line.as_bytes();
     let code = &line[..memchr::memchr(b';', line).unwrap_or(line.len())];
-    // Every statement sets its parameters with `$`, `_` or `BAS`: most lines have none of them
-    // (one pass over every line of every step).
-    let (mut dollar, mut underscore, mut b) = (false, false, false);
-    for &c in code {
-        dollar |= c == b'$';
-        underscore |= c == b'_';
-        b |= (c | 0x20) == b'b';
-    }
-    if !(dollar || underscore || b) {
+    // Every statement sets its parameters with `$`, `_` or `BAS(`: most lines have none of
+    // them (one pass over every line of every step).
+    if memchr::memchr3(b'$', b'_', b'(', code).is_none() {
         return false;
     }
     let has = |needle: &[u8]| {
         code.windows(needle.len())
-            .position(|w| w.eq_ignore_ascii_case(needle))
+            .any(|w| w.eq_ignore_ascii_case(needle))
     };
-    if dollar
+    if memchr::memchr(b'$', code).is_some()
         && [
             &b"$VEL"[..],
             b"$ACC",
@@ -630,23 +657,26 @@ fn sets_motion(line: &str) -> bool {
             b"$CIRC_TYPE",
         ]
         .iter()
-        .any(|w| has(w).is_some())
+        .any(|w| has(w))
     {
         return true;
     }
-    if underscore
+    if memchr::memchr(b'_', code).is_some()
         && [&b"PDAT_ACT"[..], b"LDAT_ACT", b"FDAT_ACT"]
             .iter()
-            .any(|w| has(w).is_some())
+            .any(|w| has(w))
     {
         return true;
     }
-    // `BAS(` or `BAS (` as a word of its own.
-    b && memchr::memchr2_iter(b'b', b'B', code).any(|i| {
-        code.get(i..i + 3)
-            .is_some_and(|w| w.eq_ignore_ascii_case(b"BAS"))
-            && (i == 0 || !(code[i - 1].is_ascii_alphanumeric() || b"_$".contains(&code[i - 1])))
-            && code[i + 3..].iter().find(|b| !b.is_ascii_whitespace()) == Some(&b'(')
+    // `BAS(` or `BAS (` as a word of its own: before each `(`, white space, then `BAS` not
+    // part of a longer name.
+    memchr::memchr_iter(b'(', code).any(|i| {
+        let before = code[..i].trim_ascii_end();
+        before.len() >= 3
+            && before[before.len() - 3..].eq_ignore_ascii_case(b"BAS")
+            && before[..before.len() - 3]
+                .last()
+                .is_none_or(|c| !(c.is_ascii_alphanumeric() || b"_$".contains(c)))
     })
 }
 
@@ -849,6 +879,9 @@ mod tests {
             "x=1 BAS  (#INITMOV,0)",
             "PDAT_ACT=PPDAT1",
             "lin_ldat_act=1 LDAT_ACT=L1",
+            "BAS\t(#PTP_PARAMS,100)",
+            "IF F(1) THEN BAS (#TOOL,1)",
+            "A(1) BAS(2)",
         ] {
             assert!(sets_motion(l), "{l}");
         }
@@ -861,9 +894,23 @@ mod tests {
             "BAS",
             "BASIS(1)",
             "WAIT FOR $IN[1]",
+            "x=F(1) ; BAS(#TOOL)",
+            "_BAS(1)",
+            "XBAS (1)",
+            "BAS X(1)",
+            "(",
         ] {
             assert!(!sets_motion(l), "{l}");
         }
+        // In a step's code: the first line that does, whichever line it is.
+        assert_eq!(
+            first_setting_motion("SetVelCP (0.5)\nPTP {X 1}\n  BAS (#TOOL,1)\n$VEL.CP=1"),
+            Some("  BAS (#TOOL,1)")
+        );
+        assert_eq!(first_setting_motion("$VEL.CP=1"), Some("$VEL.CP=1"));
+        assert_eq!(first_setting_motion("A(1)\nB\n$IN[1]=X ; $VEL"), None);
+        assert_eq!(first_setting_motion("BAS\n(#TOOL)"), None);
+        assert_eq!(first_setting_motion(""), None);
     }
 
     #[test]
