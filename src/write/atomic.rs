@@ -285,8 +285,8 @@ fn write_all_with_hook(
         |path: &Path, e: io::Error| io::Error::new(e.kind(), format!("{}: {e}", path.display()));
     let mut outcomes = Vec::with_capacity(files.len());
     let mut staged = Vec::new();
-    for (path, bytes) in files {
-        let s = stage(path, bytes).map_err(|e| named(path, e))?;
+    for ((path, _), s) in files.iter().zip(stage_all(files)) {
+        let s = s.map_err(|e| named(path, e))?;
         outcomes.push(if s.is_some() {
             WriteOutcome::Written
         } else {
@@ -336,6 +336,74 @@ fn write_all_with_hook(
         sync_dir(d);
     }
     Ok(outcomes)
+}
+
+/// Files from this many on are staged by several threads.
+const STAGED_TOGETHER: usize = 8;
+
+/// The threads that stage files at once. Staging waits on the disk (creating the temporary
+/// file, `fsync`) more than it computes, so more threads than cores help: 145 new files of a
+/// split 100,000-step program took 70 ms on one thread, 55 on four, 57 on eight (2 cores).
+const STAGING_THREADS: usize = 4;
+
+/// Every file of `files` staged ([`stage`]), in order: a split program's 145 files are written
+/// and synced on [`STAGING_THREADS`] threads at once. The results of the files before the first that
+/// failed, that one's error, and then nothing: once a file fails, no thread takes another (the
+/// files are taken in order, so every file before the failed one is staged, and the error is
+/// the one staging them one by one would have met first).
+fn stage_all(files: &[(&Path, &[u8])]) -> Vec<io::Result<Option<Staged>>> {
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+    let threads = if files.len() < STAGED_TOGETHER {
+        1
+    } else {
+        STAGING_THREADS
+    };
+    let next = AtomicUsize::new(0);
+    let failed = AtomicBool::new(false);
+    let work = || {
+        let mut done = Vec::new();
+        while !failed.load(Ordering::Relaxed) {
+            let k = next.fetch_add(1, Ordering::Relaxed);
+            let Some((path, bytes)) = files.get(k) else {
+                break;
+            };
+            let r = stage(path, bytes);
+            if r.is_err() {
+                failed.store(true, Ordering::Relaxed);
+            }
+            done.push((k, r));
+        }
+        done
+    };
+    let mut done = std::thread::scope(|s| {
+        // A thread that cannot be started leaves its files to the others; this one works too.
+        let helpers: Vec<_> = (1..threads)
+            .filter_map(|_| {
+                std::thread::Builder::new()
+                    .name("skillpost-write".into())
+                    .spawn_scoped(s, work)
+                    .ok()
+            })
+            .collect();
+        let mut done = work();
+        for h in helpers {
+            match h.join() {
+                Ok(d) => done.extend(d),
+                Err(panic) => std::panic::resume_unwind(panic),
+            }
+        }
+        done
+    });
+    done.sort_unstable_by_key(|(k, _)| *k);
+    let mut results = Vec::with_capacity(done.len());
+    for (_, r) in done {
+        let stop = r.is_err();
+        results.push(r);
+        if stop {
+            break;
+        }
+    }
+    results
 }
 
 /// Undoes the rename over `target`: its second name goes back (or, when it had none because it
@@ -673,6 +741,50 @@ mod tests {
         let out = write_all_if_changed(&[(&src, b"new src"), (&dat, b"new dat")]).unwrap();
         assert_eq!(out, [WriteOutcome::Unchanged, WriteOutcome::Written]);
         assert!(temp_leftovers(t.path()).is_empty(), "no second names left");
+    }
+
+    #[test]
+    fn many_files_staged_together_are_each_written_or_none_is() {
+        let t = tempfile::tempdir().unwrap();
+        let paths: Vec<PathBuf> = (0..3 * STAGED_TOGETHER)
+            .map(|k| t.path().join(format!("p_{k}.src")))
+            .collect();
+        let texts: Vec<String> = (0..paths.len()).map(|k| format!("part {k}\n")).collect();
+        fn files<'a>(paths: &'a [PathBuf], texts: &'a [String]) -> Vec<(&'a Path, &'a [u8])> {
+            paths
+                .iter()
+                .zip(texts)
+                .map(|(p, t)| (p.as_path(), t.as_bytes()))
+                .collect()
+        }
+        let out = write_all_if_changed(&files(&paths, &texts)).unwrap();
+        assert!(out.iter().all(|o| *o == WriteOutcome::Written));
+        for (p, text) in paths.iter().zip(&texts) {
+            assert_eq!(&fs::read_to_string(p).unwrap(), text, "{}", p.display());
+        }
+        // Two files that cannot be written, one early, one late: the error is the first's
+        // (as written one by one), and no file changes, no temporary file is left.
+        let new: Vec<String> = (0..paths.len()).map(|k| format!("new {k}\n")).collect();
+        for k in [5, paths.len() - 2] {
+            fs::remove_file(&paths[k]).unwrap();
+            fs::create_dir(&paths[k]).unwrap();
+        }
+        let err = write_all_if_changed(&files(&paths, &new)).unwrap_err();
+        let msg = err.to_string();
+        assert!(
+            msg.starts_with(&format!("{}: ", paths[5].display())),
+            "{msg}"
+        );
+        for (k, (p, text)) in paths.iter().zip(&texts).enumerate() {
+            if k != 5 && k != paths.len() - 2 {
+                assert_eq!(&fs::read_to_string(p).unwrap(), text, "{}", p.display());
+            }
+        }
+        assert!(
+            temp_leftovers(t.path()).is_empty(),
+            "{:?}",
+            temp_leftovers(t.path())
+        );
     }
 
     #[test]
