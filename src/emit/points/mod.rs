@@ -519,14 +519,25 @@ pub fn for_program(
     for l in definitions() {
         words(l);
     }
+    // KRL's named points are inline forms unless the program sets motion parameters itself:
+    // the first statement that does, in a step or an IRL definition.
+    let find_setting = lang == Language::Krl && mode == Mode::Named && !forms;
+    let mut found = None;
     // Steps that may move to a literal position: about as many points.
     let mut literal = 0;
-    if mode == Mode::Named {
-        for b in input.bound.steps.iter().flatten() {
-            if memchr::memchr2(b'{', b'[', b.code.as_bytes()).is_some() {
-                literal += 1;
-                words(&b.code);
-            }
+    // One pass over the steps' code for both (100,000 steps: each step's code is read while it
+    // is in the cache).
+    for (i, b) in input.bound.steps.iter().enumerate() {
+        let Some(b) = b else { continue };
+        if mode == Mode::Named && memchr::memchr2(b'{', b'[', b.code.as_bytes()).is_some() {
+            literal += 1;
+            words(&b.code);
+        }
+        if find_setting
+            && found.is_none()
+            && let Some(l) = first_setting_motion(&b.code)
+        {
+            found = Some((Ok(i), l.trim().to_owned()));
         }
     }
     if lang == Language::UrScript {
@@ -538,21 +549,16 @@ pub fn for_program(
     if let Ok(Some((tool, base))) = tools.krl_numbers() {
         krl = KrlForm::Inline { tool, base };
     }
-    if lang == Language::Krl && mode == Mode::Named && !forms {
-        let steps = input
-            .bound
-            .steps
-            .iter()
-            .enumerate()
-            .filter_map(|(i, b)| b.as_ref().map(|b| (i, b.code.as_str())));
-        let defs = input.bound.definitions.iter().flat_map(|&(i, d)| {
-            let def = &input.irls[i].definitions[d];
-            def.lines.iter().map(move |l| (Err(def), l.as_str()))
-        });
-        let steps = steps.map(|(i, code)| (Ok(i), code));
-        let found = steps.chain(defs).find_map(|(step, code)| {
-            first_setting_motion(code).map(|l| (step, l.trim().to_owned()))
-        });
+    if find_setting {
+        if found.is_none() {
+            found = input.bound.definitions.iter().find_map(|&(i, d)| {
+                let def = &input.irls[i].definitions[d];
+                def.lines
+                    .iter()
+                    .find_map(|l| first_setting_motion(l))
+                    .map(|l| (Err(def), l.trim().to_owned()))
+            });
+        }
         // The blackboard's tool, base and load, set by statements before the steps: an inline
         // form's FDAT must say the same tool and base, and set no other load.
         let found = found.map(|(step, statement)| (step.map_err(Some), statement));
