@@ -308,10 +308,12 @@ pub fn plan(sfc: &Sfc, diags: &mut Diagnostics) -> Option<Plan> {
     }
     let sequences = ends?;
     let mut bodies = Vec::with_capacity(sequences.len());
-    let order = Order::new(&g);
+    // The order of the connections, for the dominators of the jumps' targets (none without
+    // jumps: a flat chart of 100,000 steps does not pay for it).
+    let order = jumps.iter().any(Option::is_some).then(|| Order::new(&g));
     for &(start, _) in &sequences {
         // Every sequence is walked, so one run reports the faults of each.
-        bodies.push(walk(sfc, &g, &jumps, start, &order, diags));
+        bodies.push(walk(sfc, &g, &jumps, start, order.as_ref(), diags));
     }
     let mut bodies: Vec<Vec<Block>> = bodies.into_iter().collect::<Option<_>>()?;
     let mut body = if bodies.len() == 1 {

@@ -2,6 +2,8 @@
 //! simultaneous and selection branches, loops closed by jumps (see `ARCHITECTURE.md`, "The
 //! program tree").
 
+use std::cell::OnceCell;
+
 use foldhash::HashMap;
 
 mod selection;
@@ -26,16 +28,19 @@ pub fn walk(
     g: &Graph,
     jumps: &[Option<usize>],
     start: usize,
-    order: &Order,
+    order: Option<&Order>,
     diags: &mut Diagnostics,
 ) -> Option<Vec<Block>> {
+    // Each element's simultaneous branches: made when a jump or a state asks (a chart without
+    // jumps whose flow is structured never does).
+    let contexts = std::cell::OnceCell::new();
+    let contexts_of = || contexts_at(&contexts, sfc, g, start);
     // A jump into or out of a simultaneous branch: the chart itself is wrong.
-    let contexts = branch_contexts(sfc, g, start);
     let el = &sfc.elements;
     let mut unsafe_jumps = 0;
     for (j, t) in jumps.iter().enumerate() {
         if let Some(t) = *t
-            && contexts[j] != contexts[t]
+            && contexts_of()[j] != contexts_of()[t]
         {
             unsafe_jumps += 1;
             diags.push(
@@ -60,12 +65,15 @@ pub fn walk(
     // begins a state from the start, so a chart of many such jumps is walked once, not once per
     // jump, and the branches they leave do not nest. (Jumps that leave several loops are found
     // by the walk.)
-    let dom = Dominators::new(g, start, order);
-    for (j, t) in jumps.iter().enumerate() {
-        if let Some(t) = *t
-            && !dom.dominates(t, j)
-        {
-            entries[t] = true;
+    // (`order` is there when the chart has jumps.)
+    if let Some(order) = order {
+        let dom = Dominators::new(g, start, order);
+        for (j, t) in jumps.iter().enumerate() {
+            if let Some(t) = *t
+                && !dom.dominates(t, j)
+            {
+                entries[t] = true;
+            }
         }
     }
     loop {
@@ -102,6 +110,16 @@ pub fn walk(
     }
 }
 
+/// [`branch_contexts`] from `start`, made the first time it is asked for.
+fn contexts_at<'c>(
+    contexts: &'c OnceCell<Vec<u32>>,
+    sfc: &Sfc,
+    g: &Graph,
+    start: usize,
+) -> &'c [u32] {
+    contexts.get_or_init(|| branch_contexts(sfc, g, start))
+}
+
 /// One walk with the given state entries: the body, or `None` and the elements that, made
 /// entries of states, would let the walk go further.
 fn walk_once(
@@ -110,7 +128,7 @@ fn walk_once(
     jumps: &[Option<usize>],
     start: usize,
     entries: &[bool],
-    branch_of: &[u32],
+    contexts: &OnceCell<Vec<u32>>,
     diags: &mut Diagnostics,
 ) -> (Option<Vec<Block>>, Vec<usize>) {
     // A jump to a state's entry is a Goto, never a loop.
@@ -133,7 +151,8 @@ fn walk_once(
         targeted,
         jumps_to,
         entries,
-        branch_of,
+        contexts,
+        start,
         proposed: Vec::new(),
         loops: Vec::new(),
         marks: vec![0; sfc.elements.len()],
@@ -260,8 +279,10 @@ struct Walker<'a> {
     targeted: Vec<bool>,
     /// The elements that begin states ([`Block::Machine`]): reaching one is a Goto.
     entries: &'a [bool],
-    /// Each element's simultaneous branches ([`branch_contexts`]).
-    branch_of: &'a [u32],
+    /// Each element's simultaneous branches ([`branch_contexts`]), made when first asked
+    /// ([`Walker::branch_of`]).
+    contexts: &'a OnceCell<Vec<u32>>,
+    start: usize,
     /// Elements that would let a failed walk go further as entries of states.
     proposed: Vec<usize>,
     /// The jumps to each target step.
@@ -279,7 +300,12 @@ struct Walker<'a> {
     failed: bool,
 }
 
-impl Walker<'_> {
+impl<'a> Walker<'a> {
+    /// Each element's simultaneous branches.
+    fn branch_of(&self) -> &'a [u32] {
+        contexts_at(self.contexts, self.sfc, self.g, self.start)
+    }
+
     /// Walks a sequence from `cur` until it ends. `entered` says `cur` itself is to be taken
     /// even if it is a convergence (we arrive there after its branches) or a loop head that is
     /// being opened.
@@ -390,7 +416,8 @@ impl Walker<'_> {
             return (body, end);
         }
         let el = &self.sfc.elements;
-        let here = self.branch_of[first];
+        let branch_of = self.branch_of();
+        let here = branch_of[first];
         let mut states = vec![State { entry: first, body }];
         let mut ends = vec![end];
         let mut number: HashMap<usize, usize> = HashMap::default();
@@ -400,7 +427,7 @@ impl Walker<'_> {
             if number.contains_key(&entry) {
                 continue;
             }
-            if self.branch_of[entry] != here {
+            if branch_of[entry] != here {
                 let mut from = first;
                 for st in &states {
                     visit(&st.body, &mut |b| {
