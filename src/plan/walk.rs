@@ -33,7 +33,7 @@ pub fn walk(
 ) -> Option<Vec<Block>> {
     // Each element's simultaneous branches: made when a jump or a state asks (a chart without
     // jumps whose flow is structured never does).
-    let contexts = std::cell::OnceCell::new();
+    let contexts = OnceCell::new();
     let contexts_of = || contexts_at(&contexts, sfc, g, start);
     // A jump into or out of a simultaneous branch: the chart itself is wrong.
     let el = &sfc.elements;
