@@ -8,11 +8,23 @@
 use crate::diag::Span;
 use crate::model::{Closed, Element, ElementKind, Inputs, Name, Sfc};
 
+/// Whether every connection comes from an element of a smaller localId. Then the ids ascend
+/// along every path, no connection closes a cycle, and [`close_circles`] has nothing to do: one
+/// pass over the elements (charts are usually numbered so) instead of building their graph.
+fn all_forward(sfc: &Sfc) -> bool {
+    sfc.elements
+        .iter()
+        .all(|e| e.inputs.iter().all(|(r, _)| *r < e.local_id))
+}
+
 /// Makes every connection back to an earlier step a jump; returns how many there were.
 /// "Earlier": the connection closes a cycle of the depth-first walk from the start steps (the
 /// steps marked `initialStep="true"` and those without a predecessor), and leads into a step
 /// or into a selection convergence whose one successor is a step.
 pub fn close_circles(sfc: &mut Sfc) -> usize {
+    if all_forward(sfc) {
+        return 0;
+    }
     let n = sfc.elements.len();
     let mut ids = super::graph::Ids::new(sfc);
     for (i, e) in sfc.elements.iter().enumerate() {
@@ -149,4 +161,92 @@ pub fn close_circles(sfc: &mut Sfc) -> usize {
         made += 1;
     }
     made
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diag::{Diagnostics, Sources};
+
+    fn read(body: &str) -> Sfc {
+        let text = format!(
+            "<project><types><pous><pou name=\"P\" pouType=\"program\"><body><SFC>{body}</SFC></body></pou></pous></types></project>"
+        );
+        let mut sources = Sources::default();
+        let f = sources.add("s.xml".into(), "s.xml".into(), text, false);
+        crate::read::sfc::read_sfc(&sources, f, &mut Diagnostics::default()).expect("readable")
+    }
+
+    fn step(id: u64, name: &str, inputs: &[u64]) -> String {
+        let conns: String = inputs
+            .iter()
+            .map(|r| format!("<connection refLocalId=\"{r}\"/>"))
+            .collect();
+        let input = if inputs.is_empty() {
+            String::new()
+        } else {
+            format!("<connectionPointIn>{conns}</connectionPointIn>")
+        };
+        // The first step is the initial one.
+        let initial = if name == "A" {
+            " initialStep=\"true\""
+        } else {
+            ""
+        };
+        format!("<step localId=\"{id}\" name=\"{name}\"{initial}>{input}</step>")
+    }
+
+    fn transition(id: u64, input: u64) -> String {
+        format!(
+            "<transition localId=\"{id}\"><connectionPointIn><connection refLocalId=\"{input}\"/></connectionPointIn><condition><inline><ST>TRUE</ST></inline></condition></transition>"
+        )
+    }
+
+    #[test]
+    fn a_connection_back_is_closed_in_any_order_of_ids_and_elements() {
+        // Drawn in order: the last transition (4) leads back into the first step (1).
+        let mut sfc = read(
+            &[
+                step(1, "A", &[4]),
+                transition(2, 1),
+                step(3, "B", &[2]),
+                transition(4, 3),
+            ]
+            .concat(),
+        );
+        assert!(!all_forward(&sfc));
+        assert_eq!(close_circles(&mut sfc), 1);
+        assert_eq!(sfc.closed.len(), 1);
+        // Numbered backwards: every connection comes from a larger id, and the circle is found.
+        let mut sfc = read(
+            &[
+                step(9, "A", &[6]),
+                transition(8, 9),
+                step(7, "B", &[8]),
+                transition(6, 7),
+            ]
+            .concat(),
+        );
+        assert!(!all_forward(&sfc));
+        assert_eq!(close_circles(&mut sfc), 1);
+    }
+
+    #[test]
+    fn a_chart_numbered_forward_is_left_as_it_is_whatever_its_element_order() {
+        // Listed out of order, each connection from a smaller id: no cycle, nothing changes.
+        let body = [
+            transition(4, 3),
+            step(3, "B", &[2]),
+            step(1, "A", &[]),
+            transition(2, 1),
+        ]
+        .concat();
+        let mut sfc = read(&body);
+        assert!(all_forward(&sfc));
+        let before: Vec<_> = sfc.elements.iter().map(|e| e.inputs.to_vec()).collect();
+        assert_eq!(close_circles(&mut sfc), 0);
+        let after: Vec<_> = sfc.elements.iter().map(|e| e.inputs.to_vec()).collect();
+        assert_eq!(before, after);
+        assert!(sfc.closed.is_empty());
+    }
 }
