@@ -27,7 +27,6 @@
 //! - [`excerpt`]: the lines of a streamed file (the SFC) that diagnostics point into, read
 //!   again without holding the file.
 //! - [`names`]: case-insensitive name keys, KRL names, transliteration.
-//! - [`umask`]: the process's umask (the mode of new output files).
 //! - [`paths`]: `refURI` values → paths, lexical normalisation, absolute paths.
 #![forbid(unsafe_code)]
 
@@ -52,7 +51,6 @@ pub mod print;
 pub mod read;
 pub mod simulate;
 pub mod template;
-pub mod umask;
 pub mod value;
 pub mod write;
 

@@ -9,8 +9,8 @@ use std::path::Path;
 /// From the bottom up.
 const ORDER: &[&str] = &[
     "names", "paths", "convert", "load", "excerpt", "diag", "cond", "value", "template", "lang",
-    "check", "model", "read", "plan", "bind", "emit", "umask", "write", "picture", "compile",
-    "simulate", "print", "daemon", "cli",
+    "check", "model", "read", "plan", "bind", "emit", "write", "picture", "compile", "simulate",
+    "print", "daemon", "cli",
 ];
 
 fn module_of(rel: &Path) -> String {

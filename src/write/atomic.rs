@@ -32,8 +32,10 @@ pub enum WriteOutcome {
 /// - **Permissions:** an existing target keeps its permission bits (Unix: the whole mode
 ///   including setuid/setgid/sticky; elsewhere: the read-only flag). A new file gets `0o666`
 ///   less the process umask on Unix, like any program's new file (`0o664` under the service's
-///   `UMask=0002`, so planners in the group can write it; the temporary file is created `0o600`
-///   and then set to that mode explicitly).
+///   `UMask=0002`, so planners in the group can write it): the temporary file is created with
+///   mode `0o666`, which the kernel narrows by the umask, or by the folder's default ACL where it
+///   has one, as for `cp` or an editor. A replacing temporary file is created `0o600` and then
+///   given the mode of the file it replaces.
 /// - **Ownership (Unix):** an existing target's owner and group are copied to the new file where
 ///   the process may do so (as root, or a group the user belongs to); failures are ignored, the
 ///   file then belongs to the writing user.
@@ -160,16 +162,22 @@ pub(super) fn parent_dir(path: &Path) -> PathBuf {
 }
 
 /// A temporary file `.skillpost-<random>.tmp` in `dir` holding `bytes`, with the permissions (and
-/// owner, best effort) of `existing` or `0o644`, synced. Dropping it removes it.
+/// owner, best effort) of `existing`, or a new file's (`0o666` less the umask), synced. Dropping
+/// it removes it.
 pub(super) fn stage_in(
     dir: &Path,
     bytes: &[u8],
     existing: Option<&fs::Metadata>,
 ) -> io::Result<tempfile::NamedTempFile> {
     // Dropping `tmp` (every early return below) removes the temporary file.
-    let mut tmp = temp_builder().tempfile_in(dir)?;
+    let mut tmp = match existing {
+        Some(_) => temp_builder().tempfile_in(dir)?,
+        None => new_file_builder().tempfile_in(dir)?,
+    };
     tmp.as_file_mut().write_all(bytes)?;
-    set_metadata(tmp.as_file(), existing)?;
+    if let Some(m) = existing {
+        set_metadata(tmp.as_file(), m)?;
+    }
     tmp.as_file().sync_all()?;
     Ok(tmp)
 }
@@ -222,6 +230,19 @@ pub(super) fn temp_builder() -> tempfile::Builder<'static, 'static> {
     b.prefix(TEMP_PREFIX)
         .suffix(TEMP_SUFFIX)
         .rand_bytes(TEMP_RANDOM);
+    b
+}
+
+/// [`temp_builder`] for a new file: created with mode `0o666`, which the kernel narrows as it
+/// does for any program's new file (the umask, or a folder's default ACL), so the file needs no
+/// `chmod` after.
+fn new_file_builder() -> tempfile::Builder<'static, 'static> {
+    let mut b = temp_builder();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt as _;
+        b.permissions(fs::Permissions::from_mode(0o666));
+    }
     b
 }
 
@@ -437,7 +458,7 @@ fn second_name_with(
             let mut copy = builder.tempfile_in(dir)?;
             let mut from = fs::File::open(target)?;
             io::copy(&mut from, copy.as_file_mut())?;
-            set_metadata(copy.as_file(), Some(&from.metadata()?))?;
+            set_metadata(copy.as_file(), &from.metadata()?)?;
             copy.as_file().sync_all()?;
             Ok(copy.into_temp_path())
         }
@@ -445,13 +466,10 @@ fn second_name_with(
 }
 
 /// Gives the temporary file the permissions (and on Unix, best effort, the owner) of the file it
-/// replaces, or `0o666` less the umask for a new file.
+/// replaces (a new file got its mode when it was created: [`new_file_builder`]).
 #[cfg(unix)]
-fn set_metadata(file: &fs::File, existing: Option<&fs::Metadata>) -> io::Result<()> {
+fn set_metadata(file: &fs::File, m: &fs::Metadata) -> io::Result<()> {
     use std::os::unix::fs::{MetadataExt as _, PermissionsExt as _};
-    let Some(m) = existing else {
-        return file.set_permissions(fs::Permissions::from_mode(crate::umask::new_file_mode()));
-    };
     let mode = m.permissions().mode() & 0o7777;
     // The mode first, while the file is still ours: once it belongs to another user (a
     // service with CAP_CHOWN keeping a planner's blackboard theirs) we may not chmod it.
@@ -472,11 +490,8 @@ fn set_metadata(file: &fs::File, existing: Option<&fs::Metadata>) -> io::Result<
 }
 
 #[cfg(not(unix))]
-fn set_metadata(file: &fs::File, existing: Option<&fs::Metadata>) -> io::Result<()> {
-    match existing {
-        Some(m) => file.set_permissions(m.permissions()),
-        None => Ok(()),
-    }
+fn set_metadata(file: &fs::File, m: &fs::Metadata) -> io::Result<()> {
+    file.set_permissions(m.permissions())
 }
 
 #[cfg(test)]
@@ -507,6 +522,15 @@ mod tests {
         fs::metadata(p).unwrap().permissions().mode() & 0o7777
     }
 
+    /// The process's umask, as Linux shows it in `/proc/self/status` (reading it with `umask(2)`
+    /// would change it).
+    #[cfg(unix)]
+    fn umask() -> u32 {
+        let status = fs::read_to_string("/proc/self/status").unwrap();
+        let line = status.lines().find(|l| l.starts_with("Umask:")).unwrap();
+        u32::from_str_radix(line["Umask:".len()..].trim(), 8).unwrap()
+    }
+
     #[cfg(unix)]
     fn set_mode(p: &Path, m: u32) {
         use std::os::unix::fs::PermissionsExt as _;
@@ -523,7 +547,7 @@ mod tests {
         );
         assert_eq!(fs::read(&p).unwrap(), b"DEF x()\n");
         #[cfg(unix)]
-        assert_eq!(mode(&p), 0o666 & !crate::umask::get());
+        assert_eq!(mode(&p), 0o666 & !umask());
         assert!(temp_leftovers(d.path()).is_empty());
     }
 
