@@ -484,7 +484,10 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             .map(|b| b.steps.iter().filter(|s| s.is_some()).count())
             .sum();
         if !opts.keep_model {
-            sfc.drop_variables();
+            let variables = sfc.take_variables();
+            if sfc.elements.len() >= FREE_ASIDE_FROM {
+                free_aside(variables);
+            }
         }
         let sfc = &*sfc;
         lap(&mut out, "bind");

@@ -478,7 +478,7 @@ pub struct Sfc {
     /// The `SFC` element.
     pub span: Option<Span>,
     /// Every step's variables one after another, and their values' texts: two allocations
-    /// for all steps (not two per step), so freeing them ([`Sfc::drop_variables`]) gives the
+    /// for all steps (not two per step), so freeing them ([`Sfc::take_variables`]) gives the
     /// memory back rather than leaving holes between the steps.
     pub variables: Vec<Variable>,
     pub values: String,
@@ -521,7 +521,7 @@ impl Sfc {
         }
     }
 
-    /// A step's variables (none once [`Sfc::drop_variables`] ran).
+    /// A step's variables (none once [`Sfc::take_variables`] ran).
     pub fn variables_of(&self, step: &Step) -> &[Variable] {
         self.variables.get(step.variables.clone()).unwrap_or(&[])
     }
@@ -537,12 +537,15 @@ impl Sfc {
         crate::value::parse_value(raw).unwrap_or_else(|_| Value::Scalar(raw.to_owned()))
     }
 
-    /// Frees what only the binder reads, the steps' variables, once it is done: the writers
-    /// need the rest (names, ids, conditions). With 100,000 steps the variables are a third of
-    /// the model, and the steps block the writer makes comes after them.
-    pub fn drop_variables(&mut self) {
-        self.variables = Vec::new();
-        self.values = String::new();
+    /// Takes out what only the binder reads, the steps' variables, once it is done, for the
+    /// caller to free (a large model's on another thread): the writers need the rest (names,
+    /// ids, conditions). With 100,000 steps the variables are a third of the model, and the
+    /// steps block the writer makes comes after them.
+    pub fn take_variables(&mut self) -> (Vec<Variable>, String) {
+        (
+            std::mem::take(&mut self.variables),
+            std::mem::take(&mut self.values),
+        )
     }
 }
 

@@ -6,7 +6,10 @@
 //! The same switch writes a cell's programs two at a time (docs/CELLS.md): the cell fixtures, with
 //! their bases, are compared the same way. And it reads a program's steps (their motions, the
 //! points' base names, the titles) on a second thread ahead of the writer (`emit::ahead`): every
-//! fixture's program is written so at the switch's 1 and compared with the one thread's.
+//! fixture's program is written so at the switch's 1 and compared with the one thread's. A long
+//! program's steps' code is scanned for the words points may not be named and for a statement that
+//! sets motion parameters in two halves, one on another thread: a case where both are in the
+//! second half.
 
 use std::path::{Path, PathBuf};
 
@@ -192,4 +195,70 @@ fn a_cells_programs_are_the_same_written_two_at_a_time() {
         assert!(c.outputs.len() >= 3, "{case}: {:?}", c.diagnostics);
         same_both_ways(&bb);
     }
+}
+
+/// The steps' code of a long program is scanned in two halves (`emit::points::for_program`):
+/// the words no point may be named and the first statement that sets motion parameters (W210)
+/// must be found in the second half as in one pass.
+#[test]
+fn what_a_long_programs_second_half_sets_and_names_is_found_as_on_one_thread() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = generator::Spec {
+        steps: 3000,
+        branch_every: 0,
+        branch_width: 0,
+        select_every: 0,
+        looped: false,
+    };
+    let project = generator::write_project(dir.path(), &spec).unwrap();
+    // The IRL definition no longer sets the velocity: only a step's own code does.
+    let irl = project.blackboard.with_file_name("kr15-2.irl");
+    let text = std::fs::read_to_string(&irl).unwrap();
+    assert!(text.contains("$VEL.CP = VALUE"));
+    std::fs::write(&irl, text.replace("$VEL.CP = VALUE", "VALUE = VALUE")).unwrap();
+    // The velocity a text, so that a step's code can say anything.
+    let bb = std::fs::read_to_string(&project.blackboard).unwrap();
+    let typed = "\"Velocity\" AttributeDataType=\"xs:double\"";
+    assert!(bb.contains(typed));
+    std::fs::write(
+        &project.blackboard,
+        bb.replace(typed, "\"Velocity\" AttributeDataType=\"xs:string\""),
+    )
+    .unwrap();
+    let mut sfc = std::fs::read_to_string(&project.sfc).unwrap();
+    let velocity = "<Variable name=\"Velocity\" Value=\"";
+    let n = sfc.matches(velocity).count();
+    // Near the end: a statement that sets motion parameters, and the name of an early point
+    // (`XP2P_4`, step 4's) as a word of the code.
+    sfc = replace_nth(&sfc, velocity, n - 10, &format!("{velocity}$VEL.CP\" x=\""));
+    sfc = replace_nth(&sfc, velocity, n - 20, &format!("{velocity}XP2P_4\" x=\""));
+    std::fs::write(&project.sfc, &sfc).unwrap();
+    let c = compile(
+        &FsSource::default(),
+        &project.blackboard,
+        &Options {
+            program: Some("out".into()),
+            bind_split_from: Some(1),
+            ..Default::default()
+        },
+    );
+    let w210: Vec<&str> = c
+        .diagnostics
+        .iter()
+        .filter(|d| d.code.as_str() == "W210")
+        .map(|d| d.message.as_str())
+        .collect();
+    assert!(
+        w210.len() == 1 && w210[0].contains("`SetVelCP (\"$VEL.CP\")`"),
+        "{w210:?}"
+    );
+    let dat: String = c
+        .outputs
+        .iter()
+        .filter(|(p, _)| p.extension().is_some_and(|e| e == "dat"))
+        .map(|(_, f)| f.text.as_str())
+        .collect();
+    assert!(dat.contains("DECL E6POS XP2P_3="), "points are named");
+    assert!(!dat.contains("DECL E6POS XP2P_4="), "a word of the code");
+    same_both_ways(&project.blackboard);
 }

@@ -6,6 +6,7 @@ use super::motion::krl_motion;
 use super::{KrlForm, Mode, Points};
 use crate::lang::Language;
 use crate::names::transliterate;
+use std::collections::HashSet;
 
 /// The points of the program `input` writes: how (the program resource's `Points` attribute,
 /// `E216` when it is neither `named` nor `inline`), for KRL in which form (`W210` when its code
@@ -53,59 +54,59 @@ pub fn for_program(
         Language::Rapid => [(b'p', b'P'), (b'j', b'J')],
         Language::UrScript => [(b'p', b'P'), (b'q', b'Q')],
     };
-    let mut taken = std::collections::HashSet::new();
-    // The words (letters, digits, `_`) of more than one character that begin with one of
-    // `starts`: each such letter found (memchr), then its word (every step's code, 100,000
-    // steps).
-    let mut words = |text: &str| {
-        let b = text.as_bytes();
-        let word = |c: &u8| c.is_ascii_alphanumeric() || *c == b'_';
-        for (lower, upper) in starts {
-            for start in memchr::memchr2_iter(lower, upper, b) {
-                if start > 0 && word(&b[start - 1]) {
-                    continue;
-                }
-                let len = b[start..].iter().take_while(|c| word(c)).count();
-                if len > 1 {
-                    taken.insert(text[start..start + len].to_ascii_lowercase());
-                }
-            }
-        }
-    };
-    let definitions = || {
-        input
-            .bound
-            .definitions
-            .iter()
-            .flat_map(|&(i, d)| input.irls[i].definitions[d].lines.iter())
-    };
-    for l in definitions() {
-        words(l);
+    let mut taken = HashSet::new();
+    for l in input
+        .bound
+        .definitions
+        .iter()
+        .flat_map(|&(i, d)| input.irls[i].definitions[d].lines.iter())
+    {
+        words(l, &starts, &mut taken);
     }
     // KRL's named points are inline forms unless the program sets motion parameters itself:
     // the first statement that does, in a step or an IRL definition.
     let find_setting = lang == Language::Krl && mode == Mode::Named && !forms;
-    let mut found = None;
-    // Steps that may move to a literal position: about as many points.
-    let mut literal = 0;
-    // One pass over the steps' code for both (100,000 steps: each step's code is read while it
-    // is in the cache).
-    for (i, b) in input.bound.steps.iter().enumerate() {
-        let Some(b) = b else { continue };
-        if mode == Mode::Named && memchr::memchr2(b'{', b'[', b.code.as_bytes()).is_some() {
-            literal += 1;
-            words(&b.code);
-        }
-        if find_setting
-            && found.is_none()
-            && let Some(l) = first_setting_motion(&b.code)
-        {
-            found = Some((Ok(i), l.trim().to_owned()));
-        }
-    }
+    // One pass over the steps' code for the words, the steps that may move to a literal
+    // position (about as many points) and the first statement that sets motion parameters
+    // (100,000 steps: each step's code is read while it is in the cache); a long program's
+    // second half on another thread (its first touch of the code is mostly waiting for memory).
+    let steps = &input.bound.steps;
+    let scan_of = |from: usize, to: usize| {
+        scan(
+            &steps[from..to],
+            from,
+            &starts,
+            mode == Mode::Named,
+            find_setting,
+        )
+    };
+    let count = steps.iter().filter(|s| s.is_some()).count();
+    let half = steps.len() / 2;
+    let (first, second) = if count >= input.read_ahead_from {
+        std::thread::scope(|s| {
+            let second = std::thread::Builder::new()
+                .name("skillpost-points".into())
+                .spawn_scoped(s, || scan_of(half, steps.len()))
+                .ok();
+            let first = scan_of(0, half);
+            // A thread that could not be started: its half here.
+            let second = match second.map(|h| h.join()) {
+                Some(Ok(second)) => second,
+                Some(Err(panic)) => std::panic::resume_unwind(panic),
+                None => scan_of(half, steps.len()),
+            };
+            (first, second)
+        })
+    } else {
+        (scan_of(0, steps.len()), Scan::default())
+    };
+    taken.extend(first.taken);
+    taken.extend(second.taken);
+    let literal = first.literal + second.literal;
+    let mut found = first.found.or(second.found).map(|(i, l)| (Ok(i), l));
     if lang == Language::UrScript {
         for w in crate::emit::urscript::KEYWORDS {
-            words(w);
+            words(w, &starts, &mut taken);
         }
     }
     let mut krl = KrlForm::Inline { tool: 0, base: 0 };
@@ -178,6 +179,64 @@ pub fn for_program(
     points.names.reserve(literal);
     points.declarations.reserve(literal);
     Some(points)
+}
+
+/// What one pass over steps' code finds (see [`for_program`]).
+#[derive(Default)]
+struct Scan {
+    /// The words a point's declared name may not be, lower-case.
+    taken: HashSet<String>,
+    /// Steps that may move to a literal position.
+    literal: usize,
+    /// The first step (its element index) with a statement that sets motion parameters, and
+    /// that statement.
+    found: Option<(usize, String)>,
+}
+
+/// [`Scan`] of `steps`, the first of which is element `from`. `named`: literal targets become
+/// points (their steps' words are collected); `find_setting`: look for a statement that sets
+/// motion parameters.
+fn scan(
+    steps: &[Option<crate::bind::BoundStep>],
+    from: usize,
+    starts: &[(u8, u8); 2],
+    named: bool,
+    find_setting: bool,
+) -> Scan {
+    let mut scan = Scan::default();
+    for (i, b) in steps.iter().enumerate() {
+        let Some(b) = b else { continue };
+        if named && memchr::memchr2(b'{', b'[', b.code.as_bytes()).is_some() {
+            scan.literal += 1;
+            words(&b.code, starts, &mut scan.taken);
+        }
+        if find_setting
+            && scan.found.is_none()
+            && let Some(l) = first_setting_motion(&b.code)
+        {
+            scan.found = Some((from + i, l.trim().to_owned()));
+        }
+    }
+    scan
+}
+
+/// The words (letters, digits, `_`) of `text` of more than one character that begin with one
+/// of `starts` (upper or lower case), lower-case, into `taken`: each such letter found
+/// (memchr), then its word.
+fn words(text: &str, starts: &[(u8, u8); 2], taken: &mut HashSet<String>) {
+    let b = text.as_bytes();
+    let word = |c: &u8| c.is_ascii_alphanumeric() || *c == b'_';
+    for &(lower, upper) in starts {
+        for start in memchr::memchr2_iter(lower, upper, b) {
+            if start > 0 && word(&b[start - 1]) {
+                continue;
+            }
+            let len = b[start..].iter().take_while(|c| word(c)).count();
+            if len > 1 {
+                taken.insert(text[start..start + len].to_ascii_lowercase());
+            }
+        }
+    }
 }
 
 /// The first of `code`'s lines (separated by `\n`) that [`sets_motion`]: only the lines that
