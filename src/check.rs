@@ -189,16 +189,20 @@ fn is_word_char(c: char) -> bool {
     c.is_ascii_alphanumeric() || c == '_' || c == '$'
 }
 
-/// A word upper case, on the stack: every line's first word is looked at, and a program of
+/// A word upper case: the text's own when it has no lower-case letter (as generated code
+/// mostly is), else a copy on the stack. Every line's first word is looked at, and a program of
 /// 100,000 steps has a million lines. Longer words than any keyword are kept as `""`.
-struct Word {
-    buf: [u8; 16],
-    len: usize,
+enum Word<'t> {
+    Upper(&'t str),
+    Folded { buf: [u8; 16], len: usize },
 }
 
-impl Word {
+impl Word<'_> {
     fn as_str(&self) -> &str {
-        std::str::from_utf8(&self.buf[..self.len]).unwrap_or("")
+        match self {
+            Word::Upper(w) => w,
+            Word::Folded { buf, len } => std::str::from_utf8(&buf[..*len]).unwrap_or(""),
+        }
     }
 }
 
@@ -211,17 +215,30 @@ fn word_end(s: &str) -> usize {
 }
 
 /// The first word of `code` (letters, digits, `_`, `$`), upper case, and the text after it.
-fn first_word(code: &str) -> (Word, &str) {
-    let end = word_end(code);
-    let mut w = Word {
-        buf: [0; 16],
-        len: 0,
-    };
-    if let Some(buf) = w.buf.get_mut(..end) {
-        buf.copy_from_slice(&code.as_bytes()[..end]);
-        buf.make_ascii_uppercase();
-        w.len = end;
+fn first_word(code: &str) -> (Word<'_>, &str) {
+    let b = code.as_bytes();
+    // The word's end and whether it has a lower-case letter, in one pass.
+    let mut end = 0;
+    let mut lower = false;
+    while let Some(&c) = b.get(end) {
+        if c.is_ascii_lowercase() {
+            lower = true;
+        } else if !(c.is_ascii_uppercase() || c.is_ascii_digit() || c == b'_' || c == b'$') {
+            break;
+        }
+        end += 1;
     }
+    let w = if end > 16 {
+        Word::Upper("")
+    } else if !lower {
+        // (ASCII: a character boundary.)
+        Word::Upper(&code[..end])
+    } else {
+        let mut buf = [0; 16];
+        buf[..end].copy_from_slice(&b[..end]);
+        buf[..end].make_ascii_uppercase();
+        Word::Folded { buf, len: end }
+    };
     (w, trim_start(&code[end..]))
 }
 
@@ -830,6 +847,37 @@ mod tests {
         // The column counts characters of the indentation.
         assert_eq!(code_of("\u{3000}\u{3000}PTP P1 ; x", ';'), ("PTP P1", 3));
         assert_eq!(code_of("\t  WAIT SEC 1", ';'), ("WAIT SEC 1", 4));
+    }
+
+    /// A line's first word is its upper-case form whether the text already is upper case (taken
+    /// as it is) or not (folded on the stack); a word longer than any keyword is `""`.
+    #[test]
+    fn the_first_word_is_upper_case_either_way() {
+        for (code, word, after) in [
+            ("ENDIF", "ENDIF", ""),
+            ("endIf ; x", "ENDIF", "; x"),
+            ("$VEL.CP = 1", "$VEL", ".CP = 1"),
+            ("e6pos_2 P", "E6POS_2", "P"),
+            ("DECL E6POS X1={X 1}", "DECL", "E6POS X1={X 1}"),
+            ("ABCDEFGHIJKLMNOP x", "ABCDEFGHIJKLMNOP", "x"),
+            ("ABCDEFGHIJKLMNOPQ x", "", "x"),
+            ("abcdefghijklmnopq x", "", "x"),
+            ("Wait\u{e4} 1", "WAIT", "\u{e4} 1"),
+            ("", "", ""),
+        ] {
+            let (w, rest) = first_word(code);
+            assert_eq!((w.as_str(), rest), (word, after), "{code:?}");
+        }
+        // Keywords in any case: the same check.
+        let lower = "def p( )\n  if a then\n    loop\n      exit\n    endloop\n  endif\nend\n";
+        assert_eq!(
+            msgs(Language::Krl, Unit::Program, lower),
+            Vec::<String>::new()
+        );
+        assert_eq!(
+            msgs(Language::Krl, Unit::Program, "Def p( )\n  If a Then\nEnd\n").len(),
+            1
+        );
     }
 
     #[test]
