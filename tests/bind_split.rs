@@ -77,16 +77,21 @@ fn replace_nth(text: &str, what: &str, n: usize, with: &str) -> String {
     format!("{}{with}{}", &text[..at], &text[at + what.len()..])
 }
 
-#[test]
-fn a_large_chart_with_problems_in_both_halves_binds_the_same_on_two_threads() {
-    let dir = tempfile::tempdir().unwrap();
-    let spec = generator::Spec {
+/// A generated flat chart of 3,000 steps, a two-way selection every `select_every` (0: none).
+fn steps_3000(select_every: usize) -> generator::Spec {
+    generator::Spec {
         steps: 3000,
         branch_every: 0,
         branch_width: 0,
-        select_every: 25,
+        select_every,
         looped: false,
-    };
+    }
+}
+
+#[test]
+fn a_large_chart_with_problems_in_both_halves_binds_the_same_on_two_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = steps_3000(25);
     let project = generator::write_project(dir.path(), &spec).unwrap();
     let mut sfc = std::fs::read_to_string(&project.sfc).unwrap();
     let velocity = "<Variable name=\"Velocity\" Value=\"";
@@ -203,14 +208,7 @@ fn a_cells_programs_are_the_same_written_two_at_a_time() {
 #[test]
 fn what_a_long_programs_second_half_sets_and_names_is_found_as_on_one_thread() {
     let dir = tempfile::tempdir().unwrap();
-    let spec = generator::Spec {
-        steps: 3000,
-        branch_every: 0,
-        branch_width: 0,
-        select_every: 0,
-        looped: false,
-    };
-    let project = generator::write_project(dir.path(), &spec).unwrap();
+    let project = generator::write_project(dir.path(), &steps_3000(0)).unwrap();
     // The IRL definition no longer sets the velocity: only a step's own code does.
     let irl = project.blackboard.with_file_name("kr15-2.irl");
     let text = std::fs::read_to_string(&irl).unwrap();
