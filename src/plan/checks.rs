@@ -279,12 +279,16 @@ pub fn start_end(
     for t in jumps.iter().flatten() {
         targeted[*t] = true;
     }
+    // The marked initial steps, found once (each a step's data to look at: 100,000 steps).
+    let initials: Vec<usize> = (0..el.len()).filter(|&i| initial(sfc, g, i)).collect();
+    if initials.len() < 2 {
+        // One sequence at most: which network each element is in does not matter.
+        return one_sequence(sfc, g, &targeted, &initials, &|_| true, diags).map(|se| vec![se]);
+    }
     let net = networks(g, jumps);
     // The networks with a marked initial step, in the document order of their first one.
     let mut marked_nets: Vec<usize> = Vec::new();
     let mut has_initial = vec![false; el.len()];
-    // The marked initial steps, found once (each a step's data to look at: 100,000 steps).
-    let initials: Vec<usize> = (0..el.len()).filter(|&i| initial(sfc, g, i)).collect();
     for &i in &initials {
         let e = &el[i];
         if !has_initial[net[i]] {
@@ -547,6 +551,11 @@ fn one_sequence(
 /// connections).
 pub fn find_cycle(g: &Graph) -> Option<usize> {
     let n = g.len();
+    // Every connection from an earlier element (as charts are mostly written): no cycle, seen
+    // in one pass over the connections.
+    if (0..n).all(|i| g.preds(i).iter().all(|&p| p < i)) {
+        return None;
+    }
     let mut indeg: Vec<usize> = (0..n).map(|i| g.preds(i).len()).collect();
     let mut queue: Vec<usize> = (0..n).filter(|&i| indeg[i] == 0).collect();
     let mut seen = 0;
