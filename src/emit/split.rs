@@ -212,15 +212,11 @@ fn used_names(text: &str, names: &HashSet<String>, fold: bool) -> HashSet<String
 /// Whether a KRL declaration is a named point or an inline form's data
 /// ([`super::points`]): a part holds its own in its `.dat`.
 fn is_point_data(line: &str) -> bool {
-    [
-        "DECL E6POS ",
-        "DECL E6AXIS ",
-        "DECL FDAT ",
-        "DECL PDAT ",
-        "DECL LDAT ",
-    ]
-    .iter()
-    .any(|p| line.starts_with(p))
+    line.strip_prefix("DECL ").is_some_and(|rest| {
+        ["E6POS ", "E6AXIS ", "FDAT ", "PDAT ", "LDAT "]
+            .iter()
+            .any(|p| rest.starts_with(p))
+    })
 }
 
 /// Whether `name` is one of the writer's variables that live within one block: set before the
@@ -319,14 +315,9 @@ pub fn split(
             0..0
         }
     };
-    let declared_names: HashSet<String> = generated
-        .declarations
-        .iter()
-        .filter(|d| !is_point_data(d))
-        .filter_map(|d| declared(d))
-        .map(|(n, _)| key(n))
-        .collect();
-    // Each declaration's index by the name it declares.
+    // The names the declarations other than points declare, and each declaration's index by
+    // its name (one pass: a program of 100,000 points has as many declarations).
+    let mut declared_names: HashSet<String> = HashSet::new();
     let mut by_name: std::collections::HashMap<String, Vec<usize>> =
         std::collections::HashMap::new();
     for (i, d) in generated.declarations.iter().enumerate() {
@@ -334,7 +325,9 @@ pub fn split(
             continue;
         }
         if let Some((n, _)) = declared(d) {
-            by_name.entry(key(n)).or_default().push(i);
+            let k = key(n);
+            by_name.entry(k.clone()).or_default().push(i);
+            declared_names.insert(k);
         }
     }
     // The declared names the program's own routines use (KRL: held by every part's file).
