@@ -72,6 +72,8 @@ pub struct Points {
     stem: String,
     lower: String,
     numbered: String,
+    /// A declared name being looked up ([`Points::free`]).
+    full: String,
     names_buf: [String; 2],
     out: String,
     /// The declarations, in order: `.dat` lines (KRL), module data (RAPID), the program's first
@@ -117,6 +119,7 @@ impl Points {
             stem: String::new(),
             lower: String::new(),
             numbered: String::new(),
+            full: String::new(),
             names_buf: [String::new(), String::new()],
             out: String::new(),
             declarations: Vec::new(),
@@ -199,8 +202,8 @@ impl Points {
         lower.make_ascii_lowercase();
         // A stem that was taken before goes on at its next number (many steps of one name:
         // not quadratic); only stems taken twice are recorded.
-        let mut n = match self.next.get(lower.as_str()) {
-            Some(&n) => n,
+        let mut n = match self.next.get(lower.as_str()).copied() {
+            Some(n) => n,
             None if self.free(&lower) => {
                 self.names.insert(&lower);
                 self.count += 1;
@@ -257,7 +260,7 @@ impl Points {
     /// Whether the name whose lower-case form is `lower` may be a point's: not a point's
     /// already, none of its declared names a word of the program's code or a keyword, and not
     /// KUKA's own (`XHOME`, `XHOME1` … in `$config.dat`) or skillpost's (`skp_…`).
-    fn free(&self, lower: &str) -> bool {
+    fn free(&mut self, lower: &str) -> bool {
         let b = lower.as_bytes();
         if b.starts_with(b"skp_") {
             return false;
@@ -271,17 +274,14 @@ impl Points {
         if self.names.contains(lower) {
             return false;
         }
-        // The declared names, `x` + name …, on the stack (a name is at most 62 bytes).
-        let mut buf = [0u8; 80];
-        let Some(rest) = buf.get_mut(1..=b.len()) else {
-            return false;
-        };
-        rest.copy_from_slice(b);
+        // The declared names, `x` + name …, in a kept buffer.
+        let mut full = std::mem::take(&mut self.full);
+        let mut free = true;
         for &p in self.prefixes() {
-            buf[0] = p;
-            let Ok(full) = std::str::from_utf8(&buf[..=b.len()]) else {
-                return false;
-            };
+            full.clear();
+            full.push(char::from(p));
+            full.push_str(lower);
+            let full = full.as_str();
             let keyword = match self.lang {
                 // (No KRL keyword is longer than 16 characters.)
                 Language::Krl => full.len() <= 16 && crate::names::is_krl_keyword(full),
@@ -289,10 +289,12 @@ impl Points {
                 Language::UrScript => false,
             };
             if keyword || (!self.words.is_empty() && self.words.contains(full)) {
-                return false;
+                free = false;
+                break;
             }
         }
-        true
+        self.full = full;
+        free
     }
 
     /// Writes the motion of `line` to the named points and declares them.
