@@ -28,6 +28,7 @@
 //!   again without holding the file.
 //! - [`names`]: case-insensitive name keys, KRL names, transliteration.
 //! - [`paths`]: `refURI` values → paths, lexical normalisation, absolute paths.
+//! - [`threads`]: work split in two, one part on a thread of its own.
 #![forbid(unsafe_code)]
 
 pub mod bind;
@@ -51,6 +52,7 @@ pub mod print;
 pub mod read;
 pub mod simulate;
 pub mod template;
+pub mod threads;
 pub mod value;
 pub mod write;
 

@@ -8,9 +8,9 @@ use std::path::Path;
 
 /// From the bottom up.
 const ORDER: &[&str] = &[
-    "names", "paths", "convert", "load", "excerpt", "diag", "cond", "value", "template", "lang",
-    "check", "model", "read", "plan", "bind", "emit", "write", "picture", "compile", "simulate",
-    "print", "daemon", "cli",
+    "names", "paths", "convert", "threads", "load", "excerpt", "diag", "cond", "value", "template",
+    "lang", "check", "model", "read", "plan", "bind", "emit", "write", "picture", "compile",
+    "simulate", "print", "daemon", "cli",
 ];
 
 fn module_of(rel: &Path) -> String {

@@ -510,25 +510,16 @@ pub fn bind(
     let steps = &order.steps[..];
     let (mut first, second) = if steps.len() >= split_from.max(2) {
         let (a, b) = steps.split_at(steps.len() / 2);
-        std::thread::scope(|s| {
-            let mut other = diags.empty_like();
-            let cx = &cx;
-            let started = std::thread::Builder::new()
-                .name("skillpost-bind".into())
-                .spawn_scoped(s, move || {
-                    let part = cx.run(b, &mut other);
-                    (part, other)
-                });
-            let first = cx.run(a, diags);
-            let second = match started {
-                Ok(h) => h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)),
-                Err(_) => {
-                    let mut other = diags.empty_like();
-                    (cx.run(b, &mut other), other)
-                }
-            };
-            (first, Some(second))
-        })
+        let like = diags.empty_like();
+        let (first, second) = crate::threads::both(
+            "skillpost-bind",
+            || cx.run(a, diags),
+            || {
+                let mut other = like.empty_like();
+                (cx.run(b, &mut other), other)
+            },
+        );
+        (first, Some(second))
     } else {
         (cx.run(steps, diags), None)
     };

@@ -24,30 +24,18 @@ pub(super) fn emit_programs(
     } else {
         // Odd programs on a second thread, even ones here.
         let like = diags.empty_like();
-        let (here, there) = std::thread::scope(|s| {
-            let like = &like;
-            let started = std::thread::Builder::new()
-                .name("skillpost-emit".into())
-                .spawn_scoped(s, move || {
-                    inputs
-                        .iter()
-                        .skip(1)
-                        .step_by(2)
-                        .map(|i| one(i, like))
-                        .collect::<Vec<_>>()
-                });
-            let here: Vec<Emitted> = inputs.iter().step_by(2).map(|i| one(i, like)).collect();
-            let there: Vec<Emitted> = match started {
-                Ok(h) => h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)),
-                Err(_) => inputs
+        let (here, there) = crate::threads::both(
+            "skillpost-emit",
+            || -> Vec<Emitted> { inputs.iter().step_by(2).map(|i| one(i, &like)).collect() },
+            || -> Vec<Emitted> {
+                inputs
                     .iter()
                     .skip(1)
                     .step_by(2)
-                    .map(|i| one(i, like))
-                    .collect(),
-            };
-            (here, there)
-        });
+                    .map(|i| one(i, &like))
+                    .collect()
+            },
+        );
         let (mut here, mut there) = (here.into_iter(), there.into_iter());
         (0..inputs.len())
             .filter_map(|k| {

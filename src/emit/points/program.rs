@@ -83,20 +83,11 @@ pub fn for_program(
     let count = steps.iter().filter(|s| s.is_some()).count();
     let half = steps.len() / 2;
     let (first, second) = if count >= input.read_ahead_from {
-        std::thread::scope(|s| {
-            let second = std::thread::Builder::new()
-                .name("skillpost-points".into())
-                .spawn_scoped(s, || scan_of(half, steps.len()))
-                .ok();
-            let first = scan_of(0, half);
-            // A thread that could not be started: its half here.
-            let second = match second.map(|h| h.join()) {
-                Some(Ok(second)) => second,
-                Some(Err(panic)) => std::panic::resume_unwind(panic),
-                None => scan_of(half, steps.len()),
-            };
-            (first, second)
-        })
+        crate::threads::both(
+            "skillpost-points",
+            || scan_of(0, half),
+            || scan_of(half, steps.len()),
+        )
     } else {
         (scan_of(0, steps.len()), Scan::default())
     };
