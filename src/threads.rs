@@ -1,5 +1,7 @@
 //! Work split in two: one part on the calling thread, the other on a thread of its own.
 
+use std::sync::atomic::{AtomicUsize, Ordering};
+
 /// Runs `here` on the calling thread and `there` on a thread named `name`, at the same time, and
 /// returns both results. Where no thread can be started, `there` runs here after `here`. A panic
 /// on the other thread goes on here.
@@ -19,6 +21,38 @@ pub fn both<A, B: Send>(
         };
         (a, b)
     })
+}
+
+/// `work` over `items` cut into `pieces` pieces (about equal; fewer when there are fewer items),
+/// on the calling thread and a thread named `name` at once, each taking the next piece when it
+/// is done with one: a core that runs slower (a busy or shared one) takes fewer, and neither
+/// waits long for the other at the end. The results in the pieces' order, whichever thread made
+/// them.
+pub fn pieces<T: Sync, R: Send>(
+    name: &str,
+    items: &[T],
+    pieces: usize,
+    work: impl Fn(&[T]) -> R + Sync,
+) -> Vec<R> {
+    let len = items.len().div_ceil(pieces.max(1)).max(1);
+    let count = items.len().div_ceil(len);
+    let next = AtomicUsize::new(0);
+    let take = || {
+        let mut done = Vec::new();
+        loop {
+            let k = next.fetch_add(1, Ordering::Relaxed);
+            if k >= count {
+                break;
+            }
+            let end = items.len().min((k + 1) * len);
+            done.push((k, work(&items[k * len..end])));
+        }
+        done
+    };
+    let (mut done, there) = both(name, take, take);
+    done.extend(there);
+    done.sort_unstable_by_key(|&(k, _)| k);
+    done.into_iter().map(|(_, r)| r).collect()
 }
 
 #[cfg(test)]
@@ -43,5 +77,40 @@ mod tests {
     #[should_panic(expected = "there")]
     fn a_panic_on_the_other_thread_goes_on_here() {
         super::both("skillpost-test", || (), || panic!("there"));
+    }
+
+    #[test]
+    fn pieces_come_back_in_order_whoever_made_them() {
+        let items: Vec<u32> = (0..1000).collect();
+        for pieces in [1, 2, 7, 32, 999, 1000, 5000] {
+            let made = super::pieces("skillpost-test", &items, pieces, |some| {
+                (
+                    some.to_vec(),
+                    std::thread::current().name().map(str::to_owned),
+                )
+            });
+            assert!((1..=pieces).contains(&made.len()), "{pieces} pieces");
+            let joined: Vec<u32> = made.iter().flat_map(|(p, _)| p.iter().copied()).collect();
+            assert_eq!(joined, items, "{pieces} pieces");
+        }
+        // Nothing to do: no piece.
+        assert!(super::pieces("skillpost-test", &[] as &[u32], 4, |s| s.len()).is_empty());
+    }
+
+    #[test]
+    fn a_slow_thread_takes_fewer_pieces() {
+        // The other thread is slowed down: the calling thread takes most pieces, instead of
+        // waiting for the other's half.
+        let caller = std::thread::current().id();
+        let items: Vec<u32> = (0..64).collect();
+        let made = super::pieces("skillpost-test", &items, 64, |_| {
+            let here = std::thread::current().id() == caller;
+            if !here {
+                std::thread::sleep(std::time::Duration::from_millis(50));
+            }
+            here
+        });
+        let here = made.iter().filter(|&&h| h).count();
+        assert!(here > 48, "the calling thread made {here} of 64 pieces");
     }
 }

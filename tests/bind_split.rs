@@ -1,8 +1,9 @@
-//! A chart of `bind::PARALLEL_FROM` steps or more is bound on two threads, the second half of
-//! the steps on the other one, and the halves' diagnostics, unused variables (`W303`, grouped
-//! over all steps) and definitions (in order of first use) joined after. The result must be what
-//! one thread gives: compared through `compile` over every fixture (split at every chart of two
-//! steps or more) and a generated 3,000-step project with errors and warnings in both halves.
+//! A chart of `bind::PARALLEL_FROM` steps or more is bound on two threads, its steps cut into
+//! pieces that either thread takes, and the pieces' diagnostics, unused variables (`W303`,
+//! grouped over all steps) and definitions (in order of first use) joined after in step order.
+//! The result must be what one thread gives: compared through `compile` over every fixture
+//! (split at every chart of two steps or more: pieces of a step or two) and a generated
+//! 3,000-step project with errors and warnings in both halves (in many pieces).
 //! The same switch writes a cell's programs two at a time (docs/CELLS.md): the cell fixtures, with
 //! their bases, are compared the same way. And it reads a program's steps (their motions, the
 //! points' base names, the titles) on a second thread ahead of the writer (`emit::ahead`): every

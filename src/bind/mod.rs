@@ -471,15 +471,20 @@ pub struct Calls<'a> {
 /// conversion that needs it.
 type Valued<'a> = (Cow<'a, str>, Option<crate::value::Literal<'a>>);
 
-/// Steps from which [`bind`] renders the second half of them on a second thread.
+/// Steps from which [`bind`] renders them on two threads.
 pub const PARALLEL_FROM: usize = 2_000;
+
+/// The pieces [`bind`] cuts the steps into from [`PARALLEL_FROM`] on: at 100,000 steps a piece
+/// is about 2 ms of work, the longest either thread can wait for the other at the end.
+const PIECES: usize = 32;
 
 /// Renders every step. `fn_irl` maps `(resource, function)` to the loaded IRL file (absent when
 /// it could not be loaded; that was reported). From `split_from` steps ([`PARALLEL_FROM`] as the
-/// compile calls it) the steps are split in two halves, the second rendered on another thread.
-/// The result is the same either way (the tests compare them): each half keeps its diagnostics,
-/// unused variables and definitions in step order, and the second half's are put after the
-/// first's.
+/// compile calls it) the steps are cut into [`PIECES`] pieces, rendered on this thread and
+/// another, each taking the next piece when done with one (a core that runs slower takes fewer).
+/// The result is the same either way (the tests compare them): each piece keeps its
+/// diagnostics, unused variables and definitions in step order, and each piece's are put after
+/// those of the pieces before it.
 #[allow(clippy::too_many_arguments)]
 pub fn bind(
     bb: &Blackboard,
@@ -508,26 +513,26 @@ pub fn bind(
         profile,
     };
     let steps = &order.steps[..];
-    let (mut first, second) = if steps.len() >= split_from.max(2) {
-        let (a, b) = steps.split_at(steps.len() / 2);
+    // The steps in pieces, rendered by this thread and another, each taking the next piece
+    // when done with one; the pieces' results put together in step order.
+    let mut later: Vec<Vec<(usize, BoundStep)>> = Vec::new();
+    let mut first = if steps.len() >= split_from.max(2) {
         let like = diags.empty_like();
-        let (first, second) = crate::threads::both(
-            "skillpost-bind",
-            || cx.run(a, diags),
-            || {
-                let mut other = like.empty_like();
-                (cx.run(b, &mut other), other)
-            },
-        );
-        (first, Some(second))
+        let mut pieces = crate::threads::pieces("skillpost-bind", steps, PIECES, |some| {
+            let mut d = like.empty_like();
+            (cx.run(some, &mut d), d)
+        })
+        .into_iter();
+        let (mut first, d) = pieces.next().expect("a piece of one step or more");
+        diags.append(d);
+        for (part, d) in pieces {
+            diags.append(d);
+            later.push(first.append(part));
+        }
+        first
     } else {
-        (cx.run(steps, diags), None)
+        cx.run(steps, diags)
     };
-    let mut later = Vec::new();
-    if let Some((part, other)) = second {
-        diags.append(other);
-        later = first.append(part);
-    }
     let mut bound = Bound {
         steps: (0..sfc.elements.len()).map(|_| None).collect(),
         definitions: first.definitions.into_iter().map(|(d, _)| d).collect(),
@@ -541,7 +546,7 @@ pub fn bind(
     for (i, step) in std::mem::take(&mut first.steps) {
         bound.steps[i] = Some(step);
     }
-    for (i, step) in later {
+    for (i, step) in later.into_iter().flatten() {
         bound.steps[i] = Some(step);
     }
     first.extras.report(diags);

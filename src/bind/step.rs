@@ -1,7 +1,7 @@
 //! One step bound: its variables checked and looked up by key, each call's arguments made
 //! from them (values converted, constraints checked), and its code rendered from the IRL
-//! template; a step's extra variables (`W303`) counted. `bind` runs it for every step, on two
-//! threads from [`PARALLEL_FROM`] steps.
+//! template; a step's extra variables (`W303`) counted. `bind` runs it for every step, from
+//! [`PARALLEL_FROM`] steps piece by piece on two threads.
 
 use super::*;
 

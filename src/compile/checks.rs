@@ -215,9 +215,10 @@ pub(super) fn check_snippets(
 
 /// `E606` for each problem the built-in check finds in a generated file ([`crate::check`]):
 /// what the IRL snippets and the output template made together. Nothing is written then.
-/// The problems of each generated file (none for a file of no language), the larger files of
-/// a cell checked on a second thread while this one checks the others: the check is one pass
-/// over each file's text, and a cell's programs together are about twice one program's.
+/// The problems of each generated file (none for a file of no language), checked by this
+/// thread and another at once when there are several large ones (a split program's parts, a
+/// cell's programs): each takes the next file, the largest first, when done with one, so a
+/// core that runs slower checks fewer.
 pub(super) fn check_outputs_in_parallel(
     outputs: &[(PathBuf, OutputFile)],
 ) -> Vec<Vec<crate::check::Problem>> {
@@ -225,52 +226,26 @@ pub(super) fn check_outputs_in_parallel(
         Some((language, unit)) => crate::check::check(language, unit, &f.text),
         None => Vec::new(),
     };
-    // Two groups of about the same size, the larger files first; only worth a thread when the
-    // second group is large (as the programs of a cell are written, from about 2,000 steps).
     let mut order: Vec<usize> = (0..outputs.len()).collect();
     order.sort_by_key(|&k| std::cmp::Reverse(outputs[k].1.text.len()));
-    let (mut here, mut there, mut sizes) = (Vec::new(), Vec::new(), (0usize, 0usize));
-    for k in order {
-        let n = outputs[k].1.text.len();
-        if sizes.0 <= sizes.1 {
-            here.push(k);
-            sizes.0 += n;
-        } else {
-            there.push(k);
-            sizes.1 += n;
-        }
+    // Only worth a thread when the files other than the largest are large (as a split
+    // program's parts or a cell's programs are, from about 2,000 steps).
+    let rest: usize = order.iter().skip(1).map(|&k| outputs[k].1.text.len()).sum();
+    if rest < PARALLEL_CHECK_FROM {
+        return outputs.iter().map(check).collect();
     }
-    let mut out: Vec<Vec<crate::check::Problem>> = vec![Vec::new(); outputs.len()];
-    if sizes.1 < PARALLEL_CHECK_FROM {
-        for (k, o) in outputs.iter().enumerate() {
-            out[k] = check(o);
-        }
-        return out;
-    }
-    let theirs = std::thread::scope(|s| {
-        let h = s.spawn(|| {
-            there
-                .iter()
-                .map(|&k| (k, check(&outputs[k])))
-                .collect::<Vec<_>>()
-        });
-        for &k in &here {
-            out[k] = check(&outputs[k]);
-        }
-        h.join()
+    let checked = crate::threads::pieces("skillpost-check", &order, order.len(), |ks| {
+        ks.iter().map(|&k| check(&outputs[k])).collect::<Vec<_>>()
     });
-    match theirs {
-        Ok(v) => {
-            for (k, p) in v {
-                out[k] = p;
-            }
-        }
-        Err(panic) => std::panic::resume_unwind(panic),
+    let mut out: Vec<Vec<crate::check::Problem>> = vec![Vec::new(); outputs.len()];
+    for (&k, problems) in order.iter().zip(checked.into_iter().flatten()) {
+        out[k] = problems;
     }
     out
 }
 
-/// The bytes of generated files from which a second thread checks part of them.
+/// The bytes of the generated files other than the largest from which a second thread checks
+/// some of them.
 const PARALLEL_CHECK_FROM: usize = 256 * 1024;
 
 pub(super) fn check_generated(
@@ -327,6 +302,45 @@ pub(super) fn check_generated(
                 }
             }
             diags.push(d);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Many large files, some broken: each file's problems are its own, in any order of sizes,
+    /// as one thread checking them one by one finds them.
+    #[test]
+    fn files_checked_on_two_threads_keep_their_own_problems() {
+        let body = "  WAIT SEC 0\r\n".repeat(10_000);
+        let outputs: Vec<(PathBuf, OutputFile)> = (0..12)
+            .map(|k| {
+                // Sizes out of order; every third file misses its ENDIF at a line of its own.
+                let mut text = format!("DEF p{k}()\r\n{}", body.repeat(1 + k % 4));
+                if k % 3 == 0 {
+                    text.push_str(&"  WAIT SEC 0\r\n".repeat(k));
+                    text.push_str("  IF TRUE THEN\r\n");
+                }
+                text.push_str("END\r\n");
+                let file = OutputFile {
+                    extension: "src",
+                    text,
+                    stem: None,
+                    parts: Vec::new(),
+                };
+                (PathBuf::from(format!("p{k}.src")), file)
+            })
+            .collect();
+        let one_by_one: Vec<Vec<crate::check::Problem>> = outputs
+            .iter()
+            .map(|(_, f)| crate::check::check(Language::Krl, crate::check::Unit::Program, &f.text))
+            .collect();
+        let together = check_outputs_in_parallel(&outputs);
+        assert_eq!(together, one_by_one);
+        for (k, problems) in together.iter().enumerate() {
+            assert_eq!(problems.is_empty(), k % 3 != 0, "file {k}: {problems:?}");
         }
     }
 }
