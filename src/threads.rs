@@ -26,13 +26,13 @@ pub fn both<A, B: Send>(
 /// `work` over `items` cut into `pieces` pieces (about equal; fewer when there are fewer items),
 /// on the calling thread and a thread named `name` at once, each taking the next piece when it
 /// is done with one: a core that runs slower (a busy or shared one) takes fewer, and neither
-/// waits long for the other at the end. The results in the pieces' order, whichever thread made
-/// them.
+/// waits long for the other at the end. `work` gets the index of the piece's first item and
+/// the piece. The results in the pieces' order, whichever thread made them.
 pub fn pieces<T: Sync, R: Send>(
     name: &str,
     items: &[T],
     pieces: usize,
-    work: impl Fn(&[T]) -> R + Sync,
+    work: impl Fn(usize, &[T]) -> R + Sync,
 ) -> Vec<R> {
     let len = items.len().div_ceil(pieces.max(1)).max(1);
     let count = items.len().div_ceil(len);
@@ -45,7 +45,7 @@ pub fn pieces<T: Sync, R: Send>(
                 break;
             }
             let end = items.len().min((k + 1) * len);
-            done.push((k, work(&items[k * len..end])));
+            done.push((k, work(k * len, &items[k * len..end])));
         }
         done
     };
@@ -83,18 +83,16 @@ mod tests {
     fn pieces_come_back_in_order_whoever_made_them() {
         let items: Vec<u32> = (0..1000).collect();
         for pieces in [1, 2, 7, 32, 999, 1000, 5000] {
-            let made = super::pieces("skillpost-test", &items, pieces, |some| {
-                (
-                    some.to_vec(),
-                    std::thread::current().name().map(str::to_owned),
-                )
+            let made = super::pieces("skillpost-test", &items, pieces, |from, some| {
+                assert_eq!(some.first(), items.get(from));
+                some.to_vec()
             });
             assert!((1..=pieces).contains(&made.len()), "{pieces} pieces");
-            let joined: Vec<u32> = made.iter().flat_map(|(p, _)| p.iter().copied()).collect();
+            let joined: Vec<u32> = made.into_iter().flatten().collect();
             assert_eq!(joined, items, "{pieces} pieces");
         }
         // Nothing to do: no piece.
-        assert!(super::pieces("skillpost-test", &[] as &[u32], 4, |s| s.len()).is_empty());
+        assert!(super::pieces("skillpost-test", &[] as &[u32], 4, |_, s| s.len()).is_empty());
     }
 
     #[test]
@@ -103,7 +101,7 @@ mod tests {
         // waiting for the other's half.
         let caller = std::thread::current().id();
         let items: Vec<u32> = (0..64).collect();
-        let made = super::pieces("skillpost-test", &items, 64, |_| {
+        let made = super::pieces("skillpost-test", &items, 64, |_, _| {
             let here = std::thread::current().id() == caller;
             if !here {
                 std::thread::sleep(std::time::Duration::from_millis(50));

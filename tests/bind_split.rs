@@ -9,8 +9,8 @@
 //! points' base names, the titles) on a second thread ahead of the writer (`emit::ahead`): every
 //! fixture's program is written so at the switch's 1 and compared with the one thread's. A long
 //! program's steps' code is scanned for the words points may not be named and for a statement that
-//! sets motion parameters in two halves, one on another thread: a case where both are in the
-//! second half.
+//! sets motion parameters in pieces on two threads: a case where both are in the second half
+//! (a later piece).
 
 use std::path::{Path, PathBuf};
 
@@ -203,7 +203,8 @@ fn a_cells_programs_are_the_same_written_two_at_a_time() {
     }
 }
 
-/// The steps' code of a long program is scanned in two halves (`emit::points::for_program`):
+/// The steps' code of a long program is scanned in pieces on two threads
+/// (`emit::points::for_program`):
 /// the words no point may be named and the first statement that sets motion parameters (W210)
 /// must be found in the second half as in one pass.
 #[test]

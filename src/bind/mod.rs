@@ -518,7 +518,7 @@ pub fn bind(
     let mut later: Vec<Vec<(usize, BoundStep)>> = Vec::new();
     let mut first = if steps.len() >= split_from.max(2) {
         let like = diags.empty_like();
-        let mut pieces = crate::threads::pieces("skillpost-bind", steps, PIECES, |some| {
+        let mut pieces = crate::threads::pieces("skillpost-bind", steps, PIECES, |_, some| {
             let mut d = like.empty_like();
             (cx.run(some, &mut d), d)
         })

@@ -234,7 +234,7 @@ pub(super) fn check_outputs_in_parallel(
     if rest < PARALLEL_CHECK_FROM {
         return outputs.iter().map(check).collect();
     }
-    let checked = crate::threads::pieces("skillpost-check", &order, order.len(), |ks| {
+    let checked = crate::threads::pieces("skillpost-check", &order, order.len(), |_, ks| {
         ks.iter().map(|&k| check(&outputs[k])).collect::<Vec<_>>()
     });
     let mut out: Vec<Vec<crate::check::Problem>> = vec![Vec::new(); outputs.len()];

@@ -666,13 +666,22 @@ fn warn_missing(
     let language = input.profile.language();
     let mut seen = HashSet::new();
     let mut order = Vec::new();
+    // (The resource of the step before is looked up no further: a program's steps mostly run
+    // on one resource, 100,000 of them.)
+    let mut last = None;
     each_step(input.body, &mut |i| {
-        if let Some(bs) = &input.bound.steps[i]
-            && !seen.contains(&bs.resource)
-            && moves(language, &bs.code)
-        {
+        let Some(bs) = &input.bound.steps[i] else {
+            return;
+        };
+        if last == Some(bs.resource) {
+            return;
+        }
+        if seen.contains(&bs.resource) {
+            last = Some(bs.resource);
+        } else if moves(language, &bs.code) {
             seen.insert(bs.resource);
             order.push(bs.resource);
+            last = Some(bs.resource);
         }
     });
     for r in order {

@@ -69,32 +69,27 @@ pub fn for_program(
     // One pass over the steps' code for the words, the steps that may move to a literal
     // position (about as many points) and the first statement that sets motion parameters
     // (100,000 steps: each step's code is read while it is in the cache); a long program's
-    // second half on another thread (its first touch of the code is mostly waiting for memory).
+    // steps in pieces on two threads, each taking the next piece when done with one (its first
+    // touch of the code is mostly waiting for memory).
     let steps = &input.bound.steps;
-    let scan_of = |from: usize, to: usize| {
-        scan(
-            &steps[from..to],
-            from,
-            &starts,
-            mode == Mode::Named,
-            find_setting,
-        )
+    let scan_of = |from: usize, some: &[Option<crate::bind::BoundStep>]| {
+        scan(some, from, &starts, mode == Mode::Named, find_setting)
     };
     let count = steps.iter().filter(|s| s.is_some()).count();
-    let half = steps.len() / 2;
-    let (first, second) = if count >= input.read_ahead_from {
-        crate::threads::both(
-            "skillpost-points",
-            || scan_of(0, half),
-            || scan_of(half, steps.len()),
-        )
+    let scans = if count >= input.read_ahead_from {
+        crate::threads::pieces("skillpost-points", steps, SCAN_PIECES, scan_of)
     } else {
-        (scan_of(0, steps.len()), Scan::default())
+        vec![scan_of(0, steps)]
     };
-    taken.extend(first.taken);
-    taken.extend(second.taken);
-    let literal = first.literal + second.literal;
-    let mut found = first.found.or(second.found).map(|(i, l)| (Ok(i), l));
+    let mut literal = 0;
+    let mut found = None;
+    for s in scans {
+        taken.extend(s.taken);
+        literal += s.literal;
+        // The first in the program's order.
+        found = found.or(s.found);
+    }
+    let mut found = found.map(|(i, l)| (Ok(i), l));
     if lang == Language::UrScript {
         for w in crate::emit::urscript::KEYWORDS {
             words(w, &starts, &mut taken);
@@ -171,6 +166,9 @@ pub fn for_program(
     points.declarations.reserve(literal);
     Some(points)
 }
+
+/// The pieces a long program's steps are scanned in ([`for_program`]).
+const SCAN_PIECES: usize = 16;
 
 /// What one pass over steps' code finds (see [`for_program`]).
 #[derive(Default)]
