@@ -3,11 +3,14 @@
 #   1. builds the release binary and the generator example;
 #   2. generates a project (default 100 000 flat steps) into a temporary folder;
 #   3. runs `/usr/bin/time -v ./target/release/skillpost <blackboard> out` RUNS times (the
-#      outputs are deleted before each run, so every run writes them) and reports each run's wall
-#      time and maximum resident set size, their median wall time and the largest RSS;
+#      outputs, a long program's parts too, are deleted before each run, so every run writes
+#      them; then `sync` and REST seconds: ext4 passes over inodes freed in the last 5-10 s when
+#      it makes a file, so the 145 files of a run right after another one's deletion take up to
+#      twice as long to create) and reports each run's wall time and maximum resident set
+#      size, their median wall time and the largest RSS;
 #   4. runs `cargo bench --bench compile` (the in-process tables).
 #
-# Environment: STEPS (default 100000), RUNS (default 5), GEN_ARGS (extra generator arguments,
+# Environment: STEPS (default 100000), RUNS (default 5), REST (default 12), GEN_ARGS (extra generator arguments,
 # e.g. "--branch-every 50 --branch-width 3"), BENCH=0 to skip step 4, BENCH_ARGS (case filter
 # for the bench, e.g. "100k").
 set -euo pipefail
@@ -15,6 +18,7 @@ cd "$(dirname "$0")/.."
 
 STEPS=${STEPS:-100000}
 RUNS=${RUNS:-5}
+REST=${REST:-12}
 GEN_ARGS=${GEN_ARGS:-}
 BENCH=${BENCH:-1}
 BENCH_ARGS=${BENCH_ARGS:-}
@@ -37,7 +41,9 @@ sfc_bytes=$(stat -c %s "$work/p/sfc.xml")
 walls=()
 max_rss=0
 for i in $(seq 1 "$RUNS"); do
-    rm -f "$work/p/out.src" "$work/p/out.dat"
+    find "$work/p" -maxdepth 1 -type f -name 'out*' -delete
+    sync
+    sleep "$REST"
     /usr/bin/time -v -o "$work/time.txt" \
         ./target/release/skillpost "$work/p/Blackboard.aml" out >/dev/null 2>"$work/stderr.txt" || {
         echo "run.sh: skillpost failed:" >&2
