@@ -1,4 +1,5 @@
-//! Work split in two: one part on the calling thread, the other on a thread of its own.
+//! Work shared by the calling thread and one thread of its own: in two parts ([`both`]), or in
+//! pieces that each takes in turn ([`pieces`]).
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
