@@ -480,7 +480,7 @@ const PIECES: usize = 32;
 
 /// Renders every step. `fn_irl` maps `(resource, function)` to the loaded IRL file (absent when
 /// it could not be loaded; that was reported). From `split_from` steps ([`PARALLEL_FROM`] as the
-/// compile calls it) the steps are cut into [`PIECES`] pieces, rendered on this thread and
+/// compile calls it) the steps are cut into 32 pieces (`PIECES`), rendered on this thread and
 /// another, each taking the next piece when done with one (a core that runs slower takes fewer).
 /// The result is the same either way (the tests compare them): each piece keeps its
 /// diagnostics, unused variables and definitions in step order, and each piece's are put after
