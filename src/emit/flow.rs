@@ -36,6 +36,14 @@ impl<'a> Lines<'a> {
         self.out.push_str(self.newline);
     }
 
+    /// One line at `level`, written straight from its pieces (no `String` made for it).
+    pub fn line_fmt(&mut self, level: usize, text: std::fmt::Arguments) {
+        self.indent(level);
+        // Writing into a `String` cannot fail.
+        let _ = std::fmt::Write::write_fmt(&mut self.out, text);
+        self.out.push_str(self.newline);
+    }
+
     /// The indentation of `level`.
     pub fn indent(&mut self, level: usize) {
         self.out.push_str(self.base);

@@ -128,7 +128,7 @@ impl Profile for Krl {
         let hand = super::handshake::Hand::new(input);
         if let Some(h) = &hand {
             h.check(diags);
-            super::handshake::write(&mut writer.out, 0, h.init());
+            h.init(&mut super::handshake::At::new(&mut writer.out, 0));
         }
         writer.hand = hand;
         // Each top-level block's start, and the end: where the program may be split.
@@ -151,7 +151,7 @@ impl Profile for Krl {
         cuts.push(writer.out.out.len());
         point_cuts.push(writer.points.declarations.len());
         if let Some(h) = &writer.hand {
-            super::handshake::write(&mut writer.out, 0, h.finish());
+            h.finish(&mut super::handshake::At::new(&mut writer.out, 0));
         }
         let mut declarations = declarations(input, writer.uses_branch_var);
         let mut routines = Vec::new();
@@ -366,8 +366,7 @@ impl Writer<'_> {
             &flow::follow_comment(self.input, div, branches.len(), &decider),
         );
         if let Some(h) = &self.hand {
-            let lines = h.hear(heard);
-            super::handshake::write(&mut self.out, level, lines);
+            h.hear(&mut super::handshake::At::new(&mut self.out, level), heard);
         }
         let var = super::handshake::DECISION_VAR;
         let last = branches.len().saturating_sub(1);

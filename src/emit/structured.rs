@@ -103,7 +103,7 @@ pub fn generate(
     }
     if let Some(h) = &w.hand {
         h.check(diags);
-        super::handshake::write(&mut w.out, 0, h.init());
+        h.init(&mut super::handshake::At::new(&mut w.out, 0));
     }
     // Each top-level block's start, and the end: where the program may be split. (At the top
     // level no loop is open and no state, so `sequence` puts no block under another.)
@@ -114,7 +114,7 @@ pub fn generate(
     }
     cuts.push(w.out.out.len());
     if let Some(h) = &w.hand {
-        super::handshake::write(&mut w.out, 0, h.finish());
+        h.finish(&mut super::handshake::At::new(&mut w.out, 0));
     }
     let mut declarations = (dialect.declare)(w.uses_branch_var, w.flags, w.uses_state_var);
     declarations.extend(timer_declarations);
@@ -380,8 +380,7 @@ impl Writer<'_> {
                     &flow::follow_comment(self.input, *divergence, branches.len(), &decider),
                 );
                 if let Some(h) = &self.hand {
-                    let lines = h.hear(heard);
-                    super::handshake::write(&mut self.out, level, lines);
+                    h.hear(&mut super::handshake::At::new(&mut self.out, level), heard);
                 }
                 let var = super::handshake::DECISION_VAR;
                 if branches.len() == 1 {

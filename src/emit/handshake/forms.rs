@@ -4,12 +4,13 @@
 //! (what is waited for, in which order) is in the parent module.
 
 use super::*;
+use std::borrow::Cow;
 
 /// `text` with no quote or backslash (inside a string literal of any of the three languages).
-pub(super) fn clean(t: &str) -> String {
-    // Most texts have neither: copied whole (every handshake cleans several).
+pub(super) fn clean(t: &str) -> Cow<'_, str> {
+    // Most texts have neither: taken as they are (every handshake cleans several).
     if memchr::memchr2(b'"', b'\\', t.as_bytes()).is_none() {
-        return t.to_owned();
+        return Cow::Borrowed(t);
     }
     t.chars()
         .map(|c| match c {
@@ -17,7 +18,8 @@ pub(super) fn clean(t: &str) -> String {
             '\\' => '/',
             c => c,
         })
-        .collect()
+        .collect::<String>()
+        .into()
 }
 
 /// Besides URScript's keywords ([`crate::emit::urscript::KEYWORDS`]), the functions the
@@ -58,17 +60,26 @@ fn rapid_whole(cond: &str) -> std::borrow::Cow<'_, str> {
 }
 
 /// A message for KRL's `Msg_Txt` and RAPID's lines (80 characters): `text`, or where it is
-/// longer `short`, cut at 80; both cleaned.
-pub(super) fn fit(text: &str, short: &str) -> String {
+/// longer `short` (made only then), cut at 80; both cleaned.
+pub(super) fn fit(text: Arguments, short: Arguments) -> String {
+    let text = text.to_string();
     // At most 80 bytes is at most 80 characters: counted only when longer.
     if text.len() <= 80 || text.chars().count() <= 80 {
-        return clean(text);
+        return cleaned(text);
     }
-    let short = clean(short);
+    let short = cleaned(short.to_string());
     if short.len() <= 80 {
         return short;
     }
     short.chars().take(80).collect()
+}
+
+/// [`clean`] of a text of one's own: kept as it is when it needs no cleaning.
+fn cleaned(text: String) -> String {
+    match clean(&text) {
+        Cow::Borrowed(_) => text,
+        Cow::Owned(c) => c,
+    }
 }
 
 /// Milliseconds as seconds, as short as the value allows (`10`, `0.05`).
@@ -322,11 +333,12 @@ impl<'a> Hand<'a> {
         }
     }
 
-    pub(super) fn toggle(&self, var: &str) -> String {
+    /// The line that toggles `var`.
+    pub(super) fn toggle(&self, out: &mut At, var: &str) {
         match self.lang {
-            Language::Krl => format!("{var} = NOT {var}"),
-            Language::Rapid => format!("{var} := 1 - {var};"),
-            Language::UrScript => format!("{var} = not {var}"),
+            Language::Krl => out.put(0, format_args!("{var} = NOT {var}")),
+            Language::Rapid => out.put(0, format_args!("{var} := 1 - {var};")),
+            Language::UrScript => out.put(0, format_args!("{var} = not {var}")),
         }
     }
 
@@ -370,30 +382,31 @@ impl<'a> Hand<'a> {
     /// A wait until `cond` holds, once the motions before have ended: KRL's `WAIT FOR` stops
     /// the advance run, RAPID's `\InPos` waits for the robot to stand, URScript's moves return
     /// at their target.
-    pub(super) fn wait_until(&self, lines: &mut Vec<(usize, String)>, cond: &str) {
+    pub(super) fn wait_until(&self, out: &mut At, cond: Arguments) {
         match self.lang {
-            Language::Krl => lines.push((0, format!("WAIT FOR {cond}"))),
+            Language::Krl => out.put(0, format_args!("WAIT FOR {cond}")),
             Language::Rapid => {
                 // `\InPos` also where the robot stands anyway, and a condition of several
                 // parts in parentheses as a whole: `rapidchecker` reads `WaitUntil (a) AND (b)`
                 // and `WaitUntil (c) \PollRate` as calls.
                 let pos = "\\InPos, ";
-                lines.push((
+                let cond = cond.to_string();
+                out.put(
                     0,
-                    format!(
+                    format_args!(
                         "WaitUntil {pos}{} {};",
-                        rapid_whole(cond),
+                        rapid_whole(&cond),
                         crate::emit::rapid::POLL_RATE
                     ),
-                ));
+                );
             }
             // URScript's `movel`/`movej` return when the motion has ended (as for the chart's
             // own waits; an IRL that blends leaves that to its own code): no `is_steady()`,
             // which turns true only after 0.5 s of standstill and never in force mode.
             Language::UrScript => {
-                lines.push((0, format!("while not ({cond}):")));
-                lines.push((1, "sync()".to_owned()));
-                lines.push((0, "end".to_owned()));
+                out.put(0, format_args!("while not ({cond}):"));
+                out.line(1, "sync()");
+                out.line(0, "end");
             }
         }
     }
@@ -407,14 +420,14 @@ impl<'a> Hand<'a> {
     /// the start and the end of the long wait.
     pub(super) fn watched_wait(
         &self,
-        out: &mut Vec<(usize, String)>,
+        out: &mut At,
         cond: &str,
-        text: &str,
-        short: &str,
+        text: Arguments,
+        short: Arguments,
         nr: u64,
     ) {
         let Some(w) = self.input.bound.watch else {
-            return self.wait_until(out, cond);
+            return self.wait_until(out, format_args!("{cond}"));
         };
         let after = seconds(w.after_ms);
         match self.lang {
@@ -422,113 +435,112 @@ impl<'a> Hand<'a> {
             // message; the text goes into the message first.
             Language::Krl => {
                 let t = w.timer;
-                out.push((0, format!("{WATCH}()")));
-                out.push((
+                out.put(0, format_args!("{WATCH}()"));
+                out.put(
                     0,
-                    format!("WAIT FOR ({cond}) OR ($TIMER[{t}] >= {})", w.after_ms),
-                ));
-                out.push((0, format!("IF NOT ({cond}) THEN")));
-                out.push((1, format!("{MSG_VAR}.Msg_Txt[] = \"{}\"", fit(text, short))));
-                out.push((1, format!("{SHOW}({})", message_nr(nr))));
+                    format_args!("WAIT FOR ({cond}) OR ($TIMER[{t}] >= {})", w.after_ms),
+                );
+                out.put(0, format_args!("IF NOT ({cond}) THEN"));
+                out.put(
+                    1,
+                    format_args!("{MSG_VAR}.Msg_Txt[] = \"{}\"", fit(text, short)),
+                );
+                out.put(1, format_args!("{SHOW}({})", message_nr(nr)));
                 self.wait_inside(out, cond);
-                out.push((1, format!("{HIDE}()")));
-                out.push((0, "ENDIF".to_owned()));
+                out.put(1, format_args!("{HIDE}()"));
+                out.line(0, "ENDIF");
             }
             Language::Rapid => {
                 let poll = crate::emit::rapid::POLL_RATE;
-                out.push((
+                out.put(
                     0,
-                    format!(
+                    format_args!(
                         "WaitUntil \\InPos, {} \\MaxTime:={after} \\TimeFlag:={LATE_VAR} {poll};",
                         rapid_whole(cond)
                     ),
-                ));
-                out.push((0, format!("IF {LATE_VAR} THEN")));
-                out.push((1, format!("TPWrite \"{}\";", fit(text, short))));
+                );
+                out.put(0, format_args!("IF {LATE_VAR} THEN"));
+                out.put(1, format_args!("TPWrite \"{}\";", fit(text, short)));
                 self.wait_inside(out, cond);
-                out.push((1, "TPErase;".to_owned()));
-                out.push((0, "ENDIF".to_owned()));
+                out.line(1, "TPErase;");
+                out.line(0, "ENDIF");
             }
             Language::UrScript => {
-                let text = clean(text);
-                out.push((0, format!("{WATCH_VAR} = 0.0")));
+                let text = cleaned(text.to_string());
+                out.put(0, format_args!("{WATCH_VAR} = 0.0"));
                 // A number URScript reads as a float.
                 let after = if after.contains('.') {
                     after
                 } else {
                     format!("{after}.0")
                 };
-                self.wait_until(out, &format!("({cond}) or ({WATCH_VAR} >= {after})"));
-                out.push((0, format!("if not ({cond}):")));
-                out.push((1, format!("textmsg(\"skillpost: {text}\")")));
+                self.wait_until(out, format_args!("({cond}) or ({WATCH_VAR} >= {after})"));
+                out.put(0, format_args!("if not ({cond}):"));
+                out.put(1, format_args!("textmsg(\"skillpost: {text}\")"));
                 self.wait_inside(out, cond);
-                out.push((
+                out.put(
                     1,
-                    format!("textmsg(\"skillpost: {text}: the wait has ended\")"),
-                ));
-                out.push((0, "end".to_owned()));
+                    format_args!("textmsg(\"skillpost: {text}: the wait has ended\")"),
+                );
+                out.line(0, "end");
             }
         }
     }
 
     /// [`Hand::wait_until`] one level deeper (the wait inside a watched wait's message block).
-    fn wait_inside(&self, out: &mut Vec<(usize, String)>, cond: &str) {
-        let at = out.len();
-        self.wait_until(out, cond);
-        for (level, _) in &mut out[at..] {
-            *level += 1;
-        }
+    fn wait_inside(&self, out: &mut At, cond: &str) {
+        self.wait_until(&mut out.deeper(), format_args!("{cond}"));
     }
 
     /// `IF cond`: a message to the operator, and the program stops for good (until it is
     /// started again from its start).
     pub(super) fn stop_if(
         &self,
-        out: &mut Vec<(usize, String)>,
+        out: &mut At,
         cond: &str,
-        text: &str,
-        short: &str,
+        text: Arguments,
+        short: Arguments,
         nr: u64,
         when: &str,
     ) {
-        let text = clean(text);
         let c = self.comment();
         match self.lang {
             // The text into the message, then the program's routine `skp_stop` (see
             // `routines`): KRL takes no string literal as an argument.
             Language::Krl => {
-                out.push((0, format!("IF {cond} THEN")));
-                out.push((
+                out.put(0, format_args!("IF {cond} THEN"));
+                out.put(
                     1,
-                    format!("{c}handshake: a partner was started again{when}: stop"),
-                ));
-                out.push((
+                    format_args!("{c}handshake: a partner was started again{when}: stop"),
+                );
+                out.put(
                     1,
-                    format!("{MSG_VAR}.Msg_Txt[] = \"{}\"", fit(&text, short)),
-                ));
-                out.push((1, format!("{STOP}({})", message_nr(nr))));
-                out.push((0, "ENDIF".to_owned()));
+                    format_args!("{MSG_VAR}.Msg_Txt[] = \"{}\"", fit(text, short)),
+                );
+                out.put(1, format_args!("{STOP}({})", message_nr(nr)));
+                out.line(0, "ENDIF");
             }
             Language::Rapid => {
-                let short = fit(&text, short);
-                out.push((0, format!("IF {cond} THEN")));
-                out.push((
+                let short = fit(text, short);
+                out.put(0, format_args!("IF {cond} THEN"));
+                out.put(
                     1,
-                    format!("{c}handshake: a partner was started again{when}: stop"),
-                ));
-                out.push((1, format!("ErrWrite \"Partner started again\", \"{short}\" \\RL2:=\"Start this task again from main.\";")));
-                out.push((1, "EXIT;".to_owned()));
-                out.push((0, "ENDIF".to_owned()));
+                    format_args!("{c}handshake: a partner was started again{when}: stop"),
+                );
+                out.put(1, format_args!("ErrWrite \"Partner started again\", \"{short}\" \\RL2:=\"Start this task again from main.\";"));
+                out.line(1, "EXIT;");
+                out.line(0, "ENDIF");
             }
             Language::UrScript => {
-                out.push((0, format!("if {cond}:")));
-                out.push((
+                let text = cleaned(text.to_string());
+                out.put(0, format_args!("if {cond}:"));
+                out.put(
                     1,
-                    format!("{c}handshake: a partner was started again{when}: stop"),
-                ));
-                out.push((1, format!("popup(\"{text}. Start this program again.\", title=\"skillpost\", error=True, blocking=False)")));
-                out.push((1, "halt".to_owned()));
-                out.push((0, "end".to_owned()));
+                    format_args!("{c}handshake: a partner was started again{when}: stop"),
+                );
+                out.put(1, format_args!("popup(\"{text}. Start this program again.\", title=\"skillpost\", error=True, blocking=False)"));
+                out.line(1, "halt");
+                out.line(0, "end");
             }
         }
     }
@@ -592,10 +604,18 @@ mod tests {
         assert_eq!(clean("plain"), "plain");
         let long = "ä".repeat(50);
         // 100 bytes but 50 characters: whole.
-        assert_eq!(fit(&long, "short"), long);
+        assert_eq!(fit(format_args!("{long}"), format_args!("short")), long);
         let longer = "x\"".repeat(50);
-        assert_eq!(fit(&longer, "the \"short\" one"), "the 'short' one");
+        assert_eq!(
+            fit(format_args!("{longer}"), format_args!("the \"short\" one")),
+            "the 'short' one"
+        );
         let both = "é".repeat(100);
-        assert_eq!(fit(&both, &both).chars().count(), 80);
+        assert_eq!(
+            fit(format_args!("{both}"), format_args!("{both}"))
+                .chars()
+                .count(),
+            80
+        );
     }
 }

@@ -26,6 +26,7 @@ use crate::diag::{Code, Diagnostic, Diagnostics};
 use crate::lang::Language;
 use crate::model::{ElementKind, Signal, SignalKind};
 use crate::plan::cell::{Cell, Kind, Link, Message};
+use std::fmt::Arguments;
 
 /// The variable a decision is read into.
 pub const DECISION_VAR: &str = "skp_got";
@@ -55,6 +56,56 @@ pub struct CellView<'a> {
     pub me: usize,
 }
 
+/// Where a handshake's lines go: the program's lines, at the level of the block that holds it.
+/// Each line is written straight into the program's text.
+pub struct At<'o, 'l> {
+    out: &'o mut Lines<'l>,
+    level: usize,
+}
+
+impl<'o, 'l> At<'o, 'l> {
+    pub fn new(out: &'o mut Lines<'l>, level: usize) -> Self {
+        At { out, level }
+    }
+
+    /// A line `extra` levels below the block's.
+    fn line(&mut self, extra: usize, text: &str) {
+        self.out.line(self.level + extra, text);
+    }
+
+    /// A line `extra` levels below the block's, from its pieces.
+    fn put(&mut self, extra: usize, text: std::fmt::Arguments) {
+        self.out.line_fmt(self.level + extra, text);
+    }
+
+    /// The lines one level deeper (the wait inside a watched wait's message block).
+    fn deeper(&mut self) -> At<'_, 'l> {
+        At {
+            out: self.out,
+            level: self.level + 1,
+        }
+    }
+}
+
+/// What every tell (this program sends on the channel) or hear (it receives) repeats, made
+/// once per channel.
+#[derive(Default)]
+struct ChannelText {
+    /// The toggle: `skp_txN` where this program sends, `skp_rxN` where it receives.
+    var: String,
+    /// The condition the handshake waits for: the wire it reads (the acknowledgement, the
+    /// strobe) equals the toggle, or the partner was started again.
+    cond: String,
+    /// The name of the signal that wire arrives at (for a message).
+    wire: String,
+    /// For a comment: that wire, and the partner's run wire, as the program names them.
+    label: String,
+    run_label: String,
+    /// The line that puts the toggle on the wire this side drives (the strobe, the
+    /// acknowledgement); `None` when the language cannot (reported by [`Hand::check`]).
+    set_toggle: Option<String>,
+}
+
 /// Writes one program's handshakes.
 pub struct Hand<'a> {
     input: &'a EmitInput<'a>,
@@ -62,12 +113,11 @@ pub struct Hand<'a> {
     lang: Language,
     /// What every handshake site repeats, made once (a cell of 10,000 steps has thousands of
     /// sites): each controller's name, transliterated; for each partner, its run wire read as
-    /// "is `FALSE`" (the restart guard); for each channel of this program, the condition its
-    /// tell (this program sends) or hear (it receives) waits for, and the name of the wire it
-    /// reads there.
+    /// "is `FALSE`" (the restart guard); for each channel, what its tells or hears repeat
+    /// (empty for a channel of two other programs).
     names: Vec<String>,
     guards: Vec<String>,
-    waits: Vec<(String, String)>,
+    channels: Vec<ChannelText>,
     /// KRL and URScript: the name each wire on a numbered input or output (`$IN[n]`,
     /// `$OUT[n]`; URScript's standard digital I/O) goes by in the program, its signal's name in
     /// the blackboard as a KRL name (`SIGNAL` in the `.dat`, a URScript constant set at the
@@ -84,7 +134,7 @@ impl<'a> Hand<'a> {
             lang: input.profile.language(),
             names: Vec::new(),
             guards: Vec::new(),
-            waits: Vec::new(),
+            channels: Vec::new(),
             names_of_wires: Vec::new(),
         };
         let cell = h.view.cell;
@@ -105,19 +155,29 @@ impl<'a> Hand<'a> {
                 }
             })
             .collect();
-        h.waits = (0..cell.channels.len())
+        h.channels = (0..cell.channels.len())
             .map(|k| {
                 let ch = &cell.channels[k];
-                let (wire, var, p) = if ch.from == h.view.me {
-                    (ch.ack, format!("skp_tx{}", k + 1), ch.to)
+                // The wire read, the wire driven, the partner.
+                let (read, drive, var, p) = if ch.from == h.view.me {
+                    (ch.ack, ch.strobe, format!("skp_tx{}", k + 1), ch.to)
                 } else if ch.to == h.view.me {
-                    (ch.strobe, format!("skp_rx{}", k + 1), ch.from)
+                    (ch.strobe, ch.ack, format!("skp_rx{}", k + 1), ch.from)
                 } else {
-                    return (String::new(), String::new());
+                    return ChannelText::default();
                 };
-                let read = h.read_wire(wire);
-                let cond = h.join("OR", &[h.equals(&read, &var), h.guards[p].clone()]);
-                (cond, h.wire_name(wire))
+                let cond = h.join(
+                    "OR",
+                    &[h.equals(&h.read_wire(read), &var), h.guards[p].clone()],
+                );
+                ChannelText {
+                    cond,
+                    wire: h.wire_name(read),
+                    label: h.label(read, false),
+                    run_label: h.label(cell.link(p, h.view.me).and_then(|l| l.run), false),
+                    set_toggle: h.signal(drive, true).and_then(|s| h.set(s, &var).ok()),
+                    var,
+                }
             })
             .collect();
         Some(h)
@@ -153,12 +213,7 @@ impl<'a> Hand<'a> {
     }
 
     /// The lines that set this program's run (or ready) wire to each partner to `level`.
-    fn set_links(
-        &self,
-        out: &mut Vec<(usize, String)>,
-        wire: fn(&Link) -> Option<usize>,
-        level: bool,
-    ) {
+    fn set_links(&self, out: &mut At, wire: fn(&Link) -> Option<usize>, level: bool) {
         let v = if level { self.t() } else { self.f() };
         for p in self.view.cell.partners(self.view.me) {
             if let Some(s) = self
@@ -168,23 +223,9 @@ impl<'a> Hand<'a> {
                 .and_then(|l| self.signal(wire(l), true))
                 && let Ok(l) = self.set(s, v)
             {
-                out.push((0, l));
+                out.line(0, &l);
             }
         }
-    }
-
-    /// A handshake's wait until the wire `read` equals the toggle `var`, which also ends when
-    /// partner `p` was started again (its run wire `FALSE`; see [`Hand::stop_unless_running`]).
-    /// `text` and `short` say what it waits for on the pendant when the wait lasts
-    /// ([`Hand::watched_wait`]).
-    fn guarded_wait(
-        &self,
-        out: &mut Vec<(usize, String)>,
-        channel: usize,
-        (text, short): (&str, &str),
-        nr: u64,
-    ) {
-        self.watched_wait(out, &self.waits[channel].0, text, short, nr);
     }
 
     /// A wire as this program names it, for a comment: KRL's `SIGNAL` or URScript's constant,
@@ -198,7 +239,7 @@ impl<'a> Hand<'a> {
             return n.to_owned();
         }
         match &s.kind {
-            SignalKind::Address { text, .. } => forms::clean(text),
+            SignalKind::Address { text, .. } => forms::clean(text).into_owned(),
             _ => crate::names::transliterate(&s.name.text),
         }
     }
@@ -226,19 +267,13 @@ impl<'a> Hand<'a> {
     /// until it is started again itself. Read after the wires of a message: a start again sets
     /// the run wire `FALSE` before any other, so a message read while it is still `TRUE` is
     /// this run's.
-    fn stop_unless_running(
-        &self,
-        out: &mut Vec<(usize, String)>,
-        p: usize,
-        text: &str,
-        m: &Message,
-    ) {
+    fn stop_unless_running(&self, out: &mut At, p: usize, text: Arguments, m: &Message) {
         let id = self.input.sfc.elements[m.about].local_id;
-        let short = format!(
+        let short = format_args!(
             "{} started again; this program waited at localId {id}",
             self.name(p)
         );
-        self.stop_if(out, &self.guards[p], text, &short, id, "");
+        self.stop_if(out, &self.guards[p], text, short, id, "");
     }
 
     fn name(&self, c: usize) -> &str {
@@ -264,129 +299,88 @@ impl<'a> Hand<'a> {
         }
     }
 
-    /// The lines of a tell, each with its level relative to the block's.
-    pub fn tell(&self, m: &Message) -> Vec<(usize, String)> {
+    /// A tell, at the block's level.
+    pub fn tell(&self, out: &mut At, m: &Message) {
         let ch = &self.view.cell.channels[m.channel];
-        let var = format!("skp_tx{}", m.channel + 1);
-        let mut out = Vec::new();
+        let t = &self.channels[m.channel];
+        let about = self.about(m);
         let what = match m.kind {
-            Kind::Done => format!("{} is done", self.about(m)),
-            Kind::Passed(c) => format!("it {} {}", c.verb(), self.about(m)),
-            Kind::Decision => format!(
-                "branch {} was taken at the selection {}",
-                m.value + 1,
-                self.about(m)
-            ),
+            Kind::Done => format!("{about} is done"),
+            Kind::Passed(c) => format!("it {} {about}", c.verb()),
+            Kind::Decision => format!("branch {} was taken at the selection {about}", m.value + 1),
         };
-        out.push((
+        let (to, var, wire) = (self.name(ch.to), &t.var, &t.wire);
+        out.put(
             0,
-            format!(
-                "{}handshake: tell {} that {what}: wait for {} = {var} (read) or {} FALSE (started again)",
+            format_args!(
+                "{}handshake: tell {to} that {what}: wait for {} = {var} (read) or {} FALSE (started again)",
                 self.comment(),
-                self.name(ch.to),
-                self.label(ch.ack, false),
-                self.label(self.view.cell.link(ch.to, self.view.me).and_then(|l| l.run), false),
+                t.label,
+                t.run_label,
             ),
-        ));
-        let stop = format!(
-            "{} started again; this program was to tell it: {what}",
-            self.name(ch.to)
         );
         let id = self.input.sfc.elements[m.about].local_id;
-        let wire = &self.waits[m.channel].1;
-        let to = self.name(ch.to);
-        self.guarded_wait(
-            &mut out,
-            m.channel,
-            (
-                &format!("waits until {to} has read: {what}; wire {wire}"),
-                &format!("waits for {to} to read (localId {id}, wire {wire})"),
-            ),
+        self.watched_wait(
+            out,
+            &t.cond,
+            format_args!("waits until {to} has read: {what}; wire {wire}"),
+            format_args!("waits for {to} to read (localId {id}, wire {wire})"),
             id,
         );
-        self.stop_unless_running(&mut out, ch.to, &stop, m);
+        self.stop_unless_running(
+            out,
+            ch.to,
+            format_args!("{to} started again; this program was to tell it: {what}"),
+            m,
+        );
         if m.kind == Kind::Decision {
             for (bit, &w) in ch.data.iter().enumerate() {
                 let on = (m.value >> bit) & 1 == 1;
                 if let Some(s) = self.signal(Some(w), true)
                     && let Ok(l) = self.set(s, if on { self.t() } else { self.f() })
                 {
-                    out.push((0, l));
+                    out.line(0, &l);
                 }
             }
         }
-        out.push((0, self.toggle(&var)));
-        if let Some(s) = self.signal(ch.strobe, true)
-            && let Ok(l) = self.set(s, &var)
-        {
-            out.push((0, l));
+        self.toggle(out, var);
+        if let Some(l) = &t.set_toggle {
+            out.line(0, l);
         }
-        out
     }
 
-    /// The lines of a hear (a decision read into [`DECISION_VAR`]).
-    pub fn hear(&self, m: &Message) -> Vec<(usize, String)> {
+    /// A hear (a decision read into [`DECISION_VAR`]), at the block's level.
+    pub fn hear(&self, out: &mut At, m: &Message) {
         let ch = &self.view.cell.channels[m.channel];
-        let var = format!("skp_rx{}", m.channel + 1);
-        let mut out = Vec::new();
+        let t = &self.channels[m.channel];
+        let about = self.about(m);
+        let from = self.name(ch.from);
         let what = match m.kind {
-            Kind::Done => format!("until {} has done {}", self.name(ch.from), self.about(m)),
-            Kind::Passed(c) => format!(
-                "until {} {} {}",
-                self.name(ch.from),
-                c.verb(),
-                self.about(m)
-            ),
-            Kind::Decision => format!(
-                "for the branch {} takes at the selection {}",
-                self.name(ch.from),
-                self.about(m)
-            ),
+            Kind::Done => format!("until {from} has done {about}"),
+            Kind::Passed(c) => format!("until {from} {} {about}", c.verb()),
+            Kind::Decision => format!("for the branch {from} takes at the selection {about}"),
         };
-        out.push((
+        let (var, wire) = (&t.var, &t.wire);
+        out.put(
             0,
-            format!(
+            format_args!(
                 "{}handshake: wait {what}: for {} = NOT {var} (the next message) or {} FALSE (started again)",
                 self.comment(),
-                self.label(ch.strobe, false),
-                self.label(self.view.cell.link(ch.from, self.view.me).and_then(|l| l.run), false),
+                t.label,
+                t.run_label,
             ),
-        ));
-        out.push((0, self.toggle(&var)));
-        let stop = match m.kind {
-            Kind::Done => format!(
-                "{} started again; waited for its {}",
-                self.name(ch.from),
-                self.about(m)
-            ),
-            Kind::Decision => format!(
-                "{} started again; waited for its branch at the selection {}",
-                self.name(ch.from),
-                self.about(m)
-            ),
-            Kind::Passed(c) => format!(
-                "{} started again; waited until it {} {}",
-                self.name(ch.from),
-                c.verb(),
-                self.about(m)
-            ),
-        };
+        );
+        self.toggle(out, var);
         let id = self.input.sfc.elements[m.about].local_id;
-        let wire = &self.waits[m.channel].1;
-        self.guarded_wait(
-            &mut out,
-            m.channel,
-            (
-                &format!("waits {what}; wire {wire}"),
-                &format!(
-                    "waits for {} (localId {id}, wire {wire})",
-                    self.name(ch.from)
-                ),
-            ),
+        self.watched_wait(
+            out,
+            &t.cond,
+            format_args!("waits {what}; wire {wire}"),
+            format_args!("waits for {from} (localId {id}, wire {wire})"),
             id,
         );
         if m.kind == Kind::Decision {
-            out.push((0, self.assign(DECISION_VAR, "0")));
+            out.line(0, &self.assign(DECISION_VAR, "0"));
             for (bit, &w) in ch.data.iter().enumerate() {
                 let Some(read) = self.signal(Some(w), false).and_then(|s| self.read(s).ok()) else {
                     continue;
@@ -394,32 +388,37 @@ impl<'a> Hand<'a> {
                 let add = self.assign(DECISION_VAR, &format!("{DECISION_VAR} + {}", 1 << bit));
                 match self.lang {
                     Language::Krl => {
-                        out.push((0, format!("IF {read} THEN")));
-                        out.push((1, add));
-                        out.push((0, "ENDIF".to_owned()));
+                        out.put(0, format_args!("IF {read} THEN"));
+                        out.line(1, &add);
+                        out.line(0, "ENDIF");
                     }
                     Language::Rapid => {
-                        out.push((0, format!("IF {read} = 1 THEN")));
-                        out.push((1, add));
-                        out.push((0, "ENDIF".to_owned()));
+                        out.put(0, format_args!("IF {read} = 1 THEN"));
+                        out.line(1, &add);
+                        out.line(0, "ENDIF");
                     }
                     Language::UrScript => {
-                        out.push((0, format!("if {read}:")));
-                        out.push((1, add));
-                        out.push((0, "end".to_owned()));
+                        out.put(0, format_args!("if {read}:"));
+                        out.line(1, &add);
+                        out.line(0, "end");
                     }
                 }
             }
         }
-        self.stop_unless_running(&mut out, ch.from, &stop, m);
-        if let Some(s) = self.signal(ch.ack, true)
-            && let Ok(l) = self.set(s, &var)
-        {
-            out.push((0, l));
+        let stop = match m.kind {
+            Kind::Done => format_args!("{from} started again; waited for its {about}"),
+            Kind::Decision => {
+                format_args!("{from} started again; waited for its branch at the selection {about}")
+            }
+            Kind::Passed(c) => {
+                format_args!("{from} started again; waited until it {} {about}", c.verb())
+            }
+        };
+        self.stop_unless_running(out, ch.from, stop, m);
+        if let Some(l) = &t.set_toggle {
+            out.line(0, l);
         }
-        out
     }
-
     /// The channels this program sends on and hears on.
     fn own(&self) -> (Vec<usize>, Vec<usize>) {
         let chs = &self.view.cell.channels;
@@ -439,10 +438,10 @@ impl<'a> Hand<'a> {
     /// `FALSE`), say ready, wait until every partner is ready, say running, wait until every
     /// partner is running (or one is back at its start), stop unless every partner is running,
     /// take ready back.
-    pub fn init(&self) -> Vec<(usize, String)> {
+    pub fn init(&self, out: &mut At) {
         let (tx, rx) = self.own();
         if tx.is_empty() && rx.is_empty() {
-            return Vec::new();
+            return;
         }
         let c = self.comment();
         let partners: Vec<usize> = self.view.cell.partners(self.view.me).collect();
@@ -451,48 +450,43 @@ impl<'a> Hand<'a> {
             .map(|&p| self.name(p))
             .collect::<Vec<_>>()
             .join(", ");
-        let mut out = Vec::new();
         if self.lang == Language::UrScript && !self.names_of_wires.is_empty() {
-            out.push((
+            out.line(
                 0,
-                format!("{c}handshake: the wires, standard digital I/O by their signals' names in the blackboard"),
-            ));
-            out.extend(
-                self.names_of_wires
-                    .iter()
-                    .map(|(_, name, n)| (0, format!("{name} = {n}"))),
+                &format!("{c}handshake: the wires, standard digital I/O by their signals' names in the blackboard"),
             );
+            for (_, name, n) in &self.names_of_wires {
+                out.put(0, format_args!("{name} = {n}"));
+            }
         }
-        out.push((
-            0,
-            format!(
+        out.put(0, format_args!(
                 "{c}handshake: the start of {}: its run wires FALSE first, then every wire it drives",
                 self.name(self.view.me)
             ),
-        ));
-        self.set_links(&mut out, |l| l.run, false);
-        self.set_links(&mut out, |l| l.ready, false);
+        );
+        self.set_links(out, |l| l.run, false);
+        self.set_links(out, |l| l.ready, false);
         let chs = &self.view.cell.channels;
         for &ch in &tx {
-            out.push((0, self.assign(&format!("skp_tx{}", ch + 1), self.f())));
+            out.line(0, &self.assign(&format!("skp_tx{}", ch + 1), self.f()));
             for w in chs[ch].strobe.iter().chain(&chs[ch].data) {
                 if let Some(s) = self.signal(Some(*w), true)
                     && let Ok(l) = self.set(s, self.f())
                 {
-                    out.push((0, l));
+                    out.line(0, &l);
                 }
             }
         }
         for &ch in &rx {
-            out.push((0, self.assign(&format!("skp_rx{}", ch + 1), self.f())));
+            out.line(0, &self.assign(&format!("skp_rx{}", ch + 1), self.f()));
             if let Some(s) = self.signal(chs[ch].ack, true)
                 && let Ok(l) = self.set(s, self.f())
             {
-                out.push((0, l));
+                out.line(0, &l);
             }
         }
         if self.lang == Language::UrScript && rx.iter().any(|&ch| chs[ch].decisions) {
-            out.push((0, self.assign(DECISION_VAR, "0")));
+            out.line(0, &self.assign(DECISION_VAR, "0"));
         }
         let be = if partners.len() == 1 { "is" } else { "are" };
         let over = |op: &str, f: &dyn Fn(usize) -> String| -> String {
@@ -500,44 +494,42 @@ impl<'a> Hand<'a> {
         };
         let all = |f: &dyn Fn(usize) -> String| over("AND", f);
         let any = |f: &dyn Fn(usize) -> String| over("OR", f);
-        out.push((
+        out.put(
             0,
-            format!(
+            format_args!(
                 "{c}handshake: start barrier: wait until {names} {be} at the start (run {} FALSE)",
                 self.labels_of(|l| l.run)
             ),
-        ));
+        );
         let short = format!("start barrier: waits for {names}");
         self.watched_wait(
-            &mut out,
+            out,
             &all(&|p| self.is(&self.run_of(p), false)),
-            &format!("start barrier: waits until {names} {be} at the start (run wires FALSE)"),
-            &short,
+            format_args!("start barrier: waits until {names} {be} at the start (run wires FALSE)"),
+            format_args!("{short}"),
             0,
         );
-        self.set_links(&mut out, |l| l.ready, true);
-        out.push((
+        self.set_links(out, |l| l.ready, true);
+        out.put(
             0,
-            format!(
+            format_args!(
                 "{c}handshake: start barrier: wait until {names} {be} ready too (ready {} TRUE)",
                 self.labels_of(|l| l.ready)
             ),
-        ));
+        );
         self.watched_wait(
-            &mut out,
+            out,
             &all(&|p| self.is(&self.ready_of(p), true)),
-            &format!("start barrier: waits until {names} {be} ready (ready wires TRUE)"),
-            &short,
+            format_args!("start barrier: waits until {names} {be} ready (ready wires TRUE)"),
+            format_args!("{short}"),
             0,
         );
-        self.set_links(&mut out, |l| l.run, true);
-        out.push((
-            0,
-            format!(
+        self.set_links(out, |l| l.run, true);
+        out.put(0, format_args!(
                 "{c}handshake: start barrier: wait until {names} {be} running too (run {} TRUE; a partner's run and ready FALSE: started again, stop)",
                 self.labels_of(|l| l.run)
             ),
-        ));
+        );
         // A partner back at its start (run and ready FALSE) was started again inside the
         // barrier: waiting for it here could wait for ever (it waits for this program's run
         // wire to drop), going on could meet it mid-cycle; so stop.
@@ -552,10 +544,10 @@ impl<'a> Hand<'a> {
         });
         let running = all(&|p| self.is(&self.run_of(p), true));
         self.watched_wait(
-            &mut out,
+            out,
             &self.join("OR", &[running, restarted]),
-            &format!("start barrier: waits until {names} {be} running (run wires TRUE)"),
-            &short,
+            format_args!("start barrier: waits until {names} {be} running (run wires TRUE)"),
+            format_args!("{short}"),
             0,
         );
         let text = if partners.len() == 1 {
@@ -567,28 +559,24 @@ impl<'a> Hand<'a> {
         // already be ready again, so "back at its start" is not what to test here).
         let not_running = any(&|p| self.is(&self.run_of(p), false));
         self.stop_if(
-            &mut out,
+            out,
             &not_running,
-            &text,
-            "a partner was started again during the start barrier",
+            format_args!("{text}"),
+            format_args!("a partner was started again during the start barrier"),
             0,
             " during the start barrier",
         );
-        self.set_links(&mut out, |l| l.ready, false);
-        out
+        self.set_links(out, |l| l.ready, false);
     }
 
     /// The lines at the program's end: it waits until every partner has read its last
     /// message (or was started again), so that its next start cannot take a message back.
-    pub fn finish(&self) -> Vec<(usize, String)> {
+    pub fn finish(&self, out: &mut At) {
         let (tx, _) = self.own();
-        let mut out = Vec::new();
         let chs = &self.view.cell.channels;
         for &ch in &tx {
             let to = chs[ch].to;
-            out.push((
-                0,
-                format!(
+            out.put(0, format_args!(
                     "{}handshake: the end: wait until {} has read the last message: for {} = skp_tx{} or {} FALSE (started again)",
                     self.comment(),
                     self.name(to),
@@ -596,7 +584,7 @@ impl<'a> Hand<'a> {
                     ch + 1,
                     self.label(self.view.cell.link(to, self.view.me).and_then(|l| l.run), false),
                 ),
-            ));
+            );
             let ack = self.read_wire(chs[ch].ack);
             let cond = self.join(
                 "OR",
@@ -608,14 +596,13 @@ impl<'a> Hand<'a> {
             let wire = self.wire_name(chs[ch].ack);
             let to = self.name(to);
             self.watched_wait(
-                &mut out,
+                out,
                 &cond,
-                &format!("the end: waits until {to} has read the last message; wire {wire}"),
-                &format!("the end: waits for {to} (wire {wire})"),
+                format_args!("the end: waits until {to} has read the last message; wire {wire}"),
+                format_args!("the end: waits for {to} (wire {wire})"),
                 0,
             );
         }
-        out
     }
 
     /// The declarations of the toggles and the decision variable (KRL `.dat`, RAPID module
@@ -725,13 +712,6 @@ impl<'a> Hand<'a> {
     }
 }
 
-/// Writes lines made by [`Hand`] at `level`.
-pub fn write(out: &mut Lines, level: usize, lines: Vec<(usize, String)>) {
-    for (extra, l) in lines {
-        out.line(level + extra, &l);
-    }
-}
-
 /// Writes a [`Block::Tell`](crate::plan::Block::Tell) or
 /// [`Block::Hear`](crate::plan::Block::Hear) at `level`, for any writer (nothing outside a
 /// cell).
@@ -740,8 +720,8 @@ pub fn write_block(hand: Option<&Hand>, out: &mut Lines, level: usize, b: &crate
         return;
     };
     match b {
-        crate::plan::Block::Tell(m) => write(out, level, h.tell(m)),
-        crate::plan::Block::Hear(m) => write(out, level, h.hear(m)),
+        crate::plan::Block::Tell(m) => h.tell(&mut At::new(out, level), m),
+        crate::plan::Block::Hear(m) => h.hear(&mut At::new(out, level), m),
         _ => {}
     }
 }
