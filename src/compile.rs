@@ -381,7 +381,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                         .steps
                         .iter()
                         .copied()
-                        .filter(|&i| narrowed.step_skill[i].is_some())
+                        .filter(|&i| res.runs_on(&bb, i, c))
                         .collect();
                     (
                         bind::StepOrder {
@@ -425,7 +425,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             let undecided = cell.is_none() && controllers.len() > 1;
             let only = match &cell {
                 Some(c) => Some(evaluated(&c.programs[k].body)),
-                None if undecided && k > 0 => Some(std::collections::HashSet::new()),
+                None if undecided && k > 0 => Some(Vec::new()),
                 None => None,
             };
             let reads = bind::conditions(
@@ -433,7 +433,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 sfc,
                 prog.controller,
                 sure.then_some(profile),
-                only.as_ref(),
+                only.as_deref(),
                 cell.as_ref()
                     .is_some_and(|c| c.partners(k).next().is_some()),
                 undecided,

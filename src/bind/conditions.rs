@@ -94,7 +94,7 @@ impl StepTimes {
         sfc: &Sfc,
         t: usize,
         c: &'c crate::model::Condition,
-        here: Option<&HashSet<usize>>,
+        here: Option<&[usize]>,
         diags: &mut Diagnostics,
     ) -> Vec<(&'c str, usize)> {
         let mut out = Vec::new();
@@ -112,7 +112,7 @@ impl StepTimes {
                     .map(|(i, e)| (e.local_id, i))
                     .collect()
             });
-            let elsewhere = here.is_some_and(|h| !h.contains(&step));
+            let elsewhere = here.is_some_and(|h| h.binary_search(&step).is_err());
             match step_time_problem(sfc, by_id, t, n, step, count, elsewhere) {
                 Some(why) => diags.push(
                     Diagnostic::error(Code::BadCondition, format!("condition `{}`: {why}", c.text))
@@ -275,7 +275,8 @@ fn unknown_signal(
 }
 
 /// Resolves the names in every transition condition (or, for a program of a cell, those of
-/// `only`: the transitions it waits for or decides; `only` holds the steps it runs too) against
+/// `only`: the transitions it waits for or decides, and the steps it runs, as element indexes
+/// in ascending order; only those are visited) against
 /// the signals of the program's resource and the chart's steps (a step's time `S.t`, in a cell
 /// only of a step it runs), and checks the types (docs/INPUTS.md).
 #[allow(clippy::too_many_arguments)]
@@ -284,7 +285,7 @@ pub fn conditions(
     sfc: &Sfc,
     resource: Option<usize>,
     profile: Option<&dyn Rules>,
-    only: Option<&HashSet<usize>>,
+    only: Option<&[usize]>,
     partners: bool,
     undecided: bool,
     diags: &mut Diagnostics,
@@ -299,13 +300,15 @@ pub fn conditions(
     let mut first_timed: Option<usize> = None;
     let res = resource.map(|r| &bb.resources[r]);
     let mut times = StepTimes::default();
-    for (ei, e) in sfc.elements.iter().enumerate() {
+    let visited: Box<dyn Iterator<Item = usize>> = match only {
+        Some(o) => Box::new(o.iter().copied()),
+        None => Box::new(0..sfc.elements.len()),
+    };
+    for ei in visited {
+        let e = &sfc.elements[ei];
         let ElementKind::Transition(Some(c)) = &e.kind else {
             continue;
         };
-        if only.is_some_and(|o| !o.contains(&ei)) {
-            continue;
-        }
         let step_names = times.names(sfc, c);
         let lookup = |n: &str| {
             if step_names.is_some_and(|s| s.step_time(n).is_some()) {

@@ -38,8 +38,9 @@ pub trait Rules: Sync {
 /// Which resource and skill each step uses.
 #[derive(Debug, Default)]
 pub struct Resolution {
-    /// By element index: `(resource, skill)` for steps that produce code.
-    pub step_skill: Vec<Option<(usize, usize)>>,
+    /// By element index: `(resource, skill)` for steps that produce code (shared by the
+    /// programs of a cell: each binds only its own steps).
+    pub step_skill: Arc<[Option<(usize, usize)>]>,
     /// The distinct `(resource, skill)` pairs used, in first-use order.
     pub used: Vec<(usize, usize)>,
     /// The program's resource: the controller of the first step (the first program's).
@@ -47,18 +48,25 @@ pub struct Resolution {
 }
 
 impl Resolution {
-    /// This resolution narrowed to the steps of one controller: its program's.
+    /// This resolution for the program of one controller: the pairs its steps use. The steps'
+    /// table is shared, not narrowed: [`bind`] binds the steps it is given, and a program of a
+    /// cell is given its own ([`Resolution::runs_on`]).
     pub fn of_controller(&self, bb: &Blackboard, controller: usize) -> Resolution {
-        let mine = |&(r, _): &(usize, usize)| bb.controller_of(r) == controller;
         Resolution {
-            step_skill: self
-                .step_skill
+            step_skill: Arc::clone(&self.step_skill),
+            used: self
+                .used
                 .iter()
-                .map(|p| p.filter(|p| mine(p)))
+                .copied()
+                .filter(|&(r, _)| bb.controller_of(r) == controller)
                 .collect(),
-            used: self.used.iter().copied().filter(|p| mine(p)).collect(),
             resource: Some(controller),
         }
+    }
+
+    /// Whether element `i` is a step with code on `controller` (a program of a cell's step).
+    pub fn runs_on(&self, bb: &Blackboard, i: usize, controller: usize) -> bool {
+        self.step_skill[i].is_some_and(|(r, _)| bb.controller_of(r) == controller)
     }
 }
 
@@ -104,10 +112,8 @@ pub fn resolve(
     order: &StepOrder,
     diags: &mut Diagnostics,
 ) -> Resolution {
-    let mut r = Resolution {
-        step_skill: vec![None; sfc.elements.len()],
-        ..Resolution::default()
-    };
+    let mut r = Resolution::default();
+    let mut step_skill = vec![None; sfc.elements.len()];
     let mut used: HashSet<(usize, usize)> = HashSet::new();
     // Resource key → index of its first resource.
     let mut by_key: HashMap<&str, usize> = HashMap::new();
@@ -133,7 +139,7 @@ pub fn resolve(
                 .find(|(r, s, _)| Arc::ptr_eq(r, &rn.key) && Arc::ptr_eq(s, &sn.key))
         {
             // Seen: the same resource (so no second-resource error) and a pair already used.
-            r.step_skill[i] = Some(pair);
+            step_skill[i] = Some(pair);
             continue;
         }
         // Only for a diagnostic: most steps make none.
@@ -287,8 +293,9 @@ pub fn resolve(
                 )));
             }
         }
-        r.step_skill[i] = Some((res, sk));
+        step_skill[i] = Some((res, sk));
     }
+    r.step_skill = step_skill.into();
     r
 }
 

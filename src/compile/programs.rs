@@ -140,18 +140,18 @@ pub(super) fn name_part(name: &str) -> String {
 }
 
 /// The transitions a program of a cell waits for or decides, and the steps it runs (whose times
-/// its conditions may read).
-pub(super) fn evaluated(body: &[plan::Block]) -> std::collections::HashSet<usize> {
-    let mut out = std::collections::HashSet::new();
+/// its conditions may read): element indexes, ascending, each once.
+pub(super) fn evaluated(body: &[plan::Block]) -> Vec<usize> {
+    let mut out = Vec::new();
     plan::visit(body, &mut |b| match b {
-        plan::Block::Wait(t) | plan::Block::Step(t) => {
-            out.insert(*t);
-        }
+        plan::Block::Wait(t) | plan::Block::Step(t) => out.push(*t),
         plan::Block::Choice { branches, .. } => {
             out.extend(branches.iter().flat_map(|br| br.heads()));
         }
         _ => {}
     });
+    out.sort_unstable();
+    out.dedup();
     out
 }
 
