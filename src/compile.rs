@@ -481,7 +481,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         definitions::unused_definitions(&mut cx.diags, &irls, &bound_programs);
         out.skill_steps = bound_programs
             .iter()
-            .map(|b| b.steps.iter().filter(|s| s.is_some()).count())
+            .map(|b| b.steps.len())
             .sum();
         if !opts.keep_model {
             let variables = sfc.take_variables();

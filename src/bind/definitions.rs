@@ -153,7 +153,7 @@ pub fn complete(bound: &mut Bound, irls: &[Irl], files: &[usize], lang: Language
         _ => hay.extend(text.chars().map(|c| c.to_ascii_lowercase())),
     };
     let mut hay = String::new();
-    for step in bound.steps.iter().flatten() {
+    for step in bound.steps.iter() {
         fold(&step.code, &mut hay);
         hay.push('\n');
     }

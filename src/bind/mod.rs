@@ -355,8 +355,8 @@ pub fn needed_functions(
 /// The bound program: each code-producing step's rendered calls, and the definitions to append.
 #[derive(Debug, Default)]
 pub struct Bound {
-    /// By element index: the code lines of the step's calls (a call may span several lines).
-    pub steps: Vec<Option<BoundStep>>,
+    /// The code lines of each step's calls (a call may span several lines), by element index.
+    pub steps: BoundSteps,
     /// `(irl, definition)` indexes into the IRL list, in order of first use.
     pub definitions: Vec<(usize, usize)>,
     /// The program's resource, whose signals the conditions read.
@@ -381,7 +381,7 @@ impl Bound {
     /// then those whose skills its steps run, in step order.
     pub fn resources(&self) -> Vec<usize> {
         let mut out: Vec<usize> = self.resource.into_iter().collect();
-        for st in self.steps.iter().flatten() {
+        for st in self.steps.iter() {
             if !out.contains(&st.resource) {
                 out.push(st.resource);
             }
@@ -423,6 +423,83 @@ pub struct BoundStep {
     pub skill: usize,
     /// The rendered calls, one after another, lines separated by `\n`.
     pub code: String,
+}
+
+/// A program's bound steps, found by their element index: a table of 4 bytes per element of the
+/// chart (a program of a cell has one too), the steps themselves only for the program's own.
+#[derive(Debug, Default)]
+pub struct BoundSteps {
+    /// By element index: where the element's step is in `steps` ([`NO_STEP`]: none).
+    at: Vec<u32>,
+    steps: Vec<BoundStep>,
+}
+
+/// In [`BoundSteps`]' table: no step of this program. (The input's size limit keeps the steps
+/// of a chart far below it: 4 GiB of XML hold fewer than 100 million.)
+const NO_STEP: u32 = u32::MAX;
+
+impl BoundSteps {
+    /// No steps yet, in a chart of `elements` elements; room for `count`.
+    fn new(elements: usize, count: usize) -> Self {
+        BoundSteps {
+            at: vec![NO_STEP; elements],
+            steps: Vec::with_capacity(count),
+        }
+    }
+
+    /// The step of element `i` (again: the later one is kept).
+    fn put(&mut self, i: usize, step: BoundStep) {
+        match self.at[i] {
+            NO_STEP => {
+                self.at[i] = u32::try_from(self.steps.len()).unwrap_or(NO_STEP);
+                self.steps.push(step);
+            }
+            k => self.steps[k as usize] = step,
+        }
+    }
+
+    /// The step of element `i`, if it is one of the program's.
+    pub fn get(&self, i: usize) -> Option<&BoundStep> {
+        self.steps.get(*self.at.get(i)? as usize)
+    }
+
+    /// How many steps the program has.
+    pub fn len(&self) -> usize {
+        self.steps.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.steps.is_empty()
+    }
+
+    /// The steps in the chart's element order.
+    pub fn iter(&self) -> impl Iterator<Item = &BoundStep> {
+        self.at.iter().filter_map(|&k| self.steps.get(k as usize))
+    }
+
+    /// The steps in the order they were bound (for a sum or a search, where the order does not
+    /// matter: no walk over the whole chart's table).
+    pub fn unordered(&self) -> impl Iterator<Item = &BoundStep> {
+        self.steps.iter()
+    }
+
+    /// The table by element index, to cut into pieces ([`BoundSteps::of_table`] reads one).
+    pub fn table(&self) -> &[u32] {
+        &self.at
+    }
+
+    /// The steps of `piece`, a part of [`BoundSteps::table`] that begins at element `from`, with
+    /// their element indexes, in element order.
+    pub fn of_table<'s>(
+        &'s self,
+        from: usize,
+        piece: &'s [u32],
+    ) -> impl Iterator<Item = (usize, &'s BoundStep)> {
+        piece
+            .iter()
+            .enumerate()
+            .filter_map(move |(k, &at)| Some((from + k, self.steps.get(at as usize)?)))
+    }
 }
 
 /// A function mapping made ready to render: the IRL call, and for each template parameter the
@@ -540,8 +617,9 @@ pub fn bind(
     } else {
         cx.run(steps, diags)
     };
+    let count = first.steps.len() + later.iter().map(Vec::len).sum::<usize>();
     let mut bound = Bound {
-        steps: (0..sfc.elements.len()).map(|_| None).collect(),
+        steps: BoundSteps::new(sfc.elements.len(), count),
         definitions: first.definitions.into_iter().map(|(d, _)| d).collect(),
         resource: r.resource,
         signals: Vec::new(),
@@ -550,11 +628,11 @@ pub fn bind(
         timer_index: HashMap::new(),
         watch: None,
     };
-    for (i, step) in std::mem::take(&mut first.steps) {
-        bound.steps[i] = Some(step);
-    }
-    for (i, step) in later.into_iter().flatten() {
-        bound.steps[i] = Some(step);
+    for (i, step) in std::mem::take(&mut first.steps)
+        .into_iter()
+        .chain(later.into_iter().flatten())
+    {
+        bound.steps.put(i, step);
     }
     first.extras.report(diags);
     bound

@@ -125,7 +125,7 @@ pub fn start<'scope, 'env, 'a: 'env>(
             let mut gone = false;
             crate::plan::visit(input.body, &mut |b| {
                 let Block::Step(i) = b else { return };
-                let Some(bs) = input.bound.steps.get(*i).and_then(Option::as_ref) else {
+                let Some(bs) = input.bound.steps.get(*i) else {
                     return;
                 };
                 if gone {

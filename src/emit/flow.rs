@@ -408,8 +408,7 @@ pub fn steps_estimate(input: &EmitInput) -> usize {
     input
         .bound
         .steps
-        .iter()
-        .flatten()
+        .unordered()
         .map(|b| b.code.len() + 80)
         .sum::<usize>()
         + 1024

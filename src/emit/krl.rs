@@ -135,7 +135,7 @@ impl Profile for Krl {
         let mut cuts = Vec::with_capacity(input.body.len() + 1);
         // And how many points were declared by then: a block's points are its own.
         let mut point_cuts = Vec::with_capacity(input.body.len() + 1);
-        let steps = input.bound.steps.iter().flatten().count();
+        let steps = input.bound.steps.len();
         std::thread::scope(|s| {
             if steps >= input.read_ahead_from {
                 writer.ahead = super::ahead::start(s, input, Language::Krl);
@@ -248,7 +248,7 @@ impl Writer<'_> {
                         self.line(level, l);
                     }
                 }
-                let Some(bs) = &input.bound.steps[*i] else {
+                let Some(bs) = input.bound.steps.get(*i) else {
                     return;
                 };
                 self.number += 1;

@@ -280,7 +280,7 @@ impl Writer<'_> {
                         self.out.line(level, l);
                     }
                 }
-                let Some(bs) = &input.bound.steps[*i] else {
+                let Some(bs) = input.bound.steps.get(*i) else {
                     return;
                 };
                 self.number += 1;

@@ -204,7 +204,7 @@ impl Planner<'_, '_> {
     }
 
     fn step(&mut self, i: usize, st: &mut InEffect) {
-        let Some(bs) = &self.input.bound.steps[i] else {
+        let Some(bs) = self.input.bound.steps.get(i) else {
             return;
         };
         let r = bs.resource;
@@ -670,7 +670,7 @@ fn warn_missing(
     // on one resource, 100,000 of them.)
     let mut last = None;
     each_step(input.body, &mut |i| {
-        let Some(bs) = &input.bound.steps[i] else {
+        let Some(bs) = input.bound.steps.get(i) else {
             return;
         };
         if last == Some(bs.resource) {

@@ -137,7 +137,7 @@ impl<'a> Hand<'a> {
                         }
                     }
                 };
-                for b in self.input.bound.steps.iter().flatten() {
+                for b in self.input.bound.steps.unordered() {
                     words(&b.code);
                 }
                 for &(i, d) in &self.input.bound.definitions {

@@ -72,14 +72,18 @@ pub fn for_program(
     // steps in pieces on two threads, each taking the next piece when done with one (its first
     // touch of the code is mostly waiting for memory).
     let steps = &input.bound.steps;
-    let scan_of = |from: usize, some: &[Option<crate::bind::BoundStep>]| {
-        scan(some, from, &starts, mode == Mode::Named, find_setting)
+    let scan_of = |from: usize, piece: &[u32]| {
+        scan(
+            steps.of_table(from, piece),
+            &starts,
+            mode == Mode::Named,
+            find_setting,
+        )
     };
-    let count = steps.iter().filter(|s| s.is_some()).count();
-    let scans = if count >= input.read_ahead_from {
-        crate::threads::pieces("skillpost-points", steps, SCAN_PIECES, scan_of)
+    let scans = if steps.len() >= input.read_ahead_from {
+        crate::threads::pieces("skillpost-points", steps.table(), SCAN_PIECES, scan_of)
     } else {
-        vec![scan_of(0, steps)]
+        vec![scan_of(0, steps.table())]
     };
     let mut literal = 0;
     let mut found = None;
@@ -125,8 +129,7 @@ pub fn for_program(
             let has_literal = input
                 .bound
                 .steps
-                .iter()
-                .flatten()
+                .unordered()
                 .any(|b| b.code.split('\n').any(|l| krl_motion(l).is_some()));
             if has_literal {
                 let (whence, at) = match step {
@@ -185,16 +188,14 @@ struct Scan {
 /// [`Scan`] of `steps`, the first of which is element `from`. `named`: literal targets become
 /// points (their steps' words are collected); `find_setting`: look for a statement that sets
 /// motion parameters.
-fn scan(
-    steps: &[Option<crate::bind::BoundStep>],
-    from: usize,
+fn scan<'s>(
+    steps: impl Iterator<Item = (usize, &'s crate::bind::BoundStep)>,
     starts: &[(u8, u8); 2],
     named: bool,
     find_setting: bool,
 ) -> Scan {
     let mut scan = Scan::default();
-    for (i, b) in steps.iter().enumerate() {
-        let Some(b) = b else { continue };
+    for (i, b) in steps {
         if named && memchr::memchr2(b'{', b'[', b.code.as_bytes()).is_some() {
             scan.literal += 1;
             words(&b.code, starts, &mut scan.taken);
@@ -203,7 +204,7 @@ fn scan(
             && scan.found.is_none()
             && let Some(l) = first_setting_motion(&b.code)
         {
-            scan.found = Some((from + i, l.trim().to_owned()));
+            scan.found = Some((i, l.trim().to_owned()));
         }
     }
     scan
