@@ -354,12 +354,12 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         let programs = programs(&mut cx, &bb, opts, &controllers, &langs);
         let cell = match (&plan, controllers.len() > 1) {
             (Some(plan), true) => {
-                let index: HashMap<usize, usize> = controllers
-                    .iter()
-                    .enumerate()
-                    .map(|(k, &c)| (c, k))
-                    .collect();
-                let of = |i: usize| res.step_skill[i].map(|(r, _)| index[&bb.controller_of(r)]);
+                // By resource: its place among the controllers (a step's controller is one).
+                let mut index = vec![usize::MAX; bb.resources.len()];
+                for (k, &c) in controllers.iter().enumerate() {
+                    index[c] = k;
+                }
+                let of = |i: usize| res.step_skill[i].map(|(r, _)| index[bb.controller_of(r)]);
                 let mut cell = plan::cell::split(&plan.body, controllers.clone(), &of);
                 plan::cell::assign_wires(&mut cell, &bb, sfc, &mut cx.diags);
                 Some(cell)
@@ -479,10 +479,7 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             bound_programs.push(bound);
         }
         definitions::unused_definitions(&mut cx.diags, &irls, &bound_programs);
-        out.skill_steps = bound_programs
-            .iter()
-            .map(|b| b.steps.len())
-            .sum();
+        out.skill_steps = bound_programs.iter().map(|b| b.steps.len()).sum();
         if !opts.keep_model {
             let variables = sfc.take_variables();
             if sfc.elements.len() >= FREE_ASIDE_FROM {

@@ -36,15 +36,18 @@ impl Name {
 /// Each name is hashed once (SipHash with a random key, as `std`'s maps: a crafted file cannot
 /// make names collide) and its hash kept, so growing the table does not hash every name again.
 ///
-/// In front of the table, a few names found in it last (`recent`, a slot chosen by the length
-/// and the last byte): a plan repeats a handful of names (variables, resources, skills) in every
-/// step, and a hit costs one comparison instead of a hash. A name seen once (100,000 distinct
-/// variables) only costs that comparison.
+/// In front of the table, the names found in it last (`recent`: a slot chosen by the length and
+/// the last byte holds the last two names found of its slot): a plan repeats a handful of names
+/// (variables, resources, skills) in every step, and a hit costs a comparison or two instead of a
+/// hash. Two per slot, as names of the same length and last letter come together (`R1`…`R4`,
+/// `P2P`, `Frame` and `R2`). A name seen once (100,000 distinct variables) only costs those
+/// comparisons.
 #[derive(Debug, Default)]
 pub struct Interner {
     table: hashbrown::HashTable<Interned>,
     hasher: std::hash::RandomState,
-    recent: [Option<Recent>; RECENT],
+    /// Per slot the name found last, then the one before.
+    recent: [[Option<Recent>; 2]; RECENT],
 }
 
 /// Slots of [`Interner::recent`].
@@ -77,14 +80,23 @@ impl Interner {
     pub fn strings(&mut self, raw: &str) -> (Arc<str>, Arc<str>) {
         use std::hash::BuildHasher as _;
         let slot = (raw.len() ^ usize::from(raw.as_bytes().last().copied().unwrap_or(0))) % RECENT;
-        if let Some(r) = &self.recent[slot]
+        let recent = &mut self.recent[slot];
+        if let Some(r) = &recent[0]
             && *r.raw == *raw
         {
             return (r.text.clone(), r.key.clone());
         }
+        if let Some(r) = &recent[1]
+            && *r.raw == *raw
+        {
+            let found = (r.text.clone(), r.key.clone());
+            recent.swap(0, 1);
+            return found;
+        }
         let hash = self.hasher.hash_one(raw);
         if let Some(e) = self.table.find(hash, |e| *e.raw == *raw) {
-            self.recent[slot] = Some(Recent {
+            recent[1] = recent[0].take();
+            recent[0] = Some(Recent {
                 raw: e.raw.clone(),
                 text: e.text.clone(),
                 key: e.key.clone(),

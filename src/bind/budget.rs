@@ -4,8 +4,6 @@
 //! grows with controllers × SFC elements. Refused here, before the chart is split, bound or
 //! written, with the figures: 1,000 controllers of 20,000 steps (40,000 elements) took 1.6 GB.
 
-use std::collections::HashSet;
-
 use super::{Resolution, StepOrder};
 use crate::diag::{Code, Diagnostic, Diagnostics};
 use crate::model::{Blackboard, Sfc};
@@ -26,15 +24,15 @@ pub fn controllers_within_budget(
     diags: &mut Diagnostics,
 ) -> Option<Vec<usize>> {
     let elements = sfc.elements.len().max(1);
-    let mut seen: HashSet<usize> = HashSet::new();
+    // By resource: whether it is among the controllers already.
+    let mut seen = vec![false; bb.resources.len()];
     let mut out: Vec<usize> = Vec::new();
     for &i in &order.steps {
         let Some((r, _)) = res.step_skill[i] else {
             continue;
         };
         let c = bb.controller_of(r);
-        // Most steps run on the controller of the step before them.
-        if out.last() == Some(&c) || !seen.insert(c) {
+        if std::mem::replace(&mut seen[c], true) {
             continue;
         }
         out.push(c);

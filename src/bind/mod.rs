@@ -515,6 +515,19 @@ struct PreparedCall {
     call: usize,
     /// Skill parameter index per template parameter.
     args: Vec<usize>,
+    /// The IRL file's definition of the call's routine, if it has one (written with the
+    /// program when a step calls it).
+    definition: Option<usize>,
+}
+
+/// The prepared skills by resource and skill index: looked up at every step without a hash.
+/// `None` where a skill is not used; `Some(None)` where it cannot be rendered (reported).
+struct PreparedSkills(Vec<Vec<Option<Option<Prepared>>>>);
+
+impl PreparedSkills {
+    fn get(&self, res: usize, sk: usize) -> Option<&Option<Prepared>> {
+        self.0.get(res)?.get(sk)?.as_ref()
+    }
 }
 
 /// Each IRL file's function-calls (all overloads, in order) and definitions (the first) by key.
@@ -581,11 +594,15 @@ pub fn bind(
     split_from: usize,
 ) -> Bound {
     let (irls, fn_irl) = (calls_in.irls, calls_in.fn_irl);
-    let mut prepared: HashMap<(usize, usize), Option<Prepared>> = HashMap::new();
+    let mut prepared = PreparedSkills((0..bb.resources.len()).map(|_| Vec::new()).collect());
     let calls = CallIndex::new(irls);
     for &(res, sk) in &r.used {
         let p = prepare(bb, res, sk, irls, &calls, fn_irl, diags);
-        prepared.insert((res, sk), p);
+        let of_resource = &mut prepared.0[res];
+        if of_resource.len() <= sk {
+            of_resource.resize_with(bb.resources[res].skills.len().max(sk + 1), || None);
+        }
+        of_resource[sk] = Some(p);
     }
     let cx = StepCx {
         bb,
@@ -593,7 +610,6 @@ pub fn bind(
         r,
         prepared: &prepared,
         irls,
-        calls: &calls,
         profile,
     };
     let steps = &order.steps[..];
@@ -816,6 +832,7 @@ fn prepare(
             irl: irl_i,
             call: ci,
             args,
+            definition: index.definitions[irl_i].get(&*call.name.key).copied(),
         });
     }
     let variables = skill

@@ -10,9 +10,8 @@ pub(super) struct StepCx<'a> {
     pub(super) bb: &'a Blackboard,
     pub(super) sfc: &'a Sfc,
     pub(super) r: &'a Resolution,
-    pub(super) prepared: &'a HashMap<(usize, usize), Option<Prepared>>,
+    pub(super) prepared: &'a PreparedSkills,
     pub(super) irls: &'a [Irl],
-    pub(super) calls: &'a CallIndex<'a>,
     pub(super) profile: &'a dyn Rules,
 }
 
@@ -49,7 +48,6 @@ impl<'a> StepCx<'a> {
             r,
             prepared,
             irls,
-            calls,
             profile,
         } = *self;
         let mut part = Part {
@@ -66,7 +64,7 @@ impl<'a> StepCx<'a> {
             let Some((res, sk)) = r.step_skill[i] else {
                 continue;
             };
-            let Some(Some(p)) = prepared.get(&(res, sk)) else {
+            let Some(Some(p)) = prepared.get(res, sk) else {
                 continue;
             };
             let e = &sfc.elements[i];
@@ -110,8 +108,8 @@ impl<'a> StepCx<'a> {
                         diags.push(conversion_error(&why, call, pc, skill, e, &vars));
                         continue;
                     }
-                    if !part.def_keys.contains(&*call.name.key)
-                        && let Some(&d) = calls.definitions[pc.irl].get(&*call.name.key)
+                    if let Some(d) = pc.definition
+                        && !part.def_keys.contains(&*call.name.key)
                     {
                         part.def_keys.insert(&call.name.key);
                         part.definitions.push(((pc.irl, d), &call.name.key));
