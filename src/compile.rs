@@ -497,6 +497,8 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             .and_then(|p| cx.load_top(p, &mut out));
         let mut outputs = Vec::new();
         let mut output_programs = Vec::new();
+        // Per output: what the built-in check found when it ran as the file was written.
+        let mut checked = Vec::new();
         let templates: Vec<Option<OutputTemplate>> = programs
             .iter()
             .map(|prog| match user_template {
@@ -551,9 +553,14 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
                 let (Some(files), Some(name)) = (files, &prog.name) else {
                     continue;
                 };
-                out.part_files
-                    .push(parts::PartFiles::of(&cx.base, name, prog.language, &files));
-                for f in files {
+                out.part_files.push(parts::PartFiles::of(
+                    &cx.base,
+                    name,
+                    prog.language,
+                    files.first().map(|(f, _)| f),
+                ));
+                for (f, problems) in files {
+                    checked.push(problems);
                     let stem = f.stem.as_deref().unwrap_or(name);
                     let path = cx.base.join(format!("{stem}.{}", f.extension));
                     outputs.push((path, f));
@@ -608,7 +615,13 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
             check_snippets(&cx.sources, irl, &used, &mut cx.diags);
         }
         if !cx.diags.has_errors() {
-            check_generated(&outputs, &cx.sources, user_template, &mut cx.diags);
+            check_generated(
+                &outputs,
+                std::mem::take(&mut checked),
+                &cx.sources,
+                user_template,
+                &mut cx.diags,
+            );
             definitions::check_definitions_held(
                 &outputs,
                 &cx.sources,

@@ -203,6 +203,54 @@ fn a_cells_programs_are_the_same_written_two_at_a_time() {
     }
 }
 
+/// A cell's programs written two at a time are checked right after each is written, on the
+/// thread that wrote it: a template that breaks every program (`E606`, the check of the
+/// generated files) is reported as when the programs are written and checked one by one.
+#[test]
+fn a_cells_programs_checked_as_they_are_written_report_what_the_check_after_finds() {
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
+    let dir = tempfile::tempdir().unwrap();
+    for from in ["base/cell", "base/cell2", "ok/cell-two-robots-weld"] {
+        for e in std::fs::read_dir(fixtures.join(from)).unwrap() {
+            let e = e.unwrap();
+            std::fs::copy(e.path(), dir.path().join(e.file_name())).unwrap();
+        }
+    }
+    // The KRL template that opens a LOOP nothing closes.
+    let template = dir.path().join("bad.toml");
+    std::fs::copy(
+        fixtures.join("err/e606_template_loop_without_endloop/bad.toml"),
+        &template,
+    )
+    .unwrap();
+    let bb = dir.path().join("Blackboard.aml");
+    let run = |split: usize| {
+        seen(&compile(
+            &FsSource::default(),
+            &bb,
+            &Options {
+                program: Some("out".into()),
+                template: Some(template.clone()),
+                bind_split_from: Some(split),
+                picture: None,
+                ..Default::default()
+            },
+        ))
+    };
+    let (one, two) = (run(usize::MAX), run(1));
+    assert_eq!(one, two, "checked as written differs from checked after");
+    // Both robots' programs would not load, each reported once.
+    assert_eq!(two.matches("E606").count(), 2, "{two}");
+    assert!(
+        two.contains("the generated out_KUKA_KR15_2.src would not load"),
+        "{two}"
+    );
+    assert!(
+        two.contains("the generated out_KUKA_KR16_2.src would not load"),
+        "{two}"
+    );
+}
+
 /// The steps' code of a long program is scanned in pieces on two threads
 /// (`emit::points::for_program`):
 /// the words no point may be named and the first statement that sets motion parameters (W210)

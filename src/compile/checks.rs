@@ -221,27 +221,52 @@ pub(super) fn check_snippets(
 /// core that runs slower checks fewer.
 pub(super) fn check_outputs_in_parallel(
     outputs: &[(PathBuf, OutputFile)],
+    checked: Vec<Option<Vec<crate::check::Problem>>>,
 ) -> Vec<Vec<crate::check::Problem>> {
     let check = |(path, f): &(PathBuf, OutputFile)| match crate::check::language_of(path) {
         Some((language, unit)) => crate::check::check(language, unit, &f.text),
         None => Vec::new(),
     };
-    let mut order: Vec<usize> = (0..outputs.len()).collect();
+    // The files checked as they were written keep what was found.
+    let mut out: Vec<Vec<crate::check::Problem>> = Vec::with_capacity(outputs.len());
+    let mut order: Vec<usize> = Vec::new();
+    for (k, c) in checked.into_iter().enumerate() {
+        if c.is_none() {
+            order.push(k);
+        }
+        out.push(c.unwrap_or_default());
+    }
+    out.resize_with(outputs.len(), Vec::new);
+    if order.is_empty() {
+        return out;
+    }
     order.sort_by_key(|&k| std::cmp::Reverse(outputs[k].1.text.len()));
     // Only worth a thread when the files other than the largest are large (as a split
     // program's parts or a cell's programs are, from about 2,000 steps).
     let rest: usize = order.iter().skip(1).map(|&k| outputs[k].1.text.len()).sum();
     if rest < PARALLEL_CHECK_FROM {
-        return outputs.iter().map(check).collect();
+        for &k in &order {
+            out[k] = check(&outputs[k]);
+        }
+        return out;
     }
     let checked = crate::threads::pieces("skillpost-check", &order, order.len(), |_, ks| {
         ks.iter().map(|&k| check(&outputs[k])).collect::<Vec<_>>()
     });
-    let mut out: Vec<Vec<crate::check::Problem>> = vec![Vec::new(); outputs.len()];
     for (&k, problems) in order.iter().zip(checked.into_iter().flatten()) {
         out[k] = problems;
     }
     out
+}
+
+/// What the built-in check finds in a generated file, by its extension (nothing in a file no
+/// check reads, an I/O list): what [`check_outputs_in_parallel`] finds for it.
+pub(super) fn check_output(f: &OutputFile) -> Vec<crate::check::Problem> {
+    let path = PathBuf::from(format!("x.{}", f.extension));
+    match crate::check::language_of(&path) {
+        Some((language, unit)) => crate::check::check(language, unit, &f.text),
+        None => Vec::new(),
+    }
 }
 
 /// The bytes of the generated files other than the largest from which a second thread checks
@@ -250,6 +275,7 @@ const PARALLEL_CHECK_FROM: usize = 256 * 1024;
 
 pub(super) fn check_generated(
     outputs: &[(PathBuf, OutputFile)],
+    checked: Vec<Option<Vec<crate::check::Problem>>>,
     sources: &Sources,
     template: Option<FileId>,
     diags: &mut Diagnostics,
@@ -274,7 +300,7 @@ pub(super) fn check_generated(
         }
         found
     };
-    let problems = check_outputs_in_parallel(outputs);
+    let problems = check_outputs_in_parallel(outputs, checked);
     for ((path, f), problems) in outputs.iter().zip(problems) {
         for p in problems.iter().take(20) {
             let line = f.text.lines().nth(p.line - 1).unwrap_or("").trim();
@@ -337,7 +363,7 @@ mod tests {
             .iter()
             .map(|(_, f)| crate::check::check(Language::Krl, crate::check::Unit::Program, &f.text))
             .collect();
-        let together = check_outputs_in_parallel(&outputs);
+        let together = check_outputs_in_parallel(&outputs, vec![None; outputs.len()]);
         assert_eq!(together, one_by_one);
         for (k, problems) in together.iter().enumerate() {
             assert_eq!(problems.is_empty(), k % 3 != 0, "file {k}: {problems:?}");

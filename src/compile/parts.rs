@@ -21,13 +21,13 @@ pub struct PartFiles {
 }
 
 impl PartFiles {
-    /// The parts of the program `name` whose files are `files`.
-    pub fn of(folder: &Path, name: &str, language: Language, files: &[OutputFile]) -> Self {
+    /// The parts of the program `name` whose first (main) file is `main`.
+    pub fn of(folder: &Path, name: &str, language: Language, main: Option<&OutputFile>) -> Self {
         PartFiles {
             folder: folder.to_owned(),
             program: name.to_owned(),
             language,
-            parts: files.first().map_or(0, |f| f.parts.len()),
+            parts: main.map_or(0, |f| f.parts.len()),
         }
     }
 }

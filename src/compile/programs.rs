@@ -3,49 +3,55 @@
 
 use super::*;
 
+/// A generated file, and what the built-in check found in it when it was checked right after
+/// it was written (`None`: not checked yet).
+pub(super) type Written = (OutputFile, Option<Vec<crate::check::Problem>>);
+
 /// The programs' files, in order (`None` where a program has errors, reported in `diags`).
 /// A cell's programs are written two at a time when they hold `split_from` steps or more
-/// ([`bind::PARALLEL_FROM`], as the binder splits): each on its own, so the result is the same
-/// (`tests/bind_split.rs` compares them); the diagnostics kept in program order.
+/// ([`bind::PARALLEL_FROM`], as the binder splits): the calling thread and another each take
+/// the next program when done with one, the programs with most steps first, and check its
+/// files while their text is still in the cache; each is written on its own, so the result is
+/// the same (`tests/bind_split.rs` compares them); the diagnostics kept in program order.
 pub(super) fn emit_programs(
     inputs: &[(EmitInput, &OutputTemplate)],
     diags: &mut Diagnostics,
     steps: usize,
     split_from: usize,
-) -> Vec<Option<Vec<OutputFile>>> {
-    type Emitted = (Option<Vec<OutputFile>>, Diagnostics);
-    let one = |(input, template): &(EmitInput, &OutputTemplate), like: &Diagnostics| -> Emitted {
+) -> Vec<Option<Vec<Written>>> {
+    type Emitted = (Option<Vec<Written>>, Diagnostics);
+    let emit = |(input, template): &(EmitInput, &OutputTemplate),
+                like: &Diagnostics,
+                check: bool|
+     -> Emitted {
         let mut d = like.empty_like();
-        let files = crate::emit::emit_files(input, template, &mut d);
+        let files = crate::emit::emit_files(input, template, &mut d).map(|files| {
+            files
+                .into_iter()
+                .map(|f| {
+                    let problems = check.then(|| super::checks::check_output(&f));
+                    (f, problems)
+                })
+                .collect()
+        });
         (files, d)
     };
     let emitted: Vec<Emitted> = if inputs.len() < 2 || steps < split_from.max(2) {
-        inputs.iter().map(|i| one(i, diags)).collect()
+        inputs.iter().map(|i| emit(i, diags, false)).collect()
     } else {
-        // Odd programs on a second thread, even ones here.
         let like = diags.empty_like();
-        let (here, there) = crate::threads::both(
-            "skillpost-emit",
-            || -> Vec<Emitted> { inputs.iter().step_by(2).map(|i| one(i, &like)).collect() },
-            || -> Vec<Emitted> {
-                inputs
-                    .iter()
-                    .skip(1)
-                    .step_by(2)
-                    .map(|i| one(i, &like))
-                    .collect()
-            },
-        );
-        let (mut here, mut there) = (here.into_iter(), there.into_iter());
-        (0..inputs.len())
-            .filter_map(|k| {
-                if k % 2 == 0 {
-                    here.next()
-                } else {
-                    there.next()
-                }
-            })
-            .collect()
+        let mut order: Vec<usize> = (0..inputs.len()).collect();
+        order.sort_by_key(|&k| std::cmp::Reverse(inputs[k].0.bound.steps.len()));
+        let made = crate::threads::pieces("skillpost-emit", &order, order.len(), |_, ks| {
+            ks.iter()
+                .map(|&k| (k, emit(&inputs[k], &like, true)))
+                .collect::<Vec<_>>()
+        });
+        let mut emitted: Vec<Option<Emitted>> = (0..inputs.len()).map(|_| None).collect();
+        for (k, e) in made.into_iter().flatten() {
+            emitted[k] = Some(e);
+        }
+        emitted.into_iter().flatten().collect()
     };
     emitted
         .into_iter()
