@@ -587,6 +587,8 @@ impl Splitter<'_> {
                 }
                 Vec::new()
             }
+            // The frontier's list is used again for the point after (a step at a time: no
+            // allocation per step).
             Block::Step(i) => {
                 let Some(c) = (self.scan.controller)(*i) else {
                     return frontier;
@@ -594,14 +596,20 @@ impl Splitter<'_> {
                 self.acquire(c, &frontier);
                 self.push(c, Block::Step(*i));
                 let t = self.tick(c, *i, Kind::Done);
-                vec![(c, t, *i, Kind::Done)]
+                let mut next = frontier;
+                next.clear();
+                next.push((c, t, *i, Kind::Done));
+                next
             }
             Block::Wait(t) => {
                 let c = self.scan.evaluators[t];
                 self.acquire(c, &frontier);
                 self.push(c, Block::Wait(*t));
                 let k = self.tick(c, *t, Kind::Done);
-                vec![(c, k, *t, Kind::Done)]
+                let mut next = frontier;
+                next.clear();
+                next.push((c, k, *t, Kind::Done));
+                next
             }
             Block::Parallel { branches, .. } | Block::Sequences(branches) => {
                 if matches!(b, Block::Parallel { .. }) {
