@@ -16,6 +16,7 @@ use crate::plan::{self, Plan};
 use crate::read::irl::Irl;
 use crate::read::{blackboard::read_blackboard, irl, sfc::read_sfc_pou, xml};
 
+mod binding;
 mod checks;
 mod ctx;
 mod definitions;
@@ -370,114 +371,22 @@ pub fn compile(fs: &dyn FileSource, blackboard: &Path, opts: &Options) -> Compil
         // A language named wrongly (E210) makes the language a guess: its signal rules are
         // not applied then.
         let sure = !cx.diags.iter().any(|d| d.code == Code::BadLanguage);
-        let mut bound_programs: Vec<bind::Bound> = Vec::new();
-        for (k, prog) in programs.iter().enumerate() {
-            let profile = prog.language.profile();
-            let narrowed;
-            let (order_k, res_k) = match prog.controller.filter(|_| controllers.len() > 1) {
-                Some(c) => {
-                    narrowed = res.of_controller(&bb, c);
-                    let steps = order
-                        .steps
-                        .iter()
-                        .copied()
-                        .filter(|&i| res.runs_on(&bb, i, c))
-                        .collect();
-                    (
-                        bind::StepOrder {
-                            steps,
-                            start_end: order.start_end.clone(),
-                        },
-                        &narrowed,
-                    )
-                }
-                None => (order.clone(), &res),
-            };
-            let mut bound = bind::bind(
-                &bb,
+        let mut bound_programs = binding::bind_programs(
+            &binding::Inputs {
+                bb: &bb,
                 sfc,
-                &order_k,
-                res_k,
-                &bind::Calls {
-                    irls: &irls,
-                    fn_irl: &fn_irl,
-                },
-                profile,
-                &mut cx.diags,
-                opts.bind_split_from.unwrap_or(bind::PARALLEL_FROM),
-            );
-            // The definitions whose routines the program's code calls, from the IRL files of
-            // its own resources.
-            let mut mine: Vec<usize> = fn_irl
-                .iter()
-                .filter(|((r, _), _)| {
-                    controllers.len() <= 1 || prog.controller == Some(bb.controller_of(*r))
-                })
-                .map(|(_, &i)| i)
-                .collect();
-            mine.sort_unstable();
-            mine.dedup();
-            bind::definitions::complete(&mut bound, &irls, &mine, prog.language);
-            // A program of a cell reads the conditions it waits for or decides. When the flow
-            // has errors (no plan), which controller decides a condition is not known: the
-            // first program reads them all, a name any resource declares is no error then (not
-            // a follow-on of the flow's errors), the others read none.
-            let undecided = cell.is_none() && controllers.len() > 1;
-            let only = match &cell {
-                Some(c) => Some(evaluated(&c.programs[k].body)),
-                None if undecided && k > 0 => Some(Vec::new()),
-                None => None,
-            };
-            let reads = bind::conditions(
-                &bb,
-                sfc,
-                prog.controller,
-                sure.then_some(profile),
-                only.as_deref(),
-                cell.as_ref()
-                    .is_some_and(|c| c.partners(k).next().is_some()),
-                undecided,
-                &mut cx.diags,
-            );
-            bound.signals = reads.signals;
-            bound.watch = reads.watch;
-            bound.set_timers(reads.timers, reads.timer_names);
-            // The handshakes' wires are the handshakes' (docs/CELLS.md): a condition reading one
-            // would see the toggles.
-            if let (Some(cell), Some(c)) = (&cell, prog.controller) {
-                let used: Vec<usize> = cell
-                    .channels
-                    .iter()
-                    .flat_map(|ch| ch.strobe.iter().chain(&ch.data).chain(&ch.ack).copied())
-                    .chain(
-                        cell.links
-                            .iter()
-                            .flat_map(|l| l.run.into_iter().chain(l.ready)),
-                    )
-                    .collect();
-                for &si in &bound.signals {
-                    let Some(&w) = used
-                        .iter()
-                        .find(|&&w| bb.wires[w].from == (c, si) || bb.wires[w].to == (c, si))
-                    else {
-                        continue;
-                    };
-                    let sig = &bb.resources[c].signals[si];
-                    cx.diags.push(
-                        Diagnostic::error(
-                            Code::BadSignal,
-                            format!(
-                                "signal `{}` is a wire the handshakes between controllers use (InternalLink `{}`); a condition must not read it: give the condition a signal of its own, or declare more wires",
-                                sig.name.text, bb.wires[w].name
-                            ),
-                        )
-                        .at(sig.name.span.clone())
-                        .element(sig.element.clone()),
-                    );
-                }
-            }
-            bound_programs.push(bound);
-        }
+                order: &order,
+                res: &res,
+                irls: &irls,
+                fn_irl: &fn_irl,
+                controllers: &controllers,
+                cell: cell.as_ref(),
+                sure,
+                split_from: opts.bind_split_from.unwrap_or(bind::PARALLEL_FROM),
+            },
+            &programs,
+            &mut cx.diags,
+        );
         definitions::unused_definitions(&mut cx.diags, &irls, &bound_programs);
         out.skill_steps = bound_programs.iter().map(|b| b.steps.len()).sum();
         if !opts.keep_model {

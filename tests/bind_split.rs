@@ -18,6 +18,8 @@ use skillpost::compile::{Compilation, Options, compile};
 use skillpost::diag::{Format, render};
 use skillpost::load::FsSource;
 
+#[path = "../benches/common/cell.rs"]
+mod cell;
 mod common;
 #[path = "../benches/common/generator.rs"]
 mod generator;
@@ -201,6 +203,83 @@ fn a_cells_programs_are_the_same_written_two_at_a_time() {
         assert!(c.outputs.len() >= 3, "{case}: {:?}", c.diagnostics);
         same_both_ways(&bb);
     }
+}
+
+/// A cell of four controllers of about equal shares (as the cells bench spreads 3,000 steps)
+/// binds its programs two at a time, each on one thread: with problems in every program (a
+/// missing variable, a value that is not one, unused variables), the diagnostics and outputs are
+/// the same as binding the programs one after another.
+#[test]
+fn a_cells_programs_bound_two_at_a_time_are_as_bound_one_by_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let one = generator::write_project(&dir.path().join("one"), &steps_3000(25)).unwrap();
+    let four = dir.path().join("four");
+    std::fs::create_dir_all(&four).unwrap();
+    let single = generator::blackboard_text(generator::SFC_FILE, generator::IRL_FILE);
+    let bb = cell::cell_blackboard(
+        "KUKA KR15-2",
+        4,
+        6,
+        &|_| single.clone(),
+        &|_, p, j| {
+            let number = |v: usize| ("Number", v.to_string());
+            (number(100 + 10 * p + j), number(200 + 10 * p + j))
+        },
+        &|_, text| text.to_owned(),
+    );
+    std::fs::write(four.join(generator::BLACKBOARD_FILE), bb).unwrap();
+    std::fs::copy(&one.irl, four.join(generator::IRL_FILE)).unwrap();
+    let mut sfc = cell::spread(&std::fs::read_to_string(&one.sfc).unwrap(), 4);
+    let velocity = "<Variable name=\"Velocity\" Value=\"";
+    let n = sfc.matches(velocity).count();
+    // Spread over the chart, so every program has some; the even ones are `P2P` steps, whose
+    // skill reads the velocity.
+    for k in (0..8).map(|m| 2 * ((17 + m * (n - 40) / 8) / 2)).rev() {
+        sfc = replace_nth(&sfc, velocity, k, "<Variable name=\"Speed\" Value=\"");
+        sfc = replace_nth(
+            &sfc,
+            velocity,
+            k + 5,
+            "<Variable name=\"Extra\" Value=\"1\"/><Variable name=\"Velocity\" Value=\"x",
+        );
+    }
+    std::fs::write(four.join(generator::SFC_FILE), &sfc).unwrap();
+    let bb = four.join(generator::BLACKBOARD_FILE);
+    let c = compile(
+        &FsSource::default(),
+        &bb,
+        &Options {
+            program: Some("out".into()),
+            ..Default::default()
+        },
+    );
+    let codes: Vec<&str> = c.diagnostics.iter().map(|d| d.code.as_str()).collect();
+    assert!(
+        codes.iter().filter(|&&c| c == "E314").count() >= 8,
+        "{codes:?}"
+    );
+    same_both_ways(&bb);
+    // And without the problems: the four programs themselves.
+    std::fs::write(
+        four.join(generator::SFC_FILE),
+        cell::spread(&std::fs::read_to_string(&one.sfc).unwrap(), 4),
+    )
+    .unwrap();
+    let c = compile(
+        &FsSource::default(),
+        &bb,
+        &Options {
+            program: Some("out".into()),
+            ..Default::default()
+        },
+    );
+    assert_eq!(
+        c.cell.as_ref().map(|c| c.programs.len()),
+        Some(4),
+        "{:?}",
+        c.diagnostics
+    );
+    same_both_ways(&bb);
 }
 
 /// A cell's programs written two at a time are checked right after each is written, on the
