@@ -132,8 +132,8 @@ fn bind_program(
         &order_k,
         res_k,
         &bind::Calls {
-            irls: irls,
-            fn_irl: fn_irl,
+            irls,
+            fn_irl,
         },
         profile,
         diags,
