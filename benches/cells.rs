@@ -27,6 +27,8 @@ use skillpost::load::FsSource;
 
 #[path = "common/cell.rs"]
 mod cell;
+#[path = "common/cell_project.rs"]
+mod cell_project;
 #[path = "common/generator.rs"]
 mod generator;
 
@@ -69,27 +71,7 @@ fn main() {
     let one = root.join("one");
     let project = generator::write_project(&one, &spec).unwrap();
     let four = root.join("four");
-    std::fs::create_dir_all(&four).unwrap();
-    let single = generator::blackboard_text(generator::SFC_FILE, generator::IRL_FILE);
-    let bb = cell::cell_blackboard(
-        "KUKA KR15-2",
-        CONTROLLERS,
-        6,
-        &|_| single.clone(),
-        &|_, p, j| {
-            let number = |v: usize| ("Number", v.to_string());
-            (number(100 + 10 * p + j), number(200 + 10 * p + j))
-        },
-        &|_, text| text.to_owned(),
-    );
-    std::fs::write(four.join(generator::BLACKBOARD_FILE), bb).unwrap();
-    std::fs::copy(&project.irl, four.join(generator::IRL_FILE)).unwrap();
-    let sfc = std::fs::read_to_string(&project.sfc).unwrap();
-    std::fs::write(
-        four.join(generator::SFC_FILE),
-        cell::spread(&sfc, CONTROLLERS),
-    )
-    .unwrap();
+    cell_project::write(&project, &four, CONTROLLERS).unwrap();
 
     let (a, b) = (
         one.join(generator::BLACKBOARD_FILE),

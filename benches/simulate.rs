@@ -20,6 +20,8 @@ use skillpost::simulate::{self, Cell, Scenario};
 
 #[path = "common/cell.rs"]
 mod cell;
+#[path = "common/cell_project.rs"]
+mod cell_project;
 #[path = "common/generator.rs"]
 mod generator;
 
@@ -47,23 +49,7 @@ fn main() {
         Some(d) => std::path::PathBuf::from(d),
         None => tmp.path().join("two"),
     };
-    std::fs::create_dir_all(&two).unwrap();
-    let single = generator::blackboard_text(generator::SFC_FILE, generator::IRL_FILE);
-    let bb = cell::cell_blackboard(
-        "KUKA KR15-2",
-        2,
-        6,
-        &|_| single.clone(),
-        &|_, p, j| {
-            let number = |v: usize| ("Number", v.to_string());
-            (number(100 + 10 * p + j), number(200 + 10 * p + j))
-        },
-        &|_, text| text.to_owned(),
-    );
-    std::fs::write(two.join(generator::BLACKBOARD_FILE), bb).unwrap();
-    std::fs::copy(&project.irl, two.join(generator::IRL_FILE)).unwrap();
-    let sfc = std::fs::read_to_string(&project.sfc).unwrap();
-    std::fs::write(two.join(generator::SFC_FILE), cell::spread(&sfc, 2)).unwrap();
+    cell_project::write(&project, &two, 2).unwrap();
 
     let opts = Options {
         program: Some("P".into()),

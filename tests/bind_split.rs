@@ -20,6 +20,8 @@ use skillpost::load::FsSource;
 
 #[path = "../benches/common/cell.rs"]
 mod cell;
+#[path = "../benches/common/cell_project.rs"]
+mod cell_project;
 mod common;
 #[path = "../benches/common/generator.rs"]
 mod generator;
@@ -214,22 +216,9 @@ fn a_cells_programs_bound_two_at_a_time_are_as_bound_one_by_one() {
     let dir = tempfile::tempdir().unwrap();
     let one = generator::write_project(&dir.path().join("one"), &steps_3000(25)).unwrap();
     let four = dir.path().join("four");
-    std::fs::create_dir_all(&four).unwrap();
-    let single = generator::blackboard_text(generator::SFC_FILE, generator::IRL_FILE);
-    let bb = cell::cell_blackboard(
-        "KUKA KR15-2",
-        4,
-        6,
-        &|_| single.clone(),
-        &|_, p, j| {
-            let number = |v: usize| ("Number", v.to_string());
-            (number(100 + 10 * p + j), number(200 + 10 * p + j))
-        },
-        &|_, text| text.to_owned(),
-    );
-    std::fs::write(four.join(generator::BLACKBOARD_FILE), bb).unwrap();
-    std::fs::copy(&one.irl, four.join(generator::IRL_FILE)).unwrap();
-    let mut sfc = cell::spread(&std::fs::read_to_string(&one.sfc).unwrap(), 4);
+    let bb = cell_project::write(&one, &four, 4).unwrap();
+    let spread = std::fs::read_to_string(four.join(generator::SFC_FILE)).unwrap();
+    let mut sfc = spread.clone();
     let velocity = "<Variable name=\"Velocity\" Value=\"";
     let n = sfc.matches(velocity).count();
     // Spread over the chart, so every program has some; the even ones are `P2P` steps, whose
@@ -244,7 +233,6 @@ fn a_cells_programs_bound_two_at_a_time_are_as_bound_one_by_one() {
         );
     }
     std::fs::write(four.join(generator::SFC_FILE), &sfc).unwrap();
-    let bb = four.join(generator::BLACKBOARD_FILE);
     let c = compile(
         &FsSource::default(),
         &bb,
@@ -260,11 +248,7 @@ fn a_cells_programs_bound_two_at_a_time_are_as_bound_one_by_one() {
     );
     same_both_ways(&bb);
     // And without the problems: the four programs themselves.
-    std::fs::write(
-        four.join(generator::SFC_FILE),
-        cell::spread(&std::fs::read_to_string(&one.sfc).unwrap(), 4),
-    )
-    .unwrap();
+    std::fs::write(four.join(generator::SFC_FILE), &spread).unwrap();
     let c = compile(
         &FsSource::default(),
         &bb,

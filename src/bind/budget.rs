@@ -1,8 +1,9 @@
-//! The size of a cell one compile takes (docs/INPUTS.md, "Limits"): every program of a cell is
-//! bound and written from tables over the whole chart (a step's resource and skill, its bound
-//! call, which conditions it reads: about 40 bytes per SFC element per program), so memory
-//! grows with controllers × SFC elements. Refused here, before the chart is split, bound or
-//! written, with the figures: 1,000 controllers of 20,000 steps (40,000 elements) took 1.6 GB.
+//! The size of a cell one compile takes (docs/INPUTS.md, "Limits"): every program of a cell has a
+//! table over the whole chart (its bound steps' places: 4 bytes per SFC element per program;
+//! until 2026-12-01 also its steps' resources and bound calls, 40 bytes), so memory grows with
+//! controllers × SFC elements. Refused here, before the chart is split, bound or written, with
+//! the figures: 1,000 controllers of 20,000 steps (40,000 elements) took 1.6 GB with the tables
+//! of 40 bytes.
 
 use super::{Resolution, StepOrder};
 use crate::diag::{Code, Diagnostic, Diagnostics};

@@ -131,10 +131,7 @@ fn bind_program(
         sfc,
         &order_k,
         res_k,
-        &bind::Calls {
-            irls,
-            fn_irl,
-        },
+        &bind::Calls { irls, fn_irl },
         profile,
         diags,
         split_from,
