@@ -233,14 +233,17 @@ fn a_cells_programs_bound_two_at_a_time_are_as_bound_one_by_one() {
         );
     }
     std::fs::write(four.join(generator::SFC_FILE), &sfc).unwrap();
-    let c = compile(
-        &FsSource::default(),
-        &bb,
-        &Options {
-            program: Some("out".into()),
-            ..Default::default()
-        },
-    );
+    let compiled = || {
+        compile(
+            &FsSource::default(),
+            &bb,
+            &Options {
+                program: Some("out".into()),
+                ..Default::default()
+            },
+        )
+    };
+    let c = compiled();
     let codes: Vec<&str> = c.diagnostics.iter().map(|d| d.code.as_str()).collect();
     assert!(
         codes.iter().filter(|&&c| c == "E314").count() >= 8,
@@ -249,14 +252,7 @@ fn a_cells_programs_bound_two_at_a_time_are_as_bound_one_by_one() {
     same_both_ways(&bb);
     // And without the problems: the four programs themselves.
     std::fs::write(four.join(generator::SFC_FILE), &spread).unwrap();
-    let c = compile(
-        &FsSource::default(),
-        &bb,
-        &Options {
-            program: Some("out".into()),
-            ..Default::default()
-        },
-    );
+    let c = compiled();
     assert_eq!(
         c.cell.as_ref().map(|c| c.programs.len()),
         Some(4),
