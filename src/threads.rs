@@ -1,5 +1,6 @@
-//! Work shared by the calling thread and one thread of its own: in two parts ([`both`]), or in
-//! pieces that each takes in turn ([`pieces`]).
+//! Work shared by the calling thread and one thread of its own: in two parts ([`both`]), in
+//! pieces that each takes in turn ([`pieces`]), or item by item, the largest first
+//! ([`largest_first`]: a cell's programs, generated files).
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -56,6 +57,27 @@ pub fn pieces<T: Sync, R: Send>(
     done.into_iter().map(|(_, r)| r).collect()
 }
 
+/// `work(k)` for each item `k` of `sizes.len()`, on the calling thread and a thread named `name`
+/// at once, the largest items (by `sizes`) first, each thread taking the next when done with
+/// one ([`pieces`] of one item): the last item either takes is a small one. The results in the
+/// items' order.
+pub fn largest_first<R: Send>(
+    name: &str,
+    sizes: &[usize],
+    work: impl Fn(usize) -> R + Sync,
+) -> Vec<R> {
+    let mut order: Vec<usize> = (0..sizes.len()).collect();
+    order.sort_by_key(|&k| std::cmp::Reverse(sizes[k]));
+    let made = pieces(name, &order, order.len(), |_, ks| {
+        ks.iter().map(|&k| (k, work(k))).collect::<Vec<_>>()
+    });
+    let mut out: Vec<Option<R>> = (0..sizes.len()).map(|_| None).collect();
+    for (k, r) in made.into_iter().flatten() {
+        out[k] = Some(r);
+    }
+    out.into_iter().flatten().collect()
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
@@ -72,6 +94,15 @@ mod tests {
         assert_eq!(a, (caller, 1));
         assert_ne!(b.0, caller);
         assert_eq!((b.1.as_deref(), b.2), (Some("skillpost-test"), 2));
+    }
+
+    #[test]
+    fn largest_first_gives_the_results_in_the_items_order() {
+        for sizes in [vec![], vec![3], vec![1, 9, 4, 9, 0, 7, 2], vec![5; 40]] {
+            let got = super::largest_first("skillpost-test", &sizes, |k| (k, sizes[k] * 10));
+            let want: Vec<(usize, usize)> = sizes.iter().map(|&s| s * 10).enumerate().collect();
+            assert_eq!(got, want, "sizes {sizes:?}");
+        }
     }
 
     #[test]

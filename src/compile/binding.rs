@@ -32,17 +32,24 @@ pub(super) fn bind_programs(
     programs: &[ProgramSpec],
     diags: &mut Diagnostics,
 ) -> Vec<bind::Bound> {
-    let steps: Vec<usize> = programs
+    // A program of a cell binds its own steps, in the chart's order; one program all.
+    let own: Vec<Option<bind::StepOrder>> = programs
         .iter()
-        .map(
-            |p| match p.controller.filter(|_| inputs.controllers.len() > 1) {
-                Some(c) => (inputs.order.steps.iter())
-                    .filter(|&&i| inputs.res.runs_on(inputs.bb, i, c))
-                    .count(),
-                None => inputs.order.steps.len(),
-            },
-        )
+        .map(|p| {
+            let c = p.controller.filter(|_| inputs.controllers.len() > 1)?;
+            Some(bind::StepOrder {
+                steps: (inputs.order.steps.iter().copied())
+                    .filter(|&i| inputs.res.runs_on(inputs.bb, i, c))
+                    .collect(),
+                start_end: inputs.order.start_end.clone(),
+            })
+        })
         .collect();
+    let orders: Vec<&bind::StepOrder> = own
+        .iter()
+        .map(|o| o.as_ref().unwrap_or(inputs.order))
+        .collect();
+    let steps: Vec<usize> = orders.iter().map(|o| o.steps.len()).collect();
     let total: usize = steps.iter().sum();
     let largest = steps.iter().copied().max().unwrap_or(0);
     // A cell's programs of about equal size: each bound on one thread, two at a time (a thread
@@ -53,25 +60,13 @@ pub(super) fn bind_programs(
         && largest * 2 <= total
     {
         let like = diags.empty_like();
-        let mut order: Vec<usize> = (0..programs.len()).collect();
-        order.sort_by_key(|&k| std::cmp::Reverse(steps[k]));
-        let made = crate::threads::pieces("skillpost-bind", &order, order.len(), |_, ks| {
-            ks.iter()
-                .map(|&k| {
-                    let mut d = like.empty_like();
-                    let bound = bind_program(inputs, k, &programs[k], &mut d, usize::MAX);
-                    (k, bound, d)
-                })
-                .collect::<Vec<_>>()
+        let bound = crate::threads::largest_first("skillpost-bind", &steps, |k| {
+            let mut d = like.empty_like();
+            let b = bind_program(inputs, k, &programs[k], orders[k], &mut d, usize::MAX);
+            (b, d)
         });
-        let mut bound: Vec<Option<(bind::Bound, Diagnostics)>> =
-            (0..programs.len()).map(|_| None).collect();
-        for (k, b, d) in made.into_iter().flatten() {
-            bound[k] = Some((b, d));
-        }
         return bound
             .into_iter()
-            .flatten()
             .map(|(b, d)| {
                 diags.append(d);
                 b
@@ -81,22 +76,22 @@ pub(super) fn bind_programs(
     programs
         .iter()
         .enumerate()
-        .map(|(k, prog)| bind_program(inputs, k, prog, diags, inputs.split_from))
+        .map(|(k, prog)| bind_program(inputs, k, prog, orders[k], diags, inputs.split_from))
         .collect()
 }
 
-/// Binds program `k` (its steps in pieces on two threads from `split_from` steps).
+/// Binds program `k`, its steps `order` (in pieces on two threads from `split_from` steps).
 fn bind_program(
     inputs: &Inputs,
     k: usize,
     prog: &ProgramSpec,
+    order: &bind::StepOrder,
     diags: &mut Diagnostics,
     split_from: usize,
 ) -> bind::Bound {
     let Inputs {
         bb,
         sfc,
-        order,
         res,
         irls,
         fn_irl,
@@ -107,29 +102,17 @@ fn bind_program(
     } = *inputs;
     let profile = prog.language.profile();
     let narrowed;
-    let (order_k, res_k) = match prog.controller.filter(|_| controllers.len() > 1) {
+    let res_k = match prog.controller.filter(|_| controllers.len() > 1) {
         Some(c) => {
             narrowed = res.of_controller(bb, c);
-            let steps = order
-                .steps
-                .iter()
-                .copied()
-                .filter(|&i| res.runs_on(bb, i, c))
-                .collect();
-            (
-                bind::StepOrder {
-                    steps,
-                    start_end: order.start_end.clone(),
-                },
-                &narrowed,
-            )
+            &narrowed
         }
-        None => (order.clone(), res),
+        None => res,
     };
     let mut bound = bind::bind(
         bb,
         sfc,
-        &order_k,
+        order,
         res_k,
         &bind::Calls { irls, fn_irl },
         profile,

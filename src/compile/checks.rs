@@ -213,12 +213,10 @@ pub(super) fn check_snippets(
     }
 }
 
-/// `E606` for each problem the built-in check finds in a generated file ([`crate::check`]):
-/// what the IRL snippets and the output template made together. Nothing is written then.
-/// The problems of each generated file (none for a file of no language), checked by this
-/// thread and another at once when there are several large ones (a split program's parts, a
-/// cell's programs): each takes the next file, the largest first, when done with one, so a
-/// core that runs slower checks fewer.
+/// The problems of each generated file (none for a file of no language): as `checked` has them
+/// where a file was checked as it was written, else checked now, by this thread and another at
+/// once when there are several large ones (a split program's parts): each takes the next file,
+/// the largest first, when done with one, so a core that runs slower checks fewer.
 pub(super) fn check_outputs_in_parallel(
     outputs: &[(PathBuf, OutputFile)],
     checked: Vec<Option<Vec<crate::check::Problem>>>,
@@ -227,33 +225,29 @@ pub(super) fn check_outputs_in_parallel(
         Some((language, unit)) => crate::check::check(language, unit, &f.text),
         None => Vec::new(),
     };
-    // The files checked as they were written keep what was found.
+    // The files checked as they were written keep what was found; the others are checked now.
     let mut out: Vec<Vec<crate::check::Problem>> = Vec::with_capacity(outputs.len());
-    let mut order: Vec<usize> = Vec::new();
-    for (k, c) in checked.into_iter().enumerate() {
-        if c.is_none() {
-            order.push(k);
+    let mut left: Vec<usize> = Vec::new();
+    let mut checked = checked.into_iter();
+    for k in 0..outputs.len() {
+        match checked.next().flatten() {
+            Some(problems) => out.push(problems),
+            None => {
+                left.push(k);
+                out.push(Vec::new());
+            }
         }
-        out.push(c.unwrap_or_default());
     }
-    out.resize_with(outputs.len(), Vec::new);
-    if order.is_empty() {
-        return out;
-    }
-    order.sort_by_key(|&k| std::cmp::Reverse(outputs[k].1.text.len()));
+    let sizes: Vec<usize> = left.iter().map(|&k| outputs[k].1.text.len()).collect();
     // Only worth a thread when the files other than the largest are large (as a split
     // program's parts or a cell's programs are, from about 2,000 steps).
-    let rest: usize = order.iter().skip(1).map(|&k| outputs[k].1.text.len()).sum();
-    if rest < PARALLEL_CHECK_FROM {
-        for &k in &order {
-            out[k] = check(&outputs[k]);
-        }
-        return out;
-    }
-    let checked = crate::threads::pieces("skillpost-check", &order, order.len(), |_, ks| {
-        ks.iter().map(|&k| check(&outputs[k])).collect::<Vec<_>>()
-    });
-    for (&k, problems) in order.iter().zip(checked.into_iter().flatten()) {
+    let rest = sizes.iter().sum::<usize>() - sizes.iter().max().unwrap_or(&0);
+    let found: Vec<Vec<crate::check::Problem>> = if rest < PARALLEL_CHECK_FROM {
+        left.iter().map(|&k| check(&outputs[k])).collect()
+    } else {
+        crate::threads::largest_first("skillpost-check", &sizes, |j| check(&outputs[left[j]]))
+    };
+    for (&k, problems) in left.iter().zip(found) {
         out[k] = problems;
     }
     out
@@ -273,6 +267,9 @@ pub(super) fn check_output(f: &OutputFile) -> Vec<crate::check::Problem> {
 /// some of them.
 const PARALLEL_CHECK_FROM: usize = 256 * 1024;
 
+/// `E606` for each problem the built-in check finds in a generated file ([`crate::check`]):
+/// what the IRL snippets and the output template made together. Nothing is written then.
+/// `checked`: per output, what the check found when it ran as the file was written.
 pub(super) fn check_generated(
     outputs: &[(PathBuf, OutputFile)],
     checked: Vec<Option<Vec<crate::check::Problem>>>,

@@ -40,18 +40,8 @@ pub(super) fn emit_programs(
         inputs.iter().map(|i| emit(i, diags, false)).collect()
     } else {
         let like = diags.empty_like();
-        let mut order: Vec<usize> = (0..inputs.len()).collect();
-        order.sort_by_key(|&k| std::cmp::Reverse(inputs[k].0.bound.steps.len()));
-        let made = crate::threads::pieces("skillpost-emit", &order, order.len(), |_, ks| {
-            ks.iter()
-                .map(|&k| (k, emit(&inputs[k], &like, true)))
-                .collect::<Vec<_>>()
-        });
-        let mut emitted: Vec<Option<Emitted>> = (0..inputs.len()).map(|_| None).collect();
-        for (k, e) in made.into_iter().flatten() {
-            emitted[k] = Some(e);
-        }
-        emitted.into_iter().flatten().collect()
+        let steps: Vec<usize> = inputs.iter().map(|(i, _)| i.bound.steps.len()).collect();
+        crate::threads::largest_first("skillpost-emit", &steps, |k| emit(&inputs[k], &like, true))
     };
     emitted
         .into_iter()
