@@ -609,6 +609,10 @@ fn an_edit_is_compiled_once_its_permission_comes_back() {
         .arg(&p)
         .env("XDG_RUNTIME_DIR", &run)
         .env_remove("RUNTIME_DIRECTORY")
+        // Each compile's report reaches the daemon's loop 400 ms after its event, so the
+        // permission comes back while the loop still takes the failed compile for running (CI
+        // once restored it in that window, and the edit stayed uncompiled).
+        .env("SKILLPOST_TEST_REPORT_LAG_MS", "400")
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(Stdio::null())

@@ -507,6 +507,7 @@ impl Daemon {
                     job::after_panic(&sink, &key, run_id, trigger, &progress);
                     Outcome::Failed
                 });
+            stop::test_hook_report_lag();
             let _ = done.send(Report {
                 key,
                 run_id,

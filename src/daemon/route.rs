@@ -182,6 +182,14 @@ impl Daemon {
             if paths.contains(&p.spec.path) {
                 p.force = true;
             }
+            // A compile runs: what it could read is known only when it reports (its
+            // `compile-failed` may be out already). A follow-up checks the inputs' hashes then;
+            // it costs nothing when the compile read them all. Without it, a permission given
+            // back in that window left the edit uncompiled until the next one.
+            if p.sched.is_running() && paths.iter().any(|changed| !p.outputs.contains(changed)) {
+                p.sched.change(now);
+                continue;
+            }
             if let Some((input, _)) = unreadable {
                 let input = input.clone();
                 p.changed.insert(input);

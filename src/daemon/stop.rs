@@ -39,6 +39,19 @@ pub(super) fn test_hook_hang() {
     }
 }
 
+/// Test hook: `SKILLPOST_TEST_REPORT_LAG_MS` makes every compile wait that long between its
+/// outcome's event and its report to the daemon's loop (the window in which a file's change
+/// arrives while the loop still takes the compile for running, for tests/trust.rs). Not for
+/// production use.
+pub(super) fn test_hook_report_lag() {
+    if let Some(ms) = std::env::var("SKILLPOST_TEST_REPORT_LAG_MS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+    {
+        std::thread::sleep(Duration::from_millis(ms));
+    }
+}
+
 impl Daemon {
     /// Finishes the running compiles (bounded), starts no new ones, emits `stopped`, flushes
     /// the events (bounded). `Err` when compiles were still running (exit status 2).
