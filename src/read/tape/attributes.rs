@@ -2,6 +2,18 @@
 
 use quick_xml::utils::is_whitespace;
 
+/// The bytes that end an attribute's name: `=` and XML white space (quick-xml's
+/// `is_whitespace`), looked up in one step (the names are most of the bytes scanned).
+const ENDS_NAME: [bool; 256] = {
+    let mut t = [false; 256];
+    let mut c = 0;
+    while c < 256 {
+        t[c] = c == b'=' as usize || is_whitespace(c as u8);
+        c += 1;
+    }
+    t
+};
+
 /// The attributes of a tag's `content` after its name (which ends at `from`), each handed to
 /// `each` as `(qualified name, raw value)`, in order, as quick-xml's attribute iterator gives
 /// them, without its per-attribute state machine.
@@ -29,9 +41,10 @@ pub(crate) fn each_attribute<'a, E>(
         let key = i;
         // The first byte is the name's, whatever it is (as in quick-xml).
         i += 1;
-        while i < b.len() && b[i] != b'=' && !is_whitespace(b[i]) {
-            i += 1;
-        }
+        i += b[i..]
+            .iter()
+            .position(|&c| ENDS_NAME[usize::from(c)])
+            .unwrap_or(b.len() - i);
         let key_end = i;
         while i < b.len() && is_whitespace(b[i]) {
             i += 1;
