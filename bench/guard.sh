@@ -16,7 +16,7 @@
 # spent unnoticed. Raising it needs the reason in the commit message.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-LIMIT=${LIMIT:-1.76}
+LIMIT=${LIMIT:-1.75}
 STEPS=${STEPS:-10000}
 if ! command -v valgrind >/dev/null 2>&1; then
   if [ "${SKILLPOST_STRICT_TESTS:-0}" = 1 ]; then
