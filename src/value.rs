@@ -512,24 +512,30 @@ mod tests {
                 || s.starts_with('.')
                 || s.ends_with('.')
         };
-        let alphabet = ['1', '0', '.', '+', '-', 'e', 'E', 'x', ' '];
-        let mut words = vec![String::new()];
+        let alphabet = ["1", "0", ".", "+", "-", "e", "E", "x", " "];
         let mut checked = 0;
-        for _ in 0..4 {
+        every_word(&alphabet, 4, |n| {
+            assert_eq!(needs_normal(n.as_bytes()), old(n), "{n:?}");
+            checked += 1;
+        });
+        assert_eq!(needs_normal(b""), old(""));
+        assert!(checked > 7000);
+    }
+
+    /// Every string of one to `max` pieces from `alphabet`, shorter ones first, each to `each`.
+    fn every_word(alphabet: &[&str], max: usize, mut each: impl FnMut(&str)) {
+        let mut words = vec![String::new()];
+        for _ in 0..max {
             let mut longer = Vec::new();
             for w in &words {
                 for c in alphabet {
-                    let mut n = w.clone();
-                    n.push(c);
-                    assert_eq!(needs_normal(n.as_bytes()), old(&n), "{n:?}");
-                    checked += 1;
+                    let n = format!("{w}{c}");
+                    each(&n);
                     longer.push(n);
                 }
             }
             words = longer;
         }
-        assert_eq!(needs_normal(b""), old(""));
-        assert!(checked > 7000);
     }
 
     use super::*;
@@ -653,23 +659,14 @@ mod tests {
     #[test]
     fn plain_lists_are_checked_as_the_parser_checks_them() {
         let alphabet = ["(", ")", ",", " ", "a", "\"", "\t", "\u{a0}"];
-        let mut words = vec![String::new()];
         let mut accepted = 0;
-        for _ in 0..7 {
-            let mut longer = Vec::new();
-            for w in &words {
-                for c in alphabet {
-                    let n = format!("{w}{c}");
-                    assert_eq!(check_value(&n).err(), parse(&n, false).err(), "{n:?}");
-                    if plain_list(n.as_bytes()) {
-                        accepted += 1;
-                        assert!(parse(&n, false).is_ok(), "{n:?}");
-                    }
-                    longer.push(n);
-                }
+        every_word(&alphabet, 7, |n| {
+            assert_eq!(check_value(n).err(), parse(n, false).err(), "{n:?}");
+            if plain_list(n.as_bytes()) {
+                accepted += 1;
+                assert!(parse(n, false).is_ok(), "{n:?}");
             }
-            words = longer;
-        }
+        });
         assert!(accepted > 200, "{accepted}");
         for v in [
             "(-137.9, -118.9, 306.1, -73, 10, -68)",
