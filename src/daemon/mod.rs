@@ -498,7 +498,7 @@ impl Daemon {
             // The compile's log lines (and the journal's failure line) carry project and run_id.
             let span = tracing::warn_span!("compile", project = %job.key.display(), run_id);
             let _span = span.enter();
-            stop::test_hook_hang();
+            stop::test_hook_sleep("SKILLPOST_TEST_HANG_MS");
             let key = job.key.clone();
             let sink = job.sink.clone();
             // A panic is a bug, never input: report it and keep serving the other projects.
@@ -507,7 +507,7 @@ impl Daemon {
                     job::after_panic(&sink, &key, run_id, trigger, &progress);
                     Outcome::Failed
                 });
-            stop::test_hook_report_lag();
+            stop::test_hook_sleep("SKILLPOST_TEST_REPORT_LAG_MS");
             let _ = done.send(Report {
                 key,
                 run_id,

@@ -28,26 +28,13 @@ fn stop_timeout() -> Duration {
         .map_or(STOP_TIMEOUT, Duration::from_millis)
 }
 
-/// Test hook: `SKILLPOST_TEST_HANG_MS` makes every compile sleep that long before it starts (a
-/// hung compile for the stop tests in tests/events.rs). Not for production use.
-pub(super) fn test_hook_hang() {
-    if let Some(ms) = std::env::var("SKILLPOST_TEST_HANG_MS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-    {
-        std::thread::sleep(Duration::from_millis(ms));
-    }
-}
-
-/// Test hook: `SKILLPOST_TEST_REPORT_LAG_MS` makes every compile wait that long between its
-/// outcome's event and its report to the daemon's loop (the window in which a file's change
-/// arrives while the loop still takes the compile for running, for tests/trust.rs). Not for
-/// production use.
-pub(super) fn test_hook_report_lag() {
-    if let Some(ms) = std::env::var("SKILLPOST_TEST_REPORT_LAG_MS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-    {
+/// Test hooks, not for production use: a compile sleeps for the milliseconds the variable `var`
+/// gives, if set. `SKILLPOST_TEST_HANG_MS` before it starts (a hung compile for the stop tests
+/// in tests/events.rs); `SKILLPOST_TEST_REPORT_LAG_MS` between its outcome's event and its
+/// report to the daemon's loop (the window in which a file's change arrives while the loop
+/// still takes the compile for running, for tests/trust.rs).
+pub(super) fn test_hook_sleep(var: &str) {
+    if let Some(ms) = std::env::var(var).ok().and_then(|v| v.parse().ok()) {
         std::thread::sleep(Duration::from_millis(ms));
     }
 }
