@@ -1195,6 +1195,17 @@ fn hooks_never_take_the_compiles_descriptors() {
     }
     let ok = text.matches("\"compile-succeeded\"").count();
     eprintln!("{ok} of {n} compiled; at most {most} hooks at once");
+    // A project compiled more than once: its events say why.
+    let mut per: std::collections::BTreeMap<String, usize> = Default::default();
+    for l in text.lines().filter(|l| l.contains("\"compile-succeeded\"")) {
+        let v: serde_json::Value = serde_json::from_str(l).unwrap();
+        *per.entry(v["project"].to_string()).or_default() += 1;
+    }
+    for (project, _) in per.iter().filter(|(_, c)| **c > 1) {
+        for l in text.lines().filter(|l| l.contains(project.as_str())) {
+            eprintln!("{l}");
+        }
+    }
     assert!(done, "not every project was compiled: {ok} of {n}");
     assert!(!text.contains("Too many open files"), "descriptors ran out");
     assert_eq!(ok, n, "compiled");
