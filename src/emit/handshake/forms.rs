@@ -504,45 +504,42 @@ impl<'a> Hand<'a> {
         when: &str,
     ) {
         let c = self.comment();
+        let end = match self.lang {
+            Language::Krl | Language::Rapid => {
+                out.put(0, format_args!("IF {cond} THEN"));
+                "ENDIF"
+            }
+            Language::UrScript => {
+                out.put(0, format_args!("if {cond}:"));
+                "end"
+            }
+        };
+        out.put(
+            1,
+            format_args!("{c}handshake: a partner was started again{when}: stop"),
+        );
         match self.lang {
             // The text into the message, then the program's routine `skp_stop` (see
             // `routines`): KRL takes no string literal as an argument.
             Language::Krl => {
-                out.put(0, format_args!("IF {cond} THEN"));
-                out.put(
-                    1,
-                    format_args!("{c}handshake: a partner was started again{when}: stop"),
-                );
                 out.put(
                     1,
                     format_args!("{MSG_VAR}.Msg_Txt[] = \"{}\"", fit(text, short)),
                 );
                 out.put(1, format_args!("{STOP}({})", message_nr(nr)));
-                out.line(0, "ENDIF");
             }
             Language::Rapid => {
                 let short = fit(text, short);
-                out.put(0, format_args!("IF {cond} THEN"));
-                out.put(
-                    1,
-                    format_args!("{c}handshake: a partner was started again{when}: stop"),
-                );
                 out.put(1, format_args!("ErrWrite \"Partner started again\", \"{short}\" \\RL2:=\"Start this task again from main.\";"));
                 out.line(1, "EXIT;");
-                out.line(0, "ENDIF");
             }
             Language::UrScript => {
                 let text = cleaned(text.to_string());
-                out.put(0, format_args!("if {cond}:"));
-                out.put(
-                    1,
-                    format_args!("{c}handshake: a partner was started again{when}: stop"),
-                );
                 out.put(1, format_args!("popup(\"{text}. Start this program again.\", title=\"skillpost\", error=True, blocking=False)"));
                 out.line(1, "halt");
-                out.line(0, "end");
             }
         }
+        out.line(0, end);
     }
 
     /// The routines the handshakes call, written after the program (KRL only: a message takes
