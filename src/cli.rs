@@ -33,8 +33,8 @@ struct Args {
     /// The blackboard (.aml); with --sfc, the SFC file instead; optional with --info
     #[arg(value_name = "BLACKBOARD")]
     blackboard: Option<PathBuf>,
-    /// The program name, a name in the program's language: writes <PROGRAM>.src and .dat (KRL),
-    /// <PROGRAM>.mod (RAPID) or <PROGRAM>.script (URScript) beside the blackboard (not needed
+    /// The program name, a name in the program's language: writes `<PROGRAM>.src` and .dat (KRL),
+    /// `<PROGRAM>.mod` (RAPID) or `<PROGRAM>.script` (URScript) beside the blackboard (not needed
     /// with --validate)
     #[arg(value_name = "PROGRAM")]
     program: Option<PathBuf>,
@@ -133,7 +133,7 @@ enum CheckLanguage {
 #[derive(Debug, clap::Args)]
 struct StatusArgs {
     /// The daemon's state file (default: every state file in $RUNTIME_DIRECTORY,
-    /// /run/skillpost, and $XDG_RUNTIME_DIR/skillpost or /tmp/skillpost-<uid>: the daemons
+    /// /run/skillpost, and $XDG_RUNTIME_DIR/skillpost or `/tmp/skillpost-<uid>`: the daemons
     /// that run, else the one that stopped last)
     #[arg(long, value_name = "FILE")]
     state: Option<PathBuf>,

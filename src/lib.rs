@@ -16,12 +16,12 @@
 //! - [`convert`]: the conversions templates may call (`m`, `mm`, `rad`, `deg`, `quat`, `rotvec`)
 //!   and how their results are written.
 //! - [`emit`]: language profiles (KRL, RAPID, URScript): value rules, names, control flow, files.
-//! - [`write`]: atomic output files and the byte-preserving blackboard write-back.
+//! - [`write`](mod@write): atomic output files and the byte-preserving blackboard write-back.
 //! - [`compile`]: the whole pipeline for one project: inputs in, outputs + diagnostics out.
 //! - [`daemon`]: `skillpost watch`, the long-running service over the same pipeline.
 //! - [`simulate`]: `skillpost simulate`: the cell's programs run together on a built-in
 //!   interpreter of the forms skillpost writes (after `compile`, before the drivers).
-//! - [`print`]: the `-pB`/`-pS`/`-pF`/`-pO` and `--info` listings.
+//! - [`print`](mod@print): the `-pB`/`-pS`/`-pF`/`-pO` and `--info` listings.
 //! - [`picture`]: the plan as an SVG timeline (`--svg`, the daemon's `picture`).
 //! - [`diag`]: diagnostics, their codes and their rendering.
 //! - [`excerpt`]: the lines of a streamed file (the SFC) that diagnostics point into, read

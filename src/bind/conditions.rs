@@ -181,11 +181,11 @@ fn timer_range(attr: &str) -> Result<(u32, u32), String> {
 #[derive(Debug, Default)]
 pub struct Reads {
     pub signals: Vec<usize>,
-    /// See [`Bound::timers`].
+    /// See [`Bound::timers`](crate::bind::Bound::timers).
     pub timers: Vec<(usize, u32)>,
-    /// See [`Bound::timer_names`].
+    /// See [`Bound::timer_names`](crate::bind::Bound::timer_names).
     pub timer_names: HashMap<String, usize>,
-    /// See [`Bound::watch`].
+    /// See [`Bound::watch`](crate::bind::Bound::watch).
     pub watch: Option<Watch>,
 }
 

@@ -5,7 +5,7 @@
 //!
 //! What it holds a text to:
 //! - **KRL** (`.src`, `.dat`; keywords in any case, `;` comments, `"strings"`): `DEF`/`DEFFCT`
-//!   … `END`/`ENDFCT`, `DEFDAT` … `ENDDAT`, `IF … THEN` [`ELSE`] `ENDIF`, `LOOP`/`ENDLOOP`,
+//!   … `END`/`ENDFCT`, `DEFDAT` … `ENDDAT`, `IF … THEN` \[`ELSE`\] `ENDIF`, `LOOP`/`ENDLOOP`,
 //!   `WHILE`/`ENDWHILE`, `FOR`/`ENDFOR`, `REPEAT`/`UNTIL`, `SWITCH`/`CASE`/`DEFAULT`/`ENDSWITCH`,
 //!   `SPLINE`/`PTP_SPLINE` … `ENDSPLINE`; `EXIT` only in a loop; `;FOLD`/`;ENDFOLD` balanced; in a
 //!   whole `.src`/`.dat` no statement outside its `DEF`/`DEFDAT` (`&` header lines allowed);
@@ -13,7 +13,7 @@
 //!   `DEF`, `DEFFCT` and `DEFDAT` KRL names.
 //! - **RAPID** (`.mod`, `.modx`, `.sys`; any case, `!` comments): `MODULE` … `ENDMODULE`,
 //!   `PROC`/`FUNC`/`TRAP` … `ENDPROC`/`ENDFUNC`/`ENDTRAP` (with `LOCAL`), `IF … THEN`
-//!   [`ELSEIF … THEN`]* [`ELSE`] `ENDIF` (a compact `IF c stmt;` opens nothing), `WHILE … DO`,
+//!   [`ELSEIF … THEN`]* \[`ELSE`\] `ENDIF` (a compact `IF c stmt;` opens nothing), `WHILE … DO`,
 //!   `FOR … DO`, `TEST` with `CASE`/`DEFAULT`, `ENDTEST`; `ERROR`/`BACKWARD`/`UNDO` only in a
 //!   routine; in a whole module no routine outside `MODULE`.
 //! - **URScript** (`.script`; `#` comments): `def`/`thread`/`if`/`elif`/`else`/`while` lines end

@@ -43,7 +43,7 @@ pub const MAX_DEPLOYS_RANGE: RangeInclusive<u64> = 1..=64;
 /// The descriptors one running hook may hold in the daemon: its stdout and stderr pipes and
 /// the process descriptor its end is waited on, and for a moment while it starts the pipes'
 /// other ends and the pipe that reports a failed `exec`. The folder locks leave this many per
-/// hook ([`super::lock::Locks::reserving`]), so hooks never take the compiles' descriptors.
+/// hook (`Locks::reserving`), so hooks never take the compiles' descriptors.
 pub const FDS_PER_HOOK: u64 = 8;
 /// The variable each hook (and whatever it starts, which inherits it) carries: its token, by
 /// which the daemon finds the hook's processes also after they left its process group
@@ -819,7 +819,7 @@ fn tail_text(bytes: &[u8], cut: bool) -> String {
 /// The hook's program as the configuration gives it: an absolute path as written, a path with a
 /// `/` relative to the configuration file's folder, a bare name looked up when the
 /// configuration is read in the absolute folders of `PATH` ([`find_in_path`]). A bare name not
-/// found there stays bare: [`run`] refuses to run it (it never falls to the process's own
+/// found there stays bare: `run` refuses to run it (it never falls to the process's own
 /// lookup, which would search an empty or relative `PATH` entry in the project folder).
 pub fn program_path(program: &str, base: &Path) -> String {
     if program.starts_with('/') {

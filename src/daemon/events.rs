@@ -535,7 +535,7 @@ impl EventSink {
         v
     }
 
-    /// This run's identity, the `instance` of every event it emits (see [`new_instance`]).
+    /// This run's identity, the `instance` of every event it emits (see `new_instance`).
     pub fn instance(&self) -> &str {
         &self.shared.instance
     }

@@ -14,7 +14,7 @@
 //!   the same runtime directory. Without either, the daemon is refused all the same, without
 //!   its pid.
 //! - A folder that does not exist holds no lock and no descriptor: it is locked when it
-//!   appears ([`Locks::ensure`]); if another daemon keeps it by then, the project waits.
+//!   appears (`Locks::ensure`); if another daemon keeps it by then, the project waits.
 //! - One descriptor per locked folder, never more than the process may open less
 //!   [`RESERVE`]: the compiles always have descriptors left ([`raise_open_file_limit`] lifts
 //!   the soft limit to the hard one first). A folder beyond that is refused with the reason.
@@ -29,7 +29,7 @@ use std::path::{Path, PathBuf};
 pub const RESERVE: u64 = 256;
 
 /// Lifts the soft limit of open files to the hard one (a service may keep thousands of folders;
-/// the soft limit is often 1,024). [`Locks::new`] reads the limit in force afterwards; where it
+/// the soft limit is often 1,024). `Locks::new` reads the limit in force afterwards; where it
 /// cannot be lifted, the old one stays.
 pub fn raise_open_file_limit() {
     use rustix::process::{Resource, getrlimit, setrlimit};
@@ -239,7 +239,7 @@ impl Locks {
     /// Why `real` (whose locked file is `id`) cannot be locked: another skillpost daemon keeps
     /// it, or another program holds a lock on it. The holder's pid comes from the kernel's list
     /// of locks, else from the note a daemon leaves; a holder the kernel names is a daemon only
-    /// when it is a skillpost process ([`is_skillpost`]). Without `/proc`, a daemon.
+    /// when it is a skillpost process ([`not_skillpost`]). Without `/proc`, a daemon.
     fn refusal(&self, real: &Path, note: &Path, id: Option<Id>) -> Refused {
         let from_note = || {
             crate::load::read_limited(note, 4096)

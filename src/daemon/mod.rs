@@ -19,7 +19,7 @@
 //! # Invariants
 //!
 //! - Compiles run off the event loop (`spawn_blocking`), at most one per project, at most
-//!   [`Daemon::parallel`] at once; projects never wait for each other's events.
+//!   [`parallel_compiles`] at once; projects never wait for each other's events.
 //! - A change starts a compile only if an input's bytes changed: every input's content hash is
 //!   kept from the last compile (our own write-back updates it), so reads, `touch`, saves of the
 //!   same bytes and our own writes start nothing. (An attribute change of the project folder

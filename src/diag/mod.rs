@@ -5,8 +5,8 @@
 //! stop at the first problem: they push into a [`Diagnostics`] sink and go on.
 //!
 //! Layout: this file holds [`Diagnostic`], the [`Diagnostics`] sink and the [`Code`] list;
-//! [`sources`] the texts diagnostics point into ([`Sources`]: files, line and column, the lines
-//! kept of a file read as a stream); [`render`](mod@render) how they are shown (human, short,
+//! `sources` the texts diagnostics point into ([`Sources`]: files, line and column, the lines
+//! kept of a file read as a stream); `render` how they are shown (human, short,
 //! JSON; [`Located`]).
 
 use std::ops::Range;

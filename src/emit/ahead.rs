@@ -10,7 +10,7 @@
 //! writes, a step written in an order of its own, a thread that is behind) it reads itself: the
 //! text is the same either way.
 //!
-//! Memory stays flat: at most [`QUEUE`] batches of [`BATCH`] steps are read ahead, and emptied
+//! Memory stays flat: at most `QUEUE` batches of `BATCH` steps are read ahead, and emptied
 //! batches go back to the reading thread. When the writer is done, the thread stops at its next
 //! batch.
 

@@ -11,6 +11,8 @@
 //! [`Profile`] (a language of `if`/`while` blocks describes its words in a
 //! [`structured::Dialect`]), a `templates/<lang>.toml` whose keys are `step_indent` and the
 //! profile's files, and a [`Language`] variant.
+//!
+//! [`Literal`]: crate::value::Literal
 
 pub mod ahead;
 pub mod flow;

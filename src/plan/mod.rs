@@ -1,6 +1,6 @@
 //! SFC graph checks and the ordered program tree (docs/INPUTS.md).
 //!
-//! [`plan`] runs in parts, each with its own tests: [`graph`] (ids and connections),
+//! [`plan`] runs in parts, each with its own tests: [`graph`](fn@graph) (ids and connections),
 //! [`check_nodes`] (each element's inputs and outputs), [`resolve_jumps`] (jump targets),
 //! [`start_end`] (found after the jumps are resolved), [`find_cycle`] (a cycle of connections,
 //! not of jumps) and the walk, which recognises the structure: sequences, guarded transitions

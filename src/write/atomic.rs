@@ -249,7 +249,7 @@ fn new_file_builder() -> tempfile::Builder<'static, 'static> {
 /// How many random letters and digits `tempfile` puts between prefix and suffix.
 const TEMP_RANDOM: usize = 6;
 
-/// Whether a file name is shaped exactly as our temporary files are (see [`temp_builder`]):
+/// Whether a file name is shaped exactly as our temporary files are (see `temp_builder`):
 /// `.skillpost-`, six ASCII letters or digits, `.tmp`. The name alone does not make a file
 /// ours: the daemon also checks that no project reads it before it removes one.
 pub fn is_temporary(name: &str) -> bool {

@@ -79,7 +79,7 @@
 //! # `SIGIO`
 //!
 //! A lease break sends the holder `SIGIO`, whose default action terminates the process. Before
-//! the first lease, [`lease`] installs a handler that only sets a flag (`signal-hook`, once per
+//! the first lease, `lease` installs a handler that only sets a flag (`signal-hook`, once per
 //! process), so a break can never kill skillpost; the break is read with `F_GETLEASE`.
 
 use std::fs;

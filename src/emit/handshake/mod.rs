@@ -17,6 +17,9 @@
 //!
 //! A sender is never more than one message ahead on a channel, so no toggle is ever missed,
 //! also across loop rounds.
+//!
+//! [`Block::Tell`]: crate::plan::Block::Tell
+//! [`Block::Hear`]: crate::plan::Block::Hear
 
 mod forms;
 

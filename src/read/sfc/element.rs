@@ -845,7 +845,7 @@ pub(super) fn inline_text<'s>(
 
 /// Appends `t`, read from the file at `raw`, to a text assembled from pieces, and to `map`
 /// where the piece came from (byte for byte when `t` is as long as its source: no reference or
-/// line end was resolved in it; [`map_offset`](super::named::map_offset)).
+/// line end was resolved in it; [`map_offset`]).
 pub(super) fn push_piece(
     text: &mut String,
     map: &mut Vec<(usize, usize, bool)>,

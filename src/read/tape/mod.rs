@@ -1,13 +1,13 @@
 //! The SFC's XML events as a tape: what [`super::sfc`] needs of each event (kind, place, tag,
 //! raw content), copied into batches.
 //!
-//! Tokenizing the XML and checking its UTF-8 is more than half of reading a large SFC. A [`Producer`] does that part; the SFC reader consumes the batches. For a large file the
-//! producer runs on a second thread ([`read`] with [`Pipeline::Threaded`]), so the two halves run
+//! Tokenizing the XML and checking its UTF-8 is more than half of reading a large SFC. A `Producer` does that part; the SFC reader consumes the batches. For a large file the
+//! producer runs on a second thread (`read` with [`Pipeline::Threaded`]), so the two halves run
 //! side by side on two cores; for a small one it fills a batch whenever the reader asks
 //! ([`Pipeline::Inline`]). Both give the same records: the reader cannot tell them apart, and the
 //! tests compare the two.
 //!
-//! Batches are bounded (about [`BATCH_BYTES`] of text each, at most [`QUEUE`] waiting), so the
+//! Batches are bounded (about [`BATCH_BYTES`] of text each, at most `QUEUE` waiting), so the
 //! memory a read holds stays flat however large the file; emptied batches go back to the producer
 //! to be filled again.
 //!

@@ -169,6 +169,8 @@ impl Run<'_> {
 
     /// A random value of integer input `k` of [`Cell::inputs`]: 0, or a number the programs
     /// compare it with, or one next to it (so a wait for `Count >= 5` can end).
+    ///
+    /// [`Cell::inputs`]: crate::simulate::Cell::inputs
     pub(super) fn random_number(&mut self, k: usize) -> Val {
         let values = self.cell.input_values.get(k).map_or(&[][..], Vec::as_slice);
         let n = values.len() as u64 * 3 + 1;
