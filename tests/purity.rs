@@ -15,7 +15,7 @@ const CORE: &[&str] = &[
     "src/template.rs",
     "src/value.rs",
     "src/convert.rs",
-    "src/cond.rs",
+    "src/cond",
     "src/model.rs",
     "src/names.rs",
 ];

@@ -1,4 +1,4 @@
-//! The transition condition parser (`cond.rs`):
+//! The transition condition parser (`cond/`):
 //!
 //! - `parse` never panics; an error's range lies inside the text, on character boundaries;
 //! - a parsed condition printed back as ST (`Expr::to_st`, fully parenthesised) parses to a tree

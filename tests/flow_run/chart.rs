@@ -198,7 +198,7 @@ impl Chart {
 // ---------------------------------------------------------------------------------------------
 
 /// A condition as the chart player reads it: IEC 61131-3 ST, by a reader of its own
-/// (independent of the project's parser, `src/cond.rs`). Booleans and integers are numbers
+/// (independent of the project's parser, `src/cond/`). Booleans and integers are numbers
 /// (`TRUE` is 1); durations are nanoseconds of their own type.
 #[derive(Debug, Clone)]
 pub enum Cond {
