@@ -312,6 +312,7 @@ pub(crate) fn write_back_with(
     // then taken away unseen. The opener waits in `open` until this lease goes; by then the
     // name holds what it must (see `adopt`).
     let (new_file, tmp) = tmp.into_parts();
+    let new_file = lease::Unleased(new_file);
     let new_leased = opts.lease && matches!(lease::take(&new_file), Ok(true));
     hook(Point::Staged);
     // Never through a link swapped in meanwhile: `target` is the resolved file. Without
@@ -323,7 +324,7 @@ pub(crate) fn write_back_with(
         .custom_flags(flags.bits() as i32)
         .open(&target)
     {
-        Ok(f) => f,
+        Ok(f) => lease::Unleased(f),
         Err(e) if e.kind() == io::ErrorKind::NotFound => {
             return Ok(WriteBackOutcome::SkippedChangedOnDisk);
         }
@@ -408,7 +409,7 @@ pub(crate) fn write_back_with(
     // the exchange holds our new file and waits for its lease: the taken file's bytes go into
     // the new file, which stays at the name, once nobody else has the taken file open.
     if new_leased && let Some(taken) = out_id {
-        let held = (leased && taken == old_id).then_some(&file);
+        let held = (leased && taken == old_id).then_some(&*file);
         let adopted = adopt(&new_file, &tmp, taken, held, expected, hook)?;
         if adopted != Adopted::No {
             drop(tmp);
@@ -496,10 +497,10 @@ fn adopt(
                 .custom_flags(flags.bits() as i32)
                 .open(tmp)
             {
-                Ok(f) => f,
+                Ok(f) => lease::Unleased(f),
                 Err(_) => return Ok(Adopted::No),
             };
-            &opened
+            &opened.0
         }
     };
     let meta = old.metadata()?;
@@ -676,6 +677,28 @@ pub(crate) mod lease {
 
     use fdlease::Lease;
 
+    /// An open file whose lease, if we took one, goes when it is closed. A lease belongs to the
+    /// open file, not to one descriptor of it: a hook being started holds a copy of every
+    /// descriptor of the daemon until its `exec` (`posix_spawn`, `fork`), and a lease left to
+    /// go with our descriptor outlived it there. Our own next `open` of the blackboard (the
+    /// check for a save racing the write-back, the next hash check) then failed with
+    /// `EWOULDBLOCK`, was taken for a change, and the project compiled a second time.
+    pub struct Unleased(pub File);
+
+    impl std::ops::Deref for Unleased {
+        type Target = File;
+        fn deref(&self) -> &File {
+            &self.0
+        }
+    }
+
+    impl Drop for Unleased {
+        fn drop(&mut self) {
+            // Whichever copies of the open file live on, the lease goes now (an error: none).
+            let _ = fdlease::set(&self.0, Lease::None);
+        }
+    }
+
     /// Installs, once per process, a `SIGIO` handler that only sets a flag: a lease break sends
     /// `SIGIO`, whose default action would terminate the process. `Err` when it cannot be
     /// installed (then no lease is taken).
@@ -811,8 +834,6 @@ mod tests {
         fs::rename(&tmp, p).unwrap();
     }
 
-    /// Whether this process can take leases on files in `dir`; prints why a test is skipped
-    /// when not, and fails under `SKILLPOST_STRICT_TESTS=1`.
     /// Waits until `/proc/locks` lists a lease on inode `ino` that is being broken (a process
     /// blocked in `open` by it).
     fn lease_breaking(ino: u64, timeout: Duration) -> bool {
@@ -832,6 +853,8 @@ mod tests {
         false
     }
 
+    /// Whether this process can take leases on files in `dir`; prints why a test is skipped
+    /// when not, and fails under `SKILLPOST_STRICT_TESTS=1`.
     fn leases_work(dir: &Path) -> bool {
         let p = dir.join("lease-probe");
         fs::write(&p, "x").unwrap();
@@ -1036,6 +1059,27 @@ mod tests {
         assert_eq!(out, WriteBackOutcome::SkippedChangedOnDisk);
         assert_eq!(fs::read_to_string(&p).unwrap(), "save B");
         assert!(temp_leftovers(d.path()).is_empty());
+    }
+
+    /// Our lease goes with our descriptor, also while a copy of the open file lives on: a hook
+    /// being started holds one of every descriptor until its `exec`. Then our own next open of
+    /// the blackboard (without blocking, as the hash check opens it) was refused as long as the
+    /// copy lived, and taken for a change: a second, forced compile (seen in CI: 601 of 600).
+    #[test]
+    fn our_lease_goes_with_our_descriptor_while_a_copy_lives_on() {
+        let (d, p) = project();
+        if !leases_work(d.path()) {
+            return;
+        }
+        let f = lease::Unleased(fs::File::open(&p).unwrap());
+        assert!(matches!(lease::take(&f), Ok(true)));
+        // What a hook being started holds: the same open file.
+        let copy = f.try_clone().unwrap();
+        drop(f);
+        // The daemon's hash check (after a write-back, and before a compile).
+        let hashed = crate::load::hash_file(&p, 1 << 20);
+        assert!(hashed.is_ok(), "refused: {:?}", hashed.err());
+        drop(copy);
     }
 
     /// A writer in another thread: opens `p` for writing (without truncating) when started,
