@@ -11,15 +11,16 @@ mod skills;
 
 use roxmltree::Node;
 
-// The submodules' `super::xml`/`super::tooling` paths resolve through these.
 use super::xml::{caex_element, caex_name, children, tag_span};
-use super::{tooling, xml};
 use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
 use crate::model::{Blackboard, Name};
 use crate::names;
 use caex::{no_hierarchy, unknown_elements};
 use resources::resource_nodes;
 pub use signals::{MAX_IO, is_safe_address};
+
+// The submodules' `super::xml`/`super::tooling` paths resolve through these.
+use super::{tooling, xml};
 
 /// Reads the blackboard. Returns `None` only when the document cannot be used at all (not XML,
 /// no hierarchy); otherwise a model with every problem reported in `diags`.
