@@ -409,7 +409,7 @@ pub(crate) fn write_back_with(
     // the exchange holds our new file and waits for its lease: the taken file's bytes go into
     // the new file, which stays at the name, once nobody else has the taken file open.
     if new_leased && let Some(taken) = out_id {
-        let held = (leased && taken == old_id).then_some(&*file);
+        let held = (leased && taken == old_id).then_some(&file);
         let adopted = adopt(&new_file, &tmp, taken, held, expected, hook)?;
         if adopted != Adopted::No {
             drop(tmp);
@@ -478,7 +478,7 @@ fn adopt(
     new_file: &fs::File,
     tmp: &Path,
     taken: Id,
-    held: Option<&fs::File>,
+    held: Option<&lease::Unleased>,
     expected: &[u8],
     hook: &mut dyn FnMut(Point),
 ) -> io::Result<Adopted> {
@@ -500,7 +500,7 @@ fn adopt(
                 Ok(f) => lease::Unleased(f),
                 Err(_) => return Ok(Adopted::No),
             };
-            &opened.0
+            &opened
         }
     };
     let meta = old.metadata()?;

@@ -22,6 +22,12 @@ impl std::ops::Deref for Unleased {
     }
 }
 
+impl std::os::fd::AsFd for Unleased {
+    fn as_fd(&self) -> std::os::fd::BorrowedFd<'_> {
+        self.0.as_fd()
+    }
+}
+
 impl Drop for Unleased {
     fn drop(&mut self) {
         // Whichever copies of the open file live on, the lease goes now (an error: none).
@@ -46,8 +52,9 @@ pub fn guard_sigio() -> Result<(), String> {
 
 /// Takes a write lease: `Ok(true)` held; `Ok(false)` leases are not available here (no
 /// ownership or `CAP_LEASE`, a file system without leases, no `SIGIO` guard); `Err` with
-/// `WouldBlock` when another descriptor has the file open.
-pub fn take(file: &File) -> io::Result<bool> {
+/// `WouldBlock` when another descriptor has the file open. Only on an [`Unleased`] file, so
+/// no lease of ours outlives our descriptor.
+pub fn take(file: &Unleased) -> io::Result<bool> {
     if let Err(why) = guard_sigio() {
         tracing::warn!("no SIGIO handler ({why}); writing back without a lease");
         return Ok(false);
@@ -95,7 +102,7 @@ pub fn intact(file: &File) -> bool {
 
 /// Releases the lease and takes it again at once: `false` when anyone has the file open
 /// now (such as a writer that was blocked in `open` by the lease) or it was broken.
-pub fn retake(file: &File) -> bool {
+pub fn retake(file: &Unleased) -> bool {
     intact(file)
         && fdlease::set(file, Lease::None).is_ok()
         && fdlease::set(file, Lease::Write).is_ok()

@@ -82,7 +82,7 @@ fn lease_breaking(ino: u64, timeout: Duration) -> bool {
 fn leases_work(dir: &Path) -> bool {
     let p = dir.join("lease-probe");
     fs::write(&p, "x").unwrap();
-    let f = fs::File::open(&p).unwrap();
+    let f = lease::Unleased(fs::File::open(&p).unwrap());
     let ok = lease::take(&f).unwrap_or(false);
     drop(f);
     fs::remove_file(&p).unwrap();
@@ -624,7 +624,7 @@ fn a_lease_break_does_not_kill_the_process() {
     if !leases_work(d.path()) {
         return;
     }
-    let f = fs::File::open(&p).unwrap();
+    let f = lease::Unleased(fs::File::open(&p).unwrap());
     assert!(lease::take(&f).unwrap());
     let cat = std::process::Command::new("cat")
         .arg(&p)
