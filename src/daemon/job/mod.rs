@@ -78,10 +78,34 @@ pub(super) const WRITE_BACK_WAIT: Duration = Duration::from_secs(10);
 /// [`crate::load::hash_file`]: a FIFO or device among the inputs is refused at once (a blocking
 /// read hung the project's compile for good), the file is read in pieces, and nothing past the
 /// largest file size a configuration can allow is read.
+///
+/// A file another program holds a write lease on (a file server's oplock on a shared folder) is
+/// refused for a moment while the kernel asks that program to let go: the hash is tried again
+/// after each of [`LEASE_WAITS`] before the file counts as unreadable. Taken at once for a
+/// change, the refusal compiled the project a second time for nothing (a `write-back-skipped`
+/// run whose write-back then found the blackboard "already right").
 pub(super) fn hash_file(p: &Path) -> Option<u64> {
     let max = config::MAX_FILE_SIZE_MB_RANGE.end() * 1024 * 1024;
+    for wait in LEASE_WAITS {
+        match crate::load::hash_file(p, max) {
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => std::thread::sleep(wait),
+            hashed => return hashed.ok(),
+        }
+    }
     crate::load::hash_file(p, max).ok()
 }
+
+/// The waits of [`hash_file`] for a lease being given up: 310 ms in all. A holder that answers
+/// (Samba, the daemon's own write-back) lets go within milliseconds; one that does not keeps
+/// the file for the kernel's `lease-break-time` (45 s by default), and the check goes on without
+/// it.
+const LEASE_WAITS: [Duration; 5] = [
+    Duration::from_millis(10),
+    Duration::from_millis(20),
+    Duration::from_millis(40),
+    Duration::from_millis(80),
+    Duration::from_millis(160),
+];
 
 /// How far a run got in its events: every `compile-started` gets exactly one outcome
 /// (`compile-succeeded`, `compile-failed`, `compile-retrying`) and every outcome has a
@@ -896,6 +920,42 @@ mod tests {
             }
             self.fs.open(path)
         }
+    }
+
+    /// Another program's write lease on the blackboard (a file server's oplock) refuses the
+    /// hash check's open until its holder lets go: the check waits for that instead of taking
+    /// the file for changed.
+    #[test]
+    fn a_hash_check_waits_for_a_lease_to_be_given_up() {
+        use crate::write::writeback::lease;
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("Blackboard.aml");
+        std::fs::write(&p, "<CAEXFile/>").unwrap();
+        let held = lease::Unleased(std::fs::File::open(&p).unwrap());
+        if !matches!(lease::take(&held), Ok(true)) {
+            let why = "no file leases here (not the owner and no CAP_LEASE, or no lease support)";
+            if std::env::var("SKILLPOST_STRICT_TESTS").as_deref() == Ok("1") {
+                panic!("{why} (SKILLPOST_STRICT_TESTS=1)");
+            }
+            eprintln!("skipped: {why}");
+            return;
+        }
+        // The holder: lets go when the kernel asks it to (the check's open starts that), as
+        // a file server does.
+        let holder = std::thread::spawn(move || {
+            let start = std::time::Instant::now();
+            while lease::intact(&held.0) && start.elapsed() < Duration::from_secs(5) {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            drop(held);
+        });
+        let during = hash_file(&p);
+        holder.join().unwrap();
+        assert!(
+            during.is_some(),
+            "the check took the leased file for unreadable"
+        );
+        assert_eq!(during, hash_file(&p));
     }
 
     #[test]
