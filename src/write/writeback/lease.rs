@@ -107,3 +107,24 @@ pub fn retake(file: &Unleased) -> bool {
         && fdlease::set(file, Lease::None).is_ok()
         && fdlease::set(file, Lease::Write).is_ok()
 }
+
+/// Whether this process can take leases on files in `dir` (for the tests of leases here and in
+/// the daemon); prints why a test is skipped when not, and fails under
+/// `SKILLPOST_STRICT_TESTS=1`.
+#[cfg(test)]
+pub(crate) fn leases_work(dir: &std::path::Path) -> bool {
+    let p = dir.join("lease-probe");
+    std::fs::write(&p, "x").unwrap();
+    let f = Unleased(std::fs::File::open(&p).unwrap());
+    let ok = take(&f).unwrap_or(false);
+    drop(f);
+    std::fs::remove_file(&p).unwrap();
+    if !ok {
+        let why = "no file leases here (not the owner and no CAP_LEASE, or no lease support)";
+        if std::env::var("SKILLPOST_STRICT_TESTS").as_deref() == Ok("1") {
+            panic!("{why} (SKILLPOST_STRICT_TESTS=1)");
+        }
+        eprintln!("skipped: {why}");
+    }
+    ok
+}

@@ -1,4 +1,5 @@
 use super::*;
+use lease::leases_work;
 use std::io::Write as _;
 use std::time::Duration;
 
@@ -75,25 +76,6 @@ fn lease_breaking(ino: u64, timeout: Duration) -> bool {
         std::thread::sleep(Duration::from_millis(1));
     }
     false
-}
-
-/// Whether this process can take leases on files in `dir`; prints why a test is skipped
-/// when not, and fails under `SKILLPOST_STRICT_TESTS=1`.
-fn leases_work(dir: &Path) -> bool {
-    let p = dir.join("lease-probe");
-    fs::write(&p, "x").unwrap();
-    let f = lease::Unleased(fs::File::open(&p).unwrap());
-    let ok = lease::take(&f).unwrap_or(false);
-    drop(f);
-    fs::remove_file(&p).unwrap();
-    if !ok {
-        let why = "no file leases here (not the owner and no CAP_LEASE, or no lease support)";
-        if std::env::var("SKILLPOST_STRICT_TESTS").as_deref() == Ok("1") {
-            panic!("{why} (SKILLPOST_STRICT_TESTS=1)");
-        }
-        eprintln!("skipped: {why}");
-    }
-    ok
 }
 
 #[test]
