@@ -18,10 +18,11 @@ pub trait FileSource {
     /// Opens a file to be read as a stream (the SFC: the one input that grows with the product,
     /// so its text is never whole in memory). By default, [`FileSource::read`] into memory.
     fn open(&self, path: &Path) -> std::io::Result<Opened<'_>> {
-        let bytes = self.read(path)?;
+        let bytes: std::sync::Arc<[u8]> = self.read(path)?.into();
         Ok(Opened {
             len: Some(bytes.len() as u64),
-            reader: Box::new(std::io::Cursor::new(bytes)),
+            reader: Box::new(std::io::Cursor::new(Shared(bytes.clone()))),
+            at: Some(std::sync::Arc::new(Shared(bytes))),
         })
     }
 
@@ -68,6 +69,55 @@ pub fn over_budget(left: u64) -> std::io::Error {
 pub struct Opened<'a> {
     pub reader: Box<dyn Read + Send + 'a>,
     pub len: Option<u64>,
+    /// The same open file, read at any place (a large SFC is read in two halves at once, the
+    /// second through this), if the source offers it. Its bytes are those `reader` gives; the
+    /// reader of the halves checks that they were, where the two overlap.
+    pub at: Option<std::sync::Arc<dyn ReadAt>>,
+}
+
+/// A file read at any place, by several threads at once (`pread`: the file's position is not
+/// moved, so it does not disturb a stream over the same open file).
+pub trait ReadAt: Send + Sync {
+    /// Reads into `buf` from `offset`; 0 at the end of the file.
+    fn read_at(&self, buf: &mut [u8], offset: u64) -> std::io::Result<usize>;
+}
+
+#[cfg(unix)]
+impl ReadAt for std::fs::File {
+    fn read_at(&self, buf: &mut [u8], offset: u64) -> std::io::Result<usize> {
+        std::os::unix::fs::FileExt::read_at(self, buf, offset)
+    }
+}
+
+impl ReadAt for [u8] {
+    fn read_at(&self, buf: &mut [u8], offset: u64) -> std::io::Result<usize> {
+        let from = usize::try_from(offset)
+            .unwrap_or(usize::MAX)
+            .min(self.len());
+        let n = buf.len().min(self.len() - from);
+        buf[..n].copy_from_slice(&self[from..from + n]);
+        Ok(n)
+    }
+}
+
+/// Bytes in memory, shared by a stream and a [`ReadAt`] over them.
+struct Shared(std::sync::Arc<[u8]>);
+
+impl AsRef<[u8]> for Shared {
+    fn as_ref(&self) -> &[u8] {
+        &self.0
+    }
+}
+
+impl ReadAt for Shared {
+    fn read_at(&self, buf: &mut [u8], offset: u64) -> std::io::Result<usize> {
+        let from = usize::try_from(offset)
+            .unwrap_or(usize::MAX)
+            .min(self.0.len());
+        let n = buf.len().min(self.0.len() - from);
+        buf[..n].copy_from_slice(&self.0[from..from + n]);
+        Ok(n)
+    }
 }
 
 /// Reads at most `max` bytes: one more is an error (the file grew past the limit after its
@@ -344,8 +394,16 @@ fn open_within(path: &Path, max: u64) -> std::io::Result<(std::fs::File, std::fs
 /// (a FIFO or device is an error at once; reading past `max` bytes is an error).
 pub fn open_limited(path: &Path, max: u64) -> std::io::Result<Opened<'static>> {
     let (file, meta) = open_within(path, max)?;
+    #[cfg(unix)]
+    let at = file
+        .try_clone()
+        .ok()
+        .map(|f| std::sync::Arc::new(f) as std::sync::Arc<dyn ReadAt>);
+    #[cfg(not(unix))]
+    let at = None;
     Ok(Opened {
         len: Some(meta.len()),
+        at,
         reader: Box::new(Limited {
             inner: file,
             left: max,

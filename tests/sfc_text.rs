@@ -77,6 +77,8 @@ impl FileSource for Source {
                 inner: std::io::Cursor::new(bytes),
                 n: counted,
             }),
+            // Read as one stream: what is counted is what the stream gives.
+            at: None,
         })
     }
 }

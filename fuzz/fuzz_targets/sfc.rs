@@ -2,8 +2,8 @@
 //! → the listings; every variable the reader accepted parses and looks up; the program tree's
 //! invariants (each step once, waits and branches on transitions, loops start at their head);
 //! the diagnostics in every format; the same model and diagnostics however the events were
-//! produced (`read::tape`), and those events and the attributes the reader reads itself are
-//! quick-xml's.
+//! produced (`read::tape`) or whether the file was read in two halves (`read/sfc/split.rs`),
+//! and those events and the attributes the reader reads itself are quick-xml's.
 #![no_main]
 
 mod common;
@@ -153,4 +153,39 @@ fn same_every_way(data: &[u8]) {
         read(pipeline, batch) == plain,
         "{pipeline:?} in batches of {batch} bytes reads differently"
     );
+    // Read in two halves, split at a place that depends on the input (at a `<` half of the
+    // time): the same as the plain reading, whether the second half was taken or not.
+    if data.len() > 1 {
+        let mut at = (data.len() * 7 + 3) % data.len();
+        if data.len() % 2 == 0
+            && let Some(i) = data[at..].iter().position(|&b| b == b'<')
+        {
+            at += i;
+        }
+        struct Bytes<'a>(&'a [u8]);
+        impl skillpost::load::ReadAt for Bytes<'_> {
+            fn read_at(&self, buf: &mut [u8], offset: u64) -> std::io::Result<usize> {
+                self.0.read_at(buf, offset)
+            }
+        }
+        let source = Bytes(data);
+        let mut d = skillpost::diag::Diagnostics::default();
+        let r = skillpost::read::sfc::read_sfc_stream_split(
+            data,
+            0,
+            data.len() as u64,
+            None,
+            &mut d,
+            pipeline,
+            batch,
+            Some(skillpost::read::sfc::SplitSource {
+                source: &source,
+                skipped: 0,
+                at: Some(at),
+                joined: None,
+            }),
+        );
+        let split = format!("{r:?}\n{:?}", d.into_vec());
+        assert!(split == plain, "split at {at} reads differently");
+    }
 }

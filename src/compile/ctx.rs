@@ -211,8 +211,17 @@ impl<'a> Ctx<'a> {
                 .len
                 .unwrap_or(0)
                 .saturating_sub(if bom { 3 } else { 0 });
-            let read =
-                crate::read::sfc::read_sfc_stream(&mut input, file, len_hint, pou, &mut self.diags);
+            // A large file is read in two halves at once, the second through a reader of the
+            // same open file (`read/sfc/split.rs`).
+            let at = opened.at.as_deref().map(|a| (a, if bom { 3 } else { 0 }));
+            let read = crate::read::sfc::read_sfc_file(
+                &mut input,
+                at,
+                file,
+                len_hint,
+                pou,
+                &mut self.diags,
+            );
             // The rest of the file, so its length and hash are the whole file's (the reader
             // stops at a syntax error; the daemon's hash of an input is taken at its end).
             let rest = std::io::copy(&mut input, &mut std::io::sink());

@@ -61,6 +61,7 @@ impl FileSource for Hashing {
         match self.fs.open(path) {
             Ok(o) => Ok(crate::load::Opened {
                 len: o.len,
+                at: o.at,
                 reader: Box::new(HashingReader {
                     inner: o.reader,
                     hash: Some(crate::load::ContentHash::new()),

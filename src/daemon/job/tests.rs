@@ -44,6 +44,7 @@ impl FileSource for SavedDuring {
             let o = crate::load::Opened {
                 len: Some(0),
                 reader: Box::new(std::io::Cursor::new(Vec::new())),
+                at: None,
             };
             std::fs::write(path, full)?;
             return Ok(o);

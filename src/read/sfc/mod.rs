@@ -37,6 +37,7 @@ use crate::model::{Element, FileHeader, Interner, Sfc, Variable};
 mod element;
 mod named;
 mod pick;
+mod split;
 mod tag;
 mod wired;
 
@@ -47,6 +48,7 @@ use tag::{Open, PathKind};
 use wired::{PendingWired, WireNode};
 
 pub use crate::value::MAX_LIST_DEPTH;
+pub use split::{SPLIT_FROM, SplitSource, read_sfc_file};
 
 /// Why a streamed read stopped before it could judge the file: the caller reports these (it has
 /// the file's bytes, or knows why it has none).
@@ -117,30 +119,54 @@ pub fn read_sfc_stream_with<R: BufRead + Send>(
     pipeline: Pipeline,
     batch_bytes: usize,
 ) -> Result<Option<Sfc>, StreamError> {
-    let mut r = Stream {
-        wanted: pou.map(|p| p.trim().to_owned()).filter(|p| !p.is_empty()),
-        pous: Vec::new(),
-        named: HashMap::new(),
-        wire_nodes: Vec::new(),
-        pending_wired: Vec::new(),
-        derived_text: 0,
-        derived_refused: false,
-        len_hint: usize::try_from(len_hint).unwrap_or(usize::MAX),
+    read_sfc_stream_split(
+        input,
         file,
-        names: Interner::default(),
-        found: Vec::new(),
-        ignored: Vec::new(),
-        variables: Vec::new(),
-        values: String::new(),
-    };
+        len_hint,
+        pou,
+        diags,
+        pipeline,
+        batch_bytes,
+        None,
+    )
+}
+
+/// [`read_sfc_stream_with`], the file read in two halves at once when `split` offers a second
+/// reader of it (see `split.rs`; the result is the same).
+#[doc(hidden)]
+#[allow(clippy::too_many_arguments)]
+pub fn read_sfc_stream_split<R: BufRead + Send>(
+    input: R,
+    file: FileId,
+    len_hint: u64,
+    pou: Option<&str>,
+    diags: &mut Diagnostics,
+    pipeline: Pipeline,
+    batch_bytes: usize,
+    split: Option<SplitSource<'_>>,
+) -> Result<Option<Sfc>, StreamError> {
+    let mut r = Stream::new(
+        file,
+        pou.map(|p| p.trim().to_owned()).filter(|p| !p.is_empty()),
+        usize::try_from(len_hint).unwrap_or(usize::MAX),
+    );
     let mut local = Diagnostics::default();
-    let outcome = tape::read(input, pipeline, batch_bytes, |t| r.run(t, &mut local))?;
+    let outcome = split::read_halves(
+        &mut r,
+        input,
+        len_hint,
+        pipeline,
+        batch_bytes,
+        split,
+        |r, t| r.run(t, &mut local),
+    )?;
     Ok(match outcome {
         Err(d) => {
             // Not well-formed: only the syntax error counts (the rest may be an artefact of it).
             diags.push(*d);
             None
         }
+        Ok(Outcome::Part(_)) => None,
         Ok(Outcome::WrongRoot(span, name)) => {
             diags.push(
                 Diagnostic::error(
@@ -167,6 +193,8 @@ pub fn read_sfc_stream_with<R: BufRead + Send>(
 
 enum Outcome {
     WrongRoot(Span, String),
+    /// The second half of a split reading: its elements.
+    Part(Vec<Element>),
     Done {
         header: FileHeader,
         /// The root element's tag.
@@ -227,6 +255,12 @@ struct Stream {
     /// so far ([`MAX_DERIVED_TEXT`]), and whether that was refused.
     derived_text: usize,
     derived_refused: bool,
+    /// Reading the second half of a split reading (`split.rs`): it starts inside the SFC.
+    is_part: bool,
+    /// Reading the first half: where the second half's result comes.
+    part: Option<split::Link>,
+    /// The second half's result was taken.
+    part_joined: bool,
 }
 
 /// How much condition text (in bytes of ST) the transitions of a file may take from named
@@ -238,6 +272,28 @@ struct Stream {
 pub const MAX_DERIVED_TEXT: usize = 16 * 1024 * 1024;
 
 impl Stream {
+    fn new(file: FileId, wanted: Option<String>, len_hint: usize) -> Self {
+        Stream {
+            wanted,
+            pous: Vec::new(),
+            named: HashMap::new(),
+            wire_nodes: Vec::new(),
+            pending_wired: Vec::new(),
+            derived_text: 0,
+            derived_refused: false,
+            len_hint,
+            file,
+            names: Interner::default(),
+            found: Vec::new(),
+            ignored: Vec::new(),
+            variables: Vec::new(),
+            values: String::new(),
+            is_part: false,
+            part: None,
+            part_joined: false,
+        }
+    }
+
     fn span(&self, r: Range<usize>) -> Span {
         Span::new(self.file, r)
     }
@@ -281,6 +337,21 @@ impl Stream {
         let mut seen_root = false;
         let mut scratch = String::new();
         let mut batch = Batch::default();
+        if self.is_part {
+            // Inside the SFC body of the POU being read (the first half checks that it was).
+            for (tag, name) in split::ASSUMED {
+                stack.push(tag, name);
+            }
+            seen_root = true;
+            pou = Some((None, false, 4));
+            want_pou = true;
+            body_seen = true;
+            sfc = Some((
+                self.span(0..0),
+                split::ASSUMED.len(),
+                Vec::with_capacity((self.len_hint / 320).min(1 << 24)),
+            ));
+        }
         loop {
             batch = tape.next(batch);
             for rec in &batch.recs {
@@ -423,6 +494,23 @@ impl Stream {
                         )
                         .at(self.span(at..at + 9)),
                     )));
+                    }
+                    Kind::PartEnd => {
+                        // The second half's end: at the end tag of the assumed SFC, with
+                        // nothing of its own open.
+                        return Ok(match sfc.take() {
+                            Some((_, d, els))
+                                if self.is_part
+                                    && stack.len() == d
+                                    && !building
+                                    && named.is_none()
+                                    && open_macros.is_empty()
+                                    && macros.is_empty() =>
+                            {
+                                Ok(Outcome::Part(els))
+                            }
+                            _ => Err(self.syntax_error(at, "not the end of a part".to_owned())),
+                        });
                     }
                     Kind::Eof => {
                         let end = batch.end(rec);
@@ -712,6 +800,28 @@ impl Stream {
                 }
                 if !empty {
                     stack.push(tag, name);
+                }
+            }
+            if batch.split {
+                // The split place: the second half's elements come next, if it read them as
+                // this reading would have.
+                let at_sfc = !building
+                    && named.is_none()
+                    && outer.is_none()
+                    && open_macros.is_empty()
+                    && want_pou
+                    && pou.is_some()
+                    && !sfc_done
+                    && sfc.as_ref().is_some_and(|s| s.1 == stack.len())
+                    && stack
+                        .tags
+                        .iter()
+                        .map(|t| t.0)
+                        .eq(split::ASSUMED.map(|a| a.0));
+                let (decision, part) = self.take_part(at_sfc);
+                tape.decide(decision);
+                if let (Some(part), Some((_, _, els))) = (part, &mut sfc) {
+                    self.append_part(part, els, diags);
                 }
             }
             match batch.stop.take() {

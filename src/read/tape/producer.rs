@@ -1,6 +1,6 @@
 //! The producer: a file's pieces, their UTF-8 checked once, made into records of events.
 
-use std::io::{BufRead, Read};
+use std::io::Read;
 use std::ops::Range;
 
 use quick_xml::events::Event;
@@ -41,6 +41,15 @@ pub(crate) struct Producer<R> {
     keeping: usize,
     /// The first bytes were looked at (for a byte-order mark).
     started: bool,
+    /// Where a piece is to end, if it can (the reading split in two, [`super::Split`]): the
+    /// batch that ends there is marked (`Batch::split`) when that place is between two events
+    /// and no open element keeps text.
+    split: Option<usize>,
+    /// The second half of a split reading: its events end at the first end tag that closes an
+    /// element opened before them (a [`Kind::PartEnd`] record).
+    part: bool,
+    /// Why the next batch stops (a skipped range that was not what the other half read).
+    pending: Option<Stop>,
 }
 
 /// A UTF-8 byte-order mark.
@@ -54,7 +63,7 @@ enum Piece {
     Cut(usize),
 }
 
-impl<R: BufRead> Producer<R> {
+impl<R: Read> Producer<R> {
     pub fn new(input: R, batch_bytes: usize) -> Self {
         Producer {
             input,
@@ -68,6 +77,66 @@ impl<R: BufRead> Producer<R> {
             open_starts: Vec::new(),
             keeping: 0,
             started: false,
+            split: None,
+            part: false,
+            pending: None,
+        }
+    }
+
+    /// A producer whose pieces end at `at` if they can (see `split`).
+    pub fn split_at(input: R, batch_bytes: usize, at: Option<usize>) -> Self {
+        Producer {
+            split: at,
+            ..Producer::new(input, batch_bytes)
+        }
+    }
+
+    /// The producer of the second half of a split reading: `input` starts at file offset
+    /// `base`, inside elements opened before it (none of which keeps text).
+    pub fn part(input: R, batch_bytes: usize, base: usize) -> Self {
+        Producer {
+            base,
+            started: true,
+            part: true,
+            ..Producer::new(input, batch_bytes)
+        }
+    }
+
+    /// Goes on at `to` instead of where the last batch ended (the split place): the bytes in
+    /// between, which the other half read, are read here too and dropped, so whatever counts or
+    /// hashes the input sees them all. Their hash must be `digest` (the other half's): else the
+    /// file changed between the two readings, and the next batch stops with that.
+    pub(super) fn skip(&mut self, to: usize, digest: u64) {
+        if self.done || to < self.base {
+            return;
+        }
+        let mut left = to - self.base;
+        let mut hash = xxhash_rust::xxh3::Xxh3Default::new();
+        let from_carry = left.min(self.carry.len());
+        hash.update(&self.carry[..from_carry]);
+        self.carry.drain(..from_carry);
+        left -= from_carry;
+        let mut buf = vec![0u8; left.min(256 * 1024)];
+        while left > 0 {
+            let want = left.min(buf.len());
+            match self.input.read(&mut buf[..want]) {
+                Ok(0) => break,
+                Ok(n) => {
+                    hash.update(&buf[..n]);
+                    left -= n;
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => {
+                    self.pending = Some(Stop::Io(e));
+                    return;
+                }
+            }
+        }
+        self.base = to;
+        if left > 0 || hash.digest() != digest {
+            self.pending = Some(Stop::Io(std::io::Error::other(
+                "the file changed while it was read (it is read again when it is saved)",
+            )));
         }
     }
 
@@ -96,6 +165,11 @@ impl<R: BufRead> Producer<R> {
         if self.done {
             return;
         }
+        if let Some(stop) = self.pending.take() {
+            self.done = true;
+            b.stop = Some(stop);
+            return;
+        }
         let mut bytes = std::mem::take(&mut b.text).into_bytes();
         bytes.clear();
         bytes.append(&mut self.carry);
@@ -119,7 +193,7 @@ impl<R: BufRead> Producer<R> {
             }
             // Where the piece is cut: at the end of the file, or before the last `<` (ASCII:
             // never inside a character).
-            let cut = if self.eof {
+            let mut cut = if self.eof {
                 bytes.len()
             } else {
                 match bytes.iter().rposition(|&c| c == b'<') {
@@ -131,6 +205,23 @@ impl<R: BufRead> Producer<R> {
                     }
                 }
             };
+            // The split place, if this piece reaches it and it is a `<` (else it is not between
+            // two events): the piece ends there.
+            let mut forced = false;
+            if let Some(s) = self.split {
+                if s <= self.base || self.base + bytes.len() <= s {
+                    if s <= self.base {
+                        self.split = None;
+                    }
+                } else if s - self.base <= cut {
+                    if bytes[s - self.base] == b'<' {
+                        cut = s - self.base;
+                        forced = true;
+                    } else {
+                        self.split = None;
+                    }
+                }
+            }
             if u32::try_from(cut).is_err() {
                 // Records keep offsets into the piece as `u32`; a piece this long is one event
                 // of 4 GiB (a file may be that large only where its limit was raised).
@@ -146,7 +237,11 @@ impl<R: BufRead> Producer<R> {
             let (final_piece, stop) = match String::from_utf8(bytes) {
                 Ok(text) => {
                     b.text = text;
-                    (self.eof, self.failed.take().map(Stop::Io))
+                    if forced {
+                        (false, None)
+                    } else {
+                        (self.eof, self.failed.take().map(Stop::Io))
+                    }
                 }
                 Err(e) => {
                     // The events end at the first byte that is not UTF-8, or at a character
@@ -168,10 +263,20 @@ impl<R: BufRead> Producer<R> {
                     if !self.done {
                         self.base += b.text.len();
                         self.carry = tail;
+                        if forced {
+                            // Between two events: marked if no open element keeps text (the
+                            // other half starts without).
+                            b.split = self.keeping == 0 && b.stop.is_none();
+                            self.split = None;
+                        }
                     }
                     return;
                 }
                 Piece::Cut(at) if at > 0 => {
+                    if forced {
+                        // Inside an event: no split.
+                        self.split = None;
+                    }
                     // Some events were made; the cut one goes to the next piece.
                     let mut carry = b.text.as_bytes()[at..].to_vec();
                     carry.append(&mut tail);
@@ -181,6 +286,9 @@ impl<R: BufRead> Producer<R> {
                     return;
                 }
                 Piece::Cut(_) => {
+                    if forced {
+                        self.split = None;
+                    }
                     // Not one whole event yet: read more (twice as much each time, so an event
                     // of any length is parsed a bounded number of times).
                     bytes = std::mem::take(&mut b.text).into_bytes();
@@ -316,6 +424,14 @@ impl<R: BufRead> Producer<R> {
                             });
                             self.open.truncate(start);
                             err
+                        }
+                        None if self.part => {
+                            // The end of the second half's elements: where the first half
+                            // goes on.
+                            rec.kind = Kind::PartEnd;
+                            self.done = true;
+                            b.recs.push(rec);
+                            return Piece::Parsed;
                         }
                         None => Some(quick_xml::errors::IllFormedError::UnmatchedEndTag(
                             found.to_owned(),
