@@ -17,10 +17,13 @@
 //!   the start tag `Tagged`): begun from its start tag, finished into the model; a step's
 //!   data and a transition's condition made from it, the text gathered into it, the POU
 //!   chosen at the end and the ignored elements reported.
+//! - `inside.rs`: the descendants of the element being built, picked by where they stand
+//!   below it (a step's position, connections, variables and data; a condition's parts).
 //! - `named.rs`: named transitions (their bodies, the ST text gathered and its expression),
 //!   the places of text assembled from pieces, and the limit on derived condition text.
 //! - `wired.rs`: conditions wired from FBD/LD elements (`WireNode`, `Wiring`), made
 //!   expressions at the body's end or from a named transition's LD/FBD body.
+//! - `split.rs`: a large file read in two halves at once.
 //! - `tests.rs`: the unit tests.
 
 use std::collections::HashMap;
@@ -35,13 +38,14 @@ use crate::diag::{Code, Diagnostic, Diagnostics, FileId, Sources, Span};
 use crate::model::{Element, FileHeader, Interner, Sfc, Variable};
 
 mod element;
+mod inside;
 mod named;
 mod pick;
 mod split;
 mod tag;
 mod wired;
 
-use element::{Building, IwbState, Tagged, Val, VarAttrs, end_inside, inline_text, report_ignored};
+use element::{Building, Tagged, Val, end_inside, inline_text, report_ignored};
 use named::{Named, Outer, ReadingNamed, named_text};
 pub(crate) use tag::Tag;
 use tag::{Open, PathKind};
@@ -840,184 +844,6 @@ impl Stream {
                 }
             }
         }
-    }
-
-    /// A descendant of the element being built, at `stack` (which ends below the element).
-    fn inside(
-        &mut self,
-        b: &mut Building,
-        stack: &Open,
-        tag: Tag,
-        tag_span: Span,
-        t: &Tagged,
-    ) -> Result<(), Box<Diagnostic>> {
-        let mut rel = std::mem::take(&mut b.rel);
-        stack.below(b.depth, &mut rel);
-        let r = self.inside_at(b, &rel, tag, tag_span, t);
-        b.rel = rel;
-        r
-    }
-
-    fn inside_at(
-        &mut self,
-        b: &mut Building,
-        rel: &[Tag],
-        tag: Tag,
-        tag_span: Span,
-        t: &Tagged,
-    ) -> Result<(), Box<Diagnostic>> {
-        use Tag as T;
-        let mut scratch = std::mem::take(&mut b.scratch);
-        let r = (|| {
-            match (rel, tag) {
-                ([], T::Position) if b.x.is_none() => {
-                    let [x] = self.pick(t, ["x"], &mut scratch)?;
-                    b.x = Some(
-                        x.and_then(|a| a.get(&scratch).trim().parse::<f64>().ok())
-                            .filter(|x| x.is_finite())
-                            .unwrap_or(0.0),
-                    );
-                }
-                ([T::ConnectionPointIn], T::Connection) => {
-                    let mark = scratch.len();
-                    match self.pick(t, ["refLocalId"], &mut scratch)? {
-                        [Some(a)] => match a.get(&scratch).trim().parse::<u64>() {
-                            Ok(r) => b.inputs.push((r, a.range.clone())),
-                            Err(_) => b.bad_inputs.push(
-                                Diagnostic::error(
-                                    Code::DanglingReference,
-                                    format!("refLocalId `{}` is not a number", a.get(&scratch)),
-                                )
-                                .at(self.span(a.range.clone())),
-                            ),
-                        },
-                        [None] => b.bad_inputs.push(
-                            Diagnostic::error(
-                                Code::DanglingReference,
-                                "connection without refLocalId",
-                            )
-                            .at(tag_span),
-                        ),
-                    }
-                    scratch.truncate(mark);
-                }
-                ([], T::Variable) => {
-                    let [name, value] = self.pick(t, ["name", "Value"], &mut scratch)?;
-                    b.vars.push(VarAttrs {
-                        tag: tag_span,
-                        name,
-                        value,
-                        iwb: false,
-                    });
-                }
-                ([T::AddData, T::Data], T::Iwb) if b.iwb == IwbState::Before => {
-                    b.iwb = IwbState::Inside;
-                }
-                ([T::AddData, T::Data, T::Iwb], _) if b.iwb == IwbState::Inside => match tag {
-                    T::Resources if !b.resources_seen => b.resources_seen = true,
-                    T::Skill if b.skill.is_none() => {
-                        b.skill = self.name_attr(t, &mut scratch)?;
-                    }
-                    T::Time if !b.time_seen => {
-                        b.time_seen = true;
-                        let mark = scratch.len();
-                        let [d] = self.pick(t, ["duration"], &mut scratch)?;
-                        b.duration = d
-                            .as_ref()
-                            .and_then(|a| a.get(&scratch).trim().parse::<f64>().ok())
-                            .filter(|d| d.is_finite() && *d >= 0.0);
-                        if b.duration.is_none()
-                            && let Some(a) = &d
-                        {
-                            b.bad_duration =
-                                Some((a.get(&scratch).trim().to_owned(), a.range.clone()));
-                        }
-                        scratch.truncate(mark);
-                    }
-                    T::Variable => {
-                        let [name, value] = self.pick(t, ["name", "Value"], &mut scratch)?;
-                        b.vars.push(VarAttrs {
-                            tag: tag_span,
-                            name,
-                            value,
-                            iwb: true,
-                        });
-                    }
-                    _ => {}
-                },
-                ([T::AddData, T::Data, T::Iwb, T::Resources], T::Resource)
-                    if b.iwb == IwbState::Inside && b.resource.is_none() =>
-                {
-                    b.resource = self.name_attr(t, &mut scratch)?;
-                }
-                ([], T::Condition) if b.condition.is_none() && !b.condition_done => {
-                    b.condition = Some(tag_span);
-                }
-                ([T::Condition], T::Inline)
-                    if b.condition.is_some() && b.inline.is_none() && b.reference.is_none() =>
-                {
-                    b.inline = Some(String::new());
-                }
-                ([T::Condition], T::Reference)
-                    if b.condition.is_some() && b.inline.is_none() && b.reference.is_none() =>
-                {
-                    let mark = scratch.len();
-                    let [n] = self.pick(t, ["name"], &mut scratch)?;
-                    b.reference = Some(match n {
-                        Some(a) => (a.get(&scratch).to_owned(), a.range),
-                        None => (String::new(), tag_span.range.clone()),
-                    });
-                    scratch.truncate(mark);
-                }
-                ([T::Condition], T::ConnectionPointIn) if b.condition.is_some() => b.wired = true,
-                // The wired condition's connections (`condition/connectionPointIn/connection`;
-                // older files: `condition/connection`).
-                // (Also after a written condition: both at once is an error, `condition`.)
-                ([T::Condition, T::ConnectionPointIn], T::Connection)
-                | ([T::Condition], T::Connection)
-                    if b.condition.is_some() =>
-                {
-                    b.wired = true;
-                    let mark = scratch.len();
-                    let [r] = self.pick(t, ["refLocalId"], &mut scratch)?;
-                    if let Some(a) = r
-                        && let Ok(id) = a.get(&scratch).trim().parse::<u64>()
-                    {
-                        b.wired_refs.push((id, a.range.clone()));
-                    }
-                    scratch.truncate(mark);
-                }
-                ([], T::Expression) | ([], T::WireVariable)
-                    if b.tag == T::Other && b.wire_text.is_none() =>
-                {
-                    b.wire_text = Some((String::new(), Vec::new()));
-                }
-                ([T::InputVariables], T::WireVariable) => {
-                    let mark = scratch.len();
-                    let [f] = self.pick(t, ["formalParameter"], &mut scratch)?;
-                    let formal = f
-                        .map(|a| a.get(&scratch).trim().to_owned())
-                        .unwrap_or_default();
-                    scratch.truncate(mark);
-                    b.formal.push((formal, Vec::new()));
-                }
-                ([T::InputVariables, T::WireVariable, T::ConnectionPointIn], T::Connection) => {
-                    let mark = scratch.len();
-                    let [r] = self.pick(t, ["refLocalId"], &mut scratch)?;
-                    if let Some(a) = r
-                        && let Ok(id) = a.get(&scratch).trim().parse::<u64>()
-                        && let Some(f) = b.formal.last_mut()
-                    {
-                        f.1.push((id, a.range.clone()));
-                    }
-                    scratch.truncate(mark);
-                }
-                _ => {}
-            }
-            Ok(())
-        })();
-        b.scratch = scratch;
-        r
     }
 }
 
