@@ -277,10 +277,29 @@ fn a_file_changed_between_the_two_readings_is_an_error() {
     );
     assert!(joined, "the second half read its part");
     assert!(
-        got.starts_with("Err(") && got.contains("the file changed while it was read"),
+        got.starts_with("Err(") && got.contains("it changed while it was being read; run again"),
         "the reading fails: {}",
         got.lines().take(3).collect::<Vec<_>>().join("\n")
     );
+}
+
+/// The second reader finds the file shorter (cut meanwhile): the second half ends without the
+/// SFC's end tag, is not taken, and the first half reads on.
+#[test]
+fn a_file_cut_short_for_the_second_reader_is_read_on() {
+    let text = generated();
+    let s = String::from_utf8_lossy(&text).into_owned();
+    let at = s.match_indices("<step ").nth(1000).expect("steps").0;
+    let (got, joined) = split(
+        &text,
+        &text[..at + 5000],
+        Some(at),
+        Pipeline::Threaded,
+        BATCH_BYTES,
+        None,
+    );
+    assert!(!joined, "the second half is not taken");
+    assert!(got == plain(&text, None), "the first half read on");
 }
 
 /// A file of 8 MiB or more gets its split place chosen, and is joined.

@@ -107,7 +107,15 @@ impl<R: Read> Producer<R> {
     /// hashes the input sees them all. Their hash must be `digest` (the other half's): else the
     /// file changed between the two readings, and the next batch stops with that.
     pub(super) fn skip(&mut self, to: usize, digest: u64) {
-        if self.done || to < self.base {
+        if self.done {
+            return;
+        }
+        if to < self.base {
+            // (The second half starts at the split place, where this one stopped: never.) The
+            // reader has taken its elements, so reading on from here would read them twice.
+            self.pending = Some(Stop::Io(std::io::Error::other(
+                "the second half of the reading ended before it began",
+            )));
             return;
         }
         let mut left = to - self.base;
@@ -135,7 +143,7 @@ impl<R: Read> Producer<R> {
         self.base = to;
         if left > 0 || hash.digest() != digest {
             self.pending = Some(Stop::Io(std::io::Error::other(
-                "the file changed while it was read (it is read again when it is saved)",
+                "it changed while it was being read; run again",
             )));
         }
     }
