@@ -10,6 +10,7 @@ use skillpost::read::sfc::read_sfc_stream_with;
 use skillpost::read::tape::Pipeline;
 
 mod common;
+use common::with_after_step;
 #[path = "../benches/common/generator.rs"]
 mod generator;
 
@@ -78,20 +79,6 @@ fn a_large_sfc_reads_the_same_every_way() {
     );
     let ids = threaded.matches("local_id:").count();
     assert!(ids > 4000, "the model has every element: {ids} local ids");
-}
-
-/// `text` with `insert` put in after the `n`th `</step>` (from the start).
-fn with_after_step(text: &[u8], n: usize, insert: &[u8]) -> Vec<u8> {
-    let s = String::from_utf8_lossy(text);
-    let at = s
-        .match_indices("</step>")
-        .nth(n)
-        .map(|(i, m)| i + m.len())
-        .expect("enough steps");
-    let mut out = text[..at].to_vec();
-    out.extend_from_slice(insert);
-    out.extend_from_slice(&text[at..]);
-    out
 }
 
 #[test]

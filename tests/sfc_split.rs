@@ -163,20 +163,6 @@ fn a_generated_chart_split_at_any_element_is_joined_and_reads_the_same() {
     same_at("a missing POU", &text, &elements[..10], Some("NoSuchPou"));
 }
 
-/// `text` with `insert` put in after the `n`th `</step>`.
-fn with_after_step(text: &[u8], n: usize, insert: &str) -> (Vec<u8>, usize) {
-    let s = String::from_utf8_lossy(text);
-    let at = s
-        .match_indices("</step>")
-        .nth(n)
-        .map(|(i, m)| i + m.len())
-        .expect("enough steps");
-    let mut out = text[..at].to_vec();
-    out.extend_from_slice(insert.as_bytes());
-    out.extend_from_slice(&text[at..]);
-    (out, at)
-}
-
 /// Places where the second half cannot be taken: it reads on, with the same result.
 #[test]
 fn a_split_place_the_second_half_cannot_start_at_reads_on() {
@@ -210,7 +196,7 @@ fn a_split_place_the_second_half_cannot_start_at_reads_on() {
         ),
     ];
     for (name, insert, needle) in cases {
-        let (t, at) = with_after_step(&text, 1000, insert);
+        let (t, at) = common::with_after_step_at(&text, 1000, insert.as_bytes());
         let place = at + insert.find(needle).expect("the place");
         assert_eq!(t[place], b'<', "{name}: the place is a `<`");
         let expected = plain(&t, None);

@@ -15,6 +15,25 @@ pub fn skip(reason: &str) {
     eprintln!("skipped: {reason}");
 }
 
+/// `text` with `insert` put in after the `n`th `</step>` (from the start), and where it went in.
+pub fn with_after_step_at(text: &[u8], n: usize, insert: &[u8]) -> (Vec<u8>, usize) {
+    let s = String::from_utf8_lossy(text);
+    let at = s
+        .match_indices("</step>")
+        .nth(n)
+        .map(|(i, m)| i + m.len())
+        .expect("enough steps");
+    let mut out = text[..at].to_vec();
+    out.extend_from_slice(insert);
+    out.extend_from_slice(&text[at..]);
+    (out, at)
+}
+
+/// [`with_after_step_at`] without the place.
+pub fn with_after_step(text: &[u8], n: usize, insert: &[u8]) -> Vec<u8> {
+    with_after_step_at(text, n, insert).0
+}
+
 /// Whether `SKILLPOST_STRICT_TESTS=1` is set.
 pub fn strict() -> bool {
     std::env::var("SKILLPOST_STRICT_TESTS").as_deref() == Ok("1")

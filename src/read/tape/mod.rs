@@ -119,7 +119,7 @@ pub(crate) struct Batch {
     pub recs: Vec<Rec>,
     /// Set on the last batch when the events stopped early (the records come first).
     pub stop: Option<Stop>,
-    /// The batch ends at the split place ([`Split`]), between two events, where no open
+    /// The batch ends at the split place ([`Decision`]), between two events, where no open
     /// element keeps text: the reader says how to go on ([`Tape::decide`]) before it asks for
     /// the next batch.
     pub split: bool,

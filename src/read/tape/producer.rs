@@ -41,7 +41,7 @@ pub(crate) struct Producer<R> {
     keeping: usize,
     /// The first bytes were looked at (for a byte-order mark).
     started: bool,
-    /// Where a piece is to end, if it can (the reading split in two, [`super::Split`]): the
+    /// Where a piece is to end, if it can (the reading split in two, [`super::Decision`]): the
     /// batch that ends there is marked (`Batch::split`) when that place is between two events
     /// and no open element keeps text.
     split: Option<usize>,
