@@ -89,7 +89,8 @@ impl ReadAt for std::fs::File {
     }
 }
 
-impl ReadAt for [u8] {
+/// Bytes in memory: a `&&[u8]` is a `&dyn ReadAt`.
+impl ReadAt for &[u8] {
     fn read_at(&self, buf: &mut [u8], offset: u64) -> std::io::Result<usize> {
         let from = usize::try_from(offset)
             .unwrap_or(usize::MAX)
@@ -111,12 +112,7 @@ impl AsRef<[u8]> for Shared {
 
 impl ReadAt for Shared {
     fn read_at(&self, buf: &mut [u8], offset: u64) -> std::io::Result<usize> {
-        let from = usize::try_from(offset)
-            .unwrap_or(usize::MAX)
-            .min(self.0.len());
-        let n = buf.len().min(self.0.len() - from);
-        buf[..n].copy_from_slice(&self.0[from..from + n]);
-        Ok(n)
+        (&self.0[..]).read_at(buf, offset)
     }
 }
 

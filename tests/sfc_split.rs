@@ -11,22 +11,12 @@ use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use skillpost::diag::Diagnostics;
-use skillpost::load::ReadAt;
 use skillpost::read::sfc::{SplitSource, StreamError, read_sfc_stream_split};
 use skillpost::read::tape::{BATCH_BYTES, Pipeline};
 
 mod common;
 #[path = "../benches/common/generator.rs"]
 mod generator;
-
-/// Bytes in memory read at any place (the second reader).
-struct Bytes<'a>(&'a [u8]);
-
-impl ReadAt for Bytes<'_> {
-    fn read_at(&self, buf: &mut [u8], offset: u64) -> std::io::Result<usize> {
-        self.0.read_at(buf, offset)
-    }
-}
 
 fn text_of(sfc: Result<Option<skillpost::model::Sfc>, StreamError>, diags: Diagnostics) -> String {
     format!("{sfc:#?}\n{:#?}", diags.into_vec())
@@ -59,7 +49,6 @@ fn split(
     pou: Option<&str>,
 ) -> (String, bool) {
     let joined = AtomicBool::new(false);
-    let source = Bytes(second);
     let mut diags = Diagnostics::default();
     let sfc = read_sfc_stream_split(
         text,
@@ -70,7 +59,7 @@ fn split(
         pipeline,
         batch,
         Some(SplitSource {
-            source: &source,
+            source: &second,
             skipped: 0,
             at,
             joined: Some(&joined),

@@ -162,13 +162,6 @@ fn same_every_way(data: &[u8]) {
         {
             at += i;
         }
-        struct Bytes<'a>(&'a [u8]);
-        impl skillpost::load::ReadAt for Bytes<'_> {
-            fn read_at(&self, buf: &mut [u8], offset: u64) -> std::io::Result<usize> {
-                self.0.read_at(buf, offset)
-            }
-        }
-        let source = Bytes(data);
         let mut d = skillpost::diag::Diagnostics::default();
         let r = skillpost::read::sfc::read_sfc_stream_split(
             data,
@@ -179,7 +172,7 @@ fn same_every_way(data: &[u8]) {
             pipeline,
             batch,
             Some(skillpost::read::sfc::SplitSource {
-                source: &source,
+                source: &data,
                 skipped: 0,
                 at: Some(at),
                 joined: None,
