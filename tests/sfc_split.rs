@@ -205,8 +205,7 @@ fn a_chart_with_named_transitions_is_not_joined() {
     let s = String::from_utf8_lossy(&text).into_owned();
     let pou = s.find("<body>").expect("a body");
     let named = "<transitions><transition name=\"T1\"><body><ST><xhtml xmlns=\"http://www.w3.org/1999/xhtml\">go</xhtml></ST></body></transition></transitions>";
-    let t = format!("{}{named}{}", &s[..pou], &s[pou..]).into_bytes();
-    let t = String::from_utf8(t).unwrap();
+    let t = format!("{}{named}{}", &s[..pou], &s[pou..]);
     let at = t
         .match_indices("<transition localId")
         .nth(500)
